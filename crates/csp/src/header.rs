@@ -86,7 +86,14 @@ pub struct Header {
 impl Header {
     /// Build a header with normal priority and no flags.
     pub fn new(src: u8, dst: u8, dport: u8, sport: u8) -> Self {
-        Header { prio: Priority::Norm, src, dst, dport, sport, flags: 0 }
+        Header {
+            prio: Priority::Norm,
+            src,
+            dst,
+            dport,
+            sport,
+            flags: 0,
+        }
     }
 
     /// Decode the 32-bit header word.
@@ -174,6 +181,7 @@ impl std::fmt::Display for Header {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]

@@ -17,7 +17,11 @@ pub mod cfp;
 pub mod crc32;
 pub mod header;
 pub mod kiss;
+pub mod node;
 pub mod packet;
+pub mod reqrep;
+pub mod router;
+pub mod service;
 pub mod time;
 
 pub use header::{Header, Priority};

@@ -1,7 +1,7 @@
 //! A CSP packet: header plus data, the unit every interface moves.
 
-use crate::header::{HEADER_LEN, Header};
 use crate::Error;
+use crate::header::{HEADER_LEN, Header};
 
 /// A CSP packet as the router sees it: a header and the data bytes that follow it on the
 /// wire (including any CRC32 trailer the originating node appended).
@@ -16,13 +16,19 @@ pub struct Packet {
 impl Packet {
     /// Build a packet.
     pub fn new(header: Header, data: impl Into<Vec<u8>>) -> Self {
-        Packet { header, data: data.into() }
+        Packet {
+            header,
+            data: data.into(),
+        }
     }
 
     /// Parse `header | data` wire bytes.
     pub fn parse(buf: &[u8]) -> Result<Self, Error> {
         let header = Header::parse(buf)?;
-        Ok(Packet { header, data: buf[HEADER_LEN..].to_vec() })
+        Ok(Packet {
+            header,
+            data: buf[HEADER_LEN..].to_vec(),
+        })
     }
 
     /// The wire bytes `header | data`.

@@ -1,0 +1,127 @@
+//! The thin async shell around a node: one tokio task per node that feeds its [`Host`]
+//! the frames and packets its media deliver, its timers and the run's control commands, and
+//! sends what the host wants sent. All the behaviour is in the host; this loop only moves
+//! things and keeps the node's time (`t = max(t, event stamp)`, never the wake-up time).
+
+use csp::SimTime;
+use csp::node::{App, Host, Transmit};
+use tokio::sync::mpsc;
+
+use crate::can::CanPort;
+use crate::clock::Clock;
+use crate::inbox::{Arrival, InboxRx};
+use crate::net::NetPort;
+
+/// Where one interface of a node is attached.
+#[derive(Debug, Clone)]
+pub enum Attachment {
+    /// A CAN bus endpoint.
+    Can(CanPort),
+    /// A packet network endpoint.
+    Net(NetPort),
+}
+
+impl Attachment {
+    fn set_enabled(&self, on: bool) {
+        match self {
+            Attachment::Can(p) => p.bus().set_enabled(p, on),
+            Attachment::Net(p) => p.net().set_enabled(p, on),
+        }
+    }
+}
+
+/// Commands from the run (scenario faults, shutdown).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NodeCtl {
+    /// Reboot the node (uptime from zero, volatile state lost).
+    Reboot,
+    /// Power the node off (it leaves its buses) or on (it boots).
+    Power(bool),
+    /// Hang: alive on the bus (frames are acknowledged) but silent; `false` recovers.
+    Hang(bool),
+    /// Stop the task and hand the host back.
+    Stop,
+}
+
+/// Run a node until [`NodeCtl::Stop`] (or every sender of `ctl` is gone); returns the host.
+pub async fn run_node<A: App>(
+    mut host: Host<A>,
+    ports: Vec<Attachment>,
+    mut inbox: InboxRx,
+    mut ctl: mpsc::UnboundedReceiver<NodeCtl>,
+    clock: Clock,
+) -> Host<A> {
+    let mut t = clock.now();
+    let mut powered = true;
+    let mut hung = false;
+    loop {
+        flush(&mut host, &ports, t);
+        let deadline = if powered && !hung {
+            host.poll_timeout()
+        } else {
+            None
+        };
+        tokio::select! {
+            biased;
+            c = ctl.recv() => {
+                t = t.max(clock.now());
+                match c {
+                    None | Some(NodeCtl::Stop) => break,
+                    Some(NodeCtl::Reboot) => if powered { host.reboot(t) },
+                    Some(NodeCtl::Power(on)) => {
+                        if on != powered {
+                            powered = on;
+                            for p in &ports { p.set_enabled(on); }
+                            if on {
+                                hung = false;
+                                host.reboot(t);
+                            }
+                        }
+                    }
+                    Some(NodeCtl::Hang(h)) => hung = h,
+                }
+            }
+            m = inbox.recv() => {
+                let Some(m) = m else { break };
+                t = t.max(m.t);
+                if powered && !hung {
+                    match m.what {
+                        Arrival::Can(f) => host.handle_frame(m.iface, &f, t),
+                        Arrival::Packet(p) => host.handle_packet(m.iface, p, t),
+                    }
+                }
+            }
+            () = clock.sleep_until(deadline.unwrap_or(SimTime::MAX)), if deadline.is_some() => {
+                t = t.max(deadline.unwrap_or(t));
+                host.handle_timeout(t);
+            }
+        }
+    }
+    host
+}
+
+fn flush<A: App>(host: &mut Host<A>, ports: &[Attachment], t: SimTime) {
+    while let Some(out) = host.node.poll_transmit() {
+        match out {
+            Transmit::Can { iface, frame } => match ports.get(iface) {
+                Some(Attachment::Can(p)) => p.send(t, frame),
+                _ => tracing::warn!(
+                    node = host.node.name(),
+                    iface,
+                    "CAN frame for a non-CAN interface"
+                ),
+            },
+            Transmit::Packet { iface, packet } => match ports.get(iface) {
+                Some(Attachment::Net(p)) => p.send(t, packet),
+                _ => tracing::warn!(
+                    node = host.node.name(),
+                    iface,
+                    "packet for a non-packet interface"
+                ),
+            },
+        }
+    }
+    while let Some(ev) = host.node.poll_event() {
+        tracing::debug!(node = host.node.name(), t = %ev.t, "{}", ev.what);
+    }
+}

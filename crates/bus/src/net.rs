@@ -1,0 +1,384 @@
+//! A packet network: endpoints exchange whole CSP packets, addressed by the CSP
+//! destination. The ground segment is one (ground stations 16-20, outside ground programs,
+//! and the satellite's UHF radio as the default endpoint).
+//!
+//! Model:
+//! - each endpoint owns a set of addresses; a packet goes to the endpoint owning its
+//!   destination, else to the default endpoint (the radio), never back to its sender.
+//!   An outside program's exclusive claim on an address takes it from an internal endpoint
+//!   while the claim lasts ([`PacketNet::claim`]);
+//! - endpoints marked `radio` share one half-duplex air channel: a packet to or from a
+//!   radio endpoint occupies the channel for `(len + overhead) * 8 / rate` and arrives
+//!   `air_delay` after it leaves; traffic between ground endpoints is instantaneous;
+//! - impairments (drop, corrupt, delay, down) apply to the air channel, drawn from the
+//!   net's seeded generator.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use csp::{Packet, SimTime};
+use tokio::sync::Notify;
+
+use crate::clock::Clock;
+use crate::impair::{Fate, ImpairRng, Impairments};
+use crate::inbox::{Arrival, Inbound, InboxTx};
+use crate::trace::{TraceEvent, TraceFrame, TraceTx};
+
+/// Settings of a packet network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PacketNetConfig {
+    /// Network name (`ground`).
+    pub name: String,
+    /// Air data rate in bit/s (UHF default 9600).
+    pub air_rate_bps: u32,
+    /// Framing overhead per packet on the air, bytes.
+    pub air_overhead_bytes: u32,
+    /// Propagation and modem delay on the air.
+    pub air_delay: Duration,
+}
+
+impl PacketNetConfig {
+    /// The ground segment with a 9600 bit/s UHF channel.
+    pub fn ground() -> Self {
+        PacketNetConfig {
+            name: "ground".to_owned(),
+            air_rate_bps: 9600,
+            air_overhead_bytes: 0,
+            air_delay: Duration::from_millis(3),
+        }
+    }
+}
+
+/// Counters of a packet network.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NetStats {
+    /// Network name.
+    pub name: String,
+    /// Packets delivered or dropped.
+    pub packets: u64,
+    /// Bytes of those packets.
+    pub bytes: u64,
+    /// Time the air channel was busy.
+    pub air_busy: Duration,
+    /// Packets lost to impairments.
+    pub dropped: u64,
+    /// Packets with no endpoint to go to.
+    pub unroutable: u64,
+    /// Per-endpoint (name, packets sent, packets received).
+    pub endpoints: Vec<(String, u64, u64)>,
+}
+
+#[derive(Debug)]
+struct Endpoint {
+    name: String,
+    addrs: BTreeSet<u8>,
+    radio: bool,
+    enabled: bool,
+    inbox: InboxTx,
+    iface: usize,
+    tx: u64,
+    rx: u64,
+}
+
+#[derive(Debug)]
+struct State {
+    cfg: PacketNetConfig,
+    name: Arc<str>,
+    eps: Vec<Endpoint>,
+    default_ep: Option<usize>,
+    claims: BTreeMap<u8, usize>,
+    air_busy_until: SimTime,
+    in_flight: BTreeMap<(SimTime, u64), (usize, usize, Packet, Fate)>,
+    seq: u64,
+    stats: NetStats,
+    impair: Impairments,
+    rng: ImpairRng,
+    trace: Option<TraceTx>,
+}
+
+/// A packet network; clones share it.
+#[derive(Debug, Clone)]
+pub struct PacketNet {
+    state: Arc<Mutex<State>>,
+    wake: Arc<Notify>,
+}
+
+/// An endpoint's handle for sending on the network.
+#[derive(Debug, Clone)]
+pub struct NetPort {
+    net: PacketNet,
+    idx: usize,
+}
+
+impl NetPort {
+    /// Send `packet`, ready at `t`.
+    pub fn send(&self, t: SimTime, packet: Packet) {
+        self.net.lock().submit(self.idx, t, packet);
+        self.net.wake.notify_one();
+    }
+    /// The network.
+    pub fn net(&self) -> &PacketNet {
+        &self.net
+    }
+}
+
+impl PacketNet {
+    /// A network; `seed` drives its impairments.
+    pub fn new(cfg: PacketNetConfig, seed: u64) -> Self {
+        let name: Arc<str> = cfg.name.as_str().into();
+        PacketNet {
+            state: Arc::new(Mutex::new(State {
+                rng: ImpairRng::new(seed, &cfg.name),
+                stats: NetStats {
+                    name: cfg.name.clone(),
+                    ..Default::default()
+                },
+                cfg,
+                name,
+                eps: Vec::new(),
+                default_ep: None,
+                claims: BTreeMap::new(),
+                air_busy_until: SimTime::ZERO,
+                in_flight: BTreeMap::new(),
+                seq: 0,
+                impair: Impairments::default(),
+                trace: None,
+            })),
+            wake: Arc::new(Notify::new()),
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Attach an endpoint owning `addrs`. A `radio` endpoint sits behind the air channel;
+    /// `default` makes it the destination of every address nobody owns.
+    pub fn attach(
+        &self,
+        name: &str,
+        addrs: &[u8],
+        radio: bool,
+        default: bool,
+        inbox: InboxTx,
+        iface: usize,
+    ) -> NetPort {
+        let mut st = self.lock();
+        st.eps.push(Endpoint {
+            name: name.to_owned(),
+            addrs: addrs.iter().copied().collect(),
+            radio,
+            enabled: true,
+            inbox,
+            iface,
+            tx: 0,
+            rx: 0,
+        });
+        let idx = st.eps.len() - 1;
+        if default {
+            st.default_ep = Some(idx);
+        }
+        NetPort {
+            net: self.clone(),
+            idx,
+        }
+    }
+
+    /// Enable or disable an endpoint (power).
+    pub fn set_enabled(&self, port: &NetPort, enabled: bool) {
+        if let Some(e) = self.lock().eps.get_mut(port.idx) {
+            e.enabled = enabled;
+        }
+    }
+
+    /// Make `port` the only receiver of `addr` until released.
+    pub fn claim(&self, port: &NetPort, addr: u8) {
+        let mut st = self.lock();
+        st.claims.insert(addr, port.idx);
+        if let Some(e) = st.eps.get_mut(port.idx) {
+            e.addrs.insert(addr);
+        }
+    }
+
+    /// Give back an endpoint's claims and disable it.
+    pub fn release(&self, port: &NetPort) {
+        let mut st = self.lock();
+        st.claims.retain(|_, i| *i != port.idx);
+        if let Some(e) = st.eps.get_mut(port.idx) {
+            e.addrs.clear();
+            e.enabled = false;
+        }
+    }
+
+    /// Set the air channel's impairments.
+    pub fn set_impairments(&self, imp: Impairments) {
+        self.lock().impair = imp;
+    }
+
+    /// Send every packet that crosses the network to `tx`.
+    pub fn set_trace(&self, tx: TraceTx) {
+        self.lock().trace = Some(tx);
+    }
+
+    /// A snapshot of the counters.
+    pub fn stats(&self) -> NetStats {
+        let st = self.lock();
+        let mut s = st.stats.clone();
+        s.endpoints = st
+            .eps
+            .iter()
+            .map(|e| (e.name.clone(), e.tx, e.rx))
+            .collect();
+        s
+    }
+
+    /// The network task: deliver packets when they arrive.
+    pub async fn run(self, clock: Clock) {
+        loop {
+            let next = {
+                let mut st = self.lock();
+                st.deliver_due(clock.now());
+                st.in_flight
+                    .first_key_value()
+                    .map_or(SimTime::MAX, |((t, _), _)| *t)
+            };
+            let notified = self.wake.notified();
+            tokio::select! {
+                biased;
+                () = notified => {}
+                () = clock.sleep_until(next) => {}
+            }
+        }
+    }
+}
+
+impl State {
+    fn owner(&self, dst: u8) -> Option<usize> {
+        if let Some(&i) = self.claims.get(&dst) {
+            return Some(i);
+        }
+        self.eps
+            .iter()
+            .position(|e| e.enabled && e.addrs.contains(&dst))
+            .or(self.default_ep)
+    }
+
+    fn submit(&mut self, from: usize, t: SimTime, packet: Packet) {
+        if !self.eps.get(from).is_some_and(|e| e.enabled) {
+            return;
+        }
+        let Some(to) = self.owner(packet.header.dst).filter(|&to| to != from) else {
+            self.stats.unroutable += 1;
+            return;
+        };
+        self.eps[from].tx += 1;
+        let len = 4 + packet.data.len() as u64;
+        self.stats.packets += 1;
+        self.stats.bytes += len;
+        let over_air = self.eps[from].radio || self.eps[to].radio;
+        let (at, fate) = if over_air {
+            let bits = (len + u64::from(self.cfg.air_overhead_bytes)) * 8;
+            let dur = Duration::from_nanos(
+                bits * 1_000_000_000 / u64::from(self.cfg.air_rate_bps.max(1)),
+            );
+            let start = t.max(self.air_busy_until);
+            self.air_busy_until = start + dur;
+            self.stats.air_busy += dur;
+            let fate = self.rng.fate(&self.impair);
+            (
+                self.air_busy_until + self.cfg.air_delay + self.impair.delay,
+                fate,
+            )
+        } else {
+            (t, Fate::Deliver)
+        };
+        self.seq += 1;
+        self.in_flight
+            .insert((at, self.seq), (from, to, packet, fate));
+    }
+
+    fn deliver_due(&mut self, now: SimTime) {
+        while let Some(entry) = self.in_flight.first_entry() {
+            if entry.key().0 > now {
+                return;
+            }
+            let ((t, _), (from, to, mut packet, fate)) = entry.remove_entry();
+            let dropped = match fate {
+                Fate::Drop => {
+                    self.stats.dropped += 1;
+                    true
+                }
+                Fate::Corrupt { bit } => {
+                    let mut bytes = packet.to_bytes();
+                    let nbits = bytes.len() as u32 * 8;
+                    let b = bit % nbits.max(1);
+                    bytes[(b / 8) as usize] ^= 1 << (b % 8);
+                    if let Ok(p) = Packet::parse(&bytes) {
+                        packet = p;
+                    }
+                    false
+                }
+                Fate::Deliver => false,
+            };
+            if let Some(tr) = &self.trace {
+                let _ = tr.send(TraceEvent {
+                    t,
+                    medium: self.name.clone(),
+                    from: self.eps[from].name.as_str().into(),
+                    frame: TraceFrame::Packet(packet.to_bytes()),
+                    dropped,
+                });
+            }
+            if dropped {
+                continue;
+            }
+            let ep = &mut self.eps[to];
+            if ep.enabled {
+                ep.rx += 1;
+                let _ = ep.inbox.send(Inbound {
+                    t,
+                    iface: ep.iface,
+                    what: Arrival::Packet(packet),
+                });
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::clock::ClockMode;
+    use crate::inbox::inbox;
+    use csp::Header;
+
+    #[tokio::test(start_paused = true)]
+    async fn routes_by_owner_then_default_over_the_air() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let net = PacketNet::new(PacketNetConfig::ground(), 1);
+        let (tx_gs, mut rx_gs) = inbox();
+        let (tx_sat, mut rx_sat) = inbox();
+        let gs = net.attach("GS16", &[16], false, false, tx_gs, 0);
+        let sat = net.attach("COMM1-uhf", &[], true, true, tx_sat, 1);
+        tokio::spawn(net.clone().run(clock));
+        gs.send(
+            SimTime::ZERO,
+            Packet::new(Header::new(16, 3, 1, 40), vec![0; 96]),
+        );
+        let a = rx_sat.recv().await.unwrap();
+        // 100 bytes at 9600 bit/s = 83.33 ms, plus 3 ms delay.
+        assert_eq!(a.t, SimTime(83_333_333 + 3_000_000));
+        assert_eq!(a.iface, 1);
+        sat.send(a.t, Packet::new(Header::new(3, 16, 40, 1), vec![]));
+        let b = rx_gs.recv().await.unwrap();
+        assert!(b.t > a.t);
+        // Unknown ground address from the satellite side: nobody owns it, default is sender.
+        sat.send(b.t, Packet::new(Header::new(3, 19, 40, 1), vec![]));
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        assert_eq!(net.stats().unroutable, 1);
+    }
+}

@@ -1,0 +1,203 @@
+//! Attaching a program outside the twin (over KISS/TCP or SocketCAN) to the right segment.
+//!
+//! Which segment an outside CSP address sits on is decided by its range (INTERPRETATION.md
+//! section 1): 12-15 the payload CAN bus, 16-20 the ground segment, anything else the main
+//! CAN bus. On a CAN bus the outside endpoint fragments and reassembles with CFP like any
+//! libcsp CAN interface; on the ground segment it exchanges whole packets. An outside
+//! address is claimed exclusively: while the link is up, an internal node with the same
+//! address no longer receives its traffic.
+
+use csp::cfp::{Fragmenter, Reassembler, ReassemblerConfig};
+use csp::{Packet, SimTime};
+
+use crate::can::{CanBus, CanPort};
+use crate::inbox::{Arrival, Inbound, InboxTx};
+use crate::net::{NetPort, PacketNet};
+
+/// The media an outside program can join.
+#[derive(Debug, Clone)]
+pub struct Segments {
+    /// The main CAN bus (COMM, FC, EPS, ECU, PC).
+    pub main: CanBus,
+    /// The payload CAN bus (PC, payloads 12-15).
+    pub payload: CanBus,
+    /// The ground segment (16-20, behind COMM's UHF radio).
+    pub ground: PacketNet,
+}
+
+/// Which medium an address belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SegmentKind {
+    /// Main CAN bus.
+    Main,
+    /// Payload CAN bus.
+    Payload,
+    /// Ground segment.
+    Ground,
+}
+
+impl SegmentKind {
+    /// The segment of `addr` by the default ranges.
+    pub fn of(addr: u8) -> Self {
+        match addr {
+            12..=15 => SegmentKind::Payload,
+            16..=20 => SegmentKind::Ground,
+            _ => SegmentKind::Main,
+        }
+    }
+}
+
+#[derive(Debug)]
+enum Port {
+    Can {
+        port: CanPort,
+        frag: Fragmenter,
+        reasm: Reassembler,
+    },
+    Net(NetPort),
+}
+
+/// An outside program's place in the twin.
+#[derive(Debug)]
+pub struct OutsideEndpoint {
+    kind: SegmentKind,
+    port: Port,
+    addrs: Vec<u8>,
+}
+
+/// Why an outside packet was not taken into the twin.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutsideError {
+    /// The packet's source is on another segment than the link's first address.
+    #[error("source {src} is not on the {kind:?} segment of this link")]
+    WrongSegment {
+        /// The source address.
+        src: u8,
+        /// The link's segment.
+        kind: SegmentKind,
+    },
+    /// Broadcast or out of range source.
+    #[error("source address {0} cannot be claimed")]
+    BadSource(u8),
+    /// The packet does not fit the CAN MTU.
+    #[error("packet does not fit the CAN MTU: {0}")]
+    TooLong(csp::Error),
+}
+
+impl OutsideEndpoint {
+    /// Attach a link named `name` for `addr` on its segment, delivering to `inbox`.
+    pub fn attach(
+        segs: &Segments,
+        name: &str,
+        addr: u8,
+        inbox: InboxTx,
+        seed_ident: u16,
+    ) -> Result<Self, OutsideError> {
+        if addr >= csp::header::BROADCAST {
+            return Err(OutsideError::BadSource(addr));
+        }
+        let kind = SegmentKind::of(addr);
+        let port = match kind {
+            SegmentKind::Main | SegmentKind::Payload => {
+                let bus = if kind == SegmentKind::Main {
+                    &segs.main
+                } else {
+                    &segs.payload
+                };
+                let port = bus.attach(name, &[], false, inbox, 0);
+                bus.claim(&port, addr);
+                Port::Can {
+                    port,
+                    frag: Fragmenter::new(seed_ident % 1024, csp::cfp::CSP_CAN_MTU),
+                    reasm: Reassembler::new(ReassemblerConfig::default()),
+                }
+            }
+            SegmentKind::Ground => {
+                let port = segs.ground.attach(name, &[], false, false, inbox, 0);
+                segs.ground.claim(&port, addr);
+                Port::Net(port)
+            }
+        };
+        Ok(OutsideEndpoint {
+            kind,
+            port,
+            addrs: vec![addr],
+        })
+    }
+
+    /// The segment the link sits on.
+    pub fn kind(&self) -> SegmentKind {
+        self.kind
+    }
+    /// Addresses claimed by the link.
+    pub fn addrs(&self) -> &[u8] {
+        &self.addrs
+    }
+
+    /// Claim another address on the same segment.
+    pub fn claim(&mut self, addr: u8) -> Result<(), OutsideError> {
+        if self.addrs.contains(&addr) {
+            return Ok(());
+        }
+        if addr >= csp::header::BROADCAST {
+            return Err(OutsideError::BadSource(addr));
+        }
+        if SegmentKind::of(addr) != self.kind {
+            return Err(OutsideError::WrongSegment {
+                src: addr,
+                kind: self.kind,
+            });
+        }
+        match &self.port {
+            Port::Can { port, .. } => port.bus().claim(port, addr),
+            Port::Net(p) => p.net().claim(p, addr),
+        }
+        self.addrs.push(addr);
+        Ok(())
+    }
+
+    /// Send a packet from the outside program into the twin at `t`.
+    pub fn send(&mut self, t: SimTime, packet: &Packet) -> Result<(), OutsideError> {
+        match &mut self.port {
+            Port::Can { port, frag, .. } => {
+                let mut frames = Vec::new();
+                // The outside node is a CAN node of its own: CFP dst is the CSP destination
+                // unless it needs the PC as next hop (payload bus to anything off it).
+                let dst = packet.header.dst;
+                let via = match self.kind {
+                    SegmentKind::Payload if !(12..=15).contains(&dst) => 6,
+                    SegmentKind::Main if (12..=15).contains(&dst) => 6,
+                    SegmentKind::Main if (16..=20).contains(&dst) => 1,
+                    _ => dst,
+                };
+                frag.fragment(packet, via, &mut frames)
+                    .map_err(OutsideError::TooLong)?;
+                for f in frames {
+                    port.send(t, f);
+                }
+            }
+            Port::Net(p) => p.send(t, packet.clone()),
+        }
+        Ok(())
+    }
+
+    /// Turn an arrival into a packet for the outside program (CAN frames are reassembled).
+    pub fn receive(&mut self, arrival: Inbound) -> Option<Result<Packet, String>> {
+        match (arrival.what, &mut self.port) {
+            (Arrival::Packet(p), _) => Some(Ok(p)),
+            (Arrival::Can(f), Port::Can { reasm, .. }) => reasm
+                .handle(&f, arrival.t)
+                .map(|r| r.map_err(|e| e.to_string())),
+            (Arrival::Can(_), Port::Net(_)) => None,
+        }
+    }
+
+    /// Leave the segment, giving back every claim.
+    pub fn release(&self) {
+        match &self.port {
+            Port::Can { port, .. } => port.bus().release(port),
+            Port::Net(p) => p.net().release(p),
+        }
+    }
+}

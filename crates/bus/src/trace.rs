@@ -1,0 +1,49 @@
+//! The trace of everything that crossed a medium: the raw material of recordings and of
+//! the determinism check (two runs of one configuration give the same trace).
+
+use std::sync::Arc;
+
+use csp::SimTime;
+use csp::cfp::CanFrame;
+use tokio::sync::mpsc;
+
+/// What crossed the medium.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum TraceFrame {
+    /// A CAN frame, as it went on the wire (after any corruption).
+    Can(CanFrame),
+    /// A CSP packet's wire bytes (`header | data`).
+    Packet(Vec<u8>),
+}
+
+/// One frame or packet on a medium.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TraceEvent {
+    /// When it finished crossing the medium.
+    pub t: SimTime,
+    /// The medium (bus or network name).
+    pub medium: Arc<str>,
+    /// The sending endpoint.
+    pub from: Arc<str>,
+    /// The frame.
+    pub frame: TraceFrame,
+    /// Whether an impairment dropped it.
+    pub dropped: bool,
+}
+
+impl TraceEvent {
+    /// The frame's bytes for comparisons: CAN id (4 bytes big-endian) and data, or the packet.
+    pub fn bytes(&self) -> Vec<u8> {
+        match &self.frame {
+            TraceFrame::Can(f) => {
+                let mut v = f.id.to_be_bytes().to_vec();
+                v.extend_from_slice(f.data());
+                v
+            }
+            TraceFrame::Packet(p) => p.clone(),
+        }
+    }
+}
+
+/// Where media send their trace.
+pub type TraceTx = mpsc::UnboundedSender<TraceEvent>;

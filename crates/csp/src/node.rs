@@ -1,0 +1,608 @@
+//! A CSP node: routing, CRC32 handling, CFP per CAN interface, the service handler and port
+//! bindings, as one deterministic state machine (libcsp 1.4 `csp_route.c`, `csp_io.c`).
+//!
+//! Inputs carry the simulated time: [`Node::handle_frame`] (a CAN frame on a CAN
+//! interface), [`Node::handle_packet`] (a whole packet on a packet interface such as KISS or
+//! the UHF link), [`Node::send`] (the application originates a packet) and
+//! [`Node::handle_timeout`]. Outputs are pulled: [`Node::poll_transmit`] for the links and
+//! [`Node::poll_delivery`] for the application's bound ports.
+//!
+//! Rules kept from libcsp 1.4:
+//! - a packet whose destination is this node or broadcast (31) is local; broadcast is
+//!   never forwarded; replies carry the node's real address;
+//! - a forwarded packet is never modified (its CRC32 is left alone) and is not sent back on
+//!   the interface it came from;
+//! - the CRC32 is appended only by the originating node when the CRC flag is set, and
+//!   verified and stripped on local delivery; a mismatch is a counted drop;
+//! - ports 0-6 are answered by the service handler; packets to unbound ports are dropped.
+//!
+//! [`Host`] pairs a node with an [`App`] (the node's own behaviour: FC, PC, payload...).
+
+use std::collections::{BTreeMap, VecDeque};
+use std::time::Duration;
+
+use crate::cfp::{CanFrame, Fragmenter, Reassembler, ReassemblerConfig};
+use crate::header::{BROADCAST, EPHEMERAL_PORT_MIN, MAX_PORT};
+use crate::router::{IfaceId, Route, RoutingTable};
+use crate::service::{self, ServiceAction, ServiceConfig};
+use crate::{Packet, SimTime, crc32};
+
+/// The kind of link an interface sits on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IfaceKind {
+    /// A CAN bus: packets are fragmented with CFP.
+    Can,
+    /// A packet link (KISS, UHF radio, ground network): whole packets.
+    Packet,
+}
+
+/// One interface of a node.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IfaceConfig {
+    /// Name used in logs and tables (for example `main-can`).
+    pub name: String,
+    /// Kind of link.
+    pub kind: IfaceKind,
+    /// Largest data length sent on it (256 for CAN and KISS in libcsp 1.4).
+    pub mtu: usize,
+}
+
+impl IfaceConfig {
+    /// A CAN interface with libcsp 1.4's MTU of 256 bytes.
+    pub fn can(name: &str) -> Self {
+        IfaceConfig {
+            name: name.to_owned(),
+            kind: IfaceKind::Can,
+            mtu: crate::cfp::CSP_CAN_MTU,
+        }
+    }
+    /// A packet interface with libcsp 1.4's KISS MTU of 256 bytes.
+    pub fn packet(name: &str) -> Self {
+        IfaceConfig {
+            name: name.to_owned(),
+            kind: IfaceKind::Packet,
+            mtu: crate::kiss::KISS_MTU,
+        }
+    }
+}
+
+/// Static configuration of a node.
+#[derive(Debug, Clone)]
+pub struct NodeConfig {
+    /// Node name (`FC`, `PC`, ...).
+    pub name: String,
+    /// CSP address, 0..=30.
+    pub addr: u8,
+    /// Interfaces, indexed by [`IfaceId`].
+    pub ifaces: Vec<IfaceConfig>,
+    /// The static routing table.
+    pub routes: RoutingTable,
+    /// Whether ports 0-6 run the service handler.
+    pub services: bool,
+    /// Service handler answers.
+    pub service: ServiceConfig,
+    /// First CFP ident (libcsp 1.4 starts at `rand()`; the twin draws it from the run's seed).
+    pub cfp_first_ident: u16,
+    /// First ephemeral port tried (32..=63; libcsp 1.4 starts at `rand()`).
+    pub first_ephemeral_port: u8,
+    /// CFP reassembly settings.
+    pub reassembly: ReassemblerConfig,
+    /// UTC unix seconds at simulated time zero (for the CMP clock).
+    pub epoch_unix_s: u64,
+}
+
+impl NodeConfig {
+    /// A node with services on, default CFP settings and no interfaces yet.
+    pub fn new(name: &str, addr: u8) -> Self {
+        NodeConfig {
+            name: name.to_owned(),
+            addr,
+            ifaces: Vec::new(),
+            routes: RoutingTable::new(),
+            services: true,
+            service: ServiceConfig::named(name),
+            cfp_first_ident: 0,
+            first_ephemeral_port: EPHEMERAL_PORT_MIN,
+            reassembly: ReassemblerConfig::default(),
+            epoch_unix_s: 0,
+        }
+    }
+}
+
+/// Something a node wants sent on one of its interfaces.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Transmit {
+    /// A CAN frame on a CAN interface.
+    Can {
+        /// The interface.
+        iface: IfaceId,
+        /// The frame.
+        frame: CanFrame,
+    },
+    /// A whole packet on a packet interface.
+    Packet {
+        /// The interface.
+        iface: IfaceId,
+        /// The packet (`header | data`, CRC32 included when flagged).
+        packet: Packet,
+    },
+}
+
+/// Why a node could not send a packet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SendError {
+    /// No route to the destination.
+    #[error("no route to node {0}")]
+    NoRoute(u8),
+    /// Data longer than the interface MTU.
+    #[error("{len} bytes exceed the MTU of {mtu}")]
+    TooLong {
+        /// Data length including the CRC32 trailer.
+        len: usize,
+        /// The interface MTU.
+        mtu: usize,
+    },
+    /// A header field is out of range.
+    #[error("header field out of range")]
+    BadHeader,
+    /// Every ephemeral port is in use.
+    #[error("no free ephemeral port")]
+    NoPort,
+}
+
+/// Traffic counters of a node. Drops are keyed by a short reason (ordered for tables).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NodeCounters {
+    /// Packets received (local or to forward).
+    pub rx_packets: u64,
+    /// Packets sent (originated or forwarded).
+    pub tx_packets: u64,
+    /// Packets forwarded to another interface.
+    pub forwarded: u64,
+    /// Packets handed to the application.
+    pub delivered: u64,
+    /// Replies sent by the service handler.
+    pub service_replies: u64,
+    /// Reboots.
+    pub reboots: u64,
+    /// Dropped packets and frames by reason.
+    pub drops: BTreeMap<&'static str, u64>,
+}
+
+impl NodeCounters {
+    /// Total drops.
+    pub fn total_drops(&self) -> u64 {
+        self.drops.values().sum()
+    }
+    fn drop(&mut self, reason: &'static str) {
+        *self.drops.entry(reason).or_default() += 1;
+    }
+}
+
+/// A drop or event worth a log line, pulled with [`Node::poll_event`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeEvent {
+    /// When it happened.
+    pub t: SimTime,
+    /// What happened.
+    pub what: String,
+}
+
+/// The CSP part of a node (see the module doc).
+#[derive(Debug)]
+pub struct Node {
+    cfg: NodeConfig,
+    frag: Vec<Option<Fragmenter>>,
+    reasm: Vec<Option<Reassembler>>,
+    tx: VecDeque<Transmit>,
+    rx: VecDeque<Packet>,
+    events: VecDeque<NodeEvent>,
+    bound: [bool; 64],
+    next_port: u8,
+    boot: SimTime,
+    clock_offset_ns: i128,
+    reboot_requested: bool,
+    counters: NodeCounters,
+    frames: Vec<CanFrame>,
+}
+
+/// Keep at most this many unread events (older ones are counted, not kept).
+const MAX_EVENTS: usize = 1024;
+
+impl Node {
+    /// A node booting at `now`.
+    pub fn new(cfg: NodeConfig, now: SimTime) -> Self {
+        let mut node = Node {
+            frag: Vec::new(),
+            reasm: Vec::new(),
+            tx: VecDeque::new(),
+            rx: VecDeque::new(),
+            events: VecDeque::new(),
+            bound: [false; 64],
+            next_port: cfg.first_ephemeral_port.clamp(EPHEMERAL_PORT_MIN, MAX_PORT),
+            boot: now,
+            clock_offset_ns: 0,
+            reboot_requested: false,
+            counters: NodeCounters::default(),
+            frames: Vec::new(),
+            cfg,
+        };
+        node.reset_links();
+        node
+    }
+
+    fn reset_links(&mut self) {
+        let mut ident = self.cfg.cfp_first_ident;
+        self.frag = Vec::new();
+        self.reasm = Vec::new();
+        for iface in &self.cfg.ifaces {
+            match iface.kind {
+                IfaceKind::Can => {
+                    self.frag
+                        .push(Some(Fragmenter::new(ident % 1024, iface.mtu)));
+                    self.reasm.push(Some(Reassembler::new(self.cfg.reassembly)));
+                    ident = ident.wrapping_add(331);
+                }
+                IfaceKind::Packet => {
+                    self.frag.push(None);
+                    self.reasm.push(None);
+                }
+            }
+        }
+    }
+
+    /// The node's CSP address.
+    pub fn addr(&self) -> u8 {
+        self.cfg.addr
+    }
+    /// The node's name.
+    pub fn name(&self) -> &str {
+        &self.cfg.name
+    }
+    /// The node's configuration.
+    pub fn config(&self) -> &NodeConfig {
+        &self.cfg
+    }
+    /// Traffic counters.
+    pub fn counters(&self) -> &NodeCounters {
+        &self.counters
+    }
+    /// Time since the last boot.
+    pub fn uptime(&self, now: SimTime) -> Duration {
+        service::uptime(self.boot, now)
+    }
+    /// UTC unix time of the node's clock, in nanoseconds.
+    pub fn clock_unix_ns(&self, now: SimTime) -> i128 {
+        i128::from(self.cfg.epoch_unix_s) * 1_000_000_000
+            + i128::from(now.as_ns())
+            + self.clock_offset_ns
+    }
+
+    /// Bind `port` so packets to it are delivered to the application.
+    pub fn bind(&mut self, port: u8) {
+        if let Some(b) = self.bound.get_mut(usize::from(port)) {
+            *b = true;
+        }
+    }
+    /// Unbind `port`.
+    pub fn unbind(&mut self, port: u8) {
+        if let Some(b) = self.bound.get_mut(usize::from(port)) {
+            *b = false;
+        }
+    }
+    /// Whether `port` is bound.
+    pub fn is_bound(&self, port: u8) -> bool {
+        self.bound.get(usize::from(port)).copied().unwrap_or(false)
+    }
+    /// Take a free ephemeral source port (32..=63) and bind it, cycling as libcsp does.
+    pub fn alloc_port(&mut self) -> Option<u8> {
+        let span = MAX_PORT - EPHEMERAL_PORT_MIN + 1;
+        for _ in 0..span {
+            let p = self.next_port;
+            self.next_port = if p >= MAX_PORT {
+                EPHEMERAL_PORT_MIN
+            } else {
+                p + 1
+            };
+            if !self.is_bound(p) {
+                self.bind(p);
+                return Some(p);
+            }
+        }
+        None
+    }
+
+    /// A CAN frame arrived on CAN interface `iface` (already accepted by its CFP dst).
+    pub fn handle_frame(&mut self, iface: IfaceId, frame: &CanFrame, now: SimTime) {
+        let Some(Some(reasm)) = self.reasm.get_mut(iface) else {
+            self.note_drop(now, "frame on non-CAN iface", String::new());
+            return;
+        };
+        match reasm.handle(frame, now) {
+            Some(Ok(packet)) => self.route_in(iface, packet, now),
+            Some(Err(reason)) => {
+                self.note_drop(now, "cfp", format!("{reason} (can id {:#010x})", frame.id))
+            }
+            None => {}
+        }
+    }
+
+    /// A whole packet arrived on packet interface `iface`.
+    pub fn handle_packet(&mut self, iface: IfaceId, packet: Packet, now: SimTime) {
+        self.route_in(iface, packet, now);
+    }
+
+    fn route_in(&mut self, iface: IfaceId, packet: Packet, now: SimTime) {
+        self.counters.rx_packets += 1;
+        let dst = packet.header.dst;
+        if dst == self.cfg.addr || dst == BROADCAST {
+            self.deliver_local(packet, now);
+            return;
+        }
+        match self.cfg.routes.lookup(dst) {
+            None => self.note_drop(now, "no route", packet.header.to_string()),
+            Some(route) if route.iface == iface => {
+                // csp_route_work: never loop a packet back out of the interface it came in on.
+                self.note_drop(now, "same iface", packet.header.to_string())
+            }
+            Some(route) => {
+                if let Err(e) = self.transmit(route, &packet) {
+                    self.note_drop(now, "forward failed", format!("{}: {e}", packet.header));
+                } else {
+                    self.counters.forwarded += 1;
+                }
+            }
+        }
+    }
+
+    fn deliver_local(&mut self, mut packet: Packet, now: SimTime) {
+        if packet.header.has_crc() && !crc32::verify_and_strip(&mut packet.data) {
+            self.note_drop(now, "crc32", packet.header.to_string());
+            return;
+        }
+        let dport = packet.header.dport;
+        if self.cfg.services && dport <= service::MAX_SERVICE_PORT {
+            self.serve(packet, now);
+        } else if self.is_bound(dport) {
+            self.counters.delivered += 1;
+            self.rx.push_back(packet);
+        } else {
+            self.note_drop(now, "unbound port", packet.header.to_string());
+        }
+    }
+
+    fn serve(&mut self, packet: Packet, now: SimTime) {
+        let clock_ns = self.clock_unix_ns(now).max(0);
+        let clock = (
+            u32::try_from(clock_ns / 1_000_000_000).unwrap_or(u32::MAX),
+            (clock_ns % 1_000_000_000) as u32,
+        );
+        let action = service::handle(
+            &self.cfg.service,
+            packet.header.dport,
+            &packet.data,
+            self.uptime(now),
+            clock,
+        );
+        let reply_header = packet.header.reply(self.cfg.addr);
+        let replies = match action {
+            ServiceAction::Reply(d) => vec![d],
+            ServiceAction::Replies(ds) => ds,
+            ServiceAction::Reboot => {
+                self.reboot_requested = true;
+                vec![]
+            }
+            ServiceAction::SetClock { tv_sec, tv_nsec } => {
+                let want = i128::from(tv_sec) * 1_000_000_000 + i128::from(tv_nsec);
+                self.clock_offset_ns += want - self.clock_unix_ns(now);
+                vec![service::clock_reply((tv_sec, tv_nsec))]
+            }
+            ServiceAction::None => vec![],
+        };
+        for data in replies {
+            self.counters.service_replies += 1;
+            if let Err(e) = self.send(Packet::new(reply_header, data), now) {
+                self.note_drop(now, "service reply", e.to_string());
+            }
+        }
+    }
+
+    /// Originate `packet` from this node: append the CRC32 when flagged, route and queue it.
+    ///
+    /// A packet to this node's own address is delivered locally (libcsp's loopback).
+    pub fn send(&mut self, mut packet: Packet, now: SimTime) -> Result<(), SendError> {
+        packet.header.validate().map_err(|_| SendError::BadHeader)?;
+        if packet.header.has_crc() {
+            crc32::append(&mut packet.data);
+        }
+        let dst = packet.header.dst;
+        if dst == self.cfg.addr {
+            self.counters.tx_packets += 1;
+            self.route_in(usize::MAX, packet, now);
+            return Ok(());
+        }
+        let route = self.cfg.routes.lookup(dst).ok_or(SendError::NoRoute(dst))?;
+        self.transmit(route, &packet)
+    }
+
+    fn transmit(&mut self, route: Route, packet: &Packet) -> Result<(), SendError> {
+        let Some(iface) = self.cfg.ifaces.get(route.iface) else {
+            return Err(SendError::NoRoute(packet.header.dst));
+        };
+        if packet.data.len() > iface.mtu {
+            return Err(SendError::TooLong {
+                len: packet.data.len(),
+                mtu: iface.mtu,
+            });
+        }
+        match self.frag.get_mut(route.iface) {
+            Some(Some(frag)) => {
+                self.frames.clear();
+                frag.fragment(packet, route.next_hop(packet.header.dst), &mut self.frames)
+                    .map_err(|_| SendError::TooLong {
+                        len: packet.data.len(),
+                        mtu: iface.mtu,
+                    })?;
+                for frame in self.frames.drain(..) {
+                    self.tx.push_back(Transmit::Can {
+                        iface: route.iface,
+                        frame,
+                    });
+                }
+            }
+            _ => self.tx.push_back(Transmit::Packet {
+                iface: route.iface,
+                packet: packet.clone(),
+            }),
+        }
+        self.counters.tx_packets += 1;
+        Ok(())
+    }
+
+    /// The next thing to send on a link.
+    pub fn poll_transmit(&mut self) -> Option<Transmit> {
+        self.tx.pop_front()
+    }
+    /// The next packet for a bound application port.
+    pub fn poll_delivery(&mut self) -> Option<Packet> {
+        self.rx.pop_front()
+    }
+    /// The next drop or event worth logging.
+    pub fn poll_event(&mut self) -> Option<NodeEvent> {
+        self.events.pop_front()
+    }
+
+    /// The earliest time [`Node::handle_timeout`] has work.
+    pub fn poll_timeout(&self) -> Option<SimTime> {
+        self.reasm
+            .iter()
+            .flatten()
+            .filter_map(Reassembler::poll_timeout)
+            .min()
+    }
+    /// Purge stale partial CFP packets.
+    pub fn handle_timeout(&mut self, now: SimTime) {
+        let mut purged = 0;
+        for r in self.reasm.iter_mut().flatten() {
+            purged += r.handle_timeout(now);
+        }
+        for _ in 0..purged {
+            self.note_drop(now, "cfp", "partial packet timed out".to_owned());
+        }
+    }
+
+    /// Whether the service handler asked for a reboot (cleared by [`Node::reboot`]).
+    pub fn reboot_requested(&self) -> bool {
+        self.reboot_requested
+    }
+    /// Reboot: uptime from zero, queues, partial packets and bindings cleared.
+    pub fn reboot(&mut self, now: SimTime) {
+        self.boot = now;
+        self.reboot_requested = false;
+        self.tx.clear();
+        self.rx.clear();
+        self.bound = [false; 64];
+        self.clock_offset_ns = 0;
+        self.counters.reboots += 1;
+        self.reset_links();
+    }
+
+    fn note_drop(&mut self, t: SimTime, reason: &'static str, detail: String) {
+        self.counters.drop(reason);
+        if self.events.len() < MAX_EVENTS {
+            self.events.push_back(NodeEvent {
+                t,
+                what: format!("drop ({reason}): {detail}"),
+            });
+        }
+    }
+}
+
+/// A node's own behaviour on top of CSP: the FC, the PC, a payload, a ground station.
+///
+/// Pure like the node: it gets the node to send through and the simulated time.
+pub trait App: Send + 'static {
+    /// Called at boot and after every reboot: bind ports, arm timers.
+    fn start(&mut self, node: &mut Node, now: SimTime);
+    /// A packet arrived on a bound port.
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime);
+    /// The earliest time [`App::handle_timeout`] has work.
+    fn poll_timeout(&self) -> Option<SimTime> {
+        None
+    }
+    /// Timers due at `now`.
+    fn handle_timeout(&mut self, _node: &mut Node, _now: SimTime) {}
+    /// Forget volatile state (reboot or power cycle).
+    fn reset(&mut self, _now: SimTime) {}
+}
+
+/// An application that binds nothing: the node only routes and answers ports 0-6.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoApp;
+
+impl App for NoApp {
+    fn start(&mut self, _node: &mut Node, _now: SimTime) {}
+    fn handle_packet(&mut self, _node: &mut Node, _packet: Packet, _now: SimTime) {}
+}
+
+/// A node and its application, driven together.
+#[derive(Debug)]
+pub struct Host<A> {
+    /// The CSP node.
+    pub node: Node,
+    /// Its application.
+    pub app: A,
+}
+
+impl<A: App> Host<A> {
+    /// Boot a node with its application at `now`.
+    pub fn new(cfg: NodeConfig, mut app: A, now: SimTime) -> Self {
+        let mut node = Node::new(cfg, now);
+        app.start(&mut node, now);
+        Host { node, app }
+    }
+
+    /// A CAN frame arrived on `iface`.
+    pub fn handle_frame(&mut self, iface: IfaceId, frame: &CanFrame, now: SimTime) {
+        self.node.handle_frame(iface, frame, now);
+        self.after_input(now);
+    }
+    /// A packet arrived on packet interface `iface`.
+    pub fn handle_packet(&mut self, iface: IfaceId, packet: Packet, now: SimTime) {
+        self.node.handle_packet(iface, packet, now);
+        self.after_input(now);
+    }
+    /// The earliest time [`Host::handle_timeout`] has work.
+    pub fn poll_timeout(&self) -> Option<SimTime> {
+        match (self.node.poll_timeout(), self.app.poll_timeout()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+    /// Run timers due at `now`.
+    pub fn handle_timeout(&mut self, now: SimTime) {
+        self.node.handle_timeout(now);
+        self.app.handle_timeout(&mut self.node, now);
+        self.after_input(now);
+    }
+    /// Reboot node and application (service port 4, or a scenario fault).
+    pub fn reboot(&mut self, now: SimTime) {
+        self.node.reboot(now);
+        self.app.reset(now);
+        self.app.start(&mut self.node, now);
+    }
+
+    fn after_input(&mut self, now: SimTime) {
+        // Deliveries can cause replies that loop back locally; bound the loop.
+        for _ in 0..1024 {
+            let Some(packet) = self.node.poll_delivery() else {
+                break;
+            };
+            self.app.handle_packet(&mut self.node, packet, now);
+        }
+        if self.node.reboot_requested() {
+            self.reboot(now);
+        }
+    }
+}
