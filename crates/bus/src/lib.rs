@@ -1,1 +1,24 @@
-//! placeholder
+//! The media of the twin and the thin async shells around pure cores.
+//!
+//! - [`clock`]: virtual or real time.
+//! - [`can`]: an in-process CAN segment (bit timing, arbitration, acceptance, impairments).
+//! - [`net`]: a packet network (the ground segment and the UHF air channel).
+//! - [`driver`]: the task that runs one node.
+//! - [`outside`], [`kiss_tcp`]: programs outside the twin over KISS/TCP.
+//! - `socketcan` (cargo feature `socketcan`, Linux): a bridge to a real CAN interface.
+
+pub mod can;
+pub mod clock;
+pub mod driver;
+pub mod impair;
+pub mod inbox;
+pub mod kiss_tcp;
+pub mod net;
+pub mod outside;
+#[cfg(all(feature = "socketcan", target_os = "linux"))]
+pub mod socketcan;
+pub mod trace;
+
+pub use can::{CanBus, CanBusConfig, CanPort};
+pub use clock::{Clock, ClockMode};
+pub use net::{NetPort, PacketNet, PacketNetConfig};
