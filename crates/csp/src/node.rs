@@ -606,3 +606,55 @@ impl<A: App> Host<A> {
         }
     }
 }
+
+/// A placeholder for a node whose ICD ports are not modelled yet: it binds `ports` and
+/// answers every request on them with the ICD failure reply (command echoed, result 0),
+/// so a well-formed request never goes unanswered.
+#[derive(Debug, Clone, Default)]
+pub struct StubApp {
+    ports: Vec<u8>,
+}
+
+impl StubApp {
+    /// Bind `ports`.
+    pub fn new(ports: &[u8]) -> Self {
+        StubApp {
+            ports: ports.to_vec(),
+        }
+    }
+}
+
+impl App for StubApp {
+    fn start(&mut self, node: &mut Node, _now: SimTime) {
+        for &p in &self.ports {
+            node.bind(p);
+        }
+    }
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        let command = packet.data.first().copied().unwrap_or(0);
+        let reply = Packet::new(
+            packet.header.reply(node.addr()),
+            crate::reqrep::failure(command),
+        );
+        // A send failure is already counted by the node; nothing else to do here.
+        let _ = node.send(reply, now);
+    }
+}
+
+impl<T: App + ?Sized> App for Box<T> {
+    fn start(&mut self, node: &mut Node, now: SimTime) {
+        (**self).start(node, now)
+    }
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        (**self).handle_packet(node, packet, now)
+    }
+    fn poll_timeout(&self) -> Option<SimTime> {
+        (**self).poll_timeout()
+    }
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        (**self).handle_timeout(node, now)
+    }
+    fn reset(&mut self, now: SimTime) {
+        (**self).reset(now)
+    }
+}

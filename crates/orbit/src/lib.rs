@@ -1,1 +1,1 @@
-//! placeholder
+//! Orbit, frames, sun, eclipse and geomagnetic field (filled by the orbit issue).

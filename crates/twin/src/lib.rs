@@ -1,1 +1,39 @@
-//! placeholder
+//! m6p-twin: a digital twin of the NanoAvionics M6P smallsat network.
+//!
+//! - [`network`]: the nodes, media and routing tables of the M6P network.
+//! - [`runtime`]: build the network, run it in virtual or real time, report.
+//! - [`ground`]: the twin's own ground stations.
+//! - [`gs`]: the outside ground-station client (`m6p-twin gs`).
+
+pub mod duration;
+pub mod ground;
+pub mod gs;
+pub mod network;
+pub mod runtime;
+
+use std::time::Duration;
+
+use csp::SimTime;
+
+use crate::ground::PlannedRequest;
+use crate::network::{NetworkSpec, Role};
+
+/// The default run's ground activity: station 16 pings every space node once a minute.
+pub fn default_plan(net: &NetworkSpec, duration: Duration) -> Vec<PlannedRequest> {
+    let mut plan = Vec::new();
+    let mut t = Duration::from_secs(5);
+    while t < duration {
+        for n in net.nodes.iter().filter(|n| n.role != Role::Ground) {
+            plan.push(PlannedRequest {
+                at: SimTime::ZERO + t,
+                dst: n.addr,
+                dport: csp::service::PORT_PING,
+                data: ground::ping_payload(16),
+                timeout: Duration::from_secs(5),
+                label: format!("ping {}", n.name),
+            });
+        }
+        t += Duration::from_secs(60);
+    }
+    plan
+}

@@ -1,0 +1,162 @@
+//! A ground station inside the twin: it sends planned requests (pings, uptime, ICD
+//! commands) at given times and records every outcome. Scenario command timelines drive it.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use csp::node::{App, Node};
+use csp::reqrep::Client;
+use csp::{Header, Packet, SimTime};
+
+/// A request the station sends at a given time.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PlannedRequest {
+    /// When to send it.
+    pub at: SimTime,
+    /// Destination node.
+    pub dst: u8,
+    /// Destination port.
+    pub dport: u8,
+    /// Request data.
+    pub data: Vec<u8>,
+    /// How long to wait for the reply.
+    pub timeout: Duration,
+    /// A label for reports.
+    pub label: String,
+}
+
+/// What became of a request.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Outcome {
+    /// A reply arrived.
+    Reply {
+        /// Reply data.
+        data: Vec<u8>,
+        /// Round-trip time.
+        rtt: Duration,
+    },
+    /// No reply within the timeout.
+    Timeout,
+    /// The request could not be sent.
+    SendFailed(String),
+}
+
+/// A request and its outcome.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RequestResult {
+    /// The request.
+    pub request: PlannedRequest,
+    /// When it was sent.
+    pub sent: SimTime,
+    /// What became of it.
+    pub outcome: Outcome,
+}
+
+/// Where a station records its outcomes (shared with the run that reports them).
+pub type Results = Arc<Mutex<Vec<RequestResult>>>;
+
+/// The ground station application.
+#[derive(Debug)]
+pub struct GroundApp {
+    plan: VecDeque<PlannedRequest>,
+    client: Client,
+    in_flight: BTreeMap<u64, (PlannedRequest, SimTime)>,
+    next_tag: u64,
+    results: Results,
+}
+
+impl GroundApp {
+    /// A station that will send `plan` (in time order) and record outcomes in `results`.
+    pub fn new(mut plan: Vec<PlannedRequest>, results: Results) -> Self {
+        plan.sort_by_key(|r| r.at);
+        GroundApp {
+            plan: plan.into(),
+            client: Client::new(),
+            in_flight: BTreeMap::new(),
+            next_tag: 0,
+            results,
+        }
+    }
+
+    fn record(&self, request: PlannedRequest, sent: SimTime, outcome: Outcome) {
+        self.results
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(RequestResult {
+                request,
+                sent,
+                outcome,
+            });
+    }
+}
+
+impl App for GroundApp {
+    fn start(&mut self, _node: &mut Node, _now: SimTime) {}
+
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        if let Some(done) = self.client.handle_reply(node, &packet, now)
+            && let Some((req, sent)) = self.in_flight.remove(&done.request.tag)
+        {
+            self.record(
+                req,
+                sent,
+                Outcome::Reply {
+                    data: done.reply.data,
+                    rtt: done.rtt,
+                },
+            );
+        }
+    }
+
+    fn poll_timeout(&self) -> Option<SimTime> {
+        let next = self.plan.front().map(|r| r.at);
+        match (next, self.client.poll_timeout()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        for expired in self.client.handle_timeout(node, now) {
+            if let Some((req, sent)) = self.in_flight.remove(&expired.tag) {
+                self.record(req, sent, Outcome::Timeout);
+            }
+        }
+        while self.plan.front().is_some_and(|r| r.at <= now) {
+            let Some(req) = self.plan.pop_front() else {
+                break;
+            };
+            let tag = self.next_tag;
+            self.next_tag += 1;
+            let header = Header::new(node.addr(), req.dst, req.dport, 0);
+            match self.client.request(
+                node,
+                tag,
+                header,
+                req.dst,
+                req.dport,
+                req.data.clone(),
+                req.timeout,
+                now,
+            ) {
+                Ok(_) => {
+                    self.in_flight.insert(tag, (req, now));
+                }
+                Err(e) => self.record(req, now, Outcome::SendFailed(e.to_string())),
+            }
+        }
+    }
+
+    fn reset(&mut self, now: SimTime) {
+        self.client.clear();
+        for (_, (req, sent)) in std::mem::take(&mut self.in_flight) {
+            self.record(req, sent.min(now), Outcome::Timeout);
+        }
+    }
+}
+
+/// A ping request as `csp_ping` builds it: `size` bytes `0, 1, 2, ...` (i % 256).
+pub fn ping_payload(size: usize) -> Vec<u8> {
+    (0..size).map(|i| (i % 256) as u8).collect()
+}

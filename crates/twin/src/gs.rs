@@ -1,0 +1,215 @@
+//! `m6p-twin gs`: a small ground-station client that joins a running twin over KISS/TCP
+//! (as node 16 by default) and sends service requests, printing round-trip times. It is
+//! the first piece of the ground console.
+
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use csp::kiss::{self, Decoder, DecoderConfig, KissEvent};
+use csp::service::{CMP_IDENT, CMP_IDENT_LEN, CMP_REQUEST, PORT_CMP, PORT_PING, PORT_UPTIME};
+use csp::{Header, Packet};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+/// A ground node on a KISS/TCP connection.
+#[derive(Debug)]
+pub struct GsClient {
+    stream: TcpStream,
+    decoder: Decoder,
+    addr: u8,
+    next_port: u8,
+    pending: Vec<Packet>,
+}
+
+impl GsClient {
+    /// Connect to a twin's KISS server as node `addr`.
+    pub async fn connect(server: SocketAddr, addr: u8) -> anyhow::Result<Self> {
+        let stream = TcpStream::connect(server)
+            .await
+            .with_context(|| format!("connecting to {server}"))?;
+        let _ = stream.set_nodelay(true);
+        Ok(GsClient {
+            stream,
+            decoder: Decoder::new(DecoderConfig::default()),
+            addr,
+            next_port: 32,
+            pending: Vec::new(),
+        })
+    }
+
+    /// Send `data` to `dst:dport` and wait up to `timeout` for the reply; `None` on timeout.
+    pub async fn request(
+        &mut self,
+        dst: u8,
+        dport: u8,
+        data: Vec<u8>,
+        timeout: Duration,
+    ) -> anyhow::Result<Option<(Packet, Duration)>> {
+        let sport = self.next_port;
+        self.next_port = if sport >= 63 { 32 } else { sport + 1 };
+        let packet = Packet::new(Header::new(self.addr, dst, dport, sport), data);
+        let mut wire = Vec::new();
+        kiss::encode(&packet, &mut wire);
+        let start = Instant::now();
+        self.stream
+            .write_all(&wire)
+            .await
+            .context("sending the request")?;
+        let deadline = tokio::time::Instant::now() + timeout;
+        let mut buf = [0u8; 2048];
+        let mut events = Vec::new();
+        loop {
+            if let Some(i) = self.pending.iter().position(|p| {
+                p.header.dport == sport && p.header.src == dst && p.header.sport == dport
+            }) {
+                return Ok(Some((self.pending.remove(i), start.elapsed())));
+            }
+            let n = match tokio::time::timeout_at(deadline, self.stream.read(&mut buf)).await {
+                Err(_) => return Ok(None),
+                Ok(Ok(0)) => bail!("the twin closed the connection"),
+                Ok(Ok(n)) => n,
+                Ok(Err(e)) => return Err(e).context("reading the reply"),
+            };
+            self.decoder
+                .push(buf.get(..n).unwrap_or_default(), &mut events);
+            for ev in events.drain(..) {
+                if let KissEvent::Packet(p) = ev {
+                    self.pending.push(p);
+                }
+            }
+            // Keep only a bounded backlog of unmatched packets (late replies).
+            if self.pending.len() > 64 {
+                self.pending.drain(..self.pending.len() - 64);
+            }
+        }
+    }
+}
+
+/// `gs ping`: `count` pings of `size` bytes, one per `interval`; prints each and a summary.
+pub async fn ping(
+    gs: &mut GsClient,
+    node: u8,
+    count: u32,
+    size: usize,
+    interval: Duration,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
+    let payload = crate::ground::ping_payload(size);
+    let mut rtts = Vec::new();
+    for seq in 1..=count {
+        match gs
+            .request(node, PORT_PING, payload.clone(), timeout)
+            .await?
+        {
+            Some((reply, rtt)) if reply.data == payload => {
+                println!(
+                    "reply from {node}: seq={seq} size={size} time={:.3} ms",
+                    rtt.as_secs_f64() * 1e3
+                );
+                rtts.push(rtt);
+            }
+            Some((reply, _)) => println!(
+                "reply from {node}: seq={seq} WRONG ECHO ({} bytes)",
+                reply.data.len()
+            ),
+            None => println!(
+                "no reply from {node}: seq={seq} (timeout {:.1} s)",
+                timeout.as_secs_f64()
+            ),
+        }
+        if seq < count {
+            tokio::time::sleep(interval).await;
+        }
+    }
+    rtts.sort();
+    let median = rtts
+        .get(rtts.len() / 2)
+        .map_or(0.0, |d| d.as_secs_f64() * 1e3);
+    println!(
+        "--- node {node}: {count} sent, {} answered, median {median:.3} ms",
+        rtts.len()
+    );
+    Ok(!rtts.is_empty())
+}
+
+/// `gs uptime`.
+pub async fn uptime(
+    gs: &mut GsClient,
+    node: u8,
+    timeout: Duration,
+    icd_ms: bool,
+) -> anyhow::Result<bool> {
+    match gs.request(node, PORT_UPTIME, Vec::new(), timeout).await? {
+        Some((reply, rtt)) => {
+            let Ok(b) = <[u8; 4]>::try_from(reply.data.as_slice()) else {
+                println!(
+                    "node {node}: malformed uptime reply of {} bytes",
+                    reply.data.len()
+                );
+                return Ok(false);
+            };
+            if icd_ms {
+                println!(
+                    "node {node}: uptime {} ms (u32 LE, ICD reading) ({:.3} ms)",
+                    u32::from_le_bytes(b),
+                    rtt.as_secs_f64() * 1e3
+                );
+            } else {
+                println!(
+                    "node {node}: uptime {} s ({:.3} ms)",
+                    u32::from_be_bytes(b),
+                    rtt.as_secs_f64() * 1e3
+                );
+            }
+            Ok(true)
+        }
+        None => {
+            println!(
+                "no reply from {node} (timeout {:.1} s)",
+                timeout.as_secs_f64()
+            );
+            Ok(false)
+        }
+    }
+}
+
+/// `gs ident`: CMP ident (hostname, model, revision, date, time).
+pub async fn ident(gs: &mut GsClient, node: u8, timeout: Duration) -> anyhow::Result<bool> {
+    match gs
+        .request(node, PORT_CMP, vec![CMP_REQUEST, CMP_IDENT], timeout)
+        .await?
+    {
+        Some((reply, rtt)) if reply.data.len() == CMP_IDENT_LEN => {
+            let field = |a: usize, b: usize| {
+                let f = reply.data.get(a..b).unwrap_or_default();
+                let end = f.iter().position(|&c| c == 0).unwrap_or(f.len());
+                String::from_utf8_lossy(&f[..end]).into_owned()
+            };
+            println!(
+                "node {node}: hostname {:?} model {:?} revision {:?} built {} {} ({:.3} ms)",
+                field(2, 22),
+                field(22, 52),
+                field(52, 72),
+                field(72, 84),
+                field(84, 93),
+                rtt.as_secs_f64() * 1e3
+            );
+            Ok(true)
+        }
+        Some((reply, _)) => {
+            println!(
+                "node {node}: malformed ident reply of {} bytes",
+                reply.data.len()
+            );
+            Ok(false)
+        }
+        None => {
+            println!(
+                "no reply from {node} (timeout {:.1} s)",
+                timeout.as_secs_f64()
+            );
+            Ok(false)
+        }
+    }
+}

@@ -1,0 +1,211 @@
+//! The M6P network of INTERPRETATION.md section 1: which nodes exist, on which media, with
+//! which routing tables.
+//!
+//! ```text
+//!  ground segment (packet net)          main CAN bus                payload CAN bus
+//!  GS 16 ... ── UHF air ── COMM1 (1) ── COMM2 (2), FC (3), EPS (4), ECU (5) ── PC (6) ── payloads 12-15
+//! ```
+//!
+//! Routing (static for a run): main-bus nodes reach payloads through the PC (CFP next hop 6)
+//! and the ground through the primary COMM (next hop 1); the PC reaches payloads directly
+//! on the payload bus and everything else on the main bus; payloads reach everything off
+//! their bus through the PC; COMM1 sends ground traffic (16-20) over the UHF link. Ids 7-11
+//! are reserved: nobody answers there.
+
+use csp::node::{IfaceConfig, NodeConfig};
+use csp::router::{Route, RoutingTable};
+use csp::service::UptimeFormat;
+
+/// Address of the primary COMM.
+pub const COMM1: u8 = 1;
+/// Address of the secondary COMM.
+pub const COMM2: u8 = 2;
+/// Address of the flight computer.
+pub const FC: u8 = 3;
+/// Address of the EPS.
+pub const EPS: u8 = 4;
+/// Address of the ECU.
+pub const ECU: u8 = 5;
+/// Address of the payload controller.
+pub const PC: u8 = 6;
+/// Payload addresses.
+pub const PAYLOADS: std::ops::RangeInclusive<u8> = 12..=15;
+/// Ground segment addresses.
+pub const GROUND: std::ops::RangeInclusive<u8> = 16..=20;
+/// Reserved addresses (nothing answers).
+pub const RESERVED: std::ops::RangeInclusive<u8> = 7..=11;
+
+/// What a node is, which decides its media and routes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Role {
+    /// Primary COMM: main CAN bus and the UHF radio.
+    CommPrimary,
+    /// Secondary COMM: main CAN bus (radio on standby).
+    CommSecondary,
+    /// Flight computer.
+    Fc,
+    /// Power system.
+    Eps,
+    /// Propulsion.
+    Ecu,
+    /// Payload controller: both CAN buses.
+    Pc,
+    /// A simulated payload on the payload bus.
+    Payload,
+    /// A ground station on the ground segment.
+    Ground,
+}
+
+/// One node of the network.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeSpec {
+    /// Display name.
+    pub name: String,
+    /// CSP address.
+    pub addr: u8,
+    /// Role.
+    pub role: Role,
+    /// Uptime service format.
+    pub uptime: UptimeFormat,
+}
+
+/// The whole network.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NetworkSpec {
+    /// Nodes in start order.
+    pub nodes: Vec<NodeSpec>,
+    /// Main bus bit rate, bit/s.
+    pub main_bitrate_bps: u32,
+    /// Payload bus bit rate, bit/s.
+    pub payload_bitrate_bps: u32,
+    /// UHF air data rate, bit/s.
+    pub uhf_rate_bps: u32,
+}
+
+impl NetworkSpec {
+    /// The M6P network with simulated payloads at `payloads` and ground stations at `ground`.
+    pub fn m6p(payloads: &[u8], ground: &[u8]) -> Self {
+        let node = |name: &str, addr, role| NodeSpec {
+            name: name.to_owned(),
+            addr,
+            role,
+            uptime: UptimeFormat::default(),
+        };
+        let mut nodes = vec![
+            node("COMM1", COMM1, Role::CommPrimary),
+            node("COMM2", COMM2, Role::CommSecondary),
+            node("FC", FC, Role::Fc),
+            node("EPS", EPS, Role::Eps),
+            node("ECU", ECU, Role::Ecu),
+            node("PC", PC, Role::Pc),
+        ];
+        nodes.extend(
+            payloads
+                .iter()
+                .map(|&a| node(&format!("PL{a}"), a, Role::Payload)),
+        );
+        nodes.extend(
+            ground
+                .iter()
+                .map(|&a| node(&format!("GS{a}"), a, Role::Ground)),
+        );
+        NetworkSpec {
+            nodes,
+            main_bitrate_bps: 1_000_000,
+            payload_bitrate_bps: 1_000_000,
+            uhf_rate_bps: 9600,
+        }
+    }
+
+    /// The default network: payloads 12 and 13, main ground station 16.
+    pub fn default_m6p() -> Self {
+        Self::m6p(&[12, 13], &[16])
+    }
+}
+
+/// Which medium an interface is attached to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Medium {
+    /// The main CAN bus.
+    MainCan,
+    /// The payload CAN bus.
+    PayloadCan,
+    /// The ground segment, as the satellite's radio (behind the air channel).
+    GroundRadio,
+    /// The ground segment, as a ground station.
+    Ground,
+}
+
+/// The interfaces (with their media) and the routing table of a node.
+pub fn node_config(spec: &NodeSpec) -> (NodeConfig, Vec<Medium>) {
+    let mut cfg = NodeConfig::new(&spec.name, spec.addr);
+    cfg.service.uptime = spec.uptime;
+    let mut rt = RoutingTable::new();
+    let media = match spec.role {
+        Role::CommPrimary => {
+            cfg.ifaces = vec![IfaceConfig::can("main-can"), IfaceConfig::packet("uhf")];
+            rt.set_default(Route::direct(0))
+                .set_range(PAYLOADS, Route::via(0, PC))
+                .set_range(GROUND, Route::direct(1));
+            vec![Medium::MainCan, Medium::GroundRadio]
+        }
+        Role::CommSecondary | Role::Fc | Role::Eps | Role::Ecu => {
+            cfg.ifaces = vec![IfaceConfig::can("main-can")];
+            rt.set_default(Route::direct(0))
+                .set_range(PAYLOADS, Route::via(0, PC))
+                .set_range(GROUND, Route::via(0, COMM1));
+            vec![Medium::MainCan]
+        }
+        Role::Pc => {
+            cfg.ifaces = vec![
+                IfaceConfig::can("main-can"),
+                IfaceConfig::can("payload-can"),
+            ];
+            rt.set_default(Route::direct(0))
+                .set_range(PAYLOADS, Route::direct(1))
+                .set_range(GROUND, Route::via(0, COMM1));
+            vec![Medium::MainCan, Medium::PayloadCan]
+        }
+        Role::Payload => {
+            cfg.ifaces = vec![IfaceConfig::can("payload-can")];
+            rt.set_default(Route::via(0, PC))
+                .set_range(PAYLOADS, Route::direct(0));
+            vec![Medium::PayloadCan]
+        }
+        Role::Ground => {
+            cfg.ifaces = vec![IfaceConfig::packet("ground")];
+            rt.set_default(Route::direct(0));
+            vec![Medium::Ground]
+        }
+    };
+    cfg.routes = rt;
+    (cfg, media)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_network_has_every_node_of_the_table() {
+        let net = NetworkSpec::default_m6p();
+        let addrs: Vec<u8> = net.nodes.iter().map(|n| n.addr).collect();
+        assert_eq!(addrs, vec![1, 2, 3, 4, 5, 6, 12, 13, 16]);
+        assert!(addrs.iter().all(|a| !RESERVED.contains(a)));
+    }
+
+    #[test]
+    fn routes_follow_the_icd_topology() {
+        let net = NetworkSpec::default_m6p();
+        let route = |name: &str, dst: u8| {
+            let spec = net.nodes.iter().find(|n| n.name == name).cloned();
+            spec.map(|s| node_config(&s).0.routes.lookup(dst))
+        };
+        assert_eq!(route("FC", 12), Some(Some(Route::via(0, PC))));
+        assert_eq!(route("FC", 16), Some(Some(Route::via(0, COMM1))));
+        assert_eq!(route("COMM1", 16), Some(Some(Route::direct(1))));
+        assert_eq!(route("PC", 13), Some(Some(Route::direct(1))));
+        assert_eq!(route("PL12", 3), Some(Some(Route::via(0, PC))));
+        assert_eq!(route("GS16", 3), Some(Some(Route::direct(0))));
+    }
+}

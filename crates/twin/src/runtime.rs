@@ -1,0 +1,428 @@
+//! Build the network of [`NetworkSpec`] on its media, run every node as its own tokio task
+//! on one current-thread runtime, and report what happened.
+//!
+//! In virtual time the runtime's clock is paused and jumps to the next timer, so a run is
+//! deterministic (same options and seed, same trace) and as fast as the CPU allows. In real
+//! time the same tasks follow the wall clock, which is what outside programs need; a run
+//! with outside links is always in real time.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use bus::can::BusStats;
+use bus::driver::{Attachment, NodeCtl, run_node};
+use bus::inbox::inbox;
+use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats};
+use bus::net::NetStats;
+use bus::outside::Segments;
+use bus::trace::TraceEvent;
+use bus::{CanBus, CanBusConfig, Clock, ClockMode, PacketNet, PacketNetConfig};
+use csp::SimTime;
+use csp::node::{App, Host, NodeCounters};
+use tokio::sync::{mpsc, oneshot};
+
+use crate::ground::{GroundApp, PlannedRequest, RequestResult, Results};
+use crate::network::{Medium, NetworkSpec, Role, node_config};
+
+/// Everything a run needs.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// The network.
+    pub network: NetworkSpec,
+    /// Simulated duration; `None` runs until Ctrl-C.
+    pub duration: Option<Duration>,
+    /// Virtual or real time.
+    pub clock: ClockMode,
+    /// Seed of every random choice (CFP idents, ephemeral ports, impairments).
+    pub seed: u64,
+    /// KISS/TCP servers to open for outside nodes.
+    pub kiss_listen: Vec<SocketAddr>,
+    /// KISS/TCP servers of outside nodes to connect to.
+    pub kiss_connect: Vec<SocketAddr>,
+    /// Settings of every KISS link.
+    pub kiss: KissLinkConfig,
+    /// Requests each internal ground station sends, by station address.
+    pub ground_plan: BTreeMap<u8, Vec<PlannedRequest>>,
+    /// UTC unix seconds at simulated time zero.
+    pub epoch_unix_s: u64,
+    /// Keep the trace of every frame and packet in the report.
+    pub trace: bool,
+}
+
+impl RunOptions {
+    /// The default network for `duration` of virtual time with seed 1.
+    pub fn new(network: NetworkSpec, duration: Duration) -> Self {
+        RunOptions {
+            network,
+            duration: Some(duration),
+            clock: ClockMode::Virtual,
+            seed: 1,
+            kiss_listen: Vec::new(),
+            kiss_connect: Vec::new(),
+            kiss: KissLinkConfig::default(),
+            ground_plan: BTreeMap::new(),
+            epoch_unix_s: 1_577_836_800,
+            trace: false,
+        }
+    }
+
+    /// Whether the run has links to programs outside the twin.
+    pub fn has_outside_links(&self) -> bool {
+        !self.kiss_listen.is_empty() || !self.kiss_connect.is_empty()
+    }
+}
+
+/// Counters of one node at the end of a run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeReport {
+    /// Node name.
+    pub name: String,
+    /// CSP address.
+    pub addr: u8,
+    /// Its counters.
+    pub counters: NodeCounters,
+}
+
+/// What a run did.
+#[derive(Debug, Clone)]
+pub struct RunReport {
+    /// Simulated time reached.
+    pub sim_time: SimTime,
+    /// Wall-clock time taken.
+    pub wall: Duration,
+    /// Per-node counters, in start order.
+    pub nodes: Vec<NodeReport>,
+    /// Main and payload CAN bus counters.
+    pub buses: Vec<BusStats>,
+    /// Ground segment counters.
+    pub ground: NetStats,
+    /// KISS/TCP link counters, by link.
+    pub kiss: Vec<(String, KissLinkStats)>,
+    /// Outcomes of the ground stations' requests.
+    pub results: Vec<RequestResult>,
+    /// Every frame and packet, when tracing was asked for.
+    pub trace: Vec<TraceEvent>,
+}
+
+/// A tokio runtime for `mode`: current-thread, with a paused clock in virtual time.
+pub fn build_runtime(mode: ClockMode) -> anyhow::Result<tokio::runtime::Runtime> {
+    let mut b = tokio::runtime::Builder::new_current_thread();
+    b.enable_all();
+    if mode == ClockMode::Virtual {
+        b.start_paused(true);
+    }
+    b.build().context("building the tokio runtime")
+}
+
+/// A well-mixed 64-bit value from the run seed and a salt (splitmix64).
+pub fn mix(seed: u64, salt: u64) -> u64 {
+    let mut z = seed ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+fn app_for(role: Role, plan: Vec<PlannedRequest>, results: &Results) -> Box<dyn App> {
+    match role {
+        Role::CommPrimary | Role::CommSecondary => Box::new(nodes_comm::app()),
+        Role::Fc => Box::new(nodes_fc::app()),
+        Role::Eps => Box::new(nodes_eps::app()),
+        Role::Ecu => Box::new(nodes_ecu::app()),
+        Role::Pc => Box::new(nodes_pc::app()),
+        Role::Payload => Box::new(nodes_payload::app()),
+        Role::Ground => Box::new(GroundApp::new(plan, results.clone())),
+    }
+}
+
+/// Run the twin. `ready` receives the bound addresses of the KISS servers once they listen.
+pub async fn run(
+    mut opts: RunOptions,
+    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+) -> anyhow::Result<RunReport> {
+    let wall_start = Instant::now();
+    let clock = Clock::new(opts.clock);
+    let segs = Segments {
+        main: CanBus::new(
+            CanBusConfig {
+                name: "main".into(),
+                bitrate_bps: opts.network.main_bitrate_bps,
+            },
+            mix(opts.seed, 0x100),
+        ),
+        payload: CanBus::new(
+            CanBusConfig {
+                name: "payload".into(),
+                bitrate_bps: opts.network.payload_bitrate_bps,
+            },
+            mix(opts.seed, 0x101),
+        ),
+        ground: PacketNet::new(
+            PacketNetConfig {
+                air_rate_bps: opts.network.uhf_rate_bps,
+                ..PacketNetConfig::ground()
+            },
+            mix(opts.seed, 0x102),
+        ),
+    };
+    let (trace_tx, mut trace_rx) = mpsc::unbounded_channel();
+    if opts.trace {
+        segs.main.set_trace(trace_tx.clone());
+        segs.payload.set_trace(trace_tx.clone());
+        segs.ground.set_trace(trace_tx.clone());
+    }
+    drop(trace_tx);
+    let mut background = vec![
+        tokio::spawn(segs.main.clone().run(clock)),
+        tokio::spawn(segs.payload.clone().run(clock)),
+        tokio::spawn(segs.ground.clone().run(clock)),
+    ];
+
+    let results: Results = Arc::new(Mutex::new(Vec::new()));
+    let mut nodes = Vec::new();
+    for spec in &opts.network.nodes {
+        let (mut cfg, media) = node_config(spec);
+        let salt = u64::from(spec.addr);
+        cfg.cfp_first_ident = (mix(opts.seed, salt) % 1024) as u16;
+        cfg.first_ephemeral_port = 32 + (mix(opts.seed, salt + 0x40) % 32) as u8;
+        cfg.epoch_unix_s = opts.epoch_unix_s;
+        let (inbox_tx, inbox_rx) = inbox();
+        let ports: Vec<Attachment> = media
+            .iter()
+            .enumerate()
+            .map(|(i, m)| match m {
+                Medium::MainCan => Attachment::Can(segs.main.attach(
+                    &spec.name,
+                    &[spec.addr],
+                    false,
+                    inbox_tx.clone(),
+                    i,
+                )),
+                Medium::PayloadCan => Attachment::Can(segs.payload.attach(
+                    &spec.name,
+                    &[spec.addr],
+                    false,
+                    inbox_tx.clone(),
+                    i,
+                )),
+                Medium::GroundRadio => Attachment::Net(segs.ground.attach(
+                    &format!("{}-uhf", spec.name),
+                    &[],
+                    true,
+                    true,
+                    inbox_tx.clone(),
+                    i,
+                )),
+                Medium::Ground => Attachment::Net(segs.ground.attach(
+                    &spec.name,
+                    &[spec.addr],
+                    false,
+                    false,
+                    inbox_tx.clone(),
+                    i,
+                )),
+            })
+            .collect();
+        drop(inbox_tx);
+        let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
+        let host = Host::new(cfg, app_for(spec.role, plan, &results), clock.now());
+        let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
+        let handle = tokio::spawn(async move {
+            let host = run_node(host, ports, inbox_rx, ctl_rx, clock).await;
+            host.node.counters().clone()
+        });
+        nodes.push((spec.clone(), ctl_tx, handle));
+    }
+
+    let mut kiss_stats = Vec::new();
+    let mut bound = Vec::new();
+    for addr in &opts.kiss_listen {
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("listening for KISS/TCP on {addr}"))?;
+        let local = listener.local_addr().context("reading the bound address")?;
+        bound.push(local);
+        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
+        kiss_stats.push((format!("listen {local}"), stats.clone()));
+        background.push(tokio::spawn(kiss_tcp::serve(
+            listener,
+            segs.clone(),
+            opts.kiss.clone(),
+            stats,
+            clock,
+        )));
+    }
+    for addr in &opts.kiss_connect {
+        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
+        kiss_stats.push((format!("connect {addr}"), stats.clone()));
+        background.push(tokio::spawn(kiss_tcp::connect(
+            *addr,
+            segs.clone(),
+            opts.kiss.clone(),
+            stats,
+            clock,
+        )));
+    }
+    if let Some(r) = ready {
+        let _ = r.send(bound);
+    }
+
+    match opts.duration {
+        Some(d) => tokio::select! {
+            biased;
+            _ = tokio::signal::ctrl_c() => tracing::info!("Ctrl-C: stopping"),
+            () = clock.sleep_until(SimTime::ZERO + d) => {}
+        },
+        None => {
+            let _ = tokio::signal::ctrl_c().await;
+            tracing::info!("Ctrl-C: stopping");
+        }
+    }
+    let sim_time = match opts.duration {
+        Some(d) if clock.is_virtual() => SimTime::ZERO + d,
+        _ => clock.now(),
+    };
+
+    for (_, ctl, _) in &nodes {
+        let _ = ctl.send(NodeCtl::Stop);
+    }
+    let mut node_reports = Vec::new();
+    for (spec, _, handle) in nodes {
+        let counters = handle
+            .await
+            .with_context(|| format!("node {} task failed", spec.name))?;
+        node_reports.push(NodeReport {
+            name: spec.name,
+            addr: spec.addr,
+            counters,
+        });
+    }
+    for h in background {
+        h.abort();
+    }
+    let mut trace = Vec::new();
+    while let Ok(ev) = trace_rx.try_recv() {
+        trace.push(ev);
+    }
+    let results = std::mem::take(
+        &mut *results
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner),
+    );
+    Ok(RunReport {
+        sim_time,
+        wall: wall_start.elapsed(),
+        nodes: node_reports,
+        buses: vec![segs.main.stats(), segs.payload.stats()],
+        ground: segs.ground.stats(),
+        kiss: kiss_stats
+            .into_iter()
+            .map(|(n, s)| {
+                (
+                    n,
+                    s.lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .clone(),
+                )
+            })
+            .collect(),
+        results,
+        trace,
+    })
+}
+
+impl RunReport {
+    /// The end-of-run table: per node packets in/out, forwarded, drops; per bus load.
+    pub fn table(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let elapsed = self.sim_time - SimTime::ZERO;
+        let _ = writeln!(
+            s,
+            "simulated {:.3} s in {:.3} s wall ({:.0}x real time)",
+            self.sim_time.as_secs_f64(),
+            self.wall.as_secs_f64(),
+            self.sim_time.as_secs_f64() / self.wall.as_secs_f64().max(1e-9)
+        );
+        let _ = writeln!(
+            s,
+            "\n{:<7} {:>3} {:>9} {:>9} {:>9} {:>9} {:>7}  drops by reason",
+            "node", "id", "pkts in", "pkts out", "forwarded", "to app", "drops"
+        );
+        for n in &self.nodes {
+            let c = &n.counters;
+            let reasons: Vec<String> = c.drops.iter().map(|(k, v)| format!("{k}: {v}")).collect();
+            let _ = writeln!(
+                s,
+                "{:<7} {:>3} {:>9} {:>9} {:>9} {:>9} {:>7}  {}",
+                n.name,
+                n.addr,
+                c.rx_packets,
+                c.tx_packets,
+                c.forwarded,
+                c.delivered + c.service_replies,
+                c.total_drops(),
+                reasons.join(", ")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\n{:<8} {:>10} {:>11} {:>9} {:>8} {:>8}",
+            "bus", "frames", "data bytes", "load %", "dropped", "corrupt"
+        );
+        for b in &self.buses {
+            let _ = writeln!(
+                s,
+                "{:<8} {:>10} {:>11} {:>9.3} {:>8} {:>8}",
+                b.name,
+                b.frames,
+                b.bytes,
+                100.0 * b.load(elapsed),
+                b.dropped,
+                b.corrupted
+            );
+        }
+        let g = &self.ground;
+        let _ = writeln!(
+            s,
+            "{:<8} {:>10} {:>11} {:>9.3} {:>8} {:>8}  (packets; UHF air load)",
+            g.name,
+            g.packets,
+            g.bytes,
+            100.0 * g.air_busy.as_secs_f64() / elapsed.as_secs_f64().max(1e-9),
+            g.dropped,
+            "-"
+        );
+        for (name, k) in &self.kiss {
+            let _ = writeln!(
+                s,
+                "\nKISS/TCP {name}: {} connections, {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused",
+                k.connections,
+                k.packets_in,
+                k.packets_out,
+                k.garbage_bytes,
+                k.bad_crc,
+                k.short,
+                k.oversize,
+                k.refused
+            );
+        }
+        if !self.results.is_empty() {
+            let ok = self
+                .results
+                .iter()
+                .filter(|r| matches!(r.outcome, crate::ground::Outcome::Reply { .. }))
+                .count();
+            let _ = writeln!(
+                s,
+                "\nground requests: {} sent, {} answered, {} unanswered",
+                self.results.len(),
+                ok,
+                self.results.len() - ok
+            );
+        }
+        s
+    }
+}
