@@ -1,0 +1,110 @@
+//! The twin over a real TCP socket: an outside libcsp-style KISS peer (a Python script
+//! written from the spec, and the `gs` client) pings nodes through the twin, and garbage on
+//! the port is counted without stopping it. These tests run in real time.
+#![allow(clippy::unwrap_used)]
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Duration;
+
+use bus::ClockMode;
+use m6p_twin::network::NetworkSpec;
+use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
+
+fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Run the twin in real time for `secs` with a KISS server on an ephemeral port, and
+/// call `client(addr)` on a thread while it runs.
+fn with_twin(secs: u64, client: impl FnOnce(SocketAddr) + Send + 'static) -> RunReport {
+    let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(secs));
+    opts.clock = ClockMode::Realtime { speed: 1.0 };
+    opts.kiss_listen = vec!["127.0.0.1:0".parse().unwrap()];
+    let rt = build_runtime(opts.clock).unwrap();
+    rt.block_on(async move {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let twin = tokio::spawn(run(opts, Some(tx)));
+        let addr = rx.await.unwrap()[0];
+        let th = tokio::task::spawn_blocking(move || client(addr));
+        th.await.unwrap();
+        twin.await.unwrap().unwrap()
+    })
+}
+
+fn python_peer(addr: SocketAddr, extra: &[&str]) -> (bool, String) {
+    let out = Command::new("python3")
+        .arg(repo_root().join("tests/kiss_peer.py"))
+        .arg("--connect")
+        .arg(addr.to_string())
+        .args(extra)
+        .output()
+        .expect("python3 is needed for this test");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+#[test]
+fn libcsp_style_python_peer_pings_fc_and_payload_from_the_ground() {
+    let report = with_twin(12, |addr| {
+        let (ok, text) = python_peer(addr, &["--as", "16", "--targets", "3,12"]);
+        println!("{text}");
+        assert!(ok, "{text}");
+        assert_eq!(text.matches("PASS").count(), 12, "{text}");
+    });
+    assert_eq!(report.kiss[0].1.bad_crc, 0);
+    assert!(report.kiss[0].1.packets_in >= 12);
+}
+
+#[test]
+fn python_peer_on_the_payload_bus_reaches_the_fc_through_the_pc() {
+    let report = with_twin(8, |addr| {
+        let (ok, text) = python_peer(addr, &["--as", "14", "--targets", "3,6"]);
+        println!("{text}");
+        assert!(ok, "{text}");
+    });
+    let pc = report.nodes.iter().find(|n| n.name == "PC").unwrap();
+    assert!(pc.counters.forwarded >= 12, "{:?}", pc.counters);
+}
+
+#[test]
+fn gs_client_binary_pings_the_fc_over_a_real_socket() {
+    with_twin(6, |addr| {
+        let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+            .args([
+                "gs",
+                "--connect",
+                &addr.to_string(),
+                "ping",
+                "3",
+                "--count",
+                "2",
+                "--interval",
+                "100ms",
+            ])
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success(), "{text}");
+        assert!(text.contains("2 sent, 2 answered"), "{text}");
+    });
+}
+
+#[test]
+fn thirty_seconds_of_random_bytes_then_pings_still_answered() {
+    let report = with_twin(45, |addr| {
+        let (ok, text) = python_peer(addr, &["--garbage", "30", "--targets", "3"]);
+        println!("{text}");
+        assert!(ok, "{text}");
+    });
+    let k = &report.kiss[0].1;
+    println!("{k:?}");
+    assert!(k.connections >= 2);
+    assert!(k.garbage_bytes + k.bad_crc + k.short + k.oversize > 0);
+    assert!(k.bytes_in > 1_000_000, "{k:?}");
+}
