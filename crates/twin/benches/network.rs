@@ -1,1 +1,125 @@
-fn main() {}
+//! Network benchmarks (criterion): CSP request-reply round trips per second between two
+//! nodes over the in-process CAN bus in virtual time, 64-byte payload, and the whole
+//! default network for a simulated hour.
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use bus::driver::{Attachment, NodeCtl, run_node};
+use bus::inbox::inbox;
+use bus::{CanBus, CanBusConfig, Clock, ClockMode};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use csp::node::{App, Host, IfaceConfig, NoApp, Node, NodeConfig};
+use csp::reqrep::Client;
+use csp::router::Route;
+use csp::{Header, Packet, SimTime};
+use m6p_twin::network::NetworkSpec;
+use m6p_twin::runtime::{RunOptions, build_runtime, run};
+
+/// Pings node 3 back to back: each reply sends the next request.
+struct PingPong {
+    client: Client,
+    left: u64,
+    done: Arc<Mutex<u64>>,
+}
+
+impl PingPong {
+    fn fire(&mut self, node: &mut Node, now: SimTime) {
+        if self.left == 0 {
+            return;
+        }
+        self.left -= 1;
+        let payload: Vec<u8> = (0..64u8).collect();
+        let h = Header::new(node.addr(), 3, 1, 0);
+        let _ = self.client.request(node, 0, h, 3, 1, payload, Duration::from_secs(1), now);
+    }
+}
+
+impl App for PingPong {
+    fn start(&mut self, node: &mut Node, now: SimTime) {
+        self.fire(node, now);
+    }
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        if self.client.handle_reply(node, &packet, now).is_some() {
+            *self.done.lock().unwrap_or_else(std::sync::PoisonError::into_inner) += 1;
+            self.fire(node, now);
+        }
+    }
+}
+
+fn node_cfg(name: &str, addr: u8) -> NodeConfig {
+    let mut c = NodeConfig::new(name, addr);
+    c.ifaces = vec![IfaceConfig::can("can")];
+    c.routes.set_default(Route::direct(0));
+    c
+}
+
+/// Run `n` round trips; returns (wall time, simulated time).
+fn round_trips(n: u64) -> (Duration, SimTime) {
+    let rt = build_runtime(ClockMode::Virtual).expect("runtime");
+    rt.block_on(async move {
+        let clock = Clock::new(ClockMode::Virtual);
+        let bus = CanBus::new(CanBusConfig::new("bench"), 1);
+        let (ta, ra) = inbox();
+        let (tb, rb) = inbox();
+        let pa = bus.attach("A", &[16], false, ta, 0);
+        let pb = bus.attach("B", &[3], false, tb, 0);
+        tokio::spawn(bus.clone().run(clock));
+        let done = Arc::new(Mutex::new(0u64));
+        let (ca, cra) = tokio::sync::mpsc::unbounded_channel();
+        let (cb, crb) = tokio::sync::mpsc::unbounded_channel();
+        let a = Host::new(node_cfg("A", 16), PingPong { client: Client::new(), left: n, done: done.clone() }, SimTime::ZERO);
+        let b = Host::new(node_cfg("B", 3), NoApp, SimTime::ZERO);
+        let start = Instant::now();
+        let ha = tokio::spawn(run_node(a, vec![Attachment::Can(pa)], ra, cra, clock));
+        let hb = tokio::spawn(run_node(b, vec![Attachment::Can(pb)], rb, crb, clock));
+        loop {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            if *done.lock().unwrap_or_else(std::sync::PoisonError::into_inner) >= n {
+                break;
+            }
+        }
+        let wall = start.elapsed();
+        let sim = clock.now();
+        let _ = ca.send(NodeCtl::Stop);
+        let _ = cb.send(NodeCtl::Stop);
+        let _ = ha.await;
+        let _ = hb.await;
+        (wall, sim)
+    })
+}
+
+fn bench_round_trips(c: &mut Criterion) {
+    let mut g = c.benchmark_group("csp_over_can");
+    g.throughput(Throughput::Elements(1000));
+    g.sample_size(10).measurement_time(Duration::from_secs(5));
+    g.bench_function("ping_64B_round_trips_x1000", |b| {
+        b.iter_custom(|iters| (0..iters).map(|_| round_trips(1000).0).sum())
+    });
+    g.finish();
+    let (wall, sim) = round_trips(10_000);
+    eprintln!(
+        "10000 round trips of 64-byte pings: {:.0} round trips per wall second, {:.3} s simulated ({:.1} us per round trip on the bus)",
+        10_000.0 / wall.as_secs_f64(),
+        sim.as_secs_f64(),
+        sim.as_secs_f64() * 1e6 / 10_000.0
+    );
+}
+
+fn bench_default_network(c: &mut Criterion) {
+    let mut g = c.benchmark_group("network");
+    g.sample_size(10).measurement_time(Duration::from_secs(5));
+    g.bench_function("default_network_1h_virtual", |b| {
+        b.iter(|| {
+            let net = NetworkSpec::default_m6p();
+            let mut opts = RunOptions::new(net.clone(), Duration::from_secs(3600));
+            opts.ground_plan.insert(16, m6p_twin::default_plan(&net, Duration::from_secs(3600)));
+            let rt = build_runtime(opts.clock).expect("runtime");
+            rt.block_on(run(opts, None)).expect("run")
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_round_trips, bench_default_network);
+criterion_main!(benches);
