@@ -658,3 +658,188 @@ impl<T: App + ?Sized> App for Box<T> {
         (**self).reset(now)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::header::flags;
+    use crate::{Header, cfp};
+
+    /// A PC-like node: CAN iface 0 (main, default route), CAN iface 1 (payloads 12-15).
+    fn router_node() -> Node {
+        let mut cfg = NodeConfig::new("PC", 6);
+        cfg.ifaces = vec![IfaceConfig::can("main"), IfaceConfig::can("payload")];
+        cfg.routes
+            .set_default(Route::direct(0))
+            .set_range(12..=15, Route::direct(1));
+        Node::new(cfg, SimTime::ZERO)
+    }
+
+    fn frames_of(p: &Packet, mac: u8) -> Vec<CanFrame> {
+        let mut out = Vec::new();
+        cfp::fragment_with_ident(p, mac, 5, &mut out).unwrap();
+        out
+    }
+
+    fn drain(n: &mut Node) -> Vec<Transmit> {
+        std::iter::from_fn(|| n.poll_transmit()).collect()
+    }
+
+    fn reassemble(tx: &[Transmit]) -> Vec<(IfaceId, Packet)> {
+        let mut r = Reassembler::default();
+        tx.iter()
+            .filter_map(|t| match t {
+                Transmit::Can { iface, frame } => {
+                    r.handle(frame, SimTime::ZERO).map(|p| (*iface, p.unwrap()))
+                }
+                Transmit::Packet { iface, packet } => Some((*iface, packet.clone())),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn forwards_between_interfaces_without_touching_the_crc() {
+        let mut n = router_node();
+        let mut h = Header::new(3, 12, 10, 40);
+        h.flags = flags::CRC32;
+        // A deliberately wrong CRC: a router must not check or fix it.
+        let p = Packet::new(h, vec![1, 2, 3, 0xde, 0xad, 0xbe, 0xef]);
+        for f in frames_of(&p, 6) {
+            n.handle_frame(0, &f, SimTime::ZERO);
+        }
+        let out = reassemble(&drain(&mut n));
+        assert_eq!(out, vec![(1, p)]);
+        assert_eq!(n.counters().forwarded, 1);
+    }
+
+    #[test]
+    fn never_sends_back_out_of_the_incoming_interface() {
+        let mut n = router_node();
+        let p = Packet::new(Header::new(3, 4, 1, 40), vec![1]);
+        for f in frames_of(&p, 6) {
+            n.handle_frame(0, &f, SimTime::ZERO);
+        }
+        assert!(drain(&mut n).is_empty());
+        assert_eq!(n.counters().drops.get("same iface"), Some(&1));
+    }
+
+    #[test]
+    fn broadcast_is_answered_from_the_real_address_and_not_forwarded() {
+        let mut n = router_node();
+        n.handle_packet(
+            0,
+            Packet::new(Header::new(3, 31, 1, 45), vec![6]),
+            SimTime::ZERO,
+        );
+        let out = reassemble(&drain(&mut n));
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].1.header, Header::new(6, 3, 45, 1));
+        assert_eq!(n.counters().forwarded, 0);
+    }
+
+    #[test]
+    fn crc_mismatch_on_local_delivery_is_a_counted_drop() {
+        let mut n = router_node();
+        let mut h = Header::new(3, 6, 1, 40);
+        h.flags = flags::CRC32;
+        n.handle_packet(0, Packet::new(h, vec![9, 0, 0, 0, 0]), SimTime::ZERO);
+        assert!(drain(&mut n).is_empty());
+        assert_eq!(n.counters().drops.get("crc32"), Some(&1));
+    }
+
+    #[test]
+    fn unbound_ports_drop_and_bound_ports_deliver() {
+        let mut n = router_node();
+        n.handle_packet(
+            0,
+            Packet::new(Header::new(3, 6, 20, 40), vec![1]),
+            SimTime::ZERO,
+        );
+        assert_eq!(n.counters().drops.get("unbound port"), Some(&1));
+        n.bind(20);
+        n.handle_packet(
+            0,
+            Packet::new(Header::new(3, 6, 20, 40), vec![1]),
+            SimTime::ZERO,
+        );
+        assert_eq!(n.poll_delivery().map(|p| p.data), Some(vec![1]));
+    }
+
+    #[test]
+    fn sending_checks_route_and_mtu() {
+        let mut cfg = NodeConfig::new("X", 9);
+        cfg.ifaces = vec![IfaceConfig::can("main")];
+        cfg.routes.set(3, Route::direct(0));
+        let mut n = Node::new(cfg, SimTime::ZERO);
+        let to = |dst| Packet::new(Header::new(9, dst, 1, 40), vec![0; 10]);
+        assert_eq!(n.send(to(4), SimTime::ZERO), Err(SendError::NoRoute(4)));
+        assert!(n.send(to(3), SimTime::ZERO).is_ok());
+        let big = Packet::new(Header::new(9, 3, 1, 40), vec![0; 257]);
+        assert_eq!(
+            n.send(big, SimTime::ZERO),
+            Err(SendError::TooLong { len: 257, mtu: 256 })
+        );
+        let bad = Packet::new(Header::new(40, 3, 1, 40), vec![]);
+        assert_eq!(n.send(bad, SimTime::ZERO), Err(SendError::BadHeader));
+    }
+
+    #[test]
+    fn ephemeral_ports_cycle_through_32_to_63_and_run_out() {
+        let mut n = router_node();
+        let ports: Vec<u8> = (0..32).map(|_| n.alloc_port().unwrap()).collect();
+        let mut sorted = ports.clone();
+        sorted.sort();
+        assert_eq!(sorted, (32..=63).collect::<Vec<_>>());
+        assert_eq!(n.alloc_port(), None);
+        n.unbind(40);
+        assert_eq!(n.alloc_port(), Some(40));
+    }
+
+    #[test]
+    fn reboot_magic_resets_uptime_and_bindings() {
+        let mut host = Host::new(
+            {
+                let mut c = NodeConfig::new("FC", 3);
+                c.ifaces = vec![IfaceConfig::packet("p")];
+                c.routes.set_default(Route::direct(0));
+                c
+            },
+            StubApp::new(&[10]),
+            SimTime::ZERO,
+        );
+        let t = SimTime::from_secs(100);
+        let magic = 0x8007_8007u32.to_be_bytes().to_vec();
+        host.handle_packet(0, Packet::new(Header::new(16, 3, 4, 40), magic), t);
+        assert!(host.node.poll_transmit().is_none(), "reboot sends no reply");
+        assert_eq!(host.node.counters().reboots, 1);
+        assert_eq!(host.node.uptime(SimTime::from_secs(105)).as_secs(), 5);
+        assert!(host.node.is_bound(10), "the app bound its ports again");
+    }
+
+    #[test]
+    fn stub_ports_answer_failure_for_anything() {
+        let mut host = Host::new(
+            {
+                let mut c = NodeConfig::new("EPS", 4);
+                c.ifaces = vec![IfaceConfig::packet("p")];
+                c.routes.set_default(Route::direct(0));
+                c
+            },
+            StubApp::new(&[10]),
+            SimTime::ZERO,
+        );
+        for (req, want) in [(vec![5u8, 1, 2], vec![5u8, 0]), (vec![], vec![0, 0])] {
+            host.handle_packet(
+                0,
+                Packet::new(Header::new(16, 4, 10, 40), req),
+                SimTime::ZERO,
+            );
+            let Some(Transmit::Packet { packet, .. }) = host.node.poll_transmit() else {
+                panic!("no reply")
+            };
+            assert_eq!(packet.data, want);
+            assert_eq!(packet.header, Header::new(4, 16, 40, 10));
+        }
+    }
+}

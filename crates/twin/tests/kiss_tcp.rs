@@ -108,3 +108,49 @@ fn thirty_seconds_of_random_bytes_then_pings_still_answered() {
     assert!(k.garbage_bytes + k.bad_crc + k.short + k.oversize > 0);
     assert!(k.bytes_in > 1_000_000, "{k:?}");
 }
+
+#[test]
+fn kiss_connect_reaches_the_payload_server_and_reconnects_after_a_drop() {
+    use csp::kiss::{Decoder, KissEvent};
+    use csp::{Header, Packet};
+    use std::io::{Read, Write};
+    // ICD 2.3: the payload runs the TCP server, the platform connects to it.
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let server = listener.local_addr().unwrap();
+    let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(6));
+    opts.clock = ClockMode::Realtime { speed: 1.0 };
+    opts.kiss_connect = vec![server];
+    let rt = build_runtime(opts.clock).unwrap();
+    let report = rt.block_on(async move {
+        let twin = tokio::spawn(run(opts, None));
+        let outside = tokio::task::spawn_blocking(move || {
+            for round in 0..2u8 {
+                let (mut s, _) = listener.accept().unwrap();
+                s.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+                let ping = Packet::new(Header::new(12, 3, 1, 40 + round), vec![round, 0xc0, 0xdb]);
+                let mut wire = Vec::new();
+                csp::kiss::encode(&ping, &mut wire);
+                s.write_all(&wire).unwrap();
+                let mut dec = Decoder::default();
+                let mut events = Vec::new();
+                let mut buf = [0u8; 512];
+                let reply = loop {
+                    let n = s.read(&mut buf).expect("a reply within 3 s");
+                    assert!(n > 0, "twin closed the connection");
+                    dec.push(&buf[..n], &mut events);
+                    if let Some(KissEvent::Packet(p)) = events.pop() {
+                        break p;
+                    }
+                };
+                assert_eq!(reply.header, Header::new(3, 12, 40 + round, 1));
+                assert_eq!(reply.data, ping.data);
+                // Dropping the stream closes the connection; the twin must come back.
+            }
+        });
+        outside.await.unwrap();
+        twin.await.unwrap().unwrap()
+    });
+    let k = &report.kiss[0].1;
+    assert!(k.connections >= 2 && k.disconnects >= 1, "{k:?}");
+    assert_eq!(k.packets_in, 2);
+}
