@@ -31,7 +31,9 @@ impl PingPong {
         self.left -= 1;
         let payload: Vec<u8> = (0..64u8).collect();
         let h = Header::new(node.addr(), 3, 1, 0);
-        let _ = self.client.request(node, 0, h, 3, 1, payload, Duration::from_secs(1), now);
+        let _ = self
+            .client
+            .request(node, 0, h, 3, 1, payload, Duration::from_secs(1), now);
     }
 }
 
@@ -41,7 +43,10 @@ impl App for PingPong {
     }
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
         if self.client.handle_reply(node, &packet, now).is_some() {
-            *self.done.lock().unwrap_or_else(std::sync::PoisonError::into_inner) += 1;
+            *self
+                .done
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) += 1;
             self.fire(node, now);
         }
     }
@@ -68,14 +73,26 @@ fn round_trips(n: u64) -> (Duration, SimTime) {
         let done = Arc::new(Mutex::new(0u64));
         let (ca, cra) = tokio::sync::mpsc::unbounded_channel();
         let (cb, crb) = tokio::sync::mpsc::unbounded_channel();
-        let a = Host::new(node_cfg("A", 16), PingPong { client: Client::new(), left: n, done: done.clone() }, SimTime::ZERO);
+        let a = Host::new(
+            node_cfg("A", 16),
+            PingPong {
+                client: Client::new(),
+                left: n,
+                done: done.clone(),
+            },
+            SimTime::ZERO,
+        );
         let b = Host::new(node_cfg("B", 3), NoApp, SimTime::ZERO);
         let start = Instant::now();
         let ha = tokio::spawn(run_node(a, vec![Attachment::Can(pa)], ra, cra, clock));
         let hb = tokio::spawn(run_node(b, vec![Attachment::Can(pb)], rb, crb, clock));
         loop {
             tokio::time::sleep(Duration::from_millis(100)).await;
-            if *done.lock().unwrap_or_else(std::sync::PoisonError::into_inner) >= n {
+            if *done
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                >= n
+            {
                 break;
             }
         }
@@ -113,7 +130,8 @@ fn bench_default_network(c: &mut Criterion) {
         b.iter(|| {
             let net = NetworkSpec::default_m6p();
             let mut opts = RunOptions::new(net.clone(), Duration::from_secs(3600));
-            opts.ground_plan.insert(16, m6p_twin::default_plan(&net, Duration::from_secs(3600)));
+            opts.ground_plan
+                .insert(16, m6p_twin::default_plan(&net, Duration::from_secs(3600)));
             let rt = build_runtime(opts.clock).expect("runtime");
             rt.block_on(run(opts, None)).expect("run")
         })
