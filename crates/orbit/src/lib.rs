@@ -12,6 +12,7 @@
 //! - [`igrf`]: IGRF-14 main field, degree 13, with secular variation.
 //! - [`passes`]: azimuth, elevation, range and pass prediction for a ground site.
 
+pub mod cowell;
 pub mod eclipse;
 pub mod frames;
 pub mod geodetic;
