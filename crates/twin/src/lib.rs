@@ -6,10 +6,14 @@
 //! - [`gs`]: the outside ground-station client (`m6p-twin gs`).
 
 pub mod duration;
+pub mod expect;
 pub mod ground;
 pub mod gs;
 pub mod network;
+pub mod plan;
 pub mod runtime;
+pub mod scenario;
+pub mod timefmt;
 
 use std::time::Duration;
 

@@ -1,0 +1,316 @@
+//! From a validated [`Scenario`] to what the runtime executes: run options, the ground
+//! stations' request plans, the fault timeline, and the expectations to check.
+
+use std::time::Duration;
+
+use bus::ClockMode;
+use bus::impair::Impairments;
+use csp::SimTime;
+
+use crate::ground::PlannedRequest;
+use crate::runtime::RunOptions;
+use crate::scenario::{
+    ExpectKind, ExpectationSpec, FaultKind, LinkKind, NodeRef, Occurrence, RequestKind, Scenario,
+    parse_hex,
+};
+
+/// A medium a fault applies to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MediumId {
+    /// Main CAN bus.
+    Main,
+    /// Payload CAN bus.
+    Payload,
+    /// The UHF air channel of the ground segment.
+    Uhf,
+}
+
+/// One change the fault director applies at a time.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FaultAction {
+    /// Set a medium's impairments.
+    Impair(MediumId, Impairments),
+    /// Node power.
+    Power(u8, bool),
+    /// Node reboot.
+    Reboot(u8),
+    /// Node hang (or recovery).
+    Hang(u8, bool),
+}
+
+/// A fault action at a time, with a description for logs and recordings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimedFault {
+    /// When.
+    pub at: SimTime,
+    /// What.
+    pub action: FaultAction,
+    /// Human-readable, for example `faults[0]: drop 0.5 on main`.
+    pub what: String,
+}
+
+/// What an expectation checks, resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Check {
+    /// Every (or any) occurrence of a command is answered as required.
+    Reply {
+        /// Command name.
+        command: String,
+        /// Every or any.
+        occurrence: Occurrence,
+        /// Longest round trip.
+        within: Option<Duration>,
+        /// Result code (reply byte 1).
+        result: Option<u8>,
+        /// Exact reply bytes.
+        data: Option<Vec<u8>>,
+        /// Reply length.
+        data_len: Option<usize>,
+    },
+    /// Every (or any) occurrence goes unanswered.
+    NoReply {
+        /// Command name.
+        command: String,
+        /// Every or any.
+        occurrence: Occurrence,
+    },
+    /// A counter at the end of the run.
+    Counter {
+        /// Node address, or a medium name (`main`, `payload`, `ground`).
+        target: CounterTarget,
+        /// Counter name.
+        counter: String,
+        /// Lower bound.
+        min: Option<u64>,
+        /// Upper bound.
+        max: Option<u64>,
+    },
+}
+
+/// Where a counter lives.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CounterTarget {
+    /// A node.
+    Node(u8),
+    /// A medium.
+    Medium(String),
+}
+
+/// A named expectation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Expectation {
+    /// Its name.
+    pub name: String,
+    /// What it checks.
+    pub check: Check,
+}
+
+/// Everything a scenario turns into.
+#[derive(Debug, Clone)]
+pub struct Compiled {
+    /// The run.
+    pub opts: RunOptions,
+    /// Fault timeline, in time order.
+    pub faults: Vec<TimedFault>,
+    /// Expectations, in file order.
+    pub expectations: Vec<Expectation>,
+}
+
+/// Compile a validated scenario.
+pub fn compile(s: &Scenario) -> Compiled {
+    let net = s.network_spec_unchecked();
+    let mut opts = RunOptions::new(net.clone(), s.duration.0);
+    opts.seed = s.seed;
+    opts.clock = match s.clock.mode {
+        crate::scenario::ClockKind::Virtual => ClockMode::Virtual,
+        crate::scenario::ClockKind::Realtime => ClockMode::Realtime {
+            speed: s.clock.speed,
+        },
+    };
+    opts.epoch_unix_s =
+        crate::timefmt::parse_utc(&s.start).map_or(0, |ns| ns.div_euclid(1_000_000_000)) as u64;
+    for l in &s.links {
+        match l.kind {
+            LinkKind::KissListen => opts
+                .kiss_listen
+                .extend(l.addr.parse::<std::net::SocketAddr>().ok()),
+            LinkKind::KissConnect => opts
+                .kiss_connect
+                .extend(l.addr.parse::<std::net::SocketAddr>().ok()),
+            LinkKind::Socketcan => {}
+        }
+        opts.kiss.addrs.extend(&l.addrs);
+        opts.kiss.decoder.libcsp14_rx_limit |= l.libcsp14_rx_limit;
+    }
+    if opts.has_outside_links() && opts.clock == ClockMode::Virtual {
+        opts.clock = ClockMode::Realtime { speed: 1.0 };
+    }
+    let default_gs = net
+        .nodes
+        .iter()
+        .find(|n| n.role == crate::network::Role::Ground)
+        .map(|n| n.addr);
+    for (i, c) in s.commands.iter().enumerate() {
+        let name = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));
+        let from = c
+            .from
+            .as_ref()
+            .and_then(|r| net.resolve(r).ok())
+            .or(default_gs)
+            .unwrap_or(16);
+        let to = match &c.to {
+            NodeRef::Addr(a) => *a,
+            r => net.resolve(r).unwrap_or(0),
+        };
+        let (dport, data) = match c.request {
+            RequestKind::Ping => (1, crate::ground::ping_payload(c.size.unwrap_or(16))),
+            RequestKind::Uptime => (6, vec![]),
+            RequestKind::Ident => (0, vec![0x00, 0x01]),
+            RequestKind::Memfree => (3, vec![]),
+            RequestKind::BufFree => (5, vec![]),
+            RequestKind::Ps => (2, vec![]),
+            RequestKind::Reboot => (4, csp::service::REBOOT_MAGIC.to_be_bytes().to_vec()),
+            RequestKind::Raw => (
+                c.port.unwrap_or(0),
+                c.data
+                    .as_deref()
+                    .map(parse_hex)
+                    .and_then(Result::ok)
+                    .unwrap_or_default(),
+            ),
+        };
+        let timeout = c.timeout.map_or(Duration::from_secs(5), |d| d.0);
+        let every = c.every.map_or(Duration::ZERO, |d| d.0);
+        let plan = opts.ground_plan.entry(from).or_default();
+        for k in 0..c.count.unwrap_or(1) {
+            plan.push(PlannedRequest {
+                at: SimTime::ZERO + c.at.0 + every * k,
+                dst: to,
+                dport,
+                data: data.clone(),
+                timeout,
+                label: name.clone(),
+            });
+        }
+    }
+    let mut faults = Vec::new();
+    for (i, f) in s.faults.iter().enumerate() {
+        let at = SimTime::ZERO + f.at.0;
+        let until = f.until.map(|u| SimTime::ZERO + u.0);
+        let medium = match &f.target {
+            NodeRef::Name(n) if n == "main" => Some(MediumId::Main),
+            NodeRef::Name(n) if n == "payload" => Some(MediumId::Payload),
+            NodeRef::Name(n) if n == "uhf" => Some(MediumId::Uhf),
+            _ => None,
+        };
+        let node = net.resolve(&f.target).ok();
+        let what = format!("faults[{i}]: {:?} on {}", f.kind, f.target);
+        let mut push = |t: SimTime, action: FaultAction, suffix: &str| {
+            faults.push(TimedFault {
+                at: t,
+                action,
+                what: format!("{what}{suffix}"),
+            });
+        };
+        match (f.kind, medium, node) {
+            (
+                FaultKind::Drop | FaultKind::Corrupt | FaultKind::Delay | FaultKind::LinkDown,
+                Some(m),
+                _,
+            ) => {
+                let imp = match f.kind {
+                    FaultKind::Drop => Impairments {
+                        drop_prob: f.probability.unwrap_or(0.0),
+                        ..Default::default()
+                    },
+                    FaultKind::Corrupt => Impairments {
+                        corrupt_prob: f.probability.unwrap_or(0.0),
+                        ..Default::default()
+                    },
+                    FaultKind::Delay => Impairments {
+                        delay: f.delay.map_or(Duration::ZERO, |d| d.0),
+                        ..Default::default()
+                    },
+                    _ => Impairments {
+                        down: true,
+                        ..Default::default()
+                    },
+                };
+                push(at, FaultAction::Impair(m, imp), "");
+                if let Some(u) = until {
+                    push(
+                        u,
+                        FaultAction::Impair(m, Impairments::default()),
+                        " (lifted)",
+                    );
+                }
+            }
+            (FaultKind::PowerOff, _, Some(a)) => {
+                push(at, FaultAction::Power(a, false), "");
+                if let Some(u) = until {
+                    push(u, FaultAction::Power(a, true), " (power on)");
+                }
+            }
+            (FaultKind::Reboot, _, Some(a)) => push(at, FaultAction::Reboot(a), ""),
+            (FaultKind::Hang, _, Some(a)) => {
+                push(at, FaultAction::Hang(a, true), "");
+                if let Some(u) = until {
+                    push(u, FaultAction::Hang(a, false), " (recovered)");
+                }
+            }
+            _ => {}
+        }
+    }
+    faults.sort_by_key(|f| f.at);
+    let expectations = s
+        .expectations
+        .iter()
+        .enumerate()
+        .map(|(i, x)| compile_expectation(i, x, &net))
+        .collect();
+    Compiled {
+        opts,
+        faults,
+        expectations,
+    }
+}
+
+fn compile_expectation(
+    i: usize,
+    x: &ExpectationSpec,
+    net: &crate::network::NetworkSpec,
+) -> Expectation {
+    let name = x
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("expectations[{i}]"));
+    let occurrence = x.occurrence.unwrap_or(Occurrence::Every);
+    let command = x.command.clone().unwrap_or_default();
+    let check = match x.kind {
+        ExpectKind::Reply => Check::Reply {
+            command,
+            occurrence,
+            within: x.within.map(|d| d.0),
+            result: x.result,
+            data: x.data.as_deref().and_then(|d| parse_hex(d).ok()),
+            data_len: x.data_len,
+        },
+        ExpectKind::NoReply => Check::NoReply {
+            command,
+            occurrence,
+        },
+        ExpectKind::Counter => Check::Counter {
+            target: match &x.target {
+                Some(NodeRef::Name(n)) if ["main", "payload", "ground"].contains(&n.as_str()) => {
+                    CounterTarget::Medium(n.clone())
+                }
+                Some(r) => CounterTarget::Node(net.resolve(r).unwrap_or(0)),
+                None => CounterTarget::Node(0),
+            },
+            counter: x.counter.clone().unwrap_or_default(),
+            min: x.min,
+            max: x.max,
+        },
+    };
+    Expectation { name, check }
+}

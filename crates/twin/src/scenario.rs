@@ -1,0 +1,1030 @@
+//! Scenario files: one TOML file describes a run (see `docs/scenarios.md`).
+//!
+//! Parsing is strict: unknown fields, wrong types, out-of-range values and unknown node
+//! names are errors that name the file, the line and the field. [`Scenario::parse`] checks
+//! the syntax and the types (serde with `deny_unknown_fields`), then [`Scenario::validate`]
+//! checks the meaning (node names, ranges, references between entries), locating every
+//! problem in the source through the spanned TOML tree.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::time::Duration;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Deserializer};
+
+use crate::duration::parse_duration;
+
+/// A duration written as `90`, `90s`, `500ms`, `10m`, `2h` or `1d`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default, JsonSchema)]
+#[schemars(
+    with = "String",
+    description = "a duration: 90, 90s, 500ms, 10m, 2h, 1d"
+)]
+pub struct Dur(pub Duration);
+
+impl<'de> Deserialize<'de> for Dur {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Int(u64),
+            Float(f64),
+            Str(String),
+        }
+        let text = match Raw::deserialize(d)? {
+            Raw::Int(i) => i.to_string(),
+            Raw::Float(f) => f.to_string(),
+            Raw::Str(s) => s,
+        };
+        parse_duration(&text)
+            .map(Dur)
+            .map_err(serde::de::Error::custom)
+    }
+}
+
+/// A node named by name (`FC`, `PL12`, `GS16`) or by CSP address.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(untagged)]
+pub enum NodeRef {
+    /// A CSP address, 0..=30.
+    Addr(u8),
+    /// A node name from the network table.
+    Name(String),
+}
+
+impl fmt::Display for NodeRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            NodeRef::Addr(a) => write!(f, "{a}"),
+            NodeRef::Name(n) => f.write_str(n),
+        }
+    }
+}
+
+/// A whole scenario.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name, used in reports (default: the file name).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// What the scenario shows.
+    #[serde(default)]
+    pub description: Option<String>,
+    /// UTC time of simulated time zero, ISO 8601 (`2026-03-20T12:00:00Z`).
+    #[serde(default = "default_start")]
+    pub start: String,
+    /// Simulated duration.
+    pub duration: Dur,
+    /// Seed of every random choice.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Virtual or real time.
+    #[serde(default)]
+    pub clock: ClockSpec,
+    /// The satellite.
+    #[serde(default)]
+    pub satellite: SatelliteSpec,
+    /// The network.
+    #[serde(default)]
+    pub network: NetworkCfg,
+    /// Per-node options, keyed by node name.
+    #[serde(default)]
+    pub nodes: BTreeMap<String, NodeOptions>,
+    /// Links to programs outside the twin.
+    #[serde(default)]
+    pub links: Vec<LinkSpec>,
+    /// Recording settings.
+    #[serde(default)]
+    pub record: RecordSpec,
+    /// Requests sent during the run.
+    #[serde(default)]
+    pub commands: Vec<CommandSpec>,
+    /// Impairments applied during the run.
+    #[serde(default)]
+    pub faults: Vec<FaultSpec>,
+    /// What must happen.
+    #[serde(default)]
+    pub expectations: Vec<ExpectationSpec>,
+}
+
+fn default_start() -> String {
+    "2026-03-20T12:00:00Z".to_owned()
+}
+fn default_seed() -> u64 {
+    1
+}
+
+/// How simulated time runs.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ClockSpec {
+    /// `virtual` (as fast as the CPU allows, deterministic) or `realtime`.
+    #[serde(default)]
+    pub mode: ClockKind,
+    /// Simulated seconds per wall second in real time.
+    #[serde(default = "one")]
+    pub speed: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Default for ClockSpec {
+    fn default() -> Self {
+        ClockSpec {
+            mode: ClockKind::Virtual,
+            speed: 1.0,
+        }
+    }
+}
+
+/// Clock modes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ClockKind {
+    /// Paused clock jumping to the next timer.
+    #[default]
+    Virtual,
+    /// The wall clock.
+    Realtime,
+}
+
+/// The satellite's orbit.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SatelliteSpec {
+    /// Two-line elements: the two lines (a title line may come first).
+    #[serde(default)]
+    pub tle: Vec<String>,
+}
+
+/// The network's shape and link rates.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkCfg {
+    /// Simulated payload addresses (12-15).
+    #[serde(default = "default_payloads")]
+    pub payloads: Vec<u8>,
+    /// Internal ground station addresses (16-20).
+    #[serde(default = "default_ground")]
+    pub ground_stations: Vec<u8>,
+    /// Main CAN bus bit rate.
+    #[serde(default = "default_can_rate")]
+    pub main_bitrate_bps: u32,
+    /// Payload CAN bus bit rate.
+    #[serde(default = "default_can_rate")]
+    pub payload_bitrate_bps: u32,
+    /// UHF data rate.
+    #[serde(default = "default_uhf_rate")]
+    pub uhf_rate_bps: u32,
+}
+
+fn default_payloads() -> Vec<u8> {
+    vec![12, 13]
+}
+fn default_ground() -> Vec<u8> {
+    vec![16]
+}
+fn default_can_rate() -> u32 {
+    1_000_000
+}
+fn default_uhf_rate() -> u32 {
+    9600
+}
+
+impl Default for NetworkCfg {
+    fn default() -> Self {
+        NetworkCfg {
+            payloads: default_payloads(),
+            ground_stations: default_ground(),
+            main_bitrate_bps: default_can_rate(),
+            payload_bitrate_bps: default_can_rate(),
+            uhf_rate_bps: default_uhf_rate(),
+        }
+    }
+}
+
+/// Options of one node.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NodeOptions {
+    /// Uptime service format: `libcsp` (u32 BE seconds) or `icd` (u32 LE milliseconds).
+    #[serde(default)]
+    pub uptime: Option<UptimeKind>,
+}
+
+/// Uptime service formats (INTERPRETATION.md section 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum UptimeKind {
+    /// libcsp 1.4: u32 big-endian seconds.
+    Libcsp,
+    /// The ICD's table: u32 little-endian milliseconds.
+    Icd,
+}
+
+/// A link to a program outside the twin.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LinkSpec {
+    /// `kiss-listen`, `kiss-connect` or `socketcan`.
+    pub kind: LinkKind,
+    /// TCP address (KISS) or interface name with an optional `:main`/`:payload` (SocketCAN).
+    pub addr: String,
+    /// CSP addresses behind the link (default: learned from its packets).
+    #[serde(default)]
+    pub addrs: Vec<u8>,
+    /// Apply libcsp 1.4's 248-byte KISS receive limit.
+    #[serde(default)]
+    pub libcsp14_rx_limit: bool,
+}
+
+/// Link kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinkKind {
+    /// Listen for outside nodes speaking KISS over TCP.
+    KissListen,
+    /// Connect to an outside KISS/TCP server.
+    KissConnect,
+    /// Bridge to a SocketCAN interface.
+    Socketcan,
+}
+
+/// Recording settings.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RecordSpec {
+    /// MCAP file to write (relative to the working directory); none = no recording.
+    #[serde(default)]
+    pub file: Option<String>,
+}
+
+/// A request sent during the run.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CommandSpec {
+    /// Name for expectations and reports (default `commands[i]`).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// When to send it.
+    pub at: Dur,
+    /// Repeat every this long (with `count`).
+    #[serde(default)]
+    pub every: Option<Dur>,
+    /// How many times in all (default 1; with `every`).
+    #[serde(default)]
+    pub count: Option<u32>,
+    /// The sending node (a ground station; default GS16).
+    #[serde(default)]
+    pub from: Option<NodeRef>,
+    /// The destination node.
+    pub to: NodeRef,
+    /// `ping`, `uptime`, `ident`, `memfree`, `buf-free`, `ps`, `reboot` or `raw`.
+    pub request: RequestKind,
+    /// Ping payload size in bytes (default 16).
+    #[serde(default)]
+    pub size: Option<usize>,
+    /// Destination port (`raw` only).
+    #[serde(default)]
+    pub port: Option<u8>,
+    /// Request bytes as hex (`raw` only), for example `"01"` or `"06 01 00"`.
+    #[serde(default)]
+    pub data: Option<String>,
+    /// How long to wait for the reply.
+    #[serde(default)]
+    pub timeout: Option<Dur>,
+}
+
+/// Request kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum RequestKind {
+    /// CSP ping (port 1).
+    Ping,
+    /// CSP uptime (port 6).
+    Uptime,
+    /// CMP ident (port 0).
+    Ident,
+    /// CSP memfree (port 3).
+    Memfree,
+    /// CSP buf_free (port 5).
+    BufFree,
+    /// CSP ps (port 2).
+    Ps,
+    /// CSP reboot (port 4, magic 0x80078007).
+    Reboot,
+    /// Raw bytes to a port.
+    Raw,
+}
+
+/// An impairment applied at `at` (and lifted at `until`, if given).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FaultSpec {
+    /// When it starts.
+    pub at: Dur,
+    /// When it ends (default: never).
+    #[serde(default)]
+    pub until: Option<Dur>,
+    /// `drop`, `corrupt`, `delay`, `link-down`, `power-off`, `reboot` or `hang`.
+    pub kind: FaultKind,
+    /// Medium (`main`, `payload`, `uhf`) for link faults; node for node faults.
+    pub target: NodeRef,
+    /// Probability for `drop` and `corrupt`.
+    #[serde(default)]
+    pub probability: Option<f64>,
+    /// Extra delay for `delay`.
+    #[serde(default)]
+    pub delay: Option<Dur>,
+}
+
+/// Fault kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultKind {
+    /// Lose frames or packets with a probability.
+    Drop,
+    /// Flip one bit of frames or packets with a probability.
+    Corrupt,
+    /// Delay every frame or packet.
+    Delay,
+    /// The medium carries nothing.
+    LinkDown,
+    /// The node is powered off (back on at `until`).
+    PowerOff,
+    /// The node reboots.
+    Reboot,
+    /// The node is alive on the bus but silent (until `until`).
+    Hang,
+}
+
+/// Something that must happen.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExpectationSpec {
+    /// Name for reports (default `expectations[i]`).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// `reply` (a command is answered), `no-reply` (it is not), or `counter`.
+    pub kind: ExpectKind,
+    /// The command (by name) for `reply` and `no-reply`.
+    #[serde(default)]
+    pub command: Option<String>,
+    /// For repeated commands: `every` occurrence must hold (default), or `any`.
+    #[serde(default)]
+    pub occurrence: Option<Occurrence>,
+    /// Longest acceptable round trip for `reply`.
+    #[serde(default)]
+    pub within: Option<Dur>,
+    /// Result code (second reply byte) for ICD requests.
+    #[serde(default)]
+    pub result: Option<u8>,
+    /// Exact reply bytes as hex.
+    #[serde(default)]
+    pub data: Option<String>,
+    /// Reply length in bytes.
+    #[serde(default)]
+    pub data_len: Option<usize>,
+    /// The node or medium of a `counter`.
+    #[serde(default)]
+    pub target: Option<NodeRef>,
+    /// Counter name: node `rx_packets`, `tx_packets`, `forwarded`, `delivered`, `reboots`,
+    /// `drops`, `drops.<reason>`; medium `frames`, `bytes`, `dropped`, `corrupted`.
+    #[serde(default)]
+    pub counter: Option<String>,
+    /// Smallest acceptable counter value at the end of the run.
+    #[serde(default)]
+    pub min: Option<u64>,
+    /// Largest acceptable counter value at the end of the run.
+    #[serde(default)]
+    pub max: Option<u64>,
+}
+
+/// Expectation kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExpectKind {
+    /// The command is answered (within `within`, with `result`/`data` if given).
+    Reply,
+    /// The command is not answered.
+    NoReply,
+    /// A counter is within `min`..=`max` at the end of the run.
+    Counter,
+}
+
+/// Which occurrences of a repeated command an expectation covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Occurrence {
+    /// Every occurrence must satisfy it.
+    Every,
+    /// At least one must.
+    Any,
+}
+
+/// A problem in a scenario file, located in its source.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ScenarioError {
+    /// The file (as given).
+    pub file: String,
+    /// 1-based line, when known.
+    pub line: Option<usize>,
+    /// 1-based column, when known.
+    pub column: Option<usize>,
+    /// The field path, for example `commands[2].to`.
+    pub field: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if let Some(l) = self.line {
+            write!(f, ":{l}")?;
+            if let Some(c) = self.column {
+                write!(f, ":{c}")?;
+            }
+        }
+        if self.field.is_empty() {
+            write!(f, ": {}", self.message)
+        } else {
+            write!(f, ": field `{}`: {}", self.field, self.message)
+        }
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+/// Every problem found in a file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ScenarioErrors(pub Vec<ScenarioError>);
+
+impl fmt::Display for ScenarioErrors {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, e) in self.0.iter().enumerate() {
+            if i > 0 {
+                writeln!(f)?;
+            }
+            write!(f, "{e}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for ScenarioErrors {}
+
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = text.get(..offset.min(text.len())).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let col = before
+        .rfind('\n')
+        .map_or(before.len(), |i| before.len() - i - 1)
+        + 1;
+    (line, col)
+}
+
+/// One step of a field path.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PathStep {
+    /// A table key.
+    Key(String),
+    /// An array index.
+    Index(usize),
+}
+
+fn path_string(path: &[PathStep]) -> String {
+    let mut s = String::new();
+    for step in path {
+        match step {
+            PathStep::Key(k) => {
+                if !s.is_empty() {
+                    s.push('.');
+                }
+                s.push_str(k);
+            }
+            PathStep::Index(i) => s.push_str(&format!("[{i}]")),
+        }
+    }
+    s
+}
+
+/// The byte span of the value at `path` in `text`, or of its nearest existing parent.
+fn locate(text: &str, path: &[PathStep]) -> Option<std::ops::Range<usize>> {
+    let root = toml::de::DeTable::parse(text).ok()?;
+    let mut span = None;
+    let mut node: Option<&toml::de::DeValue<'_>> = None;
+    for (i, step) in path.iter().enumerate() {
+        let next = match (i, step, node) {
+            (0, PathStep::Key(k), _) => root.get_ref().get(k.as_str()),
+            (_, PathStep::Key(k), Some(n)) => n.get(k.as_str()),
+            (_, PathStep::Index(ix), Some(n)) => n.get(*ix),
+            _ => None,
+        };
+        match next {
+            Some(n) => {
+                span = Some(n.span());
+                node = Some(n.get_ref());
+            }
+            None => break,
+        }
+    }
+    span
+}
+
+/// Helpers to build paths tersely.
+fn key(k: &str) -> PathStep {
+    PathStep::Key(k.to_owned())
+}
+
+impl Scenario {
+    /// Parse and validate a scenario; `file` names it in errors.
+    pub fn parse(file: &str, text: &str) -> Result<Scenario, ScenarioErrors> {
+        let scenario: Scenario = toml::from_str(text).map_err(|e| {
+            let (line, column) = match e.span() {
+                Some(s) => {
+                    let (l, c) = line_col(text, s.start);
+                    (Some(l), Some(c))
+                }
+                None => (None, None),
+            };
+            let message = e.message().trim().to_owned();
+            ScenarioErrors(vec![ScenarioError {
+                file: file.to_owned(),
+                line,
+                column,
+                field: field_from_message(text, e.span()),
+                message,
+            }])
+        })?;
+        scenario.validate(file, text)?;
+        Ok(scenario)
+    }
+
+    /// The scenario's name: its `name`, or the file stem.
+    pub fn display_name(&self, file: &str) -> String {
+        self.name.clone().unwrap_or_else(|| {
+            std::path::Path::new(file)
+                .file_stem()
+                .map_or_else(|| file.to_owned(), |s| s.to_string_lossy().into_owned())
+        })
+    }
+
+    /// Check the meaning of every field, reporting all problems with their location.
+    pub fn validate(&self, file: &str, text: &str) -> Result<(), ScenarioErrors> {
+        let mut errs = Vec::new();
+        let mut err = |path: Vec<PathStep>, message: String| {
+            let (line, column) = match locate(text, &path) {
+                Some(s) => {
+                    let (l, c) = line_col(text, s.start);
+                    (Some(l), Some(c))
+                }
+                None => (None, None),
+            };
+            errs.push(ScenarioError {
+                file: file.to_owned(),
+                line,
+                column,
+                field: path_string(&path),
+                message,
+            });
+        };
+        if crate::timefmt::parse_utc(&self.start).is_none() {
+            err(
+                vec![key("start")],
+                format!(
+                    "`{}` is not a UTC time like 2026-03-20T12:00:00Z",
+                    self.start
+                ),
+            );
+        }
+        if self.duration.0.is_zero() {
+            err(vec![key("duration")], "must be longer than zero".into());
+        }
+        if !(self.clock.speed.is_finite() && self.clock.speed > 0.0 && self.clock.speed <= 1e6) {
+            err(
+                vec![key("clock"), key("speed")],
+                format!("{} is out of range (0, 1e6]", self.clock.speed),
+            );
+        }
+        if !self.satellite.tle.is_empty() && !(2..=3).contains(&self.satellite.tle.len()) {
+            err(
+                vec![key("satellite"), key("tle")],
+                "give the two TLE lines (optionally after a title line)".into(),
+            );
+        }
+        for (i, &p) in self.network.payloads.iter().enumerate() {
+            if !(12..=15).contains(&p) {
+                err(
+                    vec![key("network"), key("payloads"), PathStep::Index(i)],
+                    format!("payload address {p} is not in 12-15"),
+                );
+            }
+        }
+        for (i, &g) in self.network.ground_stations.iter().enumerate() {
+            if !(16..=20).contains(&g) {
+                err(
+                    vec![key("network"), key("ground_stations"), PathStep::Index(i)],
+                    format!("ground station address {g} is not in 16-20"),
+                );
+            }
+        }
+        for (field, rate, max) in [
+            ("main_bitrate_bps", self.network.main_bitrate_bps, 1_000_000),
+            (
+                "payload_bitrate_bps",
+                self.network.payload_bitrate_bps,
+                1_000_000,
+            ),
+            ("uhf_rate_bps", self.network.uhf_rate_bps, 10_000_000),
+        ] {
+            if rate == 0 || rate > max {
+                err(
+                    vec![key("network"), key(field)],
+                    format!("{rate} is out of range 1..={max}"),
+                );
+            }
+        }
+        let net = self.network_spec_unchecked();
+        let names: Vec<String> = net.nodes.iter().map(|n| n.name.clone()).collect();
+        for name in self.nodes.keys() {
+            if !names.contains(name) {
+                err(
+                    vec![key("nodes"), key(name)],
+                    format!("unknown node `{name}` (nodes: {})", names.join(", ")),
+                );
+            }
+        }
+        for (i, l) in self.links.iter().enumerate() {
+            let p = |f: &str| vec![key("links"), PathStep::Index(i), key(f)];
+            match l.kind {
+                LinkKind::KissListen | LinkKind::KissConnect => {
+                    if l.addr.parse::<std::net::SocketAddr>().is_err() {
+                        err(
+                            p("addr"),
+                            format!("`{}` is not an address like 127.0.0.1:52001", l.addr),
+                        );
+                    }
+                }
+                LinkKind::Socketcan => {
+                    let bus = l.addr.split_once(':').map(|(_, b)| b);
+                    if l.addr.is_empty() || !matches!(bus, None | Some("main") | Some("payload")) {
+                        err(
+                            p("addr"),
+                            format!(
+                                "`{}` is not an interface like vcan0 or vcan0:payload",
+                                l.addr
+                            ),
+                        );
+                    }
+                }
+            }
+            for (j, &a) in l.addrs.iter().enumerate() {
+                if a >= 31 {
+                    err(
+                        vec![
+                            key("links"),
+                            PathStep::Index(i),
+                            key("addrs"),
+                            PathStep::Index(j),
+                        ],
+                        format!("{a} is not a unicast CSP address"),
+                    );
+                }
+            }
+        }
+        let mut command_names = Vec::new();
+        for (i, c) in self.commands.iter().enumerate() {
+            let p = |f: &str| vec![key("commands"), PathStep::Index(i), key(f)];
+            let name = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));
+            if command_names.contains(&name) {
+                err(
+                    p("name"),
+                    format!("another command is already named `{name}`"),
+                );
+            }
+            command_names.push(name);
+            match c.from.as_ref().map(|r| net.resolve(r)) {
+                None => {
+                    if !net
+                        .nodes
+                        .iter()
+                        .any(|n| n.role == crate::network::Role::Ground)
+                    {
+                        err(p("to"), "there is no ground station to send from (network.ground_stations is empty)".into());
+                    }
+                }
+                Some(Err(e)) => err(p("from"), e),
+                Some(Ok(a)) if !(16..=20).contains(&a) => err(
+                    p("from"),
+                    format!("commands are sent from a ground station (16-20), not from {a}"),
+                ),
+                Some(Ok(_)) => {}
+            }
+            match &c.to {
+                NodeRef::Addr(a) if *a >= 31 => {
+                    err(p("to"), format!("{a} is not a unicast CSP address"))
+                }
+                NodeRef::Addr(_) => {}
+                r @ NodeRef::Name(_) => {
+                    if let Err(e) = net.resolve(r) {
+                        err(p("to"), e);
+                    }
+                }
+            }
+            if c.every.is_some() != c.count.is_some() {
+                err(
+                    p(if c.every.is_some() { "every" } else { "count" }),
+                    "`every` and `count` go together".into(),
+                );
+            }
+            if c.every.is_some_and(|e| e.0.is_zero()) {
+                err(p("every"), "must be longer than zero".into());
+            }
+            if c.count == Some(0) {
+                err(p("count"), "must be at least 1".into());
+            }
+            if c.count.unwrap_or(1) > 1_000_000 {
+                err(p("count"), "at most 1000000 repetitions".into());
+            }
+            let raw = c.request == RequestKind::Raw;
+            if raw && c.port.is_none() {
+                err(p("request"), "a `raw` request needs `port`".into());
+            }
+            if !raw && (c.port.is_some() || c.data.is_some()) {
+                err(
+                    p(if c.port.is_some() { "port" } else { "data" }),
+                    "only a `raw` request takes `port` and `data`".into(),
+                );
+            }
+            if c.port.is_some_and(|port| port > 63) {
+                err(
+                    p("port"),
+                    format!("{} is not a CSP port (0-63)", c.port.unwrap_or(0)),
+                );
+            }
+            if let Some(d) = &c.data
+                && let Err(e) = parse_hex(d)
+            {
+                err(p("data"), e);
+            }
+            if c.size.is_some() && c.request != RequestKind::Ping {
+                err(p("size"), "only a `ping` takes `size`".into());
+            }
+            if c.size.is_some_and(|s| s > 256) {
+                err(
+                    p("size"),
+                    format!("{} bytes exceed the CSP MTU of 256", c.size.unwrap_or(0)),
+                );
+            }
+        }
+        for (i, f) in self.faults.iter().enumerate() {
+            let p = |n: &str| vec![key("faults"), PathStep::Index(i), key(n)];
+            if f.until.is_some_and(|u| u <= f.at) {
+                err(p("until"), "must be after `at`".into());
+            }
+            let medium = matches!(
+                f.kind,
+                FaultKind::Drop | FaultKind::Corrupt | FaultKind::Delay | FaultKind::LinkDown
+            );
+            if medium {
+                if !matches!(&f.target, NodeRef::Name(n) if ["main", "payload", "uhf"].contains(&n.as_str()))
+                {
+                    err(
+                        p("target"),
+                        format!("`{}` is not a medium (main, payload, uhf)", f.target),
+                    );
+                }
+            } else if let Err(e) = net.resolve(&f.target) {
+                err(p("target"), e);
+            }
+            let needs_prob = matches!(f.kind, FaultKind::Drop | FaultKind::Corrupt);
+            match f.probability {
+                Some(x) if !needs_prob => err(
+                    p("probability"),
+                    format!("a `{:?}` fault takes no probability (got {x})", f.kind),
+                ),
+                Some(x) if !(0.0..=1.0).contains(&x) => {
+                    err(p("probability"), format!("{x} is not in 0..=1"))
+                }
+                None if needs_prob => err(p("kind"), "this fault needs `probability`".into()),
+                _ => {}
+            }
+            match (f.kind, f.delay) {
+                (FaultKind::Delay, None) => err(p("kind"), "a `delay` fault needs `delay`".into()),
+                (FaultKind::Delay, Some(_)) | (_, None) => {}
+                (_, Some(_)) => err(p("delay"), "only a `delay` fault takes `delay`".into()),
+            }
+            if f.kind == FaultKind::Reboot && f.until.is_some() {
+                err(p("until"), "a reboot is instantaneous".into());
+            }
+        }
+        for (i, x) in self.expectations.iter().enumerate() {
+            let p = |n: &str| vec![key("expectations"), PathStep::Index(i), key(n)];
+            match x.kind {
+                ExpectKind::Reply | ExpectKind::NoReply => {
+                    match &x.command {
+                        None => err(p("kind"), "this expectation needs `command`".into()),
+                        Some(c) if !command_names.contains(c) => err(
+                            p("command"),
+                            format!(
+                                "no command is named `{c}` (commands: {})",
+                                command_names.join(", ")
+                            ),
+                        ),
+                        Some(_) => {}
+                    }
+                    for (f, present) in [
+                        ("target", x.target.is_some()),
+                        ("counter", x.counter.is_some()),
+                        ("min", x.min.is_some()),
+                        ("max", x.max.is_some()),
+                    ] {
+                        if present {
+                            err(
+                                p(f),
+                                format!("a `{}` expectation takes no `{f}`", kebab(x.kind)),
+                            );
+                        }
+                    }
+                    if x.kind == ExpectKind::NoReply {
+                        for (f, present) in [
+                            ("within", x.within.is_some()),
+                            ("result", x.result.is_some()),
+                            ("data", x.data.is_some()),
+                            ("data_len", x.data_len.is_some()),
+                        ] {
+                            if present {
+                                err(p(f), format!("a `no-reply` expectation takes no `{f}`"));
+                            }
+                        }
+                    }
+                    if let Some(d) = &x.data
+                        && let Err(e) = parse_hex(d)
+                    {
+                        err(p("data"), e);
+                    }
+                }
+                ExpectKind::Counter => {
+                    match &x.target {
+                        None => err(p("kind"), "a `counter` expectation needs `target`".into()),
+                        Some(NodeRef::Name(n))
+                            if ["main", "payload", "ground"].contains(&n.as_str()) =>
+                        {
+                            if let Some(c) = &x.counter
+                                && !MEDIUM_COUNTERS.contains(&c.as_str())
+                            {
+                                err(
+                                    p("counter"),
+                                    format!(
+                                        "unknown medium counter `{c}` ({})",
+                                        MEDIUM_COUNTERS.join(", ")
+                                    ),
+                                );
+                            }
+                        }
+                        Some(r) => {
+                            if let Err(e) = net.resolve(r) {
+                                err(p("target"), e);
+                            }
+                            if let Some(c) = &x.counter
+                                && !NODE_COUNTERS.contains(&c.as_str())
+                                && !c.starts_with("drops.")
+                            {
+                                err(
+                                    p("counter"),
+                                    format!(
+                                        "unknown node counter `{c}` ({}, drops.<reason>)",
+                                        NODE_COUNTERS.join(", ")
+                                    ),
+                                );
+                            }
+                        }
+                    }
+                    if x.counter.is_none() {
+                        err(p("kind"), "a `counter` expectation needs `counter`".into());
+                    }
+                    if x.min.is_none() && x.max.is_none() {
+                        err(
+                            p("kind"),
+                            "a `counter` expectation needs `min` or `max`".into(),
+                        );
+                    }
+                    if let (Some(a), Some(b)) = (x.min, x.max)
+                        && a > b
+                    {
+                        err(p("min"), format!("min {a} is above max {b}"));
+                    }
+                }
+            }
+        }
+        if errs.is_empty() {
+            Ok(())
+        } else {
+            Err(ScenarioErrors(errs))
+        }
+    }
+
+    /// The network the scenario describes (call after validation).
+    pub fn network_spec_unchecked(&self) -> crate::network::NetworkSpec {
+        let mut net =
+            crate::network::NetworkSpec::m6p(&self.network.payloads, &self.network.ground_stations);
+        net.main_bitrate_bps = self.network.main_bitrate_bps;
+        net.payload_bitrate_bps = self.network.payload_bitrate_bps;
+        net.uhf_rate_bps = self.network.uhf_rate_bps;
+        for n in &mut net.nodes {
+            if let Some(o) = self.nodes.get(&n.name)
+                && let Some(u) = o.uptime
+            {
+                n.uptime = match u {
+                    UptimeKind::Libcsp => csp::service::UptimeFormat::LibcspSecondsBe,
+                    UptimeKind::Icd => csp::service::UptimeFormat::IcdMillisLe,
+                };
+            }
+        }
+        net
+    }
+}
+
+/// Node counters an expectation can name.
+pub const NODE_COUNTERS: &[&str] = &[
+    "rx_packets",
+    "tx_packets",
+    "forwarded",
+    "delivered",
+    "service_replies",
+    "reboots",
+    "drops",
+];
+/// Medium counters an expectation can name.
+pub const MEDIUM_COUNTERS: &[&str] = &["frames", "packets", "bytes", "dropped", "corrupted"];
+
+fn kebab(k: ExpectKind) -> &'static str {
+    match k {
+        ExpectKind::Reply => "reply",
+        ExpectKind::NoReply => "no-reply",
+        ExpectKind::Counter => "counter",
+    }
+}
+
+/// The field a serde error is about: the key at the error's span, or the table header
+/// the span lies in.
+fn field_from_message(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+    let Some(span) = span else {
+        return String::new();
+    };
+    let line_start = text
+        .get(..span.start)
+        .and_then(|t| t.rfind('\n'))
+        .map_or(0, |i| i + 1);
+    let line = text
+        .get(line_start..)
+        .and_then(|t| t.lines().next())
+        .unwrap_or("");
+    let line = line.trim();
+    if let Some((k, _)) = line.split_once('=') {
+        let header = text
+            .get(..line_start)
+            .and_then(|t| t.lines().rev().map(str::trim).find(|l| l.starts_with('[')))
+            .map(|h| h.trim_matches(|c| c == '[' || c == ']').to_owned());
+        let k = k.trim().to_owned();
+        return match header {
+            Some(h) => format!("{h}.{k}"),
+            None => k,
+        };
+    }
+    line.trim_matches(|c| c == '[' || c == ']').to_owned()
+}
+
+/// Parse hex bytes, with optional spaces (`"06 01 00"` or `"060100"`).
+pub fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
+    let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
+    hex::decode(&compact).map_err(|e| format!("`{s}` is not hex bytes: {e}"))
+}
+
+impl crate::network::NetworkSpec {
+    /// The address of a node reference, or an error naming the known nodes.
+    pub fn resolve(&self, r: &NodeRef) -> Result<u8, String> {
+        match r {
+            NodeRef::Addr(a) => self
+                .nodes
+                .iter()
+                .find(|n| n.addr == *a)
+                .map(|n| n.addr)
+                .ok_or_else(|| format!("no node has address {a}")),
+            NodeRef::Name(name) => self
+                .nodes
+                .iter()
+                .find(|n| n.name.eq_ignore_ascii_case(name))
+                .map(|n| n.addr)
+                .ok_or_else(|| {
+                    let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
+                    format!("unknown node `{name}` (nodes: {})", names.join(", "))
+                }),
+        }
+    }
+}

@@ -1,0 +1,177 @@
+//! Bad scenario files get an error naming the file, the line and the field, never a panic.
+#![allow(clippy::unwrap_used)]
+
+use m6p_twin::scenario::Scenario;
+
+/// Parse `text` as `bad.toml` and return the first error's (line, field, message).
+fn first_error(text: &str) -> (Option<usize>, String, String) {
+    let errs = Scenario::parse("bad.toml", text).expect_err("the scenario must be rejected");
+    let e = errs.0[0].clone();
+    let shown = errs.to_string();
+    assert!(shown.starts_with("bad.toml:"), "{shown}");
+    (e.line, e.field, e.message)
+}
+
+fn assert_error(text: &str, line: usize, field: &str, message_part: &str) {
+    let (l, f, m) = first_error(text);
+    assert_eq!(l, Some(line), "line of `{field}`: {m}");
+    assert!(f.contains(field), "field `{f}` should name `{field}` ({m})");
+    assert!(
+        m.contains(message_part),
+        "message `{m}` should contain `{message_part}`"
+    );
+}
+
+#[test]
+fn unknown_top_level_field() {
+    assert_error("duration = \"1m\"\ntle2 = 1\n", 2, "tle2", "unknown field");
+}
+
+#[test]
+fn unknown_field_in_a_table() {
+    assert_error(
+        "duration = \"1m\"\n[network]\npayloads = [12]\nground = [16]\n",
+        4,
+        "network.ground",
+        "unknown field",
+    );
+}
+
+#[test]
+fn wrong_type() {
+    assert_error(
+        "duration = \"1m\"\nseed = \"one\"\n",
+        2,
+        "seed",
+        "invalid type",
+    );
+}
+
+#[test]
+fn missing_required_field() {
+    let (l, _, m) = first_error("seed = 3\n");
+    assert!(m.contains("duration"), "{m}");
+    assert!(l.is_some());
+}
+
+#[test]
+fn bad_duration() {
+    assert_error("duration = \"10 parsecs\"\n", 1, "duration", "unknown unit");
+}
+
+#[test]
+fn payload_address_out_of_range() {
+    assert_error(
+        "duration = \"1m\"\n[network]\npayloads = [12, 16]\n",
+        3,
+        "network.payloads[1]",
+        "not in 12-15",
+    );
+}
+
+#[test]
+fn unknown_node_name_in_a_command() {
+    let text = "duration = \"1m\"\n\n[[commands]]\nat = \"1s\"\nto = \"FCC\"\nrequest = \"ping\"\n";
+    assert_error(text, 5, "commands[0].to", "unknown node `FCC`");
+}
+
+#[test]
+fn unknown_request_kind() {
+    let text = "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FC\"\nrequest = \"pong\"\n";
+    assert_error(text, 5, "request", "unknown variant");
+}
+
+#[test]
+fn raw_request_without_port() {
+    let text = "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FC\"\nrequest = \"raw\"\ndata = \"01\"\n";
+    assert_error(text, 5, "commands[0].request", "needs `port`");
+}
+
+#[test]
+fn bad_hex_data() {
+    let text = "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FC\"\nrequest = \"raw\"\nport = 10\ndata = \"0g\"\n";
+    assert_error(text, 7, "commands[0].data", "not hex");
+}
+
+#[test]
+fn fault_probability_out_of_range() {
+    let text = "duration = \"1m\"\n[[faults]]\nat = \"1s\"\nkind = \"drop\"\ntarget = \"main\"\nprobability = 1.5\n";
+    assert_error(text, 6, "faults[0].probability", "not in 0..=1");
+}
+
+#[test]
+fn fault_on_an_unknown_medium() {
+    let text =
+        "duration = \"1m\"\n[[faults]]\nat = \"1s\"\nkind = \"link-down\"\ntarget = \"sband\"\n";
+    assert_error(text, 5, "faults[0].target", "not a medium");
+}
+
+#[test]
+fn fault_until_before_at() {
+    let text = "duration = \"1m\"\n[[faults]]\nat = \"10s\"\nuntil = \"5s\"\nkind = \"power-off\"\ntarget = \"PC\"\n";
+    assert_error(text, 4, "faults[0].until", "after `at`");
+}
+
+#[test]
+fn expectation_on_an_unknown_command() {
+    let text = "duration = \"1m\"\n[[commands]]\nname = \"p\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[expectations]]\nkind = \"reply\"\ncommand = \"q\"\n";
+    assert_error(
+        text,
+        9,
+        "expectations[0].command",
+        "no command is named `q`",
+    );
+}
+
+#[test]
+fn unknown_counter() {
+    let text = "duration = \"1m\"\n[[expectations]]\nkind = \"counter\"\ntarget = \"FC\"\ncounter = \"packets_lost\"\nmax = 0\n";
+    assert_error(text, 5, "expectations[0].counter", "unknown node counter");
+}
+
+#[test]
+fn bad_start_time() {
+    assert_error(
+        "duration = \"1m\"\nstart = \"2026-02-30T00:00:00Z\"\n",
+        2,
+        "start",
+        "not a UTC time",
+    );
+}
+
+#[test]
+fn toml_syntax_error() {
+    let (l, _, m) = first_error("duration = \"1m\"\n[network\n");
+    assert_eq!(l, Some(2), "{m}");
+}
+
+#[test]
+fn several_problems_are_all_reported() {
+    let text = "duration = \"1m\"\n[network]\npayloads = [11]\nground_stations = [21]\n";
+    let errs = Scenario::parse("bad.toml", text).unwrap_err();
+    assert_eq!(errs.0.len(), 2, "{errs}");
+}
+
+#[test]
+fn the_shipped_scenarios_are_valid() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
+    let mut n = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            if let Err(e) = Scenario::parse(&path.display().to_string(), &text) {
+                panic!("{e}");
+            }
+            n += 1;
+        }
+    }
+    assert!(n >= 1);
+}
+
+proptest::proptest! {
+    #[test]
+    fn arbitrary_text_never_panics(text in ".{0,400}") {
+        let _ = Scenario::parse("fuzz.toml", &text);
+    }
+}
