@@ -6,6 +6,7 @@
 //! - [`gs`]: the outside ground-station client (`m6p-twin gs`).
 
 pub mod duration;
+pub mod events;
 pub mod expect;
 pub mod ground;
 pub mod gs;

@@ -1,0 +1,113 @@
+//! Everything a run emits for recording, in the order it happens: the stream the MCAP
+//! recorder writes and `replay`/`diff` compare.
+
+use bus::trace::TraceEvent;
+use csp::SimTime;
+
+/// Direction of a frame on an outside link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Direction {
+    /// From the outside program into the twin.
+    In,
+    /// From the twin to the outside program.
+    Out,
+}
+
+/// Severity of a log line (the levels of `foxglove.Log`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Level {
+    /// Debug detail (drops, refusals).
+    Debug = 1,
+    /// Normal events.
+    Info = 2,
+    /// Something went wrong but the run goes on.
+    Warning = 3,
+    /// Something failed.
+    Error = 4,
+}
+
+/// One thing that happened during a run.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RunEvent {
+    /// A CAN frame on a bus or a packet on the ground network (see [`TraceEvent`]).
+    Medium(TraceEvent),
+    /// Raw bytes of one KISS frame on an outside link.
+    Kiss {
+        /// When.
+        t: SimTime,
+        /// Link name, for example `listen 127.0.0.1:52001`.
+        link: String,
+        /// Direction.
+        dir: Direction,
+        /// The KISS frame as it crossed the socket (FENDs and escapes included).
+        bytes: Vec<u8>,
+    },
+    /// A log line from a node or the run.
+    Log {
+        /// When.
+        t: SimTime,
+        /// Who (node name, `run`, a link name).
+        source: String,
+        /// Severity.
+        level: Level,
+        /// Text.
+        message: String,
+    },
+    /// A scenario fault applied or lifted.
+    Fault {
+        /// When.
+        t: SimTime,
+        /// What, for example `faults[0]: Drop on main`.
+        what: String,
+    },
+    /// A scenario command sent by a ground station.
+    Command {
+        /// When it was sent.
+        t: SimTime,
+        /// Command name.
+        name: String,
+        /// Destination node.
+        dst: u8,
+        /// Destination port.
+        dport: u8,
+        /// Request bytes.
+        data: Vec<u8>,
+    },
+    /// The outcome of a scenario command.
+    CommandResult {
+        /// When it was decided (reply arrival or timeout).
+        t: SimTime,
+        /// Command name.
+        name: String,
+        /// Reply bytes, or `None` on timeout.
+        reply: Option<Vec<u8>>,
+        /// Round-trip time in nanoseconds, when answered.
+        rtt_ns: Option<u64>,
+    },
+    /// The verdict on an expectation (at the end of the run).
+    Expectation {
+        /// When the verdict refers to.
+        t: SimTime,
+        /// Expectation name.
+        name: String,
+        /// Whether it held.
+        passed: bool,
+        /// What was observed.
+        observed: String,
+    },
+}
+
+impl RunEvent {
+    /// The simulated time of the event.
+    pub fn t(&self) -> SimTime {
+        match self {
+            RunEvent::Medium(e) => e.t,
+            RunEvent::Kiss { t, .. }
+            | RunEvent::Log { t, .. }
+            | RunEvent::Fault { t, .. }
+            | RunEvent::Command { t, .. }
+            | RunEvent::CommandResult { t, .. }
+            | RunEvent::Expectation { t, .. } => *t,
+        }
+    }
+}
