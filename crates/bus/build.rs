@@ -4,6 +4,9 @@
 //! Emits `cfg(uml_available)` when a UML kernel, its `vcan`/`can`/`can-raw` modules,
 //! `modprobe` (kmod) and `ip` (iproute2) are all present; otherwise that test is
 //! reported as ignored. Set `M6P_UML_PROBE=off` to force "not available".
+//!
+//! `crates/twin/build.rs` runs this same probe (it includes this file as a module and
+//! calls `main`) for `crates/twin/tests/socketcan_uml.rs`.
 
 use std::env;
 use std::fs;
@@ -19,7 +22,7 @@ const CAN_MODULES: &[&str] = &[
 const MODPROBE_CANDIDATES: &[&str] = &["/usr/sbin/modprobe", "/sbin/modprobe", "/usr/bin/modprobe"];
 const IP_CANDIDATES: &[&str] = &["/usr/sbin/ip", "/sbin/ip", "/usr/bin/ip", "/bin/ip"];
 
-fn main() {
+pub fn main() {
     println!("cargo::rustc-check-cfg=cfg(uml_available)");
     println!("cargo::rerun-if-changed=build.rs");
     for var in ["M6P_UML_PROBE", "UML_KERNEL", "UML_MODULES_DIR"] {

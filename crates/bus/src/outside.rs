@@ -25,6 +25,25 @@ pub struct Segments {
     pub ground: PacketNet,
 }
 
+/// Counters of a bridge between a CAN segment and a real CAN interface
+/// (`socketcan::bridge`, cargo feature `socketcan`). Defined here, outside the feature, so
+/// that run reports can carry them whatever the build.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct BridgeStats {
+    /// Extended data frames read from the interface and put on the segment.
+    pub frames_in: u64,
+    /// Frames of the segment written to the interface.
+    pub frames_out: u64,
+    /// Frames read from the interface that CFP does not use (standard id, remote, error).
+    pub skipped: u64,
+    /// Failed reads from the interface.
+    pub recv_errors: u64,
+    /// Failed writes to the interface (the frame is lost).
+    pub send_errors: u64,
+    /// Why the bridge stopped before the end of the run (the interface went away).
+    pub ended: Option<String>,
+}
+
 /// Which medium an address belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SegmentKind {

@@ -20,12 +20,23 @@
 //!
 //! [`to_socketcan`] and [`from_socketcan`] are the pure conversions, usable without
 //! an interface.
+//!
+//! [`bridge`] joins an in-process [`CanBus`] and a real interface: every frame that crosses
+//! the bus goes out on the interface, and every CFP frame read from the interface is put on
+//! the bus, so outside CSP nodes on `can0`/`vcan0` and the twin's nodes share one bus.
 
 use std::io;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use csp::cfp::{CAN_EFF_MASK, CAN_MAX_DLC, CanFrame};
 use socketcan::{EmbeddedFrame, ExtendedId, Frame, Id};
+
+use crate::can::CanBus;
+use crate::clock::Clock;
+use crate::inbox::{Arrival, inbox};
+pub use crate::outside::BridgeStats;
 
 /// Errors of a [`SocketCanLink`]; every variant names the interface.
 #[derive(Debug, thiserror::Error)]
@@ -244,6 +255,28 @@ impl SocketCanLink {
         Ok(())
     }
 
+    /// Take the socket's pending error (`SO_ERROR`), if any, as a [`SocketCanError::Recv`].
+    ///
+    /// The kernel reports the interface going down (`ENETDOWN`) or being deleted
+    /// (`ENODEV`) to a bound socket only as a pending error (`EPOLLERR`), and tokio wakes a
+    /// task waiting in [`recv`](Self::recv) only when the socket becomes readable: a
+    /// task that must notice those events on a quiet bus polls this now and then.
+    pub fn take_error(&self) -> Option<SocketCanError> {
+        use socketcan::SocketOptions as _;
+        let source = match self
+            .socket
+            .get_socket_option_int(libc_errno::SOL_SOCKET, libc_errno::SO_ERROR)
+        {
+            Ok(0) => return None,
+            Ok(errno) => io::Error::from_raw_os_error(errno),
+            Err(e) => e,
+        };
+        Some(SocketCanError::Recv {
+            ifname: self.ifname.clone(),
+            source,
+        })
+    }
+
     /// A snapshot of the counters.
     pub fn stats(&self) -> SocketCanStats {
         let c = &self.counters;
@@ -257,9 +290,154 @@ impl SocketCanLink {
     }
 }
 
-/// The few Linux errno values `open` distinguishes (x86-64/aarch64 generic values),
+/// Shared counters of a [`bridge`].
+pub type SharedBridgeStats = Arc<Mutex<BridgeStats>>;
+
+fn bump(stats: &SharedBridgeStats, f: impl FnOnce(&mut BridgeStats)) {
+    f(&mut stats
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner));
+}
+
+impl SocketCanError {
+    /// Whether the error means the interface is gone for good (deleted: `ENODEV`, or the
+    /// socket was unbound by its removal: `ENXIO`), rather than down or busy for a while.
+    pub fn interface_gone(&self) -> bool {
+        match self {
+            SocketCanError::NoSuchInterface { .. } => true,
+            SocketCanError::Recv { source, .. } | SocketCanError::Send { source, .. } => {
+                matches!(
+                    source.raw_os_error(),
+                    Some(libc_errno::ENODEV | libc_errno::ENXIO)
+                )
+            }
+            _ => false,
+        }
+    }
+}
+
+/// Pause after a failed read, so that a persistent error cannot spin the task.
+const RECV_ERROR_PAUSE: Duration = Duration::from_millis(10);
+/// How often [`bridge`] looks for a pending socket error ([`SocketCanLink::take_error`]).
+const ERROR_POLL: Duration = Duration::from_millis(250);
+
+/// Logs I/O errors of one direction: the first of a series as a warning, the rest at debug
+/// level, and the recovery.
+#[derive(Debug)]
+struct ErrorLog {
+    what: &'static str,
+    failing: bool,
+}
+
+impl ErrorLog {
+    fn error(&mut self, name: &str, e: &SocketCanError) {
+        if std::mem::replace(&mut self.failing, true) {
+            tracing::debug!("{name}: {e}");
+        } else {
+            tracing::warn!("{name}: {e} (frames are lost while {} fails)", self.what);
+        }
+    }
+    fn ok(&mut self, name: &str) {
+        if std::mem::take(&mut self.failing) {
+            tracing::info!("{name}: {} works again", self.what);
+        }
+    }
+}
+
+/// Bridge `bus` and the real interface of `link` until the interface goes away (or the
+/// task is aborted).
+///
+/// The bridge attaches to `bus` as a promiscuous endpoint named `socketcan:<ifname>`:
+/// - every frame that crosses the bus is written to the interface;
+/// - every extended data frame read from the interface is sent on the bus at
+///   `clock.now()`; the bus delivers it by CFP destination and never back to the bridge.
+///   Other frames (standard id, remote, error) are skipped.
+///
+/// The kernel does not return a socket's own frames to it, so nothing loops. Read and
+/// write errors are counted in `stats` and logged, and the frame is lost; an interface that
+/// is down (`ENETDOWN`) is waited for. When the interface is deleted (seen at the next
+/// write, or within 250 ms on a quiet bus) the bridge logs it, records it in
+/// [`BridgeStats::ended`], leaves the bus and returns.
+pub async fn bridge(bus: CanBus, mut link: SocketCanLink, clock: Clock, stats: SharedBridgeStats) {
+    let ifname = link.ifname().to_owned();
+    let name = format!("socketcan:{ifname}");
+    let (inbox_tx, mut inbox_rx) = inbox();
+    let port = bus.attach(&name, &[], true, inbox_tx, 0);
+    tracing::info!(bus = %bus.name(), "{name}: bridging the in-process CAN bus");
+    let mut recv_log = ErrorLog {
+        what: "receiving",
+        failing: false,
+    };
+    let mut send_log = ErrorLog {
+        what: "sending",
+        failing: false,
+    };
+    let mut poll = tokio::time::interval(ERROR_POLL);
+    poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let why = loop {
+        tokio::select! {
+            biased;
+            // From the interface first: frames are stamped with the time they are read.
+            r = link.recv() => match r {
+                Ok(frame) => {
+                    port.send(clock.now(), frame);
+                    let skipped = link.stats().skipped();
+                    bump(&stats, |s| { s.frames_in += 1; s.skipped = skipped; });
+                    recv_log.ok(&name);
+                }
+                Err(e) => {
+                    bump(&stats, |s| s.recv_errors += 1);
+                    if e.interface_gone() {
+                        break e.to_string();
+                    }
+                    recv_log.error(&name, &e);
+                    tokio::time::sleep(RECV_ERROR_PAUSE).await;
+                }
+            },
+            a = inbox_rx.recv() => {
+                // The bus keeps a sender for as long as it exists: `None` means it is gone.
+                let Some(a) = a else { break "the in-process bus was dropped".to_owned() };
+                let Arrival::Can(frame) = a.what else { continue };
+                match link.send(&frame).await {
+                    Ok(()) => {
+                        bump(&stats, |s| s.frames_out += 1);
+                        send_log.ok(&name);
+                    }
+                    Err(e) => {
+                        bump(&stats, |s| s.send_errors += 1);
+                        if e.interface_gone() {
+                            break e.to_string();
+                        }
+                        send_log.error(&name, &e);
+                    }
+                }
+            }
+            _ = poll.tick() => {
+                if let Some(e) = link.take_error() {
+                    bump(&stats, |s| s.recv_errors += 1);
+                    if e.interface_gone() {
+                        break e.to_string();
+                    }
+                    recv_log.error(&name, &e);
+                }
+            }
+        }
+    };
+    tracing::warn!("{name}: bridge stopped: {why}");
+    bus.release(&port);
+    let skipped = link.stats().skipped();
+    bump(&stats, |s| {
+        s.skipped = skipped;
+        s.ended = Some(why);
+    });
+}
+
+/// The few Linux errno values `open` and [`bridge`] distinguish (x86-64/aarch64 generic values),
 /// kept here to avoid a direct `libc` dependency.
 mod libc_errno {
+    pub const SOL_SOCKET: i32 = 1;
+    pub const SO_ERROR: i32 = 4;
+    pub const ENXIO: i32 = 6;
     pub const ENODEV: i32 = 19;
     pub const EPROTONOSUPPORT: i32 = 93;
     pub const EAFNOSUPPORT: i32 = 97;

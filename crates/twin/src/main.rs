@@ -9,7 +9,7 @@ use bus::ClockMode;
 use clap::{Parser, Subcommand};
 use m6p_twin::duration::parse_duration;
 use m6p_twin::network::NetworkSpec;
-use m6p_twin::runtime::{RunOptions, build_runtime, run};
+use m6p_twin::runtime::{RunOptions, SocketCanBus, build_runtime, run};
 use m6p_twin::{default_plan, gs};
 
 /// A digital twin of the NanoAvionics M6P smallsat network: every node speaks CSP 1.4 on
@@ -34,7 +34,7 @@ struct RunArgs {
     /// Simulated duration: 90, 90s, 10m, 2h [default: 10m; with --realtime, until Ctrl-C].
     #[arg(long, value_parser = parse_duration)]
     duration: Option<Duration>,
-    /// Follow the wall clock (needed by outside programs; implied by --kiss-*).
+    /// Follow the wall clock (needed by outside programs; implied by --kiss-* and --socketcan).
     #[arg(long)]
     realtime: bool,
     /// With --realtime: simulated seconds per wall second.
@@ -55,6 +55,10 @@ struct RunArgs {
     /// Apply libcsp 1.4's KISS receive limit (at most 248 data bytes) to the twin's receiver.
     #[arg(long)]
     libcsp14_kiss_limit: bool,
+    /// Bridge a real CAN interface (can0, vcan0) to the main or payload bus [default bus:
+    /// main]. Needs a build with --features socketcan (Linux).
+    #[arg(long = "socketcan", value_name = "IFACE[:main|:payload]", value_parser = SocketCanBus::parse_arg)]
+    socketcan: Vec<(String, SocketCanBus)>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -128,7 +132,8 @@ fn main() -> ExitCode {
 
 fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
     let network = NetworkSpec::default_m6p();
-    let outside = !a.kiss_listen.is_empty() || !a.kiss_connect.is_empty();
+    let outside =
+        !a.kiss_listen.is_empty() || !a.kiss_connect.is_empty() || !a.socketcan.is_empty();
     if outside && !a.realtime {
         eprintln!("note: outside links need the wall clock: running in real time");
     }
@@ -150,6 +155,7 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
     opts.kiss_connect = a.kiss_connect;
     opts.kiss.addrs = a.kiss_addr;
     opts.kiss.decoder.libcsp14_rx_limit = a.libcsp14_kiss_limit;
+    opts.socketcan = a.socketcan;
     opts.trace = false;
     let plan_for = duration.unwrap_or(Duration::from_secs(24 * 3600));
     opts.ground_plan

@@ -17,7 +17,7 @@ use bus::driver::{Attachment, NodeCtl, run_node};
 use bus::inbox::inbox;
 use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats};
 use bus::net::NetStats;
-use bus::outside::Segments;
+use bus::outside::{BridgeStats, Segments};
 use bus::trace::TraceEvent;
 use bus::{CanBus, CanBusConfig, Clock, ClockMode, PacketNet, PacketNetConfig};
 use csp::SimTime;
@@ -46,6 +46,9 @@ pub struct RunOptions {
     pub kiss: KissLinkConfig,
     /// Requests each internal ground station sends, by station address.
     pub ground_plan: BTreeMap<u8, Vec<PlannedRequest>>,
+    /// Real CAN interfaces (`can0`, `vcan0`) to bridge to a bus of the twin; needs the
+    /// `socketcan` cargo feature (Linux) when not empty.
+    pub socketcan: Vec<(String, SocketCanBus)>,
     /// UTC unix seconds at simulated time zero.
     pub epoch_unix_s: u64,
     /// Keep the trace of every frame and packet in the report.
@@ -64,6 +67,7 @@ impl RunOptions {
             kiss_connect: Vec::new(),
             kiss: KissLinkConfig::default(),
             ground_plan: BTreeMap::new(),
+            socketcan: Vec::new(),
             epoch_unix_s: 1_577_836_800,
             trace: false,
         }
@@ -71,7 +75,45 @@ impl RunOptions {
 
     /// Whether the run has links to programs outside the twin.
     pub fn has_outside_links(&self) -> bool {
-        !self.kiss_listen.is_empty() || !self.kiss_connect.is_empty()
+        !self.kiss_listen.is_empty() || !self.kiss_connect.is_empty() || !self.socketcan.is_empty()
+    }
+}
+
+/// Which CAN bus of the twin a real CAN interface is bridged to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SocketCanBus {
+    /// The main CAN bus (COMM, FC, EPS, ECU, PC).
+    Main,
+    /// The payload CAN bus (PC, payloads).
+    Payload,
+}
+
+impl std::fmt::Display for SocketCanBus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SocketCanBus::Main => "main",
+            SocketCanBus::Payload => "payload",
+        })
+    }
+}
+
+impl SocketCanBus {
+    /// Parse the `--socketcan` argument `IFACE[:main|:payload]` (default: the main bus).
+    pub fn parse_arg(arg: &str) -> Result<(String, SocketCanBus), String> {
+        let (ifname, which) = match arg.rsplit_once(':') {
+            Some((i, "main")) => (i, SocketCanBus::Main),
+            Some((i, "payload")) => (i, SocketCanBus::Payload),
+            Some((_, other)) => {
+                return Err(format!(
+                    "unknown bus `{other}`: expected IFACE, IFACE:main or IFACE:payload"
+                ));
+            }
+            None => (arg, SocketCanBus::Main),
+        };
+        if ifname.is_empty() {
+            return Err("missing interface name: expected IFACE[:main|:payload]".to_owned());
+        }
+        Ok((ifname.to_owned(), which))
     }
 }
 
@@ -101,6 +143,8 @@ pub struct RunReport {
     pub ground: NetStats,
     /// KISS/TCP link counters, by link.
     pub kiss: Vec<(String, KissLinkStats)>,
+    /// SocketCAN bridge counters, by interface and bus (`vcan0 (main bus)`).
+    pub socketcan: Vec<(String, BridgeStats)>,
     /// Outcomes of the ground stations' requests.
     pub results: Vec<RequestResult>,
     /// Every frame and packet, when tracing was asked for.
@@ -179,6 +223,7 @@ pub async fn run(
         tokio::spawn(segs.payload.clone().run(clock)),
         tokio::spawn(segs.ground.clone().run(clock)),
     ];
+    let socketcan_stats = spawn_socketcan_bridges(&opts.socketcan, &segs, clock, &mut background)?;
 
     let results: Results = Arc::new(Mutex::new(Vec::new()));
     let mut nodes = Vec::new();
@@ -328,9 +373,69 @@ pub async fn run(
                 )
             })
             .collect(),
+        socketcan: socketcan_stats
+            .into_iter()
+            .map(|(n, s)| {
+                (
+                    n,
+                    s.lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .clone(),
+                )
+            })
+            .collect(),
         results,
         trace,
     })
+}
+
+/// Shared counters of the SocketCAN bridges, by name.
+type BridgeStatsList = Vec<(String, Arc<Mutex<BridgeStats>>)>;
+
+/// Open every interface of `links` and spawn its bridge to the chosen bus.
+#[cfg(all(feature = "socketcan", target_os = "linux"))]
+fn spawn_socketcan_bridges(
+    links: &[(String, SocketCanBus)],
+    segs: &Segments,
+    clock: Clock,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+) -> anyhow::Result<BridgeStatsList> {
+    let mut opened = Vec::new();
+    for (ifname, which) in links {
+        // The error names the interface and includes its OS cause (not chained: it would
+        // print twice).
+        let link = bus::socketcan::SocketCanLink::open(ifname)
+            .map_err(|e| anyhow::anyhow!("cannot bridge to a SocketCAN interface: {e}"))?;
+        opened.push((link, *which));
+    }
+    let mut stats = Vec::new();
+    for (link, which) in opened {
+        let can = match which {
+            SocketCanBus::Main => segs.main.clone(),
+            SocketCanBus::Payload => segs.payload.clone(),
+        };
+        let shared = Arc::new(Mutex::new(BridgeStats::default()));
+        stats.push((format!("{} ({which} bus)", link.ifname()), shared.clone()));
+        let task = bus::socketcan::bridge(can, link, clock, shared);
+        background.push(tokio::spawn(task));
+    }
+    Ok(stats)
+}
+
+/// Without the `socketcan` feature there is nothing to bridge with.
+#[cfg(not(all(feature = "socketcan", target_os = "linux")))]
+fn spawn_socketcan_bridges(
+    links: &[(String, SocketCanBus)],
+    _segs: &Segments,
+    _clock: Clock,
+    _background: &mut Vec<tokio::task::JoinHandle<()>>,
+) -> anyhow::Result<BridgeStatsList> {
+    match links.first() {
+        None => Ok(Vec::new()),
+        Some((ifname, _)) => anyhow::bail!(
+            "SocketCAN interface `{ifname}`: this m6p-twin was built without SocketCAN support; rebuild with --features socketcan (Linux only)"
+        ),
+    }
 }
 
 impl RunReport {
@@ -409,6 +514,21 @@ impl RunReport {
                 k.refused
             );
         }
+        for (name, b) in &self.socketcan {
+            let _ = writeln!(
+                s,
+                "\nSocketCAN {name}: {} frames in, {} out, {} skipped, {} receive errors, {} send errors{}",
+                b.frames_in,
+                b.frames_out,
+                b.skipped,
+                b.recv_errors,
+                b.send_errors,
+                b.ended
+                    .as_ref()
+                    .map(|why| format!("; stopped: {why}"))
+                    .unwrap_or_default()
+            );
+        }
         if !self.results.is_empty() {
             let ok = self
                 .results
@@ -424,5 +544,42 @@ impl RunReport {
             );
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn socketcan_argument_names_interface_and_bus() {
+        let parse = SocketCanBus::parse_arg;
+        assert_eq!(parse("vcan0"), Ok(("vcan0".to_owned(), SocketCanBus::Main)));
+        assert_eq!(
+            parse("can0:main"),
+            Ok(("can0".to_owned(), SocketCanBus::Main))
+        );
+        assert_eq!(
+            parse("can1:payload"),
+            Ok(("can1".to_owned(), SocketCanBus::Payload))
+        );
+        assert!(parse("can0:ground").is_err_and(|e| e.contains("ground")));
+        assert!(parse(":main").is_err());
+        assert!(parse("").is_err());
+    }
+
+    #[test]
+    fn unusable_socketcan_interface_fails_the_run_naming_it() {
+        let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(1));
+        opts.socketcan = vec![("m6pnosuch0".to_owned(), SocketCanBus::Main)];
+        let rt = build_runtime(opts.clock).expect("runtime");
+        let err = rt
+            .block_on(run(opts, None))
+            .expect_err("the interface does not exist");
+        let msg = format!("{err:#}");
+        assert!(msg.contains("m6pnosuch0"), "{msg}");
+        if cfg!(not(all(feature = "socketcan", target_os = "linux"))) {
+            assert!(msg.contains("rebuild with --features socketcan"), "{msg}");
+        }
     }
 }
