@@ -727,7 +727,7 @@ mod tests {
     #[test]
     fn decimal_year_matches_igrf_reference() {
         // igrf.csv: 2026-06-01T12:00:00 -> 2026.4150684931508.
-        assert!((t("2026-06-01T12:00:00").decimal_year() - 2026.415_068_493_150_8).abs() < 1e-12);
+        assert!((t("2026-06-01T12:00:00").decimal_year() - 2_026.415_068_493_150_8).abs() < 1e-12);
         assert_eq!(t("2024-01-01T00:00:00").decimal_year(), 2024.0);
         // Leap year: 2024-07-02T00:00 is day 183 of 366.
         assert!((t("2024-07-02T00:00:00").decimal_year() - (2024.0 + 183.0 / 366.0)).abs() < 1e-12);
