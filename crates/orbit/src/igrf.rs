@@ -30,7 +30,7 @@
 
 use std::sync::OnceLock;
 
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
 use crate::time::UtcTime;
 
@@ -77,6 +77,9 @@ pub enum FieldError {
 pub struct GaussCoefficients {
     g_nt: [[f64; N]; N],
     h_nt: [[f64; N]; N],
+    /// `g_nt` and `h_nt` times the Schmidt factors, for Gauss-normalised Legendre functions.
+    g_gauss_nt: [[f64; N]; N],
+    h_gauss_nt: [[f64; N]; N],
 }
 
 /// The parsed coefficient file: the two epochs the twin needs and the secular variation.
@@ -100,9 +103,10 @@ pub struct FieldSample {
 }
 
 impl FieldSample {
-    /// Rotate the field into ECI with the active rotation `eci_from_ecef` (v_eci = R v_ecef).
-    pub fn b_eci_nt(&self, eci_from_ecef: &Rotation3<f64>) -> Vector3<f64> {
-        eci_from_ecef * self.b_ecef_nt
+    /// The field in ECI, nT, given the rotation `a_eci_from_ecef` (v_eci = A v_ecef; the
+    /// transpose of `frames::a_ecef_from_eci`).
+    pub fn b_eci_nt(&self, a_eci_from_ecef: &Matrix3<f64>) -> Vector3<f64> {
+        a_eci_from_ecef * self.b_ecef_nt
     }
 }
 
@@ -110,6 +114,8 @@ impl GaussCoefficients {
     const ZERO: GaussCoefficients = GaussCoefficients {
         g_nt: [[0.0; N]; N],
         h_nt: [[0.0; N]; N],
+        g_gauss_nt: [[0.0; N]; N],
+        h_gauss_nt: [[0.0; N]; N],
     };
 
     /// IGRF-14 coefficients at `decimal_year` (2020.0 to 2030.0).
@@ -137,6 +143,8 @@ impl GaussCoefficients {
                 };
                 out.g_nt[n][m] = g;
                 out.h_nt[n][m] = h;
+                out.g_gauss_nt[n][m] = g * schmidt_factors()[n][m];
+                out.h_gauss_nt[n][m] = h * schmidt_factors()[n][m];
             }
         }
         Ok(out)
@@ -259,7 +267,6 @@ impl GaussCoefficients {
             sin_m[m] = sin_m[m - 1] * cp + cos_m[m - 1] * sp;
         }
 
-        let s = schmidt_factors();
         let ratio = REFERENCE_RADIUS_KM / r_km;
         let mut ratio_pow = ratio * ratio; // (a/r)^(n+2) for n = 0
         let (mut b_r, mut b_t, mut b_p) = (0.0, 0.0, 0.0);
@@ -267,8 +274,7 @@ impl GaussCoefficients {
             ratio_pow *= ratio;
             let (mut sr, mut st_, mut sp_) = (0.0, 0.0, 0.0);
             for m in 0..=n {
-                let g = self.g_nt[n][m] * s[n][m];
-                let h = self.h_nt[n][m] * s[n][m];
+                let (g, h) = (self.g_gauss_nt[n][m], self.h_gauss_nt[n][m]);
                 let gh_cos = g * cos_m[m] + h * sin_m[m];
                 sr += gh_cos * p[n][m];
                 st_ += gh_cos * dp[n][m];
@@ -397,8 +403,8 @@ fn geodetic_to_ecef_km(lat_rad: f64, lon_rad: f64, alt_km: f64) -> Vector3<f64> 
     )
 }
 
-/// WGS-84 geodetic latitude and longitude (rad) of an ECEF point: Bowring's iteration,
-/// converged to below 1e-15 rad for any point outside a few km of the centre.
+/// WGS-84 geodetic latitude and longitude (rad) of an ECEF point: two steps of Bowring's
+/// iteration (Bowring 1976), below 1e-14 rad from the ground to GEO (unit-tested).
 fn geodetic_lat_lon(r_ecef_km: &Vector3<f64>) -> (f64, f64) {
     let e2 = WGS84_F * (2.0 - WGS84_F);
     let b_km = WGS84_A_KM * (1.0 - WGS84_F);
@@ -409,7 +415,7 @@ fn geodetic_lat_lon(r_ecef_km: &Vector3<f64>) -> (f64, f64) {
     // Parametric latitude start, then a few Bowring steps.
     let mut beta = (WGS84_A_KM * z).atan2(b_km * rho);
     let mut lat = 0.0;
-    for _ in 0..4 {
+    for _ in 0..2 {
         let (sb, cb) = beta.sin_cos();
         lat = (z + ep2 * b_km * sb.powi(3)).atan2(rho - e2 * WGS84_A_KM * cb.powi(3));
         beta = ((1.0 - WGS84_F) * lat.sin()).atan2(lat.cos());
@@ -508,7 +514,15 @@ mod tests {
 
     #[test]
     fn geodetic_round_trip() {
-        for (lat_deg, alt_km) in [(0.0, 0.0), (54.6872, 0.1), (-33.0, 500.0), (89.9, 700.0)] {
+        for (lat_deg, alt_km) in [
+            (0.0, 0.0),
+            (54.6872, 0.1),
+            (-33.0, 500.0),
+            (45.0, 0.0),
+            (45.0, 35_786.0),
+            (-60.0, 2000.0),
+            (89.9, 700.0),
+        ] {
             let lat = f64::to_radians(lat_deg);
             let r = geodetic_to_ecef_km(lat, 0.4, alt_km);
             let (lat2, lon2) = geodetic_lat_lon(&r);
