@@ -20,6 +20,11 @@
 //! 1900; the twin embeds it whole but evaluates only its own mission window, where it is
 //! tested.) A caller who wants a field anyway must clamp the year itself and say so.
 //!
+//! ECI: ECI J2000 as in [`crate::frames`] ([`field_eci_at`], or [`GaussCoefficients::field_eci`]
+//! with a rotation the caller computes once per step). The reference's GCRS components differ
+//! from it by the frame realisation (about 0.1 microradian) and, without Earth-orientation
+//! data, by UT1 - UTC (up to 0.9 s of Earth rotation, 6.6e-5 rad, i.e. up to 3 nT).
+//!
 //! Invariants: the field is finite everywhere outside the Earth's centre, poles included (the
 //! `P_n^m / sin(theta)` terms are computed by their own recursion, never by division); the
 //! NED frame is that of the geodetic latitude (down along the ellipsoid normal); ECEF is the
@@ -32,7 +37,8 @@ use std::sync::OnceLock;
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::time::UtcTime;
+use crate::frames;
+use crate::time::{Eop, UtcTime};
 
 /// Maximum degree and order of the main field.
 pub const MAX_DEGREE: usize = 13;
@@ -104,10 +110,19 @@ pub struct FieldSample {
 
 impl FieldSample {
     /// The field in ECI, nT, given the rotation `a_eci_from_ecef` (v_eci = A v_ecef; the
-    /// transpose of `frames::a_ecef_from_eci`).
+    /// transpose of [`frames::a_ecef_from_eci`]).
     pub fn b_eci_nt(&self, a_eci_from_ecef: &Matrix3<f64>) -> Vector3<f64> {
         a_eci_from_ecef * self.b_ecef_nt
     }
+}
+
+/// The field at an inertial point: the Earth-fixed sample and its ECI J2000 components.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldSampleEci {
+    /// ECI J2000 components, nT.
+    pub b_eci_nt: Vector3<f64>,
+    /// The same field in NED, ECEF and geocentric spherical components.
+    pub sample: FieldSample,
 }
 
 impl GaussCoefficients {
@@ -172,6 +187,20 @@ impl GaussCoefficients {
     pub fn field_ecef(&self, r_ecef_km: &Vector3<f64>) -> Result<FieldSample, FieldError> {
         let (lat_gd_rad, lon_rad) = geodetic_lat_lon(r_ecef_km);
         self.field_at(r_ecef_km, lat_gd_rad, lon_rad)
+    }
+
+    /// The field at an ECI J2000 position, km, given A(ECEF <- ECI) at that instant (for
+    /// example [`frames::a_ecef_from_eci`], computed once per step and shared).
+    pub fn field_eci(
+        &self,
+        r_eci_km: &Vector3<f64>,
+        a_ecef_from_eci: &Matrix3<f64>,
+    ) -> Result<FieldSampleEci, FieldError> {
+        let sample = self.field_ecef(&(a_ecef_from_eci * r_eci_km))?;
+        Ok(FieldSampleEci {
+            b_eci_nt: a_ecef_from_eci.tr_mul(&sample.b_ecef_nt),
+            sample,
+        })
     }
 
     /// The field at a WGS-84 geodetic point: latitude and longitude (east) in radians,
@@ -451,6 +480,17 @@ pub fn field_geodetic_at(
 /// The field at an Earth-fixed position (km) at the UTC instant `t`.
 pub fn field_ecef_at(t: UtcTime, r_ecef_km: &Vector3<f64>) -> Result<FieldSample, FieldError> {
     field_ecef(r_ecef_km, t.decimal_year())
+}
+
+/// The field at an ECI J2000 position (km) at the UTC instant `t`, with the Earth's
+/// orientation from [`frames::a_ecef_from_eci`] (UT1 = UTC and no polar motion without `eop`).
+pub fn field_eci_at(
+    t: UtcTime,
+    r_eci_km: &Vector3<f64>,
+    eop: Option<&Eop>,
+) -> Result<FieldSampleEci, FieldError> {
+    GaussCoefficients::igrf14(t.decimal_year())?
+        .field_eci(r_eci_km, &frames::a_ecef_from_eci(t, eop))
 }
 
 #[cfg(test)]

@@ -163,3 +163,31 @@ fn igrf14_outside_2020_2030_says_so() {
     );
     assert!(err.to_string().contains("2020.0-2030.0"));
 }
+
+#[test]
+fn igrf14_eci_within_the_earth_orientation_bound_of_gcrs() {
+    use m6p_orbit::frames::a_ecef_from_eci;
+    use m6p_orbit::igrf::field_eci_at;
+    let mut worst_nt = 0.0_f64;
+    let mut worst_rad = 0.0_f64;
+    for_each_row(|row| {
+        let t = UtcTime::from_iso8601(row.s("utc_iso")).expect("ISO-8601");
+        let a = a_ecef_from_eci(t, None);
+        let r_ecef = row.v(["ecef_x_km", "ecef_y_km", "ecef_z_km"]);
+        let r_eci = a.tr_mul(&r_ecef);
+        let f = field_eci_at(t, &r_eci, None).expect("in range");
+        // The same point and field as the geodetic evaluation, rotated.
+        assert!(max_abs(f.sample.b_ecef_nt - row.v(ECEF)) < 1e-3);
+        assert!((f.sample.b_eci_nt(&a.transpose()) - f.b_eci_nt).norm() < 1e-9);
+        let b_gcrs = row.v(["b_gcrs_x_nT", "b_gcrs_y_nT", "b_gcrs_z_nT"]);
+        let err = max_abs(f.b_eci_nt - b_gcrs);
+        worst_nt = worst_nt.max(err);
+        worst_rad = worst_rad.max(f.b_eci_nt.angle(&b_gcrs));
+    });
+    println!(
+        "igrf ECI J2000 (no EOP) vs GCRS (IERS EOP): worst {worst_nt:.3} nT, {worst_rad:.2e} rad"
+    );
+    // Without EOP the Earth's rotation angle is off by UT1 - UTC (|UT1 - UTC| < 0.9 s, at
+    // most 6.6e-5 rad); J2000 vs GCRS adds about 1e-7 rad.
+    assert!(worst_rad < 6.6e-5 + 2e-7, "{worst_rad} rad");
+}
