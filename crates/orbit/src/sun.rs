@@ -6,8 +6,8 @@
 //! 2nd ed., appendix III (the same table as NREL's SPA, Reda & Andreas 2004, table A4.2);
 //! Meeus' correction to the FK5 system (eq. 32.3, as used in chapter 25); the mean obliquity of date
 //! (IAU 1980, Lieske et al. 1977); and IAU-76 precession from the mean equator and equinox of
-//! date back to J2000 (Lieske et al. 1977), i.e. the same precession as the TEME -> J2000
-//! chain of [`crate::frames`]. The theory's time argument is TT (TDB - TT < 2 ms, negligible).
+//! date back to J2000 (Lieske et al. 1977), both from [`crate::frames`] (the same
+//! precession as its TEME -> J2000 chain). The theory's time argument is TT (TDB - TT < 2 ms, negligible).
 //!
 //! Accuracy: against `erfa.epv00` (the reference `sun_geom_*` of `tests/data/sun.csv`,
 //! 25 epochs over 2000-2035) the worst errors are 0.28 arcsec in direction and 1.1e-6 in
@@ -20,7 +20,8 @@
 
 use nalgebra::Vector3;
 
-use crate::time::UtcTime;
+use crate::frames::{ARCSEC_TO_RAD, mean_obliquity_iau80, precession_iau76};
+use crate::time::{JulianDate, UtcTime};
 
 /// The astronomical unit, km (IAU 2012 Resolution B2, exact).
 pub const AU_KM: f64 = 149_597_870.7;
@@ -250,9 +251,6 @@ const R2: [Term; 6] = [
 const R3: [Term; 2] = [(145.0, 4.273, 6_283.076), (7.0, 3.92, 12_566.15)];
 const R4: [Term; 1] = [(4.0, 2.56, 6_283.08)];
 
-/// Arcseconds to radians.
-const ARCSEC_RAD: f64 = std::f64::consts::PI / (180.0 * 3600.0);
-
 /// Sum of `A cos(B + C tau)` over one series.
 fn series(terms: &[Term], tau: f64) -> f64 {
     terms.iter().map(|&(a, b, c)| a * (b + c * tau).cos()).sum()
@@ -266,9 +264,10 @@ fn power_series(series_list: &[&[Term]], tau: f64) -> f64 {
         .fold(0.0, |acc, s| acc * tau + series(s, tau))
 }
 
-/// The Earth-to-Sun vector in ECI J2000 (IAU-76/FK5 mean equator and equinox), km, at
-/// `t_tt_jc` Julian centuries of TT since J2000.0 (JD 2451545.0 TT).
-pub fn sun_eci_km_at_tt_centuries(t_tt_jc: f64) -> Vector3<f64> {
+/// The Earth-to-Sun vector in ECI J2000 (IAU-76/FK5 mean equator and equinox), km, at the
+/// TT Julian date `jd_tt`.
+pub fn sun_eci_km_tt(jd_tt: JulianDate) -> Vector3<f64> {
+    let t_tt_jc = jd_tt.centuries_since_j2000();
     let tau = t_tt_jc / 10.0; // Julian millennia
     // Heliocentric ecliptic longitude, latitude (rad) and distance (AU) of the Earth,
     // referred to the mean ecliptic and equinox of date (VSOP87D).
@@ -283,42 +282,22 @@ pub fn sun_eci_km_at_tt_centuries(t_tt_jc: f64) -> Vector3<f64> {
     let t = t_tt_jc;
     let lp = lon_rad - (1.397 * t + 0.000_31 * t * t).to_radians();
     let (slp, clp) = lp.sin_cos();
-    lon_rad += (-0.090_33 + 0.039_16 * (clp + slp) * lat_rad.tan()) * ARCSEC_RAD;
-    lat_rad += 0.039_16 * (clp - slp) * ARCSEC_RAD;
+    lon_rad += (-0.090_33 + 0.039_16 * (clp + slp) * lat_rad.tan()) * ARCSEC_TO_RAD;
+    lat_rad += 0.039_16 * (clp - slp) * ARCSEC_TO_RAD;
 
     let r_km = r_au * AU_KM;
     let (slon, clon) = lon_rad.sin_cos();
     let (slat, clat) = lat_rad.sin_cos();
     let ecl = Vector3::new(clat * clon, clat * slon, slat) * r_km;
 
-    // Mean obliquity of date (IAU 1980), ecliptic -> mean equator of date.
-    let eps_rad = (84_381.448 + t * (-46.815 + t * (-0.000_59 + t * 0.001_813))) * ARCSEC_RAD;
-    let (se, ce) = eps_rad.sin_cos();
+    // Mean obliquity of date (IAU 1980): ecliptic -> mean equator of date; then IAU-76
+    // precession back to J2000 (r_j2000 = P^T r_mod).
+    let (se, ce) = mean_obliquity_iau80(jd_tt).sin_cos();
     let mod_km = Vector3::new(ecl.x, ce * ecl.y - se * ecl.z, se * ecl.y + ce * ecl.z);
-
-    precess_mean_of_date_to_j2000(t, mod_km)
-}
-
-/// IAU-76 precession (Lieske et al. 1977): a vector in the mean equator and equinox of date
-/// `t` (TT Julian centuries since J2000) to the mean equator and equinox of J2000.
-fn precess_mean_of_date_to_j2000(t: f64, v: Vector3<f64>) -> Vector3<f64> {
-    let zeta = (2306.2181 + (0.30188 + 0.017998 * t) * t) * t * ARCSEC_RAD;
-    let z = (2306.2181 + (1.09468 + 0.018203 * t) * t) * t * ARCSEC_RAD;
-    let theta = (2004.3109 + (-0.42665 - 0.041833 * t) * t) * t * ARCSEC_RAD;
-    // r_date = R3(-z) R2(theta) R3(-zeta) r_j2000 (coordinate rotations), so
-    // r_j2000 = R3(zeta) R2(-theta) R3(z) r_date.
-    let rot3 = |a: f64, v: Vector3<f64>| {
-        let (s, c) = a.sin_cos();
-        Vector3::new(c * v.x + s * v.y, -s * v.x + c * v.y, v.z)
-    };
-    let rot2 = |a: f64, v: Vector3<f64>| {
-        let (s, c) = a.sin_cos();
-        Vector3::new(c * v.x - s * v.z, v.y, s * v.x + c * v.z)
-    };
-    rot3(zeta, rot2(-theta, rot3(z, v)))
+    precession_iau76(jd_tt).tr_mul(&mod_km)
 }
 
 /// The Earth-to-Sun vector in ECI J2000, km, at the UTC instant `t` (evaluated in TT).
 pub fn sun_eci_km(t: UtcTime) -> Vector3<f64> {
-    sun_eci_km_at_tt_centuries(t.jd_tt().centuries_since_j2000())
+    sun_eci_km_tt(t.jd_tt())
 }

@@ -2,8 +2,8 @@
 //! `tests/data/README.md`). The bar: direction within 0.01 deg, distance within
 //! 0.01 %.
 
-use m6p_orbit::sun::{sun_eci_km, sun_eci_km_at_tt_centuries};
-use m6p_orbit::time::UtcTime;
+use m6p_orbit::sun::{sun_eci_km, sun_eci_km_tt};
+use m6p_orbit::time::{JulianDate, UtcTime};
 use nalgebra::Vector3;
 
 /// Rows of a CSV file as (header, fields) pairs looked up by column name.
@@ -65,8 +65,7 @@ fn worst(model: impl Fn(&Csv, &[String]) -> Vector3<f64>) -> (f64, f64) {
 #[test]
 fn sun_direction_within_0_01_deg_and_distance_within_0_01_percent_from_tt() {
     let (deg, rel) = worst(|csv, row| {
-        let jd_tt = csv.f(row, "jd_tt1") - 2_451_545.0 + csv.f(row, "jd_tt2");
-        sun_eci_km_at_tt_centuries(jd_tt / 36_525.0)
+        sun_eci_km_tt(JulianDate::new(csv.f(row, "jd_tt1"), csv.f(row, "jd_tt2")))
     });
     println!(
         "sun from TT: worst direction {:.3e} deg ({:.3} arcsec), worst distance {:.3e} (relative)",
