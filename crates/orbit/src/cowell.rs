@@ -32,23 +32,20 @@
 
 use nalgebra::Vector3;
 
+use crate::frames::OMEGA_EARTH_RAD_S;
+use crate::geodetic::WGS84_F;
 use crate::propagate::{PropagationError, Propagator, StateVector};
 use crate::time::UtcTime;
 
 /// The Earth's gravitational parameter, km^3/s^2 (WGS-84 / EGM96, NIMA TR8350.2).
 pub const MU_EARTH_KM3_S2: f64 = 398_600.441_8;
 
-/// The Earth's equatorial radius, km (WGS-84, NIMA TR8350.2).
+/// The Earth's equatorial radius, km (WGS-84, NIMA TR8350.2; EGM96's 6378.1363 km differs by
+/// 0.7 m, 2e-7 of the J2 term).
 pub const EARTH_RADIUS_KM: f64 = 6378.137;
 
 /// The Earth's second zonal harmonic J2 (EGM96: -sqrt(5) times C20 = -0.484165371736e-3).
 pub const J2: f64 = 1.082_626_683_553_15e-3;
-
-/// The Earth's rotation rate, rad/s (WGS-84, NIMA TR8350.2).
-pub const EARTH_ROTATION_RAD_S: f64 = 7.292_115e-5;
-
-/// WGS-84 flattening, for the height above the ellipsoid in the drag model.
-const WGS84_F: f64 = 1.0 / 298.257_223_563;
 
 /// Default integration step, s.
 pub const DEFAULT_STEP_S: f64 = 10.0;
@@ -174,7 +171,7 @@ pub fn acceleration_km_s2(
     }
     if let Some(drag) = config.drag {
         // Relative to an atmosphere rotating with the Earth about the ECI z axis.
-        let v_rel = v_km_s - Vector3::new(-r_km.y, r_km.x, 0.0) * EARTH_ROTATION_RAD_S;
+        let v_rel = v_km_s - Vector3::new(-r_km.y, r_km.x, 0.0) * OMEGA_EARTH_RAD_S;
         let rho_kg_m3 = exponential_density_kg_m3(approx_height_km(r_km, r));
         // rho (kg/m^3) * Cd A/m (m^2/kg) is per metre: * 1000 for per km.
         let k = -0.5 * rho_kg_m3 * drag.cd_area_over_mass_m2_kg * 1000.0;
