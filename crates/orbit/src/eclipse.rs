@@ -20,6 +20,8 @@
 use nalgebra::Vector3;
 
 pub use crate::sun::SUN_RADIUS_KM;
+use crate::sun::sun_eci_km;
+use crate::time::UtcTime;
 
 /// The Earth's radius for the shadow, km (WGS-84 equatorial radius, NIMA TR8350.2).
 pub const EARTH_RADIUS_KM: f64 = 6378.137;
@@ -61,6 +63,12 @@ impl Illumination {
 /// centre, same frame) with the conical model of Montenbruck & Gill 3.4.2.
 pub fn illumination(r_sat_km: &Vector3<f64>, r_sun_km: &Vector3<f64>) -> Illumination {
     illumination_with_radii(r_sat_km, r_sun_km, EARTH_RADIUS_KM, SUN_RADIUS_KM)
+}
+
+/// Classify the satellite at the ECI J2000 position `r_sat_eci_km` at the UTC instant `t`,
+/// with the Sun from [`crate::sun::sun_eci_km`].
+pub fn illumination_at(t: UtcTime, r_sat_eci_km: &Vector3<f64>) -> Illumination {
+    illumination(r_sat_eci_km, &sun_eci_km(t))
 }
 
 /// As [`illumination`], with explicit occulting-body and Sun radii, km.
@@ -125,6 +133,20 @@ mod tests {
         assert_eq!(
             illumination(&Vector3::new(0.0, 7000.0, 0.0), &sun),
             Illumination::SUNLIT
+        );
+    }
+
+    #[test]
+    fn at_the_june_solstice_the_north_pole_side_is_lit() {
+        let t = UtcTime::from_iso8601("2025-06-21T02:42:00Z").expect("ISO-8601");
+        let over_north_pole = Vector3::new(0.0, 0.0, 7000.0);
+        let over_south_pole = Vector3::new(0.0, 0.0, -6600.0);
+        assert_eq!(illumination_at(t, &over_north_pole), Illumination::SUNLIT);
+        // Over the south pole the Sun is 66.6 deg from the Earth's centre; at 6600 km the
+        // Earth's disk has a radius of 75 deg and hides it.
+        assert_eq!(
+            illumination_at(t, &over_south_pole).state,
+            ShadowState::Umbra
         );
     }
 
