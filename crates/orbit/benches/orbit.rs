@@ -1,1 +1,141 @@
-fn main() {}
+//! Criterion benchmarks of m6p-orbit (short measurement times; figures go in the issue's
+//! closing note).
+//!
+//! Groups, one per model, each a `criterion_group!` listed in `criterion_main!` at the end:
+//! - `sgp4_frames`: SGP4 propagations per second (one satellite over a day at 1 s steps),
+//!   TEME -> J2000 conversions per second, the full `Propagator::state_j2000` step, TEME ->
+//!   ECEF and look angles. Compare the SGP4 figure with `benches/python_sgp4_bench.py`
+//!   (python-sgp4's `SatrecArray`, Vallado's C++) run on the same machine.
+//!
+//! Add other models' benches (IGRF, sun, eclipse, environment step) as their own group
+//! below and list it in `criterion_main!`.
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use m6p_orbit::frames::{teme_to_ecef, teme_to_j2000};
+use m6p_orbit::passes::GroundSite;
+use m6p_orbit::propagate::{Propagator, Sgp4Propagator};
+use m6p_orbit::time::UtcTime;
+use m6p_orbit::tle::{ChecksumMode, Tle};
+
+/// Short measurements: these benches report rates, not fine regressions.
+fn short() -> Criterion {
+    Criterion::default()
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(3))
+        .sample_size(10)
+}
+
+// ---------------------------------------------------------------------------------------
+// SGP4 and frames
+// ---------------------------------------------------------------------------------------
+
+/// The reference 6U cubesat TLE (`CUBESAT-6U` in tests/data/teme_to_j2000.csv).
+const TLE_6U: (&str, &str) = (
+    "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996",
+    "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009",
+);
+const DAY_S: usize = 86_400;
+
+fn cubesat() -> Sgp4Propagator {
+    let tle = Tle::parse(TLE_6U.0, TLE_6U.1, ChecksumMode::Strict).expect("reference TLE");
+    Sgp4Propagator::new(&tle).expect("reference TLE initialises")
+}
+
+fn bench_sgp4_day(c: &mut Criterion) {
+    let p = cubesat();
+    let mut g = c.benchmark_group("sgp4_frames");
+    g.throughput(Throughput::Elements(DAY_S as u64));
+    g.bench_function("sgp4_teme_one_day_1s_steps", |b| {
+        b.iter(|| {
+            let mut acc = 0.0;
+            for k in 0..DAY_S {
+                let s = p.state_teme(k as f64 / 60.0).expect("propagates");
+                acc += s.r_km.x;
+            }
+            black_box(acc)
+        })
+    });
+    // The `sgp4` crate alone, without this crate's checks (decay, finiteness).
+    let el = sgp4::Elements::from_tle(None, TLE_6U.0.as_bytes(), TLE_6U.1.as_bytes())
+        .expect("reference TLE");
+    let constants = sgp4::Constants::from_elements_afspc_compatibility_mode(&el).expect("init");
+    g.bench_function("sgp4_crate_raw_one_day_1s_steps", |b| {
+        b.iter(|| {
+            let mut acc = 0.0;
+            for k in 0..DAY_S {
+                let s = constants
+                    .propagate(sgp4::MinutesSinceEpoch(k as f64 / 60.0))
+                    .expect("propagates");
+                acc += s.position[0];
+            }
+            black_box(acc)
+        })
+    });
+    g.finish();
+}
+
+fn bench_frames(c: &mut Criterion) {
+    let mut p = cubesat();
+    let t0 = p.epoch();
+    let states: Vec<_> = (0..1000)
+        .map(|k| p.state_teme(f64::from(k) / 60.0).expect("propagates"))
+        .collect();
+    let mut g = c.benchmark_group("sgp4_frames");
+    g.throughput(Throughput::Elements(states.len() as u64));
+    g.bench_function("teme_to_j2000_1000_steps", |b| {
+        b.iter(|| {
+            let mut acc = 0.0;
+            for (k, s) in states.iter().enumerate() {
+                let t = t0.plus_ns(k as i64 * 1_000_000_000);
+                acc += teme_to_j2000(s, t).r_km.x;
+            }
+            black_box(acc)
+        })
+    });
+    g.bench_function("teme_to_ecef_1000_steps", |b| {
+        b.iter(|| {
+            let mut acc = 0.0;
+            for (k, s) in states.iter().enumerate() {
+                let t = t0.plus_ns(k as i64 * 1_000_000_000);
+                acc += teme_to_ecef(s, t, None).r_km.x;
+            }
+            black_box(acc)
+        })
+    });
+    let site = GroundSite::from_deg(54.6872, 25.2797, 100.0);
+    g.bench_function("look_angles_1000_steps", |b| {
+        b.iter(|| {
+            let mut acc = 0.0;
+            for s in &states {
+                acc += site.look_angles(&s.r_km).elevation_rad;
+            }
+            black_box(acc)
+        })
+    });
+    g.bench_function("state_j2000_sgp4_plus_frames_1000_steps", |b| {
+        b.iter(|| {
+            let mut acc = 0.0;
+            for k in 0..1000 {
+                let t: UtcTime = t0.plus_ns(k * 1_000_000_000);
+                acc += p.state_j2000(t).expect("propagates").r_km.x;
+            }
+            black_box(acc)
+        })
+    });
+    g.finish();
+}
+
+criterion_group! {
+    name = sgp4_frames;
+    config = short();
+    targets = bench_sgp4_day, bench_frames
+}
+
+// ---------------------------------------------------------------------------------------
+// (other models' groups go here)
+// ---------------------------------------------------------------------------------------
+
+criterion_main!(sgp4_frames);
