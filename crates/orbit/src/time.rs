@@ -9,9 +9,9 @@
 //!   `day = JD of the preceding 0h` (always `.5`) and `frac` in `[0, 1)`.
 //! - TT = UTC + (TAI - UTC) + 32.184 s. TAI - UTC comes from the embedded table of the
 //!   USNO/IERS `tai-utc.dat` (IERS Bulletin C): the drift formulas of 1961-1971, then whole
-//!   seconds from 1972-01-01 (10 s) to the last leap second, 2017-01-01 (37 s). IERS
-//!   Bulletin C has announced no leap second since, up to and including Bulletin C 70 (July
-//!   2025: none at the end of December 2025).
+//!   seconds from 1972-01-01 (10 s) to the last leap second, 2017-01-01 (37 s). None has
+//!   been introduced since; IERS Bulletin C announces each one about six months ahead, and
+//!   a new one needs a new entry in this table.
 //! - UT1 = UTC + (UT1 - UTC), with UT1 - UTC from an [`EopTable`] (IERS `finals` format).
 //!   Without a table, or outside its range, UT1 = UTC (an error of at most 0.9 s, i.e. up to
 //!   about 420 m of Earth rotation at the equator); callers that need more load a table.
