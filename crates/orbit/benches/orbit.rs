@@ -7,8 +7,9 @@
 //!   ECEF and look angles. Compare the SGP4 figure with `benches/python_sgp4_bench.py`
 //!   (python-sgp4's `SatrecArray`, Vallado's C++) run on the same machine.
 //!
-//! Add other models' benches (IGRF, sun, eclipse, environment step) as their own group
-//! below and list it in `criterion_main!`.
+//! - `environment`: IGRF-14 evaluations per second, sun + eclipse per step, Cowell RK4
+//!   steps per second (with and without drag), and one full environment step (SGP4, TEME ->
+//!   J2000, Earth orientation, IGRF-14 at the satellite, sun, eclipse).
 
 use std::hint::black_box;
 use std::time::Duration;
@@ -138,4 +139,114 @@ criterion_group! {
 // (other models' groups go here)
 // ---------------------------------------------------------------------------------------
 
-criterion_main!(sgp4_frames);
+// ---------------------------------------------------------------------------------------
+// Environment: IGRF-14, sun + eclipse, Cowell steps, one full environment step
+// ---------------------------------------------------------------------------------------
+
+fn bench_igrf14(c: &mut Criterion) {
+    use m6p_orbit::igrf::{GaussCoefficients, field_geodetic};
+    use nalgebra::Vector3;
+    let mut g = c.benchmark_group("environment");
+    g.throughput(Throughput::Elements(1));
+    // The date's coefficients and the field at a geodetic point, as one call.
+    g.bench_function("igrf14_field_geodetic", |b| {
+        let mut k = 0u32;
+        b.iter(|| {
+            k = k.wrapping_add(1);
+            let lat_rad = (f64::from(k % 180) - 89.5).to_radians();
+            black_box(field_geodetic(black_box(lat_rad), 0.44, 500.0, 2026.4))
+        })
+    });
+    // The field at an ECEF point with the date's coefficients computed once.
+    let coeffs = GaussCoefficients::igrf14(2026.4).expect("in range");
+    g.bench_function("igrf14_field_ecef_cached_coefficients", |b| {
+        let r_ecef_km = Vector3::new(3602.5, 1701.4, 5589.3);
+        b.iter(|| black_box(coeffs.field_ecef(black_box(&r_ecef_km))))
+    });
+    g.finish();
+}
+
+fn bench_sun_eclipse(c: &mut Criterion) {
+    use m6p_orbit::eclipse::illumination_at;
+    use nalgebra::Vector3;
+    let t0 = cubesat().epoch();
+    let mut g = c.benchmark_group("environment");
+    g.throughput(Throughput::Elements(1));
+    // One step: the sun vector at a new time and the shadow at a LEO position.
+    g.bench_function("sun_plus_eclipse_per_step", |b| {
+        let r_eci_km = Vector3::new(-1221.0, 6117.1, 2652.1);
+        let mut k = 0i64;
+        b.iter(|| {
+            k += 1;
+            let t = t0.plus_ns(k * 1_000_000_000);
+            black_box(illumination_at(black_box(t), black_box(&r_eci_km)))
+        })
+    });
+    g.finish();
+}
+
+fn bench_cowell(c: &mut Criterion) {
+    use m6p_orbit::cowell::{CowellConfig, CowellPropagator, Drag};
+    let mut p = cubesat();
+    let t0 = p.epoch();
+    let s0 = p.state_j2000(t0).expect("propagates");
+    let mut g = c.benchmark_group("environment");
+    // A day at the default 10 s step: 8640 RK4 steps per iteration.
+    g.throughput(Throughput::Elements(8640));
+    let with_drag = CowellConfig {
+        drag: Some(Drag {
+            cd_area_over_mass_m2_kg: 0.02,
+        }),
+        ..CowellConfig::default()
+    };
+    for (name, config) in [
+        ("cowell_rk4_steps_j2_one_day_10s", CowellConfig::default()),
+        ("cowell_rk4_steps_j2_drag_one_day_10s", with_drag),
+    ] {
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let mut cowell = CowellPropagator::new(t0, s0, config);
+                black_box(cowell.state_j2000(t0.plus_seconds(86_400.0)))
+            })
+        });
+    }
+    g.finish();
+}
+
+fn bench_environment_step(c: &mut Criterion) {
+    use m6p_orbit::eclipse::illumination;
+    use m6p_orbit::frames::a_ecef_from_eci;
+    use m6p_orbit::igrf::GaussCoefficients;
+    use m6p_orbit::sun::sun_eci_km;
+    let mut p = cubesat();
+    let t0 = p.epoch();
+    let mut g = c.benchmark_group("environment");
+    g.throughput(Throughput::Elements(1));
+    // Everything the twin needs per simulation step, at a new time each iteration: SGP4 and
+    // TEME -> J2000, the Earth's orientation, the IGRF-14 coefficients for the date and the
+    // field at the satellite (NED, ECEF, ECI), the sun vector and the shadow.
+    g.bench_function("full_environment_step", |b| {
+        let mut k = 0i64;
+        b.iter(|| {
+            k = (k + 1) % 86_400;
+            let t = t0.plus_ns(k * 1_000_000_000);
+            let s = p.state_j2000(black_box(t)).expect("propagates");
+            let a_ecef_from_eci = a_ecef_from_eci(t, None);
+            let field = GaussCoefficients::igrf14(t.decimal_year())
+                .and_then(|c| c.field_eci(&s.r_km, &a_ecef_from_eci))
+                .expect("in range");
+            let sun = sun_eci_km(t);
+            let ill = illumination(&s.r_km, &sun);
+            black_box((s, field, sun, ill))
+        })
+    });
+    g.finish();
+}
+
+criterion_group! {
+    name = environment;
+    config = short();
+    targets = bench_igrf14, bench_sun_eclipse, bench_cowell, bench_environment_step
+}
+
+criterion_main!(sgp4_frames, environment);
