@@ -403,7 +403,7 @@ impl State {
                     .get(d.from)
                     .map_or("?", |p| p.stats.name.as_str())
                     .into();
-                let _ = tr.send(TraceEvent {
+                tr.emit(TraceEvent {
                     t,
                     medium: self.name.clone(),
                     from,

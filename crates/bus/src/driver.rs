@@ -43,19 +43,51 @@ pub enum NodeCtl {
     Stop,
 }
 
+/// Where a node's drops and events go besides the tracing log: `(time, node, text)`.
+#[derive(Clone)]
+pub struct NodeLogTx(std::sync::Arc<LogFn>);
+
+/// The function behind a [`NodeLogTx`]: `(time, node name, text)`.
+type LogFn = dyn Fn(SimTime, &str, &str) + Send + Sync;
+
+impl NodeLogTx {
+    /// A sink calling `f(time, node name, text)`.
+    pub fn new(f: impl Fn(SimTime, &str, &str) + Send + Sync + 'static) -> Self {
+        NodeLogTx(std::sync::Arc::new(f))
+    }
+}
+
+impl std::fmt::Debug for NodeLogTx {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("NodeLogTx")
+    }
+}
+
 /// Run a node until [`NodeCtl::Stop`] (or every sender of `ctl` is gone); returns the host.
 pub async fn run_node<A: App>(
+    host: Host<A>,
+    ports: Vec<Attachment>,
+    inbox: InboxRx,
+    ctl: mpsc::UnboundedReceiver<NodeCtl>,
+    clock: Clock,
+) -> Host<A> {
+    run_node_logged(host, ports, inbox, ctl, clock, None).await
+}
+
+/// [`run_node`], also handing every node event to `log`.
+pub async fn run_node_logged<A: App>(
     mut host: Host<A>,
     ports: Vec<Attachment>,
     mut inbox: InboxRx,
     mut ctl: mpsc::UnboundedReceiver<NodeCtl>,
     clock: Clock,
+    log: Option<NodeLogTx>,
 ) -> Host<A> {
     let mut t = clock.now();
     let mut powered = true;
     let mut hung = false;
     loop {
-        flush(&mut host, &ports, t);
+        flush(&mut host, &ports, t, log.as_ref());
         let deadline = if powered && !hung {
             host.poll_timeout()
         } else {
@@ -100,7 +132,7 @@ pub async fn run_node<A: App>(
     host
 }
 
-fn flush<A: App>(host: &mut Host<A>, ports: &[Attachment], t: SimTime) {
+fn flush<A: App>(host: &mut Host<A>, ports: &[Attachment], t: SimTime, log: Option<&NodeLogTx>) {
     while let Some(out) = host.node.poll_transmit() {
         match out {
             Transmit::Can { iface, frame } => match ports.get(iface) {
@@ -123,5 +155,8 @@ fn flush<A: App>(host: &mut Host<A>, ports: &[Attachment], t: SimTime) {
     }
     while let Some(ev) = host.node.poll_event() {
         tracing::debug!(node = host.node.name(), t = %ev.t, "{}", ev.what);
+        if let Some(l) = log {
+            (l.0)(ev.t, host.node.name(), &ev.what);
+        }
     }
 }

@@ -324,7 +324,7 @@ impl State {
                 Fate::Deliver => false,
             };
             if let Some(tr) = &self.trace {
-                let _ = tr.send(TraceEvent {
+                tr.emit(TraceEvent {
                     t,
                     medium: self.name.clone(),
                     from: self.eps[from].name.as_str().into(),

@@ -45,5 +45,30 @@ impl TraceEvent {
     }
 }
 
-/// Where media send their trace.
-pub type TraceTx = mpsc::UnboundedSender<TraceEvent>;
+/// Where media send their trace: called for every frame or packet, in order, while the
+/// medium holds its own lock (keep it short: push into a channel).
+#[derive(Clone)]
+pub struct TraceTx(Arc<dyn Fn(TraceEvent) + Send + Sync>);
+
+impl TraceTx {
+    /// A sink calling `f` for every event.
+    pub fn new(f: impl Fn(TraceEvent) + Send + Sync + 'static) -> Self {
+        TraceTx(Arc::new(f))
+    }
+    /// A sink that sends into a channel.
+    pub fn channel(tx: mpsc::UnboundedSender<TraceEvent>) -> Self {
+        TraceTx::new(move |ev| {
+            let _ = tx.send(ev);
+        })
+    }
+    /// Hand one event to the sink.
+    pub fn emit(&self, ev: TraceEvent) {
+        (self.0)(ev)
+    }
+}
+
+impl std::fmt::Debug for TraceTx {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TraceTx")
+    }
+}

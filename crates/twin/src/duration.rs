@@ -31,6 +31,20 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
     Ok(Duration::from_nanos((secs * 1e9).round() as u64))
 }
 
+/// Format a duration the way it is written in scenarios (`90s`, `10m`, `3h`, `1.5s`).
+pub fn format_duration(d: Duration) -> String {
+    let s = d.as_secs_f64();
+    if d.subsec_nanos() != 0 {
+        format!("{s}s")
+    } else if s >= 3600.0 && s % 3600.0 == 0.0 {
+        format!("{}h", s / 3600.0)
+    } else if s >= 60.0 && s % 60.0 == 0.0 {
+        format!("{}m", s / 60.0)
+    } else {
+        format!("{s}s")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

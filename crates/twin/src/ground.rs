@@ -64,6 +64,7 @@ pub struct GroundApp {
     in_flight: BTreeMap<u64, (PlannedRequest, SimTime)>,
     next_tag: u64,
     results: Results,
+    events: Option<tokio::sync::mpsc::UnboundedSender<crate::events::RunEvent>>,
 }
 
 impl GroundApp {
@@ -76,10 +77,37 @@ impl GroundApp {
             in_flight: BTreeMap::new(),
             next_tag: 0,
             results,
+            events: None,
+        }
+    }
+
+    /// Also report every command sent and every outcome as run events.
+    pub fn with_events(
+        mut self,
+        tx: tokio::sync::mpsc::UnboundedSender<crate::events::RunEvent>,
+    ) -> Self {
+        self.events = Some(tx);
+        self
+    }
+
+    fn emit(&self, ev: crate::events::RunEvent) {
+        if let Some(tx) = &self.events {
+            let _ = tx.send(ev);
         }
     }
 
     fn record(&self, request: PlannedRequest, sent: SimTime, outcome: Outcome) {
+        let (reply, rtt_ns) = match &outcome {
+            Outcome::Reply { data, rtt } => (Some(data.clone()), Some(rtt.as_nanos() as u64)),
+            _ => (None, None),
+        };
+        let decided = sent + rtt_ns.map_or(request.timeout, std::time::Duration::from_nanos);
+        self.emit(crate::events::RunEvent::CommandResult {
+            t: decided,
+            name: request.label.clone(),
+            reply,
+            rtt_ns,
+        });
         self.results
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -141,6 +169,13 @@ impl App for GroundApp {
                 now,
             ) {
                 Ok(_) => {
+                    self.emit(crate::events::RunEvent::Command {
+                        t: now,
+                        name: req.label.clone(),
+                        dst: req.dst,
+                        dport: req.dport,
+                        data: req.data.clone(),
+                    });
                     self.in_flight.insert(tag, (req, now));
                 }
                 Err(e) => self.record(req, now, Outcome::SendFailed(e.to_string())),

@@ -4,14 +4,18 @@
 //! - [`runtime`]: build the network, run it in virtual or real time, report.
 //! - [`ground`]: the twin's own ground stations.
 //! - [`gs`]: the outside ground-station client (`m6p-twin gs`).
+//! - [`record`] and [`recording`]: write a run to MCAP; read, summarize and compare recordings.
 
 pub mod duration;
 pub mod events;
+pub mod exec;
 pub mod expect;
 pub mod ground;
 pub mod gs;
 pub mod network;
 pub mod plan;
+pub mod record;
+pub mod recording;
 pub mod runtime;
 pub mod scenario;
 pub mod timefmt;

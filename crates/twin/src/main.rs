@@ -8,9 +8,11 @@ use anyhow::Context as _;
 use bus::ClockMode;
 use clap::{Parser, Subcommand};
 use m6p_twin::duration::parse_duration;
-use m6p_twin::network::NetworkSpec;
-use m6p_twin::runtime::{RunOptions, SocketCanBus, build_runtime, run};
-use m6p_twin::{default_plan, gs};
+use std::path::PathBuf;
+
+use m6p_twin::exec;
+use m6p_twin::gs;
+use m6p_twin::runtime::{SocketCanBus, build_runtime};
 
 /// A digital twin of the NanoAvionics M6P smallsat network: every node speaks CSP 1.4 on
 /// simulated CAN buses, and outside programs join over KISS/TCP.
@@ -23,26 +25,41 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Run the network (in virtual time as fast as the CPU allows, unless --realtime).
+    /// Run a scenario (default: the embedded default scenario) and print what happened.
     Run(RunArgs),
+    /// Run scenarios headless for CI: a table, JUnit XML, and a non-zero exit on failure.
+    Test(TestArgs),
+    /// Validate scenario files without running them.
+    Check {
+        /// Scenario files.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
+    /// Print the JSON Schema of the scenario format (for editors).
+    Schema,
     /// Join a running twin over KISS/TCP as a ground node and send requests.
     Gs(GsArgs),
 }
 
 #[derive(Debug, clap::Args)]
 struct RunArgs {
-    /// Simulated duration: 90, 90s, 10m, 2h [default: 10m; with --realtime, until Ctrl-C].
+    /// Scenario file (TOML) [default: the embedded scenarios/default.toml].
+    scenario: Option<PathBuf>,
+    /// Simulated duration, overriding the scenario's: 90, 90s, 10m, 2h.
     #[arg(long, value_parser = parse_duration)]
     duration: Option<Duration>,
+    /// Seed, overriding the scenario's.
+    #[arg(long)]
+    seed: Option<u64>,
     /// Follow the wall clock (needed by outside programs; implied by --kiss-* and --socketcan).
     #[arg(long)]
     realtime: bool,
     /// With --realtime: simulated seconds per wall second.
     #[arg(long, default_value_t = 1.0)]
     speed: f64,
-    /// Seed of every random choice (CFP idents, ephemeral ports, impairments).
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    /// With --realtime and no --duration: run until Ctrl-C instead of the scenario's duration.
+    #[arg(long)]
+    forever: bool,
     /// Listen for outside CSP nodes speaking KISS over TCP (for example 127.0.0.1:52001).
     #[arg(long = "kiss-listen", value_name = "ADDR")]
     kiss_listen: Vec<SocketAddr>,
@@ -55,10 +72,23 @@ struct RunArgs {
     /// Apply libcsp 1.4's KISS receive limit (at most 248 data bytes) to the twin's receiver.
     #[arg(long)]
     libcsp14_kiss_limit: bool,
-    /// Bridge a real CAN interface (can0, vcan0) to the main or payload bus [default bus:
+    /// Bridge a bus to a real SocketCAN interface: IFACE[:main|:payload] [default bus:
     /// main]. Needs a build with --features socketcan (Linux).
     #[arg(long = "socketcan", value_name = "IFACE[:main|:payload]", value_parser = SocketCanBus::parse_arg)]
     socketcan: Vec<(String, SocketCanBus)>,
+}
+
+#[derive(Debug, clap::Args)]
+struct TestArgs {
+    /// Scenario files.
+    #[arg(required = true)]
+    files: Vec<PathBuf>,
+    /// Write a JUnit XML report here.
+    #[arg(long, value_name = "FILE")]
+    junit: Option<PathBuf>,
+    /// Seed, overriding every scenario's.
+    #[arg(long)]
+    seed: Option<u64>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -118,6 +148,9 @@ fn main() -> ExitCode {
         .init();
     let res = match cli.command {
         Command::Run(a) => cmd_run(a),
+        Command::Test(a) => cmd_test(a),
+        Command::Check { files } => cmd_check(&files),
+        Command::Schema => cmd_schema(),
         Command::Gs(a) => cmd_gs(a),
     };
     match res {
@@ -131,48 +164,199 @@ fn main() -> ExitCode {
 }
 
 fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
-    let network = NetworkSpec::default_m6p();
-    let outside =
-        !a.kiss_listen.is_empty() || !a.kiss_connect.is_empty() || !a.socketcan.is_empty();
-    if outside && !a.realtime {
+    let loaded = match &a.scenario {
+        Some(p) => exec::load(p)?,
+        None => exec::load_default()?,
+    };
+    let mut compiled = exec::compile_loaded(&loaded);
+    let opts = &mut compiled.opts;
+    if let Some(s) = a.seed {
+        opts.seed = s;
+    }
+    if let Some(d) = a.duration {
+        opts.duration = Some(d);
+    }
+    opts.kiss_listen.extend(a.kiss_listen);
+    opts.kiss_connect.extend(a.kiss_connect);
+    opts.kiss.addrs.extend(a.kiss_addr);
+    opts.kiss.decoder.libcsp14_rx_limit |= a.libcsp14_kiss_limit;
+    opts.socketcan.extend(a.socketcan);
+    if opts.has_outside_links() && !a.realtime && opts.clock == ClockMode::Virtual {
         eprintln!("note: outside links need the wall clock: running in real time");
     }
-    let realtime = a.realtime || outside;
-    let duration = match (a.duration, realtime) {
-        (Some(d), _) => Some(d),
-        (None, false) => Some(Duration::from_secs(600)),
-        (None, true) => None,
-    };
-    let mut opts = RunOptions::new(network, duration.unwrap_or(Duration::from_secs(600)));
-    opts.duration = duration;
-    opts.clock = if realtime {
-        ClockMode::Realtime { speed: a.speed }
-    } else {
-        ClockMode::Virtual
-    };
-    opts.seed = a.seed;
-    opts.kiss_listen = a.kiss_listen;
-    opts.kiss_connect = a.kiss_connect;
-    opts.kiss.addrs = a.kiss_addr;
-    opts.kiss.decoder.libcsp14_rx_limit = a.libcsp14_kiss_limit;
-    opts.socketcan = a.socketcan;
-    opts.trace = false;
-    let plan_for = duration.unwrap_or(Duration::from_secs(24 * 3600));
-    opts.ground_plan
-        .insert(16, default_plan(&opts.network, plan_for));
+    if a.realtime || opts.has_outside_links() {
+        let speed = match opts.clock {
+            ClockMode::Realtime { speed } if !a.realtime => speed,
+            _ => a.speed,
+        };
+        opts.clock = ClockMode::Realtime { speed };
+        if a.forever && a.duration.is_none() {
+            opts.duration = None;
+        }
+    }
+    let name = loaded.name();
+    eprintln!(
+        "running scenario `{name}` ({}), seed {}, {}",
+        loaded.file,
+        opts.seed,
+        match opts.duration {
+            Some(d) => format!("{} simulated", m6p_twin::duration::format_duration(d)),
+            None => "until Ctrl-C".into(),
+        }
+    );
     let rt = build_runtime(opts.clock)?;
-    let (tx, rx) = tokio::sync::oneshot::channel();
-    let report = rt.block_on(async {
-        let task = tokio::spawn(run(opts, Some(tx)));
-        if let Ok(addrs) = rx.await {
-            for a in addrs {
-                eprintln!("KISS/TCP: listening on {a} (try: m6p-twin gs --connect {a} ping 3)");
+    let outcome = rt.block_on(exec::execute(compiled, &mut |_| {}))?;
+    print!("{}", outcome.report.table());
+    print!("{}", outcome.verdict_table());
+    Ok(outcome.passed())
+}
+
+fn cmd_check(files: &[PathBuf]) -> anyhow::Result<bool> {
+    let mut ok = true;
+    for f in files {
+        match exec::load(f) {
+            Ok(l) => println!(
+                "{}: OK ({} commands, {} faults, {} expectations)",
+                l.file,
+                l.scenario.commands.len(),
+                l.scenario.faults.len(),
+                l.scenario.expectations.len()
+            ),
+            Err(e) => {
+                ok = false;
+                eprintln!("{e:#}");
             }
         }
-        task.await.context("the run task failed")?
-    })?;
-    print!("{}", report.table());
+    }
+    Ok(ok)
+}
+
+fn cmd_schema() -> anyhow::Result<bool> {
+    let schema = schemars::schema_for!(m6p_twin::scenario::Scenario);
+    println!("{}", serde_json::to_string_pretty(&schema)?);
     Ok(true)
+}
+
+fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
+    use std::io::IsTerminal as _;
+    let show_bar = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+    let bar = if show_bar {
+        let b = indicatif::ProgressBar::new(a.files.len() as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut rows = Vec::new();
+    let mut suite = quick_junit::TestSuite::new("m6p-twin scenarios");
+    let mut all_ok = true;
+    for f in &a.files {
+        bar.set_message(f.display().to_string());
+        let started = std::time::Instant::now();
+        let row = match exec::load(f) {
+            Err(e) => {
+                all_ok = false;
+                let mut case = quick_junit::TestCase::new(
+                    f.display().to_string(),
+                    quick_junit::TestCaseStatus::non_success(quick_junit::NonSuccessKind::Error),
+                );
+                case.set_classname("scenario file");
+                case.set_system_err(format!("{e:#}"));
+                suite.add_test_case(case);
+                bar.suspend(|| eprintln!("{e:#}"));
+                (
+                    f.display().to_string(),
+                    0,
+                    1,
+                    0.0,
+                    started.elapsed().as_secs_f64(),
+                    true,
+                )
+            }
+            Ok(loaded) => {
+                let name = loaded.name();
+                let mut compiled = exec::compile_loaded(&loaded);
+                if let Some(s) = a.seed {
+                    compiled.opts.seed = s;
+                }
+                let rt = build_runtime(compiled.opts.clock)?;
+                match rt.block_on(exec::execute(compiled, &mut |_| {})) {
+                    Err(e) => {
+                        all_ok = false;
+                        let mut case = quick_junit::TestCase::new(
+                            name.clone(),
+                            quick_junit::TestCaseStatus::non_success(
+                                quick_junit::NonSuccessKind::Error,
+                            ),
+                        );
+                        case.set_classname(name.as_str());
+                        case.set_system_err(format!("{e:#}"));
+                        suite.add_test_case(case);
+                        bar.suspend(|| eprintln!("{name}: run failed: {e:#}"));
+                        (name, 0, 1, 0.0, started.elapsed().as_secs_f64(), true)
+                    }
+                    Ok(out) => {
+                        for v in &out.verdicts {
+                            let status = if v.passed {
+                                quick_junit::TestCaseStatus::success()
+                            } else {
+                                let mut st = quick_junit::TestCaseStatus::non_success(
+                                    quick_junit::NonSuccessKind::Failure,
+                                );
+                                st.set_message(format!("t = {}: {}", v.t, v.observed));
+                                st
+                            };
+                            let mut case = quick_junit::TestCase::new(v.name.clone(), status);
+                            case.set_classname(name.as_str());
+                            case.set_system_out(format!("t = {}: {}", v.t, v.observed));
+                            suite.add_test_case(case);
+                            if !v.passed {
+                                bar.suspend(|| {
+                                    eprintln!(
+                                        "FAIL {name}: {} (t = {}): {}",
+                                        v.name, v.t, v.observed
+                                    )
+                                });
+                            }
+                        }
+                        let failed = out.verdicts.iter().filter(|v| !v.passed).count();
+                        all_ok &= failed == 0;
+                        let wall = out.report.wall.as_secs_f64();
+                        (
+                            name,
+                            out.verdicts.len() - failed,
+                            failed,
+                            out.report.sim_time.as_secs_f64(),
+                            wall,
+                            false,
+                        )
+                    }
+                }
+            }
+        };
+        rows.push(row);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    println!(
+        "{:<36} {:>6} {:>6} {:>12} {:>10} {:>12}",
+        "scenario", "passed", "failed", "sim time s", "wall s", "real-time x"
+    );
+    for (name, p, f, sim, wall, broken) in &rows {
+        let rtf = if *wall > 0.0 { sim / wall } else { 0.0 };
+        let note = if *broken { "  (did not run)" } else { "" };
+        println!("{name:<36} {p:>6} {f:>6} {sim:>12.1} {wall:>10.3} {rtf:>12.0}{note}");
+    }
+    if let Some(path) = &a.junit {
+        let mut report = quick_junit::Report::new("m6p-twin");
+        report.add_test_suite(suite);
+        let xml = report.to_string().context("serialising the JUnit report")?;
+        std::fs::write(path, xml).with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(all_ok)
 }
 
 fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {

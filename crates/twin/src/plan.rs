@@ -137,7 +137,11 @@ pub fn compile(s: &Scenario) -> Compiled {
             LinkKind::KissConnect => opts
                 .kiss_connect
                 .extend(l.addr.parse::<std::net::SocketAddr>().ok()),
-            LinkKind::Socketcan => {}
+            LinkKind::Socketcan => {
+                if let Ok(link) = crate::runtime::SocketCanBus::parse_arg(&l.addr) {
+                    opts.socketcan.push(link);
+                }
+            }
         }
         opts.kiss.addrs.extend(&l.addrs);
         opts.kiss.decoder.libcsp14_rx_limit |= l.libcsp14_rx_limit;
@@ -262,6 +266,7 @@ pub fn compile(s: &Scenario) -> Compiled {
         }
     }
     faults.sort_by_key(|f| f.at);
+    opts.faults = faults.clone();
     let expectations = s
         .expectations
         .iter()

@@ -13,19 +13,21 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use bus::can::BusStats;
-use bus::driver::{Attachment, NodeCtl, run_node};
+use bus::driver::{Attachment, NodeCtl, NodeLogTx, run_node_logged};
 use bus::inbox::inbox;
 use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats};
 use bus::net::NetStats;
 use bus::outside::{BridgeStats, Segments};
-use bus::trace::TraceEvent;
+use bus::trace::{TraceEvent, TraceTx};
 use bus::{CanBus, CanBusConfig, Clock, ClockMode, PacketNet, PacketNetConfig};
 use csp::SimTime;
 use csp::node::{App, Host, NodeCounters};
 use tokio::sync::{mpsc, oneshot};
 
+use crate::events::{Level, RunEvent};
 use crate::ground::{GroundApp, PlannedRequest, RequestResult, Results};
 use crate::network::{Medium, NetworkSpec, Role, node_config};
+use crate::plan::{FaultAction, MediumId, TimedFault};
 
 /// Everything a run needs.
 #[derive(Debug, Clone)]
@@ -53,6 +55,8 @@ pub struct RunOptions {
     pub epoch_unix_s: u64,
     /// Keep the trace of every frame and packet in the report.
     pub trace: bool,
+    /// Faults to apply, in time order.
+    pub faults: Vec<TimedFault>,
 }
 
 impl RunOptions {
@@ -70,6 +74,7 @@ impl RunOptions {
             socketcan: Vec::new(),
             epoch_unix_s: 1_577_836_800,
             trace: false,
+            faults: Vec::new(),
         }
     }
 
@@ -169,7 +174,12 @@ pub fn mix(seed: u64, salt: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-fn app_for(role: Role, plan: Vec<PlannedRequest>, results: &Results) -> Box<dyn App> {
+fn app_for(
+    role: Role,
+    plan: Vec<PlannedRequest>,
+    results: &Results,
+    events: &mpsc::UnboundedSender<RunEvent>,
+) -> Box<dyn App> {
     match role {
         Role::CommPrimary | Role::CommSecondary => Box::new(nodes_comm::app()),
         Role::Fc => Box::new(nodes_fc::app()),
@@ -177,14 +187,23 @@ fn app_for(role: Role, plan: Vec<PlannedRequest>, results: &Results) -> Box<dyn 
         Role::Ecu => Box::new(nodes_ecu::app()),
         Role::Pc => Box::new(nodes_pc::app()),
         Role::Payload => Box::new(nodes_payload::app()),
-        Role::Ground => Box::new(GroundApp::new(plan, results.clone())),
+        Role::Ground => Box::new(GroundApp::new(plan, results.clone()).with_events(events.clone())),
     }
 }
 
 /// Run the twin. `ready` receives the bound addresses of the KISS servers once they listen.
 pub async fn run(
+    opts: RunOptions,
+    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+) -> anyhow::Result<RunReport> {
+    run_with(opts, ready, &mut |_| {}).await
+}
+
+/// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder).
+pub async fn run_with(
     mut opts: RunOptions,
     ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+    sink: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<RunReport> {
     let wall_start = Instant::now();
     let clock = Clock::new(opts.clock);
@@ -211,13 +230,28 @@ pub async fn run(
             mix(opts.seed, 0x102),
         ),
     };
-    let (trace_tx, mut trace_rx) = mpsc::unbounded_channel();
-    if opts.trace {
-        segs.main.set_trace(trace_tx.clone());
-        segs.payload.set_trace(trace_tx.clone());
-        segs.ground.set_trace(trace_tx.clone());
-    }
-    drop(trace_tx);
+    // Every event of the run goes through one channel, in the order it happens.
+    let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<RunEvent>();
+    let tracer = {
+        let tx = ev_tx.clone();
+        TraceTx::new(move |e| {
+            let _ = tx.send(RunEvent::Medium(e));
+        })
+    };
+    segs.main.set_trace(tracer.clone());
+    segs.payload.set_trace(tracer.clone());
+    segs.ground.set_trace(tracer);
+    let node_log = {
+        let tx = ev_tx.clone();
+        NodeLogTx::new(move |t, node, what| {
+            let _ = tx.send(RunEvent::Log {
+                t,
+                source: node.to_owned(),
+                level: Level::Debug,
+                message: what.to_owned(),
+            });
+        })
+    };
     let mut background = vec![
         tokio::spawn(segs.main.clone().run(clock)),
         tokio::spawn(segs.payload.clone().run(clock)),
@@ -272,10 +306,11 @@ pub async fn run(
             .collect();
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
-        let host = Host::new(cfg, app_for(spec.role, plan, &results), clock.now());
+        let host = Host::new(cfg, app_for(spec.role, plan, &results, &ev_tx), clock.now());
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
+        let log = node_log.clone();
         let handle = tokio::spawn(async move {
-            let host = run_node(host, ports, inbox_rx, ctl_rx, clock).await;
+            let host = run_node_logged(host, ports, inbox_rx, ctl_rx, clock, Some(log)).await;
             host.node.counters().clone()
         });
         nodes.push((spec.clone(), ctl_tx, handle));
@@ -314,15 +349,48 @@ pub async fn run(
         let _ = r.send(bound);
     }
 
-    match opts.duration {
-        Some(d) => tokio::select! {
+    // Faults are applied by the main loop at their times, so that their events sit in the
+    // stream exactly where they take effect.
+    let ctls: BTreeMap<u8, mpsc::UnboundedSender<NodeCtl>> = nodes
+        .iter()
+        .map(|(spec, ctl, _)| (spec.addr, ctl.clone()))
+        .collect();
+    let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
+    let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
+    let mut trace = Vec::new();
+    let mut handle_event = |ev: RunEvent, trace: &mut Vec<TraceEvent>| {
+        sink(&ev);
+        if opts.trace
+            && let RunEvent::Medium(m) = ev
+        {
+            trace.push(m);
+        }
+    };
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    loop {
+        let next_fault = faults.peek().map_or(SimTime::MAX, |f| f.at).min(end);
+        tokio::select! {
             biased;
-            _ = tokio::signal::ctrl_c() => tracing::info!("Ctrl-C: stopping"),
-            () = clock.sleep_until(SimTime::ZERO + d) => {}
-        },
-        None => {
-            let _ = tokio::signal::ctrl_c().await;
-            tracing::info!("Ctrl-C: stopping");
+            _ = &mut ctrl_c => {
+                tracing::info!("Ctrl-C: stopping");
+                break;
+            }
+            ev = ev_rx.recv() => {
+                if let Some(ev) = ev {
+                    handle_event(ev, &mut trace);
+                }
+            }
+            () = clock.sleep_until(next_fault), if next_fault < SimTime::MAX => {
+                if next_fault >= end && faults.peek().is_none_or(|f| f.at >= end) {
+                    break;
+                }
+                while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
+                    apply_fault(&f, &segs, &ctls);
+                    tracing::info!(t = %f.at, "fault: {}", f.what);
+                    handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, &mut trace);
+                }
+            }
         }
     }
     let sim_time = match opts.duration {
@@ -347,9 +415,9 @@ pub async fn run(
     for h in background {
         h.abort();
     }
-    let mut trace = Vec::new();
-    while let Ok(ev) = trace_rx.try_recv() {
-        trace.push(ev);
+    drop(ev_tx);
+    while let Ok(ev) = ev_rx.try_recv() {
+        handle_event(ev, &mut trace);
     }
     let results = std::mem::take(
         &mut *results
@@ -420,6 +488,27 @@ fn spawn_socketcan_bridges(
         background.push(tokio::spawn(task));
     }
     Ok(stats)
+}
+
+/// Apply one scenario fault to the media or a node.
+fn apply_fault(
+    f: &TimedFault,
+    segs: &Segments,
+    ctls: &BTreeMap<u8, mpsc::UnboundedSender<NodeCtl>>,
+) {
+    let ctl = |addr: &u8, c: NodeCtl| {
+        if let Some(tx) = ctls.get(addr) {
+            let _ = tx.send(c);
+        }
+    };
+    match &f.action {
+        FaultAction::Impair(MediumId::Main, imp) => segs.main.set_impairments(*imp),
+        FaultAction::Impair(MediumId::Payload, imp) => segs.payload.set_impairments(*imp),
+        FaultAction::Impair(MediumId::Uhf, imp) => segs.ground.set_impairments(*imp),
+        FaultAction::Power(a, on) => ctl(a, NodeCtl::Power(*on)),
+        FaultAction::Reboot(a) => ctl(a, NodeCtl::Reboot),
+        FaultAction::Hang(a, h) => ctl(a, NodeCtl::Hang(*h)),
+    }
 }
 
 /// Without the `socketcan` feature there is nothing to bridge with.

@@ -1,0 +1,145 @@
+//! Running a scenario: load and validate the file, compile it, apply command-line
+//! overrides, run, check the expectations, and report.
+
+use std::path::Path;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use csp::SimTime;
+
+use crate::events::RunEvent;
+use crate::expect::{Verdict, check_all};
+use crate::plan::{Compiled, compile};
+use crate::runtime::{RunReport, run_with};
+use crate::scenario::Scenario;
+
+/// The embedded default scenario (`scenarios/default.toml`).
+pub const DEFAULT_SCENARIO: &str = include_str!("../../../scenarios/default.toml");
+/// The name the default scenario is reported under.
+pub const DEFAULT_SCENARIO_FILE: &str = "scenarios/default.toml (embedded)";
+
+/// A scenario file's text and its parsed form.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    /// The file name as given.
+    pub file: String,
+    /// The exact text.
+    pub text: String,
+    /// The validated scenario.
+    pub scenario: Scenario,
+}
+
+impl Loaded {
+    /// The scenario's report name.
+    pub fn name(&self) -> String {
+        self.scenario.display_name(&self.file)
+    }
+}
+
+/// Read and validate a scenario file.
+pub fn load(path: &Path) -> anyhow::Result<Loaded> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading scenario {file}"))?;
+    let scenario = Scenario::parse(&file, &text)?;
+    Ok(Loaded {
+        file,
+        text,
+        scenario,
+    })
+}
+
+/// The embedded default scenario.
+pub fn load_default() -> anyhow::Result<Loaded> {
+    let scenario = Scenario::parse(DEFAULT_SCENARIO_FILE, DEFAULT_SCENARIO)?;
+    Ok(Loaded {
+        file: DEFAULT_SCENARIO_FILE.to_owned(),
+        text: DEFAULT_SCENARIO.to_owned(),
+        scenario,
+    })
+}
+
+/// What a scenario run produced.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The run's report.
+    pub report: RunReport,
+    /// One verdict per expectation, in file order.
+    pub verdicts: Vec<Verdict>,
+}
+
+impl Outcome {
+    /// Whether every expectation held.
+    pub fn passed(&self) -> bool {
+        self.verdicts.iter().all(|v| v.passed)
+    }
+
+    /// A table of the verdicts.
+    pub fn verdict_table(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        if self.verdicts.is_empty() {
+            return s;
+        }
+        let _ = writeln!(s, "\nexpectations:");
+        for v in &self.verdicts {
+            let _ = writeln!(
+                s,
+                "  {} {} (t = {}): {}",
+                if v.passed { "PASS" } else { "FAIL" },
+                v.name,
+                v.t,
+                v.observed
+            );
+        }
+        let failed = self.verdicts.iter().filter(|v| !v.passed).count();
+        let _ = writeln!(
+            s,
+            "  {} passed, {} failed",
+            self.verdicts.len() - failed,
+            failed
+        );
+        s
+    }
+}
+
+/// Run a compiled scenario, handing every event (expectation verdicts last) to `sink`.
+pub async fn execute(
+    compiled: Compiled,
+    sink: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<Outcome> {
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    let print_listen = async move {
+        if let Ok(addrs) = rx.await {
+            for a in addrs {
+                eprintln!("KISS/TCP: listening on {a} (try: m6p-twin gs --connect {a} ping 3)");
+            }
+        }
+    };
+    let (report, ()) = tokio::join!(run_with(compiled.opts, Some(tx), sink), print_listen);
+    let report = report?;
+    let verdicts = check_all(&compiled.expectations, &report);
+    for v in &verdicts {
+        sink(&RunEvent::Expectation {
+            t: v.t.min(report.sim_time),
+            name: v.name.clone(),
+            passed: v.passed,
+            observed: v.observed.clone(),
+        });
+    }
+    Ok(Outcome { report, verdicts })
+}
+
+/// Apply a different duration: commands after the end are simply not sent.
+pub fn with_duration(c: &mut Compiled, d: Duration) {
+    c.opts.duration = Some(d);
+}
+
+/// The simulated end of a compiled run, if bounded.
+pub fn end_of(c: &Compiled) -> Option<SimTime> {
+    c.opts.duration.map(|d| SimTime::ZERO + d)
+}
+
+/// Compile a loaded scenario.
+pub fn compile_loaded(l: &Loaded) -> Compiled {
+    compile(&l.scenario)
+}
