@@ -14,6 +14,8 @@ pub mod ground;
 pub mod gs;
 pub mod network;
 pub mod plan;
+pub mod record;
+pub mod recording;
 pub mod runtime;
 pub mod scenario;
 pub mod timefmt;

@@ -1,0 +1,938 @@
+//! Read recordings made by [`crate::record::Recorder`]: summary (`inspect`), CSV export,
+//! the run's metadata (for `replay`), and comparison of two recordings (`diff`, `replay`).
+//!
+//! Everything streams through the file once with the `mcap` crate's linear reader, so
+//! memory does not grow with the recording's length. Chunk CRCs are checked before a
+//! chunk's messages are used, so a truncated file (a killed run) yields exactly the
+//! messages of its complete chunks, followed by an error that says so; a file that is not
+//! MCAP at all is an error. Nothing here panics on a malformed file.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::fs::File;
+use std::io::{Read as _, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::{Context as _, anyhow, bail};
+use mcap::McapError;
+use mcap::records::{Metadata, Record};
+use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
+use serde_json::Value;
+
+use crate::record::{
+    BeginFields, CanFrameMsg, CommandMsg, CspPacketMsg, ExpectationMsg, KissFrameMsg,
+    METADATA_NAME, NetPacketMsg, RecordingMeta, SCENARIO_ATTACHMENT, TOPIC_COMMANDS, TOPIC_CSP,
+    TOPIC_EXPECTATIONS, service_name,
+};
+
+/// Largest record the reader accepts (a chunk is about 1 MiB; this only guards against a
+/// corrupt length making it allocate without bound).
+const RECORD_LIMIT: usize = 256 * 1024 * 1024;
+
+/// One message of a recording.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordedMessage {
+    /// Channel topic.
+    pub topic: Arc<str>,
+    /// Schema name of the channel (empty when it has none).
+    pub schema: Arc<str>,
+    /// Log time, ns since the Unix epoch (simulated).
+    pub log_time: u64,
+    /// The message bytes (JSON).
+    pub data: Vec<u8>,
+}
+
+/// A top-level item of the file, in file order.
+#[derive(Debug)]
+enum Item {
+    Header {
+        library: String,
+    },
+    Message(RecordedMessage),
+    Metadata(Metadata),
+    Attachment {
+        name: String,
+        data: Vec<u8>,
+    },
+    /// A summary record after the data section ended.
+    Summary,
+}
+
+/// Streaming reader of one file's records.
+struct Reader {
+    path: PathBuf,
+    file: File,
+    reader: LinearReader,
+    schemas: BTreeMap<u16, Arc<str>>,
+    channels: BTreeMap<u16, (Arc<str>, Arc<str>)>,
+    records: u64,
+    messages: u64,
+    past_data_end: bool,
+    done: bool,
+}
+
+impl Reader {
+    fn open(path: &Path) -> anyhow::Result<Reader> {
+        let file =
+            File::open(path).with_context(|| format!("opening recording {}", path.display()))?;
+        let options = LinearReaderOptions::default()
+            .with_prevalidate_chunk_crcs(true)
+            .with_validate_data_section_crc(true)
+            .with_validate_summary_section_crc(true)
+            .with_record_length_limit(RECORD_LIMIT);
+        Ok(Reader {
+            path: path.to_owned(),
+            file,
+            reader: LinearReader::new_with_options(options),
+            schemas: BTreeMap::new(),
+            channels: BTreeMap::new(),
+            records: 0,
+            messages: 0,
+            past_data_end: false,
+            done: false,
+        })
+    }
+
+    /// Whether nothing of the file could be read (not even its header).
+    fn nothing_read(&self) -> bool {
+        self.records == 0
+    }
+
+    /// Describe a reader error, with where it happened.
+    fn error(&self, e: McapError) -> anyhow::Error {
+        let path = self.path.display();
+        let n = self.messages;
+        match e {
+            McapError::BadMagic if self.records == 0 => {
+                anyhow!("{path}: not an MCAP file (bad magic)")
+            }
+            McapError::UnexpectedEof if self.past_data_end => {
+                anyhow!("{path}: truncated in its summary section after all {n} messages were read")
+            }
+            McapError::UnexpectedEof if self.records == 0 => {
+                anyhow!("{path}: not an MCAP file (too short)")
+            }
+            McapError::UnexpectedEof => anyhow!(
+                "{path}: truncated (a killed run?): read up to the last complete chunk, \
+                 {n} messages"
+            ),
+            e => anyhow!("{path}: malformed MCAP after {n} messages: {e}"),
+        }
+    }
+
+    /// The next item, `None` at the clean end of the file. Nothing after an error.
+    fn next_item(&mut self) -> Option<anyhow::Result<Item>> {
+        if self.done {
+            return None;
+        }
+        let r = self.next_inner();
+        if !matches!(r, Some(Ok(_))) {
+            self.done = true;
+        }
+        r
+    }
+
+    fn next_inner(&mut self) -> Option<anyhow::Result<Item>> {
+        loop {
+            let event = match self.reader.next_event()? {
+                Ok(ev) => ev,
+                Err(e) => {
+                    let err = self.error(e);
+                    return Some(Err(err));
+                }
+            };
+            let (opcode, data) = match event {
+                LinearReadEvent::ReadRequest(need) => {
+                    let buf = self.reader.insert(need);
+                    let n = loop {
+                        match self.file.read(buf) {
+                            Ok(n) => break n,
+                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                            Err(e) => {
+                                return Some(Err(anyhow!(e).context(format!(
+                                    "reading recording {}",
+                                    self.path.display()
+                                ))));
+                            }
+                        }
+                    };
+                    self.reader.notify_read(n);
+                    continue;
+                }
+                LinearReadEvent::Record { opcode, data } => (opcode, data),
+            };
+            let record = match mcap::parse_record(opcode, data) {
+                Ok(r) => r,
+                Err(e) => {
+                    let err = self.error(e);
+                    return Some(Err(err));
+                }
+            };
+            self.records += 1;
+            let item = match record {
+                Record::Header(h) => Item::Header { library: h.library },
+                Record::DataEnd(_) => {
+                    self.past_data_end = true;
+                    continue;
+                }
+                _ if self.past_data_end => Item::Summary,
+                Record::Schema { header, .. } => {
+                    self.schemas.insert(header.id, header.name.into());
+                    continue;
+                }
+                Record::Channel(c) => {
+                    let schema = self
+                        .schemas
+                        .get(&c.schema_id)
+                        .cloned()
+                        .unwrap_or_else(|| Arc::from(""));
+                    self.channels.insert(c.id, (c.topic.into(), schema));
+                    continue;
+                }
+                Record::Message { header, data } => {
+                    let Some((topic, schema)) = self.channels.get(&header.channel_id) else {
+                        return Some(Err(anyhow!(
+                            "{}: malformed MCAP: message {} on unknown channel {}",
+                            self.path.display(),
+                            self.messages,
+                            header.channel_id
+                        )));
+                    };
+                    self.messages += 1;
+                    Item::Message(RecordedMessage {
+                        topic: topic.clone(),
+                        schema: schema.clone(),
+                        log_time: header.log_time,
+                        data: data.into_owned(),
+                    })
+                }
+                Record::Metadata(m) => Item::Metadata(m),
+                Record::Attachment { header, data, .. } => Item::Attachment {
+                    name: header.name,
+                    data: data.into_owned(),
+                },
+                _ => continue,
+            };
+            return Some(Ok(item));
+        }
+    }
+
+    /// The next message, `None` at the end.
+    fn next_message(&mut self) -> Option<anyhow::Result<RecordedMessage>> {
+        loop {
+            match self.next_item()? {
+                Ok(Item::Message(m)) => return Some(Ok(m)),
+                Ok(_) => continue,
+                Err(e) => return Some(Err(e)),
+            }
+        }
+    }
+
+    /// Topics of the channels seen so far, by channel id.
+    fn topics(&self) -> Vec<String> {
+        self.channels.values().map(|(t, _)| t.to_string()).collect()
+    }
+}
+
+/// Every message of a recording, in file order (see [`messages`]).
+pub struct Messages {
+    reader: Reader,
+}
+
+impl fmt::Debug for Messages {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Messages")
+            .field("path", &self.reader.path)
+            .field("read", &self.reader.messages)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Iterator for Messages {
+    type Item = anyhow::Result<RecordedMessage>;
+    fn next(&mut self) -> Option<Self::Item> {
+        self.reader.next_message()
+    }
+}
+
+/// Stream the messages of the recording at `path` in file order; an error (a truncated or
+/// malformed file) ends the stream.
+pub fn messages(path: &Path) -> anyhow::Result<Messages> {
+    Ok(Messages {
+        reader: Reader::open(path)?,
+    })
+}
+
+/// Build the metadata from the `m6p-twin` record and the scenario attachment.
+fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Result<RecordingMeta> {
+    let get = |k: &str| {
+        m.metadata
+            .get(k)
+            .cloned()
+            .with_context(|| format!("{}: metadata `{METADATA_NAME}` lacks `{k}`", path.display()))
+    };
+    let seed = get("seed")?;
+    let scenario_toml = match scenario {
+        Some(bytes) => String::from_utf8(bytes.to_vec()).with_context(|| {
+            format!(
+                "{}: attachment {SCENARIO_ATTACHMENT} is not UTF-8",
+                path.display()
+            )
+        })?,
+        None => bail!(
+            "{}: no attachment {SCENARIO_ATTACHMENT} (the scenario text)",
+            path.display()
+        ),
+    };
+    Ok(RecordingMeta {
+        scenario_name: get("scenario_name")?,
+        scenario_toml,
+        seed: seed
+            .parse()
+            .with_context(|| format!("{}: metadata seed {seed:?} is not a u64", path.display()))?,
+        start_utc: get("start_utc")?,
+        twin_version: get("twin_version")?,
+    })
+}
+
+/// Read the run's metadata (scenario text, seed, start) from a recording. Stops reading at
+/// the first message, since the recorder writes both before any.
+pub fn load_meta(path: &Path) -> anyhow::Result<RecordingMeta> {
+    let mut r = Reader::open(path)?;
+    let mut meta = None;
+    let mut scenario = None;
+    while let Some(item) = r.next_item() {
+        match item? {
+            Item::Metadata(m) if m.name == METADATA_NAME => meta = Some(m),
+            Item::Attachment { name, data } if name == SCENARIO_ATTACHMENT => scenario = Some(data),
+            Item::Message(_) => break,
+            _ => {}
+        }
+        if meta.is_some() && scenario.is_some() {
+            break;
+        }
+    }
+    let Some(m) = meta else {
+        bail!(
+            "{}: no `{METADATA_NAME}` metadata: not a recording made by m6p-twin",
+            path.display()
+        );
+    };
+    meta_from(&m, scenario.as_deref(), path)
+}
+
+/// Messages on one channel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelSummary {
+    /// Topic.
+    pub topic: String,
+    /// Schema name.
+    pub schema: String,
+    /// Messages read.
+    pub messages: u64,
+}
+
+/// Outcome of one scenario command (from `/commands`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CommandSummary {
+    /// Times sent.
+    pub sent: u64,
+    /// Times answered.
+    pub answered: u64,
+    /// Times unanswered (timeout).
+    pub unanswered: u64,
+}
+
+/// What a recording holds, as `m6p-twin inspect` prints it.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Summary {
+    /// The run's metadata, when the file has it.
+    pub meta: Option<RecordingMeta>,
+    /// The header's library field (who wrote the file).
+    pub library: String,
+    /// Simulated duration covered: the last message's time since the start (ns).
+    pub duration_ns: u64,
+    /// Messages in all.
+    pub messages: u64,
+    /// Channels in registration order with their message counts.
+    pub channels: Vec<ChannelSummary>,
+    /// `/csp/packets` per source address.
+    pub packets_per_node: BTreeMap<u8, u64>,
+    /// `/csp/packets` per destination port.
+    pub packets_per_port: BTreeMap<u8, u64>,
+    /// `/commands` per command name.
+    pub commands: BTreeMap<String, CommandSummary>,
+    /// `/expectations` in file order.
+    pub expectations: Vec<ExpectationMsg>,
+    /// Why the file could not be read to its end (truncated or malformed), if so.
+    pub incomplete: Option<String>,
+}
+
+impl Summary {
+    /// The scenario name, if recorded.
+    pub fn scenario_name(&self) -> Option<&str> {
+        self.meta.as_ref().map(|m| m.scenario_name.as_str())
+    }
+
+    /// The seed, if recorded.
+    pub fn seed(&self) -> Option<u64> {
+        self.meta.as_ref().map(|m| m.seed)
+    }
+
+    /// Messages read on `topic` (0 if there is no such channel).
+    pub fn count(&self, topic: &str) -> u64 {
+        self.channels
+            .iter()
+            .find(|c| c.topic == topic)
+            .map_or(0, |c| c.messages)
+    }
+}
+
+/// Summarize the recording at `path`. A truncated file gives the summary of what could be
+/// read, with [`Summary::incomplete`] saying why it stopped; a file with nothing readable
+/// is an error.
+pub fn read_summary(path: &Path) -> anyhow::Result<Summary> {
+    let mut r = Reader::open(path)?;
+    let mut s = Summary::default();
+    let mut meta = None;
+    let mut scenario = None;
+    let mut counts: BTreeMap<Arc<str>, u64> = BTreeMap::new();
+    let (mut first, mut last) = (u64::MAX, 0u64);
+    while let Some(item) = r.next_item() {
+        let item = match item {
+            Ok(item) => item,
+            Err(e) if r.nothing_read() => return Err(e),
+            Err(e) => {
+                s.incomplete = Some(format!("{e:#}"));
+                break;
+            }
+        };
+        match item {
+            Item::Header { library } => s.library = library,
+            Item::Metadata(m) if m.name == METADATA_NAME => meta = Some(m),
+            Item::Attachment { name, data } if name == SCENARIO_ATTACHMENT => scenario = Some(data),
+            Item::Message(m) => {
+                s.messages += 1;
+                first = first.min(m.log_time);
+                last = last.max(m.log_time);
+                *counts.entry(m.topic.clone()).or_default() += 1;
+                summarize_message(&mut s, &m);
+            }
+            _ => {}
+        }
+    }
+    if let Some(m) = &meta {
+        s.meta = Some(meta_from(m, scenario.as_deref(), path)?);
+    }
+    let start = s
+        .meta
+        .as_ref()
+        .and_then(|m| crate::timefmt::parse_utc(&m.start_utc))
+        .and_then(|ns| u64::try_from(ns).ok())
+        .unwrap_or(first);
+    s.duration_ns = if s.messages == 0 {
+        0
+    } else {
+        last.saturating_sub(start)
+    };
+    s.channels = r
+        .channels
+        .values()
+        .map(|(topic, schema)| ChannelSummary {
+            topic: topic.to_string(),
+            schema: schema.to_string(),
+            messages: counts.get(topic).copied().unwrap_or(0),
+        })
+        .collect();
+    Ok(s)
+}
+
+/// Count what one message contributes to the summary (messages that do not decode as this
+/// project's JSON are only counted per channel).
+fn summarize_message(s: &mut Summary, m: &RecordedMessage) {
+    match &*m.topic {
+        TOPIC_CSP => {
+            if let Ok(p) = serde_json::from_slice::<CspPacketMsg>(&m.data) {
+                *s.packets_per_node.entry(p.src).or_default() += 1;
+                *s.packets_per_port.entry(p.dport).or_default() += 1;
+            }
+        }
+        TOPIC_COMMANDS => {
+            if let Ok(c) = serde_json::from_slice::<CommandMsg>(&m.data) {
+                let e = s.commands.entry(c.name).or_default();
+                match c.answered {
+                    None => e.sent += 1,
+                    Some(true) => e.answered += 1,
+                    Some(false) => e.unanswered += 1,
+                }
+            }
+        }
+        TOPIC_EXPECTATIONS => {
+            if let Ok(x) = serde_json::from_slice::<ExpectationMsg>(&m.data) {
+                s.expectations.push(x);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// `ns` as seconds with nine decimals.
+fn secs(ns: u64) -> String {
+    format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
+impl fmt::Display for Summary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.meta {
+            Some(m) => writeln!(
+                f,
+                "scenario: {} (seed {}), start {}, m6p-twin {}",
+                m.scenario_name, m.seed, m.start_utc, m.twin_version
+            )?,
+            None => writeln!(f, "scenario: unknown (no m6p-twin metadata)")?,
+        }
+        writeln!(f, "written by: {}", self.library)?;
+        writeln!(
+            f,
+            "duration: {} s simulated, {} messages",
+            secs(self.duration_ns),
+            self.messages
+        )?;
+        writeln!(f, "channels:")?;
+        for c in &self.channels {
+            writeln!(f, "  {:<28} {:<18} {:>10}", c.topic, c.schema, c.messages)?;
+        }
+        if !self.packets_per_node.is_empty() {
+            writeln!(f, "CSP packets per source node:")?;
+            for (n, c) in &self.packets_per_node {
+                writeln!(f, "  {n:>2} {c:>10}")?;
+            }
+            writeln!(f, "CSP packets per destination port:")?;
+            for (p, c) in &self.packets_per_port {
+                let name = service_name(*p).unwrap_or("");
+                writeln!(f, "  {p:>2} {name:<9} {c:>10}")?;
+            }
+        }
+        if !self.commands.is_empty() {
+            writeln!(f, "commands (sent / answered / unanswered):")?;
+            for (name, c) in &self.commands {
+                writeln!(
+                    f,
+                    "  {name:<28} {:>6} {:>6} {:>6}",
+                    c.sent, c.answered, c.unanswered
+                )?;
+            }
+        }
+        if !self.expectations.is_empty() {
+            writeln!(f, "expectations:")?;
+            for x in &self.expectations {
+                writeln!(
+                    f,
+                    "  {} {} at {} s: {}",
+                    if x.passed { "PASS" } else { "FAIL" },
+                    x.name,
+                    secs(x.t_ns),
+                    x.observed
+                )?;
+            }
+        }
+        if let Some(why) = &self.incomplete {
+            writeln!(f, "incomplete: {why}")?;
+        }
+        Ok(())
+    }
+}
+
+/// Flattens one JSON document into `(dotted key, cell)` pairs in document order (a
+/// `serde_json::Value` would sort the keys): objects recurse (`cfp.src`), null is an empty
+/// cell, strings are bare, arrays stay JSON text.
+struct Flat<'a> {
+    prefix: String,
+    out: &'a mut Vec<(String, String)>,
+}
+
+impl<'de> DeserializeSeed<'de> for Flat<'_> {
+    type Value = ();
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for Flat<'_> {
+    type Value = ();
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("any JSON value")
+    }
+    fn visit_bool<E>(self, v: bool) -> Result<(), E> {
+        self.out.push((self.prefix, v.to_string()));
+        Ok(())
+    }
+    fn visit_i64<E>(self, v: i64) -> Result<(), E> {
+        self.out.push((self.prefix, v.to_string()));
+        Ok(())
+    }
+    fn visit_u64<E>(self, v: u64) -> Result<(), E> {
+        self.out.push((self.prefix, v.to_string()));
+        Ok(())
+    }
+    fn visit_f64<E>(self, v: f64) -> Result<(), E> {
+        self.out.push((self.prefix, v.to_string()));
+        Ok(())
+    }
+    fn visit_str<E>(self, v: &str) -> Result<(), E> {
+        self.out.push((self.prefix, v.to_owned()));
+        Ok(())
+    }
+    fn visit_unit<E>(self) -> Result<(), E> {
+        self.out.push((self.prefix, String::new()));
+        Ok(())
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+        let mut items = Vec::new();
+        while let Some(v) = seq.next_element::<Value>()? {
+            items.push(v);
+        }
+        self.out
+            .push((self.prefix, Value::Array(items).to_string()));
+        Ok(())
+    }
+    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+        let out = self.out;
+        while let Some(k) = map.next_key::<String>()? {
+            let prefix = if self.prefix.is_empty() {
+                k
+            } else {
+                format!("{}.{k}", self.prefix)
+            };
+            map.next_value_seed(Flat {
+                prefix,
+                out: &mut *out,
+            })?;
+        }
+        Ok(())
+    }
+}
+
+/// Flatten the JSON message `data` into `out` (cleared first).
+fn flatten(data: &[u8], out: &mut Vec<(String, String)>) -> serde_json::Result<()> {
+    out.clear();
+    let mut de = serde_json::Deserializer::from_slice(data);
+    Flat {
+        prefix: String::new(),
+        out,
+    }
+    .deserialize(&mut de)?;
+    de.end()
+}
+
+/// Whether `key` is a field inside `parent` (`csp.len` inside `csp`).
+fn is_child(key: &str, parent: &str) -> bool {
+    key.len() > parent.len() && key.starts_with(parent) && key.as_bytes()[parent.len()] == b'.'
+}
+
+/// Merge one message's keys into the column list, keeping document order: a new key goes
+/// after the previous key of the message; an object's fields replace the single column of
+/// a message where it was null; a null where other messages have fields adds nothing.
+fn merge_columns(cols: &mut Vec<String>, keys: impl Iterator<Item = String>) {
+    let mut last: Option<usize> = None;
+    for k in keys {
+        if let Some(i) = cols.iter().position(|c| *c == k) {
+            last = Some(i);
+        } else if let Some(i) = cols.iter().position(|c| is_child(&k, c)) {
+            cols[i] = k;
+            last = Some(i);
+        } else if cols.iter().any(|c| is_child(c, &k)) {
+            continue;
+        } else {
+            let at = last.map_or(cols.len(), |i| i + 1);
+            cols.insert(at, k);
+            last = Some(at);
+        }
+    }
+}
+
+/// Write one CSV row (RFC 4180 quoting).
+fn csv_row<'a>(out: &mut impl Write, cells: impl Iterator<Item = &'a str>) -> std::io::Result<()> {
+    let mut first = true;
+    for c in cells {
+        if !first {
+            out.write_all(b",")?;
+        }
+        first = false;
+        if c.contains([',', '"', '\n', '\r']) {
+            write!(out, "\"{}\"", c.replace('"', "\"\""))?;
+        } else {
+            out.write_all(c.as_bytes())?;
+        }
+    }
+    out.write_all(b"\n")
+}
+
+/// Export channel `channel` as CSV: a header row, then one row per message: `log_time_ns`
+/// and the message's JSON fields flattened (`cfp.src`, ...; null as an empty cell; arrays
+/// as JSON text), columns in the messages' field order. Reads the file twice (columns, then
+/// rows), streaming both times. Returns the number of rows. A truncated file is an error
+/// before anything is written.
+pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::Result<u64> {
+    let not_json = |i: u64| format!("{}: message {i} on {channel} is not JSON", path.display());
+    // Pass 1: the columns.
+    let mut r = Reader::open(path)?;
+    let mut cols: Vec<String> = Vec::new();
+    let mut cells = Vec::new();
+    let mut n = 0u64;
+    while let Some(m) = r.next_message() {
+        let m = m?;
+        if &*m.topic != channel {
+            continue;
+        }
+        flatten(&m.data, &mut cells).with_context(|| not_json(n))?;
+        merge_columns(&mut cols, cells.drain(..).map(|(k, _)| k));
+        n += 1;
+    }
+    if n == 0 {
+        let topics = r.topics();
+        if !topics.iter().any(|t| t == channel) {
+            bail!(
+                "{}: no channel {channel}; channels: {}",
+                path.display(),
+                topics.join(", ")
+            );
+        }
+    }
+    csv_row(
+        out,
+        std::iter::once("log_time_ns").chain(cols.iter().map(String::as_str)),
+    )?;
+    // Pass 2: the rows.
+    let mut r = Reader::open(path)?;
+    let mut rows = 0u64;
+    while let Some(m) = r.next_message() {
+        let m = m?;
+        if &*m.topic != channel {
+            continue;
+        }
+        flatten(&m.data, &mut cells).with_context(|| not_json(rows))?;
+        let time = m.log_time.to_string();
+        let row = cols.iter().map(|col| {
+            cells
+                .iter()
+                .find(|(k, _)| k == col)
+                .map_or("", |(_, v)| v.as_str())
+        });
+        csv_row(out, std::iter::once(time.as_str()).chain(row))?;
+        rows += 1;
+    }
+    Ok(rows)
+}
+
+/// Whether `topic` is a medium channel, the ones `diff` compares: `/can/*/frames`, packet
+/// networks (`/ground/packets`) and `/kiss/*`.
+pub fn is_medium_topic(topic: &str) -> bool {
+    (topic.starts_with("/can/") && topic.ends_with("/frames"))
+        || topic.starts_with("/kiss/")
+        || (topic.ends_with("/packets") && topic != TOPIC_CSP)
+}
+
+/// The outcome of comparing two recordings.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DiffResult {
+    /// Every medium message is the same in both.
+    Identical {
+        /// Medium messages compared.
+        messages: u64,
+    },
+    /// The first medium message that differs.
+    Diverged {
+        /// Index among the medium messages (0-based, file order).
+        index: u64,
+        /// Simulated time of the expected message (the actual one's if the expected
+        /// recording ended), ns since the start of the run.
+        t_ns: u64,
+        /// Channel of the expected message (or the actual one's).
+        channel: String,
+        /// The expected message (first recording): bytes and decoded fields.
+        expected: String,
+        /// The actual message (second recording).
+        actual: String,
+    },
+}
+
+impl DiffResult {
+    /// Whether the recordings are identical.
+    pub fn is_identical(&self) -> bool {
+        matches!(self, DiffResult::Identical { .. })
+    }
+}
+
+impl fmt::Display for DiffResult {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DiffResult::Identical { messages } => {
+                write!(f, "identical ({messages} medium messages)")
+            }
+            DiffResult::Diverged {
+                index,
+                t_ns,
+                channel,
+                expected,
+                actual,
+            } => write!(
+                f,
+                "first divergence at medium message {index}, t = {} s, on {channel}\n  \
+                 expected: {expected}\n  actual:   {actual}",
+                secs(*t_ns)
+            ),
+        }
+    }
+}
+
+/// The next medium message of `r`, with the error naming the recording's role.
+fn next_medium(r: &mut Reader, role: &str) -> anyhow::Result<Option<RecordedMessage>> {
+    while let Some(m) = r.next_message() {
+        let m = m.with_context(|| format!("reading the {role} recording"))?;
+        if is_medium_topic(&m.topic) {
+            return Ok(Some(m));
+        }
+    }
+    Ok(None)
+}
+
+/// The `t_ns` field of a message, else its log time.
+fn t_ns_of(m: &RecordedMessage) -> u64 {
+    serde_json::from_slice::<Value>(&m.data)
+        .ok()
+        .and_then(|v| v.get("t_ns").and_then(Value::as_u64))
+        .unwrap_or(m.log_time)
+}
+
+fn describe_header(b: &BeginFields) -> String {
+    format!(
+        "CSP prio {} {}:{} -> {}:{} flags 0x{:02x} len {}",
+        b.prio, b.src, b.sport, b.dst, b.dport, b.flags, b.len
+    )
+}
+
+/// A message as bytes and decoded fields, for a divergence report.
+pub fn describe(m: &RecordedMessage) -> String {
+    let t = |t_ns: u64| format!("t={}s", secs(t_ns));
+    let dropped = |d: bool| if d { " DROPPED" } else { "" };
+    if m.topic.starts_with("/can/")
+        && let Ok(c) = serde_json::from_slice::<CanFrameMsg>(&m.data)
+    {
+        let csp = c
+            .csp
+            .as_ref()
+            .map(|b| format!("; {}", describe_header(b)))
+            .unwrap_or_default();
+        return format!(
+            "{} from {}: can_id 0x{:08x} dlc {} data {}{} (CFP {} src {} dst {} remain {} ident {}{csp})",
+            t(c.t_ns),
+            c.from,
+            c.can_id,
+            c.dlc,
+            if c.data_hex.is_empty() {
+                "-"
+            } else {
+                &c.data_hex
+            },
+            dropped(c.dropped),
+            c.cfp.kind,
+            c.cfp.src,
+            c.cfp.dst,
+            c.cfp.remain,
+            c.cfp.ident
+        );
+    }
+    if m.topic.starts_with("/kiss/")
+        && let Ok(k) = serde_json::from_slice::<KissFrameMsg>(&m.data)
+    {
+        return format!(
+            "{} {} {}: {} bytes {}",
+            t(k.t_ns),
+            k.link,
+            k.dir,
+            k.len,
+            k.bytes_hex
+        );
+    }
+    if let Ok(p) = serde_json::from_slice::<NetPacketMsg>(&m.data) {
+        let csp = match (p.prio, p.src, p.dst, p.dport, p.sport, p.flags) {
+            (Some(prio), Some(src), Some(dst), Some(dport), Some(sport), Some(flags)) => {
+                format!(
+                    " ({})",
+                    describe_header(&BeginFields {
+                        prio,
+                        src,
+                        dst,
+                        dport,
+                        sport,
+                        flags,
+                        len: p.len.saturating_sub(4) as u16,
+                    })
+                )
+            }
+            _ => String::new(),
+        };
+        return format!(
+            "{} from {}: bytes {}{}{csp}",
+            t(p.t_ns),
+            p.from,
+            p.bytes_hex,
+            dropped(p.dropped)
+        );
+    }
+    format!(
+        "{} {}",
+        t(t_ns_of(m)),
+        String::from_utf8_lossy(&m.data).into_owned()
+    )
+}
+
+/// Compare the medium channels (`/can/*/frames`, `/ground/packets`, `/kiss/*`) of two
+/// recordings message by message in file order; `a` is the expected one. Other channels
+/// (logs, decoded packets, verdicts) follow from these and are not compared. An unreadable
+/// or truncated recording is an error unless a divergence comes before the damage.
+pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
+    let mut ra = Reader::open(a)?;
+    let mut rb = Reader::open(b)?;
+    let mut index = 0u64;
+    loop {
+        let x = next_medium(&mut ra, "expected")
+            .with_context(|| format!("after {index} identical medium messages"))?;
+        let y = next_medium(&mut rb, "actual")
+            .with_context(|| format!("after {index} identical medium messages"))?;
+        match (x, y) {
+            (None, None) => return Ok(DiffResult::Identical { messages: index }),
+            (Some(x), Some(y)) if x.topic == y.topic && x.data == y.data => index += 1,
+            (x, y) => {
+                let end = "(end of recording)".to_owned();
+                let Some(first) = x.as_ref().or(y.as_ref()) else {
+                    return Ok(DiffResult::Identical { messages: index });
+                };
+                let channel_of = |m: &RecordedMessage| {
+                    if x.as_ref()
+                        .zip(y.as_ref())
+                        .is_some_and(|(x, y)| x.topic != y.topic)
+                    {
+                        format!("[{}] ", m.topic)
+                    } else {
+                        String::new()
+                    }
+                };
+                return Ok(DiffResult::Diverged {
+                    index,
+                    t_ns: t_ns_of(first),
+                    channel: first.topic.to_string(),
+                    expected: x
+                        .as_ref()
+                        .map_or_else(|| end.clone(), |m| channel_of(m) + &describe(m)),
+                    actual: y
+                        .as_ref()
+                        .map_or_else(|| end.clone(), |m| channel_of(m) + &describe(m)),
+                });
+            }
+        }
+    }
+}
