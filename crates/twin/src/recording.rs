@@ -10,7 +10,7 @@
 use std::collections::BTreeMap;
 use std::fmt;
 use std::fs::File;
-use std::io::{Read as _, Write};
+use std::io::{Read as _, Seek as _, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -60,6 +60,21 @@ enum Item {
     Summary,
 }
 
+/// Whether `file` ends with the MCAP magic; leaves it positioned at its start.
+fn ends_with_magic(file: &mut File) -> std::io::Result<bool> {
+    let len = file.metadata()?.len();
+    let mut tail = [0u8; 8];
+    let ends = if len >= 16 {
+        file.seek(SeekFrom::End(-8))?;
+        file.read_exact(&mut tail)?;
+        tail == mcap::MAGIC
+    } else {
+        false
+    };
+    file.seek(SeekFrom::Start(0))?;
+    Ok(ends)
+}
+
 /// Streaming reader of one file's records.
 struct Reader {
     path: PathBuf,
@@ -70,13 +85,16 @@ struct Reader {
     records: u64,
     messages: u64,
     past_data_end: bool,
+    /// Whether the file ends with the MCAP magic (a writer finished it).
+    finished: bool,
     done: bool,
 }
 
 impl Reader {
     fn open(path: &Path) -> anyhow::Result<Reader> {
-        let file =
-            File::open(path).with_context(|| format!("opening recording {}", path.display()))?;
+        let ctx = || format!("opening recording {}", path.display());
+        let mut file = File::open(path).with_context(ctx)?;
+        let finished = ends_with_magic(&mut file).with_context(ctx)?;
         let options = LinearReaderOptions::default()
             .with_prevalidate_chunk_crcs(true)
             .with_validate_data_section_crc(true)
@@ -91,6 +109,7 @@ impl Reader {
             records: 0,
             messages: 0,
             past_data_end: false,
+            finished,
             done: false,
         })
     }
@@ -114,8 +133,10 @@ impl Reader {
             McapError::UnexpectedEof if self.records == 0 => {
                 anyhow!("{path}: not an MCAP file (too short)")
             }
-            McapError::UnexpectedEof => anyhow!(
-                "{path}: truncated (a killed run?): read up to the last complete chunk, \
+            // A file that does not end with the magic was never finished: a killed writer
+            // leaves its open chunk with placeholder lengths, or the copy was cut.
+            e if !self.finished && self.records > 0 => anyhow!(
+                "{path}: truncated (a killed run?): {e}; read up to the last complete chunk, \
                  {n} messages"
             ),
             e => anyhow!("{path}: malformed MCAP after {n} messages: {e}"),

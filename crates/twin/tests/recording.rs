@@ -687,3 +687,29 @@ fn python_mcap_package_decodes_every_channel() {
     assert!(stdout.contains("ground packets checked: 2"), "{stdout}");
     assert!(stdout.ends_with("ok\n"), "{stdout}");
 }
+
+/// A run killed mid-chunk (the recorder never finishes): the complete chunks are read, and
+/// the summary says the file ends in an unfinished chunk.
+#[test]
+fn a_killed_run_reads_up_to_the_last_complete_chunk() {
+    let f = TempFile::new("killed");
+    let ev = many_events();
+    let (first, rest) = ev.split_at(ev.len() / 2);
+    let mut r = Recorder::create(f.path(), meta()).unwrap();
+    for e in first {
+        r.write(e).unwrap();
+    }
+    r.flush().unwrap();
+    for e in rest {
+        r.write(e).unwrap();
+    }
+    // As if the process died: nothing more reaches the file (no summary, no footer).
+    std::mem::forget(r);
+    let s = recording::read_summary(f.path()).unwrap();
+    let frames = s.count("/can/main/frames");
+    assert!(frames >= first.len() as u64, "{s}");
+    assert!(frames < ev.len() as u64, "{s}");
+    let why = s.incomplete.unwrap();
+    assert!(why.contains("last complete chunk"), "{why}");
+    assert_eq!(recording::load_meta(f.path()).unwrap(), meta());
+}
