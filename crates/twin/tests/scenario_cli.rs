@@ -1,0 +1,129 @@
+//! The `m6p-twin` binary on scenarios: the repository's own scenarios pass under
+//! `m6p-twin test`, a failing expectation fails the run naming it with time and observed
+//! value, the JUnit report lists it, and runs are deterministic.
+#![allow(clippy::unwrap_used)]
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn twin(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin")).args(args).current_dir(repo()).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("m6p-twin-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn repository_scenarios_pass_under_m6p_twin_test() {
+    let mut files: Vec<String> = std::fs::read_dir(repo().join("scenarios"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .map(|p| p.strip_prefix(repo()).unwrap().display().to_string())
+        .collect();
+    files.sort();
+    assert!(files.len() >= 3, "{files:?}");
+    let junit = tmp("repo.xml");
+    let mut args = vec!["test", "--junit", junit.to_str().unwrap()];
+    args.extend(files.iter().map(String::as_str));
+    let (code, out, err) = twin(&args);
+    assert_eq!(code, 0, "{out}\n{err}");
+    for f in &files {
+        let name = std::path::Path::new(f).file_stem().unwrap().to_string_lossy().into_owned();
+        assert!(out.contains(&name), "{name} missing from\n{out}");
+    }
+    let xml = std::fs::read_to_string(junit).unwrap();
+    assert!(xml.contains("failures=\"0\""), "{xml}");
+}
+
+const FAILING: &str = r#"
+name = "failing"
+duration = "2m"
+[[faults]]
+at = "30s"
+until = "90s"
+kind = "power-off"
+target = "FC"
+[[commands]]
+name = "ping-fc"
+at = "10s"
+every = "20s"
+count = 5
+to = "FC"
+request = "ping"
+[[expectations]]
+name = "FC always answers"
+kind = "reply"
+command = "ping-fc"
+[[expectations]]
+name = "EPS never drops"
+kind = "counter"
+target = "EPS"
+counter = "drops"
+max = 0
+"#;
+
+#[test]
+fn a_failing_expectation_fails_the_run_and_is_named_with_time_and_value() {
+    let file = tmp("failing.toml");
+    std::fs::write(&file, FAILING).unwrap();
+    let junit = tmp("failing.xml");
+    let (code, out, err) = twin(&["test", "--junit", junit.to_str().unwrap(), file.to_str().unwrap()]);
+    assert_eq!(code, 1, "{out}\n{err}");
+    assert!(err.contains("FAIL failing: FC always answers (t = 30.000000000s)"), "{err}");
+    assert!(err.contains("no reply within the 5.000 s timeout"), "{err}");
+    assert!(out.contains("failing") && out.contains("     1      1"), "{out}");
+    let xml = std::fs::read_to_string(&junit).unwrap();
+    assert!(xml.starts_with("<?xml"), "{xml}");
+    assert!(xml.contains("failures=\"1\"") && xml.contains("tests=\"2\""), "{xml}");
+    assert!(xml.contains("<failure") && xml.contains("FC always answers"), "{xml}");
+    // The file is well-formed XML: python's parser is the independent check.
+    let py = Command::new("python3")
+        .args(["-c", "import sys, xml.dom.minidom as m; d = m.parse(sys.argv[1]); print(len(d.getElementsByTagName('testcase')))"])
+        .arg(&junit)
+        .output()
+        .unwrap();
+    assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+    assert_eq!(String::from_utf8_lossy(&py.stdout).trim(), "2");
+    // `run` on the same file also exits non-zero and prints the verdicts.
+    let (code, out, _) = twin(&["run", file.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(out.contains("FAIL FC always answers"), "{out}");
+}
+
+#[test]
+fn check_reports_file_line_and_field_and_schema_is_json() {
+    let file = tmp("bad.toml");
+    std::fs::write(&file, "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FCC\"\nrequest = \"ping\"\n").unwrap();
+    let (code, _, err) = twin(&["check", file.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("bad.toml:4:") && err.contains("commands[0].to") && err.contains("unknown node `FCC`"), "{err}");
+    let (code, out, _) = twin(&["check", "scenarios/default.toml"]);
+    assert_eq!(code, 0, "{out}");
+    let (code, out, _) = twin(&["schema"]);
+    assert_eq!(code, 0);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["title"], "Scenario");
+    assert!(v["properties"]["commands"].is_object());
+}
+
+#[test]
+fn run_output_is_the_same_for_the_same_seed() {
+    let strip = |s: String| s.lines().filter(|l| !l.starts_with("simulated")).collect::<Vec<_>>().join("\n");
+    let a = strip(twin(&["run", "scenarios/node-faults.toml"]).1);
+    let b = strip(twin(&["run", "scenarios/node-faults.toml"]).1);
+    assert_eq!(a, b);
+    assert!(a.contains("7 passed, 0 failed"), "{a}");
+}
