@@ -139,6 +139,56 @@ pub fn end_of(c: &Compiled) -> Option<SimTime> {
     c.opts.duration.map(|d| SimTime::ZERO + d)
 }
 
+/// Run a compiled scenario, recording everything to `record` when given. A recorder
+/// error stops the recording (reported at the end) but never the run.
+pub async fn execute_recorded(
+    loaded: &Loaded,
+    compiled: Compiled,
+    record: Option<&Path>,
+) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    let Some(path) = record else {
+        return Ok((execute(compiled, &mut |_| {}).await?, None));
+    };
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let start_utc = crate::timefmt::format_utc(compiled.opts.epoch_unix_s as i64 * 1_000_000_000);
+    let meta = crate::record::RecordingMeta {
+        scenario_name: loaded.name(),
+        scenario_toml: loaded.text.clone(),
+        seed: compiled.opts.seed,
+        start_utc,
+        twin_version: env!("CARGO_PKG_VERSION").to_owned(),
+        duration_ns: compiled
+            .opts
+            .duration
+            .filter(|d| *d != loaded.scenario.duration.0)
+            .map(|d| d.as_nanos() as u64),
+    };
+    let mut recorder = Some(crate::record::Recorder::create(path, meta)?);
+    let mut failure: Option<anyhow::Error> = None;
+    let outcome = execute(compiled, &mut |ev| {
+        if let Some(r) = recorder.as_mut()
+            && let Err(e) = r.write(ev)
+        {
+            failure = Some(e);
+            recorder = None;
+        }
+    })
+    .await?;
+    if let Some(e) = failure {
+        return Err(e.context(format!("recording to {} stopped", path.display())));
+    }
+    let stats = match recorder {
+        Some(r) => Some(
+            r.finish()
+                .with_context(|| format!("finishing {}", path.display()))?,
+        ),
+        None => None,
+    };
+    Ok((outcome, stats))
+}
+
 /// Compile a loaded scenario.
 pub fn compile_loaded(l: &Loaded) -> Compiled {
     compile(&l.scenario)

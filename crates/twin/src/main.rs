@@ -37,6 +37,24 @@ enum Command {
     },
     /// Print the JSON Schema of the scenario format (for editors).
     Schema,
+    /// Summarise a recording (channels, counts per node and port, expectations), or export
+    /// a channel to CSV.
+    Inspect {
+        /// The MCAP recording.
+        file: PathBuf,
+        /// Export this channel (for example /csp/packets) as CSV to standard output.
+        #[arg(long, value_name = "CHANNEL")]
+        csv: Option<String>,
+    },
+    /// Compare two recordings; exit 0 only when their bus traffic is identical.
+    Diff {
+        /// The expected recording.
+        a: PathBuf,
+        /// The actual recording.
+        b: PathBuf,
+    },
+    /// Re-run a recording's scenario with its seed and compare; exit 0 only when identical.
+    Replay(ReplayArgs),
     /// Join a running twin over KISS/TCP as a ground node and send requests.
     Gs(GsArgs),
 }
@@ -51,6 +69,9 @@ struct RunArgs {
     /// Seed, overriding the scenario's.
     #[arg(long)]
     seed: Option<u64>,
+    /// Record the run to this MCAP file (overrides the scenario's `record.file`).
+    #[arg(long, value_name = "FILE")]
+    record: Option<PathBuf>,
     /// Follow the wall clock (needed by outside programs; implied by --kiss-* and --socketcan).
     #[arg(long)]
     realtime: bool,
@@ -76,6 +97,19 @@ struct RunArgs {
     /// main]. Needs a build with --features socketcan (Linux).
     #[arg(long = "socketcan", value_name = "IFACE[:main|:payload]", value_parser = SocketCanBus::parse_arg)]
     socketcan: Vec<(String, SocketCanBus)>,
+}
+
+#[derive(Debug, clap::Args)]
+struct ReplayArgs {
+    /// The MCAP recording to reproduce.
+    file: PathBuf,
+    /// Keep the new recording here (default: a temporary file, deleted afterwards).
+    #[arg(long, value_name = "FILE")]
+    record: Option<PathBuf>,
+    /// Test-only: change a node's behaviour to prove that divergences are found
+    /// (`fc-uptime-icd`).
+    #[arg(long, hide = true)]
+    test_knob: Option<String>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -151,6 +185,9 @@ fn main() -> ExitCode {
         Command::Test(a) => cmd_test(a),
         Command::Check { files } => cmd_check(&files),
         Command::Schema => cmd_schema(),
+        Command::Inspect { file, csv } => cmd_inspect(&file, csv.as_deref()),
+        Command::Diff { a, b } => cmd_diff(&a, &b),
+        Command::Replay(a) => cmd_replay(a),
         Command::Gs(a) => cmd_gs(a),
     };
     match res {
@@ -204,11 +241,101 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
             None => "until Ctrl-C".into(),
         }
     );
+    let record = a
+        .record
+        .clone()
+        .or_else(|| loaded.scenario.record.file.as_ref().map(PathBuf::from));
     let rt = build_runtime(opts.clock)?;
-    let outcome = rt.block_on(exec::execute(compiled, &mut |_| {}))?;
+    let (outcome, stats) =
+        rt.block_on(exec::execute_recorded(&loaded, compiled, record.as_deref()))?;
     print!("{}", outcome.report.table());
     print!("{}", outcome.verdict_table());
+    if let (Some(path), Some(stats)) = (record, stats) {
+        println!(
+            "\nrecorded {} messages in {} chunks to {} ({} bytes)",
+            stats.messages,
+            stats.chunks,
+            path.display(),
+            stats.bytes
+        );
+    }
     Ok(outcome.passed())
+}
+
+fn cmd_inspect(file: &std::path::Path, csv: Option<&str>) -> anyhow::Result<bool> {
+    match csv {
+        Some(channel) => {
+            let stdout = std::io::stdout();
+            let mut out = std::io::BufWriter::new(stdout.lock());
+            let rows = m6p_twin::recording::export_csv(file, channel, &mut out)?;
+            std::io::Write::flush(&mut out)?;
+            eprintln!("{rows} rows of {channel}");
+        }
+        None => print!("{}", m6p_twin::recording::read_summary(file)?),
+    }
+    Ok(true)
+}
+
+fn cmd_diff(a: &std::path::Path, b: &std::path::Path) -> anyhow::Result<bool> {
+    let d = m6p_twin::recording::diff(a, b)?;
+    println!("{d}");
+    Ok(d.is_identical())
+}
+
+fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
+    let meta = m6p_twin::recording::load_meta(&a.file)?;
+    let file = format!(
+        "{} (recorded scenario `{}`)",
+        a.file.display(),
+        meta.scenario_name
+    );
+    let scenario = m6p_twin::scenario::Scenario::parse(&file, &meta.scenario_toml)?;
+    let loaded = exec::Loaded {
+        file,
+        text: meta.scenario_toml.clone(),
+        scenario,
+    };
+    let mut compiled = exec::compile_loaded(&loaded);
+    compiled.opts.seed = meta.seed;
+    if let Some(d) = meta.duration_ns {
+        compiled.opts.duration = Some(Duration::from_nanos(d));
+    }
+    if compiled.opts.has_outside_links() {
+        anyhow::bail!(
+            "this recording has links to outside programs; replaying their recorded input is not supported yet"
+        );
+    }
+    match a.test_knob.as_deref() {
+        None => {}
+        Some("fc-uptime-icd") => {
+            for n in compiled
+                .opts
+                .network
+                .nodes
+                .iter_mut()
+                .filter(|n| n.addr == 3)
+            {
+                n.uptime = csp::service::UptimeFormat::IcdMillisLe;
+            }
+        }
+        Some(k) => anyhow::bail!("unknown test knob `{k}`"),
+    }
+    let (path, temporary) = match &a.record {
+        Some(p) => (p.clone(), false),
+        None => (
+            std::env::temp_dir().join(format!("m6p-twin-replay-{}.mcap", std::process::id())),
+            true,
+        ),
+    };
+    let rt = build_runtime(compiled.opts.clock)?;
+    let result = rt.block_on(exec::execute_recorded(&loaded, compiled, Some(&path)));
+    let d = result.and_then(|_| m6p_twin::recording::diff(&a.file, &path));
+    if temporary {
+        let _ = std::fs::remove_file(&path);
+    }
+    let d = d?;
+    println!("{d}");
+    Ok(d.is_identical())
 }
 
 fn cmd_check(files: &[PathBuf]) -> anyhow::Result<bool> {

@@ -252,6 +252,10 @@ pub struct RecordingMeta {
     pub start_utc: String,
     /// Version of the twin that made the recording.
     pub twin_version: String,
+    /// Simulated duration in nanoseconds when the command line overrode the scenario's
+    /// (`--duration`), so that `replay` runs exactly as long; `None` keeps the scenario's.
+    #[serde(default)]
+    pub duration_ns: Option<u64>,
 }
 
 /// Messages written to one channel.
@@ -677,6 +681,10 @@ impl Recorder {
             ("twin_version", meta.twin_version.clone()),
             ("scenario_attachment", SCENARIO_ATTACHMENT.to_owned()),
             ("chunk_size", CHUNK_SIZE.to_string()),
+            (
+                "duration_ns",
+                meta.duration_ns.map_or(String::new(), |d| d.to_string()),
+            ),
         ]
         .into_iter()
         .map(|(k, v)| (k.to_owned(), v))

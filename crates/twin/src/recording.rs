@@ -315,6 +315,7 @@ fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Resu
             .with_context(|| format!("{}: metadata seed {seed:?} is not a u64", path.display()))?,
         start_utc: get("start_utc")?,
         twin_version: get("twin_version")?,
+        duration_ns: m.metadata.get("duration_ns").and_then(|d| d.parse().ok()),
     })
 }
 

@@ -44,6 +44,7 @@ fn meta() -> RecordingMeta {
         seed: 42,
         start_utc: "2026-03-20T12:00:00Z".into(),
         twin_version: "0.1.0".into(),
+        duration_ns: None,
     }
 }
 

@@ -11,7 +11,11 @@ fn repo() -> PathBuf {
 }
 
 fn twin(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin")).args(args).current_dir(repo()).output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .unwrap();
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into_owned(),
@@ -41,7 +45,11 @@ fn repository_scenarios_pass_under_m6p_twin_test() {
     let (code, out, err) = twin(&args);
     assert_eq!(code, 0, "{out}\n{err}");
     for f in &files {
-        let name = std::path::Path::new(f).file_stem().unwrap().to_string_lossy().into_owned();
+        let name = std::path::Path::new(f)
+            .file_stem()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         assert!(out.contains(&name), "{name} missing from\n{out}");
     }
     let xml = std::fs::read_to_string(junit).unwrap();
@@ -80,22 +88,43 @@ fn a_failing_expectation_fails_the_run_and_is_named_with_time_and_value() {
     let file = tmp("failing.toml");
     std::fs::write(&file, FAILING).unwrap();
     let junit = tmp("failing.xml");
-    let (code, out, err) = twin(&["test", "--junit", junit.to_str().unwrap(), file.to_str().unwrap()]);
+    let (code, out, err) = twin(&[
+        "test",
+        "--junit",
+        junit.to_str().unwrap(),
+        file.to_str().unwrap(),
+    ]);
     assert_eq!(code, 1, "{out}\n{err}");
-    assert!(err.contains("FAIL failing: FC always answers (t = 30.000000000s)"), "{err}");
+    assert!(
+        err.contains("FAIL failing: FC always answers (t = 30.000000000s)"),
+        "{err}"
+    );
     assert!(err.contains("no reply within the 5.000 s timeout"), "{err}");
-    assert!(out.contains("failing") && out.contains("     1      1"), "{out}");
+    assert!(
+        out.contains("failing") && out.contains("     1      1"),
+        "{out}"
+    );
     let xml = std::fs::read_to_string(&junit).unwrap();
     assert!(xml.starts_with("<?xml"), "{xml}");
-    assert!(xml.contains("failures=\"1\"") && xml.contains("tests=\"2\""), "{xml}");
-    assert!(xml.contains("<failure") && xml.contains("FC always answers"), "{xml}");
+    assert!(
+        xml.contains("failures=\"1\"") && xml.contains("tests=\"2\""),
+        "{xml}"
+    );
+    assert!(
+        xml.contains("<failure") && xml.contains("FC always answers"),
+        "{xml}"
+    );
     // The file is well-formed XML: python's parser is the independent check.
     let py = Command::new("python3")
         .args(["-c", "import sys, xml.dom.minidom as m; d = m.parse(sys.argv[1]); print(len(d.getElementsByTagName('testcase')))"])
         .arg(&junit)
         .output()
         .unwrap();
-    assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
     assert_eq!(String::from_utf8_lossy(&py.stdout).trim(), "2");
     // `run` on the same file also exits non-zero and prints the verdicts.
     let (code, out, _) = twin(&["run", file.to_str().unwrap()]);
@@ -106,10 +135,19 @@ fn a_failing_expectation_fails_the_run_and_is_named_with_time_and_value() {
 #[test]
 fn check_reports_file_line_and_field_and_schema_is_json() {
     let file = tmp("bad.toml");
-    std::fs::write(&file, "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FCC\"\nrequest = \"ping\"\n").unwrap();
+    std::fs::write(
+        &file,
+        "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FCC\"\nrequest = \"ping\"\n",
+    )
+    .unwrap();
     let (code, _, err) = twin(&["check", file.to_str().unwrap()]);
     assert_eq!(code, 1);
-    assert!(err.contains("bad.toml:4:") && err.contains("commands[0].to") && err.contains("unknown node `FCC`"), "{err}");
+    assert!(
+        err.contains("bad.toml:4:")
+            && err.contains("commands[0].to")
+            && err.contains("unknown node `FCC`"),
+        "{err}"
+    );
     let (code, out, _) = twin(&["check", "scenarios/default.toml"]);
     assert_eq!(code, 0, "{out}");
     let (code, out, _) = twin(&["schema"]);
@@ -121,9 +159,141 @@ fn check_reports_file_line_and_field_and_schema_is_json() {
 
 #[test]
 fn run_output_is_the_same_for_the_same_seed() {
-    let strip = |s: String| s.lines().filter(|l| !l.starts_with("simulated")).collect::<Vec<_>>().join("\n");
+    let strip = |s: String| {
+        s.lines()
+            .filter(|l| !l.starts_with("simulated"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
     let a = strip(twin(&["run", "scenarios/node-faults.toml"]).1);
     let b = strip(twin(&["run", "scenarios/node-faults.toml"]).1);
     assert_eq!(a, b);
     assert!(a.contains("7 passed, 0 failed"), "{a}");
+}
+
+#[test]
+fn recordings_are_byte_identical_replay_is_identical_and_a_changed_node_diverges() {
+    let a = tmp("a.mcap");
+    let b = tmp("b.mcap");
+    let c = tmp("c.mcap");
+    let (code, out, err) = twin(&[
+        "run",
+        "scenarios/node-faults.toml",
+        "--record",
+        a.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("recorded") && out.contains("chunks"), "{out}");
+    assert_eq!(
+        twin(&[
+            "run",
+            "scenarios/node-faults.toml",
+            "--record",
+            b.to_str().unwrap()
+        ])
+        .0,
+        0
+    );
+    assert_eq!(
+        std::fs::read(&a).unwrap(),
+        std::fs::read(&b).unwrap(),
+        "same scenario and seed, different bytes"
+    );
+    // Another seed changes what randomness drives (CFP idents, ports), so the files differ.
+    assert_eq!(
+        twin(&[
+            "run",
+            "scenarios/node-faults.toml",
+            "--seed",
+            "2",
+            "--record",
+            c.to_str().unwrap()
+        ])
+        .0,
+        0
+    );
+    assert_ne!(std::fs::read(&a).unwrap(), std::fs::read(&c).unwrap());
+    let (code, out, _) = twin(&["diff", a.to_str().unwrap(), b.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}");
+    assert!(out.starts_with("identical"), "{out}");
+    let (code, out, _) = twin(&["diff", a.to_str().unwrap(), c.to_str().unwrap()]);
+    assert_eq!(code, 1, "{out}");
+    assert!(out.contains("first divergence"), "{out}");
+    // Replay re-runs the recorded scenario and seed.
+    let (code, out, err) = twin(&["replay", a.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.starts_with("identical"), "{out}");
+}
+
+#[test]
+fn replay_names_the_first_divergence_after_a_behaviour_change() {
+    let a = tmp("default.mcap");
+    assert_eq!(
+        twin(&["run", "--duration", "60s", "--record", a.to_str().unwrap()]).0,
+        0
+    );
+    let (code, out, _) = twin(&["replay", a.to_str().unwrap()]);
+    assert_eq!(code, 0, "a replay keeps the recorded --duration: {out}");
+    // The FC answers uptime in the ICD's format under the knob: the first uptime request
+    // of the default scenario is sent at 22 s, so the first different frame is the FC's
+    // reply a few milliseconds later, on the main bus.
+    let (code, out, err) = twin(&[
+        "replay",
+        a.to_str().unwrap(),
+        "--test-knob",
+        "fc-uptime-icd",
+    ]);
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(out.contains("first divergence"), "{out}");
+    assert!(out.contains("t = 22.0"), "{out}");
+    assert!(
+        out.contains("/can/main/frames") && out.contains("from FC"),
+        "{out}"
+    );
+    assert!(
+        out.contains("3:6 -> 16:"),
+        "the uptime reply header is decoded: {out}"
+    );
+}
+
+#[test]
+fn a_real_recording_decodes_with_the_python_mcap_package() {
+    let ok = Command::new("python3")
+        .args(["-c", "import mcap"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "python3 with the `mcap` package is required in CI"
+        );
+        eprintln!("skipped: python3 with the `mcap` package not available (pip install mcap)");
+        return;
+    }
+    let f = tmp("py.mcap");
+    assert_eq!(
+        twin(&[
+            "run",
+            "scenarios/uhf-loss.toml",
+            "--record",
+            f.to_str().unwrap()
+        ])
+        .0,
+        0
+    );
+    let out = Command::new("python3")
+        .arg(repo().join("tests/decode_mcap.py"))
+        .arg(&f)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("/csp/packets") && text.trim_end().ends_with("ok"),
+        "{text}"
+    );
 }
