@@ -13,8 +13,9 @@ use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use csp::SimTime;
 use csp::kiss::{self, Decoder, DecoderConfig, KissDrop, KissEvent};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
 use crate::clock::Clock;
@@ -28,6 +29,28 @@ pub struct KissLinkConfig {
     pub addrs: Vec<u8>,
     /// Receiver settings (the v1.4 248-byte limit is off by default).
     pub decoder: DecoderConfig,
+    /// Where the raw bytes crossing the socket go (the recorder).
+    pub tap: Option<KissTap>,
+}
+
+/// Receives every chunk read from and every frame written to a link's socket:
+/// `(time, link name, true = into the twin, bytes)`.
+#[derive(Clone)]
+pub struct KissTap(Arc<TapFn>);
+
+type TapFn = dyn Fn(SimTime, &str, bool, &[u8]) + Send + Sync;
+
+impl KissTap {
+    /// A tap calling `f`.
+    pub fn new(f: impl Fn(SimTime, &str, bool, &[u8]) + Send + Sync + 'static) -> Self {
+        KissTap(Arc::new(f))
+    }
+}
+
+impl std::fmt::Debug for KissTap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("KissTap")
+    }
 }
 
 /// Counters of a KISS/TCP link, over all its connections.
@@ -69,6 +92,7 @@ fn bump(stats: &SharedStats, f: impl FnOnce(&mut KissLinkStats)) {
 /// Accept outside nodes on `listener` forever.
 pub async fn serve(
     listener: TcpListener,
+    label: String,
     segs: Segments,
     cfg: KissLinkConfig,
     stats: SharedStats,
@@ -81,18 +105,12 @@ pub async fn serve(
                 n = n.wrapping_add(1);
                 tracing::info!(%peer, "KISS/TCP: outside node connected");
                 bump(&stats, |s| s.connections += 1);
-                let (segs, cfg, stats) = (segs.clone(), cfg.clone(), stats.clone());
+                let (segs, cfg, stats, label) =
+                    (segs.clone(), cfg.clone(), stats.clone(), label.clone());
+                let _ = stream.set_nodelay(true);
                 tokio::spawn(async move {
-                    let why = run_connection(
-                        stream,
-                        &segs,
-                        &cfg,
-                        &stats,
-                        clock,
-                        &format!("kiss:{peer}"),
-                        n,
-                    )
-                    .await;
+                    let conn = format!("{label}#{n}");
+                    let why = run_connection(stream, &conn, &segs, &cfg, &stats, clock, n).await;
                     tracing::info!(%peer, "KISS/TCP: connection closed: {why}");
                     bump(&stats, |s| s.disconnects += 1);
                 });
@@ -108,6 +126,7 @@ pub async fn serve(
 /// Connect to an outside server at `addr` and keep reconnecting with back-off.
 pub async fn connect(
     addr: SocketAddr,
+    label: String,
     segs: Segments,
     cfg: KissLinkConfig,
     stats: SharedStats,
@@ -122,16 +141,9 @@ pub async fn connect(
                 backoff = Duration::from_millis(500);
                 tracing::info!(%addr, "KISS/TCP: connected to outside server");
                 bump(&stats, |s| s.connections += 1);
-                let why = run_connection(
-                    stream,
-                    &segs,
-                    &cfg,
-                    &stats,
-                    clock,
-                    &format!("kiss:{addr}"),
-                    n,
-                )
-                .await;
+                let _ = stream.set_nodelay(true);
+                let conn = format!("{label}#{n}");
+                let why = run_connection(stream, &conn, &segs, &cfg, &stats, clock, n).await;
                 tracing::info!(%addr, "KISS/TCP: connection closed: {why}");
                 bump(&stats, |s| s.disconnects += 1);
             }
@@ -142,16 +154,56 @@ pub async fn connect(
     }
 }
 
-async fn run_connection(
-    mut stream: TcpStream,
+/// Serve one connection of link `name` until it closes; returns why it closed. Generic over
+/// the stream; the bytes read are stamped with the clock's time as they arrive.
+pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
+    stream: S,
+    name: &str,
     segs: &Segments,
     cfg: &KissLinkConfig,
     stats: &SharedStats,
     clock: Clock,
-    name: &str,
     n: u16,
 ) -> String {
-    let _ = stream.set_nodelay(true);
+    let (mut rd, mut wr) = tokio::io::split(stream);
+    let (in_tx, in_rx) = tokio::sync::mpsc::unbounded_channel();
+    let reader = async move {
+        let mut buf = vec![0u8; 4096];
+        loop {
+            match rd.read(&mut buf).await {
+                Ok(0) => return "peer closed".to_owned(),
+                Ok(k) => {
+                    if in_tx
+                        .send((clock.now(), buf.get(..k).unwrap_or_default().to_vec()))
+                        .is_err()
+                    {
+                        return "link closed".to_owned();
+                    }
+                }
+                Err(e) => return format!("read error: {e}"),
+            }
+        }
+    };
+    tokio::select! {
+        biased;
+        why = serve_link(in_rx, &mut wr, name, segs, cfg, stats, n) => why,
+        why = reader => why,
+    }
+}
+
+/// The link's core: time-stamped input chunks in, KISS frames out to `stream`. Every
+/// connection has its own name (`listen 127.0.0.1:52001#2` for the second one). `replay` feeds
+/// it recorded chunks with their recorded times. Ends when the input ends or a write fails.
+#[allow(clippy::too_many_arguments)]
+pub async fn serve_link<W: AsyncWrite + Unpin>(
+    mut input: tokio::sync::mpsc::UnboundedReceiver<(SimTime, Vec<u8>)>,
+    stream: &mut W,
+    name: &str,
+    segs: &Segments,
+    cfg: &KissLinkConfig,
+    stats: &SharedStats,
+    n: u16,
+) -> String {
     let (inbox_tx, mut inbox_rx) = inbox();
     let mut endpoint: Option<OutsideEndpoint> = None;
     for &a in &cfg.addrs {
@@ -161,25 +213,24 @@ async fn run_connection(
     }
     let mut decoder = Decoder::new(cfg.decoder);
     let mut events = Vec::new();
-    let mut buf = vec![0u8; 4096];
     let mut out = Vec::new();
     let why = loop {
         tokio::select! {
             biased;
-            r = stream.read(&mut buf) => {
-                let n_read = match r {
-                    Ok(0) => break "peer closed".to_owned(),
-                    Ok(k) => k,
-                    Err(e) => break format!("read error: {e}"),
-                };
+            r = input.recv() => {
+                let Some((t, chunk)) = r else { break "peer closed".to_owned() };
+                let chunk = chunk.as_slice();
+                let n_read = chunk.len();
+                if let Some(tap) = &cfg.tap {
+                    (tap.0)(t, name, true, chunk);
+                }
                 let before = decoder.stats();
-                decoder.push(buf.get(..n_read).unwrap_or_default(), &mut events);
+                decoder.push(chunk, &mut events);
                 let after = decoder.stats();
                 bump(stats, |s| {
                     s.bytes_in += n_read as u64;
                     s.garbage_bytes += after.discarded_bytes - before.discarded_bytes;
                 });
-                let t = clock.now();
                 for ev in events.drain(..) {
                     match ev {
                         KissEvent::Packet(p) => {
@@ -206,11 +257,15 @@ async fn run_connection(
             }
             a = inbox_rx.recv() => {
                 let Some(a) = a else { break "inbox closed".to_owned() };
+                let a_t = a.t;
                 let Some(ep) = endpoint.as_mut() else { continue };
                 match ep.receive(a) {
                     Some(Ok(p)) => {
                         out.clear();
                         kiss::encode(&p, &mut out);
+                        if let Some(tap) = &cfg.tap {
+                            (tap.0)(a_t, name, false, &out);
+                        }
                         if let Err(e) = stream.write_all(&out).await {
                             break format!("write error: {e}");
                         }

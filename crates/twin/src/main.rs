@@ -262,6 +262,34 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
     Ok(outcome.passed())
 }
 
+/// The bytes outside programs sent on each KISS link of a recording, with their times.
+fn recorded_kiss_input(
+    file: &std::path::Path,
+) -> anyhow::Result<Vec<m6p_twin::runtime::KissReplay>> {
+    let mut links: std::collections::BTreeMap<String, Vec<(csp::SimTime, Vec<u8>)>> =
+        Default::default();
+    for m in m6p_twin::recording::messages(file)? {
+        let m = m?;
+        if !m.topic.starts_with("/kiss/") {
+            continue;
+        }
+        let k: m6p_twin::record::KissFrameMsg = serde_json::from_slice(&m.data)
+            .with_context(|| format!("decoding a {} message", m.topic))?;
+        if k.dir == "in" {
+            let bytes =
+                hex::decode(&k.bytes_hex).with_context(|| format!("bad hex in {}", m.topic))?;
+            links
+                .entry(k.link)
+                .or_default()
+                .push((csp::SimTime(k.t_ns), bytes));
+        }
+    }
+    Ok(links
+        .into_iter()
+        .map(|(link, chunks)| m6p_twin::runtime::KissReplay { link, chunks })
+        .collect())
+}
+
 fn cmd_inspect(file: &std::path::Path, csv: Option<&str>) -> anyhow::Result<bool> {
     match csv {
         Some(channel) => {
@@ -300,10 +328,22 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
     if let Some(d) = meta.duration_ns {
         compiled.opts.duration = Some(Duration::from_nanos(d));
     }
-    if compiled.opts.has_outside_links() {
+    if !compiled.opts.socketcan.is_empty() {
         anyhow::bail!(
-            "this recording has links to outside programs; replaying their recorded input is not supported yet"
+            "this recording bridged a SocketCAN interface; replaying SocketCAN input is not supported yet"
         );
+    }
+    // What outside programs sent (from the scenario's links or the command line's) is in
+    // the recording: feed it again in virtual time instead of opening sockets.
+    let input = recorded_kiss_input(&a.file)?;
+    if compiled.opts.has_outside_links() || !input.is_empty() {
+        compiled.opts.kiss_listen.clear();
+        compiled.opts.kiss_connect.clear();
+        compiled.opts.clock = bus::ClockMode::Virtual;
+        compiled.opts.kiss_replay = input;
+        if compiled.opts.duration.is_none() {
+            anyhow::bail!("the recorded run had no fixed duration");
+        }
     }
     match a.test_knob.as_deref() {
         None => {}

@@ -10,7 +10,7 @@
 //! | `/can/main/frames`, `/can/payload/frames` (`/can/<bus>/frames`) | `m6p.CanFrame` | CAN frame on the bus, dropped ones included |
 //! | `/ground/packets` (`/<network>/packets`) | `m6p.NetPacket` | packet on the ground network, dropped ones included |
 //! | `/csp/packets` | `m6p.CspPacket` | CSP packet delivered by a medium: CAN frames reassembled per bus, ground packets as they are |
-//! | `/kiss/<link>` | `m6p.KissFrame` | KISS frame crossing an outside link, either direction |
+//! | `/kiss/<link>#<n>/in`, `.../out` | `m6p.KissFrame` | bytes read from / frames written to connection n of an outside link |
 //! | `/log` | `foxglove.Log` | log line |
 //! | `/faults` | `m6p.Fault` | fault applied or lifted |
 //! | `/commands` | `m6p.Command` | scenario command sent, and its result |
@@ -816,15 +816,17 @@ impl Recorder {
                 dir,
                 bytes,
             } => {
-                let chan = self.channel_for(Kind::Kiss, link, || kiss_topic(link))?;
+                let d = match dir {
+                    Direction::In => "in",
+                    Direction::Out => "out",
+                };
+                let key = format!("{link}/{d}");
+                let chan =
+                    self.channel_for(Kind::Kiss, &key, || format!("{}/{d}", kiss_topic(link)))?;
                 let msg = KissFrameMsg {
                     t_ns,
                     link: link.clone(),
-                    dir: match dir {
-                        Direction::In => "in",
-                        Direction::Out => "out",
-                    }
-                    .to_owned(),
+                    dir: d.to_owned(),
                     bytes_hex: hex::encode(bytes),
                     len: bytes.len() as u32,
                 };

@@ -767,7 +767,7 @@ pub enum DiffResult {
     },
     /// The first medium message that differs.
     Diverged {
-        /// Index among the medium messages (0-based, file order).
+        /// Index of the message within its channel (0-based).
         index: u64,
         /// Simulated time of the expected message (the actual one's if the expected
         /// recording ended), ns since the start of the run.
@@ -802,7 +802,7 @@ impl fmt::Display for DiffResult {
                 actual,
             } => write!(
                 f,
-                "first divergence at medium message {index}, t = {} s, on {channel}\n  \
+                "first divergence at t = {} s on {channel} (message {index} of that channel)\n  \
                  expected: {expected}\n  actual:   {actual}",
                 secs(*t_ns)
             ),
@@ -917,44 +917,60 @@ pub fn describe(m: &RecordedMessage) -> String {
 /// (logs, decoded packets, verdicts) follow from these and are not compared. An unreadable
 /// or truncated recording is an error unless a divergence comes before the damage.
 pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
-    let mut ra = Reader::open(a)?;
-    let mut rb = Reader::open(b)?;
-    let mut index = 0u64;
-    loop {
-        let x = next_medium(&mut ra, "expected")
-            .with_context(|| format!("after {index} identical medium messages"))?;
-        let y = next_medium(&mut rb, "actual")
-            .with_context(|| format!("after {index} identical medium messages"))?;
-        match (x, y) {
-            (None, None) => return Ok(DiffResult::Identical { messages: index }),
-            (Some(x), Some(y)) if x.topic == y.topic && x.data == y.data => index += 1,
-            (x, y) => {
-                let end = "(end of recording)".to_owned();
-                let Some(first) = x.as_ref().or(y.as_ref()) else {
-                    return Ok(DiffResult::Identical { messages: index });
-                };
-                let channel_of = |m: &RecordedMessage| {
-                    if x.as_ref()
-                        .zip(y.as_ref())
-                        .is_some_and(|(x, y)| x.topic != y.topic)
-                    {
-                        format!("[{}] ", m.topic)
-                    } else {
-                        String::new()
-                    }
-                };
-                return Ok(DiffResult::Diverged {
-                    index,
-                    t_ns: t_ns_of(first),
-                    channel: first.topic.to_string(),
-                    expected: x
-                        .as_ref()
-                        .map_or_else(|| end.clone(), |m| channel_of(m) + &describe(m)),
-                    actual: y
-                        .as_ref()
-                        .map_or_else(|| end.clone(), |m| channel_of(m) + &describe(m)),
-                });
+    // Each medium channel is compared as its own sequence: messages of different channels
+    // that happen within the same scheduler tick may be written in either order, and that
+    // order is not part of what happened on the wire.
+    let collect =
+        |path: &Path, label: &str| -> anyhow::Result<BTreeMap<Arc<str>, Vec<RecordedMessage>>> {
+            let mut r = Reader::open(path)?;
+            let mut by_topic: BTreeMap<Arc<str>, Vec<RecordedMessage>> = BTreeMap::new();
+            while let Some(m) = next_medium(&mut r, label)? {
+                by_topic.entry(m.topic.clone()).or_default().push(m);
             }
+            Ok(by_topic)
+        };
+    let xa = collect(a, "expected")?;
+    let xb = collect(b, "actual")?;
+    let topics: std::collections::BTreeSet<&Arc<str>> = xa.keys().chain(xb.keys()).collect();
+    let empty = Vec::new();
+    let mut same = 0u64;
+    #[allow(clippy::type_complexity)]
+    let mut first: Option<(
+        u64,
+        u64,
+        &Arc<str>,
+        Option<&RecordedMessage>,
+        Option<&RecordedMessage>,
+    )> = None;
+    for topic in topics {
+        let (ea, eb) = (
+            xa.get(topic).unwrap_or(&empty),
+            xb.get(topic).unwrap_or(&empty),
+        );
+        for i in 0..ea.len().max(eb.len()) {
+            let (x, y) = (ea.get(i), eb.get(i));
+            if let (Some(x), Some(y)) = (x, y)
+                && x.data == y.data
+            {
+                same += 1;
+                continue;
+            }
+            let t = x.or(y).map_or(u64::MAX, t_ns_of);
+            if first.as_ref().is_none_or(|f| t < f.0) {
+                first = Some((t, i as u64, topic, x, y));
+            }
+            break;
         }
     }
+    let Some((t_ns, index, topic, x, y)) = first else {
+        return Ok(DiffResult::Identical { messages: same });
+    };
+    let end = "(end of recording)".to_owned();
+    Ok(DiffResult::Diverged {
+        index,
+        t_ns,
+        channel: topic.to_string(),
+        expected: x.map_or_else(|| end.clone(), describe),
+        actual: y.map_or_else(|| end.clone(), describe),
+    })
 }

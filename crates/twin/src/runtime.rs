@@ -15,7 +15,7 @@ use anyhow::Context as _;
 use bus::can::BusStats;
 use bus::driver::{Attachment, NodeCtl, NodeLogTx, run_node_logged};
 use bus::inbox::inbox;
-use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats};
+use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissTap};
 use bus::net::NetStats;
 use bus::outside::{BridgeStats, Segments};
 use bus::trace::{TraceEvent, TraceTx};
@@ -24,7 +24,7 @@ use csp::SimTime;
 use csp::node::{App, Host, NodeCounters};
 use tokio::sync::{mpsc, oneshot};
 
-use crate::events::{Level, RunEvent};
+use crate::events::{Direction, Level, RunEvent};
 use crate::ground::{GroundApp, PlannedRequest, RequestResult, Results};
 use crate::network::{Medium, NetworkSpec, Role, node_config};
 use crate::plan::{FaultAction, MediumId, TimedFault};
@@ -57,6 +57,17 @@ pub struct RunOptions {
     pub trace: bool,
     /// Faults to apply, in time order.
     pub faults: Vec<TimedFault>,
+    /// Recorded input of outside links to feed again (`replay`), one connection per link.
+    pub kiss_replay: Vec<KissReplay>,
+}
+
+/// What an outside program sent on one KISS link during a recorded run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KissReplay {
+    /// The link's name in the recording (for example `listen 127.0.0.1:52001`).
+    pub link: String,
+    /// The bytes read from the socket, with the times they were read.
+    pub chunks: Vec<(SimTime, Vec<u8>)>,
 }
 
 impl RunOptions {
@@ -75,6 +86,7 @@ impl RunOptions {
             epoch_unix_s: 1_577_836_800,
             trace: false,
             faults: Vec::new(),
+            kiss_replay: Vec::new(),
         }
     }
 
@@ -316,6 +328,22 @@ pub async fn run_with(
         nodes.push((spec.clone(), ctl_tx, handle));
     }
 
+    let mut kiss_cfg = opts.kiss.clone();
+    {
+        let tx = ev_tx.clone();
+        kiss_cfg.tap = Some(KissTap::new(move |t, link, into_twin, bytes| {
+            let _ = tx.send(RunEvent::Kiss {
+                t,
+                link: link.to_owned(),
+                dir: if into_twin {
+                    Direction::In
+                } else {
+                    Direction::Out
+                },
+                bytes: bytes.to_vec(),
+            });
+        }));
+    }
     let mut kiss_stats = Vec::new();
     let mut bound = Vec::new();
     for addr in &opts.kiss_listen {
@@ -328,8 +356,9 @@ pub async fn run_with(
         kiss_stats.push((format!("listen {local}"), stats.clone()));
         background.push(tokio::spawn(kiss_tcp::serve(
             listener,
+            format!("listen {addr}"),
             segs.clone(),
-            opts.kiss.clone(),
+            kiss_cfg.clone(),
             stats,
             clock,
         )));
@@ -339,11 +368,40 @@ pub async fn run_with(
         kiss_stats.push((format!("connect {addr}"), stats.clone()));
         background.push(tokio::spawn(kiss_tcp::connect(
             *addr,
+            format!("connect {addr}"),
             segs.clone(),
-            opts.kiss.clone(),
+            kiss_cfg.clone(),
             stats,
             clock,
         )));
+    }
+    for (n, input) in opts.kiss_replay.iter().enumerate() {
+        // Recorded outside input, fed through an in-memory pipe at its recorded times;
+        // what the twin answers is recorded again and compared by `replay`.
+        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
+        kiss_stats.push((format!("replayed {}", input.link), stats.clone()));
+        let (in_tx, in_rx) = mpsc::unbounded_channel();
+        let (segs2, cfg2, label) = (segs.clone(), kiss_cfg.clone(), input.link.clone());
+        background.push(tokio::spawn(async move {
+            let mut discard = tokio::io::sink();
+            // The connection number seeds its CFP ident as in the recorded run.
+            let conn = label
+                .rsplit_once('#')
+                .and_then(|(_, k)| k.parse().ok())
+                .unwrap_or(n as u16 + 1);
+            kiss_tcp::serve_link(in_rx, &mut discard, &label, &segs2, &cfg2, &stats, conn).await;
+        }));
+        let chunks = input.chunks.clone();
+        background.push(tokio::spawn(async move {
+            for (t, bytes) in chunks {
+                clock.sleep_until(t).await;
+                if in_tx.send((t, bytes)).is_err() {
+                    break;
+                }
+            }
+            // Keep the link open until the end of the run, as the recorded program was.
+            std::future::pending::<()>().await;
+        }));
     }
     if let Some(r) = ready {
         let _ = r.send(bound);

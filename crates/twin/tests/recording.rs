@@ -226,7 +226,7 @@ fn stats_count_every_channel() {
     // Request and reply on main and on ground, the resent packet on payload; not the one
     // that lost a frame.
     assert_eq!(count("/csp/packets"), Some(5));
-    assert_eq!(count("/kiss/listen_127.0.0.1:52001"), Some(1));
+    assert_eq!(count("/kiss/listen_127.0.0.1:52001/in"), Some(1));
     assert_eq!(count("/log"), Some(1));
     assert_eq!(count("/faults"), Some(1));
     assert_eq!(count("/commands"), Some(2));
@@ -249,7 +249,7 @@ fn stats_count_every_channel() {
             "/faults",
             "/commands",
             "/expectations",
-            "/kiss/listen_127.0.0.1:52001"
+            "/kiss/listen_127.0.0.1:52001/in"
         ]
     );
 }
@@ -282,7 +282,12 @@ fn diff_names_the_first_divergence() {
             }
         }
     }
-    assert_eq!(index, 2, "ground packet, BEGIN, then this MORE");
+    assert_eq!(
+        index, 2,
+        "ground packet, BEGIN, then this MORE in the event list"
+    );
+    // diff indexes within the channel: the BEGIN, then this MORE.
+    let index = 1;
     let b = TempFile::new("diff-b");
     record(b.path(), &changed);
     match recording::diff(a.path(), b.path()).unwrap() {
@@ -324,7 +329,7 @@ fn diff_names_the_first_divergence() {
     let d = recording::diff(a.path(), c.path()).unwrap();
     let text = d.to_string();
     assert!(
-        text.contains("first divergence at medium message 5"),
+        text.contains("on /can/main/frames (message 4 of that channel)"),
         "{text}"
     );
     assert!(text.contains("CSP prio 2 3:1 -> 16:40"), "{text}");
@@ -340,8 +345,9 @@ fn diff_names_the_first_divergence() {
             actual,
             ..
         } => {
-            assert_eq!(index, medium_count(&ev) - 1);
-            assert_eq!(channel, "/kiss/listen_127.0.0.1:52001");
+            // The KISS frame was the last event and the only one on its channel.
+            assert_eq!(index, 0);
+            assert_eq!(channel, "/kiss/listen_127.0.0.1:52001/in");
             assert_eq!(actual, "(end of recording)");
         }
         other => panic!("expected a divergence, got {other:?}"),
@@ -500,7 +506,7 @@ fn summary_and_meta_describe_the_run() {
     );
     assert_eq!(s.count("/can/main/frames"), 8);
     assert_eq!(s.count("/csp/packets"), 5);
-    assert_eq!(s.count("/kiss/listen_127.0.0.1:52001"), 1);
+    assert_eq!(s.count("/kiss/listen_127.0.0.1:52001/in"), 1);
     assert_eq!(s.channels.len(), 9);
     assert_eq!(
         s.packets_per_node.iter().collect::<Vec<_>>(),
