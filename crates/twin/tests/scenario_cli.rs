@@ -360,3 +360,55 @@ fn a_run_with_outside_programs_replays_identically_from_its_recorded_input() {
         "{summary}"
     );
 }
+
+#[test]
+fn ctrl_c_finishes_the_recording_cleanly() {
+    use std::io::{BufRead, BufReader};
+    let rec = tmp("interrupted.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args([
+            "run",
+            "--realtime",
+            "--forever",
+            "--kiss-listen",
+            "127.0.0.1:0",
+            "--record",
+        ])
+        .arg(&rec)
+        .current_dir(repo())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    assert!(
+        lines
+            .by_ref()
+            .map_while(Result::ok)
+            .any(|l| l.contains("listening on")),
+        "the twin started"
+    );
+    let drain = std::thread::spawn(move || lines.for_each(drop));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    drain.join().unwrap();
+    // Stopped early, the default scenario's later commands were never sent: exit 1, but
+    // the table, the verdicts and a complete file are there.
+    assert_eq!(out.status.code(), Some(1));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("expectations:") && stdout.contains("recorded"),
+        "{stdout}"
+    );
+    let (code, summary, err) = twin(&["inspect", rec.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        !summary.contains("incomplete") && !summary.contains("truncated"),
+        "{summary}"
+    );
+    assert!(summary.contains("/expectations"), "{summary}");
+}
