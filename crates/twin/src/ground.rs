@@ -24,6 +24,9 @@ pub struct PlannedRequest {
     pub timeout: Duration,
     /// A label for reports.
     pub label: String,
+    /// Send only after the first outcome (reply, timeout or send failure) of the request
+    /// labelled so; `at` then counts from that outcome.
+    pub after: Option<String>,
 }
 
 /// What became of a request.
@@ -65,11 +68,15 @@ pub struct GroundApp {
     next_tag: u64,
     results: Results,
     events: Option<tokio::sync::mpsc::UnboundedSender<crate::events::RunEvent>>,
+    /// Requests waiting for another request's outcome (`after`), in plan order.
+    deferred: Vec<PlannedRequest>,
 }
 
 impl GroundApp {
     /// A station that will send `plan` (in time order) and record outcomes in `results`.
-    pub fn new(mut plan: Vec<PlannedRequest>, results: Results) -> Self {
+    pub fn new(plan: Vec<PlannedRequest>, results: Results) -> Self {
+        let (deferred, mut plan): (Vec<_>, Vec<_>) =
+            plan.into_iter().partition(|r| r.after.is_some());
         plan.sort_by_key(|r| r.at);
         GroundApp {
             plan: plan.into(),
@@ -78,6 +85,7 @@ impl GroundApp {
             next_tag: 0,
             results,
             events: None,
+            deferred,
         }
     }
 
@@ -96,12 +104,29 @@ impl GroundApp {
         }
     }
 
-    fn record(&self, request: PlannedRequest, sent: SimTime, outcome: Outcome) {
+    fn record(&mut self, request: PlannedRequest, sent: SimTime, outcome: Outcome) {
         let (reply, rtt_ns) = match &outcome {
             Outcome::Reply { data, rtt } => (Some(data.clone()), Some(rtt.as_nanos() as u64)),
             _ => (None, None),
         };
         let decided = sent + rtt_ns.map_or(request.timeout, std::time::Duration::from_nanos);
+        // Release the requests that wait for this one (its first outcome only).
+        if self
+            .deferred
+            .iter()
+            .any(|d| d.after.as_deref() == Some(request.label.as_str()))
+        {
+            let (release, keep): (Vec<_>, Vec<_>) = std::mem::take(&mut self.deferred)
+                .into_iter()
+                .partition(|d| d.after.as_deref() == Some(request.label.as_str()));
+            self.deferred = keep;
+            for mut d in release {
+                d.at = decided + (d.at - SimTime::ZERO);
+                d.after = None;
+                self.plan.push_back(d);
+            }
+            self.plan.make_contiguous().sort_by_key(|r| r.at);
+        }
         self.emit(crate::events::RunEvent::CommandResult {
             t: decided,
             name: request.label.clone(),

@@ -40,6 +40,7 @@ pub fn default_plan(net: &NetworkSpec, duration: Duration) -> Vec<PlannedRequest
                 data: ground::ping_payload(16),
                 timeout: Duration::from_secs(5),
                 label: format!("ping {}", n.name),
+                after: None,
             });
         }
         t += Duration::from_secs(60);

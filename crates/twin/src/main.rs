@@ -200,7 +200,11 @@ fn main() -> ExitCode {
         Command::Inspect { file, csv } => cmd_inspect(&file, csv.as_deref()),
         Command::Diff { a, b } => cmd_diff(&a, &b),
         Command::Replay(a) => cmd_replay(a),
-        Command::Bench { scenario, duration, runs } => cmd_bench(scenario.as_deref(), duration, runs),
+        Command::Bench {
+            scenario,
+            duration,
+            runs,
+        } => cmd_bench(scenario.as_deref(), duration, runs),
         Command::Gs(a) => cmd_gs(a),
     };
     match res {
@@ -310,7 +314,11 @@ fn peak_rss_kib() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-fn cmd_bench(scenario: Option<&std::path::Path>, duration: Duration, runs: usize) -> anyhow::Result<bool> {
+fn cmd_bench(
+    scenario: Option<&std::path::Path>,
+    duration: Duration,
+    runs: usize,
+) -> anyhow::Result<bool> {
     let loaded = match scenario {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
@@ -328,7 +336,11 @@ fn cmd_bench(scenario: Option<&std::path::Path>, duration: Duration, runs: usize
             compiled.opts.clock = bus::ClockMode::Virtual;
             let rt = build_runtime(compiled.opts.clock)?;
             let started = std::time::Instant::now();
-            let (_, stats) = rt.block_on(exec::execute_recorded(&loaded, compiled, record.then_some(file.as_path())))?;
+            let (_, stats) = rt.block_on(exec::execute_recorded(
+                &loaded,
+                compiled,
+                record.then_some(file.as_path()),
+            ))?;
             rtf.push(duration.as_secs_f64() / started.elapsed().as_secs_f64());
             if let Some(s) = stats {
                 bytes = s.bytes;
@@ -343,11 +355,26 @@ fn cmd_bench(scenario: Option<&std::path::Path>, duration: Duration, runs: usize
     let (rtf_rec, bytes, messages) = measure(true)?;
     let peak_all = peak_rss_kib();
     let _ = std::fs::remove_file(&file);
-    let kib = |k: Option<u64>| k.map_or("n/a".to_owned(), |k| format!("{:.1} MiB", k as f64 / 1024.0));
-    println!("scenario `{}`, {} simulated per run, {runs} runs per variant (medians)", loaded.name(), m6p_twin::duration::format_duration(duration));
+    let kib = |k: Option<u64>| {
+        k.map_or("n/a".to_owned(), |k| {
+            format!("{:.1} MiB", k as f64 / 1024.0)
+        })
+    };
+    println!(
+        "scenario `{}`, {} simulated per run, {runs} runs per variant (medians)",
+        loaded.name(),
+        m6p_twin::duration::format_duration(duration)
+    );
     println!("  real-time factor without recording: {rtf_plain:.0}x");
-    println!("  real-time factor with recording:    {rtf_rec:.0}x ({:.1} % slower)", 100.0 * (1.0 - rtf_rec / rtf_plain));
-    println!("  peak memory (VmHWM): {} after the plain runs, {} after all", kib(peak_plain), kib(peak_all));
+    println!(
+        "  real-time factor with recording:    {rtf_rec:.0}x ({:.1} % slower)",
+        100.0 * (1.0 - rtf_rec / rtf_plain)
+    );
+    println!(
+        "  peak memory (VmHWM): {} after the plain runs, {} after all",
+        kib(peak_plain),
+        kib(peak_all)
+    );
     println!(
         "  MCAP: {} bytes, {messages} messages per run = {:.0} bytes per simulated hour",
         bytes,

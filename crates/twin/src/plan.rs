@@ -194,6 +194,7 @@ pub fn compile(s: &Scenario) -> Compiled {
                 data: data.clone(),
                 timeout,
                 label: name.clone(),
+                after: c.after.clone(),
             });
         }
     }

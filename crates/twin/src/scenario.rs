@@ -270,8 +270,13 @@ pub struct CommandSpec {
     /// Name for expectations and reports (default `commands[i]`).
     #[serde(default)]
     pub name: Option<String>,
-    /// When to send it.
+    /// When to send it: simulated time since the start, or, with `after`, since that
+    /// command's first outcome.
     pub at: Dur,
+    /// Send it only after the first outcome (reply or timeout) of this command, which must
+    /// come from the same ground station.
+    #[serde(default)]
+    pub after: Option<String>,
     /// Repeat every this long (with `count`).
     #[serde(default)]
     pub every: Option<Dur>,
@@ -698,6 +703,32 @@ impl Scenario {
             }
         }
         let mut command_names = Vec::new();
+        let station = |c: &CommandSpec| c.from.as_ref().and_then(|r| net.resolve(r).ok());
+        for (i, c) in self.commands.iter().enumerate() {
+            if let Some(a) = &c.after {
+                let own = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));
+                match self
+                    .commands
+                    .iter()
+                    .enumerate()
+                    .find(|(j, o)| o.name.clone().unwrap_or_else(|| format!("commands[{j}]")) == *a)
+                {
+                    None => err(
+                        vec![key("commands"), PathStep::Index(i), key("after")],
+                        format!("no command is named `{a}`"),
+                    ),
+                    Some(_) if *a == own => err(
+                        vec![key("commands"), PathStep::Index(i), key("after")],
+                        "a command cannot wait for itself".into(),
+                    ),
+                    Some((_, o)) if station(o) != station(c) => err(
+                        vec![key("commands"), PathStep::Index(i), key("after")],
+                        format!("`{a}` is sent from another ground station"),
+                    ),
+                    Some(_) => {}
+                }
+            }
+        }
         for (i, c) in self.commands.iter().enumerate() {
             let p = |f: &str| vec![key("commands"), PathStep::Index(i), key(f)];
             let name = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));

@@ -17,6 +17,7 @@ fn request(at_s: u64, dst: u8, dport: u8, data: Vec<u8>) -> PlannedRequest {
         data,
         timeout: Duration::from_secs(3),
         label: format!("{dst}:{dport}"),
+        after: None,
     }
 }
 

@@ -168,7 +168,7 @@ fn run_output_is_the_same_for_the_same_seed() {
     let a = strip(twin(&["run", "scenarios/node-faults.toml"]).1);
     let b = strip(twin(&["run", "scenarios/node-faults.toml"]).1);
     assert_eq!(a, b);
-    assert!(a.contains("7 passed, 0 failed"), "{a}");
+    assert!(a.contains("8 passed, 0 failed"), "{a}");
 }
 
 #[test]

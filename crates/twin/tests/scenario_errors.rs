@@ -124,6 +124,12 @@ fn expectation_on_an_unknown_command() {
 }
 
 #[test]
+fn command_after_an_unknown_command() {
+    let text = "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nafter = \"nope\"\nto = \"FC\"\nrequest = \"ping\"\n";
+    assert_error(text, 4, "commands[0].after", "no command is named `nope`");
+}
+
+#[test]
 fn unknown_counter() {
     let text = "duration = \"1m\"\n[[expectations]]\nkind = \"counter\"\ntarget = \"FC\"\ncounter = \"packets_lost\"\nmax = 0\n";
     assert_error(text, 5, "expectations[0].counter", "unknown node counter");
