@@ -488,28 +488,8 @@ pub async fn run_with(
         nodes: node_reports,
         buses: vec![segs.main.stats(), segs.payload.stats()],
         ground: segs.ground.stats(),
-        kiss: kiss_stats
-            .into_iter()
-            .map(|(n, s)| {
-                (
-                    n,
-                    s.lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .clone(),
-                )
-            })
-            .collect(),
-        socketcan: socketcan_stats
-            .into_iter()
-            .map(|(n, s)| {
-                (
-                    n,
-                    s.lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .clone(),
-                )
-            })
-            .collect(),
+        kiss: snapshot(kiss_stats),
+        socketcan: snapshot(socketcan_stats),
         results,
         trace,
     })
@@ -546,6 +526,21 @@ fn spawn_socketcan_bridges(
         background.push(tokio::spawn(task));
     }
     Ok(stats)
+}
+
+/// The final values of shared counters, by link name.
+fn snapshot<T: Clone>(stats: Vec<(String, Arc<Mutex<T>>)>) -> Vec<(String, T)> {
+    stats
+        .into_iter()
+        .map(|(n, s)| {
+            (
+                n,
+                s.lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .clone(),
+            )
+        })
+        .collect()
 }
 
 /// Apply one scenario fault to the media or a node.
