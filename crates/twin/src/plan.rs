@@ -129,6 +129,10 @@ pub fn compile(s: &Scenario) -> Compiled {
     };
     opts.epoch_unix_s =
         crate::timefmt::parse_utc(&s.start).map_or(0, |ns| ns.div_euclid(1_000_000_000)) as u64;
+    // The last two lines are the elements (a title line may come first).
+    if let [.., l1, l2] = s.satellite.tle.as_slice() {
+        opts.tle = Some((l1.clone(), l2.clone()));
+    }
     for l in &s.links {
         match l.kind {
             LinkKind::KissListen => opts

@@ -53,6 +53,8 @@ pub struct RunOptions {
     pub socketcan: Vec<(String, SocketCanBus)>,
     /// UTC unix seconds at simulated time zero.
     pub epoch_unix_s: u64,
+    /// The satellite's two TLE lines (the FC propagates them); `None`: no orbit.
+    pub tle: Option<(String, String)>,
     /// Keep the trace of every frame and packet in the report.
     pub trace: bool,
     /// Faults to apply, in time order.
@@ -84,6 +86,7 @@ impl RunOptions {
             ground_plan: BTreeMap::new(),
             socketcan: Vec::new(),
             epoch_unix_s: 1_577_836_800,
+            tle: None,
             trace: false,
             faults: Vec::new(),
             kiss_replay: Vec::new(),
@@ -188,13 +191,14 @@ pub fn mix(seed: u64, salt: u64) -> u64 {
 
 fn app_for(
     role: Role,
+    fc: &nodes_fc::FcConfig,
     plan: Vec<PlannedRequest>,
     results: &Results,
     events: &mpsc::UnboundedSender<RunEvent>,
 ) -> Box<dyn App> {
     match role {
         Role::CommPrimary | Role::CommSecondary => Box::new(nodes_comm::app()),
-        Role::Fc => Box::new(nodes_fc::app()),
+        Role::Fc => Box::new(nodes_fc::FcApp::new(fc.clone())),
         Role::Eps => Box::new(nodes_eps::app()),
         Role::Ecu => Box::new(nodes_ecu::app()),
         Role::Pc => Box::new(nodes_pc::app()),
@@ -272,6 +276,11 @@ pub async fn run_with(
     let socketcan_stats = spawn_socketcan_bridges(&opts.socketcan, &segs, clock, &mut background)?;
 
     let results: Results = Arc::new(Mutex::new(Vec::new()));
+    let fc = nodes_fc::FcConfig {
+        epoch_unix_s: opts.epoch_unix_s,
+        tle: opts.tle.clone(),
+        ports: nodes_fc::FcPorts::default(),
+    };
     let mut nodes = Vec::new();
     for spec in &opts.network.nodes {
         let (mut cfg, media) = node_config(spec);
@@ -318,7 +327,8 @@ pub async fn run_with(
             .collect();
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
-        let host = Host::new(cfg, app_for(spec.role, plan, &results, &ev_tx), clock.now());
+        let app = app_for(spec.role, &fc, plan, &results, &ev_tx);
+        let host = Host::new(cfg, app, clock.now());
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
         let log = node_log.clone();
         let handle = tokio::spawn(async move {

@@ -1,0 +1,1013 @@
+//! The FC's ICD commands and replies (ICD 4.2.1-4.2.3, INTERPRETATION.md sections 2, 4, 5)
+//! as wire representations, and the command tables of its ports.
+//!
+//! # Contract
+//! Every type implementing [`Repr`] is the request or reply *data* of one or more ICD
+//! commands (the bytes after `command | result` of `csp::reqrep`), with a fixed size
+//! [`Repr::LEN`] taken from the ICD tables. [`Repr::parse`] accepts exactly `LEN` bytes and
+//! never panics; [`Repr::emit`] appends exactly [`Repr::buffer_len`] bytes. All multi-byte
+//! fields are little-endian, floats IEEE-754 (ICD 1.8). A `Repr` is a byte-level view: any
+//! bit pattern of a float field parses (NaN included) and emits back to the same bytes;
+//! range checks (a normalisable quaternion, a finite point) belong to the port's
+//! [`CommandSet`]. The one exception is [`TargetMode`], an enumeration whose unknown values
+//! cannot be represented and fail to parse.
+//!
+//! # Sizes (ICD tables 4.2.1-4.2.3)
+//! | command | request | reply |
+//! |---|---|---|
+//! | TMGEN 1 | - | [`TmGen`] 16 |
+//! | TMATP 2 | - | [`TmAtp`] 60 |
+//! | TMACD 3 | - | [`TmAcd`] 19 |
+//! | TMSENS 4 | - | [`TmSens`] 70 |
+//! | TMRAWSENS 5 | - | [`TmRawSens`] 46 (the twin's layout) |
+//! | TMALL 6 | - | [`TmAll`] 165 (the twin's layout) |
+//! | RTCSTMSET 1 | [`RtcTimestamp`] 4 | - |
+//! | RTCSTMGET 2 | - | [`RtcTimestamp`] 4 |
+//! | ATCATGET 1 / ATCATSET 2 | - / [`TargetAttitude`] 32 | [`TargetAttitude`] 32 / - |
+//! | ATCPTGET 3 / ATCPTSET 4 | - / [`TargetPoint`] 24 | [`TargetPoint`] 24 / - |
+//! | ATCMDGET 5 / ATCMDSET 6 | - / [`TargetModeRepr`] 1 | [`TargetModeRepr`] 1 / - |
+//!
+//! ATCAT*/ATCPT* carry `float64 q[4]` (32 bytes) and `float64 p[3]` (24 bytes): the ICD's
+//! "16" size column contradicts its own types, and the types win (INTERPRETATION.md 5).
+
+use csp::Error;
+use csp::reqrep::le::{Reader, Writer};
+use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
+
+/// Default port of the telemetry commands (INTERPRETATION.md section 4).
+pub const PORT_TELEMETRY: u8 = 10;
+/// Default port of the real-time clock commands.
+pub const PORT_RTC: u8 = 11;
+/// Default port of the attitude target control commands.
+pub const PORT_ATTITUDE: u8 = 12;
+/// Default port of the mission-controller scripts (ICD 1.5; a later increment).
+pub const PORT_SCRIPTS: u8 = 13;
+
+/// Command ids of the FC ports (ICD tables 4.2.1-4.2.3, INTERPRETATION.md section 4).
+pub mod cmd {
+    /// Telemetry port: general telemetry.
+    pub const TMGEN: u8 = 1;
+    /// Telemetry port: attitude and position.
+    pub const TMATP: u8 = 2;
+    /// Telemetry port: attitude control data.
+    pub const TMACD: u8 = 3;
+    /// Telemetry port: pre-processed sensor data.
+    pub const TMSENS: u8 = 4;
+    /// Telemetry port: raw sensor data.
+    pub const TMRAWSENS: u8 = 5;
+    /// Telemetry port: all beacon telemetry.
+    pub const TMALL: u8 = 6;
+    /// RTC port: set the RTC.
+    pub const RTCSTMSET: u8 = 1;
+    /// RTC port: get the RTC.
+    pub const RTCSTMGET: u8 = 2;
+    /// Attitude port: get the target attitude.
+    pub const ATCATGET: u8 = 1;
+    /// Attitude port: set the target attitude.
+    pub const ATCATSET: u8 = 2;
+    /// Attitude port: get the target point.
+    pub const ATCPTGET: u8 = 3;
+    /// Attitude port: set the target point.
+    pub const ATCPTSET: u8 = 4;
+    /// Attitude port: get the target mode.
+    pub const ATCMDGET: u8 = 5;
+    /// Attitude port: set the target mode.
+    pub const ATCMDSET: u8 = 6;
+}
+
+/// A fixed-size ICD data layout (see the module doc for the contract).
+pub trait Repr: Sized {
+    /// Size in bytes, from the ICD table.
+    const LEN: usize;
+    /// Read the fields from `r` (which holds at least `LEN` bytes).
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error>;
+    /// Append the fields to `w`.
+    fn write(&self, w: &mut Writer);
+
+    /// Parse exactly `LEN` bytes.
+    fn parse(buf: &[u8]) -> Result<Self, Error> {
+        if buf.len() < Self::LEN {
+            return Err(Error::Truncated);
+        }
+        if buf.len() > Self::LEN {
+            return Err(Error::TooLong);
+        }
+        let mut r = Reader::new(buf);
+        let v = Self::read(&mut r)?;
+        r.finish()?;
+        Ok(v)
+    }
+    /// Length of the emitted bytes.
+    fn buffer_len(&self) -> usize {
+        Self::LEN
+    }
+    /// Append the bytes to `out`.
+    fn emit(&self, out: &mut Vec<u8>) {
+        let mut w = Writer {
+            buf: std::mem::take(out),
+        };
+        self.write(&mut w);
+        *out = w.buf;
+    }
+    /// The bytes.
+    fn to_vec(&self) -> Vec<u8> {
+        let mut v = Vec::with_capacity(Self::LEN);
+        self.emit(&mut v);
+        v
+    }
+}
+
+fn f64s<const N: usize>(r: &mut Reader<'_>) -> Result<[f64; N], Error> {
+    let mut a = [0.0; N];
+    for x in &mut a {
+        *x = r.f64()?;
+    }
+    Ok(a)
+}
+
+fn f32s<const N: usize>(r: &mut Reader<'_>) -> Result<[f32; N], Error> {
+    let mut a = [0.0; N];
+    for x in &mut a {
+        *x = r.f32()?;
+    }
+    Ok(a)
+}
+
+fn u8s<const N: usize>(r: &mut Reader<'_>) -> Result<[u8; N], Error> {
+    let mut a = [0; N];
+    a.copy_from_slice(r.take(N)?);
+    Ok(a)
+}
+
+fn i8s<const N: usize>(r: &mut Reader<'_>) -> Result<[i8; N], Error> {
+    let mut a = [0; N];
+    for x in &mut a {
+        *x = r.i8()?;
+    }
+    Ok(a)
+}
+
+fn u16s<const N: usize>(r: &mut Reader<'_>) -> Result<[u16; N], Error> {
+    let mut a = [0; N];
+    for x in &mut a {
+        *x = r.u16()?;
+    }
+    Ok(a)
+}
+
+fn i16s<const N: usize>(r: &mut Reader<'_>) -> Result<[i16; N], Error> {
+    let mut a = [0; N];
+    for x in &mut a {
+        let b = r.take(2)?;
+        *x = i16::from_le_bytes([b[0], b[1]]);
+    }
+    Ok(a)
+}
+
+/// TMGEN reply (ICD 4.2.1, 16 bytes): general telemetry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TmGen {
+    /// RTC, UTC unix seconds.
+    pub rtc_timestamp: u32,
+    /// Seconds since the FC's last boot.
+    pub uptime_s: u32,
+    /// Seconds the FC has been powered since the start of the run (reboots included).
+    pub global_on_time_s: u32,
+    /// Mode in effect (the [`TargetMode`] enumeration).
+    pub current_mode: u8,
+    /// FC state (0 nominal; see docs/protocol.md "FC ports").
+    pub current_state: u8,
+    /// MCU temperature, degrees C.
+    pub mcu_temp_c: i8,
+    /// Cause of the last reset (0 power-on, 1 software reboot).
+    pub reset_cause: u8,
+}
+
+impl Repr for TmGen {
+    const LEN: usize = 16;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TmGen {
+            rtc_timestamp: r.u32()?,
+            uptime_s: r.u32()?,
+            global_on_time_s: r.u32()?,
+            current_mode: r.u8()?,
+            current_state: r.u8()?,
+            mcu_temp_c: r.i8()?,
+            reset_cause: r.u8()?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.rtc_timestamp)
+            .u32(self.uptime_s)
+            .u32(self.global_on_time_s)
+            .u8(self.current_mode)
+            .u8(self.current_state)
+            .i8(self.mcu_temp_c)
+            .u8(self.reset_cause);
+    }
+}
+
+/// TMATP reply (ICD 4.2.1, 60 bytes): attitude and position.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TmAtp {
+    /// RTC, UTC unix seconds.
+    pub rtc_timestamp: u32,
+    /// Attitude of the body in ECI J2000, scalar first (r, i, j, k).
+    pub q_eci_from_body: [f64; 4],
+    /// Position, ECI J2000, metres.
+    pub r_eci_m: [f64; 3],
+}
+
+impl Repr for TmAtp {
+    const LEN: usize = 60;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TmAtp {
+            rtc_timestamp: r.u32()?,
+            q_eci_from_body: f64s(r)?,
+            r_eci_m: f64s(r)?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.rtc_timestamp);
+        for x in self.q_eci_from_body.iter().chain(&self.r_eci_m) {
+            w.f64(*x);
+        }
+    }
+}
+
+/// TMACD reply (ICD 4.2.1, 19 bytes): attitude control data.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TmAcd {
+    /// RTC, UTC unix seconds.
+    pub rtc_timestamp: u32,
+    /// ADCS algorithm state (0 off, 1 detumbling, 2 acquiring, 3 tracking).
+    pub state: u8,
+    /// Reaction wheel states (0 off, 1 on, 2 fault).
+    pub rw_state: [u8; 4],
+    /// Reaction wheel |speed| in units of 100 rpm, saturating at 255.
+    pub rw_rpm_100: [u8; 4],
+    /// Magnetorquer states (0 off, 1 positive, 2 negative).
+    pub mtq_state: [u8; 3],
+    /// Target mode ([`TargetMode`]).
+    pub target_mode: u8,
+    /// 1 when a target attitude was commanded (ATCATSET) since boot, else 0.
+    pub target_attitude: u8,
+    /// 1 when a target point was commanded (ATCPTSET) since boot, else 0.
+    pub target_point: u8,
+}
+
+impl Repr for TmAcd {
+    const LEN: usize = 19;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TmAcd {
+            rtc_timestamp: r.u32()?,
+            state: r.u8()?,
+            rw_state: u8s(r)?,
+            rw_rpm_100: u8s(r)?,
+            mtq_state: u8s(r)?,
+            target_mode: r.u8()?,
+            target_attitude: r.u8()?,
+            target_point: r.u8()?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.rtc_timestamp)
+            .u8(self.state)
+            .bytes(&self.rw_state)
+            .bytes(&self.rw_rpm_100)
+            .bytes(&self.mtq_state)
+            .u8(self.target_mode)
+            .u8(self.target_attitude)
+            .u8(self.target_point);
+    }
+}
+
+/// The TMACD `rwrpm` byte for a wheel speed: |rpm| / 100, rounded, saturating at 255.
+pub fn rw_rpm_byte(rpm: f64) -> u8 {
+    if rpm.is_nan() {
+        return 0;
+    }
+    // `as` saturates: anything at or above 255.5 hundreds of rpm gives 255.
+    (rpm.abs() / 100.0).round() as u8
+}
+
+/// TMSENS reply (ICD 4.2.1, 70 bytes): pre-processed sensor data.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TmSens {
+    /// RTC, UTC unix seconds.
+    pub rtc_timestamp: u32,
+    /// Sun direction, unit vector in BCF (zero when no sun sensor sees the sun).
+    pub sun_body: [f64; 3],
+    /// Angular rate, rad/s, BCF.
+    pub rate_body_rad_s: [f32; 3],
+    /// Acceleration, m/s^2, BCF.
+    pub acc_body_m_s2: [f32; 3],
+    /// Magnetic field, nT, BCF.
+    pub b_body_nt: [f32; 3],
+    /// Sensor temperatures, degrees C.
+    pub temps_c: [i8; 6],
+}
+
+impl Repr for TmSens {
+    const LEN: usize = 70;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TmSens {
+            rtc_timestamp: r.u32()?,
+            sun_body: f64s(r)?,
+            rate_body_rad_s: f32s(r)?,
+            acc_body_m_s2: f32s(r)?,
+            b_body_nt: f32s(r)?,
+            temps_c: i8s(r)?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.rtc_timestamp);
+        for x in &self.sun_body {
+            w.f64(*x);
+        }
+        for x in self
+            .rate_body_rad_s
+            .iter()
+            .chain(&self.acc_body_m_s2)
+            .chain(&self.b_body_nt)
+        {
+            w.f32(*x);
+        }
+        for t in &self.temps_c {
+            w.i8(*t);
+        }
+    }
+}
+
+/// TMRAWSENS reply (the twin's layout, 46 bytes; docs/protocol.md "FC ports"): raw sensor
+/// counts at each sensor's native resolution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TmRawSens {
+    /// RTC, UTC unix seconds.
+    pub rtc_timestamp: u32,
+    /// Coarse sun sensors on +X -X +Y -Y +Z -Z, 12-bit ADC counts (4095 full sun on the normal).
+    pub css_counts: [u16; 6],
+    /// Gyroscope, BCF, 0.01 deg/s per LSB.
+    pub gyro_raw: [i16; 3],
+    /// Accelerometer, BCF, 1 mg per LSB.
+    pub acc_raw: [i16; 3],
+    /// Magnetometer, BCF, 10 nT per LSB.
+    pub mag_raw: [i16; 3],
+    /// Sensor temperatures (the six of TMSENS), 0.1 degrees C per LSB.
+    pub temps_raw: [i16; 6],
+}
+
+impl Repr for TmRawSens {
+    const LEN: usize = 46;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TmRawSens {
+            rtc_timestamp: r.u32()?,
+            css_counts: u16s(r)?,
+            gyro_raw: i16s(r)?,
+            acc_raw: i16s(r)?,
+            mag_raw: i16s(r)?,
+            temps_raw: i16s(r)?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.rtc_timestamp);
+        for c in &self.css_counts {
+            w.u16(*c);
+        }
+        for x in self
+            .gyro_raw
+            .iter()
+            .chain(&self.acc_raw)
+            .chain(&self.mag_raw)
+            .chain(&self.temps_raw)
+        {
+            w.bytes(&x.to_le_bytes());
+        }
+    }
+}
+
+/// TMALL reply (the twin's layout, 165 bytes; docs/protocol.md "FC ports"): the beacon,
+/// the data of TMGEN, TMATP, TMACD and TMSENS from one instant, in that order.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TmAll {
+    /// TMGEN data.
+    pub general: TmGen,
+    /// TMATP data.
+    pub attitude_position: TmAtp,
+    /// TMACD data.
+    pub attitude_control: TmAcd,
+    /// TMSENS data.
+    pub sensors: TmSens,
+}
+
+impl Repr for TmAll {
+    const LEN: usize = TmGen::LEN + TmAtp::LEN + TmAcd::LEN + TmSens::LEN;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TmAll {
+            general: TmGen::read(r)?,
+            attitude_position: TmAtp::read(r)?,
+            attitude_control: TmAcd::read(r)?,
+            sensors: TmSens::read(r)?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        self.general.write(w);
+        self.attitude_position.write(w);
+        self.attitude_control.write(w);
+        self.sensors.write(w);
+    }
+}
+
+/// RTCSTMGET reply and RTCSTMSET request (ICD 4.2.2, 4 bytes): UTC unix seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RtcTimestamp {
+    /// UTC unix seconds.
+    pub rtc_timestamp: u32,
+}
+
+impl Repr for RtcTimestamp {
+    const LEN: usize = 4;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(RtcTimestamp {
+            rtc_timestamp: r.u32()?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u32(self.rtc_timestamp);
+    }
+}
+
+/// ATCATGET reply and ATCATSET request (ICD 4.2.3, 32 bytes): the target attitude.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TargetAttitude {
+    /// Target quaternion, scalar first (r, i, j, k), body in the mode's reference frame.
+    pub q: [f64; 4],
+}
+
+impl TargetAttitude {
+    /// The quaternion scaled to unit norm, or `None` if it has a non-finite component or
+    /// is zero (not normalisable). Safe from overflow: it scales by the largest component
+    /// first.
+    pub fn normalised(&self) -> Option<[f64; 4]> {
+        if !self.q.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        let m = self.q.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        if m == 0.0 {
+            return None;
+        }
+        let s = self.q.map(|x| x / m);
+        let n = s.iter().map(|x| x * x).sum::<f64>().sqrt();
+        Some(s.map(|x| x / n))
+    }
+}
+
+impl Repr for TargetAttitude {
+    const LEN: usize = 32;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TargetAttitude { q: f64s(r)? })
+    }
+    fn write(&self, w: &mut Writer) {
+        for x in &self.q {
+            w.f64(*x);
+        }
+    }
+}
+
+/// ATCPTGET reply and ATCPTSET request (ICD 4.2.3, 24 bytes): the target point.
+///
+/// Read by the mode in effect: in earth target mode (5) geodetic latitude (deg), longitude
+/// (deg) and altitude (m), as ICD 1.5's GeoLocation; in ECI vector tracking (6) a direction
+/// in ECI J2000 (any non-zero length).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TargetPoint {
+    /// The three values.
+    pub p: [f64; 3],
+}
+
+impl Repr for TargetPoint {
+    const LEN: usize = 24;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TargetPoint { p: f64s(r)? })
+    }
+    fn write(&self, w: &mut Writer) {
+        for x in &self.p {
+            w.f64(*x);
+        }
+    }
+}
+
+/// Attitude target modes (INTERPRETATION.md section 5; the twin's enumeration, one per
+/// ICD 1.3 mode plus idle and the fixed-quaternion modes of ICD 1.5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum TargetMode {
+    /// No control: actuators off.
+    Idle = 0,
+    /// B-dot detumbling with the magnetorquers (the mode the ADCS boots in, ICD 1.3).
+    #[default]
+    Detumble = 1,
+    /// Body +Z along the orbital velocity.
+    VelocityPointing = 2,
+    /// Body +Z towards the Earth's centre.
+    Nadir = 3,
+    /// Solar panel normal towards the sun.
+    SunMaxPower = 4,
+    /// Track the geodetic target point (ATCPTSET: lat deg, lon deg, alt m).
+    EarthTarget = 5,
+    /// Track the ECI direction of the target point (ATCPTSET: x, y, z).
+    EciVector = 6,
+    /// Hold the target attitude (ATCATSET) in ECI J2000.
+    FixedEci = 7,
+    /// Hold the target attitude in LVLH.
+    FixedLvlh = 8,
+    /// Hold the target attitude in TNW.
+    FixedTnw = 9,
+}
+
+impl TryFrom<u8> for TargetMode {
+    type Error = Error;
+    fn try_from(v: u8) -> Result<Self, Error> {
+        use TargetMode::*;
+        Ok(match v {
+            0 => Idle,
+            1 => Detumble,
+            2 => VelocityPointing,
+            3 => Nadir,
+            4 => SunMaxPower,
+            5 => EarthTarget,
+            6 => EciVector,
+            7 => FixedEci,
+            8 => FixedLvlh,
+            9 => FixedTnw,
+            _ => return Err(Error::FieldRange("target mode")),
+        })
+    }
+}
+
+/// ATCMDGET reply and ATCMDSET request (ICD 4.2.3, 1 byte): the target mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TargetModeRepr {
+    /// The mode.
+    pub mode: TargetMode,
+}
+
+impl Repr for TargetModeRepr {
+    const LEN: usize = 1;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TargetModeRepr {
+            mode: TargetMode::try_from(r.u8()?)?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u8(self.mode as u8);
+    }
+}
+
+fn no_data<T>(r: &Request<'_>, v: T) -> Result<T, RequestError> {
+    expect_len(r, 0, "0").map(|_| v)
+}
+
+fn data<T: Repr>(r: &Request<'_>, expected: &'static str) -> Result<T, RequestError> {
+    expect_len(r, T::LEN, expected)?;
+    T::parse(r.data).map_err(|_| RequestError::OutOfRange {
+        command: r.command,
+        field: "data",
+    })
+}
+
+/// The telemetry port's commands (port 10; none carries request data).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TelemetryCommand {
+    /// TMGEN 1.
+    TmGen,
+    /// TMATP 2.
+    TmAtp,
+    /// TMACD 3.
+    TmAcd,
+    /// TMSENS 4.
+    TmSens,
+    /// TMRAWSENS 5.
+    TmRawSens,
+    /// TMALL 6.
+    TmAll,
+}
+
+impl CommandSet for TelemetryCommand {
+    fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
+        use TelemetryCommand::*;
+        match r.command {
+            cmd::TMGEN => no_data(r, TmGen),
+            cmd::TMATP => no_data(r, TmAtp),
+            cmd::TMACD => no_data(r, TmAcd),
+            cmd::TMSENS => no_data(r, TmSens),
+            cmd::TMRAWSENS => no_data(r, TmRawSens),
+            cmd::TMALL => no_data(r, TmAll),
+            c => Err(RequestError::UnknownCommand(c)),
+        }
+    }
+}
+
+/// The RTC port's commands (port 11).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RtcCommand {
+    /// RTCSTMSET 1: set the RTC (any u32 is accepted).
+    Set(RtcTimestamp),
+    /// RTCSTMGET 2.
+    Get,
+}
+
+impl CommandSet for RtcCommand {
+    fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
+        match r.command {
+            cmd::RTCSTMSET => data(r, "4").map(RtcCommand::Set),
+            cmd::RTCSTMGET => no_data(r, RtcCommand::Get),
+            c => Err(RequestError::UnknownCommand(c)),
+        }
+    }
+}
+
+/// The attitude target control port's commands (port 12), validated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AttitudeCommand {
+    /// ATCATGET 1.
+    GetAttitude,
+    /// ATCATSET 2: the quaternion, already normalised.
+    SetAttitude([f64; 4]),
+    /// ATCPTGET 3.
+    GetPoint,
+    /// ATCPTSET 4: three finite values.
+    SetPoint([f64; 3]),
+    /// ATCMDGET 5.
+    GetMode,
+    /// ATCMDSET 6.
+    SetMode(TargetMode),
+}
+
+impl CommandSet for AttitudeCommand {
+    fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
+        use AttitudeCommand::*;
+        let out_of_range = |field| RequestError::OutOfRange {
+            command: r.command,
+            field,
+        };
+        match r.command {
+            cmd::ATCATGET => no_data(r, GetAttitude),
+            cmd::ATCATSET => data::<TargetAttitude>(r, "32")?
+                .normalised()
+                .map(SetAttitude)
+                .ok_or_else(|| out_of_range("quaternion")),
+            cmd::ATCPTGET => no_data(r, GetPoint),
+            cmd::ATCPTSET => {
+                let p = data::<TargetPoint>(r, "24")?.p;
+                if p.iter().all(|x| x.is_finite()) {
+                    Ok(SetPoint(p))
+                } else {
+                    Err(out_of_range("point"))
+                }
+            }
+            cmd::ATCMDGET => no_data(r, GetMode),
+            cmd::ATCMDSET => {
+                expect_len(r, 1, "1")?;
+                TargetModeRepr::parse(r.data)
+                    .map(|m| SetMode(m.mode))
+                    .map_err(|_| out_of_range("target mode"))
+            }
+            c => Err(RequestError::UnknownCommand(c)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    // 0.707106 is the ICD 1.5 example's value, deliberately not FRAC_1_SQRT_2.
+    #![allow(clippy::approx_constant)]
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Sizes of ICD tables 4.2.1-4.2.3 (with INTERPRETATION.md 5's 32 and 24 for ATC*).
+    #[test]
+    fn sizes_match_the_icd_tables() {
+        assert_eq!(TmGen::LEN, 4 + 4 + 4 + 1 + 1 + 1 + 1);
+        assert_eq!(TmGen::LEN, 16);
+        assert_eq!(TmAtp::LEN, 60);
+        assert_eq!(TmAcd::LEN, 19);
+        assert_eq!(TmSens::LEN, 70);
+        assert_eq!(TmRawSens::LEN, 46);
+        assert_eq!(TmAll::LEN, 165);
+        assert_eq!(RtcTimestamp::LEN, 4);
+        assert_eq!(TargetAttitude::LEN, 32);
+        assert_eq!(TargetPoint::LEN, 24);
+        assert_eq!(TargetModeRepr::LEN, 1);
+        // Emitted lengths agree with the constants.
+        assert_eq!(TmGen::default().to_vec().len(), 16);
+        assert_eq!(TmAtp::default().to_vec().len(), 60);
+        assert_eq!(TmAcd::default().to_vec().len(), 19);
+        assert_eq!(TmSens::default().to_vec().len(), 70);
+        assert_eq!(TmRawSens::default().to_vec().len(), 46);
+        assert_eq!(TmAll::default().to_vec().len(), 165);
+        assert_eq!(TargetAttitude::default().to_vec().len(), 32);
+        assert_eq!(TargetPoint::default().to_vec().len(), 24);
+        assert_eq!(TargetModeRepr::default().to_vec().len(), 1);
+    }
+
+    #[test]
+    fn tmgen_bytes() {
+        let v = TmGen {
+            rtc_timestamp: 0x6a13_a5a0,
+            uptime_s: 0x0102_0304,
+            global_on_time_s: 7,
+            current_mode: 3,
+            current_state: 0,
+            mcu_temp_c: -5,
+            reset_cause: 1,
+        };
+        let bytes = [
+            0xa0, 0xa5, 0x13, 0x6a, 0x04, 0x03, 0x02, 0x01, 7, 0, 0, 0, 3, 0, 0xfb, 1,
+        ];
+        assert_eq!(v.to_vec(), bytes);
+        assert_eq!(TmGen::parse(&bytes).unwrap(), v);
+        assert_eq!(TmGen::parse(&bytes[..15]), Err(Error::Truncated));
+        let mut long = bytes.to_vec();
+        long.push(0);
+        assert_eq!(TmGen::parse(&long), Err(Error::TooLong));
+    }
+
+    #[test]
+    fn tmatp_bytes() {
+        let v = TmAtp {
+            rtc_timestamp: 1,
+            q_eci_from_body: [1.0, 0.0, 0.0, -0.5],
+            r_eci_m: [7e6, -2.0, 0.25],
+        };
+        let b = v.to_vec();
+        assert_eq!(&b[..4], &[1, 0, 0, 0]);
+        assert_eq!(&b[4..12], &1.0f64.to_le_bytes());
+        assert_eq!(&b[28..36], &(-0.5f64).to_le_bytes());
+        assert_eq!(&b[36..44], &7e6f64.to_le_bytes());
+        assert_eq!(&b[52..60], &0.25f64.to_le_bytes());
+        assert_eq!(TmAtp::parse(&b).unwrap(), v);
+    }
+
+    #[test]
+    fn tmacd_bytes() {
+        let v = TmAcd {
+            rtc_timestamp: 0x0403_0201,
+            state: 3,
+            rw_state: [1, 1, 1, 2],
+            rw_rpm_100: [10, 20, 30, 255],
+            mtq_state: [0, 1, 2],
+            target_mode: 7,
+            target_attitude: 1,
+            target_point: 0,
+        };
+        let b = [1, 2, 3, 4, 3, 1, 1, 1, 2, 10, 20, 30, 255, 0, 1, 2, 7, 1, 0];
+        assert_eq!(v.to_vec(), b);
+        assert_eq!(TmAcd::parse(&b).unwrap(), v);
+        assert_eq!(rw_rpm_byte(-1234.0), 12);
+        assert_eq!(rw_rpm_byte(6000.0), 60);
+        assert_eq!(rw_rpm_byte(1e9), 255);
+        assert_eq!(rw_rpm_byte(f64::NAN), 0);
+    }
+
+    #[test]
+    fn tmsens_bytes() {
+        let v = TmSens {
+            rtc_timestamp: 9,
+            sun_body: [0.0, 0.6, 0.8],
+            rate_body_rad_s: [0.001, -0.002, 0.0],
+            acc_body_m_s2: [0.0; 3],
+            b_body_nt: [20000.0, -1500.5, 3.0],
+            temps_c: [20, -40, 85, 0, 1, -1],
+        };
+        let b = v.to_vec();
+        assert_eq!(&b[12..20], &0.6f64.to_le_bytes());
+        assert_eq!(&b[28..32], &0.001f32.to_le_bytes());
+        assert_eq!(&b[52..56], &20000.0f32.to_le_bytes());
+        assert_eq!(&b[64..70], &[20, 0xd8, 85, 0, 1, 0xff]);
+        assert_eq!(TmSens::parse(&b).unwrap(), v);
+    }
+
+    #[test]
+    fn tmrawsens_and_tmall_bytes() {
+        let v = TmRawSens {
+            rtc_timestamp: 2,
+            css_counts: [4095, 0, 1, 2, 3, 0x0102],
+            gyro_raw: [-1, 2, 3],
+            acc_raw: [100, 0, -100],
+            mag_raw: [2000, -2000, 0],
+            temps_raw: [200, 210, -400, 0, 0, 1],
+        };
+        let b = v.to_vec();
+        assert_eq!(&b[4..6], &[0xff, 0x0f]);
+        assert_eq!(&b[14..16], &[0x02, 0x01]);
+        assert_eq!(&b[16..18], &[0xff, 0xff]);
+        assert_eq!(TmRawSens::parse(&b).unwrap(), v);
+
+        let all = TmAll {
+            general: TmGen {
+                rtc_timestamp: 5,
+                ..Default::default()
+            },
+            attitude_position: TmAtp {
+                rtc_timestamp: 5,
+                q_eci_from_body: [1.0, 0.0, 0.0, 0.0],
+                r_eci_m: [1.0, 2.0, 3.0],
+            },
+            ..Default::default()
+        };
+        let b = all.to_vec();
+        assert_eq!(&b[..16], &all.general.to_vec()[..]);
+        assert_eq!(&b[16..76], &all.attitude_position.to_vec()[..]);
+        assert_eq!(&b[76..95], &all.attitude_control.to_vec()[..]);
+        assert_eq!(&b[95..165], &all.sensors.to_vec()[..]);
+        assert_eq!(TmAll::parse(&b).unwrap(), all);
+    }
+
+    #[test]
+    fn rtc_attitude_point_mode_bytes() {
+        let t = RtcTimestamp {
+            rtc_timestamp: 1_777_572_000,
+        };
+        assert_eq!(t.to_vec(), 1_777_572_000u32.to_le_bytes());
+        assert_eq!(RtcTimestamp::parse(&t.to_vec()).unwrap(), t);
+
+        let q = TargetAttitude {
+            q: [0.707106, 0.0, 0.0, -0.707106],
+        };
+        let b = q.to_vec();
+        assert_eq!(&b[24..32], &(-0.707106f64).to_le_bytes());
+        assert_eq!(TargetAttitude::parse(&b).unwrap(), q);
+
+        let p = TargetPoint {
+            p: [54.6872, 25.2797, 100.0],
+        };
+        let b = p.to_vec();
+        assert_eq!(&b[16..24], &100.0f64.to_le_bytes());
+        assert_eq!(TargetPoint::parse(&b).unwrap(), p);
+
+        for v in 0..=9u8 {
+            let m = TargetModeRepr::parse(&[v]).unwrap();
+            assert_eq!(m.to_vec(), vec![v]);
+        }
+        assert_eq!(
+            TargetModeRepr::parse(&[10]),
+            Err(Error::FieldRange("target mode"))
+        );
+        assert_eq!(TargetModeRepr::parse(&[]), Err(Error::Truncated));
+    }
+
+    #[test]
+    fn quaternion_normalisation() {
+        let n = TargetAttitude {
+            q: [0.707106, 0.0, 0.0, -0.707106],
+        }
+        .normalised()
+        .unwrap();
+        assert!((n.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-15);
+        assert!((n[0] - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);
+        let big = TargetAttitude {
+            q: [1e300, 1e300, 0.0, 0.0],
+        };
+        assert!(big.normalised().is_some());
+        for bad in [
+            [0.0; 4],
+            [f64::NAN, 1.0, 0.0, 0.0],
+            [f64::INFINITY, 0.0, 0.0, 0.0],
+        ] {
+            assert_eq!(TargetAttitude { q: bad }.normalised(), None);
+        }
+        assert_eq!(
+            TargetAttitude {
+                q: [1.0, 0.0, 0.0, 0.0]
+            }
+            .normalised(),
+            Some([1.0, 0.0, 0.0, 0.0])
+        );
+    }
+
+    fn req(command: u8, data: &[u8]) -> Request<'_> {
+        Request { command, data }
+    }
+
+    #[test]
+    fn command_tables() {
+        assert_eq!(
+            TelemetryCommand::parse(&req(2, &[])),
+            Ok(TelemetryCommand::TmAtp)
+        );
+        assert_eq!(
+            TelemetryCommand::parse(&req(7, &[])),
+            Err(RequestError::UnknownCommand(7))
+        );
+        assert!(matches!(
+            TelemetryCommand::parse(&req(1, &[0])),
+            Err(RequestError::WrongLength { .. })
+        ));
+        assert_eq!(
+            RtcCommand::parse(&req(1, &[1, 0, 0, 0])),
+            Ok(RtcCommand::Set(RtcTimestamp { rtc_timestamp: 1 }))
+        );
+        assert!(RtcCommand::parse(&req(1, &[1, 0, 0])).is_err());
+        assert!(RtcCommand::parse(&req(2, &[0])).is_err());
+        assert!(RtcCommand::parse(&req(3, &[])).is_err());
+        assert_eq!(
+            AttitudeCommand::parse(&req(6, &[9])),
+            Ok(AttitudeCommand::SetMode(TargetMode::FixedTnw))
+        );
+        assert!(matches!(
+            AttitudeCommand::parse(&req(6, &[10])),
+            Err(RequestError::OutOfRange { .. })
+        ));
+        assert!(AttitudeCommand::parse(&req(2, &[0; 32])).is_err());
+        assert!(AttitudeCommand::parse(&req(2, &[0; 24])).is_err());
+        let nan_point = TargetPoint {
+            p: [1.0, f64::NAN, 0.0],
+        }
+        .to_vec();
+        assert!(AttitudeCommand::parse(&req(4, &nan_point)).is_err());
+        let point = TargetPoint { p: [1.0, 2.0, 3.0] }.to_vec();
+        assert_eq!(
+            AttitudeCommand::parse(&req(4, &point)),
+            Ok(AttitudeCommand::SetPoint([1.0, 2.0, 3.0]))
+        );
+        assert!(AttitudeCommand::parse(&req(0, &[])).is_err());
+        assert!(AttitudeCommand::parse(&req(7, &[])).is_err());
+    }
+
+    fn bytes_round_trip<T: Repr>(b: &[u8]) {
+        let v = T::parse(b).unwrap();
+        assert_eq!(v.to_vec(), b);
+    }
+
+    fn finite_f64() -> impl Strategy<Value = f64> {
+        -1e12..1e12
+    }
+
+    proptest! {
+        /// Every bit pattern of every layout parses and emits back to the same bytes.
+        #[test]
+        fn any_bytes_of_the_right_length_round_trip(b in proptest::collection::vec(any::<u8>(), 165)) {
+            bytes_round_trip::<TmGen>(&b[..16]);
+            bytes_round_trip::<TmAtp>(&b[..60]);
+            bytes_round_trip::<TmAcd>(&b[..19]);
+            bytes_round_trip::<TmSens>(&b[..70]);
+            bytes_round_trip::<TmRawSens>(&b[..46]);
+            bytes_round_trip::<TmAll>(&b[..165]);
+            bytes_round_trip::<RtcTimestamp>(&b[..4]);
+            bytes_round_trip::<TargetAttitude>(&b[..32]);
+            bytes_round_trip::<TargetPoint>(&b[..24]);
+        }
+
+        /// Values survive emit then parse.
+        #[test]
+        fn values_round_trip(
+            rtc in any::<u32>(), up in any::<u32>(), mode in 0u8..10, temp in any::<i8>(),
+            q in proptest::array::uniform4(finite_f64()), r in proptest::array::uniform3(finite_f64()),
+            rpm in proptest::array::uniform4(any::<u8>()), f in proptest::array::uniform3(any::<f32>().prop_filter("not NaN", |x| !x.is_nan())),
+            raw in proptest::array::uniform3(any::<i16>()),
+        ) {
+            let g = TmGen { rtc_timestamp: rtc, uptime_s: up, global_on_time_s: up / 2, current_mode: mode, current_state: 0, mcu_temp_c: temp, reset_cause: 1 };
+            prop_assert_eq!(TmGen::parse(&g.to_vec()).unwrap(), g);
+            let a = TmAtp { rtc_timestamp: rtc, q_eci_from_body: q, r_eci_m: r };
+            prop_assert_eq!(TmAtp::parse(&a.to_vec()).unwrap(), a);
+            let c = TmAcd { rtc_timestamp: rtc, rw_rpm_100: rpm, target_mode: mode, ..Default::default() };
+            prop_assert_eq!(TmAcd::parse(&c.to_vec()).unwrap(), c);
+            let s = TmSens { rtc_timestamp: rtc, sun_body: r, rate_body_rad_s: f, acc_body_m_s2: f, b_body_nt: f, temps_c: [temp; 6] };
+            prop_assert_eq!(TmSens::parse(&s.to_vec()).unwrap(), s);
+            let w = TmRawSens { rtc_timestamp: rtc, gyro_raw: raw, acc_raw: raw, mag_raw: raw, ..Default::default() };
+            prop_assert_eq!(TmRawSens::parse(&w.to_vec()).unwrap(), w);
+            let all = TmAll { general: g, attitude_position: a, attitude_control: c, sensors: s };
+            prop_assert_eq!(TmAll::parse(&all.to_vec()).unwrap(), all);
+            let t = TargetAttitude { q };
+            prop_assert_eq!(TargetAttitude::parse(&t.to_vec()).unwrap(), t);
+            let p = TargetPoint { p: r };
+            prop_assert_eq!(TargetPoint::parse(&p.to_vec()).unwrap(), p);
+            let m = TargetModeRepr { mode: TargetMode::try_from(mode).unwrap() };
+            prop_assert_eq!(TargetModeRepr::parse(&m.to_vec()).unwrap(), m);
+        }
+
+        /// Arbitrary bytes of any length never panic a parser or a command table.
+        #[test]
+        fn arbitrary_bytes_never_panic(command in any::<u8>(), b in proptest::collection::vec(any::<u8>(), 0..200)) {
+            let _ = TmGen::parse(&b);
+            let _ = TmAtp::parse(&b);
+            let _ = TmAcd::parse(&b);
+            let _ = TmSens::parse(&b);
+            let _ = TmRawSens::parse(&b);
+            let _ = TmAll::parse(&b);
+            let _ = RtcTimestamp::parse(&b);
+            let _ = TargetAttitude::parse(&b);
+            let _ = TargetPoint::parse(&b);
+            let _ = TargetModeRepr::parse(&b);
+            let r = req(command, &b);
+            let _ = TelemetryCommand::parse(&r);
+            let _ = RtcCommand::parse(&r);
+            if let Ok(AttitudeCommand::SetAttitude(q)) = AttitudeCommand::parse(&r) {
+                let n: f64 = q.iter().map(|x| x * x).sum();
+                prop_assert!((n - 1.0).abs() < 1e-12, "{:?}", q);
+            }
+        }
+    }
+}
