@@ -1,0 +1,139 @@
+#!/usr/bin/env python3
+"""An independent decoder of the flight computer's ICD replies, written from the M6P
+Software ICD tables 4.2.1-4.2.3 and shared/icd/INTERPRETATION.md sections 2, 4 and 5 (and
+docs/protocol.md "FC ports" for the twin's own TMALL layout), not from the twin's code.
+
+It joins a running twin over KISS/TCP as a ground node (default 16; the framing is
+tests/kiss_peer.py's, itself written from libcsp 1.4) and asks the FC (node 3):
+
+- port 10 TMGEN 1: 16 bytes `<IIIBBbB` (rtc, uptime, global on time, mode, state, MCU
+  temperature, reset cause); TMATP 2: 60 bytes `<I4d3d` (rtc, quaternion r i j k, ECI J2000
+  position in metres); TMACD 3: 19 bytes; TMSENS 4: 70 bytes `<I3d3f3f3f6b`; TMALL 6: the
+  four above concatenated (165 bytes);
+- port 11 RTCSTMGET 2: `<I` UTC unix seconds;
+- port 12 ATCMDSET 6 / ATCMDGET 5 (u8 mode), ATCATSET 2 / ATCATGET 1 (`<4d`, 32 bytes);
+- an unknown command and a short request: the failure reply `cmd 00`.
+
+Checks sizes and plausible values: |position| between --rmin-km and --rmax-km, RTC within
+a day of --start. Exit 0 when every check passes; prints one line per check.
+"""
+import argparse
+import math
+import os
+import struct
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from kiss_peer import Peer  # noqa: E402  (KISS framing and CSP header, from the spec)
+
+# ICD 4.2.1 (reply data after `command | result`), little-endian.
+TMGEN = struct.Struct("<IIIBBbB")          # 16
+TMATP = struct.Struct("<I4d3d")            # 60
+TMACD = struct.Struct("<IB4B4B3BBBB")      # 19
+TMSENS = struct.Struct("<I3d3f3f3f6b")     # 70
+RTC = struct.Struct("<I")                  # 4 (ICD 4.2.2)
+QUAT = struct.Struct("<4d")                # 32 (ICD 4.2.3, INTERPRETATION.md 5)
+assert (TMGEN.size, TMATP.size, TMACD.size, TMSENS.size, RTC.size, QUAT.size) == (16, 60, 19, 70, 4, 32)
+
+PORT_TM, PORT_RTC, PORT_ATC = 10, 11, 12
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--connect", required=True)
+    ap.add_argument("--as", dest="me", type=int, default=16)
+    ap.add_argument("--fc", type=int, default=3)
+    ap.add_argument("--start", type=int, required=True, help="scenario start, UTC unix s")
+    ap.add_argument("--rmin-km", type=float, default=6600.0)
+    ap.add_argument("--rmax-km", type=float, default=7000.0)
+    a = ap.parse_args()
+    failures = 0
+
+    def check(name, ok, detail=""):
+        nonlocal failures
+        print(("PASS " if ok else "FAIL ") + name + (": " + detail if detail else ""))
+        failures += 0 if ok else 1
+
+    p = Peer(a.connect, a.me)
+
+    def ask(port, cmd, data=b""):
+        """Send `cmd | data`; return (result, reply data) or (None, None)."""
+        h, d = p.request(a.fc, port, bytes([cmd]) + data)
+        if d is None or len(d) < 2 or d[0] != cmd:
+            return None, d
+        return d[1], d[2:]
+
+    def rtc_ok(t):
+        return abs(t - a.start) <= 86400
+
+    res, d = ask(PORT_TM, 1)
+    ok = res == 1 and d is not None and len(d) == TMGEN.size
+    check("TMGEN is 2+16 bytes", ok, f"result {res} data {None if d is None else d.hex()}")
+    if ok:
+        rtc, up, on, mode, state, temp, cause = TMGEN.unpack(d)
+        check("TMGEN rtc within a day of the start", rtc_ok(rtc), f"rtc {rtc} start {a.start}")
+        check("TMGEN uptime and on-time plausible", 0 <= up <= on < 86400, f"uptime {up} on {on}")
+        check("TMGEN mode, state, temperature, reset cause plausible",
+              mode <= 9 and -40 <= temp <= 85 and cause in (0, 1),
+              f"mode {mode} state {state} temp {temp} cause {cause}")
+
+    res, d = ask(PORT_TM, 2)
+    ok = res == 1 and d is not None and len(d) == TMATP.size
+    check("TMATP is 2+60 bytes", ok, f"result {res} len {None if d is None else len(d)}")
+    if ok:
+        v = TMATP.unpack(d)
+        rtc, q, r = v[0], v[1:5], v[5:8]
+        r_km = math.sqrt(sum(x * x for x in r)) / 1000.0
+        check("TMATP |position| in LEO (metres, ECI)", a.rmin_km < r_km < a.rmax_km, f"{r_km:.3f} km")
+        qn = math.sqrt(sum(x * x for x in q))
+        check("TMATP quaternion has unit norm", abs(qn - 1.0) < 1e-9, f"{q}")
+        check("TMATP rtc within a day of the start", rtc_ok(rtc), f"{rtc}")
+
+    res, d = ask(PORT_TM, 3)
+    check("TMACD is 2+19 bytes", res == 1 and d is not None and len(d) == TMACD.size,
+          f"result {res} len {None if d is None else len(d)}")
+    res, d = ask(PORT_TM, 4)
+    ok = res == 1 and d is not None and len(d) == TMSENS.size
+    check("TMSENS is 2+70 bytes", ok, f"result {res} len {None if d is None else len(d)}")
+    res, d = ask(PORT_TM, 6)
+    ok = res == 1 and d is not None and len(d) == 165
+    check("TMALL is 2+165 bytes (TMGEN|TMATP|TMACD|TMSENS)", ok,
+          f"result {res} len {None if d is None else len(d)}")
+    if ok:
+        r = TMATP.unpack(d[16:76])[5:8]
+        r_km = math.sqrt(sum(x * x for x in r)) / 1000.0
+        check("TMALL's TMATP part is in LEO", a.rmin_km < r_km < a.rmax_km, f"{r_km:.3f} km")
+
+    res, d = ask(PORT_RTC, 2)
+    ok = res == 1 and d is not None and len(d) == RTC.size
+    check("RTCSTMGET is 2+4 bytes", ok, f"result {res} data {None if d is None else d.hex()}")
+    if ok:
+        (rtc,) = RTC.unpack(d)
+        check("RTCSTMGET within a day of the start", rtc_ok(rtc), f"{rtc}")
+
+    res, d = ask(PORT_ATC, 6, bytes([3]))
+    check("ATCMDSET nadir (3) succeeds with no data", res == 1 and d == b"", f"result {res} data {d}")
+    res, d = ask(PORT_ATC, 5)
+    check("ATCMDGET returns nadir (3)", res == 1 and d == bytes([3]), f"result {res} data {d}")
+    res, d = ask(PORT_ATC, 6, bytes([42]))
+    check("ATCMDSET of an unknown mode fails (cmd 00)", res == 0 and d == b"", f"result {res} data {d}")
+
+    q = (0.5, -0.5, 0.5, 0.5)
+    res, d = ask(PORT_ATC, 2, QUAT.pack(*q))
+    check("ATCATSET succeeds", res == 1 and d == b"", f"result {res} data {d}")
+    res, d = ask(PORT_ATC, 1)
+    ok = res == 1 and d is not None and len(d) == QUAT.size
+    check("ATCATGET is 2+32 bytes", ok, f"result {res} len {None if d is None else len(d)}")
+    if ok:
+        check("ATCATGET returns the set quaternion", QUAT.unpack(d) == q, f"{QUAT.unpack(d)}")
+
+    res, d = ask(PORT_TM, 0x77)
+    check("unknown telemetry command fails (cmd 00)", res == 0 and d == b"", f"result {res} data {d}")
+    res, d = ask(PORT_ATC, 2, bytes(16))
+    check("ATCATSET with the ICD's 16 bytes fails (cmd 00)", res == 0 and d == b"", f"result {res} data {d}")
+
+    sys.exit(1 if failures else 0)
+
+
+if __name__ == "__main__":
+    main()
