@@ -48,7 +48,7 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CFP_MAX_DATA, CanFrame, CfpId, FrameType, Reassembler, ReassemblerConfig};
 use csp::header::{HEADER_LEN, Header};
@@ -84,9 +84,9 @@ pub const TOPIC_COMMANDS: &str = "/commands";
 pub const TOPIC_EXPECTATIONS: &str = "/expectations";
 
 /// Message encoding of every channel.
-const JSON: &str = "json";
+pub const MESSAGE_ENCODING: &str = "json";
 /// Schema encoding of every schema.
-const JSONSCHEMA: &str = "jsonschema";
+pub const SCHEMA_ENCODING: &str = "jsonschema";
 
 /// Foxglove's `foxglove.Log` JSON Schema, verbatim from foxglove-sdk
 /// `schemas/jsonschema/Log.json` (commit 40ea5ebe), so Foxglove's Log panel recognises
@@ -559,45 +559,421 @@ pub fn begin_fields(f: &CanFrame) -> Option<BeginFields> {
     })
 }
 
-/// Which schema a channel uses.
+/// Which kind of channel a message goes to; each kind has one schema.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Kind {
+pub enum ChannelKind {
+    /// `/can/<bus>/frames` (`m6p.CanFrame`), keyed by bus.
     Can,
+    /// `/<network>/packets` (`m6p.NetPacket`), keyed by network.
     Net,
+    /// `/csp/packets` (`m6p.CspPacket`).
     Csp,
+    /// `/kiss/<link>/in|out` (`m6p.KissFrame`), keyed by `<link name>/<dir>`.
     Kiss,
+    /// `/log` (`foxglove.Log`).
     Log,
+    /// `/faults` (`m6p.Fault`).
     Fault,
+    /// `/commands` (`m6p.Command`).
     Command,
+    /// `/expectations` (`m6p.Expectation`).
     Expectation,
 }
 
-const KINDS: [Kind; 8] = [
-    Kind::Can,
-    Kind::Net,
-    Kind::Csp,
-    Kind::Kiss,
-    Kind::Log,
-    Kind::Fault,
-    Kind::Command,
-    Kind::Expectation,
+/// Every kind, in the order their schemas are written.
+pub const CHANNEL_KINDS: [ChannelKind; 8] = [
+    ChannelKind::Can,
+    ChannelKind::Net,
+    ChannelKind::Csp,
+    ChannelKind::Kiss,
+    ChannelKind::Log,
+    ChannelKind::Fault,
+    ChannelKind::Command,
+    ChannelKind::Expectation,
 ];
 
-impl Kind {
-    fn schema(self) -> anyhow::Result<(&'static str, Vec<u8>)> {
+/// The channels every run has, as (kind, key), in registration order; others (another
+/// bus, a KISS link) are registered when their first message comes.
+pub const FIXED_CHANNELS: [(ChannelKind, &str); 8] = [
+    (ChannelKind::Can, "main"),
+    (ChannelKind::Can, "payload"),
+    (ChannelKind::Net, "ground"),
+    (ChannelKind::Csp, ""),
+    (ChannelKind::Log, ""),
+    (ChannelKind::Fault, ""),
+    (ChannelKind::Command, ""),
+    (ChannelKind::Expectation, ""),
+];
+
+impl ChannelKind {
+    /// The schema's name.
+    pub fn schema_name(self) -> &'static str {
+        match self {
+            ChannelKind::Can => "m6p.CanFrame",
+            ChannelKind::Net => "m6p.NetPacket",
+            ChannelKind::Csp => "m6p.CspPacket",
+            ChannelKind::Kiss => "m6p.KissFrame",
+            ChannelKind::Log => "foxglove.Log",
+            ChannelKind::Fault => "m6p.Fault",
+            ChannelKind::Command => "m6p.Command",
+            ChannelKind::Expectation => "m6p.Expectation",
+        }
+    }
+
+    /// The JSON Schema of the messages (schema encoding [`SCHEMA_ENCODING`]).
+    pub fn schema_json(self) -> anyhow::Result<Vec<u8>> {
         fn gen_schema<T: JsonSchema>() -> anyhow::Result<Vec<u8>> {
             Ok(serde_json::to_vec(&schemars::schema_for!(T))?)
         }
-        Ok(match self {
-            Kind::Can => ("m6p.CanFrame", gen_schema::<CanFrameMsg>()?),
-            Kind::Net => ("m6p.NetPacket", gen_schema::<NetPacketMsg>()?),
-            Kind::Csp => ("m6p.CspPacket", gen_schema::<CspPacketMsg>()?),
-            Kind::Kiss => ("m6p.KissFrame", gen_schema::<KissFrameMsg>()?),
-            Kind::Log => ("foxglove.Log", FOXGLOVE_LOG_SCHEMA.as_bytes().to_vec()),
-            Kind::Fault => ("m6p.Fault", gen_schema::<FaultMsg>()?),
-            Kind::Command => ("m6p.Command", gen_schema::<CommandMsg>()?),
-            Kind::Expectation => ("m6p.Expectation", gen_schema::<ExpectationMsg>()?),
-        })
+        match self {
+            ChannelKind::Can => gen_schema::<CanFrameMsg>(),
+            ChannelKind::Net => gen_schema::<NetPacketMsg>(),
+            ChannelKind::Csp => gen_schema::<CspPacketMsg>(),
+            ChannelKind::Kiss => gen_schema::<KissFrameMsg>(),
+            ChannelKind::Log => Ok(FOXGLOVE_LOG_SCHEMA.as_bytes().to_vec()),
+            ChannelKind::Fault => gen_schema::<FaultMsg>(),
+            ChannelKind::Command => gen_schema::<CommandMsg>(),
+            ChannelKind::Expectation => gen_schema::<ExpectationMsg>(),
+        }
+    }
+
+    /// The topic of this kind's channel for `key` (the bus, network or `<link>/<dir>`;
+    /// ignored by the fixed kinds).
+    pub fn topic(self, key: &str) -> String {
+        match self {
+            ChannelKind::Can => format!("/can/{key}/frames"),
+            ChannelKind::Net => format!("/{key}/packets"),
+            ChannelKind::Kiss => match key.rsplit_once('/') {
+                Some((link, dir)) => format!("{}/{dir}", kiss_topic(link)),
+                None => kiss_topic(key),
+            },
+            ChannelKind::Csp => TOPIC_CSP.to_owned(),
+            ChannelKind::Log => TOPIC_LOG.to_owned(),
+            ChannelKind::Fault => TOPIC_FAULTS.to_owned(),
+            ChannelKind::Command => TOPIC_COMMANDS.to_owned(),
+            ChannelKind::Expectation => TOPIC_EXPECTATIONS.to_owned(),
+        }
+    }
+
+    /// The channel's metadata: `bus`, `link` or `medium` = `key` when there is a key.
+    pub fn metadata(self, key: &str) -> BTreeMap<String, String> {
+        let mut metadata = BTreeMap::new();
+        if !key.is_empty() {
+            let name = match self {
+                ChannelKind::Can => "bus",
+                ChannelKind::Kiss => "link",
+                _ => "medium",
+            };
+            metadata.insert(name.to_owned(), key.to_owned());
+        }
+        metadata
+    }
+}
+
+/// One encoded message, as [`EventEncoder::encode`] hands it out.
+#[derive(Debug, Clone, Copy)]
+pub struct Encoded<'a> {
+    /// Its channel's kind.
+    pub kind: ChannelKind,
+    /// Its channel's key (bus, network, `<link>/<dir>`; empty for the fixed kinds).
+    pub key: &'a str,
+    /// Simulated time of the event.
+    pub t: SimTime,
+    /// Log time: `start_utc` + `t`, in ns since the Unix epoch.
+    pub log_time: u64,
+    /// The JSON message (encoding [`MESSAGE_ENCODING`]).
+    pub json: &'a [u8],
+}
+
+impl Encoded<'_> {
+    /// The channel's topic.
+    pub fn topic(&self) -> String {
+        self.kind.topic(self.key)
+    }
+}
+
+/// Turns [`RunEvent`]s into channel messages: the one encoding that both the MCAP
+/// [`Recorder`] and the live view (`crate::live`) use. It keeps a CFP reassembler per CAN
+/// bus, so a frame that completes a CSP packet gives two messages (the frame, then the
+/// `/csp/packets` message).
+pub struct EventEncoder {
+    /// `start_utc` in ns since the Unix epoch.
+    base_ns: u64,
+    /// One CFP reassembler per CAN bus, by bus name, in order of appearance.
+    reassemblers: Vec<(Arc<str>, Reassembler)>,
+    cfp_drops: u64,
+    buf: Vec<u8>,
+    key: String,
+}
+
+impl std::fmt::Debug for EventEncoder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EventEncoder")
+            .field("base_ns", &self.base_ns)
+            .field("cfp_drops", &self.cfp_drops)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Where [`EventEncoder::encode`] hands its messages.
+pub type Emit<'e> = dyn FnMut(Encoded<'_>) -> anyhow::Result<()> + 'e;
+
+/// Serialize `msg` into `buf` and hand it to `emit`.
+fn emit_json<T: Serialize>(
+    buf: &mut Vec<u8>,
+    base_ns: u64,
+    (kind, key): (ChannelKind, &str),
+    t: SimTime,
+    msg: &T,
+    emit: &mut Emit<'_>,
+) -> anyhow::Result<()> {
+    buf.clear();
+    serde_json::to_writer(&mut *buf, msg)?;
+    emit(Encoded {
+        kind,
+        key,
+        t,
+        log_time: base_ns.saturating_add(t.as_ns()),
+        json: buf,
+    })
+}
+
+impl EventEncoder {
+    /// An encoder for a run that started `base_ns` after the Unix epoch.
+    pub fn new(base_ns: u64) -> EventEncoder {
+        EventEncoder {
+            base_ns,
+            reassemblers: Vec::new(),
+            cfp_drops: 0,
+            buf: Vec::with_capacity(1024),
+            key: String::new(),
+        }
+    }
+
+    /// The run's start, in ns since the Unix epoch.
+    pub fn base_ns(&self) -> u64 {
+        self.base_ns
+    }
+
+    /// CFP frames or partial packets the reassemblers dropped (lost frames).
+    pub fn cfp_drops(&self) -> u64 {
+        self.cfp_drops
+    }
+
+    /// Encode one event, handing each message to `emit` in order; stops at `emit`'s first
+    /// error.
+    pub fn encode(&mut self, ev: &RunEvent, emit: &mut Emit<'_>) -> anyhow::Result<()> {
+        let t_ns = ev.t().as_ns();
+        let base_ns = self.base_ns;
+        let buf = &mut self.buf;
+        match ev {
+            RunEvent::Medium(m) => self.encode_medium(m, emit),
+            RunEvent::Kiss {
+                t,
+                link,
+                dir,
+                bytes,
+            } => {
+                let d = match dir {
+                    Direction::In => "in",
+                    Direction::Out => "out",
+                };
+                self.key.clear();
+                self.key.push_str(link);
+                self.key.push('/');
+                self.key.push_str(d);
+                let msg = KissFrameMsg {
+                    t_ns,
+                    link: link.clone(),
+                    dir: d.to_owned(),
+                    bytes_hex: hex::encode(bytes),
+                    len: bytes.len() as u32,
+                };
+                emit_json(buf, base_ns, (ChannelKind::Kiss, &self.key), *t, &msg, emit)
+            }
+            RunEvent::Log {
+                t,
+                source,
+                level,
+                message,
+            } => {
+                let unix = base_ns.saturating_add(t_ns);
+                let msg = LogMsg {
+                    timestamp: LogTime {
+                        sec: unix / 1_000_000_000,
+                        nsec: (unix % 1_000_000_000) as u32,
+                    },
+                    level: *level as u8,
+                    message: message.clone(),
+                    name: source.clone(),
+                    file: String::new(),
+                    line: 0,
+                };
+                emit_json(buf, base_ns, (ChannelKind::Log, ""), *t, &msg, emit)
+            }
+            RunEvent::Fault { t, what } => {
+                let msg = FaultMsg {
+                    t_ns,
+                    what: what.clone(),
+                };
+                emit_json(buf, base_ns, (ChannelKind::Fault, ""), *t, &msg, emit)
+            }
+            RunEvent::Command {
+                t,
+                name,
+                dst,
+                dport,
+                data,
+            } => {
+                let msg = CommandMsg {
+                    t_ns,
+                    event: "sent".to_owned(),
+                    name: name.clone(),
+                    dst: Some(*dst),
+                    dport: Some(*dport),
+                    data_hex: Some(hex::encode(data)),
+                    answered: None,
+                    reply_hex: None,
+                    rtt_ns: None,
+                };
+                emit_json(buf, base_ns, (ChannelKind::Command, ""), *t, &msg, emit)
+            }
+            RunEvent::CommandResult {
+                t,
+                name,
+                reply,
+                rtt_ns,
+            } => {
+                let msg = CommandMsg {
+                    t_ns,
+                    event: "result".to_owned(),
+                    name: name.clone(),
+                    dst: None,
+                    dport: None,
+                    data_hex: None,
+                    answered: Some(reply.is_some()),
+                    reply_hex: reply.as_ref().map(hex::encode),
+                    rtt_ns: *rtt_ns,
+                };
+                emit_json(buf, base_ns, (ChannelKind::Command, ""), *t, &msg, emit)
+            }
+            RunEvent::Expectation {
+                t,
+                name,
+                passed,
+                observed,
+            } => {
+                let msg = ExpectationMsg {
+                    t_ns,
+                    name: name.clone(),
+                    passed: *passed,
+                    observed: observed.clone(),
+                };
+                emit_json(buf, base_ns, (ChannelKind::Expectation, ""), *t, &msg, emit)
+            }
+        }
+    }
+
+    /// A frame or packet, and the CSP packet it completes.
+    fn encode_medium(&mut self, m: &TraceEvent, emit: &mut Emit<'_>) -> anyhow::Result<()> {
+        let t_ns = m.t.as_ns();
+        match &m.frame {
+            TraceFrame::Can(f) => {
+                let msg = CanFrameMsg {
+                    t_ns,
+                    from: m.from.to_string(),
+                    can_id: f.id,
+                    dlc: f.dlc,
+                    data_hex: hex::encode(f.data()),
+                    cfp: cfp_fields(f.id),
+                    dropped: m.dropped,
+                    csp: begin_fields(f),
+                };
+                let chan = (ChannelKind::Can, &*m.medium);
+                emit_json(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)?;
+                if m.dropped {
+                    return Ok(());
+                }
+                let r = self.reassembler(&m.medium);
+                r.handle_timeout(m.t);
+                match r.handle(f, m.t) {
+                    Some(Ok(p)) => self.encode_csp(m, &p, emit),
+                    Some(Err(_)) => {
+                        self.cfp_drops += 1;
+                        Ok(())
+                    }
+                    None => Ok(()),
+                }
+            }
+            TraceFrame::Packet(bytes) => {
+                let h = Header::parse(bytes).ok();
+                let msg = NetPacketMsg {
+                    t_ns,
+                    from: m.from.to_string(),
+                    bytes_hex: hex::encode(bytes),
+                    dropped: m.dropped,
+                    len: bytes.len() as u32,
+                    prio: h.map(|h| h.prio as u8),
+                    src: h.map(|h| h.src),
+                    dst: h.map(|h| h.dst),
+                    dport: h.map(|h| h.dport),
+                    sport: h.map(|h| h.sport),
+                    flags: h.map(|h| h.flags),
+                };
+                let chan = (ChannelKind::Net, &*m.medium);
+                emit_json(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)?;
+                match Packet::parse(bytes) {
+                    Ok(p) if !m.dropped => self.encode_csp(m, &p, emit),
+                    _ => Ok(()),
+                }
+            }
+        }
+    }
+
+    /// The reassembler of CAN bus `bus`, created on first use. It keys partial packets by
+    /// src, dst and ident like libcsp; it has more slots than a node (it sees every
+    /// conversation on the bus) and accepts whatever length CFP can carry.
+    fn reassembler(&mut self, bus: &Arc<str>) -> &mut Reassembler {
+        let i = match self.reassemblers.iter().position(|(b, _)| b == bus) {
+            Some(i) => i,
+            None => {
+                let cfg = ReassemblerConfig {
+                    slots: 64,
+                    mtu: CFP_MAX_DATA,
+                    ..ReassemblerConfig::default()
+                };
+                self.reassemblers.push((bus.clone(), Reassembler::new(cfg)));
+                self.reassemblers.len() - 1
+            }
+        };
+        &mut self.reassemblers[i].1
+    }
+
+    /// The `/csp/packets` message of a packet `m`'s medium delivered.
+    fn encode_csp(
+        &mut self,
+        m: &TraceEvent,
+        p: &Packet,
+        emit: &mut Emit<'_>,
+    ) -> anyhow::Result<()> {
+        let h = &p.header;
+        let msg = CspPacketMsg {
+            t_ns: m.t.as_ns(),
+            medium: m.medium.to_string(),
+            from: m.from.to_string(),
+            prio: h.prio as u8,
+            src: h.src,
+            dst: h.dst,
+            dport: h.dport,
+            sport: h.sport,
+            flags: h.flags,
+            data_hex: hex::encode(&p.data),
+            len: p.data.len() as u32,
+            service: packet_service(h).map(str::to_owned),
+            icd: None,
+        };
+        let chan = (ChannelKind::Csp, "");
+        emit_json(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)
     }
 }
 
@@ -608,38 +984,76 @@ struct Chan {
     topic: String,
     /// The bus, network or link name it was registered for (empty for fixed channels).
     key: String,
-    kind: Kind,
+    kind: ChannelKind,
     seq: u32,
     messages: u64,
 }
 
-/// Index of the fixed channels in `Recorder::chans`.
-const CH_CSP: usize = 3;
-const CH_LOG: usize = 4;
-const CH_FAULTS: usize = 5;
-const CH_COMMANDS: usize = 6;
-const CH_EXPECTATIONS: usize = 7;
+/// The MCAP side of a [`Recorder`]: the writer and its channels.
+struct McapOut {
+    writer: Writer<BufWriter<File>>,
+    path: PathBuf,
+    schema_ids: [u16; CHANNEL_KINDS.len()],
+    chans: Vec<Chan>,
+}
+
+impl McapOut {
+    /// Register a channel; returns its index in `chans`.
+    fn add_channel(&mut self, kind: ChannelKind, key: &str) -> anyhow::Result<usize> {
+        let topic = kind.topic(key);
+        let schema = self.schema_ids[kind as usize];
+        let id = self
+            .writer
+            .add_channel(schema, &topic, MESSAGE_ENCODING, &kind.metadata(key))
+            .with_context(|| format!("writing recording {}", self.path.display()))?;
+        self.chans.push(Chan {
+            id,
+            topic,
+            key: key.to_owned(),
+            kind,
+            seq: 0,
+            messages: 0,
+        });
+        Ok(self.chans.len() - 1)
+    }
+
+    /// Write one message, registering its channel if it is the first.
+    fn put(&mut self, m: Encoded<'_>) -> anyhow::Result<()> {
+        let chan = match self
+            .chans
+            .iter()
+            .position(|c| c.kind == m.kind && c.key == m.key)
+        {
+            Some(i) => i,
+            None => self.add_channel(m.kind, m.key)?,
+        };
+        let c = &mut self.chans[chan];
+        let header = MessageHeader {
+            channel_id: c.id,
+            sequence: c.seq,
+            log_time: m.log_time,
+            publish_time: m.log_time,
+        };
+        c.seq = c.seq.wrapping_add(1);
+        c.messages += 1;
+        self.writer
+            .write_to_known_channel(&header, m.json)
+            .with_context(|| format!("writing recording {}", self.path.display()))
+    }
+}
 
 /// Writes a run's events to an MCAP file (see the module docs for the layout).
 pub struct Recorder {
-    writer: Writer<BufWriter<File>>,
-    path: PathBuf,
-    /// `start_utc` in ns since the Unix epoch.
-    base_ns: u64,
-    schema_ids: [u16; KINDS.len()],
-    chans: Vec<Chan>,
-    /// One CFP reassembler per CAN bus, by bus name, in order of appearance.
-    reassemblers: Vec<(Arc<str>, Reassembler)>,
-    cfp_drops: u64,
-    buf: Vec<u8>,
+    out: McapOut,
+    enc: EventEncoder,
 }
 
 impl std::fmt::Debug for Recorder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Recorder")
-            .field("path", &self.path)
-            .field("base_ns", &self.base_ns)
-            .field("channels", &self.chans)
+            .field("path", &self.out.path)
+            .field("base_ns", &self.enc.base_ns)
+            .field("channels", &self.out.chans)
             .finish_non_exhaustive()
     }
 }
@@ -648,18 +1062,7 @@ impl Recorder {
     /// Create `path` (truncating it) and write the header, the run's metadata and the
     /// scenario attachment, and register the fixed channels.
     pub fn create(path: &Path, meta: RecordingMeta) -> anyhow::Result<Recorder> {
-        let start_ns = crate::timefmt::parse_utc(&meta.start_utc).with_context(|| {
-            format!(
-                "recording start time {:?} is not a UTC time",
-                meta.start_utc
-            )
-        })?;
-        let base_ns = u64::try_from(start_ns).with_context(|| {
-            format!(
-                "recording start time {} is before 1970 (MCAP times are unsigned)",
-                meta.start_utc
-            )
-        })?;
+        let base_ns = start_ns(&meta.start_utc)?;
         let file =
             File::create(path).with_context(|| format!("creating recording {}", path.display()))?;
         let opts = WriteOptions::new()
@@ -705,334 +1108,54 @@ impl Recorder {
             })
             .with_context(ctx)?;
 
-        let mut schema_ids = [0u16; KINDS.len()];
-        for (slot, kind) in schema_ids.iter_mut().zip(KINDS) {
-            let (name, data) = kind.schema()?;
+        let mut schema_ids = [0u16; CHANNEL_KINDS.len()];
+        for (slot, kind) in schema_ids.iter_mut().zip(CHANNEL_KINDS) {
             *slot = writer
-                .add_schema(name, JSONSCHEMA, &data)
+                .add_schema(kind.schema_name(), SCHEMA_ENCODING, &kind.schema_json()?)
                 .with_context(ctx)?;
         }
 
-        let mut rec = Recorder {
+        let mut out = McapOut {
             writer,
             path: path.to_owned(),
-            base_ns,
             schema_ids,
             chans: Vec::new(),
-            reassemblers: Vec::new(),
-            cfp_drops: 0,
-            buf: Vec::with_capacity(1024),
         };
-        for (topic, key, kind) in [
-            ("/can/main/frames", "main", Kind::Can),
-            ("/can/payload/frames", "payload", Kind::Can),
-            ("/ground/packets", "ground", Kind::Net),
-            (TOPIC_CSP, "", Kind::Csp),
-            (TOPIC_LOG, "", Kind::Log),
-            (TOPIC_FAULTS, "", Kind::Fault),
-            (TOPIC_COMMANDS, "", Kind::Command),
-            (TOPIC_EXPECTATIONS, "", Kind::Expectation),
-        ] {
-            rec.add_channel(topic.to_owned(), key, kind)?;
+        for (kind, key) in FIXED_CHANNELS {
+            out.add_channel(kind, key)?;
         }
-        debug_assert_eq!(rec.chans[CH_CSP].topic, TOPIC_CSP);
-        debug_assert_eq!(rec.chans[CH_EXPECTATIONS].topic, TOPIC_EXPECTATIONS);
-        Ok(rec)
-    }
-
-    /// Register a channel; returns its index in `chans`.
-    fn add_channel(&mut self, topic: String, key: &str, kind: Kind) -> anyhow::Result<usize> {
-        let mut metadata = BTreeMap::new();
-        if !key.is_empty() {
-            let name = match kind {
-                Kind::Can => "bus",
-                Kind::Kiss => "link",
-                _ => "medium",
-            };
-            metadata.insert(name.to_owned(), key.to_owned());
-        }
-        let schema = self.schema_ids[kind as usize];
-        let id = self
-            .writer
-            .add_channel(schema, &topic, JSON, &metadata)
-            .with_context(|| format!("writing recording {}", self.path.display()))?;
-        self.chans.push(Chan {
-            id,
-            topic,
-            key: key.to_owned(),
-            kind,
-            seq: 0,
-            messages: 0,
-        });
-        Ok(self.chans.len() - 1)
-    }
-
-    /// The channel of `kind` registered for `key`, registering `topic` if there is none.
-    fn channel_for(
-        &mut self,
-        kind: Kind,
-        key: &str,
-        topic: impl FnOnce() -> String,
-    ) -> anyhow::Result<usize> {
-        match self
-            .chans
-            .iter()
-            .position(|c| c.kind == kind && c.key == key)
-        {
-            Some(i) => Ok(i),
-            None => self.add_channel(topic(), key, kind),
-        }
-    }
-
-    /// Serialize `msg` and write it on channel `chan` at simulated time `t`.
-    fn put<T: Serialize>(&mut self, chan: usize, t: SimTime, msg: &T) -> anyhow::Result<()> {
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, msg)?;
-        let time = self.base_ns.saturating_add(t.as_ns());
-        let Some(c) = self.chans.get_mut(chan) else {
-            bail!("internal: no channel {chan}");
-        };
-        let header = MessageHeader {
-            channel_id: c.id,
-            sequence: c.seq,
-            log_time: time,
-            publish_time: time,
-        };
-        c.seq = c.seq.wrapping_add(1);
-        c.messages += 1;
-        self.writer
-            .write_to_known_channel(&header, &self.buf)
-            .with_context(|| format!("writing recording {}", self.path.display()))
+        Ok(Recorder {
+            out,
+            enc: EventEncoder::new(base_ns),
+        })
     }
 
     /// Record one event.
     pub fn write(&mut self, ev: &RunEvent) -> anyhow::Result<()> {
-        let t_ns = ev.t().as_ns();
-        match ev {
-            RunEvent::Medium(m) => self.write_medium(m),
-            RunEvent::Kiss {
-                t,
-                link,
-                dir,
-                bytes,
-            } => {
-                let d = match dir {
-                    Direction::In => "in",
-                    Direction::Out => "out",
-                };
-                let key = format!("{link}/{d}");
-                let chan =
-                    self.channel_for(Kind::Kiss, &key, || format!("{}/{d}", kiss_topic(link)))?;
-                let msg = KissFrameMsg {
-                    t_ns,
-                    link: link.clone(),
-                    dir: d.to_owned(),
-                    bytes_hex: hex::encode(bytes),
-                    len: bytes.len() as u32,
-                };
-                self.put(chan, *t, &msg)
-            }
-            RunEvent::Log {
-                t,
-                source,
-                level,
-                message,
-            } => {
-                let unix = self.base_ns.saturating_add(t_ns);
-                let msg = LogMsg {
-                    timestamp: LogTime {
-                        sec: unix / 1_000_000_000,
-                        nsec: (unix % 1_000_000_000) as u32,
-                    },
-                    level: *level as u8,
-                    message: message.clone(),
-                    name: source.clone(),
-                    file: String::new(),
-                    line: 0,
-                };
-                self.put(CH_LOG, *t, &msg)
-            }
-            RunEvent::Fault { t, what } => self.put(
-                CH_FAULTS,
-                *t,
-                &FaultMsg {
-                    t_ns,
-                    what: what.clone(),
-                },
-            ),
-            RunEvent::Command {
-                t,
-                name,
-                dst,
-                dport,
-                data,
-            } => self.put(
-                CH_COMMANDS,
-                *t,
-                &CommandMsg {
-                    t_ns,
-                    event: "sent".to_owned(),
-                    name: name.clone(),
-                    dst: Some(*dst),
-                    dport: Some(*dport),
-                    data_hex: Some(hex::encode(data)),
-                    answered: None,
-                    reply_hex: None,
-                    rtt_ns: None,
-                },
-            ),
-            RunEvent::CommandResult {
-                t,
-                name,
-                reply,
-                rtt_ns,
-            } => self.put(
-                CH_COMMANDS,
-                *t,
-                &CommandMsg {
-                    t_ns,
-                    event: "result".to_owned(),
-                    name: name.clone(),
-                    dst: None,
-                    dport: None,
-                    data_hex: None,
-                    answered: Some(reply.is_some()),
-                    reply_hex: reply.as_ref().map(hex::encode),
-                    rtt_ns: *rtt_ns,
-                },
-            ),
-            RunEvent::Expectation {
-                t,
-                name,
-                passed,
-                observed,
-            } => self.put(
-                CH_EXPECTATIONS,
-                *t,
-                &ExpectationMsg {
-                    t_ns,
-                    name: name.clone(),
-                    passed: *passed,
-                    observed: observed.clone(),
-                },
-            ),
-        }
-    }
-
-    /// Record a frame or packet, and the CSP packet it completes.
-    fn write_medium(&mut self, m: &TraceEvent) -> anyhow::Result<()> {
-        let t_ns = m.t.as_ns();
-        match &m.frame {
-            TraceFrame::Can(f) => {
-                let chan =
-                    self.channel_for(Kind::Can, &m.medium, || format!("/can/{}/frames", m.medium))?;
-                let msg = CanFrameMsg {
-                    t_ns,
-                    from: m.from.to_string(),
-                    can_id: f.id,
-                    dlc: f.dlc,
-                    data_hex: hex::encode(f.data()),
-                    cfp: cfp_fields(f.id),
-                    dropped: m.dropped,
-                    csp: begin_fields(f),
-                };
-                self.put(chan, m.t, &msg)?;
-                if m.dropped {
-                    return Ok(());
-                }
-                let r = self.reassembler(&m.medium);
-                r.handle_timeout(m.t);
-                match r.handle(f, m.t) {
-                    Some(Ok(p)) => self.put_csp(m, &p),
-                    Some(Err(_)) => {
-                        self.cfp_drops += 1;
-                        Ok(())
-                    }
-                    None => Ok(()),
-                }
-            }
-            TraceFrame::Packet(bytes) => {
-                let chan =
-                    self.channel_for(Kind::Net, &m.medium, || format!("/{}/packets", m.medium))?;
-                let h = Header::parse(bytes).ok();
-                let msg = NetPacketMsg {
-                    t_ns,
-                    from: m.from.to_string(),
-                    bytes_hex: hex::encode(bytes),
-                    dropped: m.dropped,
-                    len: bytes.len() as u32,
-                    prio: h.map(|h| h.prio as u8),
-                    src: h.map(|h| h.src),
-                    dst: h.map(|h| h.dst),
-                    dport: h.map(|h| h.dport),
-                    sport: h.map(|h| h.sport),
-                    flags: h.map(|h| h.flags),
-                };
-                self.put(chan, m.t, &msg)?;
-                match Packet::parse(bytes) {
-                    Ok(p) if !m.dropped => self.put_csp(m, &p),
-                    _ => Ok(()),
-                }
-            }
-        }
-    }
-
-    /// The reassembler of CAN bus `bus`, created on first use. It keys partial packets by
-    /// src, dst and ident like libcsp; it has more slots than a node (it sees every
-    /// conversation on the bus) and accepts whatever length CFP can carry.
-    fn reassembler(&mut self, bus: &Arc<str>) -> &mut Reassembler {
-        let i = match self.reassemblers.iter().position(|(b, _)| b == bus) {
-            Some(i) => i,
-            None => {
-                let cfg = ReassemblerConfig {
-                    slots: 64,
-                    mtu: CFP_MAX_DATA,
-                    ..ReassemblerConfig::default()
-                };
-                self.reassemblers.push((bus.clone(), Reassembler::new(cfg)));
-                self.reassemblers.len() - 1
-            }
-        };
-        &mut self.reassemblers[i].1
-    }
-
-    /// Write the `/csp/packets` message of a packet `m`'s medium delivered.
-    fn put_csp(&mut self, m: &TraceEvent, p: &Packet) -> anyhow::Result<()> {
-        let h = &p.header;
-        let msg = CspPacketMsg {
-            t_ns: m.t.as_ns(),
-            medium: m.medium.to_string(),
-            from: m.from.to_string(),
-            prio: h.prio as u8,
-            src: h.src,
-            dst: h.dst,
-            dport: h.dport,
-            sport: h.sport,
-            flags: h.flags,
-            data_hex: hex::encode(&p.data),
-            len: p.data.len() as u32,
-            service: packet_service(h).map(str::to_owned),
-            icd: None,
-        };
-        self.put(CH_CSP, m.t, &msg)
+        let out = &mut self.out;
+        self.enc.encode(ev, &mut |m| out.put(m))
     }
 
     /// Close the current chunk and flush it to the file, so a run killed after this loses
     /// nothing written before it (costs compression ratio if called often).
     pub fn flush(&mut self) -> anyhow::Result<()> {
-        self.writer
+        self.out
+            .writer
             .flush()
-            .with_context(|| format!("flushing recording {}", self.path.display()))
+            .with_context(|| format!("flushing recording {}", self.out.path.display()))
     }
 
     /// Write the last chunk and the summary (indexes, statistics) and close the file.
     pub fn finish(self) -> anyhow::Result<RecordingStats> {
         let Recorder {
-            mut writer,
-            path,
-            chans,
-            cfp_drops,
-            ..
+            out:
+                McapOut {
+                    mut writer,
+                    path,
+                    chans,
+                    ..
+                },
+            enc,
         } = self;
         let ctx = || format!("finishing recording {}", path.display());
         let summary = writer.finish().with_context(ctx)?;
@@ -1055,7 +1178,16 @@ impl Recorder {
             channels,
             chunks,
             bytes,
-            cfp_drops,
+            cfp_drops: enc.cfp_drops,
         })
     }
+}
+
+/// A run's start time `start_utc` (`YYYY-MM-DDTHH:MM:SS[.fff]Z`) in ns since the Unix epoch.
+pub fn start_ns(start_utc: &str) -> anyhow::Result<u64> {
+    let ns = crate::timefmt::parse_utc(start_utc)
+        .with_context(|| format!("recording start time {start_utc:?} is not a UTC time"))?;
+    u64::try_from(ns).with_context(|| {
+        format!("recording start time {start_utc} is before 1970 (MCAP times are unsigned)")
+    })
 }
