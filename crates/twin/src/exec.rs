@@ -146,8 +146,19 @@ pub async fn execute_recorded(
     compiled: Compiled,
     record: Option<&Path>,
 ) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    execute_with(loaded, compiled, record, &mut |_| {}).await
+}
+
+/// [`execute_recorded`], also handing every event to `live` after the recorder (the live
+/// view, `crate::live::LiveServer::publish`, with the `live` feature).
+pub async fn execute_with(
+    loaded: &Loaded,
+    compiled: Compiled,
+    record: Option<&Path>,
+    live: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
     let Some(path) = record else {
-        return Ok((execute(compiled, &mut |_| {}).await?, None));
+        return Ok((execute(compiled, live).await?, None));
     };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -174,6 +185,7 @@ pub async fn execute_recorded(
             failure = Some(e);
             recorder = None;
         }
+        live(ev);
     })
     .await?;
     if let Some(e) = failure {
