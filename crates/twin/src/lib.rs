@@ -5,6 +5,7 @@
 //! - [`ground`]: the twin's own ground stations.
 //! - [`gs`]: the outside ground-station client (`m6p-twin gs`).
 //! - [`record`] and [`recording`]: write a run to MCAP; read, summarize and compare recordings.
+//! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
 pub mod duration;
 pub mod events;
@@ -12,6 +13,8 @@ pub mod exec;
 pub mod expect;
 pub mod ground;
 pub mod gs;
+#[cfg(feature = "live")]
+pub mod live;
 pub mod network;
 pub mod plan;
 pub mod record;

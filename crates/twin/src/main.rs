@@ -109,6 +109,22 @@ struct RunArgs {
     /// main]. Needs a build with --features socketcan (Linux).
     #[arg(long = "socketcan", value_name = "IFACE[:main|:payload]", value_parser = SocketCanBus::parse_arg)]
     socketcan: Vec<(String, SocketCanBus)>,
+    /// Serve the run live over the Foxglove WebSocket protocol on ADDR (IP:PORT or a port)
+    /// [default: 127.0.0.1:8765]; implies real time. Needs a build with --features live.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765", value_parser = parse_live_addr)]
+    live: Option<SocketAddr>,
+}
+
+/// `--live ADDR`: IP:PORT, or a port on 127.0.0.1.
+fn parse_live_addr(s: &str) -> Result<SocketAddr, String> {
+    if let Ok(port) = s.parse::<u16>() {
+        return Ok(SocketAddr::from(([127, 0, 0, 1], port)));
+    }
+    s.parse().map_err(|_| {
+        "expected IP:PORT or a port (a scenario file after a bare --live: write it first, \
+         or --live=127.0.0.1:8765)"
+            .to_owned()
+    })
 }
 
 #[derive(Debug, clap::Args)]
@@ -187,7 +203,8 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,foxglove=warn".into()),
         )
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
@@ -235,10 +252,20 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
     opts.kiss.addrs.extend(a.kiss_addr);
     opts.kiss.decoder.libcsp14_rx_limit |= a.libcsp14_kiss_limit;
     opts.socketcan.extend(a.socketcan);
+    if cfg!(not(feature = "live")) && a.live.is_some() {
+        anyhow::bail!(
+            "--live needs the Foxglove WebSocket server, which this build leaves out: \
+             rebuild with --features live (cargo build -p m6p-twin --features live)"
+        );
+    }
     if opts.has_outside_links() && !a.realtime && opts.clock == ClockMode::Virtual {
         eprintln!("note: outside links need the wall clock: running in real time");
+    } else if a.live.is_some() && !a.realtime && opts.clock == ClockMode::Virtual {
+        eprintln!(
+            "note: the live view follows the wall clock: running in real time (--speed sets the pace)"
+        );
     }
-    if a.realtime || opts.has_outside_links() {
+    if a.realtime || opts.has_outside_links() || a.live.is_some() {
         let speed = match opts.clock {
             ClockMode::Realtime { speed } if !a.realtime => speed,
             _ => a.speed,
@@ -263,8 +290,30 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
         .clone()
         .or_else(|| loaded.scenario.record.file.as_ref().map(PathBuf::from));
     let rt = build_runtime(opts.clock)?;
-    let (outcome, stats) =
-        rt.block_on(exec::execute_recorded(&loaded, compiled, record.as_deref()))?;
+    #[cfg(feature = "live")]
+    let mut live = match a.live {
+        Some(addr) => Some(start_live(addr, compiled.opts.epoch_unix_s)?),
+        None => None,
+    };
+    #[cfg(feature = "live")]
+    let mut tap = |ev: &m6p_twin::events::RunEvent| {
+        if let Some(l) = live.as_mut() {
+            l.publish(ev);
+        }
+    };
+    #[cfg(not(feature = "live"))]
+    let mut tap = |_: &m6p_twin::events::RunEvent| {};
+    let (outcome, stats) = rt.block_on(exec::execute_with(
+        &loaded,
+        compiled,
+        record.as_deref(),
+        &mut tap,
+    ))?;
+    #[cfg(feature = "live")]
+    if let Some(l) = live.take() {
+        eprintln!("live view: {} messages published; stopping", l.messages());
+        l.finish();
+    }
     print!("{}", outcome.report.table());
     print!("{}", outcome.verdict_table());
     if let (Some(path), Some(stats)) = (record, stats) {
@@ -277,6 +326,26 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
         );
     }
     Ok(outcome.passed())
+}
+
+/// Start the live view on `addr` for a run starting at `epoch_unix_s`.
+#[cfg(feature = "live")]
+fn start_live(addr: SocketAddr, epoch_unix_s: u64) -> anyhow::Result<m6p_twin::live::LiveServer> {
+    if !addr.ip().is_loopback() {
+        eprintln!(
+            "warning: the live view on {addr} is reachable from other machines, without \
+             authentication or encryption"
+        );
+    }
+    let start_ns = epoch_unix_s
+        .checked_mul(1_000_000_000)
+        .context("the scenario's start epoch is out of range")?;
+    let live = m6p_twin::live::LiveServer::start(addr, start_ns)?;
+    eprintln!(
+        "live view: ws://{} (Foxglove: Open connection, Foxglove WebSocket)",
+        live.addr()
+    );
+    Ok(live)
 }
 
 /// The bytes outside programs sent on each KISS link of a recording, with their times.

@@ -1,0 +1,263 @@
+//! `m6p-twin run --live`: a Foxglove WebSocket client written here (tokio-tungstenite)
+//! joins a short real-time run and sees the recording's channels advertised, decoded CSP
+//! packets with simulated log times, and the simulated time broadcast. Without the `live`
+//! feature, `--live` says how to rebuild.
+#![allow(clippy::unwrap_used)]
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+#[cfg(not(feature = "live"))]
+#[test]
+fn live_without_the_feature_says_how_to_rebuild() {
+    let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args(["run", "--duration", "1s", "--live"])
+        .current_dir(repo())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("rebuild with --features live"), "{err}");
+}
+
+#[cfg(feature = "live")]
+mod with_live {
+    use super::*;
+    use std::io::{BufRead, BufReader};
+    use std::process::{Child, Stdio};
+    use std::sync::mpsc;
+    use std::time::Duration;
+
+    use futures_util::{SinkExt, StreamExt};
+    use serde_json::Value;
+    use tokio_tungstenite::tungstenite::Message;
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+    fn tmp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("m6p-twin-live-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    /// Pings of the FC every 100 ms for 3 simulated seconds, from a start epoch far from
+    /// today's date, so that simulated time cannot be mistaken for the wall clock.
+    const SCENARIO: &str = r#"
+name = "live"
+start = "2020-06-01T12:00:00Z"
+duration = "3s"
+[[commands]]
+name = "ping-fc"
+at = "100ms"
+every = "100ms"
+count = 28
+to = "FC"
+request = "ping"
+"#;
+
+    /// Kills the child if the test fails half-way.
+    struct Twin(Option<Child>);
+
+    impl Drop for Twin {
+        fn drop(&mut self) {
+            if let Some(c) = self.0.as_mut() {
+                let _ = c.kill();
+                let _ = c.wait();
+            }
+        }
+    }
+
+    #[test]
+    fn a_foxglove_client_sees_the_channels_packets_and_simulated_time() {
+        let scenario = tmp("live.toml");
+        std::fs::write(&scenario, SCENARIO).unwrap();
+        let rec = tmp("live.mcap");
+        let mut twin = Twin(Some(
+            Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+                .arg("run")
+                .arg(&scenario)
+                .args(["--live", "127.0.0.1:0", "--record"])
+                .arg(&rec)
+                .current_dir(repo())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        ));
+        // The twin prints the address it bound (port 0: any free port).
+        let (tx, lines) = mpsc::channel();
+        let stderr = twin.0.as_mut().unwrap().stderr.take().unwrap();
+        std::thread::spawn(move || {
+            for l in BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = tx.send(l);
+            }
+        });
+        let mut seen = Vec::new();
+        let addr = loop {
+            let l = lines
+                .recv_timeout(Duration::from_secs(30))
+                .unwrap_or_else(|e| panic!("no live view address ({e}); stderr: {seen:?}"));
+            if let Some(rest) = l.strip_prefix("live view: ws://") {
+                break rest.split_whitespace().next().unwrap().to_owned();
+            }
+            seen.push(l);
+        };
+        assert!(
+            seen.iter().any(|l| l.contains("running in real time")),
+            "{seen:?}"
+        );
+
+        let start_ns = m6p_twin::timefmt::parse_utc("2020-06-01T12:00:00Z").unwrap() as u64;
+        let end_ns = start_ns + 3_000_000_000;
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let (packets, times) = rt
+            .block_on(async {
+                tokio::time::timeout(Duration::from_secs(20), client(&addr, start_ns, end_ns)).await
+            })
+            .expect("the client saw packets and times within 20 s");
+        assert!(!packets.is_empty() && !times.is_empty());
+
+        // The run ends on its own after 3 simulated (= wall) seconds, recording too.
+        let (done_tx, done) = mpsc::channel();
+        let child = twin.0.take().unwrap();
+        std::thread::spawn(move || {
+            let out = child.wait_with_output();
+            let _ = done_tx.send(out);
+        });
+        let out = done
+            .recv_timeout(Duration::from_secs(30))
+            .expect("the run ended")
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let stderr: Vec<String> = lines.try_iter().collect();
+        assert_eq!(out.status.code(), Some(0), "{stdout}\n{stderr:#?}");
+        assert!(stdout.contains("recorded"), "{stdout}");
+        let _ = std::fs::remove_file(&rec);
+        let _ = std::fs::remove_file(&scenario);
+    }
+
+    /// Join the server, check the advertisement, subscribe to `/csp/packets`, and return the
+    /// first few CSP packet messages (log time, JSON) and time broadcasts.
+    async fn client(addr: &str, start_ns: u64, end_ns: u64) -> (Vec<(u64, Value)>, Vec<u64>) {
+        let mut req = format!("ws://{addr}").into_client_request().unwrap();
+        req.headers_mut()
+            .insert("sec-websocket-protocol", "foxglove.sdk.v1".parse().unwrap());
+        let (mut ws, resp) = tokio_tungstenite::connect_async(req).await.unwrap();
+        assert_eq!(
+            resp.headers()["sec-websocket-protocol"],
+            "foxglove.sdk.v1",
+            "negotiated subprotocol"
+        );
+
+        // serverInfo first, with the time capability.
+        let info = next_json(&mut ws).await;
+        assert_eq!(info["op"], "serverInfo", "{info}");
+        let caps = info["capabilities"].as_array().unwrap();
+        assert!(caps.iter().any(|c| c == "time"), "{info}");
+
+        // Then the channels, as the recording has them.
+        let mut channels: Vec<Value> = Vec::new();
+        while !["/csp/packets", "/can/main/frames", "/log"]
+            .iter()
+            .all(|t| channels.iter().any(|c| c["topic"] == *t))
+        {
+            let m = next_json(&mut ws).await;
+            if m["op"] == "advertise" {
+                channels.extend(m["channels"].as_array().unwrap().iter().cloned());
+            }
+        }
+        let topics: Vec<&str> = channels
+            .iter()
+            .map(|c| c["topic"].as_str().unwrap())
+            .collect();
+        for t in [
+            "/can/main/frames",
+            "/can/payload/frames",
+            "/ground/packets",
+            "/csp/packets",
+            "/log",
+            "/faults",
+            "/commands",
+            "/expectations",
+        ] {
+            assert!(topics.contains(&t), "{t} missing from {topics:?}");
+        }
+        for c in &channels {
+            assert_eq!(c["encoding"], "json", "{c}");
+            assert_eq!(c["schemaEncoding"], "jsonschema", "{c}");
+            let schema: Value = serde_json::from_str(c["schema"].as_str().unwrap()).unwrap();
+            assert_eq!(schema["title"], c["schemaName"], "{c}");
+        }
+        let by_topic = |t: &str| channels.iter().find(|c| c["topic"] == t).unwrap();
+        assert_eq!(by_topic("/csp/packets")["schemaName"], "m6p.CspPacket");
+        assert_eq!(by_topic("/log")["schemaName"], "foxglove.Log");
+        assert_eq!(by_topic("/can/main/frames")["schemaName"], "m6p.CanFrame");
+        assert_eq!(by_topic("/can/main/frames")["metadata"]["bus"], "main");
+
+        let csp = by_topic("/csp/packets")["id"].as_u64().unwrap();
+        let sub = serde_json::json!({
+            "op": "subscribe",
+            "subscriptions": [{"id": 7, "channelId": csp}],
+        });
+        ws.send(Message::text(sub.to_string())).await.unwrap();
+
+        let mut packets = Vec::new();
+        let mut times = Vec::new();
+        while packets.len() < 5 || times.len() < 3 {
+            let Some(m) = ws.next().await else {
+                panic!("the server closed the connection early");
+            };
+            let Message::Binary(b) = m.unwrap() else {
+                continue;
+            };
+            match b[0] {
+                // messageData: opcode, subscription id u32 LE, log time u64 LE, payload.
+                0x01 => {
+                    let sub_id = u32::from_le_bytes(b[1..5].try_into().unwrap());
+                    let log_time = u64::from_le_bytes(b[5..13].try_into().unwrap());
+                    assert_eq!(sub_id, 7);
+                    let p: Value = serde_json::from_slice(&b[13..]).unwrap();
+                    assert!(p["src"].is_u64() && p["dst"].is_u64(), "{p}");
+                    // The log time is simulated: start epoch + the packet's t_ns.
+                    assert_eq!(log_time, start_ns + p["t_ns"].as_u64().unwrap(), "{p}");
+                    assert!((start_ns..=end_ns).contains(&log_time), "{log_time}");
+                    packets.push((log_time, p));
+                }
+                // time: opcode, timestamp u64 LE.
+                0x02 => {
+                    let t = u64::from_le_bytes(b[1..9].try_into().unwrap());
+                    assert!((start_ns..=end_ns).contains(&t), "time {t} outside the run");
+                    if let Some(&last) = times.last() {
+                        assert!(t >= last, "time went back: {last} then {t}");
+                    }
+                    times.push(t);
+                }
+                op => panic!("unexpected binary opcode {op}"),
+            }
+        }
+        // The FC answers pings: packets both ways.
+        assert!(packets.iter().any(|(_, p)| p["dst"] == 3), "{packets:?}");
+        assert!(packets.iter().any(|(_, p)| p["src"] == 3), "{packets:?}");
+        let _ = ws.close(None).await;
+        (packets, times)
+    }
+
+    async fn next_json<S>(ws: &mut S) -> Value
+    where
+        S: StreamExt<Item = Result<Message, tokio_tungstenite::tungstenite::Error>> + Unpin,
+    {
+        loop {
+            match ws.next().await.expect("connection open").unwrap() {
+                Message::Text(t) => return serde_json::from_str(t.as_str()).unwrap(),
+                Message::Binary(_) => continue, // a time broadcast before the advertisement
+                _ => continue,
+            }
+        }
+    }
+}
