@@ -616,11 +616,20 @@ impl Scenario {
                 format!("{} is out of range (0, 1e6]", self.clock.speed),
             );
         }
-        if !self.satellite.tle.is_empty() && !(2..=3).contains(&self.satellite.tle.len()) {
+        let tle = &self.satellite.tle;
+        if !tle.is_empty() && !(2..=3).contains(&tle.len()) {
             err(
                 vec![key("satellite"), key("tle")],
                 "give the two TLE lines (optionally after a title line)".into(),
             );
+        } else if let [.., l1, l2] = tle.as_slice() {
+            // Strict: checksums and layout are checked, as the FC's TLE upload would.
+            if let Err(e) = orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict) {
+                err(
+                    vec![key("satellite"), key("tle")],
+                    format!("the TLE does not parse: {e}"),
+                );
+            }
         }
         for (i, &p) in self.network.payloads.iter().enumerate() {
             if !(12..=15).contains(&p) {

@@ -146,6 +146,12 @@ fn bad_start_time() {
 }
 
 #[test]
+fn tle_with_a_bad_checksum() {
+    let text = "duration = \"1m\"\n[satellite]\ntle = [\n  \"1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9997\",\n  \"2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009\",\n]\n";
+    assert_error(text, 3, "satellite.tle", "the TLE does not parse: line 1");
+}
+
+#[test]
 fn toml_syntax_error() {
     let (l, _, m) = first_error("duration = \"1m\"\n[network\n");
     assert_eq!(l, Some(2), "{m}");
