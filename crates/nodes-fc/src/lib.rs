@@ -17,10 +17,14 @@
 //! - **Sensors and actuators**: no models yet. TMSENS, TMRAWSENS and the wheel and
 //!   magnetorquer fields of TMACD are zeros; temperatures are a constant 20 degrees C.
 //!
+//! [`truth`] holds the attitude dynamics (rigid body, four wheels, magnetorquers, gravity
+//! gradient) that a later increment steps and publishes; the app above does not use it yet.
+//!
 //! Port 13 (mission-controller scripts, ICD 1.5) is bound and answers every request with
 //! the failure reply until a later increment. Byte layouts and decisions are in
 //! `docs/protocol.md`, section "FC ports".
 
+pub mod truth;
 pub mod wire;
 
 use csp::node::{App, Node};

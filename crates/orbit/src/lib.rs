@@ -11,6 +11,7 @@
 //! - [`sun`], [`eclipse`]: geometric sun vector; conical umbra/penumbra.
 //! - [`igrf`]: IGRF-14 main field, degree 13, with secular variation.
 //! - [`passes`]: azimuth, elevation, range and pass prediction for a ground site.
+//! - [`state`]: [`state::TruthSnapshot`], the FC's published truth for the other nodes.
 
 pub mod cowell;
 pub mod eclipse;
@@ -19,6 +20,7 @@ pub mod geodetic;
 pub mod igrf;
 pub mod passes;
 pub mod propagate;
+pub mod state;
 pub mod sun;
 pub mod time;
 pub mod tle;
