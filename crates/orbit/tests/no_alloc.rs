@@ -1,11 +1,7 @@
 //! The per-step hot paths allocate nothing: SGP4 propagation, TEME -> J2000 / ECEF, the
 //! `Propagator` step, geodetic conversion and look angles, counted with a global allocator.
 
-// A counting `GlobalAlloc` needs `unsafe impl`; it only forwards to the system allocator.
-#![allow(unsafe_code)]
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 
 use m6p_orbit::frames::{a_j2000_from_teme, teme_to_ecef, teme_to_j2000};
 use m6p_orbit::geodetic::{ecef_km_to_geodetic, geodetic_to_ecef_m};
@@ -14,24 +10,8 @@ use m6p_orbit::propagate::{Propagator, Sgp4Propagator};
 use m6p_orbit::time::{Eop, gmst82};
 use m6p_orbit::tle::{ChecksumMode, Tle};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+mod counting_alloc;
+use counting_alloc::ALLOCATIONS;
 
 #[test]
 fn hot_paths_do_not_allocate() {

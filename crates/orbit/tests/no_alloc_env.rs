@@ -2,11 +2,7 @@
 //! one-time parse of the embedded coefficient file) and Cowell integration steps, counted
 //! with a global allocator.
 
-// A counting `GlobalAlloc` needs `unsafe impl`; it only forwards to the system allocator.
-#![allow(unsafe_code)]
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 
 use m6p_orbit::cowell::{CowellConfig, CowellPropagator, Drag};
 use m6p_orbit::eclipse::illumination_at;
@@ -17,24 +13,8 @@ use m6p_orbit::sun::sun_eci_km;
 use m6p_orbit::time::UtcTime;
 use nalgebra::Vector3;
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+mod counting_alloc;
+use counting_alloc::ALLOCATIONS;
 
 #[test]
 fn environment_steps_do_not_allocate() {
