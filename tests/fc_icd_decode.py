@@ -24,7 +24,7 @@ import struct
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from kiss_peer import Peer  # noqa: E402  (KISS framing and CSP header, from the spec)
+from kiss_peer import Checks, Peer  # noqa: E402  (KISS framing and CSP header, from the spec)
 
 # ICD 4.2.1 (reply data after `command | result`), little-endian.
 TMGEN = struct.Struct("<IIIBBbB")          # 16
@@ -47,12 +47,7 @@ def main():
     ap.add_argument("--rmin-km", type=float, default=6600.0)
     ap.add_argument("--rmax-km", type=float, default=7000.0)
     a = ap.parse_args()
-    failures = 0
-
-    def check(name, ok, detail=""):
-        nonlocal failures
-        print(("PASS " if ok else "FAIL ") + name + (": " + detail if detail else ""))
-        failures += 0 if ok else 1
+    check = Checks()
 
     p = Peer(a.connect, a.me)
 
@@ -132,7 +127,7 @@ def main():
     res, d = ask(PORT_ATC, 2, bytes(16))
     check("ATCATSET with the ICD's 16 bytes fails (cmd 00)", res == 0 and d == b"", f"result {res} data {d}")
 
-    sys.exit(1 if failures else 0)
+    sys.exit(1 if check.failures else 0)
 
 
 if __name__ == "__main__":

@@ -132,6 +132,17 @@ class Peer:
         return None, None
 
 
+class Checks:
+    """Prints one PASS/FAIL line per check and counts the failures."""
+
+    def __init__(self):
+        self.failures = 0
+
+    def __call__(self, name, ok, detail=""):
+        print(("PASS " if ok else "FAIL ") + name + (": " + detail if detail else ""))
+        self.failures += 0 if ok else 1
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", required=True)
@@ -139,15 +150,11 @@ def main():
     ap.add_argument("--targets", default="3,12")
     ap.add_argument("--garbage", type=float, default=0.0)
     a = ap.parse_args()
-    failures = 0
-
-    def check(name, ok, detail=""):
-        nonlocal failures
-        print(("PASS " if ok else "FAIL ") + name + (": " + detail if detail else ""))
-        failures += 0 if ok else 1
+    check = Checks()
 
     if a.garbage > 0:
-        g = socket.create_connection(a.connect.rsplit(":", 1) and (a.connect.rsplit(":", 1)[0], int(a.connect.rsplit(":", 1)[1])))
+        host, port = a.connect.rsplit(":", 1)
+        g = socket.create_connection((host, int(port)))
         rng = random.Random(1234)
         sent = 0
         end = time.monotonic() + a.garbage
@@ -172,7 +179,7 @@ def main():
         h, d = p.request(dst, 0, b"\x00\x01")
         ok = d is not None and len(d) == 93 and d[:2] == b"\xff\x01" and d[21] == 0
         check(f"ident {dst}", ok, "no reply" if d is None else repr(d[2:22].rstrip(b"\0")))
-    sys.exit(1 if failures else 0)
+    sys.exit(1 if check.failures else 0)
 
 
 if __name__ == "__main__":
