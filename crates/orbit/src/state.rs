@@ -51,3 +51,71 @@ impl Default for TruthSnapshot {
         }
     }
 }
+
+/// What the FC's ADCS flight software believes and does at one instant, published with each
+/// [`TruthSnapshot`] (same `t_ns`) for the recorder and the scenario expectations.
+///
+/// Angles that compare the estimate or the target with the truth are computed by the FC,
+/// which knows all three; they are `None` when they do not apply (no target, no estimate).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdcsSnapshot {
+    /// Simulated time since run start, ns (equals the truth snapshot's).
+    pub t_ns: u64,
+    /// The mode in effect (the target-mode enumeration of docs/protocol.md; 1 detumble while
+    /// the ADCS detumbles, whatever the commanded mode).
+    pub mode_in_effect: u8,
+    /// The commanded target mode (ATCMDSET or a script).
+    pub mode_commanded: u8,
+    /// ADCS state as TMACD reports it: 0 off, 1 detumbling, 2 acquiring, 3 tracking.
+    pub state: u8,
+    /// Estimated attitude (body in ECI J2000), when the estimator is initialised.
+    pub q_eci_from_body_est: Option<UnitQuaternion<f64>>,
+    /// Estimated body rate (gyro minus estimated bias), rad/s, body frame.
+    pub w_body_rad_s_est: Vector3<f64>,
+    /// Estimated gyro bias, rad/s, body frame.
+    pub gyro_bias_rad_s_est: Vector3<f64>,
+    /// Target attitude of the mode in effect (body in ECI), when the mode has one.
+    pub q_eci_from_body_target: Option<UnitQuaternion<f64>>,
+    /// Angle of the rotation from the true attitude to the target attitude, deg.
+    pub pointing_error_deg: Option<f64>,
+    /// Angle between the mode's pointing axis (true attitude) and its target direction, deg:
+    /// body +Z to nadir / velocity / ECI vector, the panel normal to the sun, the script's
+    /// body vector to the ground target; for fixed-quaternion modes the body +Z axis to its
+    /// target direction.
+    pub axis_error_deg: Option<f64>,
+    /// Elevation of the satellite seen from the ground target, deg (earth-target modes only).
+    pub target_elevation_deg: Option<f64>,
+    /// Angle of the rotation from the true attitude to the estimate, deg.
+    pub estimation_error_deg: Option<f64>,
+    /// Reaction wheel states as TMACD reports them: 0 off, 1 on, 2 fault.
+    pub rw_state: [u8; 4],
+    /// Commanded wheel motor torques, N m.
+    pub wheel_torque_cmd_nm: [f64; 4],
+    /// Commanded magnetorquer dipoles along body X, Y, Z, A m^2.
+    pub mtq_dipole_cmd_am2: [f64; 3],
+    /// Magnetorquer states as TMACD reports them: 0 off, 1 positive, 2 negative.
+    pub mtq_state: [u8; 3],
+}
+
+impl Default for AdcsSnapshot {
+    fn default() -> Self {
+        Self {
+            t_ns: 0,
+            mode_in_effect: 1,
+            mode_commanded: 1,
+            state: 1,
+            q_eci_from_body_est: None,
+            w_body_rad_s_est: Vector3::zeros(),
+            gyro_bias_rad_s_est: Vector3::zeros(),
+            q_eci_from_body_target: None,
+            pointing_error_deg: None,
+            axis_error_deg: None,
+            target_elevation_deg: None,
+            estimation_error_deg: None,
+            rw_state: [1; 4],
+            wheel_torque_cmd_nm: [0.0; 4],
+            mtq_dipole_cmd_am2: [0.0; 3],
+            mtq_state: [0; 3],
+        }
+    }
+}

@@ -84,6 +84,15 @@ pub enum RunEvent {
         /// Round-trip time in nanoseconds, when answered.
         rtt_ns: Option<u64>,
     },
+    /// The FC's published truth and what its ADCS believes and does, at one instant.
+    Truth {
+        /// When (equals `truth.t_ns`).
+        t: SimTime,
+        /// The true state.
+        truth: Box<orbit::state::TruthSnapshot>,
+        /// The ADCS's estimate, target and commands.
+        adcs: Box<orbit::state::AdcsSnapshot>,
+    },
     /// The verdict on an expectation (at the end of the run).
     Expectation {
         /// When the verdict refers to.
@@ -107,6 +116,7 @@ impl RunEvent {
             | RunEvent::Fault { t, .. }
             | RunEvent::Command { t, .. }
             | RunEvent::CommandResult { t, .. }
+            | RunEvent::Truth { t, .. }
             | RunEvent::Expectation { t, .. } => *t,
         }
     }

@@ -871,6 +871,8 @@ impl EventEncoder {
                 };
                 emit_json(buf, base_ns, (ChannelKind::Expectation, ""), *t, &msg, emit)
             }
+            // Truth channels: recorded by a later change.
+            RunEvent::Truth { .. } => Ok(()),
         }
     }
 
