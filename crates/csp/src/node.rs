@@ -508,6 +508,14 @@ impl Node {
         self.reset_links();
     }
 
+    /// An application's log line (bounded like the node's own events; the driver hands them
+    /// to the run's log).
+    pub fn log(&mut self, t: SimTime, what: String) {
+        if self.events.len() < MAX_EVENTS {
+            self.events.push_back(NodeEvent { t, what });
+        }
+    }
+
     fn note_drop(&mut self, t: SimTime, reason: &'static str, detail: String) {
         self.counters.drop(reason);
         if self.events.len() < MAX_EVENTS {

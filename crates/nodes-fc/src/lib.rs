@@ -1,42 +1,55 @@
-//! Flight computer (CSP 3): the FC ports of ICD 4 answering from the FC's state.
+//! Flight computer (CSP 3): the spacecraft's truth, its sensors and actuators, the ADCS
+//! flight software of ICD 1.3, the mission-controller scripts of ICD 1.5, and the FC ports
+//! of ICD 4.
 //!
-//! This is the first increment of the FC issue: every FC command of ICD 4.2.1-4.2.3 has its
-//! exact wire type ([`wire`]) and an answer, from a simple state that already flies the real
-//! orbit:
-//! - **Orbit**: the scenario's TLE through `orbit`'s SGP4 ([`orbit::propagate::Sgp4Propagator`]),
-//!   evaluated at the run's true UTC time (`epoch_unix_s` + simulated time), ECI J2000,
-//!   metres. No TLE, or a propagation error (decay, bad elements): TMATP and TMALL answer
-//!   the failure reply; nothing panics.
-//! - **Attitude**: until the ADCS lands, TMATP's quaternion is the commanded target, not an
-//!   estimate: the ATCATSET quaternion when the target mode is fixed quaternion in ECI (7),
-//!   the identity otherwise.
-//! - **Clock**: the RTC is the true UTC time plus an offset set by RTCSTMSET; it survives
-//!   reboots (a real-time clock), as do the global on-time and the reset cause.
-//! - **Target**: mode, attitude and point as set by ATCMDSET/ATCATSET/ATCPTSET; volatile
-//!   (a reboot restores detumble, identity and zero, as the ADCS boots in detumble, ICD 1.3).
-//! - **Sensors and actuators**: no models yet. TMSENS, TMRAWSENS and the wheel and
-//!   magnetorquer fields of TMACD are zeros; temperatures are a constant 20 degrees C.
+//! [`FcApp`] is a pure core driven by the node driver's timers: every ADCS tick
+//! (`1 / adcs_hz`, 10 Hz by default) it
+//! 1. evaluates the environment at the true orbit ([`environment`]: the scenario's TLE
+//!    through `orbit`'s SGP4, sun, shadow, IGRF-14);
+//! 2. samples the sensors ([`sensors`], seeded noise);
+//! 3. runs the flight software ([`adcs`]: detumble, MEKF, guidance, control) against the
+//!    onboard orbit (the uploaded TLE, or GPS) and the requested pointing (a running script,
+//!    else the ATCMDSET mode);
+//! 4. steps the rigid-body truth ([`truth`]) over the tick with the commanded actuators and
+//!    the disturbances (gravity gradient, residual dipole, drag);
+//! 5. every `adcs_hz / publish_hz` ticks hands a [`TruthSnapshot`] and an [`AdcsSnapshot`]
+//!    to its [`Publisher`] (the twin records them and checks expectations against them).
 //!
-//! [`truth`] holds the attitude dynamics (rigid body, four wheels, magnetorquers, gravity
-//! gradient) that a later increment steps and publishes; the app above does not use it yet.
+//! The truth (orbit, attitude, wheels) survives FC reboots; the flight software (estimate,
+//! mode, target, scripts) does not. While the FC is off or hung nothing runs; when it comes
+//! back the truth is stepped over the gap without publishing, the actuators off after a
+//! power cycle and as last commanded after a hang.
 //!
-//! Port 13 (mission-controller scripts, ICD 1.5) is bound and answers every request with
-//! the failure reply until a later increment. Byte layouts and decisions are in
-//! `docs/protocol.md`, section "FC ports".
+//! Byte layouts and decisions are in `docs/protocol.md` ("FC ports"); the models and the
+//! ADCS in `docs/adcs.md`.
 
+pub mod adcs;
+pub mod control;
+pub mod environment;
+pub mod estimator;
+pub mod guidance;
+pub mod scripts;
+pub mod sensors;
 pub mod truth;
 pub mod wire;
 
 use csp::node::{App, Node};
-use csp::reqrep::{self, RESULT_FAILURE, serve};
+use csp::reqrep::{self, RESULT_FAILURE, RESULT_SUCCESS, serve};
 use csp::{Packet, SimTime};
-use orbit::propagate::{Propagator, Sgp4Propagator};
-use orbit::time::UtcTime;
+use nalgebra::{UnitQuaternion, Vector3};
+use orbit::propagate::Sgp4Propagator;
+use orbit::state::{AdcsSnapshot, TruthSnapshot};
 use orbit::tle::{ChecksumMode, Tle};
 
+use crate::adcs::{Adcs, AdcsConfig};
+use crate::environment::{DragConfig, EnvModel, Environment, SlowModels};
+use crate::guidance::Pointing;
+use crate::scripts::{Schedule, Script, ScriptAttitude};
+use crate::sensors::{SensorConfig, SensorFault, SensorId, SensorInputs, SensorReadings, Sensors};
+use crate::truth::{AttitudeState, BodyConfig, Torques};
 use crate::wire::{
     AttitudeCommand, Repr, RtcCommand, RtcTimestamp, TargetAttitude, TargetMode, TargetModeRepr,
-    TargetPoint, TelemetryCommand, TmAcd, TmAll, TmAtp, TmGen, TmRawSens, TmSens,
+    TargetPoint, TelemetryCommand, TleLines, TmAcd, TmAll, TmAtp, TmGen, TmRawSens, TmSens,
 };
 
 /// The ports this node binds for its ICD services by default (INTERPRETATION.md section 4).
@@ -47,13 +60,14 @@ pub const PORTS: &[u8] = &[
     wire::PORT_SCRIPTS,
 ];
 
-/// Placeholder temperature of the MCU and every sensor until thermal models land, deg C.
-pub const PLACEHOLDER_TEMP_C: i8 = 20;
-
 /// Reset cause in TMGEN: power-on (the start of the run).
 pub const RESET_POWER_ON: u8 = 0;
 /// Reset cause in TMGEN: software reboot (CSP reboot service or a scenario fault).
 pub const RESET_SOFTWARE: u8 = 1;
+
+/// A gap between ticks longer than this means the FC was off or hung: the missed ticks step
+/// the truth only.
+const GAP_NS: u64 = 500_000_000;
 
 /// The FC's ICD ports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -79,15 +93,136 @@ impl Default for FcPorts {
     }
 }
 
+/// The spacecraft's state at the start of the run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InitialState {
+    /// Attitude, body in ECI.
+    pub q_eci_from_body: UnitQuaternion<f64>,
+    /// Body rate, rad/s, body frame.
+    pub w_body_rad_s: Vector3<f64>,
+    /// Wheel speeds, rad/s.
+    pub wheel_speed_rad_s: [f64; 4],
+}
+
+impl Default for InitialState {
+    fn default() -> Self {
+        InitialState {
+            q_eci_from_body: UnitQuaternion::identity(),
+            w_body_rad_s: Vector3::zeros(),
+            wheel_speed_rad_s: [0.0; 4],
+        }
+    }
+}
+
+/// A reaction wheel failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WheelFault {
+    /// Seized bearing: the wheel stops at once (its momentum goes to the body) and stays at
+    /// zero speed.
+    Stuck,
+    /// Dead drive: no motor torque; the wheel coasts down on its friction.
+    Off,
+}
+
+impl std::str::FromStr for WheelFault {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "stuck" => Ok(WheelFault::Stuck),
+            "off" => Ok(WheelFault::Off),
+            other => Err(format!(
+                "unknown wheel fault `{other}`: expected `stuck` or `off`"
+            )),
+        }
+    }
+}
+
+/// Something a scenario does to the FC at a time.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FcEvent {
+    /// A mission-controller script line, submitted as if stored onboard.
+    Script(String),
+    /// A sensor fault applied (`Some`) or cleared (`None`).
+    Sensor(SensorId, Option<SensorFault>),
+    /// A wheel fault applied or cleared.
+    Wheel(usize, Option<WheelFault>),
+}
+
+/// An [`FcEvent`] at a simulated time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimedFcEvent {
+    /// When.
+    pub at: SimTime,
+    /// What.
+    pub event: FcEvent,
+}
+
 /// What the FC needs from the scenario.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FcConfig {
     /// UTC unix seconds at simulated time zero.
     pub epoch_unix_s: u64,
-    /// The two TLE lines, if the scenario gives an orbit.
+    /// The two TLE lines of the true orbit, if the scenario gives one.
     pub tle: Option<(String, String)>,
+    /// Whether the FC holds the scenario's TLE at boot (commissioning done); otherwise it
+    /// has no orbit until ATCTLESET or a GPS fix.
+    pub tle_uploaded: bool,
     /// Port numbers.
     pub ports: FcPorts,
+    /// Seed of the sensor noise.
+    pub seed: u64,
+    /// ADCS loop rate, Hz (1-100).
+    pub adcs_hz: u32,
+    /// Truth publication rate, Hz (0: none; at most `adcs_hz`).
+    pub publish_hz: u32,
+    /// Mass properties and actuators.
+    pub body: BodyConfig,
+    /// Initial attitude, rate and wheel speeds.
+    pub initial: InitialState,
+    /// Sensor models.
+    pub sensors: SensorConfig,
+    /// Flight software settings.
+    pub adcs: AdcsConfig,
+    /// Residual magnetic dipole of the bus, body frame, A m^2.
+    pub residual_dipole_am2: Vector3<f64>,
+    /// Aerodynamic drag torque; `None` switches it off.
+    pub drag: Option<DragConfig>,
+    /// Gravity-gradient torque on or off.
+    pub gravity_gradient: bool,
+    /// The target mode commanded at the first boot (as if by ATCMDSET at time zero).
+    pub initial_mode: TargetMode,
+    /// The target attitude commanded at the first boot (as if by ATCATSET), unit.
+    pub initial_target_attitude: Option<[f64; 4]>,
+    /// The target point commanded at the first boot (as if by ATCPTSET).
+    pub initial_target_point: Option<[f64; 3]>,
+    /// Scripts and faults at their times.
+    pub timeline: Vec<TimedFcEvent>,
+}
+
+impl Default for FcConfig {
+    fn default() -> Self {
+        FcConfig {
+            epoch_unix_s: 0,
+            tle: None,
+            tle_uploaded: true,
+            ports: FcPorts::default(),
+            seed: 0,
+            adcs_hz: 10,
+            publish_hz: 1,
+            body: BodyConfig::default(),
+            initial: InitialState::default(),
+            sensors: SensorConfig::default(),
+            adcs: AdcsConfig::default(),
+            // A few mA m^2: a well-built 6U (harness loops, battery, magnetic parts).
+            residual_dipole_am2: Vector3::new(0.002, 0.002, 0.005),
+            drag: Some(DragConfig::default()),
+            gravity_gradient: true,
+            initial_mode: TargetMode::Detumble,
+            initial_target_attitude: None,
+            initial_target_point: None,
+            timeline: Vec::new(),
+        }
+    }
 }
 
 /// The commanded attitude target (ATC* commands).
@@ -117,46 +252,169 @@ impl Default for Target {
     }
 }
 
+/// Where the FC hands its snapshots.
+pub struct Publisher(Box<PublishFn>);
+
+/// The callback behind a [`Publisher`].
+type PublishFn = dyn FnMut(&TruthSnapshot, &AdcsSnapshot) + Send;
+
+impl Publisher {
+    /// A publisher calling `f` with every snapshot pair.
+    pub fn new(f: impl FnMut(&TruthSnapshot, &AdcsSnapshot) + Send + 'static) -> Self {
+        Publisher(Box::new(f))
+    }
+}
+
+impl std::fmt::Debug for Publisher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Publisher")
+    }
+}
+
+/// The onboard orbit knowledge: the uploaded TLE.
+#[derive(Debug, Clone)]
+struct OnboardOrbit {
+    lines: TleLines,
+    model: Result<EnvModel, String>,
+    /// The same elements as the true orbit: reuse the truth's environment.
+    same_as_truth: bool,
+}
+
+/// The flight software's volatile state.
+#[derive(Debug, Clone)]
+struct Fsw {
+    adcs: Adcs,
+    target: Target,
+    scripts: Schedule,
+    output: Option<adcs::Output>,
+}
+
 /// The flight computer's application (see the module doc).
 #[derive(Debug)]
 pub struct FcApp {
     cfg: FcConfig,
-    propagator: Result<Sgp4Propagator, String>,
+    dt_ns: u64,
+    publish_every: u64,
+    // --- truth (survives reboots) ---
+    truth_orbit: Result<EnvModel, String>,
+    att: AttitudeState,
+    sensors: Sensors,
+    wheel_fault: [Option<WheelFault>; 4],
+    mtq_applied_am2: Vector3<f64>,
+    wheel_cmd_nm: [f64; 4],
+    next_tick: Option<SimTime>,
+    ticks: u64,
+    timeline: std::collections::VecDeque<TimedFcEvent>,
+    env: Option<Environment>,
+    readings: Option<SensorReadings>,
+    // --- non-volatile FC state ---
+    onboard: Option<OnboardOrbit>,
+    gps_models: SlowModels,
     rtc_offset_ns: i128,
     power_on: Option<SimTime>,
     reset_cause: u8,
-    target: Target,
+    // --- flight software (volatile) ---
+    fsw: Fsw,
     refused: u64,
+    log: Vec<(SimTime, String)>,
+    publisher: Option<Publisher>,
+}
+
+fn truth_model(tle: Option<&(String, String)>) -> Result<EnvModel, String> {
+    match tle {
+        None => Err("no TLE".to_owned()),
+        Some((l1, l2)) => Tle::parse(l1, l2, ChecksumMode::Strict)
+            .map_err(|e| format!("TLE: {e}"))
+            .and_then(|tle| Sgp4Propagator::new(&tle).map_err(|e| format!("SGP4: {e}")))
+            .map(EnvModel::new),
+    }
 }
 
 impl FcApp {
-    /// An FC for `cfg`; a TLE that does not parse or initialise leaves TMATP failing.
+    /// An FC for `cfg`; a TLE that does not parse or initialise leaves the FC without an
+    /// orbit (TMATP failing, no environment), never a panic.
     pub fn new(cfg: FcConfig) -> Self {
-        let propagator = match &cfg.tle {
-            None => Err("no TLE".to_owned()),
-            Some((l1, l2)) => Tle::parse(l1, l2, ChecksumMode::Strict)
-                .map_err(|e| format!("TLE: {e}"))
-                .and_then(|tle| Sgp4Propagator::new(&tle).map_err(|e| format!("SGP4: {e}"))),
+        let truth_orbit = truth_model(cfg.tle.as_ref());
+        let hz = u64::from(cfg.adcs_hz.clamp(1, 100));
+        let dt_ns = 1_000_000_000 / hz;
+        let publish_every = if cfg.publish_hz == 0 {
+            0
+        } else {
+            (hz / u64::from(cfg.publish_hz).min(hz)).max(1)
+        };
+        let onboard = if cfg.tle_uploaded {
+            cfg.tle
+                .as_ref()
+                .and_then(|(a, b)| TleLines::from_text(a, b))
+                .map(|lines| OnboardOrbit {
+                    lines,
+                    model: truth_model(cfg.tle.as_ref()),
+                    same_as_truth: true,
+                })
+        } else {
+            None
+        };
+        let sensors = Sensors::new(cfg.sensors.clone(), cfg.seed);
+        let mut timeline: Vec<TimedFcEvent> = cfg.timeline.clone();
+        timeline.sort_by_key(|e| e.at);
+        let att = AttitudeState {
+            q_eci_from_body: cfg.initial.q_eci_from_body,
+            w_body_rad_s: cfg.initial.w_body_rad_s,
+            wheel_speed_rad_s: cfg.initial.wheel_speed_rad_s,
+        };
+        let fsw = Fsw {
+            adcs: Adcs::new(cfg.adcs.clone(), cfg.body.clone()),
+            target: Target {
+                mode: cfg.initial_mode,
+                attitude: cfg.initial_target_attitude.unwrap_or([1.0, 0.0, 0.0, 0.0]),
+                attitude_set: cfg.initial_target_attitude.is_some(),
+                point: cfg.initial_target_point.unwrap_or([0.0; 3]),
+                point_set: cfg.initial_target_point.is_some(),
+            },
+            scripts: Schedule::new(),
+            output: None,
         };
         FcApp {
-            cfg,
-            propagator,
+            dt_ns,
+            publish_every,
+            truth_orbit,
+            att,
+            sensors,
+            wheel_fault: [None; 4],
+            mtq_applied_am2: Vector3::zeros(),
+            wheel_cmd_nm: [0.0; 4],
+            next_tick: None,
+            ticks: 0,
+            timeline: timeline.into(),
+            env: None,
+            readings: None,
+            onboard,
+            gps_models: SlowModels::default(),
             rtc_offset_ns: 0,
             power_on: None,
             reset_cause: RESET_POWER_ON,
-            target: Target::default(),
+            fsw,
             refused: 0,
+            log: Vec::new(),
+            publisher: None,
+            cfg,
         }
     }
 
-    /// Why the FC has no orbit, if it has none.
+    /// Hand every published snapshot pair to `p`.
+    pub fn with_publisher(mut self, p: Publisher) -> Self {
+        self.publisher = Some(p);
+        self
+    }
+
+    /// Why the FC has no true orbit, if it has none.
     pub fn orbit_error(&self) -> Option<&str> {
-        self.propagator.as_ref().err().map(String::as_str)
+        self.truth_orbit.as_ref().err().map(String::as_str)
     }
 
     /// The commanded target.
     pub fn target(&self) -> &Target {
-        &self.target
+        &self.fsw.target
     }
 
     /// Requests answered with the failure reply because they did not parse.
@@ -164,9 +422,35 @@ impl FcApp {
         self.refused
     }
 
+    /// The true attitude state.
+    pub fn attitude(&self) -> &AttitudeState {
+        &self.att
+    }
+
+    /// The flight software's attitude estimate, if initialised.
+    pub fn estimate(&self) -> Option<UnitQuaternion<f64>> {
+        self.fsw.adcs.estimate()
+    }
+
+    /// The scripts accepted and not yet ended.
+    pub fn scripts(&self) -> &Schedule {
+        &self.fsw.scripts
+    }
+
+    /// Hand the FC's log lines (script verdicts, mode changes, faults) to the node's log.
+    fn flush_log(&mut self, node: &mut Node) {
+        for (t, line) in self.log.drain(..) {
+            node.log(t, line);
+        }
+    }
+
     /// True UTC time at `now` (the run's clock, not the RTC), nanoseconds.
     fn true_unix_ns(&self, now: SimTime) -> i128 {
         i128::from(self.cfg.epoch_unix_s) * 1_000_000_000 + i128::from(now.as_ns())
+    }
+
+    fn true_unix_ns_i64(&self, now: SimTime) -> i64 {
+        i64::try_from(self.true_unix_ns(now)).unwrap_or(i64::MAX)
     }
 
     /// The RTC at `now`, UTC unix seconds (saturating to the u32 range).
@@ -175,23 +459,323 @@ impl FcApp {
         u32::try_from(s.max(0)).unwrap_or(u32::MAX)
     }
 
-    /// ECI J2000 position in metres at `now`, or why there is none.
+    /// The RTC at `now` as UTC unix seconds with its fraction (scripts run on it).
+    fn rtc_unix_s_f64(&self, now: SimTime) -> f64 {
+        (self.true_unix_ns(now) + self.rtc_offset_ns) as f64 * 1e-9
+    }
+
+    /// The FC's knowledge of its ECI J2000 position in metres at `now` (GPS fix, else the
+    /// onboard TLE through `orbit`'s SGP4), or why there is none.
     pub fn position_eci_m(&mut self, now: SimTime) -> Result<[f64; 3], String> {
-        let t =
-            i64::try_from(self.true_unix_ns(now)).map_err(|_| "time out of range".to_owned())?;
-        let p = self.propagator.as_mut().map_err(|e| e.clone())?;
-        let s = p
-            .state_j2000(UtcTime::from_unix_ns(t))
-            .map_err(|e| e.to_string())?;
+        if let Some(r) = self.readings.as_ref().and_then(|r| r.gps_r_eci_m)
+            && self
+                .env
+                .is_some_and(|e| e.unix_ns == self.true_unix_ns_i64(now))
+        {
+            return Ok([r.x, r.y, r.z]);
+        }
+        let t = self.true_unix_ns_i64(now);
+        let onboard = self.onboard.as_mut().ok_or("no TLE uploaded")?;
+        let model = onboard.model.as_mut().map_err(|e| e.clone())?;
+        let s = model.state_j2000(t)?;
         Ok([s.r_km[0] * 1e3, s.r_km[1] * 1e3, s.r_km[2] * 1e3])
     }
 
-    /// The attitude TMATP reports: until the ADCS lands, the commanded target.
-    fn reported_attitude(&self) -> [f64; 4] {
-        match self.target.mode {
-            TargetMode::FixedEci => self.target.attitude,
-            _ => [1.0, 0.0, 0.0, 0.0],
+    /// The onboard references at the tick's time: GPS fix, else the onboard TLE.
+    fn onboard_env(&mut self, unix_ns: i64) -> Option<Environment> {
+        if let (Some(r), Some(v)) = self
+            .readings
+            .as_ref()
+            .map_or((None, None), |x| (x.gps_r_eci_m, x.gps_v_eci_m_s))
+        {
+            return Some(self.gps_models.at_state(unix_ns, r, v));
         }
+        let onboard = self.onboard.as_mut()?;
+        if onboard.same_as_truth {
+            return self.env;
+        }
+        onboard.model.as_mut().ok()?.at(unix_ns).ok()
+    }
+
+    /// The pointing a script attitude asks for, and its mode.
+    fn script_request(s: &Script) -> adcs::Request {
+        let (mode, pointing) = match s.attitude {
+            ScriptAttitude::Eci(q) => (TargetMode::FixedEci, Pointing::FixedEci(q)),
+            ScriptAttitude::Lvlh(q) => (TargetMode::FixedLvlh, Pointing::FixedLvlh(q)),
+            ScriptAttitude::Tnw(q) => (TargetMode::FixedTnw, Pointing::FixedTnw(q)),
+            ScriptAttitude::Geo {
+                lat_deg,
+                lon_deg,
+                alt_m,
+                axis_body,
+            } => (
+                TargetMode::EarthTarget,
+                Pointing::EarthTarget {
+                    lat_deg,
+                    lon_deg,
+                    alt_m,
+                    axis_body,
+                },
+            ),
+        };
+        adcs::Request {
+            mode,
+            pointing: Some(pointing),
+        }
+    }
+
+    /// The pointing of the ATCMDSET mode.
+    fn mode_request(&self) -> adcs::Request {
+        let t = &self.fsw.target;
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            t.attitude[0],
+            t.attitude[1],
+            t.attitude[2],
+            t.attitude[3],
+        ));
+        let p = Vector3::new(t.point[0], t.point[1], t.point[2]);
+        let z = Vector3::z();
+        let pointing = match t.mode {
+            TargetMode::Idle | TargetMode::Detumble => None,
+            TargetMode::VelocityPointing => Some(Pointing::Velocity),
+            TargetMode::Nadir => Some(Pointing::Nadir),
+            TargetMode::SunMaxPower => Some(Pointing::SunMaxPower {
+                panel_normal_body: self.cfg.adcs.panel_normal_body,
+            }),
+            TargetMode::EarthTarget => Some(Pointing::EarthTarget {
+                lat_deg: p.x,
+                lon_deg: p.y,
+                alt_m: p.z,
+                axis_body: z,
+            }),
+            TargetMode::EciVector => Some(Pointing::EciVector {
+                dir_eci: p,
+                axis_body: z,
+            }),
+            TargetMode::FixedEci => Some(Pointing::FixedEci(q)),
+            TargetMode::FixedLvlh => Some(Pointing::FixedLvlh(q)),
+            TargetMode::FixedTnw => Some(Pointing::FixedTnw(q)),
+        };
+        adcs::Request {
+            mode: t.mode,
+            pointing,
+        }
+    }
+
+    /// Submit a script line to the mission controller at `now`.
+    fn submit_script(&mut self, bytes: &[u8], now: SimTime) -> Result<(), String> {
+        let script = Script::parse_bytes(bytes).map_err(|e| e.to_string())?;
+        let now_s = self.rtc_unix_s_f64(now);
+        self.fsw
+            .scripts
+            .add(script, now_s)
+            .map_err(|e| e.to_string())?;
+        self.log.push((now, format!("script accepted: {script}")));
+        Ok(())
+    }
+
+    fn apply_event(&mut self, e: FcEvent, now: SimTime) {
+        match e {
+            FcEvent::Script(line) => {
+                if let Err(why) = self.submit_script(line.as_bytes(), now) {
+                    self.log
+                        .push((now, format!("script rejected: {why}: {line:?}")));
+                }
+            }
+            FcEvent::Sensor(id, fault) => {
+                self.sensors.set_fault(id, fault);
+                self.log
+                    .push((now, format!("sensor fault {id:?}: {fault:?}")));
+            }
+            FcEvent::Wheel(i, fault) => {
+                if let Some(slot) = self.wheel_fault.get_mut(i) {
+                    *slot = fault;
+                    self.log.push((now, format!("wheel {i} fault: {fault:?}")));
+                }
+            }
+        }
+    }
+
+    /// One tick at `t`: environment, sensors, flight software (when `fsw`), truth step.
+    fn tick(&mut self, t: SimTime, fsw: bool) {
+        while self.timeline.front().is_some_and(|e| e.at <= t) {
+            if let Some(e) = self.timeline.pop_front() {
+                self.apply_event(e.event, t);
+            }
+        }
+        let dt_s = self.dt_ns as f64 * 1e-9;
+        let unix_ns = self.true_unix_ns_i64(t);
+        let env = self
+            .truth_orbit
+            .as_mut()
+            .ok()
+            .and_then(|m| m.at(unix_ns).ok());
+        self.env = env;
+        let inputs = SensorInputs {
+            q_eci_from_body: self.att.q_eci_from_body,
+            w_body_rad_s: self.att.w_body_rad_s,
+            b_eci_nt: env.map_or_else(Vector3::zeros, |e| e.b_eci_nt),
+            sun_eci_unit: env.map_or_else(Vector3::zeros, |e| e.sun_eci_unit),
+            sun_visible_fraction: env.map_or(0.0, |e| e.sun_visible_fraction),
+            r_eci_m: env.map_or_else(Vector3::zeros, |e| e.r_eci_m),
+            v_eci_m_s: env.map_or_else(Vector3::zeros, |e| e.v_eci_m_s),
+            nongrav_acc_body_m_s2: Vector3::zeros(),
+        };
+        let readings = self.sensors.sample(&inputs, dt_s);
+        self.readings = Some(readings);
+        let healthy: [bool; 4] = std::array::from_fn(|i| self.wheel_fault[i].is_none());
+
+        if fsw {
+            let onboard = self.onboard_env(unix_ns);
+            let rtc_s = self.rtc_unix_s_f64(t);
+            self.fsw.scripts.expire(rtc_s);
+            let request = match self.fsw.scripts.active(rtc_s) {
+                Some(s) => Self::script_request(s),
+                None => self.mode_request(),
+            };
+            let before = self.fsw.output.map(|o| o.mode_in_effect);
+            let out = self.fsw.adcs.step(
+                &adcs::Inputs {
+                    readings: &readings,
+                    wheel_speed_rad_s: self.att.wheel_speed_rad_s,
+                    wheel_healthy: healthy,
+                    onboard: onboard.as_ref(),
+                    request,
+                },
+                dt_s,
+            );
+            if before != Some(out.mode_in_effect) {
+                self.log
+                    .push((t, format!("ADCS mode in effect: {:?}", out.mode_in_effect)));
+            }
+            self.fsw.output = Some(out);
+            self.wheel_cmd_nm = out.wheel_torque_cmd_nm;
+            self.mtq_applied_am2 =
+                truth::mtq_dipole_applied_am2(&self.cfg.body, &out.mtq_dipole_cmd_am2);
+        }
+        for (i, f) in self.wheel_fault.iter().enumerate() {
+            if f.is_some() {
+                self.wheel_cmd_nm[i] = 0.0;
+            }
+        }
+
+        if self.publish_every > 0 && fsw && self.ticks % self.publish_every == 0 {
+            self.publish(t, unix_ns);
+        }
+
+        // Truth step over [t, t + dt].
+        let b_body_t = env.map_or_else(Vector3::zeros, |e| {
+            self.att
+                .q_eci_from_body
+                .inverse_transform_vector(&e.b_eci_nt)
+                * 1e-9
+        });
+        let mut disturbance = self.cfg.residual_dipole_am2.cross(&b_body_t);
+        if let (Some(d), Some(e)) = (&self.cfg.drag, env) {
+            disturbance += environment::drag_torque_body_nm(
+                d,
+                &self.att.q_eci_from_body,
+                &e.r_eci_m,
+                &e.v_eci_m_s,
+            );
+        }
+        let torques = Torques {
+            wheel_torque_cmd_nm: self.wheel_cmd_nm,
+            mtq_dipole_cmd_am2: self.mtq_applied_am2,
+            b_body_t,
+            r_eci_m: env.filter(|_| self.cfg.gravity_gradient).map(|e| e.r_eci_m),
+            disturbance_body_nm: disturbance,
+        };
+        self.att = truth::step(&self.att, &self.cfg.body, &torques, dt_s);
+        for (i, f) in self.wheel_fault.iter().enumerate() {
+            if *f == Some(WheelFault::Stuck) {
+                truth::lock_wheel(&mut self.att, &self.cfg.body, i);
+            }
+        }
+        self.ticks += 1;
+    }
+
+    fn publish(&mut self, t: SimTime, unix_ns: i64) {
+        if self.publisher.is_none() {
+            return;
+        }
+        let env = self.env;
+        let truth = TruthSnapshot {
+            t_ns: t.as_ns(),
+            unix_ns,
+            r_eci_m: env.map_or_else(Vector3::zeros, |e| e.r_eci_m),
+            v_eci_m_s: env.map_or_else(Vector3::zeros, |e| e.v_eci_m_s),
+            q_eci_from_body: self.att.q_eci_from_body,
+            w_body_rad_s: self.att.w_body_rad_s,
+            sun_eci_unit: env.map_or_else(Vector3::zeros, |e| e.sun_eci_unit),
+            in_eclipse_fraction_visible: env.map_or(0.0, |e| e.sun_visible_fraction),
+            b_eci_nt: env.map_or_else(Vector3::zeros, |e| e.b_eci_nt),
+            wheel_speed_rad_s: self.att.wheel_speed_rad_s,
+            mtq_dipole_am2: self.mtq_applied_am2.into(),
+        };
+        let q_true = self.att.q_eci_from_body;
+        let out = self.fsw.output;
+        let target = out.and_then(|o| o.target);
+        let est = self.fsw.adcs.estimate();
+        let deg = f64::to_degrees;
+        let adcs = AdcsSnapshot {
+            t_ns: t.as_ns(),
+            mode_in_effect: out.map_or(TargetMode::Detumble as u8, |o| o.mode_in_effect as u8),
+            mode_commanded: self.fsw.target.mode as u8,
+            state: out.map_or(adcs::STATE_DETUMBLING, |o| o.state),
+            q_eci_from_body_est: est,
+            w_body_rad_s_est: out.map_or_else(Vector3::zeros, |o| o.w_body_rad_s_est),
+            gyro_bias_rad_s_est: self.fsw.adcs.gyro_bias_rad_s(),
+            q_eci_from_body_target: target.map(|g| g.q_eci_from_body),
+            pointing_error_deg: target.map(|g| deg(q_true.angle_to(&g.q_eci_from_body))),
+            axis_error_deg: target.map(|g| deg((q_true * g.axis_body).angle(&g.axis_target_eci))),
+            target_elevation_deg: target.and_then(|g| g.target_elevation_deg),
+            estimation_error_deg: est.map(|q| deg(q_true.angle_to(&q))),
+            rw_state: self.rw_state(),
+            wheel_torque_cmd_nm: self.wheel_cmd_nm,
+            mtq_dipole_cmd_am2: out.map_or([0.0; 3], |o| o.mtq_dipole_cmd_am2.into()),
+            mtq_state: self.mtq_state(),
+        };
+        if let Some(p) = self.publisher.as_mut() {
+            (p.0)(&truth, &adcs);
+        }
+    }
+
+    fn rw_state(&self) -> [u8; 4] {
+        let running = self
+            .fsw
+            .output
+            .is_some_and(|o| o.state != adcs::STATE_OFF && o.state != adcs::STATE_DETUMBLING);
+        std::array::from_fn(|i| match self.wheel_fault[i] {
+            Some(_) => 2,
+            None => u8::from(running),
+        })
+    }
+
+    fn mtq_state(&self) -> [u8; 3] {
+        std::array::from_fn(|i| {
+            let m = self.mtq_applied_am2[i];
+            if m > 1e-6 {
+                1
+            } else if m < -1e-6 {
+                2
+            } else {
+                0
+            }
+        })
+    }
+
+    /// Step the truth (physics only) over a gap up to `now`, then align the next tick.
+    fn catch_up(&mut self, now: SimTime) {
+        let Some(mut next) = self.next_tick else {
+            self.next_tick = Some(now);
+            return;
+        };
+        while next + std::time::Duration::from_nanos(GAP_NS) < now {
+            self.tick(next, false);
+            next = next + std::time::Duration::from_nanos(self.dt_ns);
+        }
+        self.next_tick = Some(next);
     }
 
     fn tm_gen(&self, node: &Node, now: SimTime) -> TmGen {
@@ -199,53 +783,71 @@ impl FcApp {
         let on = self
             .power_on
             .map_or(std::time::Duration::ZERO, |t| now.saturating_since(t));
+        let mode = self
+            .fsw
+            .output
+            .map_or(TargetMode::Detumble, |o| o.mode_in_effect);
         TmGen {
             rtc_timestamp: self.rtc_unix_s(now),
             uptime_s: secs(node.uptime(now)),
             global_on_time_s: secs(on),
-            current_mode: self.target.mode as u8,
+            current_mode: mode as u8,
             current_state: 0,
-            mcu_temp_c: PLACEHOLDER_TEMP_C,
+            mcu_temp_c: self.readings.as_ref().map_or(20, |r| sat_i8(r.mcu_temp_c)),
             reset_cause: self.reset_cause,
         }
     }
 
     fn tm_atp(&mut self, now: SimTime) -> Result<TmAtp, String> {
+        let q = self
+            .fsw
+            .adcs
+            .estimate()
+            .map_or([1.0, 0.0, 0.0, 0.0], |q| [q.w, q.i, q.j, q.k]);
         Ok(TmAtp {
             rtc_timestamp: self.rtc_unix_s(now),
-            q_eci_from_body: self.reported_attitude(),
+            q_eci_from_body: q,
             r_eci_m: self.position_eci_m(now)?,
         })
     }
 
     fn tm_acd(&self, now: SimTime) -> TmAcd {
+        let rpm = |w: f64| {
+            let r = (w.abs() * 60.0 / std::f64::consts::TAU / 100.0).round();
+            if r >= 255.0 { 255 } else { r as u8 }
+        };
         TmAcd {
             rtc_timestamp: self.rtc_unix_s(now),
-            state: 0,
-            rw_state: [0; 4],
-            rw_rpm_100: [0; 4],
-            mtq_state: [0; 3],
-            target_mode: self.target.mode as u8,
-            target_attitude: u8::from(self.target.attitude_set),
-            target_point: u8::from(self.target.point_set),
+            state: self.fsw.output.map_or(adcs::STATE_DETUMBLING, |o| o.state),
+            rw_state: self.rw_state(),
+            rw_rpm_100: self.att.wheel_speed_rad_s.map(rpm),
+            mtq_state: self.mtq_state(),
+            target_mode: self.fsw.target.mode as u8,
+            target_attitude: u8::from(self.fsw.target.attitude_set),
+            target_point: u8::from(self.fsw.target.point_set),
         }
     }
 
     fn tm_sens(&self, now: SimTime) -> TmSens {
-        TmSens {
-            rtc_timestamp: self.rtc_unix_s(now),
-            temps_c: [PLACEHOLDER_TEMP_C; 6],
-            ..TmSens::default()
-        }
+        let rtc = self.rtc_unix_s(now);
+        self.readings.as_ref().map_or(
+            TmSens {
+                rtc_timestamp: rtc,
+                ..TmSens::default()
+            },
+            |r| r.tm_sens(rtc),
+        )
     }
 
     fn tm_raw_sens(&self, now: SimTime) -> TmRawSens {
-        TmRawSens {
-            rtc_timestamp: self.rtc_unix_s(now),
-            // 0.1 degrees C per LSB.
-            temps_raw: [i16::from(PLACEHOLDER_TEMP_C) * 10; 6],
-            ..TmRawSens::default()
-        }
+        let rtc = self.rtc_unix_s(now);
+        self.readings.as_ref().map_or(
+            TmRawSens {
+                rtc_timestamp: rtc,
+                ..TmRawSens::default()
+            },
+            |r| r.tm_raw_sens(rtc),
+        )
     }
 
     fn telemetry(&mut self, node: &Node, c: TelemetryCommand, now: SimTime) -> Result<Vec<u8>, u8> {
@@ -280,35 +882,57 @@ impl FcApp {
         }
     }
 
-    fn attitude(&mut self, c: AttitudeCommand) -> Vec<u8> {
-        match c {
-            AttitudeCommand::GetAttitude => TargetAttitude {
-                q: self.target.attitude,
-            }
-            .to_vec(),
+    fn attitude_cmd(&mut self, c: AttitudeCommand) -> Result<Vec<u8>, u8> {
+        let target = &mut self.fsw.target;
+        Ok(match c {
+            AttitudeCommand::GetAttitude => TargetAttitude { q: target.attitude }.to_vec(),
             AttitudeCommand::SetAttitude(q) => {
-                self.target.attitude = q;
-                self.target.attitude_set = true;
+                target.attitude = q;
+                target.attitude_set = true;
                 Vec::new()
             }
-            AttitudeCommand::GetPoint => TargetPoint {
-                p: self.target.point,
-            }
-            .to_vec(),
+            AttitudeCommand::GetPoint => TargetPoint { p: target.point }.to_vec(),
             AttitudeCommand::SetPoint(p) => {
-                self.target.point = p;
-                self.target.point_set = true;
+                target.point = p;
+                target.point_set = true;
                 Vec::new()
             }
-            AttitudeCommand::GetMode => TargetModeRepr {
-                mode: self.target.mode,
-            }
-            .to_vec(),
+            AttitudeCommand::GetMode => TargetModeRepr { mode: target.mode }.to_vec(),
             AttitudeCommand::SetMode(m) => {
-                self.target.mode = m;
+                target.mode = m;
                 Vec::new()
             }
-        }
+            AttitudeCommand::SetTle(lines) => {
+                let (l1, l2) = lines.text();
+                let model = truth_model(Some(&(l1.clone(), l2.clone())));
+                if model.is_err() {
+                    return Err(RESULT_FAILURE);
+                }
+                let same = self
+                    .cfg
+                    .tle
+                    .as_ref()
+                    .is_some_and(|(a, b)| *a == l1 && *b == l2);
+                self.onboard = Some(OnboardOrbit {
+                    lines,
+                    model,
+                    same_as_truth: same,
+                });
+                Vec::new()
+            }
+            AttitudeCommand::GetTle => match &self.onboard {
+                Some(o) => o.lines.to_vec(),
+                None => return Err(RESULT_FAILURE),
+            },
+        })
+    }
+}
+
+fn sat_i8(x: f64) -> i8 {
+    if x.is_nan() {
+        0
+    } else {
+        x.round().clamp(-128.0, 127.0) as i8
     }
 }
 
@@ -319,6 +943,7 @@ impl App for FcApp {
         for port in [p.telemetry, p.rtc, p.attitude, p.scripts] {
             node.bind(port);
         }
+        self.catch_up(now);
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
@@ -329,11 +954,23 @@ impl App for FcApp {
         } else if dport == p.rtc {
             serve::<RtcCommand>(&packet.data, |c| Ok(self.rtc(c, now)))
         } else if dport == p.attitude {
-            serve::<AttitudeCommand>(&packet.data, |c| Ok(self.attitude(c)))
+            serve::<AttitudeCommand>(&packet.data, |c| self.attitude_cmd(c))
         } else if dport == p.scripts {
-            // Scripts (ICD 1.5) are a later increment: a well-formed packet still gets an answer.
+            // ICD 1.5 text; the first byte stands for the command id in the reply.
             let command = packet.data.first().copied().unwrap_or(0);
-            (reqrep::failure(command), None)
+            match self.submit_script(&packet.data, now) {
+                Ok(()) => (vec![command, RESULT_SUCCESS], None),
+                Err(why) => {
+                    self.log.push((
+                        now,
+                        format!(
+                            "script rejected: {why}: {:?}",
+                            String::from_utf8_lossy(&packet.data)
+                        ),
+                    ));
+                    (reqrep::failure(command), Some(reqrep::RequestError::Empty))
+                }
+            }
         } else {
             return;
         };
@@ -342,10 +979,32 @@ impl App for FcApp {
         }
         // A send failure is already counted by the node.
         let _ = node.send(Packet::new(packet.header.reply(node.addr()), reply), now);
+        self.flush_log(node);
+    }
+
+    fn poll_timeout(&self) -> Option<SimTime> {
+        self.next_tick
+    }
+
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        self.catch_up(now);
+        while let Some(t) = self.next_tick.filter(|&t| t <= now) {
+            self.tick(t, true);
+            self.next_tick = Some(t + std::time::Duration::from_nanos(self.dt_ns));
+        }
+        self.flush_log(node);
     }
 
     fn reset(&mut self, _now: SimTime) {
-        self.target = Target::default();
+        self.fsw = Fsw {
+            adcs: Adcs::new(self.cfg.adcs.clone(), self.cfg.body.clone()),
+            target: Target::default(),
+            scripts: Schedule::new(),
+            output: None,
+        };
+        // A power cycle or reboot leaves the actuators off until the software commands them.
+        self.wheel_cmd_nm = [0.0; 4];
+        self.mtq_applied_am2 = Vector3::zeros();
         self.reset_cause = RESET_SOFTWARE;
     }
 }
@@ -359,6 +1018,8 @@ mod tests {
     use csp::Header;
     use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
     use csp::router::Route;
+    use orbit::propagate::Propagator;
+    use orbit::time::UtcTime;
 
     /// The default scenario's 6U TLE (scenarios/default.toml).
     const L1: &str = "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996";
@@ -374,7 +1035,7 @@ mod tests {
         let app = FcApp::new(FcConfig {
             epoch_unix_s: START,
             tle: tle.map(|(a, b)| (a.to_owned(), b.to_owned())),
-            ports: FcPorts::default(),
+            ..FcConfig::default()
         });
         Host::new(c, app, SimTime::ZERO)
     }
@@ -513,9 +1174,9 @@ mod tests {
         assert_eq!(ask(&mut h, 12, &[6, 7], t), vec![6, 1]);
         assert_eq!(ask(&mut h, 12, &[5], t), vec![5, 1, 7]);
 
-        // In fixed-ECI mode TMATP reports the commanded quaternion.
+        // TMATP reports the ADCS estimate: none yet (no tick has run), so the identity.
         let atp = TmAtp::parse(&ask(&mut h, 10, &[2], t)[2..]).unwrap();
-        assert_eq!(atp.q_eci_from_body, n.q);
+        assert_eq!(atp.q_eci_from_body, [1.0, 0.0, 0.0, 0.0]);
         let acd = TmAcd::parse(&ask(&mut h, 10, &[3], t)[2..]).unwrap();
         assert_eq!(
             (acd.target_mode, acd.target_attitude, acd.target_point),

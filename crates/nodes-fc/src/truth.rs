@@ -349,3 +349,19 @@ pub fn step(state: &AttitudeState, cfg: &BodyConfig, inputs: &Torques, dt_s: f64
         wheel_speed_rad_s: o1,
     }
 }
+
+/// Lock wheel `i` (a seized bearing): its speed relative to the body drops to zero at once
+/// and its momentum goes to the body, so the total momentum is unchanged.
+pub fn lock_wheel(state: &mut AttitudeState, cfg: &BodyConfig, i: usize) {
+    let (Some(wc), Some(speed)) = (cfg.wheels.get(i), state.wheel_speed_rad_s.get(i).copied())
+    else {
+        return;
+    };
+    if speed == 0.0 {
+        return;
+    }
+    if let Some(i_inv) = cfg.inertia_kg_m2.try_inverse() {
+        state.w_body_rad_s += i_inv * (wc.axis_body * (wc.inertia_kg_m2 * speed));
+        state.wheel_speed_rad_s[i] = 0.0;
+    }
+}

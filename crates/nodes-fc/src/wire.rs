@@ -73,6 +73,10 @@ pub mod cmd {
     pub const ATCMDGET: u8 = 5;
     /// Attitude port: set the target mode.
     pub const ATCMDSET: u8 = 6;
+    /// Attitude port: upload the onboard TLE (the twin's extension, docs/protocol.md).
+    pub const ATCTLESET: u8 = 7;
+    /// Attitude port: read the onboard TLE (the twin's extension).
+    pub const ATCTLEGET: u8 = 8;
 }
 
 /// A fixed-size ICD data layout (see the module doc for the contract).
@@ -642,6 +646,54 @@ pub enum AttitudeCommand {
     GetMode,
     /// ATCMDSET 6.
     SetMode(TargetMode),
+    /// ATCTLESET 7 (the twin's extension): two 69-character TLE lines, ASCII, that pass
+    /// the strict checksum.
+    SetTle(TleLines),
+    /// ATCTLEGET 8 (the twin's extension).
+    GetTle,
+}
+
+/// Two TLE lines as they travel in ATCTLESET / ATCTLEGET: 69 + 69 ASCII bytes, no
+/// separators.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TleLines {
+    /// Line 1.
+    pub line1: [u8; 69],
+    /// Line 2.
+    pub line2: [u8; 69],
+}
+
+impl TleLines {
+    /// Wire length, bytes.
+    pub const LEN: usize = 138;
+
+    /// The lines from text; `None` unless each is exactly 69 ASCII bytes.
+    pub fn from_text(line1: &str, line2: &str) -> Option<Self> {
+        let arr = |l: &str| -> Option<[u8; 69]> {
+            if l.is_ascii() {
+                l.as_bytes().try_into().ok()
+            } else {
+                None
+            }
+        };
+        Some(TleLines {
+            line1: arr(line1)?,
+            line2: arr(line2)?,
+        })
+    }
+
+    /// The lines as text.
+    pub fn text(&self) -> (String, String) {
+        (
+            String::from_utf8_lossy(&self.line1).into_owned(),
+            String::from_utf8_lossy(&self.line2).into_owned(),
+        )
+    }
+
+    /// The 138 wire bytes.
+    pub fn to_vec(&self) -> Vec<u8> {
+        [&self.line1[..], &self.line2[..]].concat()
+    }
 }
 
 impl CommandSet for AttitudeCommand {
@@ -673,6 +725,23 @@ impl CommandSet for AttitudeCommand {
                     .map(|m| SetMode(m.mode))
                     .map_err(|_| out_of_range("target mode"))
             }
+            cmd::ATCTLESET => {
+                expect_len(r, TleLines::LEN, "138")?;
+                let (a, b) = r.data.split_at(69);
+                let text = |x: &[u8]| std::str::from_utf8(x).ok().map(str::to_owned);
+                match (text(a), text(b)) {
+                    (Some(l1), Some(l2))
+                        if orbit::tle::Tle::parse(&l1, &l2, orbit::tle::ChecksumMode::Strict)
+                            .is_ok() =>
+                    {
+                        TleLines::from_text(&l1, &l2)
+                            .map(SetTle)
+                            .ok_or_else(|| out_of_range("tle"))
+                    }
+                    _ => Err(out_of_range("tle")),
+                }
+            }
+            cmd::ATCTLEGET => no_data(r, GetTle),
             c => Err(RequestError::UnknownCommand(c)),
         }
     }

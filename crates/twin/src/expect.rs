@@ -4,8 +4,8 @@ use csp::SimTime;
 
 use crate::ground::{Outcome, RequestResult};
 use crate::plan::{Check, CounterTarget, Expectation};
-use crate::runtime::RunReport;
-use crate::scenario::Occurrence;
+use crate::runtime::{AttitudeSample, RunReport};
+use crate::scenario::{Occurrence, When};
 
 /// The verdict on one expectation.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -167,6 +167,30 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
                 }
             }
         }
+        Check::Attitude {
+            quantity,
+            below,
+            above,
+            from,
+            to,
+            when,
+            min_elevation_deg,
+        } => check_attitude(
+            report,
+            AttitudeCheck {
+                quantity,
+                below: *below,
+                above: *above,
+                from: *from,
+                to: to.unwrap_or(report.sim_time),
+                when: *when,
+                min_elevation_deg: *min_elevation_deg,
+            },
+        )
+        .map_or_else(
+            |(t, why)| verdict(false, t, why),
+            |(t, ok)| verdict(true, t, ok),
+        ),
         Check::Counter {
             target,
             counter,
@@ -198,6 +222,91 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
                 }
             }
         }
+    }
+}
+
+struct AttitudeCheck<'a> {
+    quantity: &'a str,
+    below: Option<f64>,
+    above: Option<f64>,
+    from: SimTime,
+    to: SimTime,
+    when: When,
+    min_elevation_deg: f64,
+}
+
+/// The named figure of a sample (`None`: it does not apply, for example no target).
+fn quantity(s: &AttitudeSample, name: &str) -> Option<f64> {
+    match name {
+        "rate_deg_s" => Some(s.rate_deg_s),
+        "pointing_error_deg" => s.pointing_error_deg,
+        "axis_error_deg" => s.axis_error_deg,
+        "estimation_error_deg" => s.estimation_error_deg,
+        "max_wheel_rpm" => Some(s.max_wheel_rpm),
+        "mode" => Some(f64::from(s.mode)),
+        "state" => Some(f64::from(s.state)),
+        _ => None,
+    }
+}
+
+/// Every selected sample in the window within bounds: `Ok((end, summary))` or
+/// `Err((first failing time, why))`.
+fn check_attitude(
+    report: &RunReport,
+    c: AttitudeCheck<'_>,
+) -> Result<(SimTime, String), (SimTime, String)> {
+    let selected = report.attitude.iter().filter(|s| {
+        s.t >= c.from
+            && s.t <= c.to
+            && match c.when {
+                When::Always => true,
+                When::Sunlit => s.sun_visible_fraction >= 1.0,
+                When::Eclipse => s.sun_visible_fraction <= 0.0,
+                When::TargetVisible => s
+                    .target_elevation_deg
+                    .is_some_and(|e| e >= c.min_elevation_deg),
+            }
+    });
+    let (mut n, mut lo, mut hi) = (0usize, f64::INFINITY, f64::NEG_INFINITY);
+    let mut failures = 0usize;
+    let mut first: Option<(SimTime, String)> = None;
+    for s in selected {
+        n += 1;
+        let v = quantity(s, c.quantity);
+        let problem = match v {
+            None => Some(format!("no `{}` at this time", c.quantity)),
+            Some(v) if c.below.is_some_and(|b| v.is_nan() || v >= b) => Some(format!(
+                "{} = {v:.4} (expected below {})",
+                c.quantity,
+                c.below.unwrap_or_default()
+            )),
+            Some(v) if c.above.is_some_and(|a| v.is_nan() || v <= a) => Some(format!(
+                "{} = {v:.4} (expected above {})",
+                c.quantity,
+                c.above.unwrap_or_default()
+            )),
+            Some(_) => None,
+        };
+        if let Some(v) = v {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        if let Some(p) = problem {
+            failures += 1;
+            first.get_or_insert((s.t, p));
+        }
+    }
+    let window = format!("{} to {} ({:?})", c.from, c.to, c.when);
+    if n == 0 {
+        return Err((c.to, format!("no FC samples in {window}")));
+    }
+    let range = format!(
+        "{n} samples in {window}, {} from {lo:.4} to {hi:.4}",
+        c.quantity
+    );
+    match first {
+        Some((t, p)) => Err((t, format!("{failures} of {range}; first at {t}: {p}"))),
+        None => Ok((c.to, range)),
     }
 }
 

@@ -36,6 +36,8 @@ pub enum FaultAction {
     Reboot(u8),
     /// Node hang (or recovery).
     Hang(u8, bool),
+    /// A fault the FC applies itself from its timeline (sensors, wheels): recorded only.
+    Fc,
 }
 
 /// A fault action at a time, with a description for logs and recordings.
@@ -74,6 +76,23 @@ pub enum Check {
         /// Every or any.
         occurrence: Occurrence,
     },
+    /// Every FC snapshot in a window has a figure within bounds.
+    Attitude {
+        /// The figure (`scenario::ATTITUDE_QUANTITIES`).
+        quantity: String,
+        /// Upper bound (exclusive).
+        below: Option<f64>,
+        /// Lower bound (exclusive).
+        above: Option<f64>,
+        /// Window start.
+        from: SimTime,
+        /// Window end (default: the end of the run).
+        to: Option<SimTime>,
+        /// Which samples count.
+        when: crate::scenario::When,
+        /// Elevation for `target-visible`, deg.
+        min_elevation_deg: f64,
+    },
     /// A counter at the end of the run.
     Counter {
         /// Node address, or a medium name (`main`, `payload`, `ground`).
@@ -88,6 +107,7 @@ pub enum Check {
 }
 
 /// Where a counter lives.
+
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum CounterTarget {
     /// A node.
@@ -270,6 +290,7 @@ pub fn compile(s: &Scenario) -> Compiled {
             _ => {}
         }
     }
+    opts.fc = compile_fc(s, &mut faults);
     faults.sort_by_key(|f| f.at);
     opts.faults = faults.clone();
     let expectations = s
@@ -283,6 +304,138 @@ pub fn compile(s: &Scenario) -> Compiled {
         faults,
         expectations,
     }
+}
+
+/// A unit vector drawn from `seed` (uniform on the sphere).
+fn random_unit(seed: u64, salt: u64) -> nalgebra::Vector3<f64> {
+    let u = |k: u64| (crate::runtime::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
+    let z = 2.0 * u(0) - 1.0;
+    let phi = std::f64::consts::TAU * u(1);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    nalgebra::Vector3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// The FC's configuration from the `[fc]` table (validated), its faults added to the
+/// recorded fault timeline.
+fn compile_fc(s: &Scenario, faults: &mut Vec<TimedFault>) -> nodes_fc::FcConfig {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    use nodes_fc::{FcEvent, TimedFcEvent};
+    let f = &s.fc;
+    let mut c = nodes_fc::FcConfig::default();
+    if let Some(h) = f.adcs_hz {
+        c.adcs_hz = h;
+    }
+    if let Some(h) = f.publish_hz {
+        c.publish_hz = h;
+    }
+    if let Some(m) = f.mode {
+        c.initial_mode = m.mode();
+    }
+    if let Some(q) = f.target_attitude {
+        let n = (q.iter().map(|x| x * x).sum::<f64>()).sqrt();
+        c.initial_target_attitude = Some(q.map(|x| x / n));
+    }
+    c.initial_target_point = f.target_point;
+    c.tle_uploaded = f.tle_uploaded.unwrap_or(true);
+    c.sensors.gps_enabled = f.gps.unwrap_or(false);
+    let axis = f
+        .initial_rate_axis
+        .map(|a| Vector3::from(a).normalize())
+        .unwrap_or_else(|| random_unit(s.seed, 0x310));
+    c.initial.w_body_rad_s = axis * f.initial_rate_deg_s.unwrap_or(0.0).to_radians();
+    c.initial.q_eci_from_body = match f.initial_attitude {
+        Some([r, i, j, k]) => UnitQuaternion::from_quaternion(Quaternion::new(r, i, j, k)),
+        None => {
+            // Uniform random rotation: an axis and an angle drawn from the seed.
+            let angle = (crate::runtime::mix(s.seed, 0x320) >> 11) as f64 / (1u64 << 53) as f64
+                * std::f64::consts::TAU;
+            UnitQuaternion::from_scaled_axis(random_unit(s.seed, 0x330) * angle)
+        }
+    };
+    if let Some(rpm) = f.initial_wheel_rpm {
+        c.initial.wheel_speed_rad_s = rpm.map(|r| r * std::f64::consts::TAU / 60.0);
+    }
+    if let Some(m) = f.inertia_kg_m2 {
+        c.body.inertia_kg_m2 = nalgebra::Matrix3::from_fn(|r, k| m[r][k]);
+    }
+    if let Some(d) = f.residual_dipole_am2 {
+        c.residual_dipole_am2 = Vector3::from(d);
+    }
+    if f.drag == Some(false) {
+        c.drag = None;
+    }
+    if let Some(g) = f.gravity_gradient {
+        c.gravity_gradient = g;
+    }
+    if let Some(n) = f.panel_normal_body {
+        c.adcs.panel_normal_body = Vector3::from(n).normalize();
+    }
+    if let Some(p) = f.ports {
+        let d = nodes_fc::FcPorts::default();
+        c.ports = nodes_fc::FcPorts {
+            telemetry: p.telemetry.unwrap_or(d.telemetry),
+            rtc: p.rtc.unwrap_or(d.rtc),
+            attitude: p.attitude.unwrap_or(d.attitude),
+            scripts: p.scripts.unwrap_or(d.scripts),
+        };
+    }
+    for sc in &f.scripts {
+        c.timeline.push(TimedFcEvent {
+            at: SimTime::ZERO + sc.at.0,
+            event: FcEvent::Script(sc.line.clone()),
+        });
+    }
+    for (i, fault) in f.faults.iter().enumerate() {
+        let (set, clear) = match (&fault.sensor, fault.wheel) {
+            (Some(name), _) => {
+                let (Ok(id), Ok(kind)) = (
+                    name.parse::<nodes_fc::sensors::SensorId>(),
+                    fault.fault.parse::<nodes_fc::sensors::SensorFault>(),
+                ) else {
+                    continue;
+                };
+                (FcEvent::Sensor(id, Some(kind)), FcEvent::Sensor(id, None))
+            }
+            (None, Some(w)) => {
+                let Ok(kind) = fault.fault.parse::<nodes_fc::WheelFault>() else {
+                    continue;
+                };
+                (
+                    FcEvent::Wheel(usize::from(w), Some(kind)),
+                    FcEvent::Wheel(usize::from(w), None),
+                )
+            }
+            (None, None) => continue,
+        };
+        let what = match (&fault.sensor, fault.wheel) {
+            (Some(n), _) => format!("fc.faults[{i}]: {n} {}", fault.fault),
+            _ => format!(
+                "fc.faults[{i}]: wheel {} {}",
+                fault.wheel.unwrap_or(0),
+                fault.fault
+            ),
+        };
+        let at = SimTime::ZERO + fault.at.0;
+        c.timeline.push(TimedFcEvent { at, event: set });
+        faults.push(TimedFault {
+            at,
+            action: FaultAction::Fc,
+            what: what.clone(),
+        });
+        if let Some(u) = fault.until {
+            let until = SimTime::ZERO + u.0;
+            c.timeline.push(TimedFcEvent {
+                at: until,
+                event: clear,
+            });
+            faults.push(TimedFault {
+                at: until,
+                action: FaultAction::Fc,
+                what: format!("{what} (cleared)"),
+            });
+        }
+    }
+    c
 }
 
 fn compile_expectation(
@@ -308,6 +461,15 @@ fn compile_expectation(
         ExpectKind::NoReply => Check::NoReply {
             command,
             occurrence,
+        },
+        ExpectKind::Attitude => Check::Attitude {
+            quantity: x.quantity.clone().unwrap_or_default(),
+            below: x.below,
+            above: x.above,
+            from: x.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),
+            to: x.to.map(|d| SimTime::ZERO + d.0),
+            when: x.when.unwrap_or(crate::scenario::When::Always),
+            min_elevation_deg: x.min_elevation_deg.unwrap_or(10.0),
         },
         ExpectKind::Counter => Check::Counter {
             target: match &x.target {

@@ -61,6 +61,9 @@ pub struct RunOptions {
     pub faults: Vec<TimedFault>,
     /// Recorded input of outside links to feed again (`replay`), one connection per link.
     pub kiss_replay: Vec<KissReplay>,
+    /// The flight computer's models and timeline; its `epoch_unix_s`, `tle` and `seed` are
+    /// taken from this run's.
+    pub fc: nodes_fc::FcConfig,
 }
 
 /// What an outside program sent on one KISS link during a recorded run.
@@ -90,6 +93,7 @@ impl RunOptions {
             trace: false,
             faults: Vec::new(),
             kiss_replay: Vec::new(),
+            fc: nodes_fc::FcConfig::default(),
         }
     }
 
@@ -169,6 +173,60 @@ pub struct RunReport {
     pub results: Vec<RequestResult>,
     /// Every frame and packet, when tracing was asked for.
     pub trace: Vec<TraceEvent>,
+    /// The FC's published attitude samples, in time order (for expectations).
+    pub attitude: Vec<AttitudeSample>,
+}
+
+/// The figures of one published FC snapshot that expectations check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeSample {
+    /// When.
+    pub t: SimTime,
+    /// True body rate magnitude, deg/s.
+    pub rate_deg_s: f64,
+    /// True attitude to target attitude, deg.
+    pub pointing_error_deg: Option<f64>,
+    /// The mode's pointing axis to its target direction, deg.
+    pub axis_error_deg: Option<f64>,
+    /// True attitude to estimate, deg.
+    pub estimation_error_deg: Option<f64>,
+    /// Elevation of the satellite at the ground target, deg.
+    pub target_elevation_deg: Option<f64>,
+    /// Fastest wheel, rpm (magnitude).
+    pub max_wheel_rpm: f64,
+    /// Visible fraction of the sun.
+    pub sun_visible_fraction: f64,
+    /// Mode in effect.
+    pub mode: u8,
+    /// ADCS state.
+    pub state: u8,
+}
+
+impl AttitudeSample {
+    /// The sample of one published snapshot pair.
+    pub fn of(
+        t: SimTime,
+        truth: &orbit::state::TruthSnapshot,
+        adcs: &orbit::state::AdcsSnapshot,
+    ) -> Self {
+        AttitudeSample {
+            t,
+            rate_deg_s: truth.w_body_rad_s.norm().to_degrees(),
+            pointing_error_deg: adcs.pointing_error_deg,
+            axis_error_deg: adcs.axis_error_deg,
+            estimation_error_deg: adcs.estimation_error_deg,
+            target_elevation_deg: adcs.target_elevation_deg,
+            max_wheel_rpm: truth
+                .wheel_speed_rad_s
+                .iter()
+                .fold(0.0_f64, |m, w| m.max(w.abs()))
+                * 60.0
+                / std::f64::consts::TAU,
+            sun_visible_fraction: truth.in_eclipse_fraction_visible,
+            mode: adcs.mode_in_effect,
+            state: adcs.state,
+        }
+    }
 }
 
 /// A tokio runtime for `mode`: current-thread, with a paused clock in virtual time.
@@ -198,7 +256,20 @@ fn app_for(
 ) -> Box<dyn App> {
     match role {
         Role::CommPrimary | Role::CommSecondary => Box::new(nodes_comm::app()),
-        Role::Fc => Box::new(nodes_fc::FcApp::new(fc.clone())),
+        Role::Fc => {
+            let tx = events.clone();
+            Box::new(
+                nodes_fc::FcApp::new(fc.clone()).with_publisher(nodes_fc::Publisher::new(
+                    move |truth, adcs| {
+                        let _ = tx.send(RunEvent::Truth {
+                            t: SimTime::from_ns(truth.t_ns),
+                            truth: Box::new(truth.clone()),
+                            adcs: Box::new(adcs.clone()),
+                        });
+                    },
+                )),
+            )
+        }
         Role::Eps => Box::new(nodes_eps::app()),
         Role::Ecu => Box::new(nodes_ecu::app()),
         Role::Pc => Box::new(nodes_pc::app()),
@@ -263,7 +334,12 @@ pub async fn run_with(
             let _ = tx.send(RunEvent::Log {
                 t,
                 source: node.to_owned(),
-                level: Level::Debug,
+                // Drops are detail; what an application reports (FC modes, scripts) is news.
+                level: if what.starts_with("drop") {
+                    Level::Debug
+                } else {
+                    Level::Info
+                },
                 message: what.to_owned(),
             });
         })
@@ -279,7 +355,8 @@ pub async fn run_with(
     let fc = nodes_fc::FcConfig {
         epoch_unix_s: opts.epoch_unix_s,
         tle: opts.tle.clone(),
-        ports: nodes_fc::FcPorts::default(),
+        seed: mix(opts.seed, 0x300),
+        ..opts.fc.clone()
     };
     let mut nodes = Vec::new();
     for spec in &opts.network.nodes {
@@ -426,12 +503,15 @@ pub async fn run_with(
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let mut trace = Vec::new();
+    let mut attitude = Vec::new();
     let mut handle_event = |ev: RunEvent, trace: &mut Vec<TraceEvent>| {
         sink(&ev);
-        if opts.trace
-            && let RunEvent::Medium(m) = ev
-        {
-            trace.push(m);
+        match ev {
+            RunEvent::Medium(m) if opts.trace => trace.push(m),
+            RunEvent::Truth { t, truth, adcs } => {
+                attitude.push(AttitudeSample::of(t, &truth, &adcs));
+            }
+            _ => {}
         }
     };
     let ctrl_c = tokio::signal::ctrl_c();
@@ -502,6 +582,7 @@ pub async fn run_with(
         socketcan: snapshot(socketcan_stats),
         results,
         trace,
+        attitude,
     })
 }
 
@@ -571,6 +652,8 @@ fn apply_fault(
         FaultAction::Power(a, on) => ctl(a, NodeCtl::Power(*on)),
         FaultAction::Reboot(a) => ctl(a, NodeCtl::Reboot),
         FaultAction::Hang(a, h) => ctl(a, NodeCtl::Hang(*h)),
+        // The FC applies its own faults from its timeline at its ticks.
+        FaultAction::Fc => {}
     }
 }
 

@@ -86,6 +86,9 @@ pub struct Scenario {
     /// The satellite.
     #[serde(default)]
     pub satellite: SatelliteSpec,
+    /// The flight computer: initial state, models, ADCS, scripts and faults.
+    #[serde(default)]
+    pub fc: FcSpec,
     /// The network.
     #[serde(default)]
     pub network: NetworkCfg,
@@ -159,6 +162,163 @@ pub struct SatelliteSpec {
     /// Two-line elements: the two lines (a title line may come first).
     #[serde(default)]
     pub tle: Vec<String>,
+}
+
+/// The flight computer's settings (docs/scenarios.md, "The FC").
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcSpec {
+    /// ADCS loop rate, Hz (default 10).
+    #[serde(default)]
+    pub adcs_hz: Option<u32>,
+    /// Truth and ADCS snapshot rate for recording and expectations, Hz (default 1; 0: none).
+    #[serde(default)]
+    pub publish_hz: Option<u32>,
+    /// Target mode commanded at the start (as by ATCMDSET at time zero; default `detumble`).
+    #[serde(default)]
+    pub mode: Option<ModeName>,
+    /// Target attitude (r, i, j, k) for the fixed-quaternion modes (as by ATCATSET).
+    #[serde(default)]
+    pub target_attitude: Option<[f64; 4]>,
+    /// Target point (as by ATCPTSET): lat deg, lon deg, alt m for `earth-target`, an ECI
+    /// direction for `eci-vector`.
+    #[serde(default)]
+    pub target_point: Option<[f64; 3]>,
+    /// Whether the FC holds the satellite's TLE at boot (default true).
+    #[serde(default)]
+    pub tle_uploaded: Option<bool>,
+    /// Whether the GPS receiver gives fixes (default false).
+    #[serde(default)]
+    pub gps: Option<bool>,
+    /// Initial body rate magnitude, deg/s (default 0).
+    #[serde(default)]
+    pub initial_rate_deg_s: Option<f64>,
+    /// Axis of the initial rate, body frame (default: a random axis drawn from the seed).
+    #[serde(default)]
+    pub initial_rate_axis: Option<[f64; 3]>,
+    /// Initial attitude, body in ECI (r, i, j, k) (default: drawn from the seed).
+    #[serde(default)]
+    pub initial_attitude: Option<[f64; 4]>,
+    /// Initial wheel speeds, rpm (default 0).
+    #[serde(default)]
+    pub initial_wheel_rpm: Option<[f64; 4]>,
+    /// Inertia tensor, kg m^2, rows (default the 6U box diag(0.10, 0.13, 0.05)).
+    #[serde(default)]
+    pub inertia_kg_m2: Option<[[f64; 3]; 3]>,
+    /// Residual magnetic dipole, body frame, A m^2 (default [0.002, 0.002, 0.005]).
+    #[serde(default)]
+    pub residual_dipole_am2: Option<[f64; 3]>,
+    /// Aerodynamic drag torque (default true).
+    #[serde(default)]
+    pub drag: Option<bool>,
+    /// Gravity-gradient torque (default true).
+    #[serde(default)]
+    pub gravity_gradient: Option<bool>,
+    /// Solar panel normal for sun max power, body frame (default +X).
+    #[serde(default)]
+    pub panel_normal_body: Option<[f64; 3]>,
+    /// Port numbers of the FC's services.
+    #[serde(default)]
+    pub ports: Option<FcPortsSpec>,
+    /// Mission-controller script lines (ICD 1.5) submitted onboard at their times.
+    #[serde(default)]
+    pub scripts: Vec<FcScriptSpec>,
+    /// Sensor and wheel faults.
+    #[serde(default)]
+    pub faults: Vec<FcFaultSpec>,
+}
+
+/// Target modes by name (docs/protocol.md, "Target modes").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModeName {
+    /// 0.
+    Idle,
+    /// 1.
+    Detumble,
+    /// 2.
+    Velocity,
+    /// 3.
+    Nadir,
+    /// 4.
+    SunMaxPower,
+    /// 5.
+    EarthTarget,
+    /// 6.
+    EciVector,
+    /// 7.
+    FixedEci,
+    /// 8.
+    FixedLvlh,
+    /// 9.
+    FixedTnw,
+}
+
+impl ModeName {
+    /// The wire enumeration value.
+    pub fn mode(self) -> nodes_fc::wire::TargetMode {
+        use nodes_fc::wire::TargetMode as M;
+        match self {
+            ModeName::Idle => M::Idle,
+            ModeName::Detumble => M::Detumble,
+            ModeName::Velocity => M::VelocityPointing,
+            ModeName::Nadir => M::Nadir,
+            ModeName::SunMaxPower => M::SunMaxPower,
+            ModeName::EarthTarget => M::EarthTarget,
+            ModeName::EciVector => M::EciVector,
+            ModeName::FixedEci => M::FixedEci,
+            ModeName::FixedLvlh => M::FixedLvlh,
+            ModeName::FixedTnw => M::FixedTnw,
+        }
+    }
+}
+
+/// FC port overrides (INTERPRETATION.md section 4: every port overridable).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcPortsSpec {
+    /// Telemetry (default 10).
+    #[serde(default)]
+    pub telemetry: Option<u8>,
+    /// RTC (default 11).
+    #[serde(default)]
+    pub rtc: Option<u8>,
+    /// Attitude target control (default 12).
+    #[serde(default)]
+    pub attitude: Option<u8>,
+    /// Mission-controller scripts (default 13).
+    #[serde(default)]
+    pub scripts: Option<u8>,
+}
+
+/// A script line submitted onboard at a time.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcScriptSpec {
+    /// When it is submitted (simulated time since the start).
+    pub at: Dur,
+    /// The ICD 1.5 line, for example `adcs 1577836800 1577836920 pointECI 1 0 0 0`.
+    pub line: String,
+}
+
+/// A sensor or wheel fault.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcFaultSpec {
+    /// When it starts.
+    pub at: Dur,
+    /// When it is cleared (default: never).
+    #[serde(default)]
+    pub until: Option<Dur>,
+    /// The sensor: `gyro`, `magnetometer`, `sun-sensors`, `css+x` ... `css-z`,
+    /// `accelerometer`, `gps`.
+    #[serde(default)]
+    pub sensor: Option<String>,
+    /// The wheel, 0-3.
+    #[serde(default)]
+    pub wheel: Option<u8>,
+    /// Sensors: `dead`, `stuck`, `bias:<value>`, `noisy:<factor>`; wheels: `stuck`, `off`.
+    pub fault: String,
 }
 
 /// The network's shape and link rates.
@@ -407,6 +567,52 @@ pub struct ExpectationSpec {
     /// Largest acceptable counter value at the end of the run.
     #[serde(default)]
     pub max: Option<u64>,
+    /// The figure an `attitude` expectation checks (see [`ATTITUDE_QUANTITIES`]).
+    #[serde(default)]
+    pub quantity: Option<String>,
+    /// Every sample in the window must be below this.
+    #[serde(default)]
+    pub below: Option<f64>,
+    /// Every sample in the window must be above this.
+    #[serde(default)]
+    pub above: Option<f64>,
+    /// Start of the window (default: the start of the run).
+    #[serde(default)]
+    pub from: Option<Dur>,
+    /// End of the window (default: the end of the run).
+    #[serde(default)]
+    pub to: Option<Dur>,
+    /// Which samples count: `always` (default), `sunlit`, `eclipse`, `target-visible`.
+    #[serde(default)]
+    pub when: Option<When>,
+    /// Elevation for `target-visible`, deg (default 10).
+    #[serde(default)]
+    pub min_elevation_deg: Option<f64>,
+}
+
+/// The figures an `attitude` expectation can check (each published FC snapshot).
+pub const ATTITUDE_QUANTITIES: &[&str] = &[
+    "rate_deg_s",
+    "pointing_error_deg",
+    "axis_error_deg",
+    "estimation_error_deg",
+    "max_wheel_rpm",
+    "mode",
+    "state",
+];
+
+/// Which samples an `attitude` expectation looks at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum When {
+    /// Every sample.
+    Always,
+    /// Sun fully visible.
+    Sunlit,
+    /// Sun not visible at all.
+    Eclipse,
+    /// The ground target at or above `min_elevation_deg`.
+    TargetVisible,
 }
 
 /// Expectation kinds.
@@ -419,6 +625,8 @@ pub enum ExpectKind {
     NoReply,
     /// A counter is within `min`..=`max` at the end of the run.
     Counter,
+    /// Every FC snapshot in a window has a figure below / above a bound.
+    Attitude,
 }
 
 /// Which occurrences of a repeated command an expectation covers.
@@ -863,6 +1071,7 @@ impl Scenario {
                 err(p("until"), "a reboot is instantaneous".into());
             }
         }
+        self.validate_fc(&mut err);
         for (i, x) in self.expectations.iter().enumerate() {
             let p = |n: &str| vec![key("expectations"), PathStep::Index(i), key(n)];
             match x.kind {
@@ -907,6 +1116,55 @@ impl Scenario {
                         && let Err(e) = parse_hex(d)
                     {
                         err(p("data"), e);
+                    }
+                }
+                ExpectKind::Attitude => {
+                    match &x.quantity {
+                        None => err(
+                            p("kind"),
+                            "an `attitude` expectation needs `quantity`".into(),
+                        ),
+                        Some(q) if !ATTITUDE_QUANTITIES.contains(&q.as_str()) => err(
+                            p("quantity"),
+                            format!(
+                                "unknown quantity `{q}` ({})",
+                                ATTITUDE_QUANTITIES.join(", ")
+                            ),
+                        ),
+                        Some(_) => {}
+                    }
+                    if x.below.is_none() && x.above.is_none() {
+                        err(
+                            p("kind"),
+                            "an `attitude` expectation needs `below` or `above`".into(),
+                        );
+                    }
+                    for (f, v) in [("below", x.below), ("above", x.above)] {
+                        if v.is_some_and(|v| !v.is_finite()) {
+                            err(p(f), "must be a finite number".into());
+                        }
+                    }
+                    if let (Some(a), Some(b)) = (x.from, x.to)
+                        && b <= a
+                    {
+                        err(p("to"), "must be after `from`".into());
+                    }
+                    if x.min_elevation_deg.is_some() && x.when != Some(When::TargetVisible) {
+                        err(
+                            p("min_elevation_deg"),
+                            "only `when = \"target-visible\"` takes `min_elevation_deg`".into(),
+                        );
+                    }
+                    for (f, present) in [
+                        ("command", x.command.is_some()),
+                        ("target", x.target.is_some()),
+                        ("counter", x.counter.is_some()),
+                        ("min", x.min.is_some()),
+                        ("max", x.max.is_some()),
+                    ] {
+                        if present {
+                            err(p(f), format!("an `attitude` expectation takes no `{f}`"));
+                        }
                     }
                 }
                 ExpectKind::Counter => {
@@ -969,6 +1227,116 @@ impl Scenario {
         }
     }
 
+    /// Check the `[fc]` table.
+    fn validate_fc(&self, err: &mut impl FnMut(Vec<PathStep>, String)) {
+        let fc = &self.fc;
+        let p = |n: &str| vec![key("fc"), key(n)];
+        if fc.adcs_hz.is_some_and(|h| !(1..=100).contains(&h)) {
+            err(p("adcs_hz"), "must be 1-100".into());
+        }
+        if let Some(h) = fc.publish_hz
+            && h > fc.adcs_hz.unwrap_or(10)
+        {
+            err(p("publish_hz"), "must not exceed `adcs_hz`".into());
+        }
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let nonzero = |v: &[f64]| finite(v) && v.iter().any(|x| *x != 0.0);
+        if fc
+            .initial_rate_deg_s
+            .is_some_and(|r| !(r.is_finite() && (0.0..=360.0).contains(&r)))
+        {
+            err(p("initial_rate_deg_s"), "must be 0-360 deg/s".into());
+        }
+        for (f, v) in [
+            (
+                "initial_rate_axis",
+                fc.initial_rate_axis.map(|a| a.to_vec()),
+            ),
+            ("initial_attitude", fc.initial_attitude.map(|a| a.to_vec())),
+            ("target_attitude", fc.target_attitude.map(|a| a.to_vec())),
+            (
+                "panel_normal_body",
+                fc.panel_normal_body.map(|a| a.to_vec()),
+            ),
+        ] {
+            if v.is_some_and(|v| !nonzero(&v)) {
+                err(p(f), "must be finite and not all zero".into());
+            }
+        }
+        for (f, v) in [
+            (
+                "initial_wheel_rpm",
+                fc.initial_wheel_rpm.map(|a| a.to_vec()),
+            ),
+            (
+                "residual_dipole_am2",
+                fc.residual_dipole_am2.map(|a| a.to_vec()),
+            ),
+            ("target_point", fc.target_point.map(|a| a.to_vec())),
+        ] {
+            if v.is_some_and(|v| !finite(&v)) {
+                err(p(f), "must be finite".into());
+            }
+        }
+        if let Some(rpm) = fc.initial_wheel_rpm
+            && rpm.iter().any(|r| r.abs() > 6000.0)
+        {
+            err(
+                p("initial_wheel_rpm"),
+                "the wheels' limit is 6000 rpm".into(),
+            );
+        }
+        if let Some(m) = fc.inertia_kg_m2 {
+            let i = nalgebra::Matrix3::from_fn(|r, c| m[r][c]);
+            let symmetric = (i - i.transpose()).abs().max() <= 1e-12 * i.abs().max();
+            let positive = i.iter().all(|x| x.is_finite())
+                && symmetric
+                && i.symmetric_eigenvalues().iter().all(|&e| e > 0.0);
+            if !positive {
+                err(
+                    p("inertia_kg_m2"),
+                    "must be a symmetric positive-definite 3x3 matrix (rows)".into(),
+                );
+            }
+        }
+        for (i, sc) in fc.scripts.iter().enumerate() {
+            if let Err(e) = nodes_fc::scripts::Script::parse(&sc.line) {
+                err(
+                    vec![key("fc"), key("scripts"), PathStep::Index(i), key("line")],
+                    format!("the script does not parse: {e}"),
+                );
+            }
+        }
+        for (i, f) in fc.faults.iter().enumerate() {
+            let q = |n: &str| vec![key("fc"), key("faults"), PathStep::Index(i), key(n)];
+            if f.until.is_some_and(|u| u <= f.at) {
+                err(q("until"), "must be after `at`".into());
+            }
+            match (&f.sensor, f.wheel) {
+                (Some(name), None) => {
+                    if let Err(e) = name.parse::<nodes_fc::sensors::SensorId>() {
+                        err(q("sensor"), e.to_string());
+                    }
+                    if let Err(e) = f.fault.parse::<nodes_fc::sensors::SensorFault>() {
+                        err(q("fault"), e.to_string());
+                    }
+                }
+                (None, Some(w)) => {
+                    if w > 3 {
+                        err(q("wheel"), format!("wheel {w} is not 0-3"));
+                    }
+                    if let Err(e) = f.fault.parse::<nodes_fc::WheelFault>() {
+                        err(q("fault"), e);
+                    }
+                }
+                _ => err(
+                    q("fault"),
+                    "give exactly one of `sensor` and `wheel`".into(),
+                ),
+            }
+        }
+    }
+
     /// The network the scenario describes (call after validation).
     pub fn network_spec_unchecked(&self) -> crate::network::NetworkSpec {
         let mut net =
@@ -1008,6 +1376,7 @@ fn kebab(k: ExpectKind) -> &'static str {
         ExpectKind::Reply => "reply",
         ExpectKind::NoReply => "no-reply",
         ExpectKind::Counter => "counter",
+        ExpectKind::Attitude => "attitude",
     }
 }
 

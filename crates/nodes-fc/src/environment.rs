@@ -1,0 +1,313 @@
+//! The space environment at the satellite: orbit state, sun, shadow, geomagnetic field, the
+//! Earth's orientation and the disturbance torques of the truth model.
+//!
+//! [`EnvModel`] evaluates the same `orbit` models the rest of the twin uses (SGP4 -> ECI J2000,
+//! Meeus/Vallado sun, conical shadow, IGRF-14) and caches what varies slowly, so that a
+//! 10 Hz ADCS loop stays cheap:
+//! - `A(J2000 <- TEME)` (precession and nutation, below 1e-11 rad/s) is recomputed every
+//!   [`SLOW_REFRESH_S`] of UTC; the Earth's rotation (GMST) is evaluated at every call.
+//! - The IGRF-14 Gauss coefficients (secular variation of a few nT per year) are recomputed
+//!   every [`SLOW_REFRESH_S`].
+//!
+//! The FC's flight software uses the same models for its references (onboard orbit from the
+//! uploaded TLE, sun and field models): the twin's sensor errors come from the sensor models,
+//! not from a mismatch of environment models (documented in docs/adcs.md).
+
+use nalgebra::{Matrix3, Vector3};
+use orbit::eclipse;
+use orbit::frames;
+use orbit::igrf::GaussCoefficients;
+use orbit::propagate::{Propagator, Sgp4Propagator, StateVector};
+use orbit::sun;
+use orbit::time::UtcTime;
+
+/// How long the slowly varying rotations and field coefficients are reused, s.
+pub const SLOW_REFRESH_S: f64 = 60.0;
+
+/// The Earth's rotation rate, rad/s (WGS-84, NIMA TR8350.2).
+pub const OMEGA_EARTH_RAD_S: f64 = 7.292_115e-5;
+
+/// The environment at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Environment {
+    /// UTC, ns since the Unix epoch.
+    pub unix_ns: i64,
+    /// Position, ECI J2000, m.
+    pub r_eci_m: Vector3<f64>,
+    /// Velocity, ECI J2000, m/s.
+    pub v_eci_m_s: Vector3<f64>,
+    /// Unit vector from the satellite to the sun, ECI J2000.
+    pub sun_eci_unit: Vector3<f64>,
+    /// Visible fraction of the solar disc (1 sunlit, 0 umbra).
+    pub sun_visible_fraction: f64,
+    /// Geomagnetic field, ECI J2000, nT (zero when the model cannot be evaluated).
+    pub b_eci_nt: Vector3<f64>,
+    /// Rotation `A(ECEF <- ECI J2000)`.
+    pub a_ecef_from_eci: Matrix3<f64>,
+}
+
+/// Cached environment models for one orbit.
+#[derive(Debug, Clone)]
+pub struct EnvModel {
+    propagator: Sgp4Propagator,
+    slow: SlowModels,
+}
+
+/// The slowly varying parts of the environment models, cached for [`SLOW_REFRESH_S`]: the
+/// environment at any ECI state (a GPS fix, say) without a propagator.
+#[derive(Debug, Clone, Default)]
+pub struct SlowModels {
+    cached: Option<Slow>,
+}
+
+#[derive(Debug, Clone)]
+struct Slow {
+    valid_from_unix_s: f64,
+    a_j2000_from_teme: Matrix3<f64>,
+    igrf: Option<GaussCoefficients>,
+}
+
+impl SlowModels {
+    fn get(&mut self, t: UtcTime) -> &Slow {
+        let unix_s = t.unix_s();
+        let fresh = self.cached.as_ref().is_some_and(|s| {
+            unix_s >= s.valid_from_unix_s && unix_s < s.valid_from_unix_s + SLOW_REFRESH_S
+        });
+        if !fresh {
+            self.cached = Some(Slow {
+                valid_from_unix_s: unix_s,
+                a_j2000_from_teme: frames::a_j2000_from_teme(t),
+                igrf: GaussCoefficients::igrf14(t.decimal_year()).ok(),
+            });
+        }
+        self.cached.get_or_insert_with(|| Slow {
+            valid_from_unix_s: unix_s,
+            a_j2000_from_teme: Matrix3::identity(),
+            igrf: None,
+        })
+    }
+
+    /// The environment at an ECI J2000 state (m, m/s) at `unix_ns`.
+    pub fn at_state(
+        &mut self,
+        unix_ns: i64,
+        r_eci_m: Vector3<f64>,
+        v_eci_m_s: Vector3<f64>,
+    ) -> Environment {
+        let t = UtcTime::from_unix_ns(unix_ns);
+        let slow = self.get(t);
+        let a_ecef_from_eci =
+            frames::a_ecef_from_teme(t, None) * slow.a_j2000_from_teme.transpose();
+        let r_km = r_eci_m / 1e3;
+        let b_eci_nt = slow
+            .igrf
+            .as_ref()
+            .and_then(|g| g.field_eci(&r_km, &a_ecef_from_eci).ok())
+            .map_or_else(Vector3::zeros, |f| f.b_eci_nt);
+        let sun_km = sun::sun_eci_km(t);
+        let ill = eclipse::illumination(&r_km, &sun_km);
+        Environment {
+            unix_ns,
+            r_eci_m,
+            v_eci_m_s,
+            sun_eci_unit: (sun_km - r_km).try_normalize(0.0).unwrap_or_default(),
+            sun_visible_fraction: ill.visible_fraction,
+            b_eci_nt,
+            a_ecef_from_eci,
+        }
+    }
+}
+
+impl EnvModel {
+    /// Models for the orbit of `propagator`.
+    pub fn new(propagator: Sgp4Propagator) -> Self {
+        EnvModel {
+            propagator,
+            slow: SlowModels::default(),
+        }
+    }
+
+    /// The environment at `unix_ns`, or why the orbit cannot be propagated (decay, bad
+    /// elements).
+    pub fn at(&mut self, unix_ns: i64) -> Result<Environment, String> {
+        let t = UtcTime::from_unix_ns(unix_ns);
+        let teme = self
+            .propagator
+            .state_teme_at(t)
+            .map_err(|e| e.to_string())?;
+        let a = self.slow.get(t).a_j2000_from_teme;
+        let r_eci_m = a * teme.r_km * 1e3;
+        let v_eci_m_s = a * teme.v_km_s * 1e3;
+        Ok(self.slow.at_state(unix_ns, r_eci_m, v_eci_m_s))
+    }
+
+    /// The exact ECI J2000 state (no cache), as `orbit`'s propagator gives it.
+    pub fn state_j2000(&mut self, unix_ns: i64) -> Result<StateVector, String> {
+        self.propagator
+            .state_j2000(UtcTime::from_unix_ns(unix_ns))
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// Atmospheric density, kg/m^3, from the exponential model of Vallado, "Fundamentals of
+/// Astrodynamics and Applications", 4th ed., table 8-4 (rows 200-1000 km), at geodetic-ish
+/// altitude `alt_m` (the caller passes |r| - the equatorial radius). Zero above 1000 km
+/// extrapolates the last row; below 200 km the first.
+pub fn density_kg_m3(alt_m: f64) -> f64 {
+    // (base altitude km, nominal density kg/m^3, scale height km)
+    const TABLE: [(f64, f64, f64); 12] = [
+        (200.0, 2.789e-10, 37.105),
+        (250.0, 7.248e-11, 45.546),
+        (300.0, 2.418e-11, 53.628),
+        (350.0, 9.518e-12, 53.298),
+        (400.0, 3.725e-12, 58.515),
+        (450.0, 1.585e-12, 60.828),
+        (500.0, 6.967e-13, 63.822),
+        (600.0, 1.454e-13, 71.835),
+        (700.0, 3.614e-14, 88.667),
+        (800.0, 1.170e-14, 124.64),
+        (900.0, 5.245e-15, 181.05),
+        (1000.0, 3.019e-15, 268.00),
+    ];
+    let h_km = alt_m / 1e3;
+    if !h_km.is_finite() {
+        return 0.0;
+    }
+    let row = TABLE
+        .iter()
+        .rev()
+        .find(|r| h_km >= r.0)
+        .unwrap_or(&TABLE[0]);
+    row.1 * (-(h_km - row.0) / row.2).exp()
+}
+
+/// The bus's outer shape for drag: six faces of a box, normals and centres in BCF.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DragConfig {
+    /// Box edges along BCF X, Y, Z, m.
+    pub size_m: Vector3<f64>,
+    /// Centre of mass relative to the box's geometric centre, BCF, m.
+    pub cm_offset_m: Vector3<f64>,
+    /// Drag coefficient (2.2, the usual free-molecular flat-plate figure).
+    pub cd: f64,
+}
+
+impl Default for DragConfig {
+    /// The 6U box of `truth::BodyConfig::default` (0.2 x 0.1 x 0.3 m) with the centre of mass
+    /// 10 mm towards the propulsion face (-Z: tank and thruster), Cd 2.2. Deployable wings
+    /// are not modelled for drag.
+    fn default() -> Self {
+        DragConfig {
+            size_m: Vector3::new(0.2, 0.1, 0.3),
+            cm_offset_m: Vector3::new(0.0, 0.0, -0.01),
+            cd: 2.2,
+        }
+    }
+}
+
+/// Aerodynamic torque about the centre of mass, body frame, N m: flat-plate drag on each
+/// face that sees the flow, `F = -rho Cd A cos(theta) |v|^2 / 2 v_hat`, applied at the face
+/// centre. The flow is the velocity relative to the co-rotating atmosphere.
+pub fn drag_torque_body_nm(
+    cfg: &DragConfig,
+    q_eci_from_body: &nalgebra::UnitQuaternion<f64>,
+    r_eci_m: &Vector3<f64>,
+    v_eci_m_s: &Vector3<f64>,
+) -> Vector3<f64> {
+    let alt_m = r_eci_m.norm() - eclipse::EARTH_RADIUS_KM * 1e3;
+    let rho = density_kg_m3(alt_m);
+    let v_rel_eci = v_eci_m_s - Vector3::z().cross(r_eci_m) * OMEGA_EARTH_RAD_S;
+    let speed = v_rel_eci.norm();
+    if rho == 0.0 || speed == 0.0 || !speed.is_finite() {
+        return Vector3::zeros();
+    }
+    let v_hat = q_eci_from_body.inverse_transform_vector(&v_rel_eci) / speed;
+    let s = cfg.size_m;
+    let mut torque = Vector3::zeros();
+    for axis in 0..3 {
+        let area = s[(axis + 1) % 3] * s[(axis + 2) % 3];
+        for sign in [1.0, -1.0] {
+            let mut n = Vector3::zeros();
+            n[axis] = sign;
+            let cos = n.dot(&v_hat);
+            if cos <= 0.0 {
+                continue;
+            }
+            let force = -v_hat * (0.5 * rho * cfg.cd * area * cos * speed * speed);
+            let centre = n * (0.5 * s[axis]) - cfg.cm_offset_m;
+            torque += centre.cross(&force);
+        }
+    }
+    torque
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use orbit::tle::{ChecksumMode, Tle};
+
+    const L1: &str = "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996";
+    const L2: &str = "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009";
+    const START_NS: i64 = 1_777_572_000 * 1_000_000_000;
+
+    fn model() -> EnvModel {
+        EnvModel::new(
+            Sgp4Propagator::new(&Tle::parse(L1, L2, ChecksumMode::Strict).unwrap()).unwrap(),
+        )
+    }
+
+    #[test]
+    fn cached_environment_matches_the_exact_models() {
+        let mut m = model();
+        for k in 0..200 {
+            let unix_ns = START_NS + k * 7_300_000_000;
+            let e = m.at(unix_ns).unwrap();
+            let t = UtcTime::from_unix_ns(unix_ns);
+            let exact = m.state_j2000(unix_ns).unwrap();
+            // Precession-nutation held for up to a minute (7.7e-12 rad/s of precession at
+            // 6900 km: 3 mm a minute): below a centimetre.
+            let dr = (e.r_eci_m - exact.r_km * 1e3).norm();
+            assert!(dr < 5e-3, "k {k}: {dr} m");
+            let b = orbit::igrf::field_eci_at(t, &exact.r_km, None)
+                .unwrap()
+                .b_eci_nt;
+            assert!(
+                (e.b_eci_nt - b).norm() < 0.01,
+                "k {k}: {}",
+                (e.b_eci_nt - b).norm()
+            );
+            let ill = eclipse::illumination_at(t, &exact.r_km);
+            assert!((e.sun_visible_fraction - ill.visible_fraction).abs() < 1e-6);
+            let a = frames::a_ecef_from_eci(t, None);
+            assert!((e.a_ecef_from_eci - a).norm() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn density_follows_the_table_and_decreases_with_altitude() {
+        assert!((density_kg_m3(500e3) - 6.967e-13).abs() < 1e-18);
+        let mut last = f64::INFINITY;
+        for h in (150..1200).step_by(10) {
+            let d = density_kg_m3(f64::from(h) * 1e3);
+            assert!(d > 0.0 && d < last, "{h} km");
+            last = d;
+        }
+        assert_eq!(density_kg_m3(f64::NAN), 0.0);
+    }
+
+    #[test]
+    fn drag_torque_is_small_and_vanishes_with_a_centred_mass_facing_the_flow() {
+        let r = Vector3::new(6_878_137.0, 0.0, 0.0);
+        let v = Vector3::new(0.0, 7_600.0, 0.0);
+        let q = nalgebra::UnitQuaternion::identity();
+        let centred = DragConfig {
+            cm_offset_m: Vector3::zeros(),
+            ..DragConfig::default()
+        };
+        assert!(drag_torque_body_nm(&centred, &q, &r, &v).norm() < 1e-15);
+        let t = drag_torque_body_nm(&DragConfig::default(), &q, &r, &v);
+        // 500 km: rho 7e-13, q = rho v^2 / 2 = 2e-5 Pa; 0.06 m^2, 2.2, 10 mm arm: ~3e-8 N m.
+        assert!(t.norm() > 1e-9 && t.norm() < 1e-7, "{t}");
+    }
+}
