@@ -15,10 +15,39 @@
 //! | `/faults` | `m6p.Fault` | fault applied or lifted |
 //! | `/commands` | `m6p.Command` | scenario command sent, and its result |
 //! | `/expectations` | `m6p.Expectation` | expectation verdict |
+//! | `/fc/truth/tf` | `foxglove.FrameTransform` | FC truth sample: the true attitude, `eci` -> `body` |
+//! | `/fc/estimate/tf` | `foxglove.FrameTransform` | FC truth sample with an estimate: `eci` -> `body_est` |
+//! | `/fc/truth/location` | `foxglove.LocationFix` | FC truth sample: geodetic position (frame `earth`) |
+//! | `/fc/truth/state` | `m6p.TruthState` | FC truth sample: orbit, sun, field, rates, actuators |
+//! | `/fc/adcs` | `m6p.Adcs` | FC truth sample: mode, estimate, target, errors, commands |
+//! | `/fc/scene` | `foxglove.SceneUpdate` | FC truth sample: the satellite drawn in `body` |
 //!
-//! The fixed channels are registered at creation in the order above; a bus, network or
-//! KISS link not known in advance gets its channel when its first event arrives, so the
-//! registration order follows the event order and is deterministic too.
+//! The fixed channels ([`FIXED_CHANNELS`]: both CAN buses, the ground network, `/csp/packets`,
+//! `/log`, `/faults`, `/commands`, `/expectations`) are registered at creation in that order;
+//! a bus, network or KISS link not known in advance, and the `/fc/...` channels, get their
+//! channel when their first message comes, so the registration order follows the event order
+//! and is deterministic too. A schema is written with the first channel that uses it.
+//!
+//! # FC truth channels
+//!
+//! One [`RunEvent::Truth`] (the FC publishes one per second of simulated time by default)
+//! gives, in this order: `/fc/truth/tf`, `/fc/estimate/tf` (only while the ADCS has an
+//! estimate), `/fc/truth/location`, `/fc/truth/state`, `/fc/adcs`, `/fc/scene`.
+//! - The transforms have **zero translation**: `eci` here means the J2000 axes carried along
+//!   with the satellite, so Foxglove's 3D panel shows the attitude (true and estimated
+//!   overlaid) at the origin without float32 jitter from a 7000 km offset; the position is in
+//!   `/fc/truth/state` and on the map. Rotation = `q_eci_from_body` as `{x, y, z, w}`.
+//! - `/fc/truth/location` rotates the ECI position to ECEF with
+//!   [`orbit::frames::a_ecef_from_eci`] at the truth's UTC (`unix_ns`, no EOP) and converts
+//!   it to WGS-84 latitude, longitude and height.
+//! - `/fc/scene` is one entity (`m6p`, replaced by each message) in frame `body`: the
+//!   0.2 x 0.1 x 0.3 m box (BCF X, Y, Z), the body axes (X red, Y green, Z blue), and the sun
+//!   (yellow, dimmed in eclipse) and nadir (magenta) directions in the body frame.
+//! - Non-finite numbers: the project's JSON (`m6p.TruthState`, `m6p.Adcs`) writes them as
+//!   `null` (the schemas say `number | null`). A Foxglove message whose numbers would not be
+//!   finite is left out instead (a transform with a NaN poisons Foxglove's transform tree):
+//!   a transform when its quaternion is not finite, the location when the position is zero
+//!   or not finite, a scene arrow when its direction is not defined.
 //!
 //! # Determinism
 //!
@@ -26,7 +55,8 @@
 //! - message `log_time` and `publish_time` are simulated time (`start_utc` + `t`, in ns since
 //!   the Unix epoch); the attachment's times are `start_utc`; nothing reads the wall clock;
 //! - the header's `library` is `m6p-twin <twin_version>` (not the mcap crate's identifier);
-//! - JSON comes from structs (key order = field order) and schemas from `schemars`;
+//! - JSON comes from structs (key order = field order; floats in serde_json's shortest
+//!   round-trip form), schemas from `schemars` or constants (Foxglove's);
 //! - zstd runs single-threaded at its default level (multithreaded zstd frames depend on
 //!   the worker count, which would tie the bytes to the machine's CPU count), and the mcap
 //!   writer orders its summary by id (checked in mcap 0.26's source: no clock, no RNG, no
@@ -58,6 +88,11 @@ use mcap::{Attachment, Compression, WriteOptions, Writer};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use orbit::frames::{a_ecef_from_eci, eci_to_body};
+use orbit::geodetic::ecef_m_to_geodetic;
+use orbit::state::{AdcsSnapshot, TruthSnapshot};
+use orbit::time::UtcTime;
+
 use crate::events::{Direction, RunEvent};
 
 /// Target uncompressed size of one chunk: 1 MiB, mcap's default. Big enough for zstd to
@@ -70,7 +105,7 @@ pub const METADATA_NAME: &str = "m6p-twin";
 /// Name of the attachment holding the scenario text.
 pub const SCENARIO_ATTACHMENT: &str = "scenario.toml";
 /// Version of the recording layout (channels and fields), stored in the metadata.
-pub const FORMAT_VERSION: &str = "1";
+pub const FORMAT_VERSION: &str = "2";
 
 /// Topic of every decoded CSP packet.
 pub const TOPIC_CSP: &str = "/csp/packets";
@@ -82,6 +117,33 @@ pub const TOPIC_FAULTS: &str = "/faults";
 pub const TOPIC_COMMANDS: &str = "/commands";
 /// Topic of expectation verdicts.
 pub const TOPIC_EXPECTATIONS: &str = "/expectations";
+/// Topic of the FC's true attitude (`foxglove.FrameTransform`, `eci` -> `body`).
+pub const TOPIC_TRUTH_TF: &str = "/fc/truth/tf";
+/// Topic of the ADCS's estimated attitude (`foxglove.FrameTransform`, `eci` -> `body_est`).
+pub const TOPIC_ESTIMATE_TF: &str = "/fc/estimate/tf";
+/// Topic of the satellite's geodetic position (`foxglove.LocationFix`).
+pub const TOPIC_TRUTH_LOCATION: &str = "/fc/truth/location";
+/// Topic of the FC's true state (`m6p.TruthState`).
+pub const TOPIC_TRUTH_STATE: &str = "/fc/truth/state";
+/// Topic of the ADCS's view: mode, estimate, target, errors, commands (`m6p.Adcs`).
+pub const TOPIC_ADCS: &str = "/fc/adcs";
+/// Topic of the 3D scene drawn in the body frame (`foxglove.SceneUpdate`).
+pub const TOPIC_SCENE: &str = "/fc/scene";
+
+/// Foxglove frame id of ECI J2000 (axes only: the transforms carry no translation).
+pub const FRAME_ECI: &str = "eci";
+/// Foxglove frame id of the true body frame (BCF).
+pub const FRAME_BODY: &str = "body";
+/// Foxglove frame id of the body frame as the ADCS estimates it.
+pub const FRAME_BODY_EST: &str = "body_est";
+/// Foxglove frame id of `/fc/truth/location` (WGS-84).
+pub const FRAME_EARTH: &str = "earth";
+/// Id of the one entity of `/fc/scene`.
+pub const SCENE_ENTITY_ID: &str = "m6p";
+
+/// Edges of the M6P body along BCF X, Y, Z, m (ICD 1.4: Z along the 300 mm edge, X along the
+/// 200 mm edge; 6U, so 100 mm along Y).
+pub const BODY_SIZE_M: [f64; 3] = [0.2, 0.1, 0.3];
 
 /// Message encoding of every channel.
 pub const MESSAGE_ENCODING: &str = "json";
@@ -415,7 +477,7 @@ pub struct KissFrameMsg {
     pub len: u32,
 }
 
-/// `foxglove.Log` timestamp.
+/// Foxglove's `time` (`foxglove.Log` and the other Foxglove schemas' `timestamp`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct LogTime {
     /// Seconds since the Unix epoch (simulated).
@@ -487,6 +549,261 @@ pub struct ExpectationMsg {
     pub passed: bool,
     /// What was observed.
     pub observed: String,
+}
+
+/// `foxglove.Vector3`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Vec3Msg {
+    /// X.
+    pub x: f64,
+    /// Y.
+    pub y: f64,
+    /// Z.
+    pub z: f64,
+}
+
+/// `foxglove.Quaternion`: vector part first, scalar `w` last (Foxglove's order).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct QuatMsg {
+    /// i component.
+    pub x: f64,
+    /// j component.
+    pub y: f64,
+    /// k component.
+    pub z: f64,
+    /// Scalar component.
+    pub w: f64,
+}
+
+/// `foxglove.Color`, each component 0..1.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ColorMsg {
+    /// Red.
+    pub r: f64,
+    /// Green.
+    pub g: f64,
+    /// Blue.
+    pub b: f64,
+    /// Alpha (1 opaque).
+    pub a: f64,
+}
+
+/// `foxglove.Pose`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseMsg {
+    /// Position in the entity's frame, m.
+    pub position: Vec3Msg,
+    /// Orientation in the entity's frame.
+    pub orientation: QuatMsg,
+}
+
+/// Foxglove's `duration`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DurationMsg {
+    /// Seconds.
+    pub sec: i32,
+    /// Nanoseconds.
+    pub nsec: u32,
+}
+
+/// `/fc/truth/tf`, `/fc/estimate/tf`: Foxglove's `foxglove.FrameTransform`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameTransformMsg {
+    /// Simulated UTC time.
+    pub timestamp: LogTime,
+    /// Always `eci`.
+    pub parent_frame_id: String,
+    /// `body` (truth) or `body_est` (estimate).
+    pub child_frame_id: String,
+    /// Always zero (see the module docs).
+    pub translation: Vec3Msg,
+    /// `q_eci_from_body`, active: body vectors to ECI.
+    pub rotation: QuatMsg,
+}
+
+/// `/fc/truth/location`: Foxglove's `foxglove.LocationFix`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LocationFixMsg {
+    /// Simulated UTC time.
+    pub timestamp: LogTime,
+    /// Always `earth`.
+    pub frame_id: String,
+    /// Geodetic latitude (WGS-84), deg.
+    pub latitude: f64,
+    /// Longitude, deg east.
+    pub longitude: f64,
+    /// Height above the WGS-84 ellipsoid, m.
+    pub altitude: f64,
+    /// Always zeros (the truth has no uncertainty).
+    pub position_covariance: [f64; 9],
+    /// Always 0 (unknown).
+    pub position_covariance_type: u8,
+    /// Colour of the track on the map.
+    pub color: ColorMsg,
+}
+
+/// `foxglove.ArrowPrimitive`: an arrow from `pose.position` along the pose's +x axis.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ArrowMsg {
+    /// Tail position and orientation (identity points along +x).
+    pub pose: PoseMsg,
+    /// Shaft length, m.
+    pub shaft_length: f64,
+    /// Shaft diameter, m.
+    pub shaft_diameter: f64,
+    /// Head length, m.
+    pub head_length: f64,
+    /// Head diameter, m.
+    pub head_diameter: f64,
+    /// Colour.
+    pub color: ColorMsg,
+}
+
+/// `foxglove.CubePrimitive`: a box centred on `pose.position`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CubeMsg {
+    /// Centre and orientation.
+    pub pose: PoseMsg,
+    /// Edge lengths along the pose's x, y, z, m.
+    pub size: Vec3Msg,
+    /// Colour.
+    pub color: ColorMsg,
+}
+
+/// `foxglove.SceneEntity`, with the primitives this recorder draws (the other kinds are
+/// always empty).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneEntityMsg {
+    /// Simulated UTC time.
+    pub timestamp: LogTime,
+    /// Always `body`.
+    pub frame_id: String,
+    /// Always `m6p`: each message replaces the previous entity.
+    pub id: String,
+    /// Zero: shown until replaced.
+    pub lifetime: DurationMsg,
+    /// True: the entity moves with `body`.
+    pub frame_locked: bool,
+    /// Always empty.
+    pub metadata: Vec<serde_json::Value>,
+    /// Body axes, then the sun and nadir directions.
+    pub arrows: Vec<ArrowMsg>,
+    /// The body box.
+    pub cubes: Vec<CubeMsg>,
+    /// Always empty.
+    pub spheres: Vec<serde_json::Value>,
+    /// Always empty.
+    pub cylinders: Vec<serde_json::Value>,
+    /// Always empty.
+    pub lines: Vec<serde_json::Value>,
+    /// Always empty.
+    pub triangles: Vec<serde_json::Value>,
+    /// Always empty.
+    pub texts: Vec<serde_json::Value>,
+    /// Always empty.
+    pub models: Vec<serde_json::Value>,
+}
+
+/// `/fc/scene`: Foxglove's `foxglove.SceneUpdate`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneUpdateMsg {
+    /// Always empty (the entity is replaced by id).
+    pub deletions: Vec<serde_json::Value>,
+    /// The one entity.
+    pub entities: Vec<SceneEntityMsg>,
+}
+
+/// A quaternion in the project's JSON: scalar first, as nalgebra and the ICD write it;
+/// a non-finite component is null.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct QuatWxyz {
+    /// Scalar component.
+    pub w: Option<f64>,
+    /// i component.
+    pub x: Option<f64>,
+    /// j component.
+    pub y: Option<f64>,
+    /// k component.
+    pub z: Option<f64>,
+}
+
+/// `/fc/truth/state`: the FC's true state at one instant. Vectors are `[x, y, z]` in the
+/// frame their name says; a non-finite number is null.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.TruthState")]
+pub struct TruthStateMsg {
+    /// Simulated ns since the start of the run.
+    pub t_ns: u64,
+    /// True attitude, body (BCF) to ECI J2000, active.
+    pub q_eci_from_body: QuatWxyz,
+    /// Position, ECI J2000, m.
+    pub r_eci_m: [Option<f64>; 3],
+    /// Velocity, ECI J2000, m/s.
+    pub v_eci_m_s: [Option<f64>; 3],
+    /// Position, ECEF (no polar motion, UT1 = UTC), m.
+    pub r_ecef_m: [Option<f64>; 3],
+    /// Geodetic latitude, WGS-84, deg.
+    pub lat_deg: Option<f64>,
+    /// Longitude, deg east.
+    pub lon_deg: Option<f64>,
+    /// Height above the WGS-84 ellipsoid, m.
+    pub alt_m: Option<f64>,
+    /// Unit vector to the sun, ECI.
+    pub sun_eci_unit: [Option<f64>; 3],
+    /// Unit vector to the sun, body frame.
+    pub sun_body_unit: [Option<f64>; 3],
+    /// Visible fraction of the solar disc: 1 sunlit, 0 umbra.
+    pub sun_visible_fraction: Option<f64>,
+    /// Geomagnetic field, ECI, nT.
+    pub b_eci_nt: [Option<f64>; 3],
+    /// Geomagnetic field, body frame, nT.
+    pub b_body_nt: [Option<f64>; 3],
+    /// Body rate relative to ECI, body frame, deg/s.
+    pub w_body_deg_s: [Option<f64>; 3],
+    /// Norm of the body rate, deg/s.
+    pub rate_deg_s: Option<f64>,
+    /// Reaction wheel speeds relative to the body, rpm (wheels 1-4).
+    pub wheel_speed_rpm: [Option<f64>; 4],
+    /// Magnetorquer dipoles as applied, body X, Y, Z, A m^2.
+    pub mtq_dipole_am2: [Option<f64>; 3],
+}
+
+/// `/fc/adcs`: what the ADCS believes and does at one instant; a non-finite number is null.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.Adcs")]
+pub struct AdcsMsg {
+    /// Simulated ns since the start of the run.
+    pub t_ns: u64,
+    /// Target mode in effect (docs/protocol.md enumeration; 1 while detumbling).
+    pub mode_in_effect: u8,
+    /// Target mode commanded.
+    pub mode_commanded: u8,
+    /// 0 off, 1 detumbling, 2 acquiring, 3 tracking.
+    pub state: u8,
+    /// Estimated attitude (body to ECI), null until the estimator is initialised.
+    pub q_eci_from_body_est: Option<QuatWxyz>,
+    /// Estimated body rate, body frame, deg/s.
+    pub w_body_deg_s_est: [Option<f64>; 3],
+    /// Estimated gyro bias, body frame, deg/s.
+    pub gyro_bias_deg_s_est: [Option<f64>; 3],
+    /// Target attitude (body to ECI) of the mode in effect, null when it has none.
+    pub q_eci_from_body_target: Option<QuatWxyz>,
+    /// Rotation angle from the true to the target attitude, deg.
+    pub pointing_error_deg: Option<f64>,
+    /// Angle between the mode's pointing axis and its target direction, deg.
+    pub axis_error_deg: Option<f64>,
+    /// Elevation of the satellite from the ground target, deg (earth-target modes).
+    pub target_elevation_deg: Option<f64>,
+    /// Rotation angle from the true to the estimated attitude, deg.
+    pub estimation_error_deg: Option<f64>,
+    /// Reaction wheel states: 0 off, 1 on, 2 fault.
+    pub rw_state: [u8; 4],
+    /// Commanded wheel motor torques, N m.
+    pub wheel_torque_cmd_nm: [Option<f64>; 4],
+    /// Commanded magnetorquer dipoles, body X, Y, Z, A m^2.
+    pub mtq_dipole_cmd_am2: [Option<f64>; 3],
+    /// Magnetorquer states: 0 off, 1 positive, 2 negative.
+    pub mtq_state: [u8; 3],
 }
 
 /// Name of CSP service port `port` (0-6), as libcsp's service handler calls them.
@@ -578,10 +895,22 @@ pub enum ChannelKind {
     Command,
     /// `/expectations` (`m6p.Expectation`).
     Expectation,
+    /// `/fc/truth/tf` (`foxglove.FrameTransform`).
+    TruthTf,
+    /// `/fc/estimate/tf` (`foxglove.FrameTransform`).
+    EstimateTf,
+    /// `/fc/truth/location` (`foxglove.LocationFix`).
+    TruthLocation,
+    /// `/fc/truth/state` (`m6p.TruthState`).
+    TruthState,
+    /// `/fc/adcs` (`m6p.Adcs`).
+    Adcs,
+    /// `/fc/scene` (`foxglove.SceneUpdate`).
+    Scene,
 }
 
-/// Every kind, in the order their schemas are written.
-pub const CHANNEL_KINDS: [ChannelKind; 8] = [
+/// Every kind, in declaration order (`kind as usize` indexes it).
+pub const CHANNEL_KINDS: [ChannelKind; 14] = [
     ChannelKind::Can,
     ChannelKind::Net,
     ChannelKind::Csp,
@@ -590,6 +919,12 @@ pub const CHANNEL_KINDS: [ChannelKind; 8] = [
     ChannelKind::Fault,
     ChannelKind::Command,
     ChannelKind::Expectation,
+    ChannelKind::TruthTf,
+    ChannelKind::EstimateTf,
+    ChannelKind::TruthLocation,
+    ChannelKind::TruthState,
+    ChannelKind::Adcs,
+    ChannelKind::Scene,
 ];
 
 /// The channels every run has, as (kind, key), in registration order; others (another
@@ -617,6 +952,11 @@ impl ChannelKind {
             ChannelKind::Fault => "m6p.Fault",
             ChannelKind::Command => "m6p.Command",
             ChannelKind::Expectation => "m6p.Expectation",
+            ChannelKind::TruthTf | ChannelKind::EstimateTf => "foxglove.FrameTransform",
+            ChannelKind::TruthLocation => "foxglove.LocationFix",
+            ChannelKind::TruthState => "m6p.TruthState",
+            ChannelKind::Adcs => "m6p.Adcs",
+            ChannelKind::Scene => "foxglove.SceneUpdate",
         }
     }
 
@@ -634,6 +974,13 @@ impl ChannelKind {
             ChannelKind::Fault => gen_schema::<FaultMsg>(),
             ChannelKind::Command => gen_schema::<CommandMsg>(),
             ChannelKind::Expectation => gen_schema::<ExpectationMsg>(),
+            ChannelKind::TruthTf | ChannelKind::EstimateTf => {
+                Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec())
+            }
+            ChannelKind::TruthLocation => Ok(FOXGLOVE_LOCATION_FIX_SCHEMA.as_bytes().to_vec()),
+            ChannelKind::TruthState => gen_schema::<TruthStateMsg>(),
+            ChannelKind::Adcs => gen_schema::<AdcsMsg>(),
+            ChannelKind::Scene => Ok(FOXGLOVE_SCENE_UPDATE_SCHEMA.as_bytes().to_vec()),
         }
     }
 
@@ -652,6 +999,12 @@ impl ChannelKind {
             ChannelKind::Fault => TOPIC_FAULTS.to_owned(),
             ChannelKind::Command => TOPIC_COMMANDS.to_owned(),
             ChannelKind::Expectation => TOPIC_EXPECTATIONS.to_owned(),
+            ChannelKind::TruthTf => TOPIC_TRUTH_TF.to_owned(),
+            ChannelKind::EstimateTf => TOPIC_ESTIMATE_TF.to_owned(),
+            ChannelKind::TruthLocation => TOPIC_TRUTH_LOCATION.to_owned(),
+            ChannelKind::TruthState => TOPIC_TRUTH_STATE.to_owned(),
+            ChannelKind::Adcs => TOPIC_ADCS.to_owned(),
+            ChannelKind::Scene => TOPIC_SCENE.to_owned(),
         }
     }
 
@@ -738,6 +1091,287 @@ fn emit_json<T: Serialize>(
     })
 }
 
+/// Foxglove's `time` of simulated time `t` in a run that started `base_ns` after the epoch.
+fn foxglove_time(base_ns: u64, t: SimTime) -> LogTime {
+    let unix = base_ns.saturating_add(t.as_ns());
+    LogTime {
+        sec: unix / 1_000_000_000,
+        nsec: (unix % 1_000_000_000) as u32,
+    }
+}
+
+/// rad/s to rpm: 60 s per minute over 2 pi rad per revolution.
+const RAD_S_TO_RPM: f64 = 60.0 / std::f64::consts::TAU;
+
+/// `x` when finite, else `None` (JSON null).
+fn num(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
+}
+
+/// [`num`] of each element.
+fn nums<const N: usize>(xs: [f64; N]) -> [Option<f64>; N] {
+    xs.map(num)
+}
+
+/// The components of a 3-vector (an nalgebra `Vector3<f64>`).
+fn xyz<V: std::ops::Index<usize, Output = f64>>(v: &V) -> [f64; 3] {
+    [v[0], v[1], v[2]]
+}
+
+/// `v` scaled to unit length, `None` when it is zero or not finite.
+fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+    let n = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+    (n.is_finite() && n > 0.0).then(|| v.map(|c| c / n))
+}
+
+/// A quaternion `[w, x, y, z]` (scalar first) in Foxglove's order, `None` if a component
+/// is not finite.
+fn quat_xyzw([w, x, y, z]: [f64; 4]) -> Option<QuatMsg> {
+    [w, x, y, z]
+        .iter()
+        .all(|c| c.is_finite())
+        .then_some(QuatMsg { x, y, z, w })
+}
+
+/// A quaternion `[w, x, y, z]` in the project's JSON.
+fn quat_wxyz([w, x, y, z]: [f64; 4]) -> QuatWxyz {
+    QuatWxyz {
+        w: num(w),
+        x: num(x),
+        y: num(y),
+        z: num(z),
+    }
+}
+
+/// The `eci` -> `child` transform with rotation `rotation` and no translation.
+fn frame_transform(timestamp: LogTime, child: &str, rotation: QuatMsg) -> FrameTransformMsg {
+    FrameTransformMsg {
+        timestamp,
+        parent_frame_id: FRAME_ECI.to_owned(),
+        child_frame_id: child.to_owned(),
+        translation: Vec3Msg {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+        },
+        rotation,
+    }
+}
+
+/// The `/fc/truth/state` message of `truth` at `t_ns`.
+fn truth_state(t_ns: u64, truth: &TruthSnapshot) -> TruthStateMsg {
+    let q = &truth.q_eci_from_body;
+    let a_ecef_from_eci = a_ecef_from_eci(UtcTime::from_unix_ns(truth.unix_ns), None);
+    let r_ecef_m = a_ecef_from_eci * truth.r_eci_m;
+    // Only a finite position has a place (the conversion maps a NaN x to longitude 0).
+    let geo = xyz(&r_ecef_m)
+        .iter()
+        .all(|c| c.is_finite())
+        .then(|| ecef_m_to_geodetic(&r_ecef_m));
+    let w_body_deg_s = xyz(&truth.w_body_rad_s).map(f64::to_degrees);
+    let rate_deg_s = w_body_deg_s.iter().map(|c| c * c).sum::<f64>().sqrt();
+    TruthStateMsg {
+        t_ns,
+        q_eci_from_body: quat_wxyz([q.w, q.i, q.j, q.k]),
+        r_eci_m: nums(xyz(&truth.r_eci_m)),
+        v_eci_m_s: nums(xyz(&truth.v_eci_m_s)),
+        r_ecef_m: nums(xyz(&r_ecef_m)),
+        lat_deg: geo.map(|g| g.lat_deg()).and_then(num),
+        lon_deg: geo.map(|g| g.lon_deg()).and_then(num),
+        alt_m: geo.map(|g| g.alt_m).and_then(num),
+        sun_eci_unit: nums(xyz(&truth.sun_eci_unit)),
+        sun_body_unit: nums(xyz(&eci_to_body(q, &truth.sun_eci_unit))),
+        sun_visible_fraction: num(truth.in_eclipse_fraction_visible),
+        b_eci_nt: nums(xyz(&truth.b_eci_nt)),
+        b_body_nt: nums(xyz(&eci_to_body(q, &truth.b_eci_nt))),
+        w_body_deg_s: nums(w_body_deg_s),
+        rate_deg_s: num(rate_deg_s),
+        wheel_speed_rpm: nums(truth.wheel_speed_rad_s.map(|w| w * RAD_S_TO_RPM)),
+        mtq_dipole_am2: nums(truth.mtq_dipole_am2),
+    }
+}
+
+/// Colour of the ground track on the map (orange).
+const TRACK_COLOR: ColorMsg = ColorMsg {
+    r: 1.0,
+    g: 0.5,
+    b: 0.0,
+    a: 1.0,
+};
+
+/// The `/fc/truth/location` message of a true state, `None` when the position is zero or
+/// not finite (no place on the map).
+fn location_fix(timestamp: LogTime, state: &TruthStateMsg) -> Option<LocationFixMsg> {
+    let r = state.r_eci_m;
+    let placed = r.iter().all(Option::is_some) && r.iter().any(|c| *c != Some(0.0));
+    if !placed {
+        return None;
+    }
+    Some(LocationFixMsg {
+        timestamp,
+        frame_id: FRAME_EARTH.to_owned(),
+        latitude: state.lat_deg?,
+        longitude: state.lon_deg?,
+        altitude: state.alt_m?,
+        position_covariance: [0.0; 9],
+        position_covariance_type: 0,
+        color: TRACK_COLOR,
+    })
+}
+
+/// The `/fc/adcs` message of `adcs` at `t_ns`.
+fn adcs_msg(t_ns: u64, adcs: &AdcsSnapshot) -> AdcsMsg {
+    let deg = |v: [f64; 3]| nums(v.map(f64::to_degrees));
+    let fin = |x: Option<f64>| x.and_then(num);
+    AdcsMsg {
+        t_ns,
+        mode_in_effect: adcs.mode_in_effect,
+        mode_commanded: adcs.mode_commanded,
+        state: adcs.state,
+        q_eci_from_body_est: adcs
+            .q_eci_from_body_est
+            .as_ref()
+            .map(|q| quat_wxyz([q.w, q.i, q.j, q.k])),
+        w_body_deg_s_est: deg(xyz(&adcs.w_body_rad_s_est)),
+        gyro_bias_deg_s_est: deg(xyz(&adcs.gyro_bias_rad_s_est)),
+        q_eci_from_body_target: adcs
+            .q_eci_from_body_target
+            .as_ref()
+            .map(|q| quat_wxyz([q.w, q.i, q.j, q.k])),
+        pointing_error_deg: fin(adcs.pointing_error_deg),
+        axis_error_deg: fin(adcs.axis_error_deg),
+        target_elevation_deg: fin(adcs.target_elevation_deg),
+        estimation_error_deg: fin(adcs.estimation_error_deg),
+        rw_state: adcs.rw_state,
+        wheel_torque_cmd_nm: nums(adcs.wheel_torque_cmd_nm),
+        mtq_dipole_cmd_am2: nums(adcs.mtq_dipole_cmd_am2),
+        mtq_state: adcs.mtq_state,
+    }
+}
+
+/// The orientation that turns an arrow (identity points along +x) onto unit vector `d`:
+/// the shortest rotation, `[1 + x.d, x × d]` normalised, or a half turn about z when `d`
+/// is -x.
+fn arrow_orientation(d: [f64; 3]) -> QuatMsg {
+    let w = 1.0 + d[0];
+    if w < 1e-9 {
+        return QuatMsg {
+            x: 0.0,
+            y: 0.0,
+            z: 1.0,
+            w: 0.0,
+        };
+    }
+    // x × d = (0, -d.z, d.y); adding 0.0 turns -0.0 into 0.0 for tidier JSON.
+    let (y, z) = (-d[2] + 0.0, d[1] + 0.0);
+    let n = (w * w + y * y + z * z).sqrt();
+    QuatMsg {
+        x: 0.0,
+        y: y / n,
+        z: z / n,
+        w: w / n,
+    }
+}
+
+/// Shaft length, head length, shaft diameter and head diameter of the body axis arrows, m.
+const AXIS_ARROW_M: [f64; 4] = [0.25, 0.05, 0.01, 0.025];
+/// The same for the sun and nadir arrows, m.
+const DIRECTION_ARROW_M: [f64; 4] = [0.4, 0.08, 0.015, 0.04];
+
+/// An arrow from the body origin along unit vector `d`.
+fn arrow(d: [f64; 3], [shaft, head, shaft_d, head_d]: [f64; 4], color: ColorMsg) -> ArrowMsg {
+    ArrowMsg {
+        pose: PoseMsg {
+            position: Vec3Msg {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+            },
+            orientation: arrow_orientation(d),
+        },
+        shaft_length: shaft,
+        shaft_diameter: shaft_d,
+        head_length: head,
+        head_diameter: head_d,
+        color,
+    }
+}
+
+/// An opaque colour.
+const fn rgb(r: f64, g: f64, b: f64) -> ColorMsg {
+    ColorMsg { r, g, b, a: 1.0 }
+}
+
+/// The `/fc/scene` message of `truth`: the body box, the body axes, and the sun and nadir
+/// directions in the body frame (each left out when it is not defined).
+fn scene_update(timestamp: LogTime, truth: &TruthSnapshot) -> SceneUpdateMsg {
+    let q = &truth.q_eci_from_body;
+    let mut arrows = vec![
+        arrow([1.0, 0.0, 0.0], AXIS_ARROW_M, rgb(1.0, 0.0, 0.0)),
+        arrow([0.0, 1.0, 0.0], AXIS_ARROW_M, rgb(0.0, 0.8, 0.0)),
+        arrow([0.0, 0.0, 1.0], AXIS_ARROW_M, rgb(0.0, 0.3, 1.0)),
+    ];
+    if let Some(sun) = unit(xyz(&eci_to_body(q, &truth.sun_eci_unit))) {
+        // Full yellow in sunlight, dimmed towards umbra.
+        let lit = truth.in_eclipse_fraction_visible;
+        let lit = if lit.is_finite() {
+            lit.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let color = ColorMsg {
+            a: 0.3 + 0.7 * lit,
+            ..rgb(1.0, 0.85, 0.0)
+        };
+        arrows.push(arrow(sun, DIRECTION_ARROW_M, color));
+    }
+    if let Some(nadir) = unit(xyz(&eci_to_body(q, &-truth.r_eci_m))) {
+        arrows.push(arrow(nadir, DIRECTION_ARROW_M, rgb(1.0, 0.0, 1.0)));
+    }
+    let [x, y, z] = BODY_SIZE_M;
+    let body = CubeMsg {
+        pose: PoseMsg {
+            position: Vec3Msg {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+            },
+            orientation: QuatMsg {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            },
+        },
+        size: Vec3Msg { x, y, z },
+        color: ColorMsg {
+            r: 0.75,
+            g: 0.75,
+            b: 0.8,
+            a: 0.4,
+        },
+    };
+    SceneUpdateMsg {
+        deletions: Vec::new(),
+        entities: vec![SceneEntityMsg {
+            timestamp,
+            frame_id: FRAME_BODY.to_owned(),
+            id: SCENE_ENTITY_ID.to_owned(),
+            lifetime: DurationMsg { sec: 0, nsec: 0 },
+            frame_locked: true,
+            metadata: Vec::new(),
+            arrows,
+            cubes: vec![body],
+            spheres: Vec::new(),
+            cylinders: Vec::new(),
+            lines: Vec::new(),
+            triangles: Vec::new(),
+            texts: Vec::new(),
+            models: Vec::new(),
+        }],
+    }
+}
+
 impl EventEncoder {
     /// An encoder for a run that started `base_ns` after the Unix epoch.
     pub fn new(base_ns: u64) -> EventEncoder {
@@ -797,12 +1431,8 @@ impl EventEncoder {
                 level,
                 message,
             } => {
-                let unix = base_ns.saturating_add(t_ns);
                 let msg = LogMsg {
-                    timestamp: LogTime {
-                        sec: unix / 1_000_000_000,
-                        nsec: (unix % 1_000_000_000) as u32,
-                    },
+                    timestamp: foxglove_time(base_ns, *t),
                     level: *level as u8,
                     message: message.clone(),
                     name: source.clone(),
@@ -871,9 +1501,48 @@ impl EventEncoder {
                 };
                 emit_json(buf, base_ns, (ChannelKind::Expectation, ""), *t, &msg, emit)
             }
-            // Truth channels: recorded by a later change.
-            RunEvent::Truth { .. } => Ok(()),
+            RunEvent::Truth { t, truth, adcs } => self.encode_truth(*t, truth, adcs, emit),
         }
+    }
+
+    /// The `/fc/...` messages of one truth sample (see the module docs for what is left out
+    /// when a number is not finite).
+    fn encode_truth(
+        &mut self,
+        t: SimTime,
+        truth: &TruthSnapshot,
+        adcs: &AdcsSnapshot,
+        emit: &mut Emit<'_>,
+    ) -> anyhow::Result<()> {
+        let base_ns = self.base_ns;
+        let buf = &mut self.buf;
+        let stamp = foxglove_time(base_ns, t);
+        let q = &truth.q_eci_from_body;
+        if let Some(rotation) = quat_xyzw([q.w, q.i, q.j, q.k]) {
+            let msg = frame_transform(stamp, FRAME_BODY, rotation);
+            emit_json(buf, base_ns, (ChannelKind::TruthTf, ""), t, &msg, emit)?;
+        }
+        let q_est = adcs.q_eci_from_body_est.as_ref();
+        if let Some(rotation) = q_est.and_then(|q| quat_xyzw([q.w, q.i, q.j, q.k])) {
+            let msg = frame_transform(stamp, FRAME_BODY_EST, rotation);
+            emit_json(buf, base_ns, (ChannelKind::EstimateTf, ""), t, &msg, emit)?;
+        }
+        let state = truth_state(t.as_ns(), truth);
+        if let Some(msg) = location_fix(stamp, &state) {
+            emit_json(
+                buf,
+                base_ns,
+                (ChannelKind::TruthLocation, ""),
+                t,
+                &msg,
+                emit,
+            )?;
+        }
+        emit_json(buf, base_ns, (ChannelKind::TruthState, ""), t, &state, emit)?;
+        let msg = adcs_msg(t.as_ns(), adcs);
+        emit_json(buf, base_ns, (ChannelKind::Adcs, ""), t, &msg, emit)?;
+        let msg = scene_update(stamp, truth);
+        emit_json(buf, base_ns, (ChannelKind::Scene, ""), t, &msg, emit)
     }
 
     /// A frame or packet, and the CSP packet it completes.
@@ -995,15 +1664,29 @@ struct Chan {
 struct McapOut {
     writer: Writer<BufWriter<File>>,
     path: PathBuf,
-    schema_ids: [u16; CHANNEL_KINDS.len()],
+    /// Schema id per kind (`kind as usize`), once written.
+    schema_ids: [Option<u16>; CHANNEL_KINDS.len()],
     chans: Vec<Chan>,
 }
 
 impl McapOut {
-    /// Register a channel; returns its index in `chans`.
+    /// Register a channel, and its schema if it is the first of its kind; returns its index
+    /// in `chans`.
     fn add_channel(&mut self, kind: ChannelKind, key: &str) -> anyhow::Result<usize> {
         let topic = kind.topic(key);
-        let schema = self.schema_ids[kind as usize];
+        let schema = match self.schema_ids[kind as usize] {
+            Some(id) => id,
+            None => {
+                // Two kinds with the same schema (the two transforms) share one record: the
+                // writer returns the id of identical content.
+                let id = self
+                    .writer
+                    .add_schema(kind.schema_name(), SCHEMA_ENCODING, &kind.schema_json()?)
+                    .with_context(|| format!("writing recording {}", self.path.display()))?;
+                self.schema_ids[kind as usize] = Some(id);
+                id
+            }
+        };
         let id = self
             .writer
             .add_channel(schema, &topic, MESSAGE_ENCODING, &kind.metadata(key))
@@ -1062,7 +1745,7 @@ impl std::fmt::Debug for Recorder {
 
 impl Recorder {
     /// Create `path` (truncating it) and write the header, the run's metadata and the
-    /// scenario attachment, and register the fixed channels.
+    /// scenario attachment, and register the fixed channels (with their schemas).
     pub fn create(path: &Path, meta: RecordingMeta) -> anyhow::Result<Recorder> {
         let base_ns = start_ns(&meta.start_utc)?;
         let file =
@@ -1110,17 +1793,10 @@ impl Recorder {
             })
             .with_context(ctx)?;
 
-        let mut schema_ids = [0u16; CHANNEL_KINDS.len()];
-        for (slot, kind) in schema_ids.iter_mut().zip(CHANNEL_KINDS) {
-            *slot = writer
-                .add_schema(kind.schema_name(), SCHEMA_ENCODING, &kind.schema_json()?)
-                .with_context(ctx)?;
-        }
-
         let mut out = McapOut {
             writer,
             path: path.to_owned(),
-            schema_ids,
+            schema_ids: [None; CHANNEL_KINDS.len()],
             chans: Vec::new(),
         };
         for (kind, key) in FIXED_CHANNELS {
@@ -1192,4 +1868,142 @@ pub fn start_ns(start_utc: &str) -> anyhow::Result<u64> {
     u64::try_from(ns).with_context(|| {
         format!("recording start time {start_utc} is before 1970 (MCAP times are unsigned)")
     })
+}
+
+// Foxglove's published JSON Schemas, verbatim from the npm package `@foxglove/schemas` 2.1.0
+// (MIT; `dist/jsonschema`, which its build copies from foxglove-sdk's
+// `schemas/jsonschema/*.json`), printed as those files are: `JSON.stringify(schema, null, 2)`
+// and a newline. Foxglove's panels recognise the channels by these schema names.
+
+/// Foxglove's `foxglove.FrameTransform` JSON Schema (`@foxglove/schemas` 2.1.0), for
+/// `/fc/truth/tf` and `/fc/estimate/tf`.
+pub const FOXGLOVE_FRAME_TRANSFORM_SCHEMA: &str =
+    include_str!("../data/foxglove/FrameTransform.json");
+
+/// Foxglove's `foxglove.LocationFix` JSON Schema (`@foxglove/schemas` 2.1.0), for
+/// `/fc/truth/location`.
+pub const FOXGLOVE_LOCATION_FIX_SCHEMA: &str = include_str!("../data/foxglove/LocationFix.json");
+
+/// Foxglove's `foxglove.SceneUpdate` JSON Schema (`@foxglove/schemas` 2.1.0), for
+/// `/fc/scene`.
+pub const FOXGLOVE_SCENE_UPDATE_SCHEMA: &str = include_str!("../data/foxglove/SceneUpdate.json");
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// `v` rotated by `q` (`v + 2w (q x v) + 2 q x (q x v)`).
+    fn rotate(q: QuatMsg, v: [f64; 3]) -> [f64; 3] {
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let u = [q.x, q.y, q.z];
+        let t = cross(u, v).map(|c| 2.0 * c);
+        let w = cross(u, t);
+        [0, 1, 2].map(|i| v[i] + q.w * t[i] + w[i])
+    }
+
+    #[test]
+    fn arrow_orientation_turns_x_onto_the_direction() {
+        let s = 1.0 / 3f64.sqrt();
+        for d in [
+            [1.0, 0.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, -1.0],
+            [s, -s, s],
+            [-0.6, 0.0, 0.8],
+            [-1.0, 1e-12, 0.0],
+        ] {
+            let d = unit(d).unwrap();
+            let q = arrow_orientation(d);
+            let n = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+            assert!((n - 1.0).abs() < 1e-12, "{d:?}: {q:?}");
+            let got = rotate(q, [1.0, 0.0, 0.0]);
+            for i in 0..3 {
+                assert!((got[i] - d[i]).abs() < 1e-9, "{d:?}: {got:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn every_kind_has_a_json_schema_titled_with_its_name() {
+        for kind in CHANNEL_KINDS {
+            let schema: serde_json::Value =
+                serde_json::from_slice(&kind.schema_json().unwrap()).unwrap();
+            assert_eq!(schema["title"], kind.schema_name(), "{kind:?}");
+            assert_eq!(CHANNEL_KINDS[kind as usize], kind);
+        }
+        // The Foxglove messages carry every field their schema requires.
+        let required = |schema: &str| -> Vec<String> {
+            let v: serde_json::Value = serde_json::from_str(schema).unwrap();
+            serde_json::from_value(v["required"].clone()).unwrap()
+        };
+        let stamp = foxglove_time(0, SimTime::from_secs(1));
+        let q = QuatMsg {
+            x: 0.0,
+            y: 0.0,
+            z: 0.0,
+            w: 1.0,
+        };
+        let truth = TruthSnapshot::default();
+        let mut state = truth_state(0, &truth);
+        state.r_eci_m = [Some(7e6), Some(0.0), Some(0.0)];
+        state.lat_deg = Some(0.0);
+        state.lon_deg = Some(0.0);
+        state.alt_m = Some(0.0);
+        for (schema, msg) in [
+            (
+                FOXGLOVE_FRAME_TRANSFORM_SCHEMA,
+                serde_json::to_value(frame_transform(stamp, FRAME_BODY, q)).unwrap(),
+            ),
+            (
+                FOXGLOVE_LOCATION_FIX_SCHEMA,
+                serde_json::to_value(location_fix(stamp, &state).unwrap()).unwrap(),
+            ),
+            (
+                FOXGLOVE_SCENE_UPDATE_SCHEMA,
+                serde_json::to_value(scene_update(stamp, &truth)).unwrap(),
+            ),
+        ] {
+            for k in required(schema) {
+                assert!(msg.get(&k).is_some(), "{k} missing in {msg}");
+            }
+        }
+        let entity: serde_json::Value = serde_json::from_str(FOXGLOVE_SCENE_UPDATE_SCHEMA).unwrap();
+        let entity_required: Vec<String> =
+            serde_json::from_value(entity["properties"]["entities"]["items"]["required"].clone())
+                .unwrap();
+        let msg = serde_json::to_value(scene_update(stamp, &truth)).unwrap();
+        for k in entity_required {
+            assert!(
+                msg["entities"][0].get(&k).is_some(),
+                "entity field {k} missing"
+            );
+        }
+    }
+
+    #[test]
+    fn zero_or_non_finite_positions_have_no_location() {
+        let stamp = foxglove_time(0, SimTime::ZERO);
+        let truth = TruthSnapshot::default();
+        let state = truth_state(0, &truth);
+        assert!(location_fix(stamp, &state).is_none(), "the Earth's centre");
+        // The default snapshot has no sun and no position: the scene keeps the box and axes.
+        let scene = scene_update(stamp, &truth);
+        assert_eq!(scene.entities[0].arrows.len(), 3);
+        assert_eq!(num(f64::NAN), None);
+        assert_eq!(num(f64::NEG_INFINITY), None);
+        assert_eq!(num(-0.5), Some(-0.5));
+        assert_eq!(
+            serde_json::to_string(&quat_wxyz([f64::NAN, 0.0, 1.0, f64::INFINITY])).unwrap(),
+            r#"{"w":null,"x":0.0,"y":1.0,"z":null}"#
+        );
+        assert_eq!(quat_xyzw([1.0, 0.0, f64::NAN, 0.0]), None);
+    }
 }

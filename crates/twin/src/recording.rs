@@ -22,9 +22,9 @@ use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde_json::Value;
 
 use crate::record::{
-    BeginFields, CanFrameMsg, CommandMsg, CspPacketMsg, ExpectationMsg, KissFrameMsg,
-    METADATA_NAME, NetPacketMsg, RecordingMeta, SCENARIO_ATTACHMENT, TOPIC_COMMANDS, TOPIC_CSP,
-    TOPIC_EXPECTATIONS, service_name,
+    AdcsMsg, BeginFields, CanFrameMsg, CommandMsg, CspPacketMsg, ExpectationMsg, KissFrameMsg,
+    METADATA_NAME, NetPacketMsg, RecordingMeta, SCENARIO_ATTACHMENT, TOPIC_ADCS, TOPIC_COMMANDS,
+    TOPIC_CSP, TOPIC_EXPECTATIONS, TOPIC_TRUTH_STATE, TruthStateMsg, service_name,
 };
 
 /// Largest record the reader accepts (a chunk is about 1 MiB; this only guards against a
@@ -368,7 +368,7 @@ pub struct CommandSummary {
 }
 
 /// What a recording holds, as `m6p-twin inspect` prints it.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Summary {
     /// The run's metadata, when the file has it.
     pub meta: Option<RecordingMeta>,
@@ -388,6 +388,10 @@ pub struct Summary {
     pub commands: BTreeMap<String, CommandSummary>,
     /// `/expectations` in file order.
     pub expectations: Vec<ExpectationMsg>,
+    /// The last `/fc/truth/state` message (runs that recorded the FC's truth).
+    pub truth_last: Option<TruthStateMsg>,
+    /// The last `/fc/adcs` message.
+    pub adcs_last: Option<AdcsMsg>,
     /// Why the file could not be read to its end (truncated or malformed), if so.
     pub incomplete: Option<String>,
 }
@@ -496,8 +500,23 @@ fn summarize_message(s: &mut Summary, m: &RecordedMessage) {
                 s.expectations.push(x);
             }
         }
+        TOPIC_TRUTH_STATE => {
+            if let Ok(x) = serde_json::from_slice::<TruthStateMsg>(&m.data) {
+                s.truth_last = Some(x);
+            }
+        }
+        TOPIC_ADCS => {
+            if let Ok(x) = serde_json::from_slice::<AdcsMsg>(&m.data) {
+                s.adcs_last = Some(x);
+            }
+        }
         _ => {}
     }
+}
+
+/// `x` with `decimals` decimals, `-` when null.
+fn opt(x: Option<f64>, decimals: usize) -> String {
+    x.map_or_else(|| "-".to_owned(), |v| format!("{v:.decimals$}"))
 }
 
 /// `ns` as seconds with nine decimals.
@@ -524,7 +543,7 @@ impl fmt::Display for Summary {
         )?;
         writeln!(f, "channels:")?;
         for c in &self.channels {
-            writeln!(f, "  {:<28} {:<18} {:>10}", c.topic, c.schema, c.messages)?;
+            writeln!(f, "  {:<28} {:<24} {:>10}", c.topic, c.schema, c.messages)?;
         }
         if !self.packets_per_node.is_empty() {
             writeln!(f, "CSP packets per source node:")?;
@@ -546,6 +565,30 @@ impl fmt::Display for Summary {
                     c.sent, c.answered, c.unanswered
                 )?;
             }
+        }
+        if let Some(x) = &self.truth_last {
+            writeln!(f, "FC truth at the end (t = {} s):", secs(x.t_ns))?;
+            writeln!(
+                f,
+                "  lat {} deg, lon {} deg, alt {} km; body rate {} deg/s; sun visible {}",
+                opt(x.lat_deg, 3),
+                opt(x.lon_deg, 3),
+                opt(x.alt_m.map(|a| a / 1e3), 3),
+                opt(x.rate_deg_s, 4),
+                opt(x.sun_visible_fraction, 2)
+            )?;
+        }
+        if let Some(a) = &self.adcs_last {
+            writeln!(
+                f,
+                "ADCS at the end: mode {} (commanded {}), state {}; pointing error {} deg, \
+                 estimation error {} deg",
+                a.mode_in_effect,
+                a.mode_commanded,
+                a.state,
+                opt(a.pointing_error_deg, 3),
+                opt(a.estimation_error_deg, 3)
+            )?;
         }
         if !self.expectations.is_empty() {
             writeln!(f, "expectations:")?;
@@ -569,7 +612,8 @@ impl fmt::Display for Summary {
 
 /// Flattens one JSON document into `(dotted key, cell)` pairs in document order (a
 /// `serde_json::Value` would sort the keys): objects recurse (`cfp.src`), null is an empty
-/// cell, strings are bare, arrays stay JSON text.
+/// cell, strings are bare, a non-empty array of scalars gives one cell per element
+/// (`r_eci_m[0]`, `r_eci_m[1]`, ...), other arrays stay JSON text.
 struct Flat<'a> {
     prefix: String,
     out: &'a mut Vec<(String, String)>,
@@ -616,8 +660,16 @@ impl<'de> Visitor<'de> for Flat<'_> {
         while let Some(v) = seq.next_element::<Value>()? {
             items.push(v);
         }
-        self.out
-            .push((self.prefix, Value::Array(items).to_string()));
+        let scalars = !items.is_empty() && items.iter().all(|v| !v.is_array() && !v.is_object());
+        if scalars {
+            for (i, v) in items.into_iter().enumerate() {
+                self.out
+                    .push((format!("{}[{i}]", self.prefix), scalar_cell(v)));
+            }
+        } else {
+            self.out
+                .push((self.prefix, Value::Array(items).to_string()));
+        }
         Ok(())
     }
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
@@ -637,6 +689,21 @@ impl<'de> Visitor<'de> for Flat<'_> {
     }
 }
 
+/// The cell of a scalar array element, written as [`Flat`] writes a scalar field.
+fn scalar_cell(v: Value) -> String {
+    match v {
+        Value::Null => String::new(),
+        Value::String(s) => s,
+        Value::Number(n) => match (n.as_u64(), n.as_i64(), n.as_f64()) {
+            (Some(u), _, _) => u.to_string(),
+            (None, Some(i), _) => i.to_string(),
+            (None, None, Some(f)) => f.to_string(),
+            _ => n.to_string(),
+        },
+        v => v.to_string(),
+    }
+}
+
 /// Flatten the JSON message `data` into `out` (cleared first).
 fn flatten(data: &[u8], out: &mut Vec<(String, String)>) -> serde_json::Result<()> {
     out.clear();
@@ -649,9 +716,12 @@ fn flatten(data: &[u8], out: &mut Vec<(String, String)>) -> serde_json::Result<(
     de.end()
 }
 
-/// Whether `key` is a field inside `parent` (`csp.len` inside `csp`).
+/// Whether `key` is a field or element inside `parent` (`csp.len` inside `csp`,
+/// `r_eci_m[0]` inside `r_eci_m`).
 fn is_child(key: &str, parent: &str) -> bool {
-    key.len() > parent.len() && key.starts_with(parent) && key.as_bytes()[parent.len()] == b'.'
+    key.len() > parent.len()
+        && key.starts_with(parent)
+        && matches!(key.as_bytes()[parent.len()], b'.' | b'[')
 }
 
 /// Merge one message's keys into the column list, keeping document order: a new key goes
@@ -694,7 +764,8 @@ fn csv_row<'a>(out: &mut impl Write, cells: impl Iterator<Item = &'a str>) -> st
 
 /// Export channel `channel` as CSV: a header row, then one row per message: `log_time_ns`
 /// and the message's JSON fields flattened (`cfp.src`, ...; null as an empty cell; arrays
-/// as JSON text), columns in the messages' field order. Reads the file twice (columns, then
+/// of numbers one column per element, `r_eci_m[0]`; other arrays as JSON text), columns in
+/// the messages' field order. Reads the file twice (columns, then
 /// rows), streaming both times. Returns the number of rows. A truncated file is an error
 /// before anything is written.
 pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::Result<u64> {

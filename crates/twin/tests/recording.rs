@@ -3,9 +3,12 @@
 //! (the `mcap` Python package) decoding every channel.
 #![allow(clippy::unwrap_used)]
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::TempFile;
+
+use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU32, Ordering};
 
 use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CanFrame, fragment_with_ident};
@@ -13,29 +16,6 @@ use csp::{Header, Packet, SimTime};
 use m6p_twin::events::{Direction, Level, RunEvent};
 use m6p_twin::record::{CspPacketMsg, Recorder, RecordingMeta, RecordingStats};
 use m6p_twin::recording::{self, DiffResult, RecordedMessage};
-
-/// A unique path in the temp dir, removed when dropped.
-struct TempFile(PathBuf);
-
-impl TempFile {
-    fn new(name: &str) -> TempFile {
-        static N: AtomicU32 = AtomicU32::new(0);
-        let n = N.fetch_add(1, Ordering::Relaxed);
-        TempFile(std::env::temp_dir().join(format!(
-            "m6p-twin-rec-{}-{name}-{n}.mcap",
-            std::process::id()
-        )))
-    }
-    fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempFile {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.0);
-    }
-}
 
 fn meta() -> RecordingMeta {
     RecordingMeta {
@@ -665,31 +645,11 @@ fn truncated_and_foreign_files_give_errors_not_panics() {
 /// machine without the package can still run the suite (`pip install mcap` to run it).
 #[test]
 fn python_mcap_package_decodes_every_channel() {
-    let have = std::process::Command::new("python3")
-        .args(["-c", "import mcap.reader"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !have {
-        if std::env::var_os("CI").is_some() {
-            panic!("python3 with the `mcap` package is required in CI: pip install mcap");
-        }
-        eprintln!("skipped: python3 `mcap` package not importable (pip install mcap)");
-        return;
-    }
     let f = TempFile::new("python");
     record(f.path(), &events());
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/decode_mcap.py");
-    let out = std::process::Command::new("python3")
-        .arg(&script)
-        .arg(f.path())
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let Some(stdout) = common::decode(f.path()) else {
+        return;
+    };
     assert!(stdout.contains("/csp/packets 5"), "{stdout}");
     assert!(stdout.contains("ground packets checked: 2"), "{stdout}");
     assert!(stdout.ends_with("ok\n"), "{stdout}");

@@ -1,0 +1,61 @@
+//! Helpers shared by the recording tests: temporary MCAP files and running
+//! `tests/decode_mcap.py` (the independent Python reader) on a recording.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU32, Ordering};
+
+/// A unique path in the temp dir, removed when dropped.
+pub struct TempFile(PathBuf);
+
+impl TempFile {
+    /// `m6p-twin-<pid>-<name>-<n>.mcap` in the temp dir.
+    pub fn new(name: &str) -> TempFile {
+        static N: AtomicU32 = AtomicU32::new(0);
+        let n = N.fetch_add(1, Ordering::Relaxed);
+        TempFile(
+            std::env::temp_dir().join(format!("m6p-twin-{}-{name}-{n}.mcap", std::process::id())),
+        )
+    }
+
+    /// The path.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// The script's standard output for `mcap_file`, after asserting it succeeded; `None` (with
+/// a note) when `python3` with the `mcap` package is missing, which fails under `CI`
+/// (`.ci/run` installs the package, so a missing package there is a broken CI setup).
+pub fn decode(mcap_file: &Path) -> Option<String> {
+    let have = std::process::Command::new("python3")
+        .args(["-c", "import mcap.reader"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !have {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "python3 with the `mcap` package is required in CI: pip install mcap"
+        );
+        eprintln!("skipped: python3 `mcap` package not importable (pip install mcap)");
+        return None;
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/decode_mcap.py");
+    let out = std::process::Command::new("python3")
+        .arg(&script)
+        .arg(mcap_file)
+        .output()
+        .expect("running python3");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(stdout)
+}
