@@ -1027,11 +1027,17 @@ mod tests {
     /// 2026-04-30T18:00:00Z, the default scenario's `start`.
     const START: u64 = 1_777_572_000;
 
-    fn host(tle: Option<(&str, &str)>) -> Host<FcApp> {
+    /// The FC's node on one packet interface with a default route.
+    fn node_cfg() -> NodeConfig {
         let mut c = NodeConfig::new("FC", 3);
         c.ifaces = vec![IfaceConfig::packet("p")];
         c.routes.set_default(Route::direct(0));
         c.epoch_unix_s = START;
+        c
+    }
+
+    fn host(tle: Option<(&str, &str)>) -> Host<FcApp> {
+        let c = node_cfg();
         let app = FcApp::new(FcConfig {
             epoch_unix_s: START,
             tle: tle.map(|(a, b)| (a.to_owned(), b.to_owned())),
@@ -1306,5 +1312,130 @@ mod tests {
         );
         assert_eq!(ask(&mut h, 10, &[2], late), vec![2, 0]);
         assert_eq!(ask(&mut h, 10, &[1], late)[..2], [1, 1]);
+    }
+
+    /// A nadir-pointing FC with the default TLE, flown for `secs` seconds.
+    fn flown(secs: u64) -> Host<FcApp> {
+        let c = node_cfg();
+        let app = FcApp::new(FcConfig {
+            epoch_unix_s: START,
+            tle: Some((L1.to_owned(), L2.to_owned())),
+            initial_mode: TargetMode::Nadir,
+            initial: InitialState {
+                w_body_rad_s: Vector3::new(0.0, 0.005, 0.0),
+                ..InitialState::default()
+            },
+            ..FcConfig::default()
+        });
+        let mut h = Host::new(c, app, SimTime::ZERO);
+        let end = SimTime::from_secs(secs);
+        while let Some(t) = h.poll_timeout().filter(|&t| t <= end) {
+            h.handle_timeout(t);
+        }
+        while h.node.poll_event().is_some() {}
+        h
+    }
+
+    #[test]
+    fn tmatp_reports_the_estimate_which_agrees_with_the_truth() {
+        let mut h = flown(1800);
+        let t = SimTime::from_secs(1800);
+        let atp = TmAtp::parse(&ask(&mut h, 10, &[2], t)[2..]).unwrap();
+        let est = h.app.estimate().unwrap();
+        assert_eq!(atp.q_eci_from_body, [est.w, est.i, est.j, est.k]);
+        let err_deg = est.angle_to(&h.app.attitude().q_eci_from_body).to_degrees();
+        assert!(err_deg < 0.5, "estimation error {err_deg} deg");
+        let g = TmGen::parse(&ask(&mut h, 10, &[1], t)[2..]).unwrap();
+        assert_eq!(g.current_mode, TargetMode::Nadir as u8);
+        let acd = TmAcd::parse(&ask(&mut h, 10, &[3], t)[2..]).unwrap();
+        assert_eq!(acd.state, adcs::STATE_TRACKING);
+        assert_eq!(acd.rw_state, [1; 4]);
+    }
+
+    /// The ICD 1.5 examples, verbatim, on port 13, with the RTC set to their 2020 times.
+    #[test]
+    fn the_four_icd_script_examples_are_flown_on_the_rtc() {
+        let examples = [
+            (
+                "adcs 1577836800 1577836920 pointECI 1 0 0 0",
+                TargetMode::FixedEci,
+            ),
+            (
+                "adcs 1577836800 1577836920 pointECI 0.707106 0 0 -0.707106",
+                TargetMode::FixedEci,
+            ),
+            (
+                "adcs 1577836800 1577836920 pointLVLH 1 0 0 0",
+                TargetMode::FixedLvlh,
+            ),
+            (
+                "adcs 1577836800 1577836920 pointGEO 54.6872 25.2797 100 0 0 1",
+                TargetMode::EarthTarget,
+            ),
+        ];
+        for (line, mode) in examples {
+            let mut h = flown(900);
+            let t0 = SimTime::from_secs(900);
+            // RTCSTMSET 1577836790: the script starts 10 s later on the FC's clock.
+            let mut set = vec![1];
+            set.extend_from_slice(&1_577_836_790u32.to_le_bytes());
+            assert_eq!(ask(&mut h, 11, &set, t0), vec![1, 1]);
+            assert_eq!(
+                ask(&mut h, 13, line.as_bytes(), t0),
+                vec![b'a', 1],
+                "{line}"
+            );
+            assert_eq!(h.app.scripts().len(), 1);
+            // The same line again overlaps itself: refused.
+            assert_eq!(
+                ask(&mut h, 13, line.as_bytes(), t0),
+                vec![b'a', 0],
+                "{line}"
+            );
+            let during = SimTime::from_secs(900 + 20);
+            while let Some(t) = h.poll_timeout().filter(|&t| t <= during) {
+                h.handle_timeout(t);
+            }
+            let g = TmGen::parse(&ask(&mut h, 10, &[1], during)[2..]).unwrap();
+            assert_eq!(g.current_mode, mode as u8, "{line}");
+            // After END (120 s on the RTC) the ATCMDSET mode, nadir, is back.
+            let after = SimTime::from_secs(900 + 10 + 121);
+            while let Some(t) = h.poll_timeout().filter(|&t| t <= after) {
+                h.handle_timeout(t);
+            }
+            let g = TmGen::parse(&ask(&mut h, 10, &[1], after)[2..]).unwrap();
+            assert_eq!(g.current_mode, TargetMode::Nadir as u8, "{line}");
+            assert!(h.app.scripts().is_empty());
+        }
+    }
+
+    #[test]
+    fn tle_upload_gives_the_fc_its_orbit() {
+        let c = node_cfg();
+        let app = FcApp::new(FcConfig {
+            epoch_unix_s: START,
+            tle: Some((L1.to_owned(), L2.to_owned())),
+            tle_uploaded: false,
+            ..FcConfig::default()
+        });
+        let mut h = Host::new(c, app, SimTime::ZERO);
+        let t = SimTime::from_secs(10);
+        assert_eq!(
+            ask(&mut h, 10, &[2], t),
+            vec![2, 0],
+            "no orbit before the upload"
+        );
+        assert_eq!(ask(&mut h, 12, &[8], t), vec![8, 0]);
+        let mut req = vec![7];
+        req.extend_from_slice(L1.as_bytes());
+        req.extend_from_slice(L2.as_bytes());
+        assert_eq!(ask(&mut h, 12, &req, t), vec![7, 1]);
+        assert_eq!(ask(&mut h, 12, &[8], t)[2..], req[1..]);
+        assert_eq!(ask(&mut h, 10, &[2], t)[..2], [2, 1]);
+        // A line with a bad checksum or the wrong length is refused.
+        let mut bad = req.clone();
+        bad[69] = b'7';
+        assert_eq!(ask(&mut h, 12, &bad, t), vec![7, 0]);
+        assert_eq!(ask(&mut h, 12, &req[..100], t), vec![7, 0]);
     }
 }

@@ -169,6 +169,7 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
         }
         Check::Attitude {
             quantity,
+            occurrence,
             below,
             above,
             from,
@@ -179,6 +180,7 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
             report,
             AttitudeCheck {
                 quantity,
+                occurrence: *occurrence,
                 below: *below,
                 above: *above,
                 from: *from,
@@ -227,6 +229,7 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
 
 struct AttitudeCheck<'a> {
     quantity: &'a str,
+    occurrence: Occurrence,
     below: Option<f64>,
     above: Option<f64>,
     from: SimTime,
@@ -304,6 +307,13 @@ fn check_attitude(
         "{n} samples in {window}, {} from {lo:.4} to {hi:.4}",
         c.quantity
     );
+    if c.occurrence == Occurrence::Any {
+        return if failures < n {
+            Ok((c.to, format!("{} of {range} within bounds", n - failures)))
+        } else {
+            Err((c.to, format!("none of {range} within bounds")))
+        };
+    }
     match first {
         Some((t, p)) => Err((t, format!("{failures} of {range}; first at {t}: {p}"))),
         None => Ok((c.to, range)),

@@ -80,6 +80,8 @@ pub enum Check {
     Attitude {
         /// The figure (`scenario::ATTITUDE_QUANTITIES`).
         quantity: String,
+        /// Every selected sample (default) or at least one must be within bounds.
+        occurrence: Occurrence,
         /// Upper bound (exclusive).
         below: Option<f64>,
         /// Lower bound (exclusive).
@@ -200,11 +202,15 @@ pub fn compile(s: &Scenario) -> Compiled {
             RequestKind::Reboot => (4, csp::service::REBOOT_MAGIC.to_be_bytes().to_vec()),
             RequestKind::Raw => (
                 c.port.unwrap_or(0),
-                c.data
-                    .as_deref()
-                    .map(parse_hex)
-                    .and_then(Result::ok)
-                    .unwrap_or_default(),
+                match &c.text {
+                    Some(t) => t.as_bytes().to_vec(),
+                    None => c
+                        .data
+                        .as_deref()
+                        .map(parse_hex)
+                        .and_then(Result::ok)
+                        .unwrap_or_default(),
+                },
             ),
         };
         let timeout = c.timeout.map_or(Duration::from_secs(5), |d| d.0);
@@ -464,6 +470,7 @@ fn compile_expectation(
         },
         ExpectKind::Attitude => Check::Attitude {
             quantity: x.quantity.clone().unwrap_or_default(),
+            occurrence,
             below: x.below,
             above: x.above,
             from: x.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),

@@ -459,6 +459,10 @@ pub struct CommandSpec {
     /// Request bytes as hex (`raw` only), for example `"01"` or `"06 01 00"`.
     #[serde(default)]
     pub data: Option<String>,
+    /// Request bytes as text (`raw` only, instead of `data`), for example an ICD 1.5 script
+    /// line for FC port 13.
+    #[serde(default)]
+    pub text: Option<String>,
     /// How long to wait for the reply.
     #[serde(default)]
     pub timeout: Option<Dur>,
@@ -539,7 +543,8 @@ pub struct ExpectationSpec {
     /// The command (by name) for `reply` and `no-reply`.
     #[serde(default)]
     pub command: Option<String>,
-    /// For repeated commands: `every` occurrence must hold (default), or `any`.
+    /// For repeated commands: `every` occurrence must hold (default), or `any`; for
+    /// `attitude`: every selected sample (default), or `any` one.
     #[serde(default)]
     pub occurrence: Option<Occurrence>,
     /// Longest acceptable round trip for `reply`.
@@ -1003,11 +1008,23 @@ impl Scenario {
             if raw && c.port.is_none() {
                 err(p("request"), "a `raw` request needs `port`".into());
             }
-            if !raw && (c.port.is_some() || c.data.is_some()) {
+            if !raw && (c.port.is_some() || c.data.is_some() || c.text.is_some()) {
                 err(
-                    p(if c.port.is_some() { "port" } else { "data" }),
-                    "only a `raw` request takes `port` and `data`".into(),
+                    p(if c.port.is_some() {
+                        "port"
+                    } else if c.data.is_some() {
+                        "data"
+                    } else {
+                        "text"
+                    }),
+                    "only a `raw` request takes `port`, `data` and `text`".into(),
                 );
+            }
+            if c.data.is_some() && c.text.is_some() {
+                err(p("text"), "give `data` or `text`, not both".into());
+            }
+            if c.text.as_ref().is_some_and(|t| t.len() > 256) {
+                err(p("text"), "more than the CSP MTU of 256 bytes".into());
             }
             if c.port.is_some_and(|port| port > 63) {
                 err(
