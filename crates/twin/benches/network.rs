@@ -1,6 +1,8 @@
 //! Network benchmarks (criterion): CSP request-reply round trips per second between two
-//! nodes over the in-process CAN bus in virtual time, 64-byte payload, and the whole
-//! default network for a simulated hour.
+//! nodes over the in-process CAN bus in virtual time, 64-byte payload, the whole
+//! default network for a simulated hour, and the embedded default scenario (FC flying its
+//! ADCS at 10 Hz, publishing at 1 Hz) for ten simulated minutes with and without the MCAP
+//! recorder (`m6p-twin run --record`).
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -139,5 +141,43 @@ fn bench_default_network(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_round_trips, bench_default_network);
+/// Ten simulated minutes of the embedded default scenario, as `m6p-twin run` runs it,
+/// recording to `record` when given; returns the recording's size in bytes.
+fn default_scenario_10min(record: Option<&std::path::Path>) -> u64 {
+    use m6p_twin::exec::{compile_loaded, execute_recorded, load_default, with_duration};
+    let loaded = load_default().expect("default scenario");
+    let mut compiled = compile_loaded(&loaded);
+    with_duration(&mut compiled, Duration::from_secs(600));
+    let rt = build_runtime(compiled.opts.clock).expect("runtime");
+    let (outcome, stats) = rt
+        .block_on(execute_recorded(&loaded, compiled, record))
+        .expect("run");
+    assert_eq!(outcome.report.sim_time, SimTime::from_secs(600));
+    stats.map_or(0, |s| s.bytes)
+}
+
+fn bench_default_scenario(c: &mut Criterion) {
+    let path = std::env::temp_dir().join(format!("m6p-twin-bench-{}.mcap", std::process::id()));
+    let mut g = c.benchmark_group("network");
+    // Elements per second = simulated seconds per wall second.
+    g.throughput(Throughput::Elements(600));
+    g.sample_size(10).measurement_time(Duration::from_secs(5));
+    g.bench_function("default_scenario_10min_virtual", |b| {
+        b.iter(|| default_scenario_10min(None))
+    });
+    g.bench_function("default_scenario_10min_virtual_recorded", |b| {
+        b.iter(|| default_scenario_10min(Some(&path)))
+    });
+    g.finish();
+    let bytes = default_scenario_10min(Some(&path));
+    eprintln!("10 minutes of the default scenario: recording of {bytes} bytes");
+    let _ = std::fs::remove_file(&path);
+}
+
+criterion_group!(
+    benches,
+    bench_round_trips,
+    bench_default_network,
+    bench_default_scenario
+);
 criterion_main!(benches);
