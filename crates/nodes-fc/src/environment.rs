@@ -149,36 +149,14 @@ impl EnvModel {
     }
 }
 
-/// Atmospheric density, kg/m^3, from the exponential model of Vallado, "Fundamentals of
-/// Astrodynamics and Applications", 4th ed., table 8-4 (rows 200-1000 km), at geodetic-ish
-/// altitude `alt_m` (the caller passes |r| - the equatorial radius). Zero above 1000 km
-/// extrapolates the last row; below 200 km the first.
+/// Atmospheric density, kg/m^3, at altitude `alt_m`: `orbit`'s exponential model
+/// (Vallado 2013 table 8-4); zero for a non-finite altitude.
 pub fn density_kg_m3(alt_m: f64) -> f64 {
-    // (base altitude km, nominal density kg/m^3, scale height km)
-    const TABLE: [(f64, f64, f64); 12] = [
-        (200.0, 2.789e-10, 37.105),
-        (250.0, 7.248e-11, 45.546),
-        (300.0, 2.418e-11, 53.628),
-        (350.0, 9.518e-12, 53.298),
-        (400.0, 3.725e-12, 58.515),
-        (450.0, 1.585e-12, 60.828),
-        (500.0, 6.967e-13, 63.822),
-        (600.0, 1.454e-13, 71.835),
-        (700.0, 3.614e-14, 88.667),
-        (800.0, 1.170e-14, 124.64),
-        (900.0, 5.245e-15, 181.05),
-        (1000.0, 3.019e-15, 268.00),
-    ];
-    let h_km = alt_m / 1e3;
-    if !h_km.is_finite() {
-        return 0.0;
+    if alt_m.is_finite() {
+        orbit::cowell::exponential_density_kg_m3(alt_m / 1e3)
+    } else {
+        0.0
     }
-    let row = TABLE
-        .iter()
-        .rev()
-        .find(|r| h_km >= r.0)
-        .unwrap_or(&TABLE[0]);
-    row.1 * (-(h_km - row.0) / row.2).exp()
 }
 
 /// The bus's outer shape for drag: six faces of a box, normals and centres in BCF.
