@@ -8,13 +8,36 @@
 //!   leaves it for the requested mode once the orbit is known (TLE uploaded or GPS valid),
 //!   the attitude estimate is initialised, and the measured rate has stayed below
 //!   [`AdcsConfig::detumble_exit_rate_rad_s`] for [`AdcsConfig::detumble_exit_hold_s`]. It
-//!   falls back to detumble when the measured rate exceeds
+//!   falls back to detumble (the safe mode) when the measured rate exceeds
 //!   [`AdcsConfig::safe_rate_rad_s`] for [`AdcsConfig::safe_hold_s`] (a tumble: a stuck
-//!   wheel, a controller fighting a bad estimate).
+//!   wheel, a controller fighting a bad estimate), or when the estimator has been unhealthy
+//!   for [`HealthConfig::dwell_s`] (below); [`Adcs::fallback_reason`] says which.
 //! - **Determination**: the MEKF ([`crate::estimator`]) propagated with the gyro and updated
 //!   with the magnetometer (every tick) and the sun vector of the coarse sun sensors (when
 //!   the onboard model says sunlit); initialised by TRIAD (sun primary, field secondary).
-//!   Without a gyro the rate is the smoothed finite difference of successive estimates.
+//! - **Without a gyro** (dead, or a non-finite sample) the MEKF carries the body rate as a
+//!   state and propagates it with Euler's equations, `I dw/dt = tau - w x (I w + h)`, from
+//!   what the flight software knows: the wheels' reaction torque from the tachometers
+//!   (`-(h(t) - h(t - dt)) / dt`: exact, it includes friction, clipping and a seized wheel),
+//!   the magnetorquer torque of the last command and of the ground-measured residual dipole
+//!   ([`AdcsConfig::residual_dipole_am2`]) on the last calibrated field, and the gravity
+//!   gradient at the onboard position and the estimated attitude; drag and any unmeasured
+//!   dipole (below 1e-7 N m) are the filter's rate random walk. The residual dipole matters:
+//!   its 1e-7 N m, unmodelled, turned into 0.05 deg/s of rate error over 15 minutes of
+//!   eclipse (magnetometer only) and tens of degrees of drift. The controller and
+//!   the safe-rate check use that rate state. (Until this change the attitude was held
+//!   between updates and the rate was the finite difference of successive estimates: in
+//!   eclipse, with the magnetometer alone, the estimate drifted about the field at the orbit
+//!   rate, the controller followed it and the loop diverged to 8 deg/s without the rate
+//!   fallback seeing it, since it watched that same estimate.)
+//! - **Estimator health** ([`HealthConfig`]): running averages (time constant
+//!   [`HealthConfig::window_s`]) of the fraction of vector updates the MEKF gates out and of
+//!   their normalised innovation squared, and the MEKF's attitude 1-sigma. Any of them past
+//!   its threshold makes the estimator unhealthy; unhealthy for [`HealthConfig::dwell_s`],
+//!   the ADCS restarts the filter (TRIAD again, bias forgotten) and, in a pointing mode,
+//!   falls back to detumble. It leaves detumble only with a healthy estimator. A flight
+//!   ADCS watches its estimator because the rate fallback alone cannot see a confidently
+//!   wrong estimate: the rate it watches comes from that estimate.
 //! - **Control**: quaternion feedback with rate limit and gyroscopic compensation on the
 //!   healthy reaction wheels ([`crate::control`]), momentum desaturation with the
 //!   magnetorquers. Idle: every actuator off.
@@ -41,6 +64,78 @@ pub const STATE_ACQUIRING: u8 = 2;
 /// TMACD `state`: tracking the target.
 pub const STATE_TRACKING: u8 = 3;
 
+/// [`Adcs::fallback_reason`]: the body rate stayed above the safe rate.
+pub const REASON_RATE: &str = "rate above the safe limit";
+/// [`Adcs::fallback_reason`]: the MEKF gated out too many updates.
+pub const REASON_GATED: &str = "estimator unhealthy: updates gated out";
+/// [`Adcs::fallback_reason`]: the accepted innovations were too large for the filter's
+/// covariance.
+pub const REASON_INNOVATION: &str = "estimator unhealthy: innovations too large";
+/// [`Adcs::fallback_reason`]: the attitude uncertainty grew too large.
+pub const REASON_SIGMA: &str = "estimator unhealthy: attitude uncertainty too large";
+
+/// Thresholds of the estimator health monitor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HealthConfig {
+    /// Time constant of the running averages (gated fraction, innovation), s.
+    pub window_s: f64,
+    /// Gated fraction of the vector updates above which the estimator is unhealthy.
+    pub max_rejected_fraction: f64,
+    /// Mean normalised innovation squared above which the estimator is unhealthy (each
+    /// update's value clipped at [`NIS_CLIP`] before averaging).
+    pub max_mean_nis: f64,
+    /// Attitude 1-sigma (worst axis) above which the estimator is unhealthy, rad.
+    pub max_attitude_sigma_rad: f64,
+    /// How long the estimator must stay unhealthy before the ADCS acts, s.
+    pub dwell_s: f64,
+}
+
+/// A single update's normalised innovation squared counts at most this much in the mean
+/// (four times the 5-sigma gate's 25): one wild outlier does not make the mean.
+pub const NIS_CLIP: f64 = 100.0;
+
+impl Default for HealthConfig {
+    /// - `window_s` 60 s: a minute of 10 Hz updates (600-1200), long against one noisy or
+    ///   gated sample, short against the 10 s safe-rate hold plus a slew.
+    /// - `max_rejected_fraction` 0.5: a consistent filter gates out 4e-6 of its updates; half
+    ///   means a sensor (or the estimate) is wrong, not noisy.
+    /// - `max_mean_nis` 10: the mean is about 2 for a consistent filter (two degrees of
+    ///   freedom per vector); measured nominal runs stay below 1.5 (the 0.25 deg
+    ///   magnetometer and 0.5 deg sun sigmas are conservative).
+    /// - `max_attitude_sigma_rad` 5 deg: the TRIAD start (10 deg) converges below 1 deg within
+    ///   a minute of sun and field updates; 5 deg is half the init sigma, and above the
+    ///   detumble exit's own 60 s hold after an initialisation.
+    /// - `dwell_s` 10 s, as the safe-rate hold: the averages already filter over a minute,
+    ///   and every second a controller spends on a wrong estimate (or a wrong rate) can put
+    ///   up to 2 mN m x 3 of wheel torque into the body (a 1 deg/s gyro bias jump trips after
+    ///   about 20 s with it; with 30 s a 5.7 deg/s one left the body at 7 deg/s).
+    fn default() -> Self {
+        HealthConfig {
+            window_s: 60.0,
+            max_rejected_fraction: 0.5,
+            max_mean_nis: 10.0,
+            max_attitude_sigma_rad: 5.0_f64.to_radians(),
+            dwell_s: 10.0,
+        }
+    }
+}
+
+/// The estimator health monitor's figures at the last tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EstimatorHealth {
+    /// Running gated fraction of the vector updates (0 without updates).
+    pub rejected_fraction: f64,
+    /// Running mean normalised innovation squared (0 without updates).
+    pub mean_nis: f64,
+    /// The MEKF's attitude 1-sigma, worst axis, rad (`pi` uninitialised).
+    pub attitude_sigma_rad: f64,
+    /// The first threshold exceeded ([`REASON_GATED`], [`REASON_INNOVATION`],
+    /// [`REASON_SIGMA`]); `None` while healthy or uninitialised.
+    pub unhealthy: Option<&'static str>,
+    /// How long it has been unhealthy without a break, s.
+    pub unhealthy_s: f64,
+}
+
 /// Settings of the flight software.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AdcsConfig {
@@ -58,6 +153,11 @@ pub struct AdcsConfig {
     /// calibration"): by default the sensor model's bias, i.e. calibrated on the ground; a
     /// scenario's `bias:` fault adds an uncalibrated part on top.
     pub mag_calibration_bias_nt: Vector3<f64>,
+    /// The bus's residual magnetic dipole as measured on the ground, body, A m^2: its torque
+    /// `m x B` on the calibrated field is part of the gyro-less dynamics model. By default
+    /// the FC's default residual dipole (2, 2, 5) mA m^2 (a magnetic cleanliness test); a
+    /// scenario's other figure is an unmeasured part the filter's rate noise must cover.
+    pub residual_dipole_am2: Vector3<f64>,
     /// Rate below which detumbling may end, rad/s (1 deg/s).
     pub detumble_exit_rate_rad_s: f64,
     /// How long the rate must stay below the exit rate, s.
@@ -70,6 +170,8 @@ pub struct AdcsConfig {
     pub tracking_threshold_rad: f64,
     /// Solar panel normal for sun max power, body frame.
     pub panel_normal_body: Vector3<f64>,
+    /// Estimator health thresholds.
+    pub health: HealthConfig,
 }
 
 impl Default for AdcsConfig {
@@ -84,12 +186,15 @@ impl Default for AdcsConfig {
             mag_sigma_rad: 0.25_f64.to_radians(),
             sun_sigma_rad: 0.5_f64.to_radians(),
             mag_calibration_bias_nt: crate::sensors::SensorConfig::default().mag_bias_nt,
+            // The FC's default (`FcConfig::default().residual_dipole_am2`).
+            residual_dipole_am2: Vector3::new(0.002, 0.002, 0.005),
             detumble_exit_rate_rad_s: 1.0_f64.to_radians(),
             detumble_exit_hold_s: 60.0,
             safe_rate_rad_s: 5.0_f64.to_radians(),
             safe_hold_s: 10.0,
             tracking_threshold_rad: 2.0_f64.to_radians(),
             panel_normal_body: guidance::DEFAULT_PANEL_NORMAL_BODY,
+            health: HealthConfig::default(),
         }
     }
 }
@@ -145,8 +250,18 @@ pub struct Adcs {
     below_exit_s: f64,
     above_safe_s: f64,
     prev_mag_body_nt: Option<Vector3<f64>>,
-    prev_estimate: Option<UnitQuaternion<f64>>,
-    w_nogyro_body_rad_s: Vector3<f64>,
+    /// The wheel momentum at the last tick, body, N m s (for the gyro-less dynamics).
+    prev_h_wheels_body_nms: Option<Vector3<f64>>,
+    /// The known external torque over the step that follows the last tick (magnetorquer
+    /// command on the last field, gravity gradient), body, N m.
+    known_torque_body_nm: Vector3<f64>,
+    /// Running sums of the health monitor (time-weighted exponential averages).
+    avg_attempts: f64,
+    avg_rejected: f64,
+    avg_nis: f64,
+    health: EstimatorHealth,
+    fallback_reason: Option<&'static str>,
+    estimator_restarts: u64,
 }
 
 impl Adcs {
@@ -161,9 +276,37 @@ impl Adcs {
             below_exit_s: 0.0,
             above_safe_s: 0.0,
             prev_mag_body_nt: None,
-            prev_estimate: None,
-            w_nogyro_body_rad_s: Vector3::zeros(),
+            prev_h_wheels_body_nms: None,
+            known_torque_body_nm: Vector3::zeros(),
+            avg_attempts: 0.0,
+            avg_rejected: 0.0,
+            avg_nis: 0.0,
+            health: EstimatorHealth::default(),
+            fallback_reason: None,
+            estimator_restarts: 0,
         }
+    }
+
+    /// Why the ADCS last fell back to detumble ([`REASON_RATE`], [`REASON_GATED`],
+    /// [`REASON_INNOVATION`], [`REASON_SIGMA`]): `Some` from the fallback until it leaves
+    /// detumble again; `None` otherwise (and for a commanded detumble).
+    pub fn fallback_reason(&self) -> Option<&'static str> {
+        self.fallback_reason
+    }
+
+    /// The estimator health monitor's figures at the last tick.
+    pub fn health(&self) -> &EstimatorHealth {
+        &self.health
+    }
+
+    /// How many times the health monitor has restarted the estimator.
+    pub fn estimator_restarts(&self) -> u64 {
+        self.estimator_restarts
+    }
+
+    /// The gyro-less body rate estimate (the MEKF's rate state), rad/s; `None` with a gyro.
+    pub fn gyroless_rate_rad_s(&self) -> Option<Vector3<f64>> {
+        self.mekf.rate_state_rad_s()
     }
 
     /// The attitude estimate, if initialised.
@@ -186,13 +329,47 @@ impl Adcs {
         &self.cfg
     }
 
-    fn determine(&mut self, r: &SensorReadings, env: Option<&Environment>, dt_s: f64) {
+    /// The body's angular acceleration over the last step for the gyro-less propagation:
+    /// Euler's equations with the wheels' reaction torque from the tachometers, the known
+    /// external torque and the gyroscopic term at the rate state, rad/s^2.
+    fn gyroless_accel_rad_s2(&self, h_wheels_body_nms: &Vector3<f64>, dt_s: f64) -> Vector3<f64> {
+        let w = self.mekf.rate_state_rad_s().unwrap_or_default();
+        let h_prev = self.prev_h_wheels_body_nms.unwrap_or(*h_wheels_body_nms);
+        let wheel_reaction = -(h_wheels_body_nms - h_prev) / dt_s;
+        let h_mid = (h_wheels_body_nms + h_prev) * 0.5;
+        let i = &self.body.inertia_kg_m2;
+        let torque = wheel_reaction + self.known_torque_body_nm - w.cross(&(i * w + h_mid));
+        i.try_inverse()
+            .map_or_else(Vector3::zeros, |inv| inv * torque)
+    }
+
+    fn propagate(&mut self, r: &SensorReadings, h_wheels_body_nms: &Vector3<f64>, dt_s: f64) {
+        match r
+            .gyro_body_rad_s
+            .filter(|g| g.iter().all(|x| x.is_finite()))
+        {
+            Some(g) => self.mekf.propagate(Some(&g), dt_s),
+            None if dt_s > 0.0 => {
+                let a = self.gyroless_accel_rad_s2(h_wheels_body_nms, dt_s);
+                self.mekf.propagate_without_gyro(&a, dt_s);
+            }
+            None => {}
+        }
+    }
+
+    fn determine(
+        &mut self,
+        r: &SensorReadings,
+        env: Option<&Environment>,
+        h_wheels_body_nms: &Vector3<f64>,
+        dt_s: f64,
+    ) -> (u32, u32, f64) {
         let Some(env) = env else {
             // No references: nothing to determine the attitude against.
             if self.mekf.is_initialised() {
-                self.mekf.propagate(r.gyro_body_rad_s.as_ref(), dt_s);
+                self.propagate(r, h_wheels_body_nms, dt_s);
             }
-            return;
+            return (0, 0, 0.0);
         };
         let sun_ref = (env.sun_visible_fraction > 0.5).then_some(env.sun_eci_unit);
         let b_ref = (env.b_eci_nt.norm() > 0.0).then_some(env.b_eci_nt);
@@ -203,47 +380,128 @@ impl Adcs {
             {
                 self.mekf.initialise(q);
             }
-            return;
+            return (0, 0, 0.0);
         }
-        self.mekf.propagate(r.gyro_body_rad_s.as_ref(), dt_s);
-        if let (Some(b_body), Some(b_eci)) = (r.mag_body_nt, b_ref) {
-            self.mekf
-                .update_vector(&b_body, &b_eci, self.cfg.mag_sigma_rad);
+        self.propagate(r, h_wheels_body_nms, dt_s);
+        // Update attempts that reached the gate, rejections, sum of clipped NIS.
+        let mut tally = (0u32, 0u32, 0.0f64);
+        let pairs = [
+            (r.mag_body_nt.zip(b_ref), self.cfg.mag_sigma_rad),
+            (r.sun_body_unit.zip(sun_ref), self.cfg.sun_sigma_rad),
+        ];
+        for (pair, sigma) in pairs {
+            let Some((meas, reference)) = pair else {
+                continue;
+            };
+            let rejected_before = self.mekf.rejected_updates();
+            let accepted = self.mekf.update_vector(&meas, &reference, sigma);
+            let rejected = self.mekf.rejected_updates() > rejected_before;
+            if accepted || rejected {
+                tally.0 += 1;
+                tally.1 += u32::from(rejected);
+                tally.2 += self.mekf.last_nis().unwrap_or(0.0).min(NIS_CLIP);
+            }
         }
-        if let (Some(s_body), Some(s_eci)) = (r.sun_body_unit, sun_ref) {
-            self.mekf
-                .update_vector(&s_body, &s_eci, self.cfg.sun_sigma_rad);
-        }
+        tally
     }
 
-    /// The estimated body rate: gyro minus estimated bias, or without a gyro the smoothed
-    /// finite difference of successive estimates.
-    fn rate_estimate(&mut self, r: &SensorReadings, dt_s: f64) -> Option<Vector3<f64>> {
+    /// Update the health monitor with one tick's update tally; restart the estimator after
+    /// `dwell_s` unhealthy. Returns the reason when it has just done so.
+    fn monitor_health(&mut self, tally: (u32, u32, f64), dt_s: f64) -> Option<&'static str> {
+        let h = self.cfg.health;
+        let a = if h.window_s > 0.0 {
+            (dt_s / h.window_s).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        // Per-tick sums averaged over the window; their ratios are per-update means.
+        self.avg_attempts += (f64::from(tally.0) - self.avg_attempts) * a;
+        self.avg_rejected += (f64::from(tally.1) - self.avg_rejected) * a;
+        self.avg_nis += (tally.2 - self.avg_nis) * a;
+        // Below a tenth of an update per tick on average the ratios mean little.
+        let enough = self.avg_attempts > 0.1;
+        let ratio = |x: f64| if enough { x / self.avg_attempts } else { 0.0 };
+        let rejected_fraction = ratio(self.avg_rejected);
+        let accepted = self.avg_attempts - self.avg_rejected;
+        let mean_nis = if enough && accepted > 0.05 {
+            (self.avg_nis / self.avg_attempts).min(NIS_CLIP)
+        } else {
+            0.0
+        };
+        let sigma = self.mekf.attitude_sigma_rad();
+        let unhealthy = if !self.mekf.is_initialised() {
+            None
+        } else if rejected_fraction > h.max_rejected_fraction {
+            Some(REASON_GATED)
+        } else if mean_nis > h.max_mean_nis {
+            Some(REASON_INNOVATION)
+        } else if sigma > h.max_attitude_sigma_rad {
+            Some(REASON_SIGMA)
+        } else {
+            None
+        };
+        let unhealthy_s = if unhealthy.is_some() {
+            self.health.unhealthy_s + dt_s
+        } else {
+            0.0
+        };
+        self.health = EstimatorHealth {
+            rejected_fraction,
+            mean_nis,
+            attitude_sigma_rad: sigma,
+            unhealthy,
+            unhealthy_s,
+        };
+        let why = unhealthy.filter(|_| unhealthy_s >= h.dwell_s)?;
+        // Restart: TRIAD again at the next sun and field, bias forgotten, averages cleared.
+        self.mekf.reset();
+        self.avg_attempts = 0.0;
+        self.avg_rejected = 0.0;
+        self.avg_nis = 0.0;
+        self.health.unhealthy = None;
+        self.health.unhealthy_s = 0.0;
+        self.estimator_restarts = self.estimator_restarts.saturating_add(1);
+        Some(why)
+    }
+
+    /// The estimated body rate: gyro minus estimated bias, or without a gyro the MEKF's rate
+    /// state.
+    fn rate_estimate(&self, r: &SensorReadings) -> Option<Vector3<f64>> {
         let est = self.mekf.attitude();
-        let w = match r.gyro_body_rad_s {
+        match r
+            .gyro_body_rad_s
+            .filter(|g| g.iter().all(|x| x.is_finite()))
+        {
             Some(g) => Some(if est.is_some() {
                 self.mekf.rate_body_rad_s(&g)
             } else {
                 g
             }),
-            None => match (self.prev_estimate, est) {
-                (Some(p), Some(q)) if dt_s > 0.0 => {
-                    let d = p.inverse() * q;
-                    let raw = d.scaled_axis() / dt_s;
-                    // First-order smoothing over ~1 s.
-                    let a = (dt_s / 1.0).min(1.0);
-                    self.w_nogyro_body_rad_s += (raw - self.w_nogyro_body_rad_s) * a;
-                    Some(self.w_nogyro_body_rad_s)
-                }
-                _ => None,
-            },
-        };
-        self.prev_estimate = est;
-        w
+            None => est.and(self.mekf.rate_state_rad_s()),
+        }
     }
 
     /// One ADCS tick of `dt_s`.
     pub fn step(&mut self, inp: &Inputs<'_>, dt_s: f64) -> Output {
+        let h_wheels = crate::truth::wheel_momentum_body_nms(&self.body, &inp.wheel_speed_rad_s);
+        let out = self.step_inner(inp, &h_wheels, dt_s);
+        // What the gyro-less propagation of the next tick knows of the external torque.
+        let b_t = self
+            .prev_mag_body_nt
+            .map_or_else(Vector3::zeros, |b| b * 1e-9);
+        let m = crate::truth::mtq_dipole_applied_am2(&self.body, &out.mtq_dipole_cmd_am2);
+        let gg = match (self.mekf.attitude(), inp.onboard) {
+            (Some(q), Some(env)) => {
+                crate::truth::gravity_gradient_body_nm(&self.body, &q, &env.r_eci_m)
+            }
+            _ => Vector3::zeros(),
+        };
+        self.known_torque_body_nm = (m + self.cfg.residual_dipole_am2).cross(&b_t) + gg;
+        self.prev_h_wheels_body_nms = Some(h_wheels);
+        out
+    }
+
+    fn step_inner(&mut self, inp: &Inputs<'_>, h_wheels: &Vector3<f64>, dt_s: f64) -> Output {
         let calibrated = SensorReadings {
             mag_body_nt: inp
                 .readings
@@ -252,8 +510,9 @@ impl Adcs {
             ..*inp.readings
         };
         let r = &calibrated;
-        self.determine(r, inp.onboard, dt_s);
-        let w_est = self.rate_estimate(r, dt_s);
+        let tally = self.determine(r, inp.onboard, h_wheels, dt_s);
+        let restarted = self.monitor_health(tally, dt_s);
+        let w_est = self.rate_estimate(r);
         let rate = w_est.map(|w| w.norm());
 
         let mut out = Output {
@@ -273,7 +532,8 @@ impl Adcs {
             return out;
         }
 
-        // Mode logic: leave detumble once slow, orbit known and estimate initialised.
+        // Mode logic: leave detumble once slow, orbit known and estimate initialised and
+        // healthy; fall back to it on a high rate or an unhealthy (restarted) estimator.
         if self.detumbling {
             match rate {
                 Some(w) if w < self.cfg.detumble_exit_rate_rad_s => self.below_exit_s += dt_s,
@@ -282,20 +542,29 @@ impl Adcs {
             if inp.request.mode != TargetMode::Detumble
                 && inp.onboard.is_some()
                 && self.mekf.is_initialised()
+                && self.health.unhealthy.is_none()
                 && self.below_exit_s >= self.cfg.detumble_exit_hold_s
             {
                 self.detumbling = false;
                 self.above_safe_s = 0.0;
+                self.fallback_reason = None;
             }
         } else {
             match rate {
                 Some(w) if w > self.cfg.safe_rate_rad_s => self.above_safe_s += dt_s,
                 _ => self.above_safe_s = 0.0,
             }
-            if inp.request.mode == TargetMode::Detumble || self.above_safe_s >= self.cfg.safe_hold_s
-            {
+            let why = if restarted.is_some() {
+                restarted
+            } else if self.above_safe_s >= self.cfg.safe_hold_s {
+                Some(REASON_RATE)
+            } else {
+                None
+            };
+            if inp.request.mode == TargetMode::Detumble || why.is_some() {
                 self.detumbling = true;
                 self.below_exit_s = 0.0;
+                self.fallback_reason = why;
             }
         }
 
@@ -310,7 +579,7 @@ impl Adcs {
 
         out.mode_in_effect = inp.request.mode;
         out.state = STATE_ACQUIRING;
-        let h_wheels = crate::truth::wheel_momentum_body_nms(&self.body, &inp.wheel_speed_rad_s);
+        let h_wheels = *h_wheels;
         let target = match (inp.request.pointing, inp.onboard) {
             (Some(p), Some(env)) => guidance::target(
                 &p,

@@ -65,6 +65,9 @@ struct Slow {
     valid_from_unix_s: f64,
     a_j2000_from_teme: Matrix3<f64>,
     igrf: Option<GaussCoefficients>,
+    /// The sun (km, ECI J2000) at the start and the end of the window: linear in between.
+    /// The sun moves 1.2e-5 rad in 60 s, so the chord is within 1e-11 rad of the arc.
+    sun_km: [Vector3<f64>; 2],
 }
 
 impl SlowModels {
@@ -74,17 +77,26 @@ impl SlowModels {
             unix_s >= s.valid_from_unix_s && unix_s < s.valid_from_unix_s + SLOW_REFRESH_S
         });
         if !fresh {
+            let end = UtcTime::from_unix_ns(t.unix_ns() + (SLOW_REFRESH_S * 1e9) as i64);
             self.cached = Some(Slow {
                 valid_from_unix_s: unix_s,
                 a_j2000_from_teme: frames::a_j2000_from_teme(t),
                 igrf: GaussCoefficients::igrf14(t.decimal_year()).ok(),
+                sun_km: [sun::sun_eci_km(t), sun::sun_eci_km(end)],
             });
         }
         self.cached.get_or_insert_with(|| Slow {
             valid_from_unix_s: unix_s,
             a_j2000_from_teme: Matrix3::identity(),
             igrf: None,
+            sun_km: [Vector3::zeros(); 2],
         })
+    }
+
+    /// The sun from the cached window (linear between its ends).
+    fn sun_km(slow: &Slow, unix_s: f64) -> Vector3<f64> {
+        let f = ((unix_s - slow.valid_from_unix_s) / SLOW_REFRESH_S).clamp(0.0, 1.0);
+        slow.sun_km[0] + (slow.sun_km[1] - slow.sun_km[0]) * f
     }
 
     /// The environment at an ECI J2000 state (m, m/s) at `unix_ns`.
@@ -104,7 +116,7 @@ impl SlowModels {
             .as_ref()
             .and_then(|g| g.field_eci(&r_km, &a_ecef_from_eci).ok())
             .map_or_else(Vector3::zeros, |f| f.b_eci_nt);
-        let sun_km = sun::sun_eci_km(t);
+        let sun_km = Self::sun_km(slow, t.unix_s());
         let ill = eclipse::illumination(&r_km, &sun_km);
         Environment {
             unix_ns,
@@ -257,6 +269,9 @@ mod tests {
             );
             let ill = eclipse::illumination_at(t, &exact.r_km);
             assert!((e.sun_visible_fraction - ill.visible_fraction).abs() < 1e-6);
+            let sun = (orbit::sun::sun_eci_km(t) - exact.r_km).normalize();
+            let d_sun_rad = e.sun_eci_unit.cross(&sun).norm();
+            assert!(d_sun_rad < 1e-9, "k {k}: sun off by {d_sun_rad} rad");
             let a = frames::a_ecef_from_eci(t, None);
             assert!((e.a_ecef_from_eci - a).norm() < 1e-9);
         }

@@ -28,12 +28,32 @@
 //!   Crassidis section 6.2: `Q11 = (sv^2 dt + su^2 dt^3 / 3) I`, `Q12 = -(su^2 dt^2 / 2) I`,
 //!   `Q22 = su^2 dt I`, where `sv^2 dt = (gyro_noise_rad_s * dt)^2` (the noise is given per
 //!   sample) and `su = gyro_bias_walk_rad_s2 * sqrt(1 s)`.
-//! - **Propagation without a gyro** (`None`, or a non-finite sample: the gyro is dead): the
-//!   attitude is held (`w = 0`, `Phi = I`) and the attitude block grows as a random walk,
-//!   `Q11 = no_gyro_rate_sigma^2 * dt * 1 s`: after one second without measurements the
-//!   attitude sigma has grown by `no_gyro_rate_sigma * 1 s`, as for a body turning at that
-//!   rate for that second, independent of `dt`. The bias keeps its estimate and its random
-//!   walk.
+//! - **Propagation without a gyro** ([`Mekf::propagate_without_gyro`], or `propagate(None)`:
+//!   the gyro is dead): the filter switches its second error block from the gyro bias to the
+//!   **body rate** (Markley & Crassidis section 6.2.4, "gyroless" attitude estimation with a
+//!   dynamics model). The rate state `w` is propagated with the body's angular acceleration
+//!   the caller computes from what it knows (Euler's equations with the wheel tachometers,
+//!   the magnetorquer command, the gravity gradient: `crate::adcs`), trapezoidally:
+//!   `q <- q * exp((0, (w + a dt / 2) dt / 2))`, `w <- w + a dt`. The error state is then
+//!   `dx = (dtheta, dw)` with `w_true = w + dw`, `F = [[-[w x], I], [0, 0]]` (the gyroscopic
+//!   coupling of `dw` is neglected: at the rates of a pointing bus, 1e-3 rad/s, it acts over
+//!   hours), `Phi12 = +integral_0^dt exp(-[w x] s) ds`, and the unmodelled torques (drag,
+//!   model errors; some 2e-8 N m on the default 6U, 4e-7 rad/s^2 about its smallest axis) as
+//!   a rate random walk [`MekfConfig::no_gyro_accel_sigma_rad_s2`]:
+//!   `Q11 = sa^2 dt^3 / 3`, `Q12 = sa^2 dt^2 / 2`, `Q22 = sa^2 dt`. The vector updates are
+//!   unchanged; their correction of the second block goes to the rate. Entering this mode the
+//!   rate starts at the running average of the gyro rate `gyro - b` (time constant
+//!   [`MekfConfig::gyro_rate_smoothing_s`]; its covariance the bias covariance plus the
+//!   averaged gyro noise, the cross terms negated as `dw = -db`), or at zero with
+//!   [`MekfConfig::no_gyro_rate_sigma_rad_s`] when no gyro rate is known. The gyro bias
+//!   estimate is frozen meanwhile and restored with the next gyro sample, its covariance grown
+//!   by the bias random walk over the gap (cross terms zero). Why a rate model and not the old
+//!   attitude random walk (`w = 0`): a nadir-pointing bus turns at the orbit rate
+//!   (0.063 deg/s) and the controller turns it further; holding the attitude makes every
+//!   propagation wrong by that, and in eclipse the magnetometer alone cannot see the rotation
+//!   about the field, so the estimate drifted about it, the controller followed the wrong
+//!   estimate and the loop diverged (the body reached 8 deg/s within 20 minutes of a dead gyro
+//!   in eclipse, on every seed of `scenarios/adcs-gyro-dead.toml`'s window).
 //! - **Vector update**: `meas_body = q_true^-1 * ref_eci + noise`, both unit-normalised. The
 //!   predicted measurement is `r_b = q^-1 * ref_eci`, the innovation `y = meas - r_b`, the
 //!   sensitivity `H = [[r_b x], 0]` (because `q_true^-1 ref = r_b + [r_b x] dtheta` to first
@@ -66,7 +86,10 @@
 //! - Uninitialised, `propagate` does nothing and `update_vector` returns `false`.
 //! - The filter does not bound its own attitude uncertainty: with the gyro dead and no
 //!   measurements, [`Mekf::attitude_sigma_rad`] grows without limit; the caller decides when
-//!   the estimate is too poor to use (and may reset and re-run TRIAD).
+//!   the estimate is too poor to use (and may reset and re-run TRIAD). For that it reads the
+//!   filter's health figures: [`Mekf::last_nis`] (the normalised innovation squared of the
+//!   last update attempt, accepted or gated), [`Mekf::accepted_updates`] and
+//!   [`Mekf::rejected_updates`], [`Mekf::attitude_sigma_rad`] (`crate::adcs` watches them).
 //!
 //! # Use (the ADCS loop at 10 Hz)
 //! While uninitialised, run [`triad`] (sun primary, field secondary) when both are
@@ -80,7 +103,9 @@
 //! error the attitude stays below 0.5 deg after 23-106 s and the bias within 0.01 deg/s
 //! after 39-87 s, with a steady error of 0.06-0.23 deg (mean) and 0.12-0.32 deg (max); with
 //! the field alone it stays below 1 deg after 243-654 s (0.08-0.36 deg mean later); with the
-//! gyro dead it follows a body turning at 0.2 deg/s to 0.6-1.1 deg (mean). One propagation
+//! gyro dead (the rate a filter state from zero) it follows a body turning at 0.2 deg/s
+//! to 0.09 deg mean, 0.2 deg max over the last 100 s (seed 5; the attitude random walk
+//! this replaced gave 0.6-1.1 deg mean). One propagation
 //! and two updates take about 1.5-2 us (release build).
 //!
 //! # TRIAD
@@ -101,10 +126,6 @@ use nalgebra::{Matrix3, Matrix6, Rotation3, SMatrix, UnitQuaternion, Vector3};
 /// One degree, rad.
 const DEG: f64 = PI / 180.0;
 
-/// The correlation time that turns [`MekfConfig::no_gyro_rate_sigma_rad_s`] into an attitude
-/// random walk, s: the attitude variance grows by `sigma^2 * dt * NO_GYRO_CORRELATION_S`.
-pub const NO_GYRO_CORRELATION_S: f64 = 1.0;
-
 /// Below this rotation angle `|w| dt`, rad, the transition matrix uses its Taylor series
 /// (the closed form loses digits to cancellation; the series' first neglected term is
 /// `theta^6 / 5040` relative, below 1e-15 here).
@@ -120,9 +141,17 @@ pub struct MekfConfig {
     /// axis, in rad/s (numerically the rate random walk density `su` in rad/s^(3/2)); the
     /// bias variance grows by `gyro_bias_walk_rad_s2^2 * dt * 1 s`.
     pub gyro_bias_walk_rad_s2: f64,
-    /// Attitude process noise rate when the gyro is dead, rad/s (see
-    /// [`NO_GYRO_CORRELATION_S`]).
+    /// Body rate 1-sigma per axis the gyro-less rate state starts with when no gyro rate is
+    /// known (the gyro was dead from the start), rad/s.
     pub no_gyro_rate_sigma_rad_s: f64,
+    /// Time constant of the running average of the gyro rate (`gyro - b`) that starts the
+    /// gyro-less rate state, s (one sample's noise would otherwise become a rate error that
+    /// lasts until the vector updates see it).
+    pub gyro_rate_smoothing_s: f64,
+    /// Rate random walk of the gyro-less propagation, rad/s^2: the 1-sigma change of the
+    /// body rate over one second that the dynamics model does not explain (the rate variance
+    /// grows by `no_gyro_accel_sigma_rad_s2^2 * dt * 1 s`).
+    pub no_gyro_accel_sigma_rad_s2: f64,
     /// Attitude 1-sigma per axis set by [`Mekf::initialise`] and by a gate reopening, rad.
     pub init_attitude_sigma_rad: f64,
     /// Gyro bias 1-sigma per axis set by [`Mekf::initialise`], rad/s.
@@ -146,6 +175,16 @@ impl Default for MekfConfig {
     ///   field-only case converge 2-4 times slower. Raise it for a gyro with a stronger
     ///   temperature drift.
     /// - `no_gyro_rate_sigma_rad_s` 0.5 deg/s: a controlled or slowly tumbling bus.
+    /// - `gyro_rate_smoothing_s` 10 s: the 0.01 deg/s sample noise averages down to
+    ///   0.0007 deg/s per axis; a pointing bus's rate changes far slower (the orbit rate is
+    ///   constant in nadir).
+    /// - `no_gyro_accel_sigma_rad_s2` 1e-6 rad/s^2: two to three times the angular
+    ///   acceleration the ADCS's dynamics model leaves out on the default 6U (drag, up to
+    ///   2e-8 N m, over 0.05 kg m^2). Chosen by simulation (`tests/health.rs`, nadir with the
+    ///   gyro dead for 30 minutes of eclipse, magnetometer only): 3e-7 to 1e-6 hold the
+    ///   estimate within 1 deg; 3e-6 drifts to about 1 deg and 1e-5 to 6 deg (the filter
+    ///   then explains the magnetometer noise as rate changes about the unobservable field
+    ///   axis). Raise it for a bus whose residual dipole is not measured.
     /// - `init_attitude_sigma_rad` 10 deg: covers a TRIAD from 2-5 deg coarse sun sensors and
     ///   a 1-2 deg field model.
     /// - `init_bias_sigma_rad_s` 0.5 deg/s: an uncalibrated MEMS turn-on bias (datasheet zero
@@ -157,6 +196,8 @@ impl Default for MekfConfig {
             gyro_noise_rad_s: 0.01 * DEG,
             gyro_bias_walk_rad_s2: 1.0e-6,
             no_gyro_rate_sigma_rad_s: 0.5 * DEG,
+            gyro_rate_smoothing_s: 10.0,
+            no_gyro_accel_sigma_rad_s2: 1.0e-6,
             init_attitude_sigma_rad: 10.0 * DEG,
             init_bias_sigma_rad_s: 0.5 * DEG,
             gate_sigma: 5.0,
@@ -176,6 +217,11 @@ impl MekfConfig {
             no_gyro_rate_sigma_rad_s: pick(
                 self.no_gyro_rate_sigma_rad_s,
                 d.no_gyro_rate_sigma_rad_s,
+            ),
+            gyro_rate_smoothing_s: pick(self.gyro_rate_smoothing_s, d.gyro_rate_smoothing_s),
+            no_gyro_accel_sigma_rad_s2: pick(
+                self.no_gyro_accel_sigma_rad_s2,
+                d.no_gyro_accel_sigma_rad_s2,
             ),
             init_attitude_sigma_rad: pick(self.init_attitude_sigma_rad, d.init_attitude_sigma_rad),
             init_bias_sigma_rad_s: pick(self.init_bias_sigma_rad_s, d.init_bias_sigma_rad_s),
@@ -199,11 +245,21 @@ pub struct Mekf {
     /// `q_eci_from_body`; `None` until initialised.
     q_eci_from_body: Option<UnitQuaternion<f64>>,
     bias_rad_s: Vector3<f64>,
-    /// Error-state covariance, `(dtheta, db)`.
+    /// Error-state covariance, `(dtheta, db)`, or `(dtheta, dw)` while gyro-less.
     p: Matrix6<f64>,
+    /// The body rate state while gyro-less (`None` with a gyro), rad/s.
+    rate_rad_s: Option<Vector3<f64>>,
+    /// The bias covariance frozen while gyro-less, and the time spent gyro-less, s.
+    frozen_bias_cov: Matrix3<f64>,
+    gyroless_s: f64,
+    /// The running average of the gyro rate (`gyro - b`), the gyro-less rate state's start,
+    /// and its noise variance per axis; `None` until the first gyro propagation.
+    last_gyro_rate_rad_s: Option<(Vector3<f64>, f64)>,
     consecutive_rejections: u32,
     rejected_updates: u64,
+    accepted_updates: u64,
     gate_reopenings: u64,
+    last_nis: Option<f64>,
 }
 
 impl Mekf {
@@ -216,9 +272,15 @@ impl Mekf {
             q_eci_from_body: None,
             bias_rad_s: Vector3::zeros(),
             p: cfg.init_covariance(),
+            rate_rad_s: None,
+            frozen_bias_cov: Matrix3::zeros(),
+            gyroless_s: 0.0,
+            last_gyro_rate_rad_s: None,
             consecutive_rejections: 0,
             rejected_updates: 0,
+            accepted_updates: 0,
             gate_reopenings: 0,
+            last_nis: None,
         }
     }
 
@@ -232,17 +294,21 @@ impl Mekf {
         self.q_eci_from_body.is_some()
     }
 
-    /// Return to uninitialised, bias estimate zero, covariance to the init sigmas. The
-    /// rejection counters survive (they are statistics).
+    /// Return to uninitialised, bias estimate zero, covariance to the init sigmas, no rate
+    /// state. The update counters survive (they are statistics).
     pub fn reset(&mut self) {
         self.q_eci_from_body = None;
         self.bias_rad_s = Vector3::zeros();
         self.p = self.cfg.init_covariance();
+        self.rate_rad_s = None;
+        self.last_gyro_rate_rad_s = None;
         self.consecutive_rejections = 0;
+        self.last_nis = None;
     }
 
     /// Start (or restart) from `q_eci_from_body` (e.g. [`triad`]'s), the covariance set to the
-    /// init sigmas; the bias estimate is kept. A non-finite quaternion is ignored.
+    /// init sigmas; the bias estimate is kept, a gyro-less rate state dropped (the next
+    /// gyro-less step starts it again). A non-finite quaternion is ignored.
     pub fn initialise(&mut self, q_eci_from_body: UnitQuaternion<f64>) {
         let c = q_eci_from_body.coords;
         if !c.iter().all(|x| x.is_finite()) || c.norm() == 0.0 {
@@ -250,13 +316,15 @@ impl Mekf {
         }
         self.q_eci_from_body = Some(UnitQuaternion::new_normalize(q_eci_from_body.into_inner()));
         self.p = self.cfg.init_covariance();
+        self.rate_rad_s = None;
         self.consecutive_rejections = 0;
     }
 
     /// Advance by `dt_s` with a gyro sample (rad/s, body frame, held over the step), or with
-    /// `None` when the gyro is dead: the attitude is held and its covariance inflated with
-    /// `no_gyro_rate_sigma_rad_s`. A non-finite sample counts as `None`; a non-finite or
-    /// non-positive `dt_s` does nothing; uninitialised, nothing happens.
+    /// `None` when the gyro is dead: then as [`Mekf::propagate_without_gyro`] with no
+    /// angular acceleration (a body turning at its estimated rate). A non-finite sample counts
+    /// as `None`; a non-finite or non-positive `dt_s` does nothing; uninitialised, nothing
+    /// happens.
     pub fn propagate(&mut self, gyro_body_rad_s: Option<&Vector3<f64>>, dt_s: f64) {
         let Some(q) = self.q_eci_from_body else {
             return;
@@ -264,41 +332,108 @@ impl Mekf {
         if !(dt_s.is_finite() && dt_s > 0.0) {
             return;
         }
-        let gyro = gyro_body_rad_s.filter(|g| g.iter().all(|x| x.is_finite()));
+        let Some(g) = gyro_body_rad_s.filter(|g| g.iter().all(|x| x.is_finite())) else {
+            self.propagate_without_gyro(&Vector3::zeros(), dt_s);
+            return;
+        };
         let su2 = self.cfg.gyro_bias_walk_rad_s2 * self.cfg.gyro_bias_walk_rad_s2;
-        let mut qd = Matrix6::zeros();
-        let (q_new, p_new) = match gyro {
-            Some(g) => {
-                let w = g - self.bias_rad_s;
-                let (phi11, phi12) = transition_blocks(&w, dt_s);
-                let sv_dt = self.cfg.gyro_noise_rad_s * dt_s;
-                let q11 = sv_dt * sv_dt + su2 * dt_s * dt_s * dt_s / 3.0;
-                let q12 = -su2 * dt_s * dt_s / 2.0;
-                let q22 = su2 * dt_s;
-                for i in 0..3 {
-                    qd[(i, i)] = q11;
-                    qd[(i, i + 3)] = q12;
-                    qd[(i + 3, i)] = q12;
-                    qd[(i + 3, i + 3)] = q22;
-                }
-                let mut phi = Matrix6::identity();
-                phi.fixed_view_mut::<3, 3>(0, 0).copy_from(&phi11);
-                phi.fixed_view_mut::<3, 3>(0, 3).copy_from(&phi12);
-                let q_new = q * UnitQuaternion::from_scaled_axis(w * dt_s);
-                (q_new, phi * self.p * phi.transpose() + qd)
-            }
+        let mut p = self.p;
+        if self.rate_rad_s.take().is_some() {
+            // The gyro is back: the frozen bias returns, grown by its walk over the gap.
+            let grown =
+                self.frozen_bias_cov + Matrix3::from_diagonal_element(su2 * self.gyroless_s);
+            p.fixed_view_mut::<3, 3>(3, 3).copy_from(&grown);
+            p.fixed_view_mut::<3, 3>(0, 3).fill(0.0);
+            p.fixed_view_mut::<3, 3>(3, 0).fill(0.0);
+            self.gyroless_s = 0.0;
+        }
+        let w = g - self.bias_rad_s;
+        let (phi11, phi12) = transition_blocks(&w, dt_s);
+        let sv_dt = self.cfg.gyro_noise_rad_s * dt_s;
+        let q11 = sv_dt * sv_dt + su2 * dt_s * dt_s * dt_s / 3.0;
+        let q12 = -su2 * dt_s * dt_s / 2.0;
+        let q22 = su2 * dt_s;
+        let qd = block_noise(q11, q12, q22);
+        let mut phi = Matrix6::identity();
+        phi.fixed_view_mut::<3, 3>(0, 0).copy_from(&phi11);
+        phi.fixed_view_mut::<3, 3>(0, 3).copy_from(&phi12);
+        let q_new = q * UnitQuaternion::from_scaled_axis(w * dt_s);
+        if self.commit(q_new, self.bias_rad_s, phi * p * phi.transpose() + qd) {
+            // Exponential average; its steady noise variance is sv^2 a / (2 - a).
+            let tau = self.cfg.gyro_rate_smoothing_s;
+            let a = if tau > dt_s { dt_s / tau } else { 1.0 };
+            let sv2 = self.cfg.gyro_noise_rad_s * self.cfg.gyro_noise_rad_s;
+            self.last_gyro_rate_rad_s = Some(match self.last_gyro_rate_rad_s {
+                Some((avg, var)) => (
+                    avg + (w - avg) * a,
+                    (1.0 - a) * (1.0 - a) * var + a * a * sv2,
+                ),
+                None => (w, sv2),
+            });
+        }
+    }
+
+    /// Advance by `dt_s` without a gyro, the body rate a filter state: `accel_body_rad_s2` is
+    /// the body's angular acceleration over the step as the caller's dynamics model predicts
+    /// it (Euler's equations with the known torques; zero for a body left alone at a low
+    /// rate). The first such step after gyro steps starts the rate state (module doc). A
+    /// non-finite acceleration counts as zero; a non-finite or non-positive `dt_s` does
+    /// nothing; uninitialised, nothing happens.
+    pub fn propagate_without_gyro(&mut self, accel_body_rad_s2: &Vector3<f64>, dt_s: f64) {
+        let Some(q) = self.q_eci_from_body else {
+            return;
+        };
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return;
+        }
+        let a = if accel_body_rad_s2.iter().all(|x| x.is_finite()) {
+            *accel_body_rad_s2
+        } else {
+            Vector3::zeros()
+        };
+        let mut p = self.p;
+        let w0 = match self.rate_rad_s {
+            Some(w) => w,
             None => {
-                let sr = self.cfg.no_gyro_rate_sigma_rad_s;
-                let q11 = sr * sr * dt_s * NO_GYRO_CORRELATION_S;
-                let q22 = su2 * dt_s;
-                for i in 0..3 {
-                    qd[(i, i)] = q11;
-                    qd[(i + 3, i + 3)] = q22;
+                // Enter gyro-less: freeze the bias block, start the rate (module doc).
+                self.frozen_bias_cov = p.fixed_view::<3, 3>(3, 3).into_owned();
+                self.gyroless_s = 0.0;
+                match self.last_gyro_rate_rad_s {
+                    Some((w, var)) => {
+                        let pww = self.frozen_bias_cov + Matrix3::from_diagonal_element(var);
+                        p.fixed_view_mut::<3, 3>(3, 3).copy_from(&pww);
+                        let c = -p.fixed_view::<3, 3>(0, 3).into_owned();
+                        p.fixed_view_mut::<3, 3>(0, 3).copy_from(&c);
+                        p.fixed_view_mut::<3, 3>(3, 0).copy_from(&c.transpose());
+                        w
+                    }
+                    None => {
+                        let s = self.cfg.no_gyro_rate_sigma_rad_s;
+                        p.fixed_view_mut::<3, 3>(3, 3)
+                            .copy_from(&Matrix3::from_diagonal_element(s * s));
+                        p.fixed_view_mut::<3, 3>(0, 3).fill(0.0);
+                        p.fixed_view_mut::<3, 3>(3, 0).fill(0.0);
+                        Vector3::zeros()
+                    }
                 }
-                (q, self.p + qd)
             }
         };
-        self.commit(q_new, self.bias_rad_s, p_new);
+        let w_mid = w0 + a * (dt_s / 2.0);
+        let (phi11, phi12) = transition_blocks(&w_mid, dt_s);
+        let sa2 = self.cfg.no_gyro_accel_sigma_rad_s2 * self.cfg.no_gyro_accel_sigma_rad_s2;
+        let q11 = sa2 * dt_s * dt_s * dt_s / 3.0;
+        let q12 = sa2 * dt_s * dt_s / 2.0;
+        let q22 = sa2 * dt_s;
+        let qd = block_noise(q11, q12, q22);
+        let mut phi = Matrix6::identity();
+        phi.fixed_view_mut::<3, 3>(0, 0).copy_from(&phi11);
+        phi.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-phi12));
+        let q_new = q * UnitQuaternion::from_scaled_axis(w_mid * dt_s);
+        let w_new = w0 + a * dt_s;
+        let p_new = phi * p * phi.transpose() + qd;
+        if self.commit_rate(q_new, w_new, p_new) {
+            self.gyroless_s += dt_s;
+        }
     }
 
     /// Fuse one unit-vector measurement: `meas_body` (body frame) of the direction
@@ -335,6 +470,7 @@ impl Mekf {
         if !d2.is_finite() {
             return false;
         }
+        self.last_nis = Some(d2);
         if d2 > self.cfg.gate_sigma * self.cfg.gate_sigma {
             self.note_rejection();
             return false;
@@ -347,11 +483,15 @@ impl Mekf {
         left -= kh;
         let p_new = i_kh * self.p * i_kh.transpose() + k * k.transpose() * r_var;
         let dtheta = Vector3::new(dx[0], dx[1], dx[2]);
-        let db = Vector3::new(dx[3], dx[4], dx[5]);
+        let d2nd = Vector3::new(dx[3], dx[4], dx[5]);
         let q_new = q * UnitQuaternion::from_scaled_axis(dtheta);
-        let ok = self.commit(q_new, self.bias_rad_s + db, p_new);
+        let ok = match self.rate_rad_s {
+            Some(w) => self.commit_rate(q_new, w + d2nd, p_new),
+            None => self.commit(q_new, self.bias_rad_s + d2nd, p_new),
+        };
         if ok {
             self.consecutive_rejections = 0;
+            self.accepted_updates = self.accepted_updates.saturating_add(1);
         }
         ok
     }
@@ -371,6 +511,17 @@ impl Mekf {
         gyro_body_rad_s - self.bias_rad_s
     }
 
+    /// The gyro-less body rate state, rad/s; `None` with a gyro (or before the first
+    /// gyro-less step).
+    pub fn rate_state_rad_s(&self) -> Option<Vector3<f64>> {
+        self.rate_rad_s
+    }
+
+    /// Whether the last propagation was without a gyro (the rate is a filter state).
+    pub fn is_gyroless(&self) -> bool {
+        self.rate_rad_s.is_some()
+    }
+
     /// Attitude 1-sigma about the worst axis: the square root of the largest eigenvalue of
     /// the attitude block of the covariance, rad; `pi` (nothing known) until initialised.
     pub fn attitude_sigma_rad(&self) -> f64 {
@@ -381,8 +532,8 @@ impl Mekf {
         largest_eigenvalue_sym3(&a).max(0.0).sqrt()
     }
 
-    /// The 6x6 error-state covariance, attitude (rad^2) then bias ((rad/s)^2); the init
-    /// covariance while uninitialised.
+    /// The 6x6 error-state covariance, attitude (rad^2) then bias ((rad/s)^2), or the body
+    /// rate while gyro-less; the init covariance while uninitialised.
     pub fn covariance(&self) -> &Matrix6<f64> {
         &self.p
     }
@@ -395,6 +546,18 @@ impl Mekf {
     /// Gate rejections since creation.
     pub fn rejected_updates(&self) -> u64 {
         self.rejected_updates
+    }
+
+    /// Accepted vector updates since creation.
+    pub fn accepted_updates(&self) -> u64 {
+        self.accepted_updates
+    }
+
+    /// The normalised innovation squared `y^T S^-1 y` of the last vector update that got as
+    /// far as the gate (accepted or rejected); `None` before the first one or after a reset.
+    /// For a consistent filter its mean is about 2 (two effective degrees of freedom).
+    pub fn last_nis(&self) -> Option<f64> {
+        self.last_nis
     }
 
     /// Times the attitude covariance was reopened after lost lock, since creation.
@@ -438,6 +601,31 @@ impl Mekf {
         }
         sound
     }
+
+    /// [`Mekf::commit`] for a gyro-less step: the second block is the rate state `w`, the
+    /// frozen bias is kept.
+    fn commit_rate(&mut self, q: UnitQuaternion<f64>, w: Vector3<f64>, p: Matrix6<f64>) -> bool {
+        let ok = w.iter().all(|x| x.is_finite()) && self.commit(q, self.bias_rad_s, p);
+        if ok {
+            self.rate_rad_s = Some(w);
+        } else {
+            self.reset();
+        }
+        ok
+    }
+}
+
+/// The 6x6 discrete process noise with the same 3x3 blocks on each axis: `q11 I` (attitude),
+/// `q12 I` (cross terms, both off-diagonal blocks) and `q22 I` (second state).
+fn block_noise(q11: f64, q12: f64, q22: f64) -> Matrix6<f64> {
+    let mut qd = Matrix6::zeros();
+    for i in 0..3 {
+        qd[(i, i)] = q11;
+        qd[(i, i + 3)] = q12;
+        qd[(i + 3, i)] = q12;
+        qd[(i + 3, i + 3)] = q22;
+    }
+    qd
 }
 
 /// The attitude rows of the error-state transition matrix over `dt_s` at the constant body

@@ -86,7 +86,7 @@ pub struct GuidanceInputs {
     pub r_eci_m: Vector3<f64>,
     /// Velocity, ECI J2000, m/s.
     pub v_eci_m_s: Vector3<f64>,
-    /// Unit vector from the Earth to the sun, ECI J2000.
+    /// Unit vector from the spacecraft to the sun, ECI J2000.
     pub sun_eci_unit: Vector3<f64>,
     /// A(ECEF <- ECI) at `unix_s` (`orbit::frames::a_ecef_from_eci`).
     pub a_ecef_from_eci: Matrix3<f64>,

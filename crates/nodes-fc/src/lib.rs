@@ -69,6 +69,10 @@ pub const RESET_SOFTWARE: u8 = 1;
 /// the truth only.
 const GAP_NS: u64 = 500_000_000;
 
+/// How old a GPS fix may be and still give TMATP's position (a receiver reports at 1 Hz;
+/// older than this the FC falls back to its TLE).
+pub const GPS_FIX_MAX_AGE_NS: i64 = 10_000_000_000;
+
 /// The FC's ICD ports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FcPorts {
@@ -127,7 +131,7 @@ pub enum WheelFault {
 impl std::str::FromStr for WheelFault {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
+        match s.trim().to_ascii_lowercase().as_str() {
             "stuck" => Ok(WheelFault::Stuck),
             "off" => Ok(WheelFault::Off),
             other => Err(format!(
@@ -287,6 +291,10 @@ struct Fsw {
     target: Target,
     scripts: Schedule,
     output: Option<adcs::Output>,
+    /// The mode the software asked the ADCS for at the last tick (a script's or ATCMDSET's).
+    request_mode: Option<TargetMode>,
+    /// The latest GPS fix: UTC unix ns, ECI J2000 position (m) and velocity (m/s).
+    gps_fix: Option<(i64, Vector3<f64>, Vector3<f64>)>,
 }
 
 /// The flight computer's application (see the module doc).
@@ -373,6 +381,8 @@ impl FcApp {
             },
             scripts: Schedule::new(),
             output: None,
+            request_mode: None,
+            gps_fix: None,
         };
         FcApp {
             dt_ns,
@@ -464,18 +474,25 @@ impl FcApp {
         (self.true_unix_ns(now) + self.rtc_offset_ns) as f64 * 1e-9
     }
 
-    /// The FC's knowledge of its ECI J2000 position in metres at `now` (GPS fix, else the
-    /// onboard TLE through `orbit`'s SGP4), or why there is none.
+    /// The FC's knowledge of its ECI J2000 position in metres at `now`: the latest GPS fix
+    /// (when younger than [`GPS_FIX_MAX_AGE_NS`]) carried to `now` under two-body gravity,
+    /// else the onboard TLE through `orbit`'s SGP4, or why there is neither.
     pub fn position_eci_m(&mut self, now: SimTime) -> Result<[f64; 3], String> {
-        if let Some(r) = self.readings.as_ref().and_then(|r| r.gps_r_eci_m)
-            && self
-                .env
-                .is_some_and(|e| e.unix_ns == self.true_unix_ns_i64(now))
-        {
-            return Ok([r.x, r.y, r.z]);
-        }
         let t = self.true_unix_ns_i64(now);
-        let onboard = self.onboard.as_mut().ok_or("no TLE uploaded")?;
+        if let Some((t_fix, r, v)) = self.fsw.gps_fix
+            && (t - t_fix).abs() <= GPS_FIX_MAX_AGE_NS
+        {
+            let dt_s = (t - t_fix) as f64 * 1e-9;
+            // r + v dt + a dt^2 / 2 with a = -mu r / |r|^3: over at most a few seconds the
+            // error is centimetres (the jerk term, ~|a| n dt^3 / 6).
+            let a = -r * (orbit::cowell::MU_EARTH_KM3_S2 * 1e9 / r.norm().powi(3));
+            let p = r + v * dt_s + a * (0.5 * dt_s * dt_s);
+            return Ok([p.x, p.y, p.z]);
+        }
+        let onboard = self
+            .onboard
+            .as_mut()
+            .ok_or("no TLE uploaded and no GPS fix")?;
         let model = onboard.model.as_mut().map_err(|e| e.clone())?;
         let s = model.state_j2000(t)?;
         Ok([s.r_km[0] * 1e3, s.r_km[1] * 1e3, s.r_km[2] * 1e3])
@@ -574,8 +591,13 @@ impl FcApp {
         Ok(())
     }
 
-    fn apply_event(&mut self, e: FcEvent, now: SimTime) {
+    fn apply_event(&mut self, e: FcEvent, now: SimTime, fsw: bool) {
         match e {
+            FcEvent::Script(line) if !fsw => {
+                // The FC is off or hung: nothing receives the line.
+                self.log
+                    .push((now, format!("script lost (FC not running): {line:?}")));
+            }
             FcEvent::Script(line) => {
                 if let Err(why) = self.submit_script(line.as_bytes(), now) {
                     self.log
@@ -600,7 +622,7 @@ impl FcApp {
     fn tick(&mut self, t: SimTime, fsw: bool) {
         while self.timeline.front().is_some_and(|e| e.at <= t) {
             if let Some(e) = self.timeline.pop_front() {
-                self.apply_event(e.event, t);
+                self.apply_event(e.event, t, fsw);
             }
         }
         let dt_s = self.dt_ns as f64 * 1e-9;
@@ -623,6 +645,9 @@ impl FcApp {
         };
         let readings = self.sensors.sample(&inputs, dt_s);
         self.readings = Some(readings);
+        if fsw && let (Some(r), Some(v)) = (readings.gps_r_eci_m, readings.gps_v_eci_m_s) {
+            self.fsw.gps_fix = Some((unix_ns, r, v));
+        }
         let healthy: [bool; 4] = std::array::from_fn(|i| self.wheel_fault[i].is_none());
 
         if fsw {
@@ -633,6 +658,7 @@ impl FcApp {
                 Some(s) => Self::script_request(s),
                 None => self.mode_request(),
             };
+            self.fsw.request_mode = Some(request.mode);
             let before = self.fsw.output.map(|o| o.mode_in_effect);
             let out = self.fsw.adcs.step(
                 &adcs::Inputs {
@@ -645,8 +671,15 @@ impl FcApp {
                 dt_s,
             );
             if before != Some(out.mode_in_effect) {
-                self.log
-                    .push((t, format!("ADCS mode in effect: {:?}", out.mode_in_effect)));
+                let why = self
+                    .fsw
+                    .adcs
+                    .fallback_reason()
+                    .map_or(String::new(), |r| format!(" (safe fallback: {r})"));
+                self.log.push((
+                    t,
+                    format!("ADCS mode in effect: {:?}{why}", out.mode_in_effect),
+                ));
             }
             self.fsw.output = Some(out);
             self.wheel_cmd_nm = out.wheel_torque_cmd_nm;
@@ -721,7 +754,7 @@ impl FcApp {
         let adcs = AdcsSnapshot {
             t_ns: t.as_ns(),
             mode_in_effect: out.map_or(TargetMode::Detumble as u8, |o| o.mode_in_effect as u8),
-            mode_commanded: self.fsw.target.mode as u8,
+            mode_commanded: self.fsw.request_mode.unwrap_or(self.fsw.target.mode) as u8,
             state: out.map_or(adcs::STATE_DETUMBLING, |o| o.state),
             q_eci_from_body_est: est,
             w_body_rad_s_est: out.map_or_else(Vector3::zeros, |o| o.w_body_rad_s_est),
@@ -1001,6 +1034,8 @@ impl App for FcApp {
             target: Target::default(),
             scripts: Schedule::new(),
             output: None,
+            request_mode: None,
+            gps_fix: None,
         };
         // A power cycle or reboot leaves the actuators off until the software commands them.
         self.wheel_cmd_nm = [0.0; 4];
@@ -1334,6 +1369,105 @@ mod tests {
         }
         while h.node.poll_event().is_some() {}
         h
+    }
+
+    fn run_until(h: &mut Host<FcApp>, end: SimTime) {
+        while let Some(t) = h.poll_timeout().filter(|&t| t <= end) {
+            h.handle_timeout(t);
+        }
+    }
+
+    #[test]
+    fn tmatp_with_gps_and_no_tle_gives_the_latest_fix_between_ticks() {
+        let mut cfg = FcConfig {
+            epoch_unix_s: START,
+            tle: Some((L1.to_owned(), L2.to_owned())),
+            tle_uploaded: false,
+            ..FcConfig::default()
+        };
+        cfg.sensors.gps_enabled = true;
+        let mut h = Host::new(node_cfg(), FcApp::new(cfg), SimTime::ZERO);
+        let mut prop =
+            Sgp4Propagator::new(&Tle::parse(L1, L2, ChecksumMode::Strict).unwrap()).unwrap();
+        run_until(&mut h, SimTime::from_secs(30));
+        // Between ticks (30.05 s) and a few seconds after the last one: the fix carried on.
+        for t_ms in [30_050u64, 30_099, 33_000] {
+            let t = SimTime(t_ms * 1_000_000);
+            let reply = ask(&mut h, 10, &[2], t);
+            assert_eq!(&reply[..2], &[2, 1], "t = {t_ms} ms");
+            let atp = TmAtp::parse(&reply[2..]).unwrap();
+            let want = prop
+                .state_j2000(UtcTime::from_unix_ns(
+                    (START * 1_000_000_000 + t_ms * 1_000_000) as i64,
+                ))
+                .unwrap()
+                .r_km
+                * 1e3;
+            let err_m = (Vector3::from(atp.r_eci_m) - want).norm();
+            // GPS noise 10 m per axis (1 sigma): 100 m is far outside it.
+            assert!(err_m < 100.0, "t = {t_ms} ms: {err_m} m from the truth");
+        }
+        // No fix for longer than the limit and no TLE: the failure reply.
+        assert_eq!(ask(&mut h, 10, &[2], SimTime::from_secs(60)), vec![2, 0]);
+    }
+
+    #[test]
+    fn the_published_commanded_mode_is_the_running_scripts() {
+        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let sink = seen.clone();
+        let app = FcApp::new(FcConfig {
+            epoch_unix_s: START,
+            tle: Some((L1.to_owned(), L2.to_owned())),
+            initial_mode: TargetMode::Nadir,
+            timeline: vec![TimedFcEvent {
+                at: SimTime::from_secs(5),
+                event: FcEvent::Script(format!(
+                    "adcs {} {} pointLVLH 1 0 0 0",
+                    START + 10,
+                    START + 20
+                )),
+            }],
+            ..FcConfig::default()
+        })
+        .with_publisher(Publisher::new(move |_, a| {
+            sink.lock()
+                .unwrap()
+                .push((a.t_ns / 1_000_000_000, a.mode_commanded));
+        }));
+        let mut h = Host::new(node_cfg(), app, SimTime::ZERO);
+        run_until(&mut h, SimTime::from_secs(25));
+        let seen = seen.lock().unwrap();
+        let at = |s: u64| seen.iter().find(|(t, _)| *t == s).map(|x| x.1);
+        assert_eq!(at(8), Some(TargetMode::Nadir as u8));
+        assert_eq!(at(15), Some(TargetMode::FixedLvlh as u8));
+        assert_eq!(at(22), Some(TargetMode::Nadir as u8));
+    }
+
+    #[test]
+    fn a_timeline_script_due_while_the_fc_is_off_is_lost() {
+        let app = FcApp::new(FcConfig {
+            epoch_unix_s: START,
+            tle: Some((L1.to_owned(), L2.to_owned())),
+            timeline: vec![TimedFcEvent {
+                at: SimTime::from_secs(5),
+                event: FcEvent::Script(format!(
+                    "adcs {} {} pointLVLH 1 0 0 0",
+                    START + 100,
+                    START + 200
+                )),
+            }],
+            ..FcConfig::default()
+        });
+        let mut h = Host::new(node_cfg(), app, SimTime::ZERO);
+        run_until(&mut h, SimTime::from_secs(1));
+        // The driver does not run the FC from 1 s to 10 s (off); it catches up at 10 s.
+        h.handle_timeout(SimTime::from_secs(10));
+        assert_eq!(h.app.scripts().len(), 0);
+        let mut lines = Vec::new();
+        while let Some(e) = h.node.poll_event() {
+            lines.push(e.what);
+        }
+        assert!(lines.iter().any(|l| l.contains("script lost")), "{lines:?}");
     }
 
     #[test]

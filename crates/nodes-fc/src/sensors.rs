@@ -558,25 +558,36 @@ impl SensorReadings {
 
 /// One sensor's seeded Gaussian noise source.
 #[derive(Debug, Clone)]
-struct Noise(ChaCha8Rng);
+struct Noise {
+    rng: ChaCha8Rng,
+    /// The sine branch of the last Box-Muller pair, not used yet.
+    spare: Option<f64>,
+}
 
 impl Noise {
     fn new(seed: u64, stream: u64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(stream);
-        Noise(rng)
+        Noise { rng, spare: None }
     }
 
     /// Uniform on the open interval (0, 1), 53 bits.
     fn unit(&mut self) -> f64 {
-        ((self.0.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        ((self.rng.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64
     }
 
-    /// One standard normal draw (Box-Muller, cosine branch: two uniforms per draw).
+    /// One standard normal draw (Box-Muller: two uniforms give two independent draws, the
+    /// cosine branch now and the sine branch next time).
     fn gauss(&mut self) -> f64 {
+        if let Some(z) = self.spare.take() {
+            return z;
+        }
         let u1 = self.unit();
         let u2 = self.unit();
-        (-2.0 * u1.ln()).sqrt() * (core::f64::consts::TAU * u2).cos()
+        let r = (-2.0 * u1.ln()).sqrt();
+        let (s, c) = (core::f64::consts::TAU * u2).sin_cos();
+        self.spare = Some(r * s);
+        r * c
     }
 
     fn gauss3(&mut self) -> Vector3<f64> {
@@ -937,6 +948,22 @@ mod tests {
         assert!((beyond(2.0) - 0.0455).abs() < 0.002, "{}", beyond(2.0));
         assert!((beyond(3.0) - 0.0027).abs() < 0.0006, "{}", beyond(3.0));
         assert!(xs.iter().all(|x| x.is_finite()));
+    }
+
+    #[test]
+    fn gaussian_draws_are_standard_and_successive_pairs_uncorrelated() {
+        let mut n = Noise::new(7, 1);
+        let k = 40_000;
+        let xs: Vec<f64> = (0..k).map(|_| n.gauss()).collect();
+        let mean = xs.iter().sum::<f64>() / k as f64;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / k as f64;
+        // Cosine and sine branches of one pair come out one after the other.
+        let lag1 = xs.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / (k - 1) as f64;
+        let fourth = xs.iter().map(|x| x.powi(4)).sum::<f64>() / k as f64;
+        assert!(mean.abs() < 0.02, "mean {mean}");
+        assert!((var - 1.0).abs() < 0.03, "variance {var}");
+        assert!(lag1.abs() < 0.02, "lag-1 correlation {lag1}");
+        assert!((fourth - 3.0).abs() < 0.2, "fourth moment {fourth}");
     }
 
     #[test]
