@@ -543,6 +543,9 @@ pub trait App: Send + 'static {
     fn handle_timeout(&mut self, _node: &mut Node, _now: SimTime) {}
     /// Forget volatile state (reboot or power cycle).
     fn reset(&mut self, _now: SimTime) {}
+    /// The run ends at `now`: report final figures (accounting, counters) through the
+    /// application's own outputs. Nothing is sent on the network any more.
+    fn finish(&mut self, _node: &mut Node, _now: SimTime) {}
 }
 
 /// An application that binds nothing: the node only routes and answers ports 0-6.
@@ -664,6 +667,9 @@ impl<T: App + ?Sized> App for Box<T> {
     }
     fn reset(&mut self, now: SimTime) {
         (**self).reset(now)
+    }
+    fn finish(&mut self, node: &mut Node, now: SimTime) {
+        (**self).finish(node, now)
     }
 }
 

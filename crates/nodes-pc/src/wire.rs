@@ -1,0 +1,639 @@
+//! The PC's ICD commands and replies (ICD 3.1.8, INTERPRETATION.md sections 2, 4 and 7) as
+//! wire representations, and the command tables of its ports.
+//!
+//! # Contract
+//! Every type here is the request or reply *data* of an ICD command: the bytes after the
+//! `command` byte of a request, or after the `command | result` head of a reply
+//! (`csp::reqrep`). The "Size" columns of ICD tables 4 and 5 count exactly these bytes,
+//! never the command or result byte. `parse` accepts exactly the table's size (or its range
+//! for the `N`-byte tails) and never panics; `emit` appends exactly `buffer_len()` bytes.
+//! All multi-byte fields are little-endian (ICD 1.8). Range checks (duration 5-900 s,
+//! frame size 1-254) belong to the port's [`CommandSet`], so a `Repr` round-trips any bytes
+//! of the right length; the enumerations [`SessionState`] and [`SessionResult`] are the
+//! exception: unknown values do not parse.
+//!
+//! # Sizes
+//! | port | command | request data | reply data |
+//! |---|---|---|---|
+//! | 10 | SETUP 1 | [`SessionConfig`] 10 + N (N 0..=128) | 0 |
+//! | 10 | STATUS 2 | session id, 1 | [`Status`] 11 + N |
+//! | 10 | ABORT 3 | session id, 1 | 0 |
+//! | payload | SYNC 1 | message, N (0..=128) | the same N bytes |
+//! | payload | POLL 2 | frame size, 1 | 0..=frame size |
+//! | 11 | (none: raw data) | 0..=256 bytes, no command byte, no reply | - |
+//! | 12 | TMPC 1 | 0 | [`Tmpc`] 89 (the twin's layout) |
+//!
+//! So a whole SETUP request is `11 + N` bytes on the wire, a whole STATUS reply `13 + N`.
+
+use csp::Error;
+use csp::reqrep::le::{Reader, Writer};
+use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
+
+/// Default port of session control (INTERPRETATION.md section 4).
+pub const PORT_CONTROL: u8 = 10;
+/// Default port of buffered data ingest (INTERPRETATION.md section 4, ICD 3.1.5).
+pub const PORT_INGEST: u8 = 11;
+/// Default port of the PC's own telemetry (the twin's addition; docs/protocol.md).
+pub const PORT_TELEMETRY: u8 = 12;
+/// Default SYNC/POLL port of a payload (INTERPRETATION.md section 4).
+pub const PORT_PAYLOAD: u8 = 10;
+
+/// Command ids (ICD tables 4 and 5; TMPC is the twin's).
+pub mod cmd {
+    /// Control port: set up a session.
+    pub const SETUP: u8 = 1;
+    /// Control port: read a session's state, configuration and last result.
+    pub const STATUS: u8 = 2;
+    /// Control port: abort a PENDING or ACTIVE session.
+    pub const ABORT: u8 = 3;
+    /// Payload port: synchronisation message, echoed by the payload.
+    pub const SYNC: u8 = 1;
+    /// Payload port: poll for one data frame.
+    pub const POLL: u8 = 2;
+    /// Telemetry port: the PC's sessions and S-band.
+    pub const TMPC: u8 = 1;
+}
+
+/// Bytes of SETUP request data before the sync message (ICD table 4: "10 + N").
+pub const SETUP_FIXED_LEN: usize = 10;
+/// Bytes of STATUS reply data before the sync message (ICD table 4: "11 + N").
+pub const STATUS_FIXED_LEN: usize = 11;
+/// Longest sync message (ICD 3.1.3 item 6).
+pub const SYNC_MAX_LEN: usize = 128;
+/// Shortest session (ICD 3.1.3 item 3).
+pub const DURATION_MIN_S: u16 = 5;
+/// Longest session (ICD 3.1.3 item 3).
+pub const DURATION_MAX_S: u16 = 900;
+/// Smallest poll frame (ICD 3.1.3 item 5).
+pub const FRAME_SIZE_MIN: u8 = 1;
+/// Largest poll frame (ICD 3.1.3 item 5).
+pub const FRAME_SIZE_MAX: u8 = 254;
+/// Largest ingest packet (ICD 3.1.5: "the maximum data size in one CSP packet is 256 bytes").
+pub const INGEST_MAX_LEN: usize = 256;
+/// Session slots in TMPC (one per payload id 12-15).
+pub const TMPC_SLOTS: usize = 4;
+
+/// Session state (ICD table 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub enum SessionState {
+    /// Not configured or finished.
+    #[default]
+    NotActive = 0,
+    /// Waiting for its start time.
+    Pending = 1,
+    /// Running.
+    Active = 2,
+}
+
+impl SessionState {
+    /// The ICD value.
+    pub fn to_u8(self) -> u8 {
+        self as u8
+    }
+    /// From the ICD value.
+    pub fn from_u8(v: u8) -> Option<Self> {
+        match v {
+            0 => Some(SessionState::NotActive),
+            1 => Some(SessionState::Pending),
+            2 => Some(SessionState::Active),
+            _ => None,
+        }
+    }
+}
+
+/// Last session result (ICD table 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+pub enum SessionResult {
+    /// Finished successfully or never executed.
+    #[default]
+    Done = 0,
+    /// Aborted by the ABORT command.
+    Aborted = 1,
+    /// The payload did not acknowledge the sync message.
+    NoAck = 2,
+    /// Aborted by an S-band transmitter failure.
+    SbandFailure = 3,
+}
+
+impl SessionResult {
+    /// The ICD value.
+    pub fn to_u8(self) -> u8 {
+        self as u8
+    }
+    /// From the ICD value.
+    pub fn from_u8(v: u8) -> Option<Self> {
+        match v {
+            0 => Some(SessionResult::Done),
+            1 => Some(SessionResult::Aborted),
+            2 => Some(SessionResult::NoAck),
+            3 => Some(SessionResult::SbandFailure),
+            _ => None,
+        }
+    }
+}
+
+/// SETUP request data (ICD 3.1.3, table 4: `10 + N` bytes): one session's configuration.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct SessionConfig {
+    /// Session id (one per payload).
+    pub session_id: u8,
+    /// Start, UTC unix seconds of the M6P clock; 0 or past = at once.
+    pub timestamp: u32,
+    /// Duration, seconds (5-900).
+    pub duration_s: u16,
+    /// Packets after which the session ends (0 = no limit).
+    pub max_packets: u16,
+    /// POLL frame size, bytes (1-254).
+    pub poll_frame_size: u8,
+    /// Sync message sent once at the start (0-128 bytes).
+    pub sync_message: Vec<u8>,
+}
+
+impl SessionConfig {
+    /// Parse `10 + N` bytes, N at most 128.
+    pub fn parse(buf: &[u8]) -> Result<Self, Error> {
+        if buf.len() < SETUP_FIXED_LEN {
+            return Err(Error::Truncated);
+        }
+        if buf.len() > SETUP_FIXED_LEN + SYNC_MAX_LEN {
+            return Err(Error::TooLong);
+        }
+        let mut r = Reader::new(buf);
+        Ok(SessionConfig {
+            session_id: r.u8()?,
+            timestamp: r.u32()?,
+            duration_s: r.u16()?,
+            max_packets: r.u16()?,
+            poll_frame_size: r.u8()?,
+            sync_message: r.remaining().to_vec(),
+        })
+    }
+    /// Length of the emitted bytes.
+    pub fn buffer_len(&self) -> usize {
+        SETUP_FIXED_LEN + self.sync_message.len()
+    }
+    /// Append the bytes to `out`.
+    pub fn emit(&self, out: &mut Vec<u8>) {
+        let mut w = Writer::new();
+        w.u8(self.session_id)
+            .u32(self.timestamp)
+            .u16(self.duration_s)
+            .u16(self.max_packets)
+            .u8(self.poll_frame_size)
+            .bytes(&self.sync_message);
+        out.extend_from_slice(&w.buf);
+    }
+    /// The bytes.
+    pub fn to_vec(&self) -> Vec<u8> {
+        let mut v = Vec::with_capacity(self.buffer_len());
+        self.emit(&mut v);
+        v
+    }
+    /// The whole SETUP request payload (`01 | data`).
+    pub fn to_request(&self) -> Vec<u8> {
+        let mut v = vec![cmd::SETUP];
+        self.emit(&mut v);
+        v
+    }
+    /// Check the ICD 3.1.3 ranges; the error names the field.
+    pub fn check_ranges(&self) -> Result<(), &'static str> {
+        if !(DURATION_MIN_S..=DURATION_MAX_S).contains(&self.duration_s) {
+            return Err("sessionDuration");
+        }
+        if !(FRAME_SIZE_MIN..=FRAME_SIZE_MAX).contains(&self.poll_frame_size) {
+            return Err("pollFrameSize");
+        }
+        if self.sync_message.len() > SYNC_MAX_LEN {
+            return Err("syncMessage");
+        }
+        Ok(())
+    }
+}
+
+/// STATUS reply data (ICD 3.1.7, table 4: `11 + N` bytes).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Status {
+    /// Result of the last finished session.
+    pub last_result: SessionResult,
+    /// Current state.
+    pub state: SessionState,
+    /// The configuration (all zero and empty when never configured).
+    pub timestamp: u32,
+    /// Configured duration, seconds.
+    pub duration_s: u16,
+    /// Configured packet limit.
+    pub max_packets: u16,
+    /// Configured POLL frame size.
+    pub poll_frame_size: u8,
+    /// Configured sync message.
+    pub sync_message: Vec<u8>,
+}
+
+impl Status {
+    /// Parse `11 + N` bytes, N at most 128; unknown state or result values fail.
+    pub fn parse(buf: &[u8]) -> Result<Self, Error> {
+        if buf.len() < STATUS_FIXED_LEN {
+            return Err(Error::Truncated);
+        }
+        if buf.len() > STATUS_FIXED_LEN + SYNC_MAX_LEN {
+            return Err(Error::TooLong);
+        }
+        let mut r = Reader::new(buf);
+        let last_result =
+            SessionResult::from_u8(r.u8()?).ok_or(Error::FieldRange("lastSessionResult"))?;
+        let state = SessionState::from_u8(r.u8()?).ok_or(Error::FieldRange("currState"))?;
+        Ok(Status {
+            last_result,
+            state,
+            timestamp: r.u32()?,
+            duration_s: r.u16()?,
+            max_packets: r.u16()?,
+            poll_frame_size: r.u8()?,
+            sync_message: r.remaining().to_vec(),
+        })
+    }
+    /// Length of the emitted bytes.
+    pub fn buffer_len(&self) -> usize {
+        STATUS_FIXED_LEN + self.sync_message.len()
+    }
+    /// Append the bytes to `out`.
+    pub fn emit(&self, out: &mut Vec<u8>) {
+        let mut w = Writer::new();
+        w.u8(self.last_result.to_u8())
+            .u8(self.state.to_u8())
+            .u32(self.timestamp)
+            .u16(self.duration_s)
+            .u16(self.max_packets)
+            .u8(self.poll_frame_size)
+            .bytes(&self.sync_message);
+        out.extend_from_slice(&w.buf);
+    }
+    /// The bytes.
+    pub fn to_vec(&self) -> Vec<u8> {
+        let mut v = Vec::with_capacity(self.buffer_len());
+        self.emit(&mut v);
+        v
+    }
+}
+
+/// One session slot of [`Tmpc`] (20 bytes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TmpcSlot {
+    /// Session id (0 for an unused slot).
+    pub session_id: u8,
+    /// Payload CSP address (0 for an unused slot).
+    pub payload_addr: u8,
+    /// [`SessionState`] value.
+    pub state: u8,
+    /// [`SessionResult`] value of the last finished session.
+    pub last_result: u8,
+    /// Packets counted in the current (or last) session.
+    pub packets: u32,
+    /// Payload bytes of this slot that reached the ground since the PC booted (saturating).
+    pub downlinked_bytes: u32,
+    /// Payload bytes of this slot dropped since the PC booted, any reason (saturating).
+    pub dropped_bytes: u32,
+    /// Bytes in the payload's buffer file now.
+    pub buffer_bytes: u32,
+}
+
+impl TmpcSlot {
+    /// Size in bytes.
+    pub const LEN: usize = 20;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(TmpcSlot {
+            session_id: r.u8()?,
+            payload_addr: r.u8()?,
+            state: r.u8()?,
+            last_result: r.u8()?,
+            packets: r.u32()?,
+            downlinked_bytes: r.u32()?,
+            dropped_bytes: r.u32()?,
+            buffer_bytes: r.u32()?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u8(self.session_id)
+            .u8(self.payload_addr)
+            .u8(self.state)
+            .u8(self.last_result)
+            .u32(self.packets)
+            .u32(self.downlinked_bytes)
+            .u32(self.dropped_bytes)
+            .u32(self.buffer_bytes);
+    }
+}
+
+/// S-band flag in [`Tmpc::sband_flags`]: switched on.
+pub const SBAND_ON: u8 = 0x01;
+/// S-band flag: failed (hardware fault).
+pub const SBAND_FAILED: u8 = 0x02;
+/// S-band flag: a frame is on the air.
+pub const SBAND_TRANSMITTING: u8 = 0x04;
+
+/// TMPC reply data (the twin's layout, 89 bytes): four session slots in configuration
+/// order (unused slots zero), then the S-band.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Tmpc {
+    /// Session slots.
+    pub slots: [TmpcSlot; TMPC_SLOTS],
+    /// [`SBAND_ON`] | [`SBAND_FAILED`] | [`SBAND_TRANSMITTING`].
+    pub sband_flags: u8,
+    /// Bytes waiting in the transmitter (frame on the air included).
+    pub sband_queue_bytes: u32,
+    /// Payload bytes the S-band delivered to the ground since the PC booted (saturating).
+    pub sband_downlinked_bytes: u32,
+}
+
+impl Tmpc {
+    /// Size in bytes: 4 x 20 + 1 + 4 + 4.
+    pub const LEN: usize = TMPC_SLOTS * TmpcSlot::LEN + 9;
+    /// Parse exactly [`Tmpc::LEN`] bytes.
+    pub fn parse(buf: &[u8]) -> Result<Self, Error> {
+        if buf.len() < Self::LEN {
+            return Err(Error::Truncated);
+        }
+        if buf.len() > Self::LEN {
+            return Err(Error::TooLong);
+        }
+        let mut r = Reader::new(buf);
+        let mut slots = [TmpcSlot::default(); TMPC_SLOTS];
+        for s in &mut slots {
+            *s = TmpcSlot::read(&mut r)?;
+        }
+        let t = Tmpc {
+            slots,
+            sband_flags: r.u8()?,
+            sband_queue_bytes: r.u32()?,
+            sband_downlinked_bytes: r.u32()?,
+        };
+        r.finish()?;
+        Ok(t)
+    }
+    /// Length of the emitted bytes.
+    pub fn buffer_len(&self) -> usize {
+        Self::LEN
+    }
+    /// Append the bytes to `out`.
+    pub fn emit(&self, out: &mut Vec<u8>) {
+        let mut w = Writer::new();
+        for s in &self.slots {
+            s.write(&mut w);
+        }
+        w.u8(self.sband_flags)
+            .u32(self.sband_queue_bytes)
+            .u32(self.sband_downlinked_bytes);
+        out.extend_from_slice(&w.buf);
+    }
+    /// The bytes.
+    pub fn to_vec(&self) -> Vec<u8> {
+        let mut v = Vec::with_capacity(Self::LEN);
+        self.emit(&mut v);
+        v
+    }
+}
+
+/// A SYNC request to a payload: `01 | message`.
+pub fn sync_request(message: &[u8]) -> Vec<u8> {
+    let mut v = Vec::with_capacity(1 + message.len());
+    v.push(cmd::SYNC);
+    v.extend_from_slice(message);
+    v
+}
+
+/// A POLL request to a payload: `02 | frameSize`.
+pub fn poll_request(frame_size: u8) -> Vec<u8> {
+    vec![cmd::POLL, frame_size]
+}
+
+/// A command on the control port, parsed and range-checked.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ControlCommand {
+    /// SETUP 1.
+    Setup(SessionConfig),
+    /// STATUS 2.
+    Status {
+        /// Session id.
+        session_id: u8,
+    },
+    /// ABORT 3.
+    Abort {
+        /// Session id.
+        session_id: u8,
+    },
+}
+
+impl CommandSet for ControlCommand {
+    fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
+        match r.command {
+            cmd::SETUP => {
+                let cfg = SessionConfig::parse(r.data).map_err(|_| RequestError::WrongLength {
+                    command: r.command,
+                    expected: "10 + N, N <= 128",
+                    got: r.data.len(),
+                })?;
+                cfg.check_ranges()
+                    .map_err(|field| RequestError::OutOfRange {
+                        command: r.command,
+                        field,
+                    })?;
+                Ok(ControlCommand::Setup(cfg))
+            }
+            cmd::STATUS => {
+                expect_len(r, 1, "1")?;
+                Ok(ControlCommand::Status {
+                    session_id: r.data.first().copied().unwrap_or(0),
+                })
+            }
+            cmd::ABORT => {
+                expect_len(r, 1, "1")?;
+                Ok(ControlCommand::Abort {
+                    session_id: r.data.first().copied().unwrap_or(0),
+                })
+            }
+            c => Err(RequestError::UnknownCommand(c)),
+        }
+    }
+}
+
+/// A command on the PC telemetry port.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TelemetryCommand {
+    /// TMPC 1: sessions and S-band.
+    Tmpc,
+}
+
+impl CommandSet for TelemetryCommand {
+    fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
+        match r.command {
+            cmd::TMPC => expect_len(r, 0, "0").map(|_| TelemetryCommand::Tmpc),
+            c => Err(RequestError::UnknownCommand(c)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use proptest::prelude::*;
+
+    /// ICD table 2's example: session 1 at 2020-01-01T00:00:00Z, 60 s, 30 packets of 64.
+    fn icd_example() -> SessionConfig {
+        SessionConfig {
+            session_id: 1,
+            timestamp: 1_577_836_800,
+            duration_s: 60,
+            max_packets: 30,
+            poll_frame_size: 64,
+            sync_message: b"Send telemetry".to_vec(),
+        }
+    }
+
+    #[test]
+    fn setup_icd_example_bytes() {
+        let c = icd_example();
+        let b = c.to_vec();
+        let mut want = vec![1u8, 0x00, 0xe1, 0x0b, 0x5e, 60, 0, 30, 0, 64];
+        want.extend_from_slice(b"Send telemetry");
+        assert_eq!(b, want);
+        assert_eq!(b.len(), SETUP_FIXED_LEN + 14);
+        assert_eq!(c.buffer_len(), b.len());
+        assert_eq!(SessionConfig::parse(&b).unwrap(), c);
+        assert_eq!(c.to_request()[0], cmd::SETUP);
+        assert_eq!(c.to_request().len(), 11 + 14);
+    }
+
+    #[test]
+    fn setup_sizes_are_10_to_138() {
+        assert_eq!(SessionConfig::parse(&[0; 9]), Err(Error::Truncated));
+        assert!(SessionConfig::parse(&[0; 10]).is_ok());
+        assert!(SessionConfig::parse(&[0; 138]).is_ok());
+        assert_eq!(SessionConfig::parse(&[0; 139]), Err(Error::TooLong));
+    }
+
+    #[test]
+    fn status_layout_is_11_plus_n() {
+        let s = Status {
+            last_result: SessionResult::NoAck,
+            state: SessionState::Pending,
+            timestamp: 0x0403_0201,
+            duration_s: 0x0605,
+            max_packets: 0x0807,
+            poll_frame_size: 9,
+            sync_message: vec![0xaa, 0xbb],
+        };
+        assert_eq!(
+            s.to_vec(),
+            vec![2, 1, 1, 2, 3, 4, 5, 6, 7, 8, 9, 0xaa, 0xbb]
+        );
+        assert_eq!(s.buffer_len(), STATUS_FIXED_LEN + 2);
+        assert_eq!(Status::parse(&s.to_vec()).unwrap(), s);
+        assert_eq!(Status::default().to_vec(), vec![0; 11]);
+        assert!(Status::parse(&[4, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]).is_err());
+        assert!(Status::parse(&[0, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0]).is_err());
+        assert_eq!(Status::parse(&[0; 10]), Err(Error::Truncated));
+    }
+
+    #[test]
+    fn tmpc_is_89_bytes_with_fields_in_order() {
+        assert_eq!(Tmpc::LEN, 89);
+        let mut t = Tmpc::default();
+        t.slots[1] = TmpcSlot {
+            session_id: 2,
+            payload_addr: 13,
+            state: 2,
+            last_result: 3,
+            packets: 0x0102_0304,
+            downlinked_bytes: 5,
+            dropped_bytes: 6,
+            buffer_bytes: 7,
+        };
+        t.sband_flags = SBAND_ON | SBAND_TRANSMITTING;
+        t.sband_queue_bytes = 8;
+        t.sband_downlinked_bytes = 9;
+        let b = t.to_vec();
+        assert_eq!(b.len(), 89);
+        assert_eq!(
+            &b[20..40],
+            &[2, 13, 2, 3, 4, 3, 2, 1, 5, 0, 0, 0, 6, 0, 0, 0, 7, 0, 0, 0]
+        );
+        assert_eq!(&b[80..], &[5, 8, 0, 0, 0, 9, 0, 0, 0]);
+        assert_eq!(Tmpc::parse(&b).unwrap(), t);
+        assert_eq!(Tmpc::parse(&b[..88]), Err(Error::Truncated));
+    }
+
+    #[test]
+    fn control_table_checks_lengths_and_ranges() {
+        let req = |b: &[u8]| ControlCommand::parse(&Request::parse(b).unwrap());
+        assert!(matches!(
+            req(&[2, 1]),
+            Ok(ControlCommand::Status { session_id: 1 })
+        ));
+        assert!(matches!(
+            req(&[3, 7]),
+            Ok(ControlCommand::Abort { session_id: 7 })
+        ));
+        assert!(matches!(req(&[2]), Err(RequestError::WrongLength { .. })));
+        assert!(matches!(
+            req(&[3, 1, 2]),
+            Err(RequestError::WrongLength { .. })
+        ));
+        assert!(matches!(req(&[4, 1]), Err(RequestError::UnknownCommand(4))));
+        let mut c = icd_example();
+        c.duration_s = 901;
+        assert!(matches!(
+            req(&c.to_request()),
+            Err(RequestError::OutOfRange {
+                field: "sessionDuration",
+                ..
+            })
+        ));
+        let mut c = icd_example();
+        c.poll_frame_size = 0;
+        assert!(matches!(
+            req(&c.to_request()),
+            Err(RequestError::OutOfRange {
+                field: "pollFrameSize",
+                ..
+            })
+        ));
+        let t = |b: &[u8]| TelemetryCommand::parse(&Request::parse(b).unwrap());
+        assert_eq!(t(&[1]), Ok(TelemetryCommand::Tmpc));
+        assert!(t(&[1, 0]).is_err());
+        assert!(t(&[2]).is_err());
+    }
+
+    #[test]
+    fn payload_requests() {
+        assert_eq!(sync_request(b"hi"), vec![1, b'h', b'i']);
+        assert_eq!(sync_request(&[]), vec![1]);
+        assert_eq!(poll_request(64), vec![2, 64]);
+    }
+
+    proptest! {
+        #[test]
+        fn setup_round_trip(id: u8, ts: u32, d: u16, m: u16, f: u8,
+                            msg in proptest::collection::vec(any::<u8>(), 0..=128)) {
+            let c = SessionConfig { session_id: id, timestamp: ts, duration_s: d,
+                max_packets: m, poll_frame_size: f, sync_message: msg };
+            prop_assert_eq!(SessionConfig::parse(&c.to_vec()).unwrap(), c);
+        }
+
+        #[test]
+        fn tmpc_round_trip(b in proptest::collection::vec(any::<u8>(), 89)) {
+            prop_assert_eq!(Tmpc::parse(&b).unwrap().to_vec(), b);
+        }
+
+        #[test]
+        fn decoders_never_panic(b in proptest::collection::vec(any::<u8>(), 0..300)) {
+            let _ = SessionConfig::parse(&b);
+            let _ = Status::parse(&b);
+            let _ = Tmpc::parse(&b);
+            if let Ok(r) = Request::parse(&b) {
+                let _ = ControlCommand::parse(&r);
+                let _ = TelemetryCommand::parse(&r);
+            }
+        }
+    }
+}
