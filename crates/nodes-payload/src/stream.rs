@@ -1,0 +1,504 @@
+//! The payload's data stream: what POLL replies and buffering pushes are cut from.
+//!
+//! # The Counter stream
+//! An endless byte stream of self-checking frames, so that the ground can verify what it
+//! received byte for byte and name what it lost. Frame `seq` of payload `addr`:
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | sync marker `1A CF FC 1D` (the CCSDS attached sync marker 0x1ACFFC1D, CCSDS 131.0-B, sent most significant byte first) |
+//! | 4 | 1 | payload CSP address |
+//! | 5 | 4 | `seq`, u32 little-endian (frame 0 is the first byte of the stream) |
+//! | 9 | 1 | `len`, the data length: `32 + (7 * seq mod 64)`, so 32..=95 |
+//! | 10 | `len` | data: a xorshift32 pattern seeded by `seq` and `addr`, with 0x1A replaced by 0x1B so the marker's first byte never occurs in data |
+//! | 10 + `len` | 4 | CRC-32C (Castagnoli, `crc::CRC_32_ISCSI`) of bytes `0 .. 10 + len`, little-endian |
+//!
+//! Frames are 46..=109 bytes; the lengths repeat every 64 frames ([`CYCLE_BYTES`] bytes), so
+//! byte `n` of the stream is found without generating what comes before it
+//! ([`counter_stream`]). `seq` wraps at 2^32 (after some 330 GB). POLL replies and pushes
+//! cut the stream at any byte boundary: a frame may span several replies.
+//!
+//! [`check_counter_stream`] verifies a received stream: it walks frame by frame, compares
+//! each frame with the one the generator makes for its `seq`, and after a damaged frame
+//! hunts byte by byte for the next sync marker that starts a valid frame.
+//!
+//! # Generators and rate
+//! [`Generator::Counter`] is the stream above; [`Generator::Bytes`] is a file's bytes, sent
+//! once, after which the stream is exhausted. [`DataStream`] adds the rate limit: with a
+//! rate, byte `n` (counting from 0) is available once `n + 1 <= rate * (now - t0)`, `t0`
+//! being the payload's first boot; without one, everything is available at once.
+
+use std::sync::Arc;
+
+use crc::{CRC_32_ISCSI, Crc};
+use csp::SimTime;
+
+/// The frame sync marker (CCSDS attached sync marker 0x1ACFFC1D, most significant byte first).
+pub const SYNC_MARKER: [u8; 4] = [0x1A, 0xCF, 0xFC, 0x1D];
+/// Bytes before the data: sync 4, addr 1, seq 4, len 1.
+pub const FRAME_HEADER_BYTES: usize = 10;
+/// Header and CRC-32C trailer.
+pub const FRAME_OVERHEAD_BYTES: usize = FRAME_HEADER_BYTES + 4;
+/// Shortest frame data.
+pub const DATA_LEN_MIN: usize = 32;
+/// Frames in one cycle of lengths.
+const CYCLE_FRAMES: u64 = 64;
+/// Bytes in one cycle of 64 frames: 64 * 14 + (32 + 33 + ... + 95).
+pub const CYCLE_BYTES: u64 = 4960;
+/// At most this many missing seqs are listed in a [`StreamCheck`] (all are counted).
+pub const MAX_LISTED_MISSING: usize = 1024;
+
+const CRC32C: Crc<u32> = Crc::<u32>::new(&CRC_32_ISCSI);
+
+/// Data length of frame `seq`: 32..=95, a permutation over every 64 frames.
+pub fn data_len(seq: u32) -> usize {
+    DATA_LEN_MIN + (seq.wrapping_mul(7) % 64) as usize
+}
+
+/// Total length of frame `seq`.
+pub fn frame_len(seq: u32) -> usize {
+    FRAME_OVERHEAD_BYTES + data_len(seq)
+}
+
+/// Append frame `seq` of payload `addr` to `out`.
+pub fn emit_counter_frame(addr: u8, seq: u32, out: &mut Vec<u8>) {
+    let start = out.len();
+    let len = data_len(seq);
+    out.extend_from_slice(&SYNC_MARKER);
+    out.push(addr);
+    out.extend_from_slice(&seq.to_le_bytes());
+    // len <= 95 by construction.
+    out.push(len as u8);
+    let mut x = (seq ^ (u32::from(addr) << 24)).wrapping_mul(0x9E37_79B9) | 1;
+    for _ in 0..len {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        let b = x as u8;
+        out.push(if b == SYNC_MARKER[0] { b + 1 } else { b });
+    }
+    let crc = CRC32C.checksum(&out[start..]);
+    out.extend_from_slice(&crc.to_le_bytes());
+}
+
+/// Frame `seq` of payload `addr`.
+pub fn counter_frame(addr: u8, seq: u32) -> Vec<u8> {
+    let mut v = Vec::with_capacity(frame_len(seq));
+    emit_counter_frame(addr, seq, &mut v);
+    v
+}
+
+/// The exact bytes `from_byte .. from_byte + len` of payload `addr`'s Counter stream.
+pub fn counter_stream(addr: u8, from_byte: u64, len: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(len);
+    let mut frame_index = from_byte / CYCLE_BYTES * CYCLE_FRAMES;
+    let mut skip = from_byte % CYCLE_BYTES;
+    // Walk at most 64 frames to the one holding `from_byte`; seq = frame index mod 2^32,
+    // consistent with the cycle because 64 divides 2^32.
+    loop {
+        let fl = frame_len(frame_index as u32) as u64;
+        if skip < fl {
+            break;
+        }
+        skip -= fl;
+        frame_index += 1;
+    }
+    let mut skip = skip as usize;
+    let mut frame = Vec::with_capacity(128);
+    while out.len() < len {
+        frame.clear();
+        emit_counter_frame(addr, frame_index as u32, &mut frame);
+        let take = (frame.len() - skip).min(len - out.len());
+        out.extend_from_slice(&frame[skip..skip + take]);
+        skip = 0;
+        frame_index = frame_index.wrapping_add(1);
+    }
+    out
+}
+
+/// What [`check_counter_stream`] found in a received stream.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct StreamCheck {
+    /// Frames identical to the generator's.
+    pub frames_ok: u64,
+    /// Places where a frame should have started (right after a good frame) but no valid
+    /// frame did: a damaged, cut or spliced frame.
+    pub frames_bad: u64,
+    /// Address in the first good frame.
+    pub addr: Option<u8>,
+    /// Seq of the first good frame.
+    pub first_seq: Option<u32>,
+    /// Highest seq of the good frames (in stream order).
+    pub last_seq: Option<u32>,
+    /// Seqs absent between the good frames (the first [`MAX_LISTED_MISSING`] of them).
+    pub missing_seqs: Vec<u32>,
+    /// Number of absent seqs.
+    pub missing_count: u64,
+    /// Good frames whose seq is not after `last_seq` (duplicates or reordering).
+    pub out_of_order: u64,
+    /// Bytes of good frames.
+    pub good_bytes: u64,
+    /// Bytes before the first good frame (a stream cut from the middle starts mid-frame).
+    pub lead_bytes: u64,
+    /// Bytes after the first good frame that belong to no good frame.
+    pub skipped_bytes: u64,
+    /// A frame cut by the end of the input (not an error: the next bytes come later).
+    pub tail_bytes: u64,
+}
+
+impl StreamCheck {
+    /// Whether the stream after its first good frame is whole: no bad frame, no gap, no
+    /// reordering, no stray bytes.
+    pub fn is_clean(&self) -> bool {
+        self.frames_bad == 0
+            && self.missing_count == 0
+            && self.out_of_order == 0
+            && self.skipped_bytes == 0
+    }
+
+    fn record(&mut self, addr: u8, seq: u32, len: usize) {
+        self.frames_ok += 1;
+        self.good_bytes += len as u64;
+        match self.last_seq {
+            None => {
+                self.addr = Some(addr);
+                self.first_seq = Some(seq);
+                self.last_seq = Some(seq);
+            }
+            Some(last) => {
+                let expected = last.wrapping_add(1);
+                let gap = seq.wrapping_sub(expected);
+                if gap < 1 << 31 {
+                    self.missing_count += u64::from(gap);
+                    let room = MAX_LISTED_MISSING.saturating_sub(self.missing_seqs.len());
+                    self.missing_seqs
+                        .extend((0..gap.min(room as u32)).map(|i| expected.wrapping_add(i)));
+                    self.last_seq = Some(seq);
+                } else {
+                    self.out_of_order += 1;
+                }
+            }
+        }
+    }
+}
+
+enum Candidate {
+    /// A valid frame: its address, seq and length.
+    Good(u8, u32, usize),
+    /// The input ends inside what may be a frame.
+    Incomplete,
+    /// No valid frame starts here.
+    Bad,
+}
+
+fn candidate(rest: &[u8]) -> Candidate {
+    if rest.len() < SYNC_MARKER.len() {
+        return if SYNC_MARKER.starts_with(rest) {
+            Candidate::Incomplete
+        } else {
+            Candidate::Bad
+        };
+    }
+    if rest[..4] != SYNC_MARKER {
+        return Candidate::Bad;
+    }
+    let [_, _, _, _, addr, s0, s1, s2, s3, len, ..] = *rest else {
+        return Candidate::Incomplete;
+    };
+    let seq = u32::from_le_bytes([s0, s1, s2, s3]);
+    if usize::from(len) != data_len(seq) {
+        return Candidate::Bad;
+    }
+    let flen = frame_len(seq);
+    let Some(got) = rest.get(..flen) else {
+        return Candidate::Incomplete;
+    };
+    if got == counter_frame(addr, seq) {
+        Candidate::Good(addr, seq, flen)
+    } else {
+        Candidate::Bad
+    }
+}
+
+/// Verify a received Counter stream (see the module doc); never panics.
+pub fn check_counter_stream(bytes: &[u8]) -> StreamCheck {
+    let mut check = StreamCheck::default();
+    let mut i = 0;
+    // Whether the previous bytes were a good frame, so a frame must start at `i`.
+    let mut synced = false;
+    while let Some(rest) = bytes.get(i..).filter(|r| !r.is_empty()) {
+        match candidate(rest) {
+            Candidate::Good(addr, seq, flen) => {
+                check.record(addr, seq, flen);
+                i += flen;
+                synced = true;
+            }
+            Candidate::Incomplete => {
+                check.tail_bytes = rest.len() as u64;
+                break;
+            }
+            Candidate::Bad => {
+                if synced {
+                    check.frames_bad += 1;
+                    synced = false;
+                }
+                if check.frames_ok == 0 {
+                    check.lead_bytes += 1;
+                } else {
+                    check.skipped_bytes += 1;
+                }
+                i += 1;
+            }
+        }
+    }
+    check
+}
+
+/// Where the payload's data comes from.
+#[derive(Clone, PartialEq, Eq, Default)]
+pub enum Generator {
+    /// The endless self-checking Counter stream (module doc).
+    #[default]
+    Counter,
+    /// A file's bytes (read by the twin), sent once; afterwards the stream is exhausted.
+    Bytes(Arc<[u8]>),
+}
+
+impl std::fmt::Debug for Generator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Generator::Counter => f.write_str("Counter"),
+            Generator::Bytes(b) => write!(f, "Bytes({} bytes)", b.len()),
+        }
+    }
+}
+
+impl Generator {
+    /// Total length of the stream; `None` for an endless one.
+    pub fn total_bytes(&self) -> Option<u64> {
+        match self {
+            Generator::Counter => None,
+            Generator::Bytes(b) => Some(b.len() as u64),
+        }
+    }
+
+    /// Bytes `from .. from + len` of the stream of payload `addr`, clipped at its end.
+    pub fn bytes_at(&self, addr: u8, from: u64, len: usize) -> Vec<u8> {
+        match self {
+            Generator::Counter => counter_stream(addr, from, len),
+            Generator::Bytes(b) => {
+                let start = usize::try_from(from).unwrap_or(usize::MAX).min(b.len());
+                let end = start.saturating_add(len).min(b.len());
+                b[start..end].to_vec()
+            }
+        }
+    }
+}
+
+/// A generator with its read position and rate limit (module doc).
+#[derive(Debug, Clone)]
+pub struct DataStream {
+    generator: Generator,
+    rate_bytes_per_s: Option<u64>,
+    addr: u8,
+    t0: Option<SimTime>,
+    position: u64,
+}
+
+impl DataStream {
+    /// A stream at position 0, producing nothing until [`DataStream::begin`].
+    pub fn new(generator: Generator, rate_bytes_per_s: Option<u64>) -> Self {
+        DataStream {
+            generator,
+            rate_bytes_per_s,
+            addr: 0,
+            t0: None,
+            position: 0,
+        }
+    }
+
+    /// The payload booted at `now` with address `addr`: the first call starts the rate clock.
+    pub fn begin(&mut self, addr: u8, now: SimTime) {
+        self.addr = addr;
+        self.t0.get_or_insert(now);
+    }
+
+    /// Bytes taken so far (the next byte's index in the stream).
+    pub fn position(&self) -> u64 {
+        self.position
+    }
+
+    /// Bytes that may be taken at `now`.
+    pub fn available(&self, now: SimTime) -> u64 {
+        let Some(t0) = self.t0 else {
+            return 0;
+        };
+        let by_rate = match self.rate_bytes_per_s {
+            None => u64::MAX,
+            Some(rate) => {
+                let made = u128::from(rate) * now.saturating_since(t0).as_nanos() / 1_000_000_000;
+                u64::try_from(made).unwrap_or(u64::MAX)
+            }
+        };
+        let by_end = self.generator.total_bytes().unwrap_or(u64::MAX);
+        by_rate.min(by_end).saturating_sub(self.position)
+    }
+
+    /// Take up to `max` bytes at `now` (fewer when the rate or the end limits it).
+    pub fn take(&mut self, max: usize, now: SimTime) -> Vec<u8> {
+        let n = usize::try_from(self.available(now))
+            .unwrap_or(usize::MAX)
+            .min(max);
+        let out = self.generator.bytes_at(self.addr, self.position, n);
+        self.position += out.len() as u64;
+        out
+    }
+
+    /// Give back the last `n` bytes taken (their packet could not be sent).
+    pub fn untake(&mut self, n: usize) {
+        self.position = self.position.saturating_sub(n as u64);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn cycle_bytes_is_the_sum_of_64_frame_lengths() {
+        let sum: u64 = (0..64u32).map(|s| frame_len(s) as u64).sum();
+        assert_eq!(sum, CYCLE_BYTES);
+        let mut lens: Vec<usize> = (0..64u32).map(data_len).collect();
+        lens.sort_unstable();
+        assert_eq!(lens, (32..96).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn frame_layout_and_crc() {
+        let f = counter_frame(12, 0x0403_0201);
+        let len = data_len(0x0403_0201);
+        assert_eq!(f.len(), 14 + len);
+        assert_eq!(f[..4], [0x1A, 0xCF, 0xFC, 0x1D]);
+        assert_eq!(f[4], 12);
+        assert_eq!(f[5..9], [1, 2, 3, 4]);
+        assert_eq!(usize::from(f[9]), len);
+        assert!(!f[10..10 + len].contains(&0x1A));
+        let crc = u32::from_le_bytes(f[10 + len..].try_into().unwrap());
+        assert_eq!(crc, CRC32C.checksum(&f[..10 + len]));
+        // CRC-32C check value ("123456789" -> 0xE3069283, RFC 3720 B.4 / crc catalogue).
+        assert_eq!(CRC32C.checksum(b"123456789"), 0xE306_9283);
+    }
+
+    #[test]
+    fn counter_stream_matches_concatenated_frames_at_any_offset() {
+        let mut whole = Vec::new();
+        for seq in 0..200u32 {
+            emit_counter_frame(13, seq, &mut whole);
+        }
+        for from in [0usize, 1, 45, 46, 4959, 4960, 4961, 7000, 9919, 9920] {
+            assert_eq!(
+                counter_stream(13, from as u64, 500),
+                whole[from..from + 500],
+                "from {from}"
+            );
+        }
+        assert!(counter_stream(13, 17, 0).is_empty());
+    }
+
+    #[test]
+    fn counter_stream_wraps_seq_consistently() {
+        // Frame 2^32 (seq 0 again) starts exactly 2^32 / 64 cycles in.
+        let at = (1u64 << 32) / 64 * CYCLE_BYTES;
+        assert_eq!(counter_stream(12, at, 60), counter_stream(12, 0, 60));
+        let before = counter_stream(12, at - 20, 20);
+        let last = counter_frame(12, u32::MAX);
+        assert_eq!(before, last[last.len() - 20..]);
+    }
+
+    #[test]
+    fn check_clean_stream() {
+        let s = counter_stream(14, 0, 10_000);
+        let c = check_counter_stream(&s);
+        assert!(c.is_clean(), "{c:?}");
+        assert_eq!(c.first_seq, Some(0));
+        assert_eq!(c.addr, Some(14));
+        assert_eq!(c.lead_bytes, 0);
+        assert_eq!(c.good_bytes + c.tail_bytes, 10_000);
+        assert!(c.tail_bytes > 0 && c.tail_bytes < 109);
+    }
+
+    #[test]
+    fn check_from_the_middle_skips_the_lead() {
+        let s = counter_stream(14, 3000, 5000);
+        let c = check_counter_stream(&s);
+        assert!(c.is_clean(), "{c:?}");
+        assert!(c.lead_bytes > 0 && c.lead_bytes < 109);
+        assert_eq!(c.lead_bytes + c.good_bytes + c.tail_bytes, 5000);
+    }
+
+    #[test]
+    fn check_names_missing_seqs() {
+        let s = counter_stream(12, 0, 20_000);
+        // Remove frames 10..13 whole, and a chunk from the middle of frame 40.
+        let off = |seq: u32| (0..seq).map(frame_len).sum::<usize>();
+        let mut cut = s[..off(10)].to_vec();
+        cut.extend_from_slice(&s[off(13)..off(40) + 20]);
+        cut.extend_from_slice(&s[off(40) + 30..]);
+        let c = check_counter_stream(&cut);
+        assert_eq!(c.missing_seqs, vec![10, 11, 12, 40]);
+        assert_eq!(c.missing_count, 4);
+        assert_eq!(c.frames_bad, 1);
+        assert!(c.skipped_bytes > 0);
+        assert!(!c.is_clean());
+    }
+
+    #[test]
+    fn check_flags_a_flipped_bit() {
+        let mut s = counter_stream(12, 0, 3000);
+        s[500] ^= 0x10;
+        let c = check_counter_stream(&s);
+        assert_eq!(c.frames_bad, 1);
+        assert_eq!(c.missing_count, 1);
+    }
+
+    #[test]
+    fn check_counts_duplicates() {
+        let a = counter_stream(12, 0, off_of(5));
+        let mut s = a.clone();
+        s.extend_from_slice(&a);
+        let c = check_counter_stream(&s);
+        assert_eq!(c.frames_ok, 10);
+        assert_eq!(c.out_of_order, 5);
+        assert_eq!(c.missing_count, 0);
+    }
+
+    fn off_of(seq: u32) -> usize {
+        (0..seq).map(frame_len).sum()
+    }
+
+    #[test]
+    fn rate_limits_availability() {
+        let mut s = DataStream::new(Generator::Counter, Some(1000));
+        assert_eq!(s.available(SimTime::from_secs(5)), 0, "before begin");
+        s.begin(12, SimTime::from_secs(1));
+        assert_eq!(s.available(SimTime::from_secs(1)), 0);
+        assert_eq!(s.available(SimTime::from_ms(1500)), 500);
+        assert_eq!(s.take(300, SimTime::from_ms(1500)).len(), 300);
+        assert_eq!(s.take(300, SimTime::from_ms(1500)).len(), 200);
+        assert_eq!(s.position(), 500);
+        s.untake(100);
+        assert_eq!(s.position(), 400);
+    }
+
+    #[test]
+    fn bytes_generator_is_sent_once() {
+        let file: Arc<[u8]> = (0..=99u8).collect::<Vec<_>>().into();
+        let mut s = DataStream::new(Generator::Bytes(file.clone()), None);
+        s.begin(12, SimTime::ZERO);
+        assert_eq!(s.take(60, SimTime::ZERO), file[..60]);
+        assert_eq!(s.take(60, SimTime::ZERO), file[60..]);
+        assert!(s.take(60, SimTime::ZERO).is_empty());
+        assert_eq!(format!("{:?}", Generator::Bytes(file)), "Bytes(100 bytes)");
+    }
+}
