@@ -93,6 +93,16 @@ pub enum RunEvent {
         /// The ADCS's estimate, target and commands.
         adcs: Box<orbit::state::AdcsSnapshot>,
     },
+    /// What the payload controller did: a session started or ended, bytes reached the
+    /// ground, bytes were dropped, the final accounting.
+    Pc(Box<nodes_pc::PcOutput>),
+    /// What a simulated payload did: bytes produced, a SYNC received.
+    Payload {
+        /// The payload's address.
+        addr: u8,
+        /// What.
+        out: nodes_payload::PayloadOutput,
+    },
     /// The verdict on an expectation (at the end of the run).
     Expectation {
         /// When the verdict refers to.
@@ -118,6 +128,17 @@ impl RunEvent {
             | RunEvent::CommandResult { t, .. }
             | RunEvent::Truth { t, .. }
             | RunEvent::Expectation { t, .. } => *t,
+            RunEvent::Pc(o) => match **o {
+                nodes_pc::PcOutput::SessionStarted { t, .. }
+                | nodes_pc::PcOutput::SessionEnded { t, .. }
+                | nodes_pc::PcOutput::Downlinked { t, .. }
+                | nodes_pc::PcOutput::Dropped { t, .. }
+                | nodes_pc::PcOutput::Final { t, .. } => t,
+            },
+            RunEvent::Payload { out, .. } => match out {
+                nodes_payload::PayloadOutput::Produced { t, .. }
+                | nodes_payload::PayloadOutput::SyncReceived { t, .. } => *t,
+            },
         }
     }
 }

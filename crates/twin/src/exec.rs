@@ -157,8 +157,11 @@ pub async fn execute_with(
     record: Option<&Path>,
     live: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    let downlink_dir = downlink_dir(loaded, record);
     let Some(path) = record else {
-        return Ok((execute(compiled, live).await?, None));
+        let outcome = execute(compiled, live).await?;
+        write_downlink(&outcome, downlink_dir.as_deref())?;
+        return Ok((outcome, None));
     };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -198,7 +201,37 @@ pub async fn execute_with(
         ),
         None => None,
     };
+    write_downlink(&outcome, downlink_dir.as_deref())?;
     Ok((outcome, stats))
+}
+
+/// Where the S-band sink's files go: `[pc] downlink_dir`, else beside the recording
+/// (`out/run.mcap` -> `out/run.downlink/`), else nowhere.
+pub fn downlink_dir(loaded: &Loaded, record: Option<&Path>) -> Option<std::path::PathBuf> {
+    match (&loaded.scenario.pc.downlink_dir, record) {
+        (Some(d), _) => Some(d.into()),
+        (None, Some(r)) => Some(r.with_extension("downlink")),
+        (None, None) => None,
+    }
+}
+
+/// Write each session run's downlinked bytes under `dir` (nothing when no session ran).
+fn write_downlink(outcome: &Outcome, dir: Option<&Path>) -> anyhow::Result<()> {
+    let Some(dir) = dir else { return Ok(()) };
+    if outcome.report.sessions.runs.is_empty() {
+        return Ok(());
+    }
+    let files = outcome
+        .report
+        .sessions
+        .write_files(dir)
+        .with_context(|| format!("writing the downlinked data to {}", dir.display()))?;
+    eprintln!(
+        "downlink: {} session file(s) in {}",
+        files.len(),
+        dir.display()
+    );
+    Ok(())
 }
 
 /// Compile a loaded scenario.

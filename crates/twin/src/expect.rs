@@ -193,6 +193,10 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
             |(t, why)| verdict(false, t, why),
             |(t, ok)| verdict(true, t, ok),
         ),
+        Check::Session { .. } | Check::Downlink { .. } | Check::Accounting { .. } => {
+            let (passed, t, observed) = crate::sessions::check(&x.check, report);
+            verdict(passed, t, observed)
+        }
         Check::Counter {
             target,
             counter,

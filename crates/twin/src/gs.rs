@@ -213,3 +213,89 @@ pub async fn ident(gs: &mut GsClient, node: u8, timeout: Duration) -> anyhow::Re
         }
     }
 }
+
+fn no_reply(node: u8, timeout: Duration) -> anyhow::Result<bool> {
+    println!(
+        "no reply from {node} (timeout {:.1} s)",
+        timeout.as_secs_f64()
+    );
+    Ok(false)
+}
+
+/// `gs raw`: any request; prints the reply in hex.
+pub async fn raw(
+    gs: &mut GsClient,
+    node: u8,
+    port: u8,
+    data: Vec<u8>,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
+    match gs.request(node, port, data, timeout).await? {
+        Some((reply, rtt)) => {
+            println!(
+                "{node}:{port} replied {} ({:.3} ms)",
+                hex::encode(&reply.data),
+                rtt.as_secs_f64() * 1e3
+            );
+            Ok(true)
+        }
+        None => no_reply(node, timeout),
+    }
+}
+
+/// `gs setup|status|abort`: a request to the PC's session control port (6:10); the reply
+/// decoded (ICD 3.1.8.1). Succeeds when the PC answers with result 1.
+pub async fn pc_request(
+    gs: &mut GsClient,
+    request: Vec<u8>,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
+    use nodes_pc::wire::{PORT_CONTROL, Status, cmd};
+    const PC: u8 = 6;
+    let command = request.first().copied().unwrap_or(0);
+    let name = match command {
+        cmd::SETUP => "SETUP",
+        cmd::STATUS => "STATUS",
+        _ => "ABORT",
+    };
+    let Some((reply, rtt)) = gs.request(PC, PORT_CONTROL, request, timeout).await? else {
+        return no_reply(PC, timeout);
+    };
+    let ms = rtt.as_secs_f64() * 1e3;
+    match reply.data.as_slice() {
+        [c, 1, rest @ ..] if *c == command => {
+            if command == cmd::STATUS {
+                match Status::parse(rest) {
+                    Ok(st) => println!(
+                        "STATUS: state {:?}, last result {:?}, start {}, {} s, max packets {}, \
+                         frame {} bytes, sync {:?} ({ms:.3} ms)",
+                        st.state,
+                        st.last_result,
+                        st.timestamp,
+                        st.duration_s,
+                        st.max_packets,
+                        st.poll_frame_size,
+                        String::from_utf8_lossy(&st.sync_message)
+                    ),
+                    Err(e) => {
+                        println!("STATUS: malformed reply {} ({e:?})", hex::encode(rest));
+                        return Ok(false);
+                    }
+                }
+            } else {
+                println!("{name}: accepted ({ms:.3} ms)");
+            }
+            Ok(true)
+        }
+        [c, 0, ..] if *c == command => {
+            println!(
+                "{name}: refused by the PC (result 0; the reason is in the run log, `/log` of the recording) ({ms:.3} ms)"
+            );
+            Ok(false)
+        }
+        other => {
+            println!("{name}: unexpected reply {}", hex::encode(other));
+            Ok(false)
+        }
+    }
+}

@@ -21,6 +21,7 @@ pub mod record;
 pub mod recording;
 pub mod runtime;
 pub mod scenario;
+pub mod sessions;
 pub mod timefmt;
 
 use std::time::Duration;

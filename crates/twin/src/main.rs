@@ -197,6 +197,45 @@ enum GsRequest {
         /// Node address.
         node: u8,
     },
+    /// Any request: `raw NODE PORT HEX` (the reply is printed in hex).
+    Raw {
+        /// Node address.
+        node: u8,
+        /// Destination port.
+        port: u8,
+        /// Request bytes in hex (command id first).
+        data: String,
+    },
+    /// PC SETUP (ICD 3.1.8.1): configure a payload session.
+    Setup {
+        /// Session id (1 for payload 12 in the default scenario).
+        session: u8,
+        /// Start, UTC unix seconds of the M6P clock (0: now).
+        #[arg(long, default_value_t = 0)]
+        start: u32,
+        /// Duration, seconds (5-900).
+        #[arg(long, default_value_t = 60)]
+        duration: u16,
+        /// Packets after which the session ends (0: no limit).
+        #[arg(long, default_value_t = 0)]
+        max_packets: u16,
+        /// POLL frame size, bytes (1-254).
+        #[arg(long, default_value_t = 64)]
+        frame: u8,
+        /// Sync message (text, at most 128 bytes).
+        #[arg(long, default_value = "")]
+        sync: String,
+    },
+    /// PC STATUS: a session's state, last result and configuration.
+    Status {
+        /// Session id.
+        session: u8,
+    },
+    /// PC ABORT of a PENDING or ACTIVE session.
+    Abort {
+        /// Session id.
+        session: u8,
+    },
 }
 
 fn main() -> ExitCode {
@@ -548,7 +587,7 @@ fn cmd_check(files: &[PathBuf]) -> anyhow::Result<bool> {
                 "{}: OK ({} commands, {} faults, {} expectations)",
                 l.file,
                 l.scenario.commands.len(),
-                l.scenario.faults.len(),
+                l.scenario.faults.len() + l.scenario.fc.faults.len(),
                 l.scenario.expectations.len()
             ),
             Err(e) => {
@@ -703,6 +742,46 @@ fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
             } => gs::ping(&mut client, node, count, size, interval, a.timeout).await,
             GsRequest::Uptime { node, icd } => gs::uptime(&mut client, node, a.timeout, icd).await,
             GsRequest::Ident { node } => gs::ident(&mut client, node, a.timeout).await,
+            GsRequest::Raw { node, port, data } => {
+                let bytes = m6p_twin::scenario::parse_hex(&data).map_err(anyhow::Error::msg)?;
+                gs::raw(&mut client, node, port, bytes, a.timeout).await
+            }
+            GsRequest::Setup {
+                session,
+                start,
+                duration,
+                max_packets,
+                frame,
+                sync,
+            } => {
+                let cfg = nodes_pc::wire::SessionConfig {
+                    session_id: session,
+                    timestamp: start,
+                    duration_s: duration,
+                    max_packets,
+                    poll_frame_size: frame,
+                    sync_message: sync.into_bytes(),
+                };
+                let mut req = vec![nodes_pc::wire::cmd::SETUP];
+                cfg.emit(&mut req);
+                gs::pc_request(&mut client, req, a.timeout).await
+            }
+            GsRequest::Status { session } => {
+                gs::pc_request(
+                    &mut client,
+                    vec![nodes_pc::wire::cmd::STATUS, session],
+                    a.timeout,
+                )
+                .await
+            }
+            GsRequest::Abort { session } => {
+                gs::pc_request(
+                    &mut client,
+                    vec![nodes_pc::wire::cmd::ABORT, session],
+                    a.timeout,
+                )
+                .await
+            }
         }
     })
 }

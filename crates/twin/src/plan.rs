@@ -95,6 +95,39 @@ pub enum Check {
         /// Elevation for `target-visible`, deg.
         min_elevation_deg: f64,
     },
+    /// Every (or any) run of a PC session ended with `result`, counting `min`..=`max`
+    /// packets.
+    Session {
+        /// Session id.
+        session: u8,
+        /// The required result (ICD 3.1.6 value).
+        result: Option<u8>,
+        /// Every or any run.
+        occurrence: Occurrence,
+        /// Fewest packets counted.
+        min: Option<u64>,
+        /// Most packets counted.
+        max: Option<u64>,
+    },
+    /// A PC session's bytes at the ground over the whole run.
+    Downlink {
+        /// Session id.
+        session: u8,
+        /// Fewest bytes.
+        min: Option<u64>,
+        /// Most bytes.
+        max: Option<u64>,
+        /// The counter-stream check: `Some(false)` no damaged frame, `Some(true)` also no
+        /// missing sequence number.
+        intact: Option<bool>,
+    },
+    /// Every byte a payload produced is downlinked, dropped with a reason, or held.
+    Accounting {
+        /// One payload, or every simulated one.
+        payload: Option<u8>,
+        /// Most dropped bytes.
+        max: Option<u64>,
+    },
     /// A counter at the end of the run.
     Counter {
         /// Node address, or a medium name (`main`, `payload`, `ground`).
@@ -297,6 +330,13 @@ pub fn compile(s: &Scenario) -> Compiled {
         }
     }
     opts.fc = compile_fc(s, &mut faults);
+    opts.pc = crate::sessions::compile_pc(s);
+    opts.payloads = crate::sessions::compile_payloads(s);
+    for p in opts.payloads.values_mut() {
+        if let Some(push) = p.push.as_mut() {
+            push.pc_port = opts.pc.ingest_port;
+        }
+    }
     faults.sort_by_key(|f| f.at);
     opts.faults = faults.clone();
     let expectations = s
@@ -319,6 +359,21 @@ fn random_unit(seed: u64, salt: u64) -> nalgebra::Vector3<f64> {
     let phi = std::f64::consts::TAU * u(1);
     let r = (1.0 - z * z).max(0.0).sqrt();
     nalgebra::Vector3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// A rotation drawn uniformly from SO(3) (Shoemake, "Uniform random rotations", Graphics
+/// Gems III, 1992): three uniforms from the seed.
+fn random_rotation(seed: u64, salt: u64) -> nalgebra::UnitQuaternion<f64> {
+    let u = |k: u64| (crate::runtime::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
+    let (u1, u2, u3) = (u(0), u(1), u(2));
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    let tau = std::f64::consts::TAU;
+    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        b * (tau * u3).cos(),
+        a * (tau * u2).sin(),
+        a * (tau * u2).cos(),
+        b * (tau * u3).sin(),
+    ))
 }
 
 /// The FC's configuration from the `[fc]` table (validated), its faults added to the
@@ -351,18 +406,21 @@ fn compile_fc(s: &Scenario, faults: &mut Vec<TimedFault>) -> nodes_fc::FcConfig 
     c.initial.w_body_rad_s = axis * f.initial_rate_deg_s.unwrap_or(0.0).to_radians();
     c.initial.q_eci_from_body = match f.initial_attitude {
         Some([r, i, j, k]) => UnitQuaternion::from_quaternion(Quaternion::new(r, i, j, k)),
-        None => {
-            // Uniform random rotation: an axis and an angle drawn from the seed.
-            let angle = (crate::runtime::mix(s.seed, 0x320) >> 11) as f64 / (1u64 << 53) as f64
-                * std::f64::consts::TAU;
-            UnitQuaternion::from_scaled_axis(random_unit(s.seed, 0x330) * angle)
-        }
+        None => random_rotation(s.seed, 0x320),
     };
     if let Some(rpm) = f.initial_wheel_rpm {
         c.initial.wheel_speed_rad_s = rpm.map(|r| r * std::f64::consts::TAU / 60.0);
     }
     if let Some(m) = f.inertia_kg_m2 {
         c.body.inertia_kg_m2 = nalgebra::Matrix3::from_fn(|r, k| m[r][k]);
+        // The gains follow the body (and the orbit's rate), as the default's do.
+        let n_rad_s = match s.satellite.tle.as_slice() {
+            [.., l1, l2] => orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
+                .map(|t| t.mean_motion_rev_day * std::f64::consts::TAU / 86_400.0)
+                .unwrap_or(nodes_fc::control::DEFAULT_MEAN_MOTION_RAD_S),
+            _ => nodes_fc::control::DEFAULT_MEAN_MOTION_RAD_S,
+        };
+        c.adcs.control = nodes_fc::control::ControlConfig::for_body(&c.body, n_rad_s);
     }
     if let Some(d) = f.residual_dipole_am2 {
         c.residual_dipole_am2 = Vector3::from(d);
@@ -478,6 +536,23 @@ fn compile_expectation(
             when: x.when.unwrap_or(crate::scenario::When::Always),
             min_elevation_deg: x.min_elevation_deg.unwrap_or(10.0),
         },
+        ExpectKind::Session => Check::Session {
+            session: x.session.unwrap_or(0),
+            result: x.session_result.map(|r| r.value()),
+            occurrence,
+            min: x.min,
+            max: x.max,
+        },
+        ExpectKind::Downlink => Check::Downlink {
+            session: x.session.unwrap_or(0),
+            min: x.min,
+            max: x.max,
+            intact: x.intact,
+        },
+        ExpectKind::Accounting => Check::Accounting {
+            payload: x.payload,
+            max: x.max,
+        },
         ExpectKind::Counter => Check::Counter {
             target: match &x.target {
                 Some(NodeRef::Name(n)) if ["main", "payload", "ground"].contains(&n.as_str()) => {
@@ -492,4 +567,64 @@ fn compile_expectation(
         },
     };
     Expectation { name, check }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    const TLE: &str = r#"
+[satellite]
+tle = [
+  "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996",
+  "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009",
+]
+"#;
+
+    fn fc_of(extra: &str) -> nodes_fc::FcConfig {
+        let text = format!("name = \"t\"\nduration = \"1m\"\n{TLE}\n{extra}");
+        let s = Scenario::parse("t.toml", &text).unwrap();
+        compile(&s).opts.fc
+    }
+
+    #[test]
+    fn a_scenario_inertia_re_derives_the_control_gains() {
+        let default = fc_of("");
+        assert_eq!(
+            default.adcs.control,
+            nodes_fc::control::ControlConfig::default()
+        );
+        let big = fc_of("[fc]\ninertia_kg_m2 = [[0.4, 0, 0], [0, 0.5, 0], [0, 0, 0.2]]\n");
+        let want = nodes_fc::control::ControlConfig::for_body(
+            &big.body,
+            15.145 * std::f64::consts::TAU / 86_400.0,
+        );
+        assert_eq!(big.adcs.control, want);
+        assert_ne!(big.adcs.control, default.adcs.control);
+    }
+
+    #[test]
+    fn seeded_initial_attitudes_are_uniform_over_rotations() {
+        // For rotations uniform on SO(3) every quaternion component has E[x^2] = 1/4, and
+        // the rotation angle has density (1 - cos a) / pi: mean angle pi/2 + 2/pi.
+        let n = 4000;
+        let mut sq = [0.0f64; 4];
+        let mut angle = 0.0;
+        for seed in 0..n {
+            let q = random_rotation(seed, 0x320);
+            for (k, x) in [q.w, q.i, q.j, q.k].into_iter().enumerate() {
+                sq[k] += x * x / n as f64;
+            }
+            angle += q.angle() / n as f64;
+        }
+        for (k, m) in sq.iter().enumerate() {
+            assert!((m - 0.25).abs() < 0.02, "component {k}: E[x^2] = {m}");
+        }
+        let want = std::f64::consts::FRAC_PI_2 + 2.0 / std::f64::consts::PI;
+        assert!(
+            (angle - want).abs() < 0.03,
+            "mean angle {angle}, want {want}"
+        );
+    }
 }

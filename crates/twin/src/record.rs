@@ -129,6 +129,12 @@ pub const TOPIC_TRUTH_STATE: &str = "/fc/truth/state";
 pub const TOPIC_ADCS: &str = "/fc/adcs";
 /// Topic of the 3D scene drawn in the body frame (`foxglove.SceneUpdate`).
 pub const TOPIC_SCENE: &str = "/fc/scene";
+/// The PC's session events and drops.
+pub const TOPIC_PC_SESSIONS: &str = "/pc/sessions";
+/// Payload bytes at the ground (the S-band sink).
+pub const TOPIC_PC_DOWNLINK: &str = "/pc/downlink";
+/// What the simulated payloads did.
+pub const TOPIC_PAYLOADS: &str = "/payloads";
 
 /// Foxglove frame id of ECI J2000 (axes only: the transforms carry no translation).
 pub const FRAME_ECI: &str = "eci";
@@ -537,6 +543,63 @@ pub struct CommandMsg {
     pub rtt_ns: Option<u64>,
 }
 
+/// `/pc/sessions`: a session started or ended, or payload bytes dropped by the PC.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.PcSession")]
+pub struct PcSessionMsg {
+    /// Simulated ns since the start of the run.
+    pub t_ns: u64,
+    /// `started`, `ended`, `dropped` or `final` (the accounting at the end of the run).
+    pub event: String,
+    /// The session id (none for bytes from an unknown source).
+    pub session: Option<u8>,
+    /// The payload's address.
+    pub payload: Option<u8>,
+    /// `ended`: `done`, `aborted`, `no-ack` or `s-band-failure`.
+    pub result: Option<String>,
+    /// `ended`: packets counted.
+    pub packets: Option<u32>,
+    /// `dropped`: why (`buffer-full`, `oversize`, `late`, `session-ended`, `sband-failure`,
+    /// `unknown-source`, `power-loss`, `malformed`).
+    pub reason: Option<String>,
+    /// `dropped`: how many bytes; `final`: bytes still held (buffer and S-band queue).
+    pub bytes: Option<u64>,
+}
+
+/// `/pc/downlink`: payload bytes that reached the ground over S-band.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.Downlink")]
+pub struct DownlinkMsg {
+    /// Simulated ns since the start of the run (the last bit of the S-band frame).
+    pub t_ns: u64,
+    /// The session.
+    pub session: u8,
+    /// Its payload.
+    pub payload: u8,
+    /// Byte count.
+    pub len: u32,
+    /// The bytes, hex.
+    pub bytes_hex: String,
+}
+
+/// `/payloads`: a simulated payload produced bytes or received a SYNC.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.Payload")]
+pub struct PayloadMsg {
+    /// Simulated ns since the start of the run.
+    pub t_ns: u64,
+    /// The payload's address.
+    pub addr: u8,
+    /// `produced` or `sync`.
+    pub event: String,
+    /// `produced`: bytes that left the payload.
+    pub bytes: Option<u64>,
+    /// `produced`: `poll-reply` or `push`.
+    pub how: Option<String>,
+    /// `sync`: the message, hex.
+    pub msg_hex: Option<String>,
+}
+
 /// `/expectations`: an expectation's verdict.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[schemars(title = "m6p.Expectation")]
@@ -907,10 +970,16 @@ pub enum ChannelKind {
     Adcs,
     /// `/fc/scene` (`foxglove.SceneUpdate`).
     Scene,
+    /// `/pc/sessions` (`m6p.PcSession`).
+    PcSession,
+    /// `/pc/downlink` (`m6p.Downlink`).
+    Downlink,
+    /// `/payloads` (`m6p.Payload`).
+    Payload,
 }
 
 /// Every kind, in declaration order (`kind as usize` indexes it).
-pub const CHANNEL_KINDS: [ChannelKind; 14] = [
+pub const CHANNEL_KINDS: [ChannelKind; 17] = [
     ChannelKind::Can,
     ChannelKind::Net,
     ChannelKind::Csp,
@@ -925,6 +994,9 @@ pub const CHANNEL_KINDS: [ChannelKind; 14] = [
     ChannelKind::TruthState,
     ChannelKind::Adcs,
     ChannelKind::Scene,
+    ChannelKind::PcSession,
+    ChannelKind::Downlink,
+    ChannelKind::Payload,
 ];
 
 /// The channels every run has, as (kind, key), in registration order; others (another
@@ -957,6 +1029,9 @@ impl ChannelKind {
             ChannelKind::TruthState => "m6p.TruthState",
             ChannelKind::Adcs => "m6p.Adcs",
             ChannelKind::Scene => "foxglove.SceneUpdate",
+            ChannelKind::PcSession => "m6p.PcSession",
+            ChannelKind::Downlink => "m6p.Downlink",
+            ChannelKind::Payload => "m6p.Payload",
         }
     }
 
@@ -981,6 +1056,9 @@ impl ChannelKind {
             ChannelKind::TruthState => gen_schema::<TruthStateMsg>(),
             ChannelKind::Adcs => gen_schema::<AdcsMsg>(),
             ChannelKind::Scene => Ok(FOXGLOVE_SCENE_UPDATE_SCHEMA.as_bytes().to_vec()),
+            ChannelKind::PcSession => gen_schema::<PcSessionMsg>(),
+            ChannelKind::Downlink => gen_schema::<DownlinkMsg>(),
+            ChannelKind::Payload => gen_schema::<PayloadMsg>(),
         }
     }
 
@@ -1005,6 +1083,9 @@ impl ChannelKind {
             ChannelKind::TruthState => TOPIC_TRUTH_STATE.to_owned(),
             ChannelKind::Adcs => TOPIC_ADCS.to_owned(),
             ChannelKind::Scene => TOPIC_SCENE.to_owned(),
+            ChannelKind::PcSession => TOPIC_PC_SESSIONS.to_owned(),
+            ChannelKind::Downlink => TOPIC_PC_DOWNLINK.to_owned(),
+            ChannelKind::Payload => TOPIC_PAYLOADS.to_owned(),
         }
     }
 
@@ -1502,6 +1583,111 @@ impl EventEncoder {
                 emit_json(buf, base_ns, (ChannelKind::Expectation, ""), *t, &msg, emit)
             }
             RunEvent::Truth { t, truth, adcs } => self.encode_truth(*t, truth, adcs, emit),
+            RunEvent::Pc(o) => {
+                use nodes_pc::PcOutput as O;
+                let t = ev.t();
+                let none = PcSessionMsg {
+                    t_ns,
+                    event: String::new(),
+                    session: None,
+                    payload: None,
+                    result: None,
+                    packets: None,
+                    reason: None,
+                    bytes: None,
+                };
+                let msg = match &**o {
+                    O::Downlinked {
+                        session_id,
+                        payload_addr,
+                        bytes,
+                        ..
+                    } => {
+                        let msg = DownlinkMsg {
+                            t_ns,
+                            session: *session_id,
+                            payload: *payload_addr,
+                            len: bytes.len() as u32,
+                            bytes_hex: hex::encode(bytes),
+                        };
+                        return emit_json(buf, base_ns, (ChannelKind::Downlink, ""), t, &msg, emit);
+                    }
+                    O::Final { accounting, .. } => {
+                        // One message per session: bytes still held (buffer and queue).
+                        for x in &accounting.sessions {
+                            let msg = PcSessionMsg {
+                                event: "final".into(),
+                                session: Some(x.session_id),
+                                payload: Some(x.payload_addr),
+                                bytes: Some(x.bytes.buffered_now + x.bytes.queued_now),
+                                ..none.clone()
+                            };
+                            emit_json(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)?;
+                        }
+                        return Ok(());
+                    }
+                    O::SessionStarted { session_id, .. } => PcSessionMsg {
+                        event: "started".into(),
+                        session: Some(*session_id),
+                        ..none
+                    },
+                    O::SessionEnded {
+                        session_id,
+                        result,
+                        packets,
+                        ..
+                    } => PcSessionMsg {
+                        event: "ended".into(),
+                        session: Some(*session_id),
+                        result: Some(crate::sessions::result_name(result.to_u8()).into()),
+                        packets: Some(*packets),
+                        ..none
+                    },
+                    O::Dropped {
+                        session_id,
+                        payload_addr,
+                        reason,
+                        bytes,
+                        ..
+                    } => PcSessionMsg {
+                        event: "dropped".into(),
+                        session: *session_id,
+                        payload: Some(*payload_addr),
+                        reason: Some(reason.as_str().into()),
+                        bytes: Some(*bytes),
+                        ..none
+                    },
+                };
+                emit_json(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)
+            }
+            RunEvent::Payload { addr, out } => {
+                use nodes_payload::PayloadOutput as O;
+                let msg = match out {
+                    O::Produced { bytes, how, .. } => PayloadMsg {
+                        t_ns,
+                        addr: *addr,
+                        event: "produced".into(),
+                        bytes: Some(*bytes),
+                        how: Some(
+                            match how {
+                                nodes_payload::How::PollReply => "poll-reply",
+                                nodes_payload::How::Push => "push",
+                            }
+                            .into(),
+                        ),
+                        msg_hex: None,
+                    },
+                    O::SyncReceived { msg, .. } => PayloadMsg {
+                        t_ns,
+                        addr: *addr,
+                        event: "sync".into(),
+                        bytes: None,
+                        how: None,
+                        msg_hex: Some(hex::encode(msg)),
+                    },
+                };
+                emit_json(buf, base_ns, (ChannelKind::Payload, ""), ev.t(), &msg, emit)
+            }
         }
     }
 

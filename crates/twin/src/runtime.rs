@@ -64,6 +64,10 @@ pub struct RunOptions {
     /// The flight computer's models and timeline; its `epoch_unix_s`, `tle` and `seed` are
     /// taken from this run's.
     pub fc: nodes_fc::FcConfig,
+    /// The payload controller's sessions, S-band and events.
+    pub pc: nodes_pc::PcConfig,
+    /// The simulated payloads, by address (an address missing here gets the defaults).
+    pub payloads: BTreeMap<u8, nodes_payload::PayloadConfig>,
 }
 
 /// What an outside program sent on one KISS link during a recorded run.
@@ -94,6 +98,8 @@ impl RunOptions {
             faults: Vec::new(),
             kiss_replay: Vec::new(),
             fc: nodes_fc::FcConfig::default(),
+            pc: nodes_pc::PcConfig::default(),
+            payloads: BTreeMap::new(),
         }
     }
 
@@ -175,6 +181,8 @@ pub struct RunReport {
     pub trace: Vec<TraceEvent>,
     /// The FC's published attitude samples, in time order (for expectations).
     pub attitude: Vec<AttitudeSample>,
+    /// The PC's sessions, downlinked and dropped bytes, and what the payloads produced.
+    pub sessions: crate::sessions::SessionsReport,
 }
 
 /// The figures of one published FC snapshot that expectations check.
@@ -249,7 +257,8 @@ pub fn mix(seed: u64, salt: u64) -> u64 {
 
 fn app_for(
     role: Role,
-    fc: &nodes_fc::FcConfig,
+    addr: u8,
+    opts: &RunOptions,
     plan: Vec<PlannedRequest>,
     results: &Results,
     events: &mpsc::UnboundedSender<RunEvent>,
@@ -258,22 +267,37 @@ fn app_for(
         Role::CommPrimary | Role::CommSecondary => Box::new(nodes_comm::app()),
         Role::Fc => {
             let tx = events.clone();
+            Box::new(nodes_fc::FcApp::new(opts.fc.clone()).with_publisher(
+                nodes_fc::Publisher::new(move |truth, adcs| {
+                    let _ = tx.send(RunEvent::Truth {
+                        t: SimTime::from_ns(truth.t_ns),
+                        truth: Box::new(truth.clone()),
+                        adcs: Box::new(adcs.clone()),
+                    });
+                }),
+            ))
+        }
+        Role::Eps => Box::new(nodes_eps::app()),
+        Role::Ecu => Box::new(nodes_ecu::app()),
+        Role::Pc => {
+            let tx = events.clone();
             Box::new(
-                nodes_fc::FcApp::new(fc.clone()).with_publisher(nodes_fc::Publisher::new(
-                    move |truth, adcs| {
-                        let _ = tx.send(RunEvent::Truth {
-                            t: SimTime::from_ns(truth.t_ns),
-                            truth: Box::new(truth.clone()),
-                            adcs: Box::new(adcs.clone()),
-                        });
+                nodes_pc::PcApp::new(opts.pc.clone()).with_sink(nodes_pc::Sink::new(move |out| {
+                    let _ = tx.send(RunEvent::Pc(Box::new(out)));
+                })),
+            )
+        }
+        Role::Payload => {
+            let tx = events.clone();
+            let cfg = opts.payloads.get(&addr).cloned().unwrap_or_default();
+            Box::new(
+                nodes_payload::PayloadApp::new(cfg).with_sink(nodes_payload::Sink::new(
+                    move |out| {
+                        let _ = tx.send(RunEvent::Payload { addr, out });
                     },
                 )),
             )
         }
-        Role::Eps => Box::new(nodes_eps::app()),
-        Role::Ecu => Box::new(nodes_ecu::app()),
-        Role::Pc => Box::new(nodes_pc::app()),
-        Role::Payload => Box::new(nodes_payload::app()),
         Role::Ground => Box::new(GroundApp::new(plan, results.clone()).with_events(events.clone())),
     }
 }
@@ -352,7 +376,7 @@ pub async fn run_with(
     let socketcan_stats = spawn_socketcan_bridges(&opts.socketcan, &segs, clock, &mut background)?;
 
     let results: Results = Arc::new(Mutex::new(Vec::new()));
-    let fc = nodes_fc::FcConfig {
+    opts.fc = nodes_fc::FcConfig {
         epoch_unix_s: opts.epoch_unix_s,
         tle: opts.tle.clone(),
         seed: mix(opts.seed, 0x300),
@@ -404,13 +428,12 @@ pub async fn run_with(
             .collect();
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
-        let app = app_for(spec.role, &fc, plan, &results, &ev_tx);
+        let app = app_for(spec.role, spec.addr, &opts, plan, &results, &ev_tx);
         let host = Host::new(cfg, app, clock.now());
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
         let log = node_log.clone();
         let handle = tokio::spawn(async move {
-            let host = run_node_logged(host, ports, inbox_rx, ctl_rx, clock, Some(log)).await;
-            host.node.counters().clone()
+            run_node_logged(host, ports, inbox_rx, ctl_rx, clock, Some(log)).await
         });
         nodes.push((spec.clone(), ctl_tx, handle));
     }
@@ -504,8 +527,10 @@ pub async fn run_with(
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let mut trace = Vec::new();
     let mut attitude = Vec::new();
+    let mut sessions = crate::sessions::SessionsReport::default();
     let mut handle_event = |ev: RunEvent, trace: &mut Vec<TraceEvent>| {
         sink(&ev);
+        sessions.observe(&ev);
         match ev {
             RunEvent::Medium(m) if opts.trace => trace.push(m),
             RunEvent::Truth { t, truth, adcs } => {
@@ -551,13 +576,15 @@ pub async fn run_with(
     }
     let mut node_reports = Vec::new();
     for (spec, _, handle) in nodes {
-        let counters = handle
+        let mut host = handle
             .await
             .with_context(|| format!("node {} task failed", spec.name))?;
+        // In node order, so that the final reports sit in the event stream deterministically.
+        host.app.finish(&mut host.node, sim_time);
         node_reports.push(NodeReport {
             name: spec.name,
             addr: spec.addr,
-            counters,
+            counters: host.node.counters().clone(),
         });
     }
     for h in background {
@@ -583,6 +610,7 @@ pub async fn run_with(
         results,
         trace,
         attitude,
+        sessions,
     })
 }
 

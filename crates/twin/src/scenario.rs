@@ -89,6 +89,12 @@ pub struct Scenario {
     /// The flight computer: initial state, models, ADCS, scripts and faults.
     #[serde(default)]
     pub fc: FcSpec,
+    /// The payload controller: sessions, S-band, events.
+    #[serde(default)]
+    pub pc: crate::sessions::PcSpec,
+    /// The simulated payloads' data and behaviour (`[[payload]]`, one per address).
+    #[serde(default)]
+    pub payload: Vec<crate::sessions::PayloadSpec>,
     /// The network.
     #[serde(default)]
     pub network: NetworkCfg,
@@ -593,6 +599,41 @@ pub struct ExpectationSpec {
     /// Elevation for `target-visible`, deg (default 10).
     #[serde(default)]
     pub min_elevation_deg: Option<f64>,
+    /// The PC session of a `session` or `downlink` expectation (its id).
+    #[serde(default)]
+    pub session: Option<u8>,
+    /// `session`: the result every (or any) run of the session ended with: `done`,
+    /// `aborted`, `no-ack`, `s-band-failure`.
+    #[serde(default)]
+    pub session_result: Option<SessionResultName>,
+    /// `downlink`: the downlinked bytes, cut into the payload's counter frames, check
+    /// without a damaged frame (and, for `true`, without a missing sequence number).
+    #[serde(default)]
+    pub intact: Option<bool>,
+    /// `accounting`: the payload (default every simulated payload).
+    #[serde(default)]
+    pub payload: Option<u8>,
+}
+
+/// Session results by name (ICD 3.1.6 table 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum SessionResultName {
+    /// 0: finished (or never executed).
+    Done,
+    /// 1: ABORT command.
+    Aborted,
+    /// 2: the payload did not acknowledge the SYNC.
+    NoAck,
+    /// 3: the S-band transmitter failed.
+    SBandFailure,
+}
+
+impl SessionResultName {
+    /// The wire value.
+    pub fn value(self) -> u8 {
+        self as u8
+    }
 }
 
 /// The figures an `attitude` expectation can check (each published FC snapshot).
@@ -632,6 +673,13 @@ pub enum ExpectKind {
     Counter,
     /// Every FC snapshot in a window has a figure below / above a bound.
     Attitude,
+    /// A PC session's runs ended with a result (and a packet count within `min`..`max`).
+    Session,
+    /// A PC session downlinked `min`..`max` bytes over the run (intact, if asked).
+    Downlink,
+    /// Every byte a payload produced was downlinked, dropped with a reason, or is still
+    /// held by the PC at the end (at most `max` dropped, if given).
+    Accounting,
 }
 
 /// Which occurrences of a repeated command an expectation covers.
@@ -1089,9 +1137,33 @@ impl Scenario {
             }
         }
         self.validate_fc(&mut err);
+        crate::sessions::validate(self, &mut err);
         for (i, x) in self.expectations.iter().enumerate() {
             let p = |n: &str| vec![key("expectations"), PathStep::Index(i), key(n)];
+            let pc_fields = [
+                ("session", x.session.is_some()),
+                ("session_result", x.session_result.is_some()),
+                ("intact", x.intact.is_some()),
+                ("payload", x.payload.is_some()),
+            ];
+            let allowed: &[&str] = match x.kind {
+                ExpectKind::Session => &["session", "session_result"],
+                ExpectKind::Downlink => &["session", "intact"],
+                ExpectKind::Accounting => &["payload"],
+                _ => &[],
+            };
+            for (f, present) in pc_fields {
+                if present && !allowed.contains(&f) {
+                    err(
+                        p(f),
+                        format!("a `{}` expectation takes no `{f}`", kebab(x.kind)),
+                    );
+                }
+            }
             match x.kind {
+                ExpectKind::Session | ExpectKind::Downlink | ExpectKind::Accounting => {
+                    crate::sessions::validate_expectation(self, x, &p, &mut err);
+                }
                 ExpectKind::Reply | ExpectKind::NoReply => {
                     match &x.command {
                         None => err(p("kind"), "this expectation needs `command`".into()),
@@ -1394,6 +1466,9 @@ fn kebab(k: ExpectKind) -> &'static str {
         ExpectKind::NoReply => "no-reply",
         ExpectKind::Counter => "counter",
         ExpectKind::Attitude => "attitude",
+        ExpectKind::Session => "session",
+        ExpectKind::Downlink => "downlink",
+        ExpectKind::Accounting => "accounting",
     }
 }
 

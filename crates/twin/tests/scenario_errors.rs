@@ -94,6 +94,77 @@ fn bad_hex_data() {
 }
 
 #[test]
+fn pc_session_for_a_payload_that_does_not_exist() {
+    let text =
+        "duration = \"1m\"\n[pc]\n[[pc.sessions]]\nid = 1\npayload = 16\nmode = \"polling\"\n";
+    assert_error(text, 5, "pc.sessions[0].payload", "not a payload address");
+}
+
+#[test]
+fn pc_two_sessions_for_one_payload() {
+    let text = "duration = \"1m\"\n[[pc.sessions]]\nid = 1\npayload = 12\nmode = \"polling\"\n[[pc.sessions]]\nid = 2\npayload = 12\nmode = \"buffering\"\n";
+    assert_error(
+        text,
+        8,
+        "pc.sessions[1].payload",
+        "already has pc.sessions[0]",
+    );
+}
+
+#[test]
+fn pc_poll_period_on_a_buffering_session() {
+    let text = "duration = \"1m\"\n[[pc.sessions]]\nid = 2\npayload = 13\nmode = \"buffering\"\npoll_period = \"50ms\"\n";
+    assert_error(text, 6, "pc.sessions[0].poll_period", "only for polling");
+}
+
+#[test]
+fn payload_with_an_unknown_behaviour() {
+    let text = "duration = \"1m\"\n[[payload]]\naddr = 12\nbehaviour = \"sulky\"\n";
+    assert_error(text, 4, "payload[0].behaviour", "unknown behaviour `sulky`");
+}
+
+#[test]
+fn payload_behaviour_change_needs_its_argument() {
+    let text = "duration = \"1m\"\n[[payload]]\naddr = 12\n[[payload.changes]]\nat = \"5s\"\nbehaviour = \"silent-for\"\n";
+    assert_error(text, 6, "payload[0].changes[0].behaviour", "needs a count");
+}
+
+#[test]
+fn payload_that_is_not_simulated() {
+    let text = "duration = \"1m\"\n[network]\npayloads = [12]\n[[payload]]\naddr = 14\n";
+    assert_error(text, 5, "payload[0].addr", "not a simulated payload");
+}
+
+#[test]
+fn payload_push_packets_over_256_bytes() {
+    let text = "duration = \"1m\"\n[[payload]]\naddr = 13\npush = { rate_bytes_per_s = 100, packet_bytes = 300 }\n";
+    assert_error(text, 4, "payload[0].push.packet_bytes", "1-256");
+}
+
+#[test]
+fn session_expectation_on_an_unknown_session() {
+    let text = "duration = \"1m\"\n[[expectations]]\nkind = \"session\"\nsession = 7\nsession_result = \"done\"\n";
+    assert_error(text, 4, "expectations[0].session", "no session 7");
+}
+
+#[test]
+fn downlink_expectation_needs_a_bound() {
+    let text = "duration = \"1m\"\n[[expectations]]\nkind = \"downlink\"\nsession = 1\n";
+    assert_error(
+        text,
+        3,
+        "expectations[0].kind",
+        "needs `min`, `max` or `intact`",
+    );
+}
+
+#[test]
+fn unknown_session_result() {
+    let text = "duration = \"1m\"\n[[expectations]]\nkind = \"session\"\nsession = 1\nsession_result = \"fine\"\n";
+    assert_error(text, 5, "session_result", "unknown variant");
+}
+
+#[test]
 fn fault_probability_out_of_range() {
     let text = "duration = \"1m\"\n[[faults]]\nat = \"1s\"\nkind = \"drop\"\ntarget = \"main\"\nprobability = 1.5\n";
     assert_error(text, 6, "faults[0].probability", "not in 0..=1");

@@ -1,0 +1,1220 @@
+//! The payload controller's sessions and the simulated payloads in a scenario: the `[pc]`
+//! table, the `[[payload]]` tables, their validation and compilation into the node
+//! configurations, and what a run reports about them (session ends, downlinked bytes per
+//! session, drops by reason, the accounting of every payload byte) for the `session`,
+//! `downlink` and `accounting` expectations.
+//!
+//! See docs/scenarios.md ("The PC and the payloads") and docs/payload-guide.md.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use csp::SimTime;
+use schemars::JsonSchema;
+use serde::Deserialize;
+
+use crate::scenario::{Dur, PathStep, Scenario};
+
+/// The payload controller (`[pc]`).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PcSpec {
+    /// One session per payload (`[[pc.sessions]]`); none: session 1 polls payload 12 and
+    /// session 2 buffers payload 13 (the ICD's SETUP example works at once).
+    #[serde(default)]
+    pub sessions: Vec<PcSessionSpec>,
+    /// S-band data rate, bit/s (default 1 000 000).
+    #[serde(default)]
+    pub sband_rate_bps: Option<u64>,
+    /// Payload bytes per S-band frame.
+    #[serde(default)]
+    pub sband_frame_data_bytes: Option<u32>,
+    /// Framing bytes per S-band frame (sync marker, header, check).
+    #[serde(default)]
+    pub sband_frame_overhead_bytes: Option<u32>,
+    /// Whether the transmitter is on at boot (default true).
+    #[serde(default)]
+    pub sband_on: Option<bool>,
+    /// S-band events (`[[pc.events]]`: `at`, `sband = "fail" | "restore" | "off" | "on"`).
+    #[serde(default)]
+    pub events: Vec<PcEventSpec>,
+    /// Port numbers of the PC's services.
+    #[serde(default)]
+    pub ports: Option<PcPortsSpec>,
+    /// Directory for the downlinked files, one per session run (default: beside the
+    /// recording, `<recording>.downlink/`; no recording: none).
+    #[serde(default)]
+    pub downlink_dir: Option<String>,
+}
+
+/// One session of the PC (fixed for the run).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PcSessionSpec {
+    /// Session id (the SETUP's `sessionId`).
+    pub id: u8,
+    /// The payload's CSP address, 12-15.
+    pub payload: u8,
+    /// The payload's SYNC/POLL port (default 10).
+    #[serde(default)]
+    pub port: Option<u8>,
+    /// `polling` or `buffering`.
+    pub mode: SessionModeName,
+    /// Polling: time between POLLs.
+    #[serde(default)]
+    pub poll_period: Option<Dur>,
+    /// Polling: how long to wait for a reply before repeating.
+    #[serde(default)]
+    pub reply_timeout: Option<Dur>,
+    /// Buffering: file capacity, bytes (default 256 MiB).
+    #[serde(default)]
+    pub buffer_capacity_bytes: Option<u64>,
+}
+
+/// How a session collects data (ICD 3.1.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum SessionModeName {
+    /// The PC polls the payload.
+    Polling,
+    /// The payload pushes to the PC's file.
+    Buffering,
+}
+
+/// An S-band event at a time.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PcEventSpec {
+    /// When.
+    pub at: Dur,
+    /// `fail` (an ACTIVE session ends with S-BAND FAILURE), `restore`, `off`, `on`.
+    pub sband: SbandEventName,
+}
+
+/// S-band events.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum SbandEventName {
+    /// The transmitter fails.
+    Fail,
+    /// The failure is repaired.
+    Restore,
+    /// Switched off.
+    Off,
+    /// Switched on.
+    On,
+}
+
+/// The PC's port numbers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PcPortsSpec {
+    /// Session control (default 10).
+    #[serde(default)]
+    pub control: Option<u8>,
+    /// Buffered data ingest (default 11).
+    #[serde(default)]
+    pub ingest: Option<u8>,
+    /// The PC's telemetry (default 12).
+    #[serde(default)]
+    pub telemetry: Option<u8>,
+}
+
+/// A simulated payload (`[[payload]]`).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PayloadSpec {
+    /// Its CSP address (one of `[network] payloads`).
+    pub addr: u8,
+    /// SYNC/POLL port (default 10).
+    #[serde(default)]
+    pub port: Option<u8>,
+    /// Where the data comes from: `counter` (default; self-checking frames) or a file.
+    #[serde(default)]
+    pub file: Option<String>,
+    /// Data becomes available at this rate, bytes/s (default: all at once).
+    #[serde(default)]
+    pub rate_bytes_per_s: Option<u64>,
+    /// Delay between a request and its reply (default 5 ms).
+    #[serde(default)]
+    pub reply_latency: Option<Dur>,
+    /// Behaviour at boot: `normal`, `no-ack`, `wrong-echo`, `slow:<duration>`,
+    /// `silent-for:<polls>`, `silent`, `oversize:<bytes>`, `garbage`, `zero-length`.
+    #[serde(default)]
+    pub behaviour: Option<String>,
+    /// Behaviour changes (`[[payload.changes]]`: `at`, `behaviour`).
+    #[serde(default)]
+    pub changes: Vec<BehaviourChangeSpec>,
+    /// Buffering: push data to the PC's ingest port.
+    #[serde(default)]
+    pub push: Option<PushSpec>,
+}
+
+/// A behaviour change at a time.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BehaviourChangeSpec {
+    /// When.
+    pub at: Dur,
+    /// The new behaviour (as `behaviour`).
+    pub behaviour: String,
+}
+
+/// Pushing data to the PC (buffering mode).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PushSpec {
+    /// Bytes per second.
+    pub rate_bytes_per_s: u64,
+    /// Data bytes per packet, 1-256 (default 200).
+    #[serde(default)]
+    pub packet_bytes: Option<u16>,
+    /// First packet (default: at the start).
+    #[serde(default)]
+    pub start: Option<Dur>,
+    /// No packet from this time on (default: never stops).
+    #[serde(default)]
+    pub stop: Option<Dur>,
+}
+
+/// Parse a payload behaviour name (see [`PayloadSpec::behaviour`]).
+pub fn parse_behaviour(s: &str) -> Result<nodes_payload::Behaviour, String> {
+    use nodes_payload::Behaviour as B;
+    let t = s.trim();
+    let (kw, arg) = match t.split_once(':') {
+        Some((k, a)) => (k.trim().to_ascii_lowercase(), Some(a.trim())),
+        None => (t.to_ascii_lowercase(), None),
+    };
+    let need = |what: &str| {
+        arg.filter(|a| !a.is_empty())
+            .ok_or_else(|| format!("behaviour `{t}`: {kw} needs a {what}, as {kw}:<{what}>"))
+    };
+    let b = match kw.as_str() {
+        "normal" => B::Normal,
+        "no-ack" => B::NoAck,
+        "wrong-echo" => B::WrongEcho,
+        "silent" => B::Silent,
+        "garbage" => B::Garbage,
+        "zero-length" => B::ZeroLength,
+        "slow" => B::Slow {
+            extra: crate::duration::parse_duration(need("duration")?)
+                .map_err(|e| format!("behaviour `{t}`: {e}"))?,
+        },
+        "silent-for" => B::SilentFor {
+            polls: need("count")?
+                .parse()
+                .map_err(|_| format!("behaviour `{t}`: the count must be a whole number"))?,
+        },
+        "oversize" => B::Oversize {
+            extra_bytes: need("count")?
+                .parse()
+                .ok()
+                .filter(|n: &u8| *n > 0)
+                .ok_or_else(|| format!("behaviour `{t}`: the extra bytes must be 1-255"))?,
+        },
+        _ => {
+            return Err(format!(
+                "unknown behaviour `{t}`: expected normal, no-ack, wrong-echo, slow:<duration>, \
+                 silent-for:<polls>, silent, oversize:<bytes>, garbage or zero-length"
+            ));
+        }
+    };
+    if arg.is_some() && !matches!(kw.as_str(), "slow" | "silent-for" | "oversize") {
+        return Err(format!("behaviour `{t}`: {kw} takes no argument"));
+    }
+    Ok(b)
+}
+
+fn key(k: &str) -> PathStep {
+    PathStep::Key(k.to_owned())
+}
+
+/// Check the `[pc]` and `[[payload]]` tables.
+pub fn validate(s: &Scenario, err: &mut impl FnMut(Vec<PathStep>, String)) {
+    let pc = &s.pc;
+    let mut ids = BTreeMap::new();
+    let mut served = BTreeMap::new();
+    if pc.sessions.len() > 4 {
+        err(
+            vec![key("pc"), key("sessions")],
+            format!(
+                "{} sessions: the PC has one per payload, at most 4",
+                pc.sessions.len()
+            ),
+        );
+    }
+    for (i, x) in pc.sessions.iter().enumerate() {
+        let q = |n: &str| vec![key("pc"), key("sessions"), PathStep::Index(i), key(n)];
+        if let Some(j) = ids.insert(x.id, i) {
+            err(
+                q("id"),
+                format!("session {} is also pc.sessions[{j}]", x.id),
+            );
+        }
+        if !(12..=15).contains(&x.payload) {
+            err(
+                q("payload"),
+                format!("{} is not a payload address (12-15)", x.payload),
+            );
+        } else if let Some(j) = served.insert(x.payload, i) {
+            err(
+                q("payload"),
+                format!(
+                    "payload {} already has pc.sessions[{j}]: one session per payload",
+                    x.payload
+                ),
+            );
+        }
+        if x.port.is_some_and(|p| p > 63) {
+            err(q("port"), "must be 0-63".into());
+        }
+        match x.mode {
+            SessionModeName::Polling => {
+                if x.reply_timeout.is_some_and(|d| d.0.is_zero()) {
+                    err(q("reply_timeout"), "must be longer than zero".into());
+                }
+                if x.buffer_capacity_bytes.is_some() {
+                    err(
+                        q("buffer_capacity_bytes"),
+                        "only for buffering sessions".into(),
+                    );
+                }
+            }
+            SessionModeName::Buffering => {
+                for f in ["poll_period", "reply_timeout"] {
+                    let given = if f == "poll_period" {
+                        x.poll_period.is_some()
+                    } else {
+                        x.reply_timeout.is_some()
+                    };
+                    if given {
+                        err(q(f), "only for polling sessions".into());
+                    }
+                }
+            }
+        }
+    }
+    if pc.sband_rate_bps == Some(0) {
+        err(
+            vec![key("pc"), key("sband_rate_bps")],
+            "must be above zero".into(),
+        );
+    }
+    if pc.sband_frame_data_bytes == Some(0) {
+        err(
+            vec![key("pc"), key("sband_frame_data_bytes")],
+            "must be above zero".into(),
+        );
+    }
+    if let Some(p) = pc.ports {
+        for (f, v) in [
+            ("control", p.control),
+            ("ingest", p.ingest),
+            ("telemetry", p.telemetry),
+        ] {
+            if v.is_some_and(|v| v > 63) {
+                err(vec![key("pc"), key("ports"), key(f)], "must be 0-63".into());
+            }
+        }
+    }
+    for (i, e) in pc.events.iter().enumerate() {
+        if e.at.0 > s.duration.0 {
+            err(
+                vec![key("pc"), key("events"), PathStep::Index(i), key("at")],
+                "is after the end of the run".into(),
+            );
+        }
+    }
+
+    let mut seen = BTreeMap::new();
+    for (i, p) in s.payload.iter().enumerate() {
+        let q = |n: &str| vec![key("payload"), PathStep::Index(i), key(n)];
+        if !s.network.payloads.contains(&p.addr) {
+            err(
+                q("addr"),
+                format!(
+                    "{} is not a simulated payload: add it to [network] payloads {:?}",
+                    p.addr, s.network.payloads
+                ),
+            );
+        }
+        if let Some(j) = seen.insert(p.addr, i) {
+            err(
+                q("addr"),
+                format!("payload {} is also payload[{j}]", p.addr),
+            );
+        }
+        if p.port.is_some_and(|p| p > 63) {
+            err(q("port"), "must be 0-63".into());
+        }
+        if let Some(f) = &p.file
+            && let Err(e) = std::fs::metadata(f)
+        {
+            err(q("file"), format!("cannot read `{f}`: {e}"));
+        }
+        if let Some(b) = &p.behaviour
+            && let Err(e) = parse_behaviour(b)
+        {
+            err(q("behaviour"), e);
+        }
+        for (k, c) in p.changes.iter().enumerate() {
+            if let Err(e) = parse_behaviour(&c.behaviour) {
+                err(
+                    vec![
+                        key("payload"),
+                        PathStep::Index(i),
+                        key("changes"),
+                        PathStep::Index(k),
+                        key("behaviour"),
+                    ],
+                    e,
+                );
+            }
+        }
+        if let Some(push) = &p.push {
+            let r = |n: &str| vec![key("payload"), PathStep::Index(i), key("push"), key(n)];
+            if push.rate_bytes_per_s == 0 {
+                err(r("rate_bytes_per_s"), "must be above zero".into());
+            }
+            if push.packet_bytes.is_some_and(|b| !(1..=256).contains(&b)) {
+                err(
+                    r("packet_bytes"),
+                    "must be 1-256 (ICD 3.1.5: at most 256 data bytes per packet)".into(),
+                );
+            }
+            if let (Some(a), Some(b)) = (push.start, push.stop)
+                && b <= a
+            {
+                err(r("stop"), "must be after `start`".into());
+            }
+        }
+    }
+}
+
+/// The PC's configuration from the `[pc]` table.
+pub fn compile_pc(s: &Scenario) -> nodes_pc::PcConfig {
+    use nodes_pc::{PcConfig, PcEvent, SessionMode, SessionSpec, TimedPcEvent};
+    let mut c = PcConfig::default();
+    let pc = &s.pc;
+    if !pc.sessions.is_empty() {
+        c.sessions = pc
+            .sessions
+            .iter()
+            .map(|x| {
+                let d = SessionSpec::polling(x.id, x.payload);
+                SessionSpec {
+                    payload_port: x.port.unwrap_or(d.payload_port),
+                    mode: match x.mode {
+                        SessionModeName::Buffering => SessionMode::Buffering,
+                        SessionModeName::Polling => SessionMode::Polling {
+                            poll_period: x
+                                .poll_period
+                                .map_or(nodes_pc::DEFAULT_POLL_PERIOD, |d| d.0),
+                            reply_timeout: x
+                                .reply_timeout
+                                .map_or(nodes_pc::DEFAULT_REPLY_TIMEOUT, |d| d.0),
+                        },
+                    },
+                    buffer_capacity_bytes: x
+                        .buffer_capacity_bytes
+                        .unwrap_or(d.buffer_capacity_bytes),
+                    ..d
+                }
+            })
+            .collect();
+    }
+    if let Some(r) = pc.sband_rate_bps {
+        c.sband.rate_bps = r;
+    }
+    if let Some(b) = pc.sband_frame_data_bytes {
+        c.sband.frame_data_bytes = b;
+    }
+    if let Some(b) = pc.sband_frame_overhead_bytes {
+        c.sband.frame_overhead_bytes = b;
+    }
+    if let Some(on) = pc.sband_on {
+        c.sband.on = on;
+    }
+    if let Some(p) = pc.ports {
+        c.control_port = p.control.unwrap_or(c.control_port);
+        c.ingest_port = p.ingest.unwrap_or(c.ingest_port);
+        c.telemetry_port = p.telemetry.unwrap_or(c.telemetry_port);
+    }
+    c.timeline = pc
+        .events
+        .iter()
+        .map(|e| TimedPcEvent {
+            at: SimTime::ZERO + e.at.0,
+            event: match e.sband {
+                SbandEventName::Fail => PcEvent::SbandFail,
+                SbandEventName::Restore => PcEvent::SbandRestore,
+                SbandEventName::Off => PcEvent::SbandOff,
+                SbandEventName::On => PcEvent::SbandOn,
+            },
+        })
+        .collect();
+    c.timeline.sort_by_key(|e| e.at);
+    c
+}
+
+/// The simulated payloads' configurations, by address (every address of `[network]
+/// payloads`; those without a `[[payload]]` table get the defaults).
+pub fn compile_payloads(s: &Scenario) -> BTreeMap<u8, nodes_payload::PayloadConfig> {
+    use nodes_payload::{Generator, PayloadConfig, PushConfig};
+    let mut out = BTreeMap::new();
+    for &addr in &s.network.payloads {
+        let mut c = PayloadConfig {
+            seed: crate::runtime::mix(s.seed, 0x600 + u64::from(addr)),
+            ..PayloadConfig::default()
+        };
+        if let Some(p) = s.payload.iter().find(|p| p.addr == addr) {
+            c.port = p.port.unwrap_or(c.port);
+            if let Some(f) = &p.file {
+                // Validated readable; a file that vanished since gives an empty generator.
+                c.generator = Generator::Bytes(std::fs::read(f).unwrap_or_default().into());
+            }
+            c.rate_bytes_per_s = p.rate_bytes_per_s;
+            if let Some(l) = p.reply_latency {
+                c.reply_latency = l.0;
+            }
+            if let Some(b) = p.behaviour.as_deref().and_then(|b| parse_behaviour(b).ok()) {
+                c.behaviour = b;
+            }
+            c.timeline = p
+                .changes
+                .iter()
+                .filter_map(|x| {
+                    parse_behaviour(&x.behaviour)
+                        .ok()
+                        .map(|b| (SimTime::ZERO + x.at.0, b))
+                })
+                .collect();
+            if let Some(push) = &p.push {
+                let d = PushConfig::default();
+                c.push = Some(PushConfig {
+                    rate_bytes_per_s: push.rate_bytes_per_s,
+                    packet_bytes: push.packet_bytes.unwrap_or(d.packet_bytes),
+                    start: SimTime::ZERO + push.start.map_or(Duration::ZERO, |d| d.0),
+                    stop: push.stop.map(|d| SimTime::ZERO + d.0),
+                    ..d
+                });
+            }
+        }
+        out.insert(addr, c);
+    }
+    out
+}
+
+/// The session ids the PC will have: `[[pc.sessions]]`, or the defaults.
+pub fn session_ids(s: &Scenario) -> Vec<(u8, u8)> {
+    if s.pc.sessions.is_empty() {
+        nodes_pc::PcConfig::default()
+            .sessions
+            .iter()
+            .map(|x| (x.session_id, x.payload_addr))
+            .collect()
+    } else {
+        s.pc.sessions.iter().map(|x| (x.id, x.payload)).collect()
+    }
+}
+
+/// Check a `session`, `downlink` or `accounting` expectation.
+pub fn validate_expectation(
+    s: &Scenario,
+    x: &crate::scenario::ExpectationSpec,
+    p: &impl Fn(&str) -> Vec<PathStep>,
+    err: &mut impl FnMut(Vec<PathStep>, String),
+) {
+    use crate::scenario::ExpectKind;
+    let kind = match x.kind {
+        ExpectKind::Session => "session",
+        ExpectKind::Downlink => "downlink",
+        _ => "accounting",
+    };
+    for (f, present) in [
+        ("command", x.command.is_some()),
+        ("target", x.target.is_some()),
+        ("counter", x.counter.is_some()),
+        ("quantity", x.quantity.is_some()),
+        ("below", x.below.is_some()),
+        ("above", x.above.is_some()),
+        ("within", x.within.is_some()),
+        ("result", x.result.is_some()),
+        ("data", x.data.is_some()),
+        ("data_len", x.data_len.is_some()),
+        ("when", x.when.is_some()),
+        ("from", x.from.is_some()),
+        ("to", x.to.is_some()),
+    ] {
+        if present {
+            err(p(f), format!("a `{kind}` expectation takes no `{f}`"));
+        }
+    }
+    let ids = session_ids(s);
+    if x.kind != ExpectKind::Accounting {
+        match x.session {
+            None => err(p("kind"), format!("a `{kind}` expectation needs `session`")),
+            Some(id) if !ids.iter().any(|(i, _)| *i == id) => err(
+                p("session"),
+                format!(
+                    "the PC has no session {id} (sessions: {})",
+                    ids.iter()
+                        .map(|(i, a)| format!("{i} for payload {a}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ),
+            Some(_) => {}
+        }
+    }
+    match x.kind {
+        ExpectKind::Session if x.session_result.is_none() && x.min.is_none() && x.max.is_none() => {
+            err(
+                p("kind"),
+                "a `session` expectation needs `session_result`, `min` or `max`".into(),
+            );
+        }
+        ExpectKind::Downlink if x.intact.is_none() && x.min.is_none() && x.max.is_none() => {
+            err(
+                p("kind"),
+                "a `downlink` expectation needs `min`, `max` or `intact`".into(),
+            );
+        }
+        ExpectKind::Accounting => {
+            if let Some(a) = x.payload
+                && !s.network.payloads.contains(&a)
+            {
+                err(
+                    p("payload"),
+                    format!("{a} is not a simulated payload ({:?})", s.network.payloads),
+                );
+            }
+            if x.min.is_some() {
+                err(
+                    p("min"),
+                    "an `accounting` expectation takes `max` (dropped bytes) only".into(),
+                );
+            }
+        }
+        _ => {}
+    }
+    if let (Some(a), Some(b)) = (x.min, x.max)
+        && a > b
+    {
+        err(p("min"), format!("min {a} is above max {b}"));
+    }
+}
+
+/// One run of a session, as the PC reported it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SessionRun {
+    /// Session id.
+    pub session: u8,
+    /// When it became ACTIVE (`None`: it ended without starting, as an ABORT of a
+    /// PENDING session may report).
+    pub started: Option<SimTime>,
+    /// When it ended and how (`None`: still ACTIVE at the end of the run).
+    pub ended: Option<(SimTime, u8, u32)>,
+    /// Bytes downlinked while it was the session's latest run, in order.
+    pub bytes: Vec<u8>,
+}
+
+/// What a run's PC and payloads did, gathered from the event stream.
+#[derive(Debug, Clone, Default)]
+pub struct SessionsReport {
+    /// Every session run, in start order.
+    pub runs: Vec<SessionRun>,
+    /// Bytes downlinked, by payload.
+    pub downlinked: BTreeMap<u8, u64>,
+    /// Bytes dropped by the PC, by payload and reason.
+    pub dropped: BTreeMap<(u8, String), u64>,
+    /// Bytes each simulated payload produced (sent in replies and pushes).
+    pub produced: BTreeMap<u8, u64>,
+    /// SYNC messages each payload received.
+    pub syncs: BTreeMap<u8, u64>,
+    /// Bytes the PC still held at the end of the run (buffer file and S-band queue), by
+    /// payload; `None` until the PC's final accounting arrives.
+    pub held: Option<BTreeMap<u8, u64>>,
+    /// Whether the PC's own ledgers balanced at the end.
+    pub pc_balanced: Option<bool>,
+}
+
+impl SessionsReport {
+    /// Take in one event of the run.
+    pub fn observe(&mut self, ev: &crate::events::RunEvent) {
+        use crate::events::RunEvent;
+        use nodes_pc::PcOutput as O;
+        match ev {
+            RunEvent::Pc(o) => match &**o {
+                O::SessionStarted { t, session_id } => self.runs.push(SessionRun {
+                    session: *session_id,
+                    started: Some(*t),
+                    ended: None,
+                    bytes: Vec::new(),
+                }),
+                O::SessionEnded {
+                    t,
+                    session_id,
+                    result,
+                    packets,
+                } => {
+                    let end = Some((*t, result.to_u8(), *packets));
+                    match self.latest_open(*session_id) {
+                        Some(r) => r.ended = end,
+                        None => self.runs.push(SessionRun {
+                            session: *session_id,
+                            started: None,
+                            ended: end,
+                            bytes: Vec::new(),
+                        }),
+                    }
+                }
+                O::Downlinked {
+                    session_id,
+                    payload_addr,
+                    bytes,
+                    ..
+                } => {
+                    *self.downlinked.entry(*payload_addr).or_default() += bytes.len() as u64;
+                    if let Some(r) = self
+                        .runs
+                        .iter_mut()
+                        .rev()
+                        .find(|r| r.session == *session_id)
+                    {
+                        r.bytes.extend_from_slice(bytes);
+                    }
+                }
+                O::Dropped {
+                    payload_addr,
+                    reason,
+                    bytes,
+                    ..
+                } => {
+                    *self
+                        .dropped
+                        .entry((*payload_addr, reason.as_str().to_owned()))
+                        .or_default() += bytes;
+                }
+                O::Final { accounting, .. } => {
+                    let held = self.held.get_or_insert_with(BTreeMap::new);
+                    for x in &accounting.sessions {
+                        *held.entry(x.payload_addr).or_default() +=
+                            x.bytes.buffered_now + x.bytes.queued_now;
+                    }
+                    self.pc_balanced = Some(accounting.is_balanced());
+                }
+            },
+            RunEvent::Payload { addr, out } => match out {
+                nodes_payload::PayloadOutput::Produced { bytes, .. } => {
+                    *self.produced.entry(*addr).or_default() += bytes;
+                }
+                nodes_payload::PayloadOutput::SyncReceived { .. } => {
+                    *self.syncs.entry(*addr).or_default() += 1;
+                }
+            },
+            _ => {}
+        }
+    }
+
+    fn latest_open(&mut self, session: u8) -> Option<&mut SessionRun> {
+        self.runs
+            .iter_mut()
+            .rev()
+            .find(|r| r.session == session)
+            .filter(|r| r.ended.is_none())
+    }
+
+    /// Every byte downlinked for `session`, over all its runs.
+    pub fn session_bytes(&self, session: u8) -> Vec<u8> {
+        self.runs
+            .iter()
+            .filter(|r| r.session == session)
+            .flat_map(|r| r.bytes.iter().copied())
+            .collect()
+    }
+
+    /// Bytes dropped for `payload`, all reasons.
+    pub fn dropped_total(&self, payload: u8) -> u64 {
+        self.dropped
+            .iter()
+            .filter(|((a, _), _)| *a == payload)
+            .map(|(_, n)| n)
+            .sum()
+    }
+
+    /// Write each run's downlinked bytes to `dir/session-<id>-run<k>.bin` (k from 1 per
+    /// session); returns the files written.
+    pub fn write_files(&self, dir: &std::path::Path) -> std::io::Result<Vec<std::path::PathBuf>> {
+        std::fs::create_dir_all(dir)?;
+        let mut count: BTreeMap<u8, u32> = BTreeMap::new();
+        let mut out = Vec::new();
+        for r in &self.runs {
+            let k = count.entry(r.session).or_default();
+            *k += 1;
+            let f = dir.join(format!("session-{}-run{}.bin", r.session, k));
+            std::fs::write(&f, &r.bytes)?;
+            out.push(f);
+        }
+        Ok(out)
+    }
+}
+
+fn bounds(min: Option<u64>, max: Option<u64>) -> String {
+    match (min, max) {
+        (Some(a), Some(b)) => format!("{a}..={b}"),
+        (Some(a), None) => format!(">= {a}"),
+        (None, Some(b)) => format!("<= {b}"),
+        (None, None) => "any".into(),
+    }
+}
+
+/// The scenario name of a session result value.
+pub fn result_name(r: u8) -> &'static str {
+    match r {
+        0 => "done",
+        1 => "aborted",
+        2 => "no-ack",
+        3 => "s-band-failure",
+        _ => "?",
+    }
+}
+
+/// Judge a `session`, `downlink` or `accounting` check: (held, when, what was observed).
+pub fn check(
+    check: &crate::plan::Check,
+    report: &crate::runtime::RunReport,
+) -> (bool, SimTime, String) {
+    use crate::plan::Check;
+    use crate::scenario::Occurrence;
+    let r = &report.sessions;
+    let end = report.sim_time;
+    match check {
+        Check::Session {
+            session,
+            result,
+            occurrence,
+            min,
+            max,
+        } => {
+            let ended: Vec<(SimTime, u8, u32)> = r
+                .runs
+                .iter()
+                .filter(|x| x.session == *session)
+                .filter_map(|x| x.ended)
+                .collect();
+            if ended.is_empty() {
+                let started = r.runs.iter().any(|x| x.session == *session);
+                return (
+                    false,
+                    end,
+                    format!(
+                        "session {session} never ended{}",
+                        if started {
+                            " (still ACTIVE at the end of the run)"
+                        } else {
+                            " (it never started)"
+                        }
+                    ),
+                );
+            }
+            let problem = |(_, res, packets): &(SimTime, u8, u32)| -> Option<String> {
+                if let Some(want) = result
+                    && res != want
+                {
+                    return Some(format!(
+                        "ended {} (expected {})",
+                        result_name(*res),
+                        result_name(*want)
+                    ));
+                }
+                let p = u64::from(*packets);
+                if min.is_some_and(|m| p < m) || max.is_some_and(|m| p > m) {
+                    return Some(format!("{p} packets (expected {})", bounds(*min, *max)));
+                }
+                None
+            };
+            let describe = |e: &(SimTime, u8, u32)| {
+                format!(
+                    "ended {} at {} after {} packets",
+                    result_name(e.1),
+                    e.0,
+                    e.2
+                )
+            };
+            let bad: Vec<_> = ended
+                .iter()
+                .filter_map(|e| problem(e).map(|p| (e.0, p)))
+                .collect();
+            let n = ended.len();
+            match occurrence {
+                Occurrence::Every => match bad.first() {
+                    Some((t, p)) => (
+                        false,
+                        *t,
+                        format!("{} of {n} runs failed; first, at {t}: {p}", bad.len()),
+                    ),
+                    None => (
+                        true,
+                        ended[n - 1].0,
+                        format!("{n} of {n} runs held; last {}", describe(&ended[n - 1])),
+                    ),
+                },
+                Occurrence::Any => match ended.iter().find(|e| problem(e).is_none()) {
+                    Some(e) => (
+                        true,
+                        e.0,
+                        format!("{} of {n} runs held; {}", n - bad.len(), describe(e)),
+                    ),
+                    None => (
+                        false,
+                        ended[n - 1].0,
+                        format!("none of {n} runs held; last: {}", bad[n - 1].1),
+                    ),
+                },
+            }
+        }
+        Check::Downlink {
+            session,
+            min,
+            max,
+            intact,
+        } => {
+            let bytes = r.session_bytes(*session);
+            let n = bytes.len() as u64;
+            let mut why = Vec::new();
+            if min.is_some_and(|m| n < m) || max.is_some_and(|m| n > m) {
+                why.push(format!("expected {} bytes", bounds(*min, *max)));
+            }
+            let mut seen = format!("session {session}: {n} bytes downlinked");
+            if let Some(strict) = intact {
+                // Each run is checked on its own (a run's stream ends where the next one's
+                // begins only if nothing was lost between them); the seqs lost between
+                // runs count as missing.
+                let (mut ok, mut bad, mut missing) = (0u64, 0u64, 0u64);
+                let (mut first, mut last) = (None, None::<u32>);
+                let mut examples = Vec::new();
+                for run in r.runs.iter().filter(|x| x.session == *session) {
+                    let c = nodes_payload::check_counter_stream(&run.bytes);
+                    ok += c.frames_ok;
+                    bad += c.frames_bad;
+                    missing += c.missing_count;
+                    examples.extend(c.missing_seqs.iter().take(8).copied());
+                    if let (Some(prev), Some(a)) = (last, c.first_seq) {
+                        // The frame cut at the end of the previous run (its tail) is one
+                        // of the seqs in between.
+                        let gap = u64::from(a.saturating_sub(prev).saturating_sub(1));
+                        missing += gap;
+                        if gap > 0 {
+                            examples.push(prev + 1);
+                        }
+                    }
+                    first = first.or(c.first_seq);
+                    last = c.last_seq.or(last);
+                }
+                seen.push_str(&format!(
+                    "; {ok} frames intact, {bad} damaged, {missing} missing"
+                ));
+                if let (Some(a), Some(b)) = (first, last) {
+                    seen.push_str(&format!(" (seq {a}..={b})"));
+                }
+                if bad > 0 {
+                    why.push("damaged frames".to_owned());
+                }
+                if *strict && missing > 0 {
+                    why.push(format!(
+                        "missing seqs, from {:?}",
+                        &examples[..examples.len().min(8)]
+                    ));
+                }
+                if ok == 0 {
+                    why.push("no intact frame".to_owned());
+                }
+            }
+            if why.is_empty() {
+                (true, end, seen)
+            } else {
+                (false, end, format!("{seen} ({})", why.join("; ")))
+            }
+        }
+        Check::Accounting { payload, max } => {
+            let Some(held) = &r.held else {
+                return (
+                    false,
+                    end,
+                    "the PC gave no final accounting (was it running?)".to_owned(),
+                );
+            };
+            let addrs: Vec<u8> = match payload {
+                Some(a) => vec![*a],
+                None => r.produced.keys().copied().collect(),
+            };
+            let mut lines = Vec::new();
+            let mut ok = r.pc_balanced != Some(false);
+            if !ok {
+                lines.push("the PC's own ledgers do not balance".to_owned());
+            }
+            for a in addrs {
+                let produced = r.produced.get(&a).copied().unwrap_or(0);
+                let down = r.downlinked.get(&a).copied().unwrap_or(0);
+                let dropped = r.dropped_total(a);
+                let h = held.get(&a).copied().unwrap_or(0);
+                let missing = produced as i128 - (down + dropped + h) as i128;
+                let reasons: Vec<String> = r
+                    .dropped
+                    .iter()
+                    .filter(|((x, _), _)| *x == a)
+                    .map(|((_, why), n)| format!("{why} {n}"))
+                    .collect();
+                let mut line = format!(
+                    "payload {a}: produced {produced} = downlinked {down} + dropped {dropped}{} + held {h}",
+                    if reasons.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({})", reasons.join(", "))
+                    }
+                );
+                if missing != 0 {
+                    ok = false;
+                    line.push_str(&format!(" -- {missing} bytes unaccounted for"));
+                }
+                if max.is_some_and(|m| dropped > m) {
+                    ok = false;
+                    line.push_str(&format!(" -- more than {} dropped", max.unwrap_or(0)));
+                }
+                lines.push(line);
+            }
+            (ok, end, lines.join("; "))
+        }
+        _ => (false, end, "not a session check".to_owned()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::events::RunEvent;
+    use nodes_payload::Behaviour as B;
+
+    #[test]
+    fn behaviour_names() {
+        let ok = [
+            ("normal", B::Normal),
+            ("No-Ack", B::NoAck),
+            ("wrong-echo", B::WrongEcho),
+            ("silent", B::Silent),
+            ("garbage", B::Garbage),
+            ("zero-length", B::ZeroLength),
+            (
+                "slow:250ms",
+                B::Slow {
+                    extra: Duration::from_millis(250),
+                },
+            ),
+            ("silent-for: 3", B::SilentFor { polls: 3 }),
+            ("oversize:10", B::Oversize { extra_bytes: 10 }),
+        ];
+        for (s, want) in ok {
+            assert_eq!(parse_behaviour(s), Ok(want), "{s}");
+        }
+        for (s, part) in [
+            ("slow", "needs a duration"),
+            ("slow:fast", "not a duration"),
+            ("silent-for:-1", "whole number"),
+            ("oversize:0", "1-255"),
+            ("oversize:256", "1-255"),
+            ("normal:1", "takes no argument"),
+            ("grumpy", "unknown behaviour"),
+        ] {
+            let e = parse_behaviour(s).unwrap_err();
+            assert!(e.contains(part), "{s}: {e}");
+        }
+    }
+
+    fn report_of(events: Vec<RunEvent>) -> crate::runtime::RunReport {
+        let mut r = SessionsReport::default();
+        for e in &events {
+            r.observe(e);
+        }
+        crate::runtime::RunReport {
+            sim_time: SimTime::from_secs(100),
+            wall: Duration::ZERO,
+            nodes: Vec::new(),
+            buses: Vec::new(),
+            ground: Default::default(),
+            kiss: Vec::new(),
+            socketcan: Vec::new(),
+            results: Vec::new(),
+            trace: Vec::new(),
+            attitude: Vec::new(),
+            sessions: r,
+        }
+    }
+
+    fn produced(addr: u8, bytes: u64) -> RunEvent {
+        RunEvent::Payload {
+            addr,
+            out: nodes_payload::PayloadOutput::Produced {
+                t: SimTime::from_secs(1),
+                bytes,
+                how: nodes_payload::How::PollReply,
+            },
+        }
+    }
+
+    fn pc(o: nodes_pc::PcOutput) -> RunEvent {
+        RunEvent::Pc(Box::new(o))
+    }
+
+    fn final_held(addr: u8, held: u64) -> RunEvent {
+        let ledger = nodes_pc::Ledger {
+            received: held,
+            buffered_now: held,
+            ..Default::default()
+        };
+        pc(nodes_pc::PcOutput::Final {
+            t: SimTime::from_secs(100),
+            accounting: nodes_pc::Accounting {
+                sessions: vec![nodes_pc::SessionAccounting {
+                    session_id: 1,
+                    payload_addr: addr,
+                    bytes: ledger,
+                }],
+                unattributed: Default::default(),
+            },
+        })
+    }
+
+    #[test]
+    fn accounting_finds_bytes_that_went_nowhere() {
+        let t = SimTime::from_secs(2);
+        let stream = nodes_payload::counter_stream(12, 0, 500);
+        let events = vec![
+            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            produced(12, 600),
+            pc(nodes_pc::PcOutput::Downlinked {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+                bytes: stream.clone(),
+            }),
+            pc(nodes_pc::PcOutput::Dropped {
+                t,
+                session_id: Some(1),
+                payload_addr: 12,
+                reason: nodes_pc::DropReason::Oversize,
+                bytes: 40,
+            }),
+            final_held(12, 50),
+        ];
+        let report = report_of(events);
+        let acc = crate::plan::Check::Accounting {
+            payload: Some(12),
+            max: None,
+        };
+        let (ok, _, seen) = check(&acc, &report);
+        assert!(!ok, "{seen}");
+        assert!(seen.contains("10 bytes unaccounted for"), "{seen}");
+        assert!(seen.contains("oversize 40"), "{seen}");
+        // The same, with the 10 bytes dropped for a reason: it balances; max bounds drops.
+        let mut events2 = vec![pc(nodes_pc::PcOutput::Dropped {
+            t,
+            session_id: Some(1),
+            payload_addr: 12,
+            reason: nodes_pc::DropReason::Late,
+            bytes: 10,
+        })];
+        events2.extend([
+            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            produced(12, 600),
+            pc(nodes_pc::PcOutput::Downlinked {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+                bytes: stream,
+            }),
+            pc(nodes_pc::PcOutput::Dropped {
+                t,
+                session_id: Some(1),
+                payload_addr: 12,
+                reason: nodes_pc::DropReason::Oversize,
+                bytes: 40,
+            }),
+            final_held(12, 50),
+        ]);
+        let report = report_of(events2);
+        assert!(check(&acc, &report).0, "{}", check(&acc, &report).2);
+        let strict = crate::plan::Check::Accounting {
+            payload: Some(12),
+            max: Some(49),
+        };
+        assert!(!check(&strict, &report).0);
+        // The downlinked counter stream is intact.
+        let dl = crate::plan::Check::Downlink {
+            session: 1,
+            min: Some(500),
+            max: Some(500),
+            intact: Some(true),
+        };
+        let (ok, _, seen) = check(&dl, &report);
+        assert!(ok, "{seen}");
+    }
+
+    #[test]
+    fn downlink_with_a_hole_is_not_intact_and_a_damaged_byte_is_damage() {
+        let t = SimTime::from_secs(2);
+        let mut bytes = nodes_payload::counter_stream(12, 0, 3000);
+        bytes.drain(1000..1400);
+        let mk = |b: Vec<u8>| {
+            report_of(vec![
+                pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+                pc(nodes_pc::PcOutput::Downlinked {
+                    t,
+                    session_id: 1,
+                    payload_addr: 12,
+                    bytes: b,
+                }),
+            ])
+        };
+        let strict = crate::plan::Check::Downlink {
+            session: 1,
+            min: None,
+            max: None,
+            intact: Some(true),
+        };
+        let lenient = crate::plan::Check::Downlink {
+            session: 1,
+            min: None,
+            max: None,
+            intact: Some(false),
+        };
+        let report = mk(bytes.clone());
+        assert!(!check(&strict, &report).0);
+        // A cut inside the stream damages the frame it falls in.
+        assert!(
+            !check(&lenient, &report).0,
+            "{}",
+            check(&lenient, &report).2
+        );
+        let mut flipped = nodes_payload::counter_stream(12, 0, 3000);
+        flipped[1500] ^= 1;
+        let (ok, _, seen) = check(&lenient, &mk(flipped));
+        assert!(!ok && seen.contains("1 damaged"), "{seen}");
+    }
+
+    #[test]
+    fn a_session_that_never_ran_fails_its_expectation() {
+        let report = report_of(Vec::new());
+        let c = crate::plan::Check::Session {
+            session: 1,
+            result: Some(0),
+            occurrence: crate::scenario::Occurrence::Every,
+            min: None,
+            max: None,
+        };
+        let (ok, _, seen) = check(&c, &report);
+        assert!(!ok);
+        assert!(seen.contains("never started"), "{seen}");
+    }
+}
