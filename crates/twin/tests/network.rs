@@ -208,3 +208,48 @@ fn crc_flagged_request_gets_a_crc_flagged_reply() {
     assert_eq!(gs.node.counters().delivered, 1);
     assert_eq!(gs.node.counters().total_drops(), 0);
 }
+
+/// The embedded default scenario as shipped: a SETUP for session 1 sent from the ground
+/// starts a real polling session of payload 12 at once (issue #6's default).
+#[test]
+fn a_setup_for_session_1_on_the_default_scenario_polls_payload_12() {
+    let loaded = m6p_twin::exec::load_default().unwrap();
+    let mut compiled = m6p_twin::exec::compile_loaded(&loaded);
+    m6p_twin::exec::with_duration(&mut compiled, Duration::from_secs(40));
+    // SETUP: session 1, now, 10 s, no packet limit, 64-byte frames, "Send telemetry".
+    let mut setup = vec![1, 1, 0, 0, 0, 0, 10, 0, 0, 0, 64];
+    setup.extend_from_slice(b"Send telemetry");
+    let plan = compiled.opts.ground_plan.entry(16).or_default();
+    plan.push(request(20, 6, 10, setup));
+    plan.push(request(25, 6, 10, vec![2, 1]));
+    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let report = rt.block_on(run(compiled.opts, None)).unwrap();
+    let reply = |label: &str| {
+        report
+            .results
+            .iter()
+            .filter(|r| r.request.label == label)
+            .map(|r| match &r.outcome {
+                Outcome::Reply { data, .. } => data.clone(),
+                other => panic!("{label}: {other:?}"),
+            })
+            .collect::<Vec<_>>()
+    };
+    let replies = reply("6:10");
+    assert_eq!(replies[0], vec![1, 1], "SETUP accepted");
+    // STATUS during the session: result DONE (never run before), state ACTIVE (2).
+    assert_eq!(&replies[1][..4], &[2, 1, 0, 2]);
+    let runs = &report.sessions.runs;
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    let (t_end, result, packets) = runs[0].ended.unwrap();
+    assert_eq!(result, 0, "DONE");
+    assert!(
+        (95..=100).contains(&packets),
+        "{packets} polls in 10 s at 100 ms"
+    );
+    assert!(t_end > SimTime::from_secs(30) && t_end < SimTime::from_secs(31));
+    assert_eq!(runs[0].bytes.len(), packets as usize * 64);
+    let check = nodes_payload::check_counter_stream(&runs[0].bytes);
+    assert!(check.is_clean(), "{check:?}");
+    assert_eq!(check.addr, Some(12));
+}

@@ -15,8 +15,8 @@ use std::path::Path;
 use csp::SimTime;
 use m6p_twin::events::{Level, RunEvent};
 use m6p_twin::record::{
-    AdcsMsg, FrameTransformMsg, LocationFixMsg, Recorder, RecordingMeta, RecordingStats,
-    SceneUpdateMsg, TruthStateMsg,
+    AdcsMsg, FrameTransformMsg, LocationFixMsg, RecordingMeta, RecordingStats, SceneUpdateMsg,
+    TruthStateMsg,
 };
 use m6p_twin::recording::{self, DiffResult, RecordedMessage};
 use orbit::frames::{a_ecef_from_eci, q_eci_from_body_point_eci};
@@ -140,20 +140,10 @@ fn samples() -> Vec<RunEvent> {
 }
 
 fn record(path: &Path, events: &[RunEvent]) -> RecordingStats {
-    let mut r = Recorder::create(path, meta()).unwrap();
-    for e in events {
-        r.write(e).unwrap();
-    }
-    r.finish().unwrap()
+    common::record(path, meta(), events)
 }
 
-fn on(path: &Path, topic: &str) -> Vec<RecordedMessage> {
-    recording::messages(path)
-        .unwrap()
-        .map(Result::unwrap)
-        .filter(|m| &*m.topic == topic)
-        .collect()
-}
+use common::on;
 
 fn decode<T: serde::de::DeserializeOwned>(m: &RecordedMessage) -> T {
     serde_json::from_slice(&m.data).unwrap()

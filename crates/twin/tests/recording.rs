@@ -136,20 +136,10 @@ fn events() -> Vec<RunEvent> {
 }
 
 fn record(path: &Path, events: &[RunEvent]) -> RecordingStats {
-    let mut r = Recorder::create(path, meta()).unwrap();
-    for e in events {
-        r.write(e).unwrap();
-    }
-    r.finish().unwrap()
+    common::record(path, meta(), events)
 }
 
-fn on(path: &Path, topic: &str) -> Vec<RecordedMessage> {
-    recording::messages(path)
-        .unwrap()
-        .map(Result::unwrap)
-        .filter(|m| &*m.topic == topic)
-        .collect()
-}
+use common::on;
 
 fn medium_count(events: &[RunEvent]) -> u64 {
     events

@@ -1,5 +1,6 @@
-//! Helpers shared by the recording tests: temporary MCAP files and running
-//! `tests/decode_mcap.py` (the independent Python reader) on a recording.
+//! Helpers shared by the recording tests: temporary MCAP files, writing events to a
+//! recording and reading a channel back, and running `tests/decode_mcap.py` (the independent
+//! Python reader) on a recording.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -58,4 +59,26 @@ pub fn decode(mcap_file: &Path) -> Option<String> {
         String::from_utf8_lossy(&out.stderr)
     );
     Some(stdout)
+}
+
+/// Record `events` to `path` with `meta`.
+pub fn record(
+    path: &Path,
+    meta: m6p_twin::record::RecordingMeta,
+    events: &[m6p_twin::events::RunEvent],
+) -> m6p_twin::record::RecordingStats {
+    let mut r = m6p_twin::record::Recorder::create(path, meta).unwrap();
+    for e in events {
+        r.write(e).unwrap();
+    }
+    r.finish().unwrap()
+}
+
+/// The messages of `topic` in the recording at `path`, in file order.
+pub fn on(path: &Path, topic: &str) -> Vec<m6p_twin::recording::RecordedMessage> {
+    m6p_twin::recording::messages(path)
+        .unwrap()
+        .map(Result::unwrap)
+        .filter(|m| &*m.topic == topic)
+        .collect()
 }
