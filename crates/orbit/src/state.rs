@@ -119,3 +119,255 @@ impl Default for AdcsSnapshot {
         }
     }
 }
+
+/// How many snapshots a [`TruthBoard`] keeps (a minute at the default 1 Hz, a few seconds at
+/// 10 Hz: readers only ever want the latest one before their own time).
+pub const TRUTH_BOARD_DEPTH: usize = 64;
+
+/// Where the FC posts its truth snapshots and the other nodes (EPS, COMM, ECU) read them,
+/// wired together by the twin (node crates never import one another).
+///
+/// Determinism: a reader at simulated time `t` gets the latest snapshot **strictly before**
+/// `t` ([`TruthBoard::latest_before`]). Nodes run as concurrent tasks, and at an instant
+/// where the FC publishes and another node reads, either may run first; excluding the
+/// snapshot of the reader's own instant makes the answer independent of that order.
+#[derive(Debug, Clone, Default)]
+pub struct TruthBoard(std::sync::Arc<std::sync::Mutex<std::collections::VecDeque<TruthSnapshot>>>);
+
+impl TruthBoard {
+    /// An empty board.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Post a snapshot (in time order; older ones beyond [`TRUTH_BOARD_DEPTH`] are dropped).
+    pub fn publish(&self, s: &TruthSnapshot) {
+        let mut q = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if q.len() >= TRUTH_BOARD_DEPTH {
+            q.pop_front();
+        }
+        q.push_back(s.clone());
+    }
+
+    /// The latest snapshot with `t_ns < t_ns_now`, if any.
+    pub fn latest_before(&self, t_ns_now: u64) -> Option<TruthSnapshot> {
+        let q = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        q.iter().rev().find(|s| s.t_ns < t_ns_now).cloned()
+    }
+}
+
+/// A thruster firing, posted by the ECU for the FC, which owns the true orbit: between
+/// `start_ns` and `end_ns` (simulated time) the thruster pushes along `dir_body` (unit, BCF)
+/// with `thrust_n` newtons on a spacecraft of `mass_kg` (its mass at the start; the FC
+/// integrates the rocket equation with `mass_flow_kg_s`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Burn {
+    /// When the ECU posted it, simulated ns (the FC takes a burn at its first tick strictly
+    /// after this, so that the order of two tasks at one instant does not matter).
+    pub posted_ns: u64,
+    /// Start, simulated ns since the start of the run.
+    pub start_ns: u64,
+    /// End (exclusive), simulated ns.
+    pub end_ns: u64,
+    /// Thrust, N.
+    pub thrust_n: f64,
+    /// Propellant mass flow, kg/s (thrust / (Isp g0)).
+    pub mass_flow_kg_s: f64,
+    /// Spacecraft mass at the start of the burn, kg.
+    pub mass_kg: f64,
+    /// Thrust direction in the body frame (unit).
+    pub dir_body: Vector3<f64>,
+}
+
+/// Where the ECU posts its burns and the FC takes them (see [`TruthBoard`] for the wiring).
+/// The FC applies each burn's thrust from `start_ns` to `end_ns`, at its ticks after the
+/// burn was posted (a part of the burn before that tick is applied at that tick); a burn cut
+/// short (ECU safed) is re-posted with its new end, and the twin cuts every burn of an ECU
+/// that loses power ([`BurnBoard::cut_all`]).
+#[derive(Debug, Clone, Default)]
+pub struct BurnBoard(std::sync::Arc<std::sync::Mutex<Vec<Burn>>>);
+
+impl BurnBoard {
+    /// An empty board.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Post a burn, or replace the one with the same `start_ns` (cut short).
+    pub fn post(&self, b: Burn) {
+        let mut v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        match v.iter_mut().find(|x| x.start_ns == b.start_ns) {
+            Some(x) => *x = b,
+            None => v.push(b),
+        }
+    }
+
+    /// Every burn posted strictly before `now_ns` that has not ended by `applied_until_ns`,
+    /// in start order (the FC keeps `applied_until_ns`, how far it has applied them).
+    pub fn pending(&self, now_ns: u64, applied_until_ns: u64) -> Vec<Burn> {
+        let v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut out: Vec<Burn> = v
+            .iter()
+            .filter(|b| b.posted_ns < now_ns && b.end_ns > applied_until_ns)
+            .copied()
+            .collect();
+        out.sort_by_key(|b| b.start_ns);
+        out
+    }
+
+    /// End every burn still running at `at_ns` there (the ECU lost power).
+    pub fn cut_all(&self, at_ns: u64) {
+        let mut v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        for b in v.iter_mut() {
+            if b.end_ns > at_ns {
+                b.end_ns = b.end_ns.min(at_ns.max(b.start_ns));
+                b.posted_ns = b.posted_ns.min(at_ns);
+            }
+        }
+    }
+
+    /// Forget burns that ended at or before `ns`.
+    pub fn forget_before(&self, ns: u64) {
+        let mut v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        v.retain(|b| b.end_ns > ns);
+    }
+}
+
+/// Switched activities of the platform that cost power and that the EPS must know about:
+/// posted by the node that does them (through the twin's wiring), read by the EPS.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Activity {
+    /// The S-band transmitter is sending a frame.
+    SbandTx,
+    /// The UHF radio (COMM) is transmitting.
+    UhfTx,
+    /// The ECU's thruster heaters are on (armed).
+    ThrusterHeater,
+    /// The thruster is firing.
+    Firing,
+}
+
+/// A log of [`Activity`] switches with their times; readers see the state **strictly
+/// before** their own instant (see [`TruthBoard`] for why).
+#[derive(Debug, Clone, Default)]
+pub struct ActivityBoard(std::sync::Arc<std::sync::Mutex<ActivityLog>>);
+
+/// Each activity's switches: (time ns, on).
+type ActivityLog = std::collections::BTreeMap<Activity, Vec<(u64, bool)>>;
+
+impl ActivityBoard {
+    /// An empty board: every activity off.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// `what` switched on or off at `t_ns` (switches of one activity come in time order;
+    /// only the last 256 are kept).
+    pub fn set(&self, what: Activity, t_ns: u64, on: bool) {
+        let mut m = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let v = m.entry(what).or_default();
+        if v.last().is_some_and(|&(_, last)| last == on) {
+            return;
+        }
+        if v.len() >= 256 {
+            v.remove(0);
+        }
+        v.push((t_ns, on));
+    }
+
+    /// Whether `what` was on just before `t_ns`.
+    pub fn on_before(&self, what: Activity, t_ns: u64) -> bool {
+        let m = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        m.get(&what)
+            .and_then(|v| v.iter().rev().find(|(t, _)| *t < t_ns))
+            .is_some_and(|&(_, on)| on)
+    }
+
+    /// The fraction of `[from_ns, to_ns)` during which `what` was on (0 when the interval is
+    /// empty), for energy over an EPS step.
+    pub fn duty(&self, what: Activity, from_ns: u64, to_ns: u64) -> f64 {
+        if to_ns <= from_ns {
+            return 0.0;
+        }
+        let m = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let Some(v) = m.get(&what) else { return 0.0 };
+        let mut on_ns = 0u64;
+        let mut state = v
+            .iter()
+            .rev()
+            .find(|(t, _)| *t <= from_ns)
+            .is_some_and(|&(_, on)| on);
+        let mut since = from_ns;
+        for &(t, on) in v.iter().filter(|(t, _)| *t > from_ns && *t < to_ns) {
+            if state {
+                on_ns += t - since;
+            }
+            state = on;
+            since = t;
+        }
+        if state {
+            on_ns += to_ns - since;
+        }
+        on_ns as f64 / (to_ns - from_ns) as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn readers_see_only_what_came_strictly_before() {
+        let b = TruthBoard::new();
+        let post = |k: u64| {
+            b.publish(&TruthSnapshot {
+                t_ns: k * 1_000_000_000,
+                ..TruthSnapshot::default()
+            })
+        };
+        (0..10).for_each(post);
+        assert_eq!(b.latest_before(5_000_000_000).unwrap().t_ns, 4_000_000_000);
+        assert_eq!(b.latest_before(5_000_000_001).unwrap().t_ns, 5_000_000_000);
+        assert!(b.latest_before(0).is_none());
+        (10..100).for_each(post);
+        // Only the last TRUTH_BOARD_DEPTH are kept.
+        assert!(b.latest_before(10_000_000_000).is_none());
+        assert_eq!(b.latest_before(u64::MAX).unwrap().t_ns, 99_000_000_000);
+    }
+
+    #[test]
+    fn burns_are_taken_after_they_are_posted_and_cut_at_power_loss() {
+        let b = BurnBoard::new();
+        let burn = Burn {
+            posted_ns: 100,
+            start_ns: 100,
+            end_ns: 10_100,
+            thrust_n: 1.0,
+            mass_flow_kg_s: 0.001,
+            mass_kg: 12.0,
+            dir_body: Vector3::z(),
+        };
+        b.post(burn);
+        assert!(b.pending(100, 0).is_empty(), "not at the instant it was posted");
+        assert_eq!(b.pending(101, 0), vec![burn]);
+        assert!(b.pending(20_000, 10_100).is_empty(), "applied to its end");
+        b.cut_all(5_000);
+        assert_eq!(b.pending(101, 0)[0].end_ns, 5_000);
+        b.forget_before(5_000);
+        assert!(b.pending(u64::MAX, 0).is_empty());
+    }
+
+    #[test]
+    fn activity_duty_over_an_interval() {
+        let a = ActivityBoard::new();
+        a.set(Activity::SbandTx, 10, true);
+        a.set(Activity::SbandTx, 30, false);
+        a.set(Activity::SbandTx, 50, true);
+        assert!(!a.on_before(Activity::SbandTx, 10));
+        assert!(a.on_before(Activity::SbandTx, 11));
+        assert!((a.duty(Activity::SbandTx, 0, 100) - 0.7).abs() < 1e-12);
+        assert!((a.duty(Activity::SbandTx, 20, 40) - 0.5).abs() < 1e-12);
+        assert_eq!(a.duty(Activity::UhfTx, 0, 100), 0.0);
+    }
+}
