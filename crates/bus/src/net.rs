@@ -65,6 +65,9 @@ pub struct NetStats {
     pub dropped: u64,
     /// Packets with no endpoint to go to.
     pub unroutable: u64,
+    /// Packets sent over the air while the satellite and the ground were out of contact
+    /// (lost; also counted in `dropped`).
+    pub no_contact: u64,
     /// Per-endpoint (name, packets sent, packets received).
     pub endpoints: Vec<(String, u64, u64)>,
 }
@@ -95,6 +98,9 @@ struct State {
     impair: Impairments,
     rng: ImpairRng,
     trace: Option<TraceTx>,
+    /// Whether the radio link can close (a pass over a ground station); see
+    /// [`PacketNet::set_contact`].
+    contact: bool,
 }
 
 /// A packet network; clones share it.
@@ -144,6 +150,7 @@ impl PacketNet {
                 seq: 0,
                 impair: Impairments::default(),
                 trace: None,
+                contact: true,
             })),
             wake: Arc::new(Notify::new()),
         }
@@ -218,6 +225,13 @@ impl PacketNet {
         self.lock().impair = imp;
     }
 
+    /// Contact between the radios on the air (a pass) or none: out of contact every packet
+    /// that would cross the air is lost (counted in `no_contact`), whatever the
+    /// impairments. On at creation.
+    pub fn set_contact(&self, on: bool) {
+        self.lock().contact = on;
+    }
+
     /// Send every packet that crosses the network to `tx`.
     pub fn set_trace(&self, tx: TraceTx) {
         self.lock().trace = Some(tx);
@@ -287,7 +301,12 @@ impl State {
             let start = t.max(self.air_busy_until);
             self.air_busy_until = start + dur;
             self.stats.air_busy += dur;
-            let fate = self.rng.fate(&self.impair);
+            let fate = if self.contact {
+                self.rng.fate(&self.impair)
+            } else {
+                self.stats.no_contact += 1;
+                Fate::Drop
+            };
             (
                 self.air_busy_until + self.cfg.air_delay + self.impair.delay,
                 fate,
@@ -380,5 +399,30 @@ mod tests {
         sat.send(b.t, Packet::new(Header::new(3, 19, 40, 1), vec![]));
         tokio::time::sleep(Duration::from_millis(10)).await;
         assert_eq!(net.stats().unroutable, 1);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn out_of_contact_nothing_crosses_the_air() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let net = PacketNet::new(PacketNetConfig::ground(), 1);
+        let (tx_gs, _rx_gs) = inbox();
+        let (tx_sat, mut rx_sat) = inbox();
+        let gs = net.attach("GS16", &[16], false, false, tx_gs, 0);
+        let _sat = net.attach("COMM1-uhf", &[], true, true, tx_sat, 1);
+        tokio::spawn(net.clone().run(clock));
+        net.set_contact(false);
+        gs.send(
+            SimTime::ZERO,
+            Packet::new(Header::new(16, 3, 1, 40), vec![1]),
+        );
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        assert!(rx_sat.try_recv().is_err());
+        let st = net.stats();
+        assert_eq!((st.no_contact, st.dropped), (1, 1));
+        net.set_contact(true);
+        gs.send(clock.now(), Packet::new(Header::new(16, 3, 1, 41), vec![2]));
+        let a = rx_sat.recv().await.unwrap();
+        assert!(matches!(a.what, crate::inbox::Arrival::Packet(ref p) if p.data == vec![2]));
+        assert_eq!(net.stats().no_contact, 1);
     }
 }

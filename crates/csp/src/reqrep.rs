@@ -413,6 +413,69 @@ pub mod le {
         write_fn!(f32, f32);
         write_fn!(f64, f64);
     }
+
+    /// A fixed-size little-endian layout (an ICD table, or one the twin defines): read and
+    /// written field by field, parsed only from exactly [`Repr::LEN`] bytes.
+    pub trait Repr: Sized {
+        /// Size in bytes.
+        const LEN: usize;
+        /// Read the fields from `r` (which holds at least `LEN` bytes).
+        fn read(r: &mut Reader<'_>) -> Result<Self, Error>;
+        /// Append the fields to `w`.
+        fn write(&self, w: &mut Writer);
+
+        /// Parse exactly `LEN` bytes.
+        fn parse(buf: &[u8]) -> Result<Self, Error> {
+            if buf.len() < Self::LEN {
+                return Err(Error::Truncated);
+            }
+            if buf.len() > Self::LEN {
+                return Err(Error::TooLong);
+            }
+            let mut r = Reader::new(buf);
+            let v = Self::read(&mut r)?;
+            r.finish()?;
+            Ok(v)
+        }
+        /// Length of the emitted bytes.
+        fn buffer_len(&self) -> usize {
+            Self::LEN
+        }
+        /// Append the bytes to `out`.
+        fn emit(&self, out: &mut Vec<u8>) {
+            let mut w = Writer {
+                buf: std::mem::take(out),
+            };
+            self.write(&mut w);
+            *out = w.buf;
+        }
+        /// The bytes.
+        fn to_vec(&self) -> Vec<u8> {
+            let mut v = Vec::with_capacity(Self::LEN);
+            self.emit(&mut v);
+            v
+        }
+    }
+
+    macro_rules! array_fn {
+        ($name:ident, $t:ty, $read:ident) => {
+            #[doc = concat!("Read `N` little-endian `", stringify!($t), "`s.")]
+            pub fn $name<const N: usize>(r: &mut Reader<'_>) -> Result<[$t; N], Error> {
+                let mut a = [<$t>::default(); N];
+                for x in &mut a {
+                    *x = r.$read()?;
+                }
+                Ok(a)
+            }
+        };
+    }
+
+    array_fn!(u8s, u8, u8);
+    array_fn!(i8s, i8, i8);
+    array_fn!(u16s, u16, u16);
+    array_fn!(u32s, u32, u32);
+    array_fn!(f32s, f32, f32);
+    array_fn!(f64s, f64, f64);
 }
 
 #[cfg(test)]

@@ -1,11 +1,541 @@
-//! UHF radio (CSP 1 and 2): bridges the main CAN bus and the ground segment. Port 10 answers failure until the COMM issue fills it.
+//! The UHF radio (CSP 1 and 2): COMM's own application on top of the CSP node that routes
+//! between the main CAN bus and the ground segment.
+//!
+//! What is modelled where:
+//! - Routing (COMM1: main CAN <-> UHF) is the CSP node's job, configured by the twin; the
+//!   air link itself (9600 bit/s half duplex, delay, impairments, contact only during passes)
+//!   is `bus::net`'s, switched by the twin at orbit-predicted rises and sets.
+//! - [`CommApp`] (this crate, the same for both radios) adds port 10 ([`wire`]: TMCOMM 1,
+//!   BEACONSET 2, BEACONGET 3, BEACON 4), the periodic beacon, and the link state
+//!   ([`link`]) computed from the FC's truth (`TruthBoard::latest_before(now)`).
+//!
+//! # Roles and the radio
+//! [`CommRole::Primary`] (COMM1) starts with its radio **active**; [`CommRole::Secondary`]
+//! (COMM2) starts on **standby**: it answers port 10 (TMCOMM says standby) and sends no
+//! beacon. [`CommApp::set_active`] is the switch the twin flips when COMM2 takes the radio
+//! route over (COMM1 powered off or failed); it is hardware state and survives reboots.
+//! Only an active radio beacons.
+//!
+//! # Beacons
+//! An active radio sends a beacon every period (default 60 s, BEACONSET 0 = off, else
+//! 10..=3600 s), the first one a period after boot, after a BEACONSET, or after becoming
+//! active (the schedule restarts from that instant). The beacon goes to the main ground
+//! station (CSP 16, port 10) from COMM's port 10, normal priority, no CRC, whether or not
+//! a station is in contact: out of contact the air link loses it (`bus::net`); a ground
+//! station does not reply. Its data is `04 | 01 | Beacon` ([`wire::Beacon`], 171 + 2
+//! bytes): the BEACON 4 reply sent unsolicited.
+//!
+//! Each beacon puts [`Activity::UhfTx`] on for its air time,
+//! `(4 + data) bytes x 8 / rate` (CSP header and data; plus the configured framing
+//! overhead, 0 by default like `bus::net`), so the EPS charges the transmitter. Both
+//! switches are posted when the beacon is sent (the off one at its future instant), so no
+//! timer is needed and readers (which see only switches strictly before their instant) stay
+//! deterministic. Downlink traffic the node forwards (replies to the ground) is not the
+//! application's to see and is not charged here: the twin can post it from the air channel.
+//!
+//! # Reboot
+//! Volatile ([`App::reset`]): the beacon sequence (restarts at 1), the period (back to the
+//! configured one), the schedule, the "since boot" counters of TMCOMM. The role, the
+//! active flag and the run counters ([`CommApp::counters`]) survive.
 
-use csp::node::StubApp;
+pub mod link;
+pub mod wire;
+
+use std::time::Duration;
+
+use csp::node::{App, Node};
+use csp::reqrep::serve;
+use csp::{Header, Packet, SimTime};
+use orbit::geodetic::ecef_km_to_geodetic;
+use orbit::passes::GroundSite;
+use orbit::state::{Activity, ActivityBoard, TruthBoard, TruthSnapshot};
+
+pub use crate::link::{LinkBudget, LinkState, Station};
+use crate::wire::Repr;
+pub use crate::wire::{Beacon, BeaconPeriod, CommCommand, TmComm};
 
 /// The ports this node binds for its ICD services (INTERPRETATION.md section 4).
-pub const PORTS: &[u8] = &[10];
+pub const PORTS: &[u8] = &[wire::PORT];
+/// The main ground station, where beacons go (INTERPRETATION.md section 1).
+pub const GROUND_ADDR: u8 = 16;
+/// Default beacon period (the brief's; a scenario setting and BEACONSET).
+pub const DEFAULT_BEACON_PERIOD: Duration = Duration::from_secs(60);
+/// Default UHF data rate, bit/s (issue #7; `bus::net`'s default).
+pub const DEFAULT_AIR_RATE_BPS: u32 = 9600;
+/// Default elevation mask, deg (issue #7).
+pub const DEFAULT_MASK_DEG: f64 = 10.0;
 
-/// The node's application.
-pub fn app() -> StubApp {
-    StubApp::new(PORTS)
+/// Which of the two radios this is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum CommRole {
+    /// COMM1 (CSP 1): routes main CAN <-> UHF, radio active.
+    #[default]
+    Primary,
+    /// COMM2 (CSP 2): on the main bus, radio on standby until the twin activates it.
+    Secondary,
 }
+
+impl CommRole {
+    /// The TMCOMM value ([`wire::role`]).
+    pub fn to_u8(self) -> u8 {
+        match self {
+            CommRole::Primary => wire::role::PRIMARY,
+            CommRole::Secondary => wire::role::SECONDARY,
+        }
+    }
+}
+
+/// What a COMM needs from the scenario (fixed for the run).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CommConfig {
+    /// Primary (radio active at start) or secondary (standby).
+    pub role: CommRole,
+    /// COMM's command port, also the beacon's source port (10).
+    pub port: u8,
+    /// Beacon period at boot (zero: off; else whole seconds, 10..=3600).
+    pub beacon_period: Duration,
+    /// Ground stations for the link state (the first is the main one).
+    pub stations: Vec<Station>,
+    /// Elevation mask, deg.
+    pub mask_deg: f64,
+    /// The downlink budget for the RSSI estimate.
+    pub link: LinkBudget,
+    /// Where beacons go (16).
+    pub ground_addr: u8,
+    /// The beacon's destination port (10).
+    pub ground_port: u8,
+    /// UHF data rate for the beacon's air time, bit/s.
+    pub air_rate_bps: u32,
+    /// Framing overhead per packet on the air, bytes (as `bus::net`'s).
+    pub air_overhead_bytes: u32,
+}
+
+impl Default for CommConfig {
+    /// COMM1: primary, port 10, 60 s beacons to 16:10, Vilnius with a 10 deg mask.
+    fn default() -> Self {
+        CommConfig {
+            role: CommRole::Primary,
+            port: wire::PORT,
+            beacon_period: DEFAULT_BEACON_PERIOD,
+            stations: vec![Station::vilnius()],
+            mask_deg: DEFAULT_MASK_DEG,
+            link: LinkBudget::default(),
+            ground_addr: GROUND_ADDR,
+            ground_port: wire::PORT,
+            air_rate_bps: DEFAULT_AIR_RATE_BPS,
+            air_overhead_bytes: 0,
+        }
+    }
+}
+
+impl CommConfig {
+    /// The default configuration with the secondary role (COMM2).
+    pub fn secondary() -> Self {
+        CommConfig {
+            role: CommRole::Secondary,
+            ..Self::default()
+        }
+    }
+
+    /// Check the configuration (for the scenario loader); the message names the problem.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.port >= csp::header::EPHEMERAL_PORT_MIN {
+            return Err(format!("COMM port {} must be below 32", self.port));
+        }
+        if self.ground_port > csp::header::MAX_PORT {
+            return Err(format!("beacon port {} > 63", self.ground_port));
+        }
+        if !(16..=20).contains(&self.ground_addr) {
+            return Err(format!(
+                "beacon address {} is not a ground station (16-20)",
+                self.ground_addr
+            ));
+        }
+        let p = self.beacon_period;
+        let whole = p.subsec_nanos() == 0;
+        let s = p.as_secs();
+        let ok_range = s == 0
+            || (u64::from(wire::BEACON_PERIOD_MIN_S)..=u64::from(wire::BEACON_PERIOD_MAX_S))
+                .contains(&s);
+        if !whole || !ok_range {
+            return Err(format!(
+                "beacon period {p:?}: 0 (off) or whole seconds {}..={}",
+                wire::BEACON_PERIOD_MIN_S,
+                wire::BEACON_PERIOD_MAX_S
+            ));
+        }
+        if !(-90.0..=90.0).contains(&self.mask_deg) {
+            return Err(format!("elevation mask {} deg", self.mask_deg));
+        }
+        if self.air_rate_bps == 0 {
+            return Err("UHF rate 0 bit/s".to_owned());
+        }
+        for s in &self.stations {
+            if !(-90.0..=90.0).contains(&s.lat_deg) || !s.lon_deg.is_finite() {
+                return Err(format!("station {}: bad latitude/longitude", s.name));
+            }
+        }
+        if self.stations.len() > usize::from(wire::NO_STATION) {
+            return Err(format!("{} stations (at most 254)", self.stations.len()));
+        }
+        Ok(())
+    }
+}
+
+/// Air time of a packet with `data_len` bytes of data: `(4 + data_len + overhead) x 8 /
+/// rate`, in integer nanoseconds (rounded down, as `bus::net` does).
+pub fn air_time(data_len: usize, rate_bps: u32, overhead_bytes: u32) -> Duration {
+    let bits = (csp::header::HEADER_LEN as u64 + data_len as u64 + u64::from(overhead_bytes)) * 8;
+    Duration::from_nanos(bits * 1_000_000_000 / u64::from(rate_bps.max(1)))
+}
+
+/// Run counters of a COMM (since the start of the run, reboots included).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CommCounters {
+    /// Beacons handed to the radio.
+    pub beacons_sent: u64,
+    /// UHF air time of those beacons.
+    pub beacon_air: Duration,
+    /// Beacons the node could not send (no route, header): logged as drops.
+    pub beacon_failures: u64,
+    /// Port 10 requests answered with failure.
+    pub refused: u64,
+}
+
+/// The COMM application (see the module doc).
+#[derive(Debug)]
+pub struct CommApp {
+    cfg: CommConfig,
+    sites: Vec<GroundSite>,
+    truth: Option<TruthBoard>,
+    activity: Option<ActivityBoard>,
+    active: bool,
+    /// Became active since the last timer: arm the schedule at the next timeout.
+    activation_pending: bool,
+    period: Duration,
+    next_beacon: Option<SimTime>,
+    /// Beacons sent since boot (the last sequence number).
+    seq: u32,
+    air_since_boot: Duration,
+    refused_since_boot: u64,
+    last_now: SimTime,
+    counters: CommCounters,
+}
+
+impl CommApp {
+    /// A COMM with `cfg` (the radio is active for the primary role).
+    pub fn new(cfg: CommConfig) -> Self {
+        CommApp {
+            sites: cfg.stations.iter().map(Station::site).collect(),
+            truth: None,
+            activity: None,
+            active: cfg.role == CommRole::Primary,
+            activation_pending: false,
+            period: cfg.beacon_period,
+            next_beacon: None,
+            seq: 0,
+            air_since_boot: Duration::ZERO,
+            refused_since_boot: 0,
+            last_now: SimTime::ZERO,
+            counters: CommCounters::default(),
+            cfg,
+        }
+    }
+
+    /// Read the FC's truth from `b` (position, attitude, link geometry).
+    pub fn with_truth(mut self, b: TruthBoard) -> Self {
+        self.truth = Some(b);
+        self
+    }
+
+    /// Post the transmitter's [`Activity::UhfTx`] switches on `b`.
+    pub fn with_activity(mut self, b: ActivityBoard) -> Self {
+        self.activity = Some(b);
+        self
+    }
+
+    /// Switch the radio between active (beaconing, on the UHF route) and standby; the
+    /// beacon schedule restarts from the next timer (the twin's take-over switch).
+    pub fn set_active(&mut self, active: bool) {
+        if active == self.active {
+            return;
+        }
+        self.active = active;
+        self.activation_pending = active;
+        if !active {
+            self.next_beacon = None;
+        }
+    }
+
+    /// Whether the radio is active.
+    pub fn is_active(&self) -> bool {
+        self.active
+    }
+    /// The configured role.
+    pub fn role(&self) -> CommRole {
+        self.cfg.role
+    }
+    /// The configuration in use.
+    pub fn config(&self) -> &CommConfig {
+        &self.cfg
+    }
+    /// The beacon period in effect (zero: off).
+    pub fn beacon_period(&self) -> Duration {
+        self.period
+    }
+    /// When the next beacon goes out, if one is scheduled.
+    pub fn next_beacon(&self) -> Option<SimTime> {
+        self.next_beacon
+    }
+    /// Beacons sent since boot (the sequence number of the last one).
+    pub fn beacons_since_boot(&self) -> u32 {
+        self.seq
+    }
+    /// Run counters.
+    pub fn counters(&self) -> &CommCounters {
+        &self.counters
+    }
+
+    /// The FC's latest truth strictly before `now`.
+    pub fn truth_at(&self, now: SimTime) -> Option<TruthSnapshot> {
+        self.truth.as_ref()?.latest_before(now.as_ns())
+    }
+
+    /// The link state at `now` from the latest truth; `None` without truth or stations.
+    pub fn link_state(&self, now: SimTime) -> Option<LinkState> {
+        let t = self.truth_at(now)?;
+        self.link_of(&t)
+    }
+
+    fn link_of(&self, t: &TruthSnapshot) -> Option<LinkState> {
+        link::link_state(
+            &self.sites,
+            self.cfg.mask_deg,
+            &self.cfg.link,
+            &link::r_ecef_km(t),
+        )
+    }
+
+    /// The TMCOMM reply data at `now`.
+    pub fn tmcomm(&self, node: &Node, now: SimTime) -> TmComm {
+        let link = self.link_state(now);
+        let noise = self.cfg.link.noise_dbm() as f32;
+        let c = node.counters();
+        TmComm {
+            role: self.cfg.role.to_u8(),
+            radio_active: u8::from(self.active),
+            in_contact: u8::from(link.is_some_and(|l| l.in_contact)),
+            station: link.map_or(wire::NO_STATION, |l| station_u8(l.station)),
+            elevation_deg: link.map_or(0.0, |l| l.elevation_deg as f32),
+            azimuth_deg: link.map_or(0.0, |l| l.azimuth_deg as f32),
+            range_km: link.map_or(0.0, |l| l.range_km as f32),
+            rssi_dbm: link.map_or(noise, |l| l.rssi_dbm as f32),
+            snr_db: link.map_or(0.0, |l| l.snr_db as f32),
+            uptime_s: sat32(node.uptime(now).as_secs()),
+            beacons_sent: self.seq,
+            beacon_period_s: period_s(self.period),
+            beacon_air_ms: sat32(self.air_since_boot.as_millis() as u64),
+            rx_packets: sat32(c.rx_packets),
+            tx_packets: sat32(c.tx_packets),
+            forwarded: sat32(c.forwarded),
+            drops: sat32(c.total_drops()),
+            refused: sat32(self.refused_since_boot),
+        }
+    }
+
+    /// The beacon data at `now` with sequence number `seq`.
+    pub fn beacon(&self, node: &Node, now: SimTime, seq: u32) -> Beacon {
+        let c = node.counters();
+        let utc_ns = node.clock_unix_ns(now).max(0);
+        let mut b = Beacon {
+            seq,
+            utc_s: u32::try_from(utc_ns / 1_000_000_000).unwrap_or(u32::MAX),
+            uptime_s: sat32(node.uptime(now).as_secs()),
+            flags: if self.cfg.role == CommRole::Secondary {
+                wire::BEACON_SECONDARY
+            } else {
+                0
+            },
+            station: wire::NO_STATION,
+            rx_packets: sat32(c.rx_packets),
+            tx_packets: sat32(c.tx_packets),
+            forwarded: sat32(c.forwarded),
+            drops: sat32(c.total_drops()),
+            reboots: u16::try_from(c.reboots).unwrap_or(u16::MAX),
+            beacon_period_s: period_s(self.period),
+            ..Beacon::default()
+        };
+        let Some(t) = self.truth_at(now) else {
+            return b;
+        };
+        let f3 = |v: nalgebra::Vector3<f64>| [v.x as f32, v.y as f32, v.z as f32];
+        let r_ecef_km = link::r_ecef_km(&t);
+        let geo = ecef_km_to_geodetic(&r_ecef_km);
+        let q = t.q_eci_from_body;
+        let rpm = 60.0 / std::f64::consts::TAU;
+        b.flags |= wire::BEACON_TRUTH_VALID;
+        b.truth_utc_s = u32::try_from(t.unix_ns.max(0) / 1_000_000_000).unwrap_or(u32::MAX);
+        b.r_eci_km = f3(t.r_eci_m * 1e-3);
+        b.v_eci_km_s = f3(t.v_eci_m_s * 1e-3);
+        b.lat_deg = geo.lat_deg() as f32;
+        b.lon_deg = geo.lon_deg() as f32;
+        b.alt_km = (geo.alt_m * 1e-3) as f32;
+        b.q_eci_from_body = [q.w as f32, q.i as f32, q.j as f32, q.k as f32];
+        b.w_body_deg_s = f3(t.w_body_rad_s.map(f64::to_degrees));
+        b.sun_body_unit = f3(q.inverse_transform_vector(&t.sun_eci_unit));
+        b.sun_visible_pct = (t.in_eclipse_fraction_visible.clamp(0.0, 1.0) * 100.0).round() as u8;
+        b.b_body_nt = f3(q.inverse_transform_vector(&t.b_eci_nt));
+        b.wheel_speed_rpm = t.wheel_speed_rad_s.map(|w| (w * rpm) as f32);
+        b.mtq_dipole_am2 = t.mtq_dipole_am2.map(|m| m as f32);
+        if let Some(l) =
+            link::link_state(&self.sites, self.cfg.mask_deg, &self.cfg.link, &r_ecef_km)
+        {
+            if l.in_contact {
+                b.flags |= wire::BEACON_IN_CONTACT;
+            }
+            b.station = station_u8(l.station);
+            b.elevation_deg = l.elevation_deg as f32;
+            b.azimuth_deg = l.azimuth_deg as f32;
+            b.range_km = l.range_km as f32;
+            b.rssi_dbm = l.rssi_dbm as f32;
+        }
+        b
+    }
+
+    fn arm(&mut self, now: SimTime) {
+        self.next_beacon = (self.active && !self.period.is_zero()).then(|| now + self.period);
+    }
+
+    fn send_beacon(&mut self, node: &mut Node, now: SimTime) {
+        let seq = self.seq.wrapping_add(1);
+        let data = self.beacon(node, now, seq).to_packet_data();
+        let air = air_time(
+            data.len(),
+            self.cfg.air_rate_bps,
+            self.cfg.air_overhead_bytes,
+        );
+        let header = Header::new(
+            node.addr(),
+            self.cfg.ground_addr,
+            self.cfg.ground_port,
+            self.cfg.port,
+        );
+        match node.send(Packet::new(header, data), now) {
+            Ok(()) => {
+                self.seq = seq;
+                self.air_since_boot += air;
+                self.counters.beacons_sent += 1;
+                self.counters.beacon_air += air;
+                if let Some(a) = &self.activity {
+                    a.set(Activity::UhfTx, now.as_ns(), true);
+                    a.set(Activity::UhfTx, (now + air).as_ns(), false);
+                }
+            }
+            Err(e) => {
+                self.counters.beacon_failures += 1;
+                node.log(now, format!("drop (beacon {seq}): {e}"));
+            }
+        }
+    }
+
+    fn execute(&mut self, c: CommCommand, node: &Node, now: SimTime) -> Vec<u8> {
+        match c {
+            CommCommand::TmComm => self.tmcomm(node, now).to_vec(),
+            CommCommand::BeaconSet(p) => {
+                self.period = Duration::from_secs(u64::from(p.period_s));
+                self.arm(now);
+                Vec::new()
+            }
+            CommCommand::BeaconGet => BeaconPeriod {
+                period_s: period_s(self.period),
+            }
+            .to_vec(),
+            CommCommand::Beacon => self.beacon(node, now, self.seq).to_vec(),
+        }
+    }
+}
+
+fn sat32(v: u64) -> u32 {
+    u32::try_from(v).unwrap_or(u32::MAX)
+}
+
+fn period_s(p: Duration) -> u16 {
+    u16::try_from(p.as_secs()).unwrap_or(u16::MAX)
+}
+
+fn station_u8(i: usize) -> u8 {
+    u8::try_from(i).unwrap_or(wire::NO_STATION)
+}
+
+impl App for CommApp {
+    fn start(&mut self, node: &mut Node, now: SimTime) {
+        node.bind(self.cfg.port);
+        self.last_now = now;
+        self.activation_pending = false;
+        self.arm(now);
+    }
+
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        self.last_now = self.last_now.max(now);
+        if packet.header.dport != self.cfg.port {
+            return;
+        }
+        let (reply, refused) =
+            serve::<CommCommand>(&packet.data, |c| Ok(self.execute(c, node, now)));
+        if let Some(e) = refused {
+            self.refused_since_boot += 1;
+            self.counters.refused += 1;
+            node.log(now, format!("comm port {}: refused: {e}", self.cfg.port));
+        }
+        if let Err(e) = node.send(Packet::new(packet.header.reply(node.addr()), reply), now) {
+            node.log(now, format!("drop (comm reply): {e}"));
+        }
+    }
+
+    fn poll_timeout(&self) -> Option<SimTime> {
+        if self.activation_pending {
+            return Some(self.last_now);
+        }
+        self.next_beacon
+    }
+
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        self.last_now = self.last_now.max(now);
+        if self.activation_pending {
+            self.activation_pending = false;
+            self.arm(now);
+        }
+        let Some(due) = self.next_beacon.filter(|&t| t <= now) else {
+            return;
+        };
+        self.send_beacon(node, now);
+        // Keep the phase; a driver that wakes late sends one beacon, not a burst.
+        if self.period.is_zero() {
+            self.next_beacon = None;
+            return;
+        }
+        let mut next = due + self.period;
+        while next <= now {
+            next = next + self.period;
+        }
+        self.next_beacon = Some(next);
+    }
+
+    fn reset(&mut self, now: SimTime) {
+        self.period = self.cfg.beacon_period;
+        self.next_beacon = None;
+        self.activation_pending = false;
+        self.seq = 0;
+        self.air_since_boot = Duration::ZERO;
+        self.refused_since_boot = 0;
+        self.last_now = now;
+    }
+}
+
+/// The node's application with the default (primary) configuration and no truth.
+pub fn app() -> CommApp {
+    CommApp::new(CommConfig::default())
+}
+
+#[cfg(test)]
+mod tests;

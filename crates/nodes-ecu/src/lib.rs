@@ -1,11 +1,582 @@
-//! Propulsion control unit (CSP 5). Port 10 answers failure until the ECU issue fills it.
+//! Propulsion unit (ECU, CSP 5): one thruster along body +Z with a blow-down tank
+//! ([`thruster`]), armed, fired and safed on port 10 ([`wire`]).
+//!
+//! [`EcuApp`] is a pure core ([`csp::node::App`]) driven by packets and one timer (the end
+//! of a burn, and the end of the warm-up for its log line).
+//!
+//! # States and commands (docs/protocol.md, "ECU port")
+//! - **SAFE** after boot: heaters off. `ARM` switches the heaters on (the catalyst-bed
+//!   preheat of a monopropellant thruster) and starts the warm-up ([`EcuConfig::warmup`],
+//!   60 s by default); ARM when already armed changes nothing.
+//! - **WARMING** until the warm-up is over, then **ARMED**: `FIRE duration_ms` is accepted
+//!   only now, with 1 ms <= duration <= [`EcuConfig::max_burn`] (60 s by default) and
+//!   propellant left; a burn that would need more propellant than is left is shortened to
+//!   what is left (the reply gives the granted duration). FIRE while firing is refused.
+//! - **FIRING** for the granted duration, then back to ARMED (heaters stay on).
+//! - `SAFE` at any time: stops a burn at once, heaters off, disarmed.
+//!
+//! Refused and malformed requests get the failure reply `cmd | 00` and a log line, and are
+//! counted in TMECU.
+//!
+//! # The burn reaches the true orbit
+//! A FIRE at `now` posts a [`Burn`] `{ posted_ns: now, start_ns: now, end_ns: now +
+//! granted, thrust_n, mass_flow_kg_s, mass_kg: dry + propellant, dir_body: +Z }` on the
+//! [`BurnBoard`] the twin gives ([`EcuApp::with_burns`]); the FC applies it to the true
+//! orbit. SAFE during a burn re-posts it with `end_ns = now` and its original `posted_ns`,
+//! so that the FC, which integrates thrust up to each tick from the burns posted strictly
+//! before the tick, gets the same answer whichever of the two nodes runs first at an
+//! instant. The [`ActivityBoard`] ([`EcuApp::with_activity`]) gets
+//! [`Activity::ThrusterHeater`] on from ARM to SAFE (or power loss) and [`Activity::Firing`]
+//! from the start to the end of each burn (the EPS charges their power).
+//!
+//! # Bookkeeping
+//! Thrust and mass flow are fixed for a burn at its start (the tank pressure then); the
+//! propellant falls by `mass_flow x duration` (TMECU reports it falling during the burn),
+//! the total impulse grows by `thrust x duration`.
+//!
+//! # Reboot and power loss
+//! The tank's contents are physical and survive anything; the burn count, the last burn's
+//! duration and the total impulse are kept in non-volatile memory and survive too. The
+//! rest is volatile: the ECU comes back SAFE (heaters off, not armed, refusal counter 0).
+//! A burn in progress stops: the twin cuts the board at the power loss
+//! ([`BurnBoard::cut_all`]) and the node driver calls [`App::reset`] when power returns; the
+//! ECU then charges the burn up to the earliest of its planned end, the board's (cut) end
+//! and the reset, and re-posts it with that end (a software reboot while firing cuts the
+//! burn at the reboot this way).
 
-use csp::node::StubApp;
+pub mod thruster;
+pub mod wire;
+
+use std::fmt;
+use std::time::Duration;
+
+use csp::node::{App, Node};
+use csp::reqrep::{RESULT_FAILURE, RESULT_SUCCESS, serve};
+use csp::{Packet, SimTime};
+use orbit::state::{Activity, ActivityBoard, Burn, BurnBoard};
+
+pub use crate::thruster::ThrusterConfig;
+use crate::wire::{ArmReply, EcuCommand, FireReply, Repr};
+pub use crate::wire::{EcuState, TmEcu};
 
 /// The ports this node binds for its ICD services (INTERPRETATION.md section 4).
-pub const PORTS: &[u8] = &[10];
+pub const PORTS: &[u8] = &[wire::PORT_ECU];
 
-/// The node's application.
-pub fn app() -> StubApp {
-    StubApp::new(PORTS)
+/// Default longest burn: a minute, 18 N s at the full-tank thrust (the twin's choice: long
+/// enough for a few m/s of delta-v per command, short enough that a lost SAFE cannot empty
+/// the tank).
+pub const DEFAULT_MAX_BURN: Duration = Duration::from_secs(60);
+
+/// Default warm-up from ARM to FIRE allowed: a minute (the twin's choice; a real catalyst
+/// bed preheats for many minutes; scenarios set their own).
+pub const DEFAULT_WARMUP: Duration = Duration::from_secs(60);
+
+/// What the ECU needs from the scenario (fixed for the run).
+#[derive(Debug, Clone, PartialEq)]
+pub struct EcuConfig {
+    /// Thruster, tank and dry mass.
+    pub thruster: ThrusterConfig,
+    /// Longest burn one FIRE may ask for.
+    pub max_burn: Duration,
+    /// Heater warm-up from ARM until FIRE is accepted.
+    pub warmup: Duration,
+    /// The telemetry and control port (10).
+    pub port: u8,
+}
+
+impl Default for EcuConfig {
+    fn default() -> Self {
+        EcuConfig {
+            thruster: ThrusterConfig::default(),
+            max_burn: DEFAULT_MAX_BURN,
+            warmup: DEFAULT_WARMUP,
+            port: wire::PORT_ECU,
+        }
+    }
+}
+
+impl EcuConfig {
+    /// Check the configuration (for the scenario loader); the message names the problem.
+    pub fn validate(&self) -> Result<(), String> {
+        self.thruster.validate()?;
+        if self.max_burn < Duration::from_millis(1)
+            || self.max_burn.as_millis() > u128::from(u32::MAX)
+        {
+            return Err(format!(
+                "ECU max_burn {:?}: must be between 1 ms and 2^32 ms",
+                self.max_burn
+            ));
+        }
+        if self.port >= csp::header::EPHEMERAL_PORT_MIN {
+            return Err(format!("ECU port {}: must be below 32", self.port));
+        }
+        Ok(())
+    }
+}
+
+/// What the ECU tells the twin (for the record and the expectations).
+#[derive(Debug, Clone, PartialEq)]
+pub enum EcuOutput {
+    /// ARM accepted from SAFE: heaters on.
+    Armed {
+        /// When.
+        t: SimTime,
+    },
+    /// A burn started (as posted on the board).
+    BurnStarted {
+        /// When.
+        t: SimTime,
+        /// The burn.
+        burn: Burn,
+    },
+    /// A burn ended (its planned end, SAFE, or a reboot).
+    BurnEnded {
+        /// When it ended.
+        t: SimTime,
+        /// Its start.
+        start: SimTime,
+        /// Whether it was cut short (SAFE, reboot, power loss).
+        cut: bool,
+        /// Propellant used, kg.
+        propellant_used_kg: f64,
+        /// Impulse delivered, N s.
+        impulse_n_s: f64,
+    },
+    /// SAFE: heaters off, disarmed.
+    Safed {
+        /// When.
+        t: SimTime,
+    },
+    /// The run ended ([`App::finish`]): the final telemetry.
+    Final {
+        /// When.
+        t: SimTime,
+        /// TMECU at the end.
+        telemetry: TmEcu,
+    },
+}
+
+/// The callback behind a [`Sink`].
+type SinkFn = dyn FnMut(EcuOutput) + Send;
+
+/// Where the ECU hands its [`EcuOutput`]s.
+pub struct Sink(Box<SinkFn>);
+
+impl Sink {
+    /// A sink calling `f` with every output.
+    pub fn new(f: impl FnMut(EcuOutput) + Send + 'static) -> Self {
+        Sink(Box::new(f))
+    }
+}
+
+impl fmt::Debug for Sink {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Sink")
+    }
+}
+
+/// A burn in progress.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Firing {
+    start: SimTime,
+    end: SimTime,
+    burn: Burn,
+}
+
+/// The ECU's application (see the module doc).
+#[derive(Debug)]
+pub struct EcuApp {
+    cfg: EcuConfig,
+    burn_board: Option<BurnBoard>,
+    activity: Option<ActivityBoard>,
+    sink: Option<Sink>,
+    // --- physical and non-volatile (survive reboots) ---
+    propellant_kg: f64,
+    total_impulse_n_s: f64,
+    burns: u32,
+    last_burn_ms: u32,
+    // --- volatile ---
+    armed_at: Option<SimTime>,
+    ready_logged: bool,
+    firing: Option<Firing>,
+    refused: u32,
+    log: Vec<(SimTime, String)>,
+}
+
+impl EcuApp {
+    /// An ECU with a full tank. An invalid configuration is replaced by the default (with a
+    /// log line), never a panic; the scenario loader checks [`EcuConfig::validate`] first.
+    pub fn new(cfg: EcuConfig) -> Self {
+        let mut log = Vec::new();
+        let cfg = match cfg.validate() {
+            Ok(()) => cfg,
+            Err(why) => {
+                log.push((
+                    SimTime::ZERO,
+                    format!("ecu: config: {why}; using the default"),
+                ));
+                EcuConfig::default()
+            }
+        };
+        EcuApp {
+            propellant_kg: cfg.thruster.propellant_kg,
+            cfg,
+            burn_board: None,
+            activity: None,
+            sink: None,
+            total_impulse_n_s: 0.0,
+            burns: 0,
+            last_burn_ms: 0,
+            armed_at: None,
+            ready_logged: false,
+            firing: None,
+            refused: 0,
+            log,
+        }
+    }
+
+    /// Post burns on `b` (the FC takes them from there).
+    pub fn with_burns(mut self, b: BurnBoard) -> Self {
+        self.burn_board = Some(b);
+        self
+    }
+
+    /// Post heater and firing switches on `a` (the EPS reads them).
+    pub fn with_activity(mut self, a: ActivityBoard) -> Self {
+        self.activity = Some(a);
+        self
+    }
+
+    /// Hand every [`EcuOutput`] to `s`.
+    pub fn with_sink(mut self, s: Sink) -> Self {
+        self.sink = Some(s);
+        self
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &EcuConfig {
+        &self.cfg
+    }
+
+    /// Propellant left at `now`, kg (falling during a burn).
+    pub fn propellant_kg(&self, now: SimTime) -> f64 {
+        match &self.firing {
+            Some(f) => {
+                let dt_s = (now.min(f.end)).saturating_since(f.start).as_secs_f64();
+                (self.propellant_kg - f.burn.mass_flow_kg_s * dt_s).max(0.0)
+            }
+            None => self.propellant_kg,
+        }
+    }
+
+    /// Total impulse delivered by finished burns, N s.
+    pub fn total_impulse_n_s(&self) -> f64 {
+        self.total_impulse_n_s
+    }
+
+    /// The burn in progress, as posted.
+    pub fn current_burn(&self) -> Option<Burn> {
+        self.firing.map(|f| f.burn)
+    }
+
+    /// The state at `now`.
+    pub fn state(&self, now: SimTime) -> EcuState {
+        match (self.firing, self.armed_at) {
+            (Some(_), _) => EcuState::Firing,
+            (None, None) => EcuState::Safe,
+            (None, Some(a)) if now < a + self.cfg.warmup => EcuState::Warming,
+            (None, Some(_)) => EcuState::Armed,
+        }
+    }
+
+    /// TMECU at `now`.
+    pub fn telemetry(&self, now: SimTime) -> TmEcu {
+        let prop = self.propellant_kg(now);
+        let th = &self.cfg.thruster;
+        let thrust = match &self.firing {
+            Some(f) => f.burn.thrust_n,
+            None => th.thrust_at_n(prop),
+        };
+        let ms = |d: Duration| u32::try_from(d.as_millis()).unwrap_or(u32::MAX);
+        TmEcu {
+            state: self.state(now).to_u8(),
+            heater: u8::from(self.armed_at.is_some()),
+            warmup_left_ms: self
+                .armed_at
+                .map_or(0, |a| ms((a + self.cfg.warmup).saturating_since(now))),
+            burn_left_ms: self.firing.map_or(0, |f| ms(f.end.saturating_since(now))),
+            propellant_kg: prop as f32,
+            tank_pressure_kpa: th.pressure_kpa(prop) as f32,
+            thrust_n: thrust as f32,
+            mass_kg: (th.dry_mass_kg + prop) as f32,
+            total_impulse_n_s: self.total_impulse_n_s as f32,
+            burns: self.burns,
+            last_burn_ms: self.last_burn_ms,
+            refused: self.refused,
+        }
+    }
+
+    fn emit(&mut self, o: EcuOutput) {
+        if let Some(s) = self.sink.as_mut() {
+            (s.0)(o);
+        }
+    }
+
+    fn set_activity(&self, what: Activity, t: SimTime, on: bool) {
+        if let Some(a) = &self.activity {
+            a.set(what, t.as_ns(), on);
+        }
+    }
+
+    /// End the burn in progress at `end` (its planned end or earlier), charge it, and
+    /// re-post it if it was cut short.
+    fn end_burn(&mut self, end: SimTime) {
+        let Some(f) = self.firing.take() else {
+            return;
+        };
+        let end = end.clamp(f.start, f.end);
+        let cut = end < f.end;
+        let dur = end.saturating_since(f.start);
+        let used = (f.burn.mass_flow_kg_s * dur.as_secs_f64()).min(self.propellant_kg);
+        let impulse = f.burn.thrust_n * dur.as_secs_f64();
+        self.propellant_kg = (self.propellant_kg - used).max(0.0);
+        self.total_impulse_n_s += impulse;
+        self.last_burn_ms = u32::try_from(dur.as_millis()).unwrap_or(u32::MAX);
+        if cut && let Some(b) = &self.burn_board {
+            // The original `posted_ns`: see the module doc.
+            b.post(Burn {
+                end_ns: end.as_ns(),
+                ..f.burn
+            });
+        }
+        self.set_activity(Activity::Firing, end, false);
+        self.log.push((
+            end,
+            format!(
+                "ecu: burn {} after {} ms: {:.3} g used, {:.3} N s, {:.4} kg left",
+                if cut { "cut" } else { "ended" },
+                self.last_burn_ms,
+                used * 1e3,
+                impulse,
+                self.propellant_kg
+            ),
+        ));
+        self.emit(EcuOutput::BurnEnded {
+            t: end,
+            start: f.start,
+            cut,
+            propellant_used_kg: used,
+            impulse_n_s: impulse,
+        });
+    }
+
+    fn refuse(&mut self, now: SimTime, why: String) -> Result<Vec<u8>, u8> {
+        self.log.push((now, format!("ecu: refused: {why}")));
+        Err(RESULT_FAILURE)
+    }
+
+    fn command(&mut self, c: EcuCommand, now: SimTime) -> Result<Vec<u8>, u8> {
+        match c {
+            EcuCommand::Telemetry => Ok(self.telemetry(now).to_vec()),
+            EcuCommand::Arm => {
+                if self.armed_at.is_none() {
+                    self.armed_at = Some(now);
+                    self.ready_logged = false;
+                    self.set_activity(Activity::ThrusterHeater, now, true);
+                    self.log
+                        .push((now, format!("ecu: armed, warm-up {:?}", self.cfg.warmup)));
+                    self.emit(EcuOutput::Armed { t: now });
+                }
+                Ok(ArmReply {
+                    warmup_left_ms: self.telemetry(now).warmup_left_ms,
+                }
+                .to_vec())
+            }
+            EcuCommand::Fire(req) => self.fire(req.duration_ms, now),
+            EcuCommand::Safe => {
+                if self.firing.is_some() {
+                    self.end_burn(now);
+                }
+                if self.armed_at.take().is_some() {
+                    self.set_activity(Activity::ThrusterHeater, now, false);
+                    self.log.push((now, "ecu: safe".to_owned()));
+                    self.emit(EcuOutput::Safed { t: now });
+                }
+                Ok(Vec::new())
+            }
+        }
+    }
+
+    fn fire(&mut self, duration_ms: u32, now: SimTime) -> Result<Vec<u8>, u8> {
+        match self.state(now) {
+            EcuState::Armed => {}
+            s => return self.refuse(now, format!("FIRE {duration_ms} ms in state {s:?}")),
+        }
+        let max_ms = self.cfg.max_burn.as_millis();
+        if u128::from(duration_ms) > max_ms {
+            return self.refuse(
+                now,
+                format!("FIRE {duration_ms} ms longer than the maximum {max_ms} ms"),
+            );
+        }
+        let th = self.cfg.thruster;
+        let thrust_n = th.thrust_at_n(self.propellant_kg);
+        let mdot = th.mass_flow_kg_s(thrust_n);
+        // Whole milliseconds the propellant lasts (floor: the tank never goes negative).
+        let lasts_ms = if mdot > 0.0 {
+            (self.propellant_kg / mdot * 1e3).floor()
+        } else {
+            0.0
+        };
+        let granted_ms = (f64::from(duration_ms).min(lasts_ms)).max(0.0) as u32;
+        if granted_ms == 0 {
+            return self.refuse(
+                now,
+                format!(
+                    "FIRE {duration_ms} ms: tank empty ({} kg)",
+                    self.propellant_kg
+                ),
+            );
+        }
+        let end = now + Duration::from_millis(u64::from(granted_ms));
+        let burn = Burn {
+            posted_ns: now.as_ns(),
+            start_ns: now.as_ns(),
+            end_ns: end.as_ns(),
+            thrust_n,
+            mass_flow_kg_s: mdot,
+            mass_kg: th.dry_mass_kg + self.propellant_kg,
+            dir_body: th.dir_unit_body(),
+        };
+        if let Some(b) = &self.burn_board {
+            b.post(burn);
+        }
+        self.set_activity(Activity::Firing, now, true);
+        self.firing = Some(Firing {
+            start: now,
+            end,
+            burn,
+        });
+        self.burns = self.burns.saturating_add(1);
+        self.log.push((
+            now,
+            format!(
+                "ecu: FIRE {granted_ms} ms (asked {duration_ms}): {thrust_n:.4} N, {:.3e} kg/s, mass {:.4} kg",
+                mdot, burn.mass_kg
+            ),
+        ));
+        self.emit(EcuOutput::BurnStarted { t: now, burn });
+        Ok(FireReply {
+            granted_ms,
+            thrust_n: thrust_n as f32,
+        }
+        .to_vec())
+    }
+
+    fn next_due(&self) -> Option<SimTime> {
+        let ready = self
+            .armed_at
+            .filter(|_| !self.ready_logged)
+            .map(|a| a + self.cfg.warmup);
+        match (self.firing.map(|f| f.end), ready) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    fn flush_log(&mut self, node: &mut Node) {
+        for (t, line) in self.log.drain(..) {
+            node.log(t, line);
+        }
+    }
+}
+
+impl App for EcuApp {
+    fn start(&mut self, node: &mut Node, _now: SimTime) {
+        node.bind(self.cfg.port);
+        self.flush_log(node);
+    }
+
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        if packet.header.dport != self.cfg.port {
+            return;
+        }
+        let (reply, malformed) = serve::<EcuCommand>(&packet.data, |c| self.command(c, now));
+        if let Some(e) = malformed {
+            self.log.push((now, format!("ecu: request refused: {e}")));
+        }
+        if reply.get(1) != Some(&RESULT_SUCCESS) {
+            self.refused = self.refused.saturating_add(1);
+        }
+        // A send failure is already counted by the node.
+        let _ = node.send(Packet::new(packet.header.reply(node.addr()), reply), now);
+        self.flush_log(node);
+    }
+
+    fn poll_timeout(&self) -> Option<SimTime> {
+        self.next_due()
+    }
+
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        if let Some(f) = self.firing
+            && f.end <= now
+        {
+            self.end_burn(f.end);
+        }
+        if let Some(a) = self.armed_at
+            && !self.ready_logged
+            && a + self.cfg.warmup <= now
+        {
+            self.ready_logged = true;
+            self.log
+                .push((a + self.cfg.warmup, "ecu: warm, ready to fire".to_owned()));
+        }
+        self.flush_log(node);
+    }
+
+    fn reset(&mut self, now: SimTime) {
+        if let Some(f) = self.firing {
+            // The board's end is the power loss when the twin cut it there.
+            let board_end = self.burn_board.as_ref().and_then(|b| {
+                b.pending(u64::MAX, 0)
+                    .into_iter()
+                    .find(|x| x.start_ns == f.burn.start_ns)
+                    .map(|x| SimTime::from_ns(x.end_ns))
+            });
+            let end = board_end.map_or(now, |e| e.min(now)).min(f.end);
+            self.end_burn(end);
+            if self.armed_at.take().is_some() {
+                self.set_activity(Activity::ThrusterHeater, end, false);
+            }
+        } else if self.armed_at.take().is_some() {
+            self.set_activity(Activity::ThrusterHeater, now, false);
+        }
+        self.ready_logged = false;
+        self.refused = 0;
+        self.log.push((
+            now,
+            format!(
+                "ecu: boot: SAFE, {:.4} kg propellant, {} burns, {:.3} N s so far",
+                self.propellant_kg, self.burns, self.total_impulse_n_s
+            ),
+        ));
+    }
+
+    fn finish(&mut self, node: &mut Node, now: SimTime) {
+        let telemetry = self.telemetry(now);
+        self.log.push((
+            now,
+            format!(
+                "ecu: final: {:.4} kg propellant, {} burns, {:.3} N s",
+                telemetry.propellant_kg, telemetry.burns, telemetry.total_impulse_n_s
+            ),
+        ));
+        self.emit(EcuOutput::Final { t: now, telemetry });
+        self.flush_log(node);
+    }
+}
+
+/// The ECU with the default configuration ([`EcuConfig::default`]), not wired to any board.
+pub fn app() -> EcuApp {
+    EcuApp::new(EcuConfig::default())
 }

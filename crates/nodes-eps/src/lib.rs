@@ -1,11 +1,558 @@
-//! Electrical power system (CSP 4). Port 10 (telemetry and control) answers failure until the EPS issue fills it.
+//! Electrical power system (CSP 4): solar arrays, battery, loads, switched power channels
+//! and low-battery protection, with its telemetry and control on port 10.
+//!
+//! [`EpsApp`] is a pure core ([`csp::node::App`]) driven by packets and timers; the physics
+//! is [`eps::Eps`], built from [`solar`], [`battery`], [`loads`] and [`protect`] (each
+//! module's doc gives its model, defaults and sources).
+//!
+//! # Time
+//! The EPS integrates energy over intervals of integer simulated time: at every tick
+//! (default 1 s, on multiples of the tick since the run start), and also up to the instant
+//! of every request, scenario event and reboot, so that a channel switched between ticks
+//! draws exactly until the switch. Over an interval `[t0, t1)` the inputs are held:
+//! - the FC's truth `TruthBoard::latest_before(t1)`: sun direction in the body frame (from
+//!   `q_eci_from_body`), visible fraction of the sun (eclipse), wheel speeds, magnetorquer
+//!   dipoles. With no truth yet (no board, or nothing published before `t1`) the arrays
+//!   give nothing (as in umbra), the wheels are at rest and the magnetorquers off;
+//! - the activity duties `ActivityBoard::duty(what, t0, t1)`: S-band and UHF transmitting,
+//!   thruster heaters, firing;
+//! - the channel states (a channel switched off draws nothing).
+//!
+//! At each tick, after the integration, the protection compares the state of charge with
+//! its thresholds ([`protect`]) and the EPS hands the twin an [`EpsOutput::Sample`]; every
+//! channel switch (command, scenario, protection) is an [`EpsOutput::Channel`]: the twin
+//! powers the node off (it leaves its bus, its state is lost) or on (it boots, uptime from
+//! zero). At its first boot the EPS reports every channel configured off, so that the twin
+//! starts those nodes unpowered.
+//!
+//! # Reboot
+//! The battery and the channel states are physical, and the protection's memory is
+//! non-volatile: all survive an EPS reboot ([`App::reset`]), and the energy is integrated
+//! up to the reboot. Volatile: thresholds set by THRSET (back to the configuration), the
+//! energy counters of TMEPS (from zero), the refused-request counter.
+//!
+//! # Port 10
+//! TMEPS 1, CHGET 2, CHSET 3, THRGET 4, THRSET 5 ([`wire`] has the layouts and sizes).
 
-use csp::node::StubApp;
+pub mod battery;
+pub mod eps;
+pub mod loads;
+pub mod protect;
+pub mod solar;
+pub mod wire;
+
+use std::fmt;
+use std::time::Duration;
+
+use csp::node::{App, Node};
+use csp::reqrep::serve;
+use csp::{Packet, SimTime};
+use orbit::state::{Activity, ActivityBoard, TruthBoard};
+
+pub use crate::battery::{Battery, BatteryConfig};
+pub use crate::eps::{Eps, EpsInputs, StepState, SwitchRefused};
+pub use crate::loads::{ALL_CHANNELS, CHANNELS, Channel, Duties, LoadConfig, LoadInputs};
+pub use crate::protect::{Group, Protection, Thresholds};
+pub use crate::solar::{Panel, SolarArray, SunInput};
+use crate::wire::{EpsCommand, Repr};
 
 /// The ports this node binds for its ICD services (INTERPRETATION.md section 4).
-pub const PORTS: &[u8] = &[10];
+pub const PORTS: &[u8] = &[wire::PORT_EPS];
 
-/// The node's application.
-pub fn app() -> StubApp {
-    StubApp::new(PORTS)
+/// Default EPS tick.
+pub const DEFAULT_TICK: Duration = Duration::from_secs(1);
+/// Default initial state of charge (a battery charged before launch, after some days of
+/// commissioning).
+pub const DEFAULT_INITIAL_SOC: f64 = 0.8;
+/// Bound on the timer steps of one `handle_timeout` call (work left over runs at the next).
+const MAX_STEPS: usize = 1 << 20;
+
+/// Something a scenario does to the EPS at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EpsEvent {
+    /// Switch a channel, as CHSET would (refused while its group is shed).
+    Channel {
+        /// The channel.
+        channel: Channel,
+        /// On or off.
+        on: bool,
+    },
+    /// Set the state of charge (0..=1).
+    SetSoc(f64),
+    /// Panel `i` (index in [`SolarArray::panels`]) fails: it gives nothing.
+    PanelFail(usize),
+    /// Panel `i` works again.
+    PanelRestore(usize),
 }
+
+/// An [`EpsEvent`] at a simulated time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimedEpsEvent {
+    /// When.
+    pub at: SimTime,
+    /// What.
+    pub event: EpsEvent,
+}
+
+/// What the EPS needs from the scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpsConfig {
+    /// The solar arrays.
+    pub panels: SolarArray,
+    /// The battery.
+    pub battery: BatteryConfig,
+    /// Consumption of every node by state.
+    pub loads: LoadConfig,
+    /// Protection thresholds at boot.
+    pub thresholds: Thresholds,
+    /// State of charge at the start of the run, 0..=1.
+    pub initial_soc: f64,
+    /// EPS tick (integration, protection and samples).
+    pub tick: Duration,
+    /// Channels on at the start of the run (mask, bit = [`Channel::id`]).
+    pub channels_on: u16,
+    /// Port of telemetry and control (10).
+    pub port: u8,
+    /// Scenario events (sorted by time when the app is built).
+    pub timeline: Vec<TimedEpsEvent>,
+}
+
+impl Default for EpsConfig {
+    /// The default 6U arrays, the 77 Wh battery, the load table, thresholds 30/40 and
+    /// 20/30 %, 80 % charged, 1 s tick, every channel on.
+    fn default() -> Self {
+        EpsConfig {
+            panels: SolarArray::default(),
+            battery: BatteryConfig::default(),
+            loads: LoadConfig::default(),
+            thresholds: Thresholds::default(),
+            initial_soc: DEFAULT_INITIAL_SOC,
+            tick: DEFAULT_TICK,
+            channels_on: ALL_CHANNELS,
+            port: wire::PORT_EPS,
+            timeline: Vec::new(),
+        }
+    }
+}
+
+impl EpsConfig {
+    /// Check the configuration (for the scenario loader); the message names the problem.
+    pub fn validate(&self) -> Result<(), String> {
+        self.panels.validate()?;
+        self.battery.validate()?;
+        self.thresholds
+            .validate()
+            .map_err(|f| format!("thresholds: {f}"))?;
+        if !(0.0..=1.0).contains(&self.initial_soc) {
+            return Err(format!("initial soc {} not in 0..=1", self.initial_soc));
+        }
+        if self.tick.is_zero() {
+            return Err("EPS tick 0".to_owned());
+        }
+        if self.channels_on & !ALL_CHANNELS != 0 {
+            return Err(format!(
+                "channels_on {:#06x} has bits past channel {}",
+                self.channels_on,
+                CHANNELS - 1
+            ));
+        }
+        if self.port >= csp::header::EPHEMERAL_PORT_MIN {
+            return Err(format!("EPS port {} must be below 32", self.port));
+        }
+        Ok(())
+    }
+}
+
+/// Why a channel switched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SwitchCause {
+    /// Configured off at the start of the run (reported once, at the first boot).
+    Initial,
+    /// CHSET.
+    Command,
+    /// A scenario event.
+    Timeline,
+    /// The protection shed it.
+    Shed(Group),
+    /// The protection restored it.
+    Restore(Group),
+}
+
+/// What the EPS tells the twin.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EpsOutput {
+    /// The state after each tick.
+    Sample {
+        /// When (a tick).
+        t: SimTime,
+        /// State of charge, 0..=1.
+        soc: f64,
+        /// Battery terminal voltage, V.
+        battery_v: f64,
+        /// Battery current, A (positive charging).
+        battery_a: f64,
+        /// Array power available, W.
+        solar_w: f64,
+        /// Total load, W.
+        load_w: f64,
+        /// Power of each panel, W.
+        panels_w: Vec<f64>,
+        /// Channels on (bit = [`Channel::id`]).
+        channels: u16,
+    },
+    /// A channel switched: the twin powers the node(s) on or off.
+    Channel {
+        /// When.
+        t: SimTime,
+        /// Which.
+        channel: Channel,
+        /// On or off.
+        on: bool,
+        /// Why.
+        cause: SwitchCause,
+    },
+}
+
+/// Where the EPS hands its [`EpsOutput`]s.
+pub struct Sink(Box<SinkFn>);
+
+/// The callback behind a [`Sink`].
+type SinkFn = dyn FnMut(EpsOutput) + Send;
+
+impl Sink {
+    /// A sink calling `f` with every output.
+    pub fn new(f: impl FnMut(EpsOutput) + Send + 'static) -> Self {
+        Sink(Box::new(f))
+    }
+}
+
+impl fmt::Debug for Sink {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("Sink")
+    }
+}
+
+/// The EPS's application (see the module doc).
+#[derive(Debug)]
+pub struct EpsApp {
+    cfg: EpsConfig,
+    eps: Eps,
+    truth: Option<TruthBoard>,
+    activity: Option<ActivityBoard>,
+    sink: Option<Sink>,
+    /// The power system is integrated up to here.
+    last_t: SimTime,
+    next_tick: SimTime,
+    timeline_next: usize,
+    booted: bool,
+    cut_off: bool,
+    refused: u64,
+    log: Vec<(SimTime, String)>,
+}
+
+impl EpsApp {
+    /// An EPS with `cfg` (the timeline is sorted; a zero tick is taken as 1 s).
+    pub fn new(mut cfg: EpsConfig) -> Self {
+        cfg.timeline.sort_by_key(|e| e.at);
+        if cfg.tick.is_zero() {
+            cfg.tick = DEFAULT_TICK;
+        }
+        EpsApp {
+            eps: Eps::new(&cfg),
+            cfg,
+            truth: None,
+            activity: None,
+            sink: None,
+            last_t: SimTime::ZERO,
+            next_tick: SimTime::ZERO,
+            timeline_next: 0,
+            booted: false,
+            cut_off: false,
+            refused: 0,
+            log: Vec::new(),
+        }
+    }
+
+    /// Read the FC's truth from `b`.
+    pub fn with_truth(mut self, b: TruthBoard) -> Self {
+        self.truth = Some(b);
+        self
+    }
+    /// Read the activity duties from `b`.
+    pub fn with_activity(mut self, b: ActivityBoard) -> Self {
+        self.activity = Some(b);
+        self
+    }
+    /// Hand every [`EpsOutput`] to `s`.
+    pub fn with_sink(mut self, s: Sink) -> Self {
+        self.sink = Some(s);
+        self
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &EpsConfig {
+        &self.cfg
+    }
+    /// The power system.
+    pub fn eps(&self) -> &Eps {
+        &self.eps
+    }
+    /// Requests refused since boot.
+    pub fn refused(&self) -> u64 {
+        self.refused
+    }
+
+    fn emit(&mut self, o: EpsOutput) {
+        if let Some(s) = &mut self.sink {
+            (s.0)(o);
+        }
+    }
+
+    fn flush_log(&mut self, node: &mut Node) {
+        for (t, line) in self.log.drain(..) {
+            node.log(t, line);
+        }
+    }
+
+    fn next_tick_after(&self, now: SimTime) -> SimTime {
+        let tick = self.cfg.tick.as_nanos().max(1);
+        let k = u128::from(now.as_ns()) / tick + 1;
+        SimTime::from_ns(u64::try_from(k * tick).unwrap_or(u64::MAX))
+    }
+
+    /// Integrate the power system up to `to`.
+    fn advance(&mut self, to: SimTime) {
+        if to <= self.last_t {
+            return;
+        }
+        let (t0, t1) = (self.last_t.as_ns(), to.as_ns());
+        let truth = self.truth.as_ref().and_then(|b| b.latest_before(t1));
+        let duties = match &self.activity {
+            Some(a) => Duties {
+                sband_tx: a.duty(Activity::SbandTx, t0, t1),
+                uhf_tx: a.duty(Activity::UhfTx, t0, t1),
+                thruster_heater: a.duty(Activity::ThrusterHeater, t0, t1),
+                firing: a.duty(Activity::Firing, t0, t1),
+            },
+            None => Duties::default(),
+        };
+        let x = EpsInputs::from_truth(truth.as_ref(), duties);
+        let unmet_w = self.eps.step(t1 - t0, &x).battery.unmet_w;
+        self.last_t = to;
+        let cut_off = unmet_w > 0.0;
+        if cut_off != self.cut_off {
+            self.cut_off = cut_off;
+            self.log.push((
+                to,
+                if cut_off {
+                    format!("eps: battery empty: {unmet_w:.2} W of load unsupplied")
+                } else {
+                    "eps: loads supplied again".to_owned()
+                },
+            ));
+        }
+    }
+
+    fn switched(&mut self, t: SimTime, channel: Channel, on: bool, cause: SwitchCause) {
+        self.log.push((
+            t,
+            format!(
+                "eps: channel {} {} ({cause:?}, soc {:.1} %)",
+                channel.name(),
+                if on { "on" } else { "off" },
+                self.eps.soc() * 100.0
+            ),
+        ));
+        self.emit(EpsOutput::Channel {
+            t,
+            channel,
+            on,
+            cause,
+        });
+    }
+
+    /// Switch a channel for a command or a scenario event; `false` if refused.
+    fn switch(&mut self, t: SimTime, channel: Channel, on: bool, cause: SwitchCause) -> bool {
+        match self.eps.switch(channel, on) {
+            Ok(true) => {
+                self.switched(t, channel, on, cause);
+                true
+            }
+            Ok(false) => true,
+            Err(SwitchRefused::GroupShed(g)) => {
+                self.log.push((
+                    t,
+                    format!(
+                        "eps: refused to switch {} on: {g:?} group shed (soc {:.1} %)",
+                        channel.name(),
+                        self.eps.soc() * 100.0
+                    ),
+                ));
+                false
+            }
+        }
+    }
+
+    fn apply_event(&mut self, ev: EpsEvent, t: SimTime) {
+        match ev {
+            EpsEvent::Channel { channel, on } => {
+                self.switch(t, channel, on, SwitchCause::Timeline);
+            }
+            EpsEvent::SetSoc(soc) => {
+                self.eps.set_soc(soc);
+                self.log.push((
+                    t,
+                    format!("eps: state of charge set to {:.1} %", soc * 100.0),
+                ));
+            }
+            EpsEvent::PanelFail(i) => {
+                self.eps.set_panel_failed(i, true);
+                self.log.push((t, format!("eps: panel {i} failed")));
+            }
+            EpsEvent::PanelRestore(i) => {
+                self.eps.set_panel_failed(i, false);
+                self.log.push((t, format!("eps: panel {i} restored")));
+            }
+        }
+    }
+
+    fn tick(&mut self, t: SimTime) {
+        for (c, on, g) in self.eps.protect() {
+            let cause = if on {
+                SwitchCause::Restore(g)
+            } else {
+                SwitchCause::Shed(g)
+            };
+            self.switched(t, c, on, cause);
+        }
+        let l = self.eps.last();
+        let sample = EpsOutput::Sample {
+            t,
+            soc: self.eps.soc(),
+            battery_v: l.battery.voltage_v,
+            battery_a: l.battery.current_a,
+            solar_w: l.solar_w,
+            load_w: l.loads.total_w(),
+            panels_w: l.panels_w.clone(),
+            channels: self.eps.channels_on(),
+        };
+        self.emit(sample);
+    }
+
+    fn next_due(&self) -> SimTime {
+        match self.cfg.timeline.get(self.timeline_next) {
+            Some(e) if e.at <= self.next_tick => e.at,
+            _ => self.next_tick,
+        }
+    }
+
+    fn command(&mut self, c: EpsCommand, now: SimTime) -> Result<Vec<u8>, u8> {
+        match c {
+            EpsCommand::TmEps => Ok(self.eps.tm().to_vec()),
+            EpsCommand::ChGet => Ok(self.eps.channel_states().to_vec()),
+            EpsCommand::ChSet { channel, on } => {
+                if self.switch(now, channel, on, SwitchCause::Command) {
+                    Ok(self.eps.channel_states().to_vec())
+                } else {
+                    Err(csp::reqrep::RESULT_FAILURE)
+                }
+            }
+            EpsCommand::ThrGet => Ok(self.eps.thresholds().to_vec()),
+            EpsCommand::ThrSet(t) => {
+                self.eps.set_thresholds(t);
+                self.log
+                    .push((now, format!("eps: thresholds set to {t:?}")));
+                Ok(Vec::new())
+            }
+        }
+    }
+}
+
+impl App for EpsApp {
+    fn start(&mut self, node: &mut Node, now: SimTime) {
+        node.bind(self.cfg.port);
+        if !self.booted {
+            self.booted = true;
+            self.last_t = now;
+            for c in Channel::ALL {
+                if !self.eps.is_on(c) {
+                    self.switched(now, c, false, SwitchCause::Initial);
+                }
+            }
+        }
+        self.next_tick = self.next_tick_after(now);
+        self.flush_log(node);
+    }
+
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        if packet.header.dport != self.cfg.port {
+            return;
+        }
+        self.advance(now);
+        let (reply, refused) = serve::<EpsCommand>(&packet.data, |c| self.command(c, now));
+        if let Some(e) = refused {
+            self.log.push((now, format!("eps: request refused: {e}")));
+        }
+        if reply.get(1) != Some(&csp::reqrep::RESULT_SUCCESS) {
+            self.refused += 1;
+        }
+        // A send failure is already counted by the node.
+        let _ = node.send(Packet::new(packet.header.reply(node.addr()), reply), now);
+        self.flush_log(node);
+    }
+
+    fn poll_timeout(&self) -> Option<SimTime> {
+        Some(self.next_due())
+    }
+
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        for _ in 0..MAX_STEPS {
+            let due = self.next_due();
+            if due > now {
+                break;
+            }
+            self.advance(due);
+            match self.cfg.timeline.get(self.timeline_next).copied() {
+                Some(ev) if ev.at <= due => {
+                    self.timeline_next += 1;
+                    self.apply_event(ev.event, due);
+                }
+                _ => {
+                    self.tick(due);
+                    self.next_tick = due + self.cfg.tick;
+                }
+            }
+        }
+        self.flush_log(node);
+    }
+
+    fn reset(&mut self, now: SimTime) {
+        self.advance(now);
+        self.eps.reset_volatile();
+        self.refused = 0;
+        self.log
+            .push((now, "eps: reboot: battery and channels kept".to_owned()));
+    }
+
+    fn finish(&mut self, node: &mut Node, now: SimTime) {
+        self.advance(now);
+        let (solar, load) = self.eps.energy_since_boot_wh();
+        self.log.push((
+            now,
+            format!(
+                "eps: final: soc {:.1} %, solar {solar:.1} Wh and load {load:.1} Wh since boot, channels {:#06x}",
+                self.eps.soc() * 100.0,
+                self.eps.channels_on()
+            ),
+        ));
+        self.flush_log(node);
+    }
+}
+
+/// The EPS with the default configuration ([`EpsConfig::default`]).
+pub fn app() -> EpsApp {
+    EpsApp::new(EpsConfig::default())
+}
+
+#[cfg(test)]
+mod tests;

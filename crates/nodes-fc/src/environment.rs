@@ -12,8 +12,23 @@
 //! The FC's flight software uses the same models for its references (onboard orbit from the
 //! uploaded TLE, sun and field models): the twin's sensor errors come from the sensor models,
 //! not from a mismatch of environment models (documented in docs/adcs.md).
+//!
+//! # The orbit after a manoeuvre
+//! The orbit is an [`OrbitModel`]: SGP4 from the TLE until the first burn, then `orbit`'s
+//! Cowell integrator ([`CowellPropagator`], J2 and optionally drag per the model's
+//! [`CowellConfig`]) started from SGP4's exact J2000 state at the instant of the switch
+//! ([`EnvModel::switch_to_numerical`]); every burn after that is an impulsive delta-v
+//! ([`EnvModel::apply_delta_v`], see `crate::burns` for how a finite burn becomes
+//! impulses). [`EnvModel::at`] and [`EnvModel::state_j2000`] work for both. Cowell
+//! integrates forward from its last burn (its anchor): a query between grid points takes
+//! one partial step, a query earlier than the last grid point re-integrates from the anchor
+//! (correct, only slower), and a query before the anchor fails ("time before the start of
+//! the propagation"). The FC queries at its ticks and between them (TMATP) and applies
+//! burns up to its tick time only, so its queries never precede the anchor
+//! (`tests/burns.rs` checks the FC's pattern).
 
 use nalgebra::{Matrix3, Vector3};
+use orbit::cowell::{CowellConfig, CowellPropagator};
 use orbit::eclipse;
 use orbit::frames;
 use orbit::igrf::GaussCoefficients;
@@ -46,10 +61,21 @@ pub struct Environment {
     pub a_ecef_from_eci: Matrix3<f64>,
 }
 
+/// Where the orbit comes from: the TLE through SGP4, or numerical integration after a burn.
+#[derive(Debug, Clone)]
+pub enum OrbitModel {
+    /// SGP4 from the TLE (TEME, rotated to J2000; boxed: it is three times Cowell's size).
+    Sgp4(Box<Sgp4Propagator>),
+    /// Cowell's method in J2000 from the state at the first burn.
+    Cowell(CowellPropagator),
+}
+
 /// Cached environment models for one orbit.
 #[derive(Debug, Clone)]
 pub struct EnvModel {
-    propagator: Sgp4Propagator,
+    orbit: OrbitModel,
+    /// The force model used once the orbit is numerical.
+    cowell: CowellConfig,
     slow: SlowModels,
 }
 
@@ -131,33 +157,90 @@ impl SlowModels {
 }
 
 impl EnvModel {
-    /// Models for the orbit of `propagator`.
+    /// Models for the orbit of `propagator`; after a burn, Cowell with the default force
+    /// model (J2, no drag; see [`EnvModel::with_cowell_config`]).
     pub fn new(propagator: Sgp4Propagator) -> Self {
         EnvModel {
-            propagator,
+            orbit: OrbitModel::Sgp4(Box::new(propagator)),
+            cowell: CowellConfig::default(),
             slow: SlowModels::default(),
         }
     }
 
+    /// Use `config` (step, J2, drag) for the numerical orbit after the first burn.
+    pub fn with_cowell_config(mut self, config: CowellConfig) -> Self {
+        self.cowell = config;
+        self
+    }
+
+    /// The orbit model in use.
+    pub fn orbit(&self) -> &OrbitModel {
+        &self.orbit
+    }
+
+    /// Whether the orbit is numerical (a burn has been applied).
+    pub fn is_numerical(&self) -> bool {
+        matches!(self.orbit, OrbitModel::Cowell(_))
+    }
+
     /// The environment at `unix_ns`, or why the orbit cannot be propagated (decay, bad
-    /// elements).
+    /// elements, a time before the last burn).
     pub fn at(&mut self, unix_ns: i64) -> Result<Environment, String> {
         let t = UtcTime::from_unix_ns(unix_ns);
-        let teme = self
-            .propagator
-            .state_teme_at(t)
-            .map_err(|e| e.to_string())?;
-        let a = self.slow.get(t).a_j2000_from_teme;
-        let r_eci_m = a * teme.r_km * 1e3;
-        let v_eci_m_s = a * teme.v_km_s * 1e3;
+        let (r_eci_m, v_eci_m_s) = match &mut self.orbit {
+            OrbitModel::Sgp4(p) => {
+                let teme = p.state_teme_at(t).map_err(|e| e.to_string())?;
+                let a = self.slow.get(t).a_j2000_from_teme;
+                (a * teme.r_km * 1e3, a * teme.v_km_s * 1e3)
+            }
+            OrbitModel::Cowell(p) => {
+                let s = p.state_j2000(t).map_err(|e| e.to_string())?;
+                (s.r_km * 1e3, s.v_km_s * 1e3)
+            }
+        };
         Ok(self.slow.at_state(unix_ns, r_eci_m, v_eci_m_s))
     }
 
     /// The exact ECI J2000 state (no cache), as `orbit`'s propagator gives it.
     pub fn state_j2000(&mut self, unix_ns: i64) -> Result<StateVector, String> {
-        self.propagator
-            .state_j2000(UtcTime::from_unix_ns(unix_ns))
-            .map_err(|e| e.to_string())
+        let t = UtcTime::from_unix_ns(unix_ns);
+        match &mut self.orbit {
+            OrbitModel::Sgp4(p) => p.as_mut().state_j2000(t),
+            OrbitModel::Cowell(p) => p.state_j2000(t),
+        }
+        .map_err(|e| e.to_string())
+    }
+
+    /// Switch to numerical propagation at `unix_ns`, from SGP4's J2000 state there; nothing
+    /// happens if the orbit is numerical already.
+    pub fn switch_to_numerical(&mut self, unix_ns: i64) -> Result<(), String> {
+        if let OrbitModel::Sgp4(p) = &mut self.orbit {
+            let c = CowellPropagator::from_propagator(
+                p.as_mut(),
+                UtcTime::from_unix_ns(unix_ns),
+                self.cowell,
+            )
+            .map_err(|e| e.to_string())?;
+            self.orbit = OrbitModel::Cowell(c);
+        }
+        Ok(())
+    }
+
+    /// Add the impulsive `dv_eci_m_s` (ECI J2000, m/s) to the velocity at `unix_ns`,
+    /// switching to numerical propagation there first if needed; returns the state just
+    /// after. Fails for a time before the last burn.
+    pub fn apply_delta_v(
+        &mut self,
+        unix_ns: i64,
+        dv_eci_m_s: Vector3<f64>,
+    ) -> Result<StateVector, String> {
+        self.switch_to_numerical(unix_ns)?;
+        match &mut self.orbit {
+            OrbitModel::Cowell(p) => p
+                .apply_delta_v(UtcTime::from_unix_ns(unix_ns), dv_eci_m_s / 1e3)
+                .map_err(|e| e.to_string()),
+            OrbitModel::Sgp4(_) => Err("the orbit did not switch to numerical".to_owned()),
+        }
     }
 }
 
@@ -275,6 +358,51 @@ mod tests {
             let a = frames::a_ecef_from_eci(t, None);
             assert!((e.a_ecef_from_eci - a).norm() < 1e-9);
         }
+    }
+
+    #[test]
+    fn switching_to_numerical_continues_the_sgp4_orbit() {
+        let mut m = model();
+        let mut sgp4 = model();
+        let t0 = START_NS + 600_000_000_000;
+        assert!(!m.is_numerical());
+        m.switch_to_numerical(t0).unwrap();
+        assert!(m.is_numerical());
+        // At the switch: SGP4's exact J2000 state.
+        let s0 = sgp4.state_j2000(t0).unwrap();
+        assert_eq!(m.state_j2000(t0).unwrap(), s0);
+        // `at` agrees with `state_j2000` for the numerical orbit.
+        let e = m.at(t0 + 5_000_000_000).unwrap();
+        let s = m.state_j2000(t0 + 5_000_000_000).unwrap();
+        assert_eq!(e.r_eci_m, s.r_km * 1e3);
+        // J2-only Cowell from an SGP4 state drifts from SGP4 slowly: metres after a minute.
+        for (dt_s, tol_m) in [(1i64, 0.1), (60, 20.0)] {
+            let t = t0 + dt_s * 1_000_000_000;
+            let d = (m.at(t).unwrap().r_eci_m - sgp4.at(t).unwrap().r_eci_m).norm();
+            assert!(d < tol_m, "{dt_s} s: {d} m");
+        }
+        // A second switch changes nothing; a query before the switch fails.
+        m.switch_to_numerical(t0 + 1_000_000_000).unwrap();
+        assert_eq!(m.state_j2000(t0).unwrap(), s0);
+        assert!(m.at(t0 - 1).is_err());
+    }
+
+    #[test]
+    fn a_delta_v_changes_the_velocity_at_its_instant_only() {
+        let mut m = model();
+        let t0 = START_NS + 60_000_000_000;
+        let before = m.state_j2000(t0).unwrap();
+        let dv = Vector3::new(0.1, -0.2, 0.3);
+        let after = m.apply_delta_v(t0, dv).unwrap();
+        assert_eq!(after.r_km, before.r_km);
+        assert!(((after.v_km_s - before.v_km_s) * 1e3 - dv).norm() < 1e-12);
+        // Earlier than the burn: refused, never a silent answer from the old orbit.
+        assert!(m.apply_delta_v(t0 - 1_000, dv).is_err());
+        assert!(m.state_j2000(t0 - 1_000).is_err());
+        // Later queries, forwards and back to the anchor, keep working.
+        let later = m.state_j2000(t0 + 100_000_000_000).unwrap();
+        assert!(m.state_j2000(t0 + 1_000_000_000).is_ok());
+        assert_eq!(m.state_j2000(t0 + 100_000_000_000).unwrap(), later);
     }
 
     #[test]

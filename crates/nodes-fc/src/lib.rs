@@ -24,6 +24,7 @@
 //! ADCS in `docs/adcs.md`.
 
 pub mod adcs;
+pub mod burns;
 pub mod control;
 pub mod environment;
 pub mod estimator;
@@ -326,6 +327,10 @@ pub struct FcApp {
     refused: u64,
     log: Vec<(SimTime, String)>,
     publisher: Option<Publisher>,
+    truth_board: Option<orbit::state::TruthBoard>,
+    // --- truth: the ECU's burns (not reset by a reboot) ---
+    burns: Option<orbit::state::BurnBoard>,
+    burns_applied_until_ns: u64,
 }
 
 fn truth_model(tle: Option<&(String, String)>) -> Result<EnvModel, String> {
@@ -333,8 +338,11 @@ fn truth_model(tle: Option<&(String, String)>) -> Result<EnvModel, String> {
         None => Err("no TLE".to_owned()),
         Some((l1, l2)) => Tle::parse(l1, l2, ChecksumMode::Strict)
             .map_err(|e| format!("TLE: {e}"))
-            .and_then(|tle| Sgp4Propagator::new(&tle).map_err(|e| format!("SGP4: {e}")))
-            .map(EnvModel::new),
+            .and_then(|tle| {
+                Sgp4Propagator::new(&tle)
+                    .map_err(|e| format!("SGP4: {e}"))
+                    .map(|p| EnvModel::new(p).with_cowell_config(burns::cowell_config_for(&tle)))
+            }),
     }
 }
 
@@ -407,6 +415,9 @@ impl FcApp {
             refused: 0,
             log: Vec::new(),
             publisher: None,
+            truth_board: None,
+            burns: None,
+            burns_applied_until_ns: 0,
             cfg,
         }
     }
@@ -414,6 +425,18 @@ impl FcApp {
     /// Hand every published snapshot pair to `p`.
     pub fn with_publisher(mut self, p: Publisher) -> Self {
         self.publisher = Some(p);
+        self
+    }
+
+    /// Post the true state of every tick to `board` for the other nodes (EPS, COMM, ECU).
+    pub fn with_truth_board(mut self, board: orbit::state::TruthBoard) -> Self {
+        self.truth_board = Some(board);
+        self
+    }
+
+    /// Apply the ECU's burns posted on `board` to the true orbit ([`burns`]).
+    pub fn with_burns(mut self, board: orbit::state::BurnBoard) -> Self {
+        self.burns = Some(board);
         self
     }
 
@@ -493,6 +516,12 @@ impl FcApp {
             .onboard
             .as_mut()
             .ok_or("no TLE uploaded and no GPS fix")?;
+        if onboard.same_as_truth {
+            // The onboard orbit is the truth's: after a burn, its numerical continuation.
+            let model = self.truth_orbit.as_mut().map_err(|e| e.clone())?;
+            let s = model.state_j2000(t)?;
+            return Ok([s.r_km[0] * 1e3, s.r_km[1] * 1e3, s.r_km[2] * 1e3]);
+        }
         let model = onboard.model.as_mut().map_err(|e| e.clone())?;
         let s = model.state_j2000(t)?;
         Ok([s.r_km[0] * 1e3, s.r_km[1] * 1e3, s.r_km[2] * 1e3])
@@ -627,6 +656,24 @@ impl FcApp {
         }
         let dt_s = self.dt_ns as f64 * 1e-9;
         let unix_ns = self.true_unix_ns_i64(t);
+        // The ECU's burns up to now, before the orbit is evaluated at now (docs/adcs.md).
+        if let (Some(board), Ok(model)) = (&self.burns, self.truth_orbit.as_mut()) {
+            match burns::apply(
+                model,
+                board,
+                &self.att.q_eci_from_body,
+                t.as_ns(),
+                unix_ns,
+                &mut self.burns_applied_until_ns,
+            ) {
+                Ok(a) if a.switched => self.log.push((
+                    t,
+                    "truth orbit: numerical (Cowell) from the first burn".to_owned(),
+                )),
+                Ok(_) => {}
+                Err(e) => self.log.push((t, format!("burn not applied: {e}"))),
+            }
+        }
         let env = self
             .truth_orbit
             .as_mut()
@@ -695,6 +742,11 @@ impl FcApp {
         if self.publish_every > 0 && fsw && self.ticks % self.publish_every == 0 {
             self.publish(t, unix_ns);
         }
+        // The other nodes' view of the truth: every tick, whether the FC software runs or not
+        // (the truth is physics).
+        if let Some(board) = &self.truth_board {
+            board.publish(&self.truth_snapshot(t, unix_ns));
+        }
 
         // Truth step over [t, t + dt].
         let b_body_t = env.map_or_else(Vector3::zeros, |e| {
@@ -728,12 +780,10 @@ impl FcApp {
         self.ticks += 1;
     }
 
-    fn publish(&mut self, t: SimTime, unix_ns: i64) {
-        if self.publisher.is_none() {
-            return;
-        }
+    /// The true state at the tick `t` (environment of the tick, attitude before the step).
+    fn truth_snapshot(&self, t: SimTime, unix_ns: i64) -> TruthSnapshot {
         let env = self.env;
-        let truth = TruthSnapshot {
+        TruthSnapshot {
             t_ns: t.as_ns(),
             unix_ns,
             r_eci_m: env.map_or_else(Vector3::zeros, |e| e.r_eci_m),
@@ -745,7 +795,14 @@ impl FcApp {
             b_eci_nt: env.map_or_else(Vector3::zeros, |e| e.b_eci_nt),
             wheel_speed_rad_s: self.att.wheel_speed_rad_s,
             mtq_dipole_am2: self.mtq_applied_am2.into(),
-        };
+        }
+    }
+
+    fn publish(&mut self, t: SimTime, unix_ns: i64) {
+        if self.publisher.is_none() {
+            return;
+        }
+        let truth = self.truth_snapshot(t, unix_ns);
         let q_true = self.att.q_eci_from_body;
         let out = self.fsw.output;
         let target = out.and_then(|o| o.target);
@@ -1468,6 +1525,60 @@ mod tests {
             lines.push(e.what);
         }
         assert!(lines.iter().any(|l| l.contains("script lost")), "{lines:?}");
+    }
+
+    #[test]
+    fn tmatp_follows_the_orbit_after_a_burn() {
+        let board = orbit::state::BurnBoard::new();
+        let app = FcApp::new(FcConfig {
+            epoch_unix_s: START,
+            tle: Some((L1.to_owned(), L2.to_owned())),
+            ..FcConfig::default()
+        })
+        .with_burns(board.clone());
+        let mut h = Host::new(node_cfg(), app, SimTime::ZERO);
+        let mut prop =
+            Sgp4Propagator::new(&Tle::parse(L1, L2, ChecksumMode::Strict).unwrap()).unwrap();
+        let sgp4_m = |prop: &mut Sgp4Propagator, t_s: u64| {
+            prop.state_j2000(UtcTime::from_unix_ns(
+                ((START + t_s) * 1_000_000_000) as i64,
+            ))
+            .unwrap()
+            .r_km
+                * 1e3
+        };
+        run_until(&mut h, SimTime::from_secs(10));
+        let at10 = TmAtp::parse(&ask(&mut h, 10, &[2], SimTime::from_secs(10))[2..]).unwrap();
+        assert_eq!(Vector3::from(at10.r_eci_m), sgp4_m(&mut prop, 10));
+        // 0.3 N for 10 s on 12.5 kg (Isp 200 s) along body +Z, posted at 10 s.
+        board.post(orbit::state::Burn {
+            posted_ns: 10_000_000_000,
+            start_ns: 10_000_000_000,
+            end_ns: 20_000_000_000,
+            thrust_n: 0.3,
+            mass_flow_kg_s: 0.3 / (200.0 * 9.806_65),
+            mass_kg: 12.5,
+            dir_body: Vector3::z(),
+        });
+        let half_orbit_s = 2850;
+        run_until(&mut h, SimTime::from_secs(half_orbit_s));
+        let t = SimTime::from_secs(half_orbit_s);
+        let atp = TmAtp::parse(&ask(&mut h, 10, &[2], t)[2..]).unwrap();
+        let off_m = (Vector3::from(atp.r_eci_m) - sgp4_m(&mut prop, half_orbit_s)).norm();
+        // 0.24 m/s in some direction moves the satellite by up to ~2 km in half an orbit
+        // (Clohessy-Wiltshire; nodes-fc/tests/burns.rs checks the exact figure); SGP4 and the
+        // numerical model alone stay within ~160 m of each other over that time.
+        assert!(off_m > 300.0, "TMATP {off_m} m from SGP4 after the burn");
+        assert!(off_m < 5000.0, "TMATP {off_m} m from SGP4 after the burn");
+        // TMATP is the truth's (numerical) position.
+        let truth = h
+            .app
+            .truth_orbit
+            .as_mut()
+            .unwrap()
+            .state_j2000(((START + half_orbit_s) * 1_000_000_000) as i64)
+            .unwrap();
+        assert_eq!(Vector3::from(atp.r_eci_m), truth.r_km * 1e3);
     }
 
     #[test]

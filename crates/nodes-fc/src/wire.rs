@@ -79,83 +79,15 @@ pub mod cmd {
     pub const ATCTLEGET: u8 = 8;
 }
 
-/// A fixed-size ICD data layout (see the module doc for the contract).
-pub trait Repr: Sized {
-    /// Size in bytes, from the ICD table.
-    const LEN: usize;
-    /// Read the fields from `r` (which holds at least `LEN` bytes).
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error>;
-    /// Append the fields to `w`.
-    fn write(&self, w: &mut Writer);
-
-    /// Parse exactly `LEN` bytes.
-    fn parse(buf: &[u8]) -> Result<Self, Error> {
-        if buf.len() < Self::LEN {
-            return Err(Error::Truncated);
-        }
-        if buf.len() > Self::LEN {
-            return Err(Error::TooLong);
-        }
-        let mut r = Reader::new(buf);
-        let v = Self::read(&mut r)?;
-        r.finish()?;
-        Ok(v)
-    }
-    /// Length of the emitted bytes.
-    fn buffer_len(&self) -> usize {
-        Self::LEN
-    }
-    /// Append the bytes to `out`.
-    fn emit(&self, out: &mut Vec<u8>) {
-        let mut w = Writer {
-            buf: std::mem::take(out),
-        };
-        self.write(&mut w);
-        *out = w.buf;
-    }
-    /// The bytes.
-    fn to_vec(&self) -> Vec<u8> {
-        let mut v = Vec::with_capacity(Self::LEN);
-        self.emit(&mut v);
-        v
-    }
-}
-
-fn f64s<const N: usize>(r: &mut Reader<'_>) -> Result<[f64; N], Error> {
-    let mut a = [0.0; N];
-    for x in &mut a {
-        *x = r.f64()?;
-    }
-    Ok(a)
-}
-
-fn f32s<const N: usize>(r: &mut Reader<'_>) -> Result<[f32; N], Error> {
-    let mut a = [0.0; N];
-    for x in &mut a {
-        *x = r.f32()?;
-    }
-    Ok(a)
-}
+pub use csp::reqrep::le::Repr;
+use csp::reqrep::le::f32s;
+use csp::reqrep::le::f64s;
+use csp::reqrep::le::i8s;
+use csp::reqrep::le::u16s;
 
 fn u8s<const N: usize>(r: &mut Reader<'_>) -> Result<[u8; N], Error> {
     let mut a = [0; N];
     a.copy_from_slice(r.take(N)?);
-    Ok(a)
-}
-
-fn i8s<const N: usize>(r: &mut Reader<'_>) -> Result<[i8; N], Error> {
-    let mut a = [0; N];
-    for x in &mut a {
-        *x = r.i8()?;
-    }
-    Ok(a)
-}
-
-fn u16s<const N: usize>(r: &mut Reader<'_>) -> Result<[u16; N], Error> {
-    let mut a = [0; N];
-    for x in &mut a {
-        *x = r.u16()?;
-    }
     Ok(a)
 }
 

@@ -142,7 +142,10 @@ impl TruthBoard {
 
     /// Post a snapshot (in time order; older ones beyond [`TRUTH_BOARD_DEPTH`] are dropped).
     pub fn publish(&self, s: &TruthSnapshot) {
-        let mut q = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut q = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         if q.len() >= TRUTH_BOARD_DEPTH {
             q.pop_front();
         }
@@ -151,7 +154,10 @@ impl TruthBoard {
 
     /// The latest snapshot with `t_ns < t_ns_now`, if any.
     pub fn latest_before(&self, t_ns_now: u64) -> Option<TruthSnapshot> {
-        let q = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let q = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         q.iter().rev().find(|s| s.t_ns < t_ns_now).cloned()
     }
 }
@@ -195,7 +201,10 @@ impl BurnBoard {
 
     /// Post a burn, or replace the one with the same `start_ns` (cut short).
     pub fn post(&self, b: Burn) {
-        let mut v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut v = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         match v.iter_mut().find(|x| x.start_ns == b.start_ns) {
             Some(x) => *x = b,
             None => v.push(b),
@@ -205,7 +214,10 @@ impl BurnBoard {
     /// Every burn posted strictly before `now_ns` that has not ended by `applied_until_ns`,
     /// in start order (the FC keeps `applied_until_ns`, how far it has applied them).
     pub fn pending(&self, now_ns: u64, applied_until_ns: u64) -> Vec<Burn> {
-        let v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let v = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let mut out: Vec<Burn> = v
             .iter()
             .filter(|b| b.posted_ns < now_ns && b.end_ns > applied_until_ns)
@@ -217,7 +229,10 @@ impl BurnBoard {
 
     /// End every burn still running at `at_ns` there (the ECU lost power).
     pub fn cut_all(&self, at_ns: u64) {
-        let mut v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut v = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         for b in v.iter_mut() {
             if b.end_ns > at_ns {
                 b.end_ns = b.end_ns.min(at_ns.max(b.start_ns));
@@ -228,7 +243,10 @@ impl BurnBoard {
 
     /// Forget burns that ended at or before `ns`.
     pub fn forget_before(&self, ns: u64) {
-        let mut v = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut v = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         v.retain(|b| b.end_ns > ns);
     }
 }
@@ -264,7 +282,10 @@ impl ActivityBoard {
     /// `what` switched on or off at `t_ns` (switches of one activity come in time order;
     /// only the last 256 are kept).
     pub fn set(&self, what: Activity, t_ns: u64, on: bool) {
-        let mut m = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut m = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let v = m.entry(what).or_default();
         if v.last().is_some_and(|&(_, last)| last == on) {
             return;
@@ -277,7 +298,10 @@ impl ActivityBoard {
 
     /// Whether `what` was on just before `t_ns`.
     pub fn on_before(&self, what: Activity, t_ns: u64) -> bool {
-        let m = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let m = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         m.get(&what)
             .and_then(|v| v.iter().rev().find(|(t, _)| *t < t_ns))
             .is_some_and(|&(_, on)| on)
@@ -289,7 +313,10 @@ impl ActivityBoard {
         if to_ns <= from_ns {
             return 0.0;
         }
-        let m = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let m = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         let Some(v) = m.get(&what) else { return 0.0 };
         let mut on_ns = 0u64;
         let mut state = v
@@ -349,7 +376,10 @@ mod tests {
             dir_body: Vector3::z(),
         };
         b.post(burn);
-        assert!(b.pending(100, 0).is_empty(), "not at the instant it was posted");
+        assert!(
+            b.pending(100, 0).is_empty(),
+            "not at the instant it was posted"
+        );
         assert_eq!(b.pending(101, 0), vec![burn]);
         assert!(b.pending(20_000, 10_100).is_empty(), "applied to its end");
         b.cut_all(5_000);

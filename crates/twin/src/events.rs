@@ -96,6 +96,17 @@ pub enum RunEvent {
     /// What the payload controller did: a session started or ended, bytes reached the
     /// ground, bytes were dropped, the final accounting.
     Pc(Box<nodes_pc::PcOutput>),
+    /// A beacon from a COMM received by a ground station.
+    Beacon {
+        /// When it arrived.
+        t: SimTime,
+        /// The COMM that sent it (1 or 2).
+        from: u8,
+        /// The packet data (`04 01 | Beacon`, docs/protocol.md).
+        data: Vec<u8>,
+    },
+    /// What the EPS did: a sample of the power state each tick, a channel switched.
+    Eps(Box<nodes_eps::EpsOutput>),
     /// What a simulated payload did: bytes produced, a SYNC received.
     Payload {
         /// The payload's address.
@@ -127,6 +138,7 @@ impl RunEvent {
             | RunEvent::Command { t, .. }
             | RunEvent::CommandResult { t, .. }
             | RunEvent::Truth { t, .. }
+            | RunEvent::Beacon { t, .. }
             | RunEvent::Expectation { t, .. } => *t,
             RunEvent::Pc(o) => match **o {
                 nodes_pc::PcOutput::SessionStarted { t, .. }
@@ -134,6 +146,10 @@ impl RunEvent {
                 | nodes_pc::PcOutput::Downlinked { t, .. }
                 | nodes_pc::PcOutput::Dropped { t, .. }
                 | nodes_pc::PcOutput::Final { t, .. } => t,
+            },
+            RunEvent::Eps(o) => match **o {
+                nodes_eps::EpsOutput::Sample { t, .. }
+                | nodes_eps::EpsOutput::Channel { t, .. } => t,
             },
             RunEvent::Payload { out, .. } => match out {
                 nodes_payload::PayloadOutput::Produced { t, .. }

@@ -193,6 +193,29 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
             |(t, why)| verdict(false, t, why),
             |(t, ok)| verdict(true, t, ok),
         ),
+        Check::Power {
+            quantity,
+            statistic,
+            below,
+            above,
+            from,
+            to,
+            when,
+        } => {
+            let (passed, t, observed) = check_power(
+                report,
+                quantity,
+                (*statistic, *when),
+                (*below, *above),
+                *from,
+                to.unwrap_or(report.sim_time),
+            );
+            verdict(passed, t, observed)
+        }
+        Check::Beacon { within, min, max } => {
+            let (passed, t, observed) = check_beacons(report, *within, *min, *max);
+            verdict(passed, t, observed)
+        }
         Check::Session { .. } | Check::Downlink { .. } | Check::Accounting { .. } => {
             let (passed, t, observed) = crate::sessions::check(&x.check, report);
             verdict(passed, t, observed)
@@ -252,6 +275,7 @@ fn quantity(s: &AttitudeSample, name: &str) -> Option<f64> {
         "max_wheel_rpm" => Some(s.max_wheel_rpm),
         "mode" => Some(f64::from(s.mode)),
         "state" => Some(f64::from(s.state)),
+        "tle_offset_m" => s.tle_offset_m,
         _ => None,
     }
 }
@@ -349,6 +373,7 @@ pub fn counter_value(report: &RunReport, target: &CounterTarget, counter: &str) 
                 "packets" | "frames" => Some(g.packets),
                 "bytes" => Some(g.bytes),
                 "dropped" => Some(g.dropped),
+                "no_contact" => Some(g.no_contact),
                 _ => None,
             }
         }
@@ -363,4 +388,182 @@ pub fn counter_value(report: &RunReport, target: &CounterTarget, counter: &str) 
             }
         }
     }
+}
+
+/// Judge a `power` expectation over the EPS samples in `[from, to]`.
+fn check_power(
+    report: &RunReport,
+    quantity: &str,
+    (statistic, when): (crate::scenario::Statistic, When),
+    (below, above): (Option<f64>, Option<f64>),
+    from: SimTime,
+    to: SimTime,
+) -> (bool, SimTime, String) {
+    use crate::scenario::Statistic;
+    let value = |s: &crate::runtime::PowerSample| match quantity {
+        "soc" => s.soc,
+        "battery_v" => s.battery_v,
+        "battery_a" => s.battery_a,
+        "solar_w" => s.solar_w,
+        "load_w" => s.load_w,
+        _ => s.solar_w - s.load_w,
+    };
+    let samples: Vec<(SimTime, f64)> = report
+        .power
+        .iter()
+        .filter(|s| s.t >= from && s.t <= to)
+        .filter(|s| match when {
+            When::Sunlit => s.solar_w > 0.0,
+            When::Eclipse => s.solar_w <= 0.0,
+            _ => true,
+        })
+        .map(|s| (s.t, value(s)))
+        .collect();
+    if samples.is_empty() {
+        return (
+            false,
+            to,
+            format!("no EPS sample ({when:?}) between {from} and {to} (is the EPS running?)"),
+        );
+    }
+    let ok = |v: f64| below.is_none_or(|b| v < b) && above.is_none_or(|a| v > a);
+    let (lo, hi) = samples
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(_, v)| {
+            (a.min(v), b.max(v))
+        });
+    let mean = samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64;
+    let n = samples.len();
+    let range = format!(
+        "{n} samples in {from} to {to}, {quantity} from {lo:.4} to {hi:.4}, mean {mean:.4}"
+    );
+    let bounds = match (above, below) {
+        (Some(a), Some(b)) => format!("within ({a}, {b})"),
+        (Some(a), None) => format!("above {a}"),
+        (None, Some(b)) => format!("below {b}"),
+        (None, None) => "any".into(),
+    };
+    match statistic {
+        Statistic::Every => match samples.iter().find(|s| !ok(s.1)) {
+            Some(&(t, v)) => (
+                false,
+                t,
+                format!("{range}; first at {t}: {quantity} = {v:.4} (expected {bounds})"),
+            ),
+            None => (true, to, range),
+        },
+        Statistic::Mean | Statistic::Min | Statistic::Max => {
+            let (name, v) = match statistic {
+                Statistic::Mean => ("mean", mean),
+                Statistic::Min => ("min", lo),
+                _ => ("max", hi),
+            };
+            let held = ok(v);
+            (
+                held,
+                to,
+                if held {
+                    range
+                } else {
+                    format!("{range} ({name} {v:.4}, expected {bounds})")
+                },
+            )
+        }
+    }
+}
+
+/// The contact windows of a run: from each acquisition to the next loss (the whole run
+/// without pass modelling).
+fn contact_windows(report: &RunReport) -> Vec<(SimTime, SimTime)> {
+    let mut out = Vec::new();
+    let mut open = Some(SimTime::ZERO);
+    for &(t, on) in &report.contact {
+        match (on, open) {
+            (true, None) => open = Some(t),
+            (false, Some(a)) => {
+                if t > a {
+                    out.push((a, t));
+                }
+                open = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(a) = open {
+        out.push((a, report.sim_time));
+    }
+    out
+}
+
+/// Judge a `beacon` expectation.
+fn check_beacons(
+    report: &RunReport,
+    within: Option<std::time::Duration>,
+    min: Option<u64>,
+    max: Option<u64>,
+) -> (bool, SimTime, String) {
+    let end = report.sim_time;
+    let n = report.beacons.len() as u64;
+    let windows = contact_windows(report);
+    let contact_s: f64 = windows.iter().map(|(a, b)| (*b - *a).as_secs_f64()).sum();
+    let mut seen = format!(
+        "{n} beacons on the ground over {:.0} s of contact in {} window(s)",
+        contact_s,
+        windows.len()
+    );
+    if min.is_some_and(|m| n < m) || max.is_some_and(|m| n > m) {
+        return (
+            false,
+            end,
+            format!("{seen} (expected {:?}..={:?})", min, max),
+        );
+    }
+    if let Some(gap) = within {
+        for &(a, b) in &windows {
+            // Only windows long enough to hold a beacon are judged.
+            if (b - a) <= gap {
+                continue;
+            }
+            let mut last = a;
+            for &(t, _, _) in report.beacons.iter().filter(|(t, _, _)| *t >= a && *t <= b) {
+                if t - last > gap {
+                    return (
+                        false,
+                        t,
+                        format!(
+                            "{seen}; no beacon from {last} to {t} in contact (longer than {gap:?})"
+                        ),
+                    );
+                }
+                last = t;
+            }
+            if b - last > gap {
+                return (
+                    false,
+                    b,
+                    format!(
+                        "{seen}; no beacon from {last} to the loss of contact at {b} (longer than {gap:?})"
+                    ),
+                );
+            }
+        }
+        seen.push_str(&format!("; every gap in contact within {gap:?}"));
+    }
+    if let Some(&(t, _, _)) = report
+        .beacons
+        .iter()
+        // A beacon sent just before the loss of contact lands up to its air time later.
+        .find(|(t, _, _)| {
+            !windows
+                .iter()
+                .any(|(a, b)| t >= a && *t <= *b + std::time::Duration::from_secs(1))
+        })
+    {
+        return (
+            false,
+            t,
+            format!("{seen}; a beacon arrived out of contact at {t}"),
+        );
+    }
+    (true, end, seen)
 }

@@ -144,10 +144,24 @@ impl GroundApp {
     }
 }
 
+/// The port where a ground station receives the COMM's beacons.
+pub const BEACON_PORT: u8 = 10;
+
 impl App for GroundApp {
-    fn start(&mut self, _node: &mut Node, _now: SimTime) {}
+    fn start(&mut self, node: &mut Node, _now: SimTime) {
+        node.bind(BEACON_PORT);
+    }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        if packet.header.dport == BEACON_PORT {
+            // A beacon (nodes_comm): `04 01 | Beacon`; the ground does not reply.
+            self.emit(crate::events::RunEvent::Beacon {
+                t: now,
+                from: packet.header.src,
+                data: packet.data,
+            });
+            return;
+        }
         if let Some(done) = self.client.handle_reply(node, &packet, now)
             && let Some((req, sent)) = self.in_flight.remove(&done.request.tag)
         {

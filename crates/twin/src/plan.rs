@@ -38,6 +38,8 @@ pub enum FaultAction {
     Hang(u8, bool),
     /// A fault the FC applies itself from its timeline (sensors, wheels): recorded only.
     Fc,
+    /// The UHF link's contact with the ground (a pass begins or ends).
+    Contact(bool),
 }
 
 /// A fault action at a time, with a description for logs and recordings.
@@ -126,6 +128,32 @@ pub enum Check {
         /// One payload, or every simulated one.
         payload: Option<u8>,
         /// Most dropped bytes.
+        max: Option<u64>,
+    },
+    /// EPS samples in a window within bounds.
+    Power {
+        /// The figure (`scenario::POWER_QUANTITIES`).
+        quantity: String,
+        /// Each sample, or the window's mean, min or max.
+        statistic: crate::scenario::Statistic,
+        /// Upper bound (exclusive).
+        below: Option<f64>,
+        /// Lower bound (exclusive).
+        above: Option<f64>,
+        /// Window start.
+        from: SimTime,
+        /// Window end (default: the end of the run).
+        to: Option<SimTime>,
+        /// `always`, `sunlit` (array power above zero) or `eclipse` (none).
+        when: crate::scenario::When,
+    },
+    /// Beacons on the ground: every `within` during contact, `min`..=`max` in all.
+    Beacon {
+        /// Longest gap in contact (from acquisition, between beacons, to loss).
+        within: Option<Duration>,
+        /// Fewest beacons.
+        min: Option<u64>,
+        /// Most beacons.
         max: Option<u64>,
     },
     /// A counter at the end of the run.
@@ -330,6 +358,9 @@ pub fn compile(s: &Scenario) -> Compiled {
         }
     }
     opts.fc = compile_fc(s, &mut faults);
+    faults.extend(compile_passes(s, opts.epoch_unix_s));
+    opts.eps = compile_eps(s);
+    opts.comm = compile_comm(s);
     opts.pc = crate::sessions::compile_pc(s);
     opts.payloads = crate::sessions::compile_payloads(s);
     for p in opts.payloads.values_mut() {
@@ -553,6 +584,20 @@ fn compile_expectation(
             payload: x.payload,
             max: x.max,
         },
+        ExpectKind::Power => Check::Power {
+            quantity: x.quantity.clone().unwrap_or_default(),
+            statistic: x.statistic.unwrap_or(crate::scenario::Statistic::Every),
+            below: x.below,
+            above: x.above,
+            from: x.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),
+            to: x.to.map(|d| SimTime::ZERO + d.0),
+            when: x.when.unwrap_or(crate::scenario::When::Always),
+        },
+        ExpectKind::Beacon => Check::Beacon {
+            within: x.within.map(|d| d.0),
+            min: x.min,
+            max: x.max,
+        },
         ExpectKind::Counter => Check::Counter {
             target: match &x.target {
                 Some(NodeRef::Name(n)) if ["main", "payload", "ground"].contains(&n.as_str()) => {
@@ -567,6 +612,149 @@ fn compile_expectation(
         },
     };
     Expectation { name, check }
+}
+
+/// The UHF contact timeline of `[comm] passes = true`: passes over every station above the
+/// mask, from the scenario's TLE through `orbit`'s SGP4 and pass prediction, merged; the
+/// link is down outside them. Computed before the run from the TLE: a burn during the run
+/// (which changes the true orbit slightly) does not move them.
+pub fn compile_passes(s: &Scenario, epoch_unix_s: u64) -> Vec<TimedFault> {
+    use orbit::passes::{GroundSite, PassOptions, predict_passes_propagator};
+    use orbit::propagate::Sgp4Propagator;
+    use orbit::time::UtcTime;
+    let c = &s.comm;
+    if !c.passes {
+        return Vec::new();
+    }
+    let ns = |t: UtcTime| t.unix_ns() - epoch_unix_s as i64 * 1_000_000_000;
+    let start = UtcTime::from_unix_ns(epoch_unix_s as i64 * 1_000_000_000);
+    let end = UtcTime::from_unix_ns(
+        epoch_unix_s as i64 * 1_000_000_000
+            + i64::try_from(s.duration.0.as_nanos()).unwrap_or(i64::MAX / 2),
+    );
+    let mut windows: Vec<(i64, i64, String)> = Vec::new();
+    if let [.., l1, l2] = s.satellite.tle.as_slice()
+        && let Ok(tle) = orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
+        && let Ok(mut prop) = Sgp4Propagator::new(&tle)
+    {
+        let opts = PassOptions {
+            mask_rad: c.elevation_mask_deg.to_radians(),
+            ..PassOptions::default()
+        };
+        for st in &c.stations {
+            let site = GroundSite::from_deg(st.lat_deg, st.lon_deg, st.alt_m);
+            if let Ok(passes) = predict_passes_propagator(&site, start, end, &opts, &mut prop, None)
+            {
+                for p in passes {
+                    windows.push((
+                        ns(p.rise),
+                        ns(p.set),
+                        format!(
+                            "{} (max {:.1} deg)",
+                            st.name,
+                            p.max_elevation_rad.to_degrees()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    windows.sort_by_key(|w| w.0);
+    // Merge overlapping windows (two stations in view at once).
+    let mut merged: Vec<(i64, i64, String)> = Vec::new();
+    for w in windows {
+        match merged.last_mut() {
+            Some(m) if w.0 <= m.1 => {
+                m.1 = m.1.max(w.1);
+                m.2 = format!("{} + {}", m.2, w.2);
+            }
+            _ => merged.push(w),
+        }
+    }
+    let at = |t: i64| SimTime::from_ns(t.max(0) as u64);
+    let mut out = Vec::new();
+    if merged.first().is_none_or(|m| m.0 > 0) {
+        out.push(TimedFault {
+            at: SimTime::ZERO,
+            action: FaultAction::Contact(false),
+            what: "comm: no pass in progress: UHF out of contact".to_owned(),
+        });
+    }
+    for (rise, set, what) in merged {
+        out.push(TimedFault {
+            at: at(rise),
+            action: FaultAction::Contact(true),
+            what: format!("comm: pass over {what}: acquisition of signal"),
+        });
+        out.push(TimedFault {
+            at: at(set),
+            action: FaultAction::Contact(false),
+            what: format!("comm: pass over {what}: loss of signal"),
+        });
+    }
+    out
+}
+
+/// The EPS's configuration from the `[eps]` table (validated).
+fn compile_eps(s: &Scenario) -> nodes_eps::EpsConfig {
+    use nodes_eps::{Channel, EpsEvent, TimedEpsEvent};
+    let mut c = nodes_eps::EpsConfig::default();
+    let e = &s.eps;
+    // A payload the network does not have draws nothing: its channel starts off.
+    for addr in 12..=15u8 {
+        if !s.network.payloads.contains(&addr)
+            && let Some(ch) = Channel::of_node(addr)
+        {
+            c.channels_on &= !ch.bit();
+        }
+    }
+    if let Some(x) = e.initial_soc {
+        c.initial_soc = x;
+    }
+    for name in &e.channels_off {
+        if let Some(ch) = Channel::from_name(name) {
+            c.channels_on &= !ch.bit();
+        }
+    }
+    for ev in &e.events {
+        let event = match (&ev.channel, ev.on, ev.soc) {
+            (Some(name), Some(on), _) => match Channel::from_name(name) {
+                Some(channel) => EpsEvent::Channel { channel, on },
+                None => continue,
+            },
+            (_, _, Some(x)) => EpsEvent::SetSoc(x),
+            _ => continue,
+        };
+        c.timeline.push(TimedEpsEvent {
+            at: SimTime::ZERO + ev.at.0,
+            event,
+        });
+    }
+    c.timeline.sort_by_key(|e| e.at);
+    c
+}
+
+/// COMM1's configuration from the `[comm]` table (validated).
+fn compile_comm(s: &Scenario) -> nodes_comm::CommConfig {
+    let c = &s.comm;
+    let mut cfg = nodes_comm::CommConfig {
+        mask_deg: c.elevation_mask_deg,
+        stations: c
+            .stations
+            .iter()
+            .map(|st| nodes_comm::Station {
+                name: st.name.clone(),
+                lat_deg: st.lat_deg,
+                lon_deg: st.lon_deg,
+                alt_m: st.alt_m,
+            })
+            .collect(),
+        ..nodes_comm::CommConfig::default()
+    };
+    if let Some(p) = c.beacon_period {
+        cfg.beacon_period = p.0;
+    }
+    cfg
 }
 
 #[cfg(test)]
@@ -602,6 +790,57 @@ tle = [
         );
         assert_eq!(big.adcs.control, want);
         assert_ne!(big.adcs.control, default.adcs.control);
+    }
+
+    #[test]
+    fn the_contact_timeline_is_orbits_pass_prediction() {
+        use orbit::passes::{GroundSite, PassOptions, predict_passes_propagator};
+        let text = format!(
+            "name = \"t\"\nstart = \"2026-04-30T18:00:00Z\"\nduration = \"13800s\"\n{TLE}\n[comm]\npasses = true\n"
+        );
+        let s = Scenario::parse("t.toml", &text).unwrap();
+        let c = compile(&s);
+        let contact: Vec<(u64, bool)> = c
+            .faults
+            .iter()
+            .filter_map(|f| match f.action {
+                FaultAction::Contact(on) => Some((f.at.as_ns(), on)),
+                _ => None,
+            })
+            .collect();
+        // Independently: orbit's passes over Vilnius above 10 deg.
+        let tle = orbit::tle::Tle::parse(
+            s.satellite.tle[0].as_str(),
+            s.satellite.tle[1].as_str(),
+            orbit::tle::ChecksumMode::Strict,
+        )
+        .unwrap();
+        let mut prop = orbit::propagate::Sgp4Propagator::new(&tle).unwrap();
+        let epoch_ns = c.opts.epoch_unix_s as i64 * 1_000_000_000;
+        let start = orbit::time::UtcTime::from_unix_ns(epoch_ns);
+        let end = orbit::time::UtcTime::from_unix_ns(epoch_ns + 13_800_000_000_000);
+        let passes = predict_passes_propagator(
+            &GroundSite::from_deg(54.6872, 25.2797, 112.0),
+            start,
+            end,
+            &PassOptions {
+                mask_rad: 10f64.to_radians(),
+                ..PassOptions::default()
+            },
+            &mut prop,
+            None,
+        )
+        .unwrap();
+        assert_eq!(passes.len(), 2);
+        let mut want = vec![(0, false)];
+        for p in &passes {
+            want.push(((p.rise.unix_ns() - epoch_ns) as u64, true));
+            want.push(((p.set.unix_ns() - epoch_ns) as u64, false));
+        }
+        assert_eq!(contact, want);
+        // The second pass of the comm-passes scenario: 13149.9 s to 13587.6 s.
+        assert_eq!(contact[3].0 / 100_000_000, 131_499);
+        assert_eq!(contact[4].0 / 100_000_000, 135_875);
     }
 
     #[test]

@@ -135,6 +135,12 @@ pub const TOPIC_PC_SESSIONS: &str = "/pc/sessions";
 pub const TOPIC_PC_DOWNLINK: &str = "/pc/downlink";
 /// What the simulated payloads did.
 pub const TOPIC_PAYLOADS: &str = "/payloads";
+/// The EPS's power state, each EPS tick.
+pub const TOPIC_EPS: &str = "/eps/power";
+/// The EPS's channel switches.
+pub const TOPIC_EPS_CHANNELS: &str = "/eps/channels";
+/// Beacons received on the ground.
+pub const TOPIC_BEACONS: &str = "/ground/beacons";
 
 /// Foxglove frame id of ECI J2000 (axes only: the transforms carry no translation).
 pub const FRAME_ECI: &str = "eci";
@@ -600,6 +606,56 @@ pub struct PayloadMsg {
     pub msg_hex: Option<String>,
 }
 
+/// `/eps/power`: the EPS's state after one of its ticks.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.EpsPower")]
+pub struct EpsPowerMsg {
+    /// Simulated ns since the start of the run.
+    pub t_ns: u64,
+    /// State of charge, 0..1.
+    pub soc: f64,
+    /// Battery terminal voltage, V.
+    pub battery_v: f64,
+    /// Battery current, A (positive charging).
+    pub battery_a: f64,
+    /// Solar array power, W.
+    pub solar_w: f64,
+    /// Total load, W.
+    pub load_w: f64,
+    /// Power of each panel, W (in the EPS's panel order).
+    pub panels_w: Vec<f64>,
+    /// Channels on (bit = channel id: COMM1, COMM2, ECU, PC, PL12-PL15, S-band).
+    pub channels: u16,
+}
+
+/// `/ground/beacons`: a COMM beacon as the ground received it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.Beacon")]
+pub struct BeaconMsg {
+    /// Simulated ns since the start of the run (arrival).
+    pub t_ns: u64,
+    /// The COMM that sent it (1 or 2).
+    pub from: u8,
+    /// The beacon's sequence number.
+    pub seq: u32,
+    /// The packet data (`04 01 | Beacon`, docs/protocol.md), hex.
+    pub data_hex: String,
+}
+
+/// `/eps/channels`: a power channel switched.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.EpsChannel")]
+pub struct EpsChannelMsg {
+    /// Simulated ns since the start of the run.
+    pub t_ns: u64,
+    /// Channel name (`COMM1`, `PC`, `PL12`, `SBAND`, ...).
+    pub channel: String,
+    /// On or off.
+    pub on: bool,
+    /// Why: `initial`, `command`, `timeline`, `shed`, `restore`.
+    pub cause: String,
+}
+
 /// `/expectations`: an expectation's verdict.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[schemars(title = "m6p.Expectation")]
@@ -976,10 +1032,16 @@ pub enum ChannelKind {
     Downlink,
     /// `/payloads` (`m6p.Payload`).
     Payload,
+    /// `/eps/power` (`m6p.EpsPower`).
+    EpsPower,
+    /// `/eps/channels` (`m6p.EpsChannel`).
+    EpsChannel,
+    /// `/ground/beacons` (`m6p.Beacon`).
+    Beacon,
 }
 
 /// Every kind, in declaration order (`kind as usize` indexes it).
-pub const CHANNEL_KINDS: [ChannelKind; 17] = [
+pub const CHANNEL_KINDS: [ChannelKind; 20] = [
     ChannelKind::Can,
     ChannelKind::Net,
     ChannelKind::Csp,
@@ -997,6 +1059,9 @@ pub const CHANNEL_KINDS: [ChannelKind; 17] = [
     ChannelKind::PcSession,
     ChannelKind::Downlink,
     ChannelKind::Payload,
+    ChannelKind::EpsPower,
+    ChannelKind::EpsChannel,
+    ChannelKind::Beacon,
 ];
 
 /// The channels every run has, as (kind, key), in registration order; others (another
@@ -1032,6 +1097,9 @@ impl ChannelKind {
             ChannelKind::PcSession => "m6p.PcSession",
             ChannelKind::Downlink => "m6p.Downlink",
             ChannelKind::Payload => "m6p.Payload",
+            ChannelKind::EpsPower => "m6p.EpsPower",
+            ChannelKind::EpsChannel => "m6p.EpsChannel",
+            ChannelKind::Beacon => "m6p.Beacon",
         }
     }
 
@@ -1059,6 +1127,9 @@ impl ChannelKind {
             ChannelKind::PcSession => gen_schema::<PcSessionMsg>(),
             ChannelKind::Downlink => gen_schema::<DownlinkMsg>(),
             ChannelKind::Payload => gen_schema::<PayloadMsg>(),
+            ChannelKind::EpsPower => gen_schema::<EpsPowerMsg>(),
+            ChannelKind::EpsChannel => gen_schema::<EpsChannelMsg>(),
+            ChannelKind::Beacon => gen_schema::<BeaconMsg>(),
         }
     }
 
@@ -1086,6 +1157,9 @@ impl ChannelKind {
             ChannelKind::PcSession => TOPIC_PC_SESSIONS.to_owned(),
             ChannelKind::Downlink => TOPIC_PC_DOWNLINK.to_owned(),
             ChannelKind::Payload => TOPIC_PAYLOADS.to_owned(),
+            ChannelKind::EpsPower => TOPIC_EPS.to_owned(),
+            ChannelKind::EpsChannel => TOPIC_EPS_CHANNELS.to_owned(),
+            ChannelKind::Beacon => TOPIC_BEACONS.to_owned(),
         }
     }
 
@@ -1660,6 +1734,63 @@ impl EventEncoder {
                 };
                 emit_json(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)
             }
+            RunEvent::Beacon { t, from, data } => {
+                let msg = BeaconMsg {
+                    t_ns,
+                    from: *from,
+                    seq: data
+                        .get(2..6)
+                        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+                        .map_or(0, u32::from_le_bytes),
+                    data_hex: hex::encode(data),
+                };
+                emit_json(buf, base_ns, (ChannelKind::Beacon, ""), *t, &msg, emit)
+            }
+            RunEvent::Eps(o) => match &**o {
+                nodes_eps::EpsOutput::Sample {
+                    t,
+                    soc,
+                    battery_v,
+                    battery_a,
+                    solar_w,
+                    load_w,
+                    panels_w,
+                    channels,
+                } => {
+                    let msg = EpsPowerMsg {
+                        t_ns,
+                        soc: *soc,
+                        battery_v: *battery_v,
+                        battery_a: *battery_a,
+                        solar_w: *solar_w,
+                        load_w: *load_w,
+                        panels_w: panels_w.clone(),
+                        channels: *channels,
+                    };
+                    emit_json(buf, base_ns, (ChannelKind::EpsPower, ""), *t, &msg, emit)
+                }
+                nodes_eps::EpsOutput::Channel {
+                    t,
+                    channel,
+                    on,
+                    cause,
+                } => {
+                    let cause = match cause {
+                        nodes_eps::SwitchCause::Initial => "initial",
+                        nodes_eps::SwitchCause::Command => "command",
+                        nodes_eps::SwitchCause::Timeline => "timeline",
+                        nodes_eps::SwitchCause::Shed(_) => "shed",
+                        nodes_eps::SwitchCause::Restore(_) => "restore",
+                    };
+                    let msg = EpsChannelMsg {
+                        t_ns,
+                        channel: channel.name().to_owned(),
+                        on: *on,
+                        cause: cause.to_owned(),
+                    };
+                    emit_json(buf, base_ns, (ChannelKind::EpsChannel, ""), *t, &msg, emit)
+                }
+            },
             RunEvent::Payload { addr, out } => {
                 use nodes_payload::PayloadOutput as O;
                 let msg = match out {

@@ -68,6 +68,12 @@ pub struct RunOptions {
     pub pc: nodes_pc::PcConfig,
     /// The simulated payloads, by address (an address missing here gets the defaults).
     pub payloads: BTreeMap<u8, nodes_payload::PayloadConfig>,
+    /// The EPS: arrays, battery, loads, channels, protection, events.
+    pub eps: nodes_eps::EpsConfig,
+    /// The ECU: thruster, tank, limits.
+    pub ecu: nodes_ecu::EcuConfig,
+    /// COMM1's configuration (COMM2 takes the same with the secondary role).
+    pub comm: nodes_comm::CommConfig,
 }
 
 /// What an outside program sent on one KISS link during a recorded run.
@@ -100,6 +106,9 @@ impl RunOptions {
             fc: nodes_fc::FcConfig::default(),
             pc: nodes_pc::PcConfig::default(),
             payloads: BTreeMap::new(),
+            eps: nodes_eps::EpsConfig::default(),
+            ecu: nodes_ecu::EcuConfig::default(),
+            comm: nodes_comm::CommConfig::default(),
         }
     }
 
@@ -183,6 +192,29 @@ pub struct RunReport {
     pub attitude: Vec<AttitudeSample>,
     /// The PC's sessions, downlinked and dropped bytes, and what the payloads produced.
     pub sessions: crate::sessions::SessionsReport,
+    /// The EPS's samples, in time order (for expectations).
+    pub power: Vec<PowerSample>,
+    /// Beacons received on the ground: (time, sending COMM, sequence number).
+    pub beacons: Vec<(SimTime, u8, u32)>,
+    /// UHF contact switches applied (pass modelling): (time, in contact).
+    pub contact: Vec<(SimTime, bool)>,
+}
+
+/// The figures of one EPS sample that expectations check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PowerSample {
+    /// When.
+    pub t: SimTime,
+    /// State of charge, 0..1.
+    pub soc: f64,
+    /// Battery voltage, V.
+    pub battery_v: f64,
+    /// Battery current, A (positive charging).
+    pub battery_a: f64,
+    /// Solar array power, W.
+    pub solar_w: f64,
+    /// Total load, W.
+    pub load_w: f64,
 }
 
 /// The figures of one published FC snapshot that expectations check.
@@ -206,6 +238,9 @@ pub struct AttitudeSample {
     pub sun_visible_fraction: f64,
     /// Mode in effect.
     pub mode: u8,
+    /// Distance of the true position from the scenario TLE's SGP4 position, m (grows after
+    /// a burn, when the truth follows the numerical orbit).
+    pub tle_offset_m: Option<f64>,
     /// ADCS state.
     pub state: u8,
 }
@@ -233,6 +268,7 @@ impl AttitudeSample {
             sun_visible_fraction: truth.in_eclipse_fraction_visible,
             mode: adcs.mode_in_effect,
             state: adcs.state,
+            tle_offset_m: None,
         }
     }
 }
@@ -255,30 +291,160 @@ pub fn mix(seed: u64, salt: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// The meeting points between node applications (see `orbit::state`): the FC posts its
+/// truth and the nodes read it; the ECU posts burns and the FC applies them; nodes post
+/// power-relevant activities and the EPS reads them.
+#[derive(Debug, Clone, Default)]
+pub struct Boards {
+    /// The FC's true state, every tick.
+    pub truth: orbit::state::TruthBoard,
+    /// The ECU's firings.
+    pub burns: orbit::state::BurnBoard,
+    /// Switched activities (S-band and UHF transmitting, thruster heater, firing).
+    pub activity: orbit::state::ActivityBoard,
+    /// The nodes' control channels by address, for the EPS's power switches.
+    pub power: PowerSwitches,
+}
+
+/// The EPS's power switches: the control channel of every node by address, filled as the
+/// nodes are created (all before the run starts).
+#[derive(Debug, Clone, Default)]
+pub struct PowerSwitches(Arc<Mutex<BTreeMap<u8, mpsc::UnboundedSender<NodeCtl>>>>);
+
+impl PowerSwitches {
+    fn insert(&self, addr: u8, tx: mpsc::UnboundedSender<NodeCtl>) {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .insert(addr, tx);
+    }
+
+    /// Power node `addr` on or off (a node the run does not have: nothing).
+    pub fn set(&self, addr: u8, on: bool) {
+        if let Some(tx) = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .get(&addr)
+        {
+            let _ = tx.send(NodeCtl::Power(on));
+        }
+    }
+}
+
 fn app_for(
     role: Role,
     addr: u8,
     opts: &RunOptions,
+    boards: &Boards,
     plan: Vec<PlannedRequest>,
     results: &Results,
     events: &mpsc::UnboundedSender<RunEvent>,
 ) -> Box<dyn App> {
     match role {
-        Role::CommPrimary | Role::CommSecondary => Box::new(nodes_comm::app()),
+        Role::CommPrimary | Role::CommSecondary => {
+            let mut cfg = if role == Role::CommPrimary {
+                opts.comm.clone()
+            } else {
+                nodes_comm::CommConfig {
+                    role: nodes_comm::CommRole::Secondary,
+                    ..opts.comm.clone()
+                }
+            };
+            cfg.air_rate_bps = opts.network.uhf_rate_bps;
+            Box::new(
+                nodes_comm::CommApp::new(cfg)
+                    .with_truth(boards.truth.clone())
+                    .with_activity(boards.activity.clone()),
+            )
+        }
         Role::Fc => {
             let tx = events.clone();
-            Box::new(nodes_fc::FcApp::new(opts.fc.clone()).with_publisher(
-                nodes_fc::Publisher::new(move |truth, adcs| {
-                    let _ = tx.send(RunEvent::Truth {
-                        t: SimTime::from_ns(truth.t_ns),
-                        truth: Box::new(truth.clone()),
-                        adcs: Box::new(adcs.clone()),
-                    });
-                }),
-            ))
+            Box::new(
+                nodes_fc::FcApp::new(opts.fc.clone())
+                    .with_truth_board(boards.truth.clone())
+                    .with_burns(boards.burns.clone())
+                    .with_publisher(nodes_fc::Publisher::new(move |truth, adcs| {
+                        let _ = tx.send(RunEvent::Truth {
+                            t: SimTime::from_ns(truth.t_ns),
+                            truth: Box::new(truth.clone()),
+                            adcs: Box::new(adcs.clone()),
+                        });
+                    })),
+            )
         }
-        Role::Eps => Box::new(nodes_eps::app()),
-        Role::Ecu => Box::new(nodes_ecu::app()),
+        Role::Eps => {
+            let tx = events.clone();
+            let power = boards.power.clone();
+            let burns = boards.burns.clone();
+            let activity = boards.activity.clone();
+            Box::new(
+                nodes_eps::EpsApp::new(opts.eps.clone())
+                    .with_truth(boards.truth.clone())
+                    .with_activity(boards.activity.clone())
+                    .with_sink(nodes_eps::Sink::new(move |out| {
+                        if let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = &out
+                            && let Some(addr) = channel.node_addr()
+                        {
+                            // The node leaves (or rejoins) its buses at once; an ECU that
+                            // loses power stops firing.
+                            power.set(addr, *on);
+                            if addr == 5 && !*on {
+                                use orbit::state::Activity;
+                                burns.cut_all(t.as_ns());
+                                activity.set(Activity::ThrusterHeater, t.as_ns(), false);
+                                activity.set(Activity::Firing, t.as_ns(), false);
+                            }
+                        }
+                        let _ = tx.send(RunEvent::Eps(Box::new(out)));
+                    })),
+            )
+        }
+        Role::Ecu => {
+            let tx = events.clone();
+            Box::new(
+                nodes_ecu::EcuApp::new(opts.ecu.clone())
+                    .with_burns(boards.burns.clone())
+                    .with_activity(boards.activity.clone())
+                    .with_sink(nodes_ecu::Sink::new(move |out| {
+                        use nodes_ecu::EcuOutput as O;
+                        let (t, message) = match &out {
+                            O::Armed { t } => (*t, "armed: heaters on".to_owned()),
+                            O::BurnStarted { t, burn } => (
+                                *t,
+                                format!(
+                                    "burn started: {:.3} N for {:.3} s, mass {:.3} kg",
+                                    burn.thrust_n,
+                                    (burn.end_ns - burn.start_ns) as f64 * 1e-9,
+                                    burn.mass_kg
+                                ),
+                            ),
+                            O::BurnEnded {
+                                t,
+                                cut,
+                                propellant_used_kg,
+                                impulse_n_s,
+                                ..
+                            } => (
+                                *t,
+                                format!(
+                                    "burn ended{}: {impulse_n_s:.4} N s, {:.3} g of propellant",
+                                    if *cut { " (cut)" } else { "" },
+                                    propellant_used_kg * 1e3
+                                ),
+                            ),
+                            O::Safed { t } => (*t, "safe: heaters off".to_owned()),
+                            O::Final { t, telemetry } => (*t, format!("at the end: {telemetry:?}")),
+                        };
+                        let _ = tx.send(RunEvent::Log {
+                            t,
+                            source: "ECU".to_owned(),
+                            level: Level::Info,
+                            message,
+                        });
+                    })),
+            )
+        }
         Role::Pc => {
             let tx = events.clone();
             Box::new(
@@ -382,6 +548,7 @@ pub async fn run_with(
         seed: mix(opts.seed, 0x300),
         ..opts.fc.clone()
     };
+    let boards = Boards::default();
     let mut nodes = Vec::new();
     for spec in &opts.network.nodes {
         let (mut cfg, media) = node_config(spec);
@@ -428,9 +595,10 @@ pub async fn run_with(
             .collect();
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
-        let app = app_for(spec.role, spec.addr, &opts, plan, &results, &ev_tx);
+        let app = app_for(spec.role, spec.addr, &opts, &boards, plan, &results, &ev_tx);
         let host = Host::new(cfg, app, clock.now());
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
+        boards.power.insert(spec.addr, ctl_tx.clone());
         let log = node_log.clone();
         let handle = tokio::spawn(async move {
             run_node_logged(host, ports, inbox_rx, ctl_rx, clock, Some(log)).await
@@ -528,13 +696,58 @@ pub async fn run_with(
     let mut trace = Vec::new();
     let mut attitude = Vec::new();
     let mut sessions = crate::sessions::SessionsReport::default();
+    let mut power = Vec::new();
+    let mut beacons = Vec::new();
+    let mut contact = Vec::new();
+    // The scenario TLE's own SGP4 orbit, to measure how far the truth has left it.
+    let mut tle_orbit = opts.tle.as_ref().and_then(|(l1, l2)| {
+        orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
+            .ok()
+            .and_then(|t| orbit::propagate::Sgp4Propagator::new(&t).ok())
+    });
     let mut handle_event = |ev: RunEvent, trace: &mut Vec<TraceEvent>| {
         sink(&ev);
         sessions.observe(&ev);
         match ev {
             RunEvent::Medium(m) if opts.trace => trace.push(m),
             RunEvent::Truth { t, truth, adcs } => {
-                attitude.push(AttitudeSample::of(t, &truth, &adcs));
+                let mut sample = AttitudeSample::of(t, &truth, &adcs);
+                if let Some(p) = tle_orbit.as_mut() {
+                    use orbit::propagate::Propagator as _;
+                    sample.tle_offset_m = p
+                        .state_j2000(orbit::time::UtcTime::from_unix_ns(truth.unix_ns))
+                        .ok()
+                        .map(|s| (truth.r_eci_m - s.r_km * 1e3).norm());
+                }
+                attitude.push(sample);
+            }
+            RunEvent::Beacon { t, from, data } => {
+                let seq = data
+                    .get(2..6)
+                    .and_then(|b| <[u8; 4]>::try_from(b).ok())
+                    .map_or(0, u32::from_le_bytes);
+                beacons.push((t, from, seq));
+            }
+            RunEvent::Eps(o) => {
+                if let nodes_eps::EpsOutput::Sample {
+                    t,
+                    soc,
+                    battery_v,
+                    battery_a,
+                    solar_w,
+                    load_w,
+                    ..
+                } = *o
+                {
+                    power.push(PowerSample {
+                        t,
+                        soc,
+                        battery_v,
+                        battery_a,
+                        solar_w,
+                        load_w,
+                    });
+                }
             }
             _ => {}
         }
@@ -560,6 +773,9 @@ pub async fn run_with(
                 }
                 while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
                     apply_fault(&f, &segs, &ctls);
+                    if let FaultAction::Contact(on) = f.action {
+                        contact.push((f.at, on));
+                    }
                     tracing::info!(t = %f.at, "fault: {}", f.what);
                     handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, &mut trace);
                 }
@@ -611,6 +827,9 @@ pub async fn run_with(
         trace,
         attitude,
         sessions,
+        power,
+        beacons,
+        contact,
     })
 }
 
@@ -682,6 +901,7 @@ fn apply_fault(
         FaultAction::Hang(a, h) => ctl(a, NodeCtl::Hang(*h)),
         // The FC applies its own faults from its timeline at its ticks.
         FaultAction::Fc => {}
+        FaultAction::Contact(on) => segs.ground.set_contact(*on),
     }
 }
 

@@ -92,6 +92,12 @@ pub struct Scenario {
     /// The payload controller: sessions, S-band, events.
     #[serde(default)]
     pub pc: crate::sessions::PcSpec,
+    /// The radio link to the ground: passes over the ground stations.
+    #[serde(default)]
+    pub comm: CommSpec,
+    /// The EPS: battery state and channel switching.
+    #[serde(default)]
+    pub eps: EpsSpec,
     /// The simulated payloads' data and behaviour (`[[payload]]`, one per address).
     #[serde(default)]
     pub payload: Vec<crate::sessions::PayloadSpec>,
@@ -232,6 +238,97 @@ pub struct FcSpec {
     /// Sensor and wheel faults.
     #[serde(default)]
     pub faults: Vec<FcFaultSpec>,
+}
+
+/// The EPS (`[eps]`).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EpsSpec {
+    /// State of charge at the start, 0-1 (default 0.8).
+    #[serde(default)]
+    pub initial_soc: Option<f64>,
+    /// Channels off at the start (`COMM1`, `COMM2`, `ECU`, `PC`, `PL12`-`PL15`, `SBAND`).
+    #[serde(default)]
+    pub channels_off: Vec<String>,
+    /// Events (`[[eps.events]]`): `at` with `channel` and `on`, or `soc`.
+    #[serde(default)]
+    pub events: Vec<EpsEventSpec>,
+}
+
+/// An EPS event at a time: switch a channel (as the CHSET command would) or set the state
+/// of charge.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EpsEventSpec {
+    /// When.
+    pub at: Dur,
+    /// The channel to switch.
+    #[serde(default)]
+    pub channel: Option<String>,
+    /// On or off (with `channel`).
+    #[serde(default)]
+    pub on: Option<bool>,
+    /// Set the state of charge, 0-1.
+    #[serde(default)]
+    pub soc: Option<f64>,
+}
+
+/// The UHF link to the ground (`[comm]`).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CommSpec {
+    /// Model passes: the link closes only while the satellite is above the elevation mask
+    /// of a ground station (default false: always in contact, for development).
+    #[serde(default)]
+    pub passes: bool,
+    /// Elevation mask, deg (default 10).
+    #[serde(default = "default_mask_deg")]
+    pub elevation_mask_deg: f64,
+    /// The ground stations' sites (default: Vilnius).
+    #[serde(default = "default_stations")]
+    pub stations: Vec<StationSpec>,
+    /// COMM's beacon period (default 60 s; `0s` switches beacons off; else 10 s to 1 h).
+    #[serde(default)]
+    pub beacon_period: Option<Dur>,
+}
+
+impl Default for CommSpec {
+    fn default() -> Self {
+        CommSpec {
+            passes: false,
+            elevation_mask_deg: default_mask_deg(),
+            stations: default_stations(),
+            beacon_period: None,
+        }
+    }
+}
+
+fn default_mask_deg() -> f64 {
+    10.0
+}
+
+fn default_stations() -> Vec<StationSpec> {
+    vec![StationSpec {
+        name: "Vilnius".to_owned(),
+        lat_deg: 54.6872,
+        lon_deg: 25.2797,
+        alt_m: 112.0,
+    }]
+}
+
+/// A ground station site (WGS-84).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct StationSpec {
+    /// Name for logs.
+    pub name: String,
+    /// Geodetic latitude, deg.
+    pub lat_deg: f64,
+    /// Longitude, deg (east positive).
+    pub lon_deg: f64,
+    /// Height above the ellipsoid, m.
+    #[serde(default)]
+    pub alt_m: f64,
 }
 
 /// Target modes by name (docs/protocol.md, "Target modes").
@@ -613,7 +710,35 @@ pub struct ExpectationSpec {
     /// `accounting`: the payload (default every simulated payload).
     #[serde(default)]
     pub payload: Option<u8>,
+    /// `power`: what `below`/`above` bound: `every` sample (default), or the window's
+    /// `mean`, `min` or `max`.
+    #[serde(default)]
+    pub statistic: Option<Statistic>,
 }
+
+/// Which figure of a window a `power` expectation bounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Statistic {
+    /// Every sample.
+    Every,
+    /// The time mean over the window.
+    Mean,
+    /// The smallest sample.
+    Min,
+    /// The largest sample.
+    Max,
+}
+
+/// The figures a `power` expectation can check (each EPS sample).
+pub const POWER_QUANTITIES: &[&str] = &[
+    "soc",
+    "battery_v",
+    "battery_a",
+    "solar_w",
+    "load_w",
+    "net_w",
+];
 
 /// Session results by name (ICD 3.1.6 table 3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
@@ -645,6 +770,7 @@ pub const ATTITUDE_QUANTITIES: &[&str] = &[
     "max_wheel_rpm",
     "mode",
     "state",
+    "tle_offset_m",
 ];
 
 /// Which samples an `attitude` expectation looks at.
@@ -680,6 +806,11 @@ pub enum ExpectKind {
     /// Every byte a payload produced was downlinked, dropped with a reason, or is still
     /// held by the PC at the end (at most `max` dropped, if given).
     Accounting,
+    /// EPS samples in a window (each, or their mean, min or max) below / above a bound.
+    Power,
+    /// Beacons reach the ground at least every `within` while in contact (and `min`..`max`
+    /// of them over the run).
+    Beacon,
 }
 
 /// Which occurrences of a repeated command an expectation covers.
@@ -1138,6 +1269,83 @@ impl Scenario {
         }
         self.validate_fc(&mut err);
         crate::sessions::validate(self, &mut err);
+        let e = &self.eps;
+        if e.initial_soc
+            .is_some_and(|x| !(x.is_finite() && (0.0..=1.0).contains(&x)))
+        {
+            err(vec![key("eps"), key("initial_soc")], "must be 0-1".into());
+        }
+        let channel_names = "COMM1, COMM2, ECU, PC, PL12, PL13, PL14, PL15, SBAND";
+        for (i, c) in e.channels_off.iter().enumerate() {
+            if nodes_eps::Channel::from_name(c).is_none() {
+                err(
+                    vec![key("eps"), key("channels_off"), PathStep::Index(i)],
+                    format!("unknown channel `{c}` ({channel_names})"),
+                );
+            }
+        }
+        for (i, ev) in e.events.iter().enumerate() {
+            let q = |n: &str| vec![key("eps"), key("events"), PathStep::Index(i), key(n)];
+            match (&ev.channel, ev.on, ev.soc) {
+                (Some(c), Some(_), None) => {
+                    if nodes_eps::Channel::from_name(c).is_none() {
+                        err(
+                            q("channel"),
+                            format!("unknown channel `{c}` ({channel_names})"),
+                        );
+                    }
+                }
+                (None, None, Some(x)) => {
+                    if !(x.is_finite() && (0.0..=1.0).contains(&x)) {
+                        err(q("soc"), "must be 0-1".into());
+                    }
+                }
+                _ => err(
+                    q("at"),
+                    "an EPS event is `channel` with `on`, or `soc`".into(),
+                ),
+            }
+        }
+        let c = &self.comm;
+        if !(c.elevation_mask_deg.is_finite() && (-5.0..=80.0).contains(&c.elevation_mask_deg)) {
+            err(
+                vec![key("comm"), key("elevation_mask_deg")],
+                "must be -5 to 80 deg".into(),
+            );
+        }
+        if let Some(p) = c.beacon_period
+            && !p.0.is_zero()
+            && !(Duration::from_secs(10)..=Duration::from_secs(3600)).contains(&p.0)
+        {
+            err(
+                vec![key("comm"), key("beacon_period")],
+                "must be 0 (off) or 10 s to 1 h".into(),
+            );
+        }
+        if c.passes && c.stations.is_empty() {
+            err(
+                vec![key("comm"), key("stations")],
+                "pass modelling needs at least one station".into(),
+            );
+        }
+        for (i, st) in c.stations.iter().enumerate() {
+            let q = |n: &str| vec![key("comm"), key("stations"), PathStep::Index(i), key(n)];
+            if !(st.lat_deg.is_finite() && (-90.0..=90.0).contains(&st.lat_deg)) {
+                err(q("lat_deg"), "must be -90 to 90".into());
+            }
+            if !(st.lon_deg.is_finite() && (-180.0..=360.0).contains(&st.lon_deg)) {
+                err(q("lon_deg"), "must be -180 to 360".into());
+            }
+            if !(st.alt_m.is_finite() && (-500.0..=10_000.0).contains(&st.alt_m)) {
+                err(q("alt_m"), "must be -500 to 10000 m".into());
+            }
+        }
+        if c.passes && self.satellite.tle.len() < 2 {
+            err(
+                vec![key("comm"), key("passes")],
+                "pass modelling needs the satellite's TLE ([satellite] tle)".into(),
+            );
+        }
         for (i, x) in self.expectations.iter().enumerate() {
             let p = |n: &str| vec![key("expectations"), PathStep::Index(i), key(n)];
             let pc_fields = [
@@ -1160,7 +1368,72 @@ impl Scenario {
                     );
                 }
             }
+            if x.statistic.is_some() && x.kind != ExpectKind::Power {
+                err(
+                    p("statistic"),
+                    "only a `power` expectation takes `statistic`".into(),
+                );
+            }
             match x.kind {
+                ExpectKind::Beacon => {
+                    if x.within.is_none() && x.min.is_none() && x.max.is_none() {
+                        err(
+                            p("kind"),
+                            "a `beacon` expectation needs `within`, `min` or `max`".into(),
+                        );
+                    }
+                    for (f, present) in [
+                        ("command", x.command.is_some()),
+                        ("target", x.target.is_some()),
+                        ("counter", x.counter.is_some()),
+                        ("quantity", x.quantity.is_some()),
+                        ("below", x.below.is_some()),
+                        ("above", x.above.is_some()),
+                    ] {
+                        if present {
+                            err(p(f), format!("a `beacon` expectation takes no `{f}`"));
+                        }
+                    }
+                }
+                ExpectKind::Power => {
+                    match &x.quantity {
+                        None => err(p("kind"), "a `power` expectation needs `quantity`".into()),
+                        Some(q) if !POWER_QUANTITIES.contains(&q.as_str()) => err(
+                            p("quantity"),
+                            format!("unknown quantity `{q}` ({})", POWER_QUANTITIES.join(", ")),
+                        ),
+                        Some(_) => {}
+                    }
+                    if x.below.is_none() && x.above.is_none() {
+                        err(
+                            p("kind"),
+                            "a `power` expectation needs `below` or `above`".into(),
+                        );
+                    }
+                    if x.when == Some(When::TargetVisible) {
+                        err(
+                            p("when"),
+                            "a `power` expectation takes `always`, `sunlit` or `eclipse`".into(),
+                        );
+                    }
+                    if let (Some(a), Some(b)) = (x.from, x.to)
+                        && b <= a
+                    {
+                        err(p("to"), "must be after `from`".into());
+                    }
+                    for (f, present) in [
+                        ("command", x.command.is_some()),
+                        ("target", x.target.is_some()),
+                        ("counter", x.counter.is_some()),
+                        ("min", x.min.is_some()),
+                        ("max", x.max.is_some()),
+                        ("min_elevation_deg", x.min_elevation_deg.is_some()),
+                    ] {
+                        if present {
+                            err(p(f), format!("a `power` expectation takes no `{f}`"));
+                        }
+                    }
+                }
                 ExpectKind::Session | ExpectKind::Downlink | ExpectKind::Accounting => {
                     crate::sessions::validate_expectation(self, x, &p, &mut err);
                 }
@@ -1458,7 +1731,14 @@ pub const NODE_COUNTERS: &[&str] = &[
     "drops",
 ];
 /// Medium counters an expectation can name.
-pub const MEDIUM_COUNTERS: &[&str] = &["frames", "packets", "bytes", "dropped", "corrupted"];
+pub const MEDIUM_COUNTERS: &[&str] = &[
+    "frames",
+    "packets",
+    "bytes",
+    "dropped",
+    "corrupted",
+    "no_contact",
+];
 
 fn kebab(k: ExpectKind) -> &'static str {
     match k {
@@ -1469,6 +1749,8 @@ fn kebab(k: ExpectKind) -> &'static str {
         ExpectKind::Session => "session",
         ExpectKind::Downlink => "downlink",
         ExpectKind::Accounting => "accounting",
+        ExpectKind::Power => "power",
+        ExpectKind::Beacon => "beacon",
     }
 }
 

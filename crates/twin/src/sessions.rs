@@ -1049,6 +1049,9 @@ mod tests {
             trace: Vec::new(),
             attitude: Vec::new(),
             sessions: r,
+            power: Vec::new(),
+            beacons: Vec::new(),
+            contact: Vec::new(),
         }
     }
 
