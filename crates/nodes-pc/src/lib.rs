@@ -632,6 +632,10 @@ pub struct PcApp {
     counters: PcCounters,
     sink: Option<Sink>,
     log: Vec<(SimTime, String)>,
+    /// Where the S-band's transmissions are posted for the EPS and its power is read.
+    activity: Option<orbit::state::ActivityBoard>,
+    /// The transmitter is off because its power channel is (not by a scenario event).
+    unpowered: bool,
 }
 
 impl PcApp {
@@ -661,6 +665,8 @@ impl PcApp {
             counters: PcCounters::default(),
             sink: None,
             log,
+            activity: None,
+            unpowered: false,
             cfg,
         }
     }
@@ -669,6 +675,40 @@ impl PcApp {
     pub fn with_sink(mut self, s: Sink) -> Self {
         self.sink = Some(s);
         self
+    }
+
+    /// Post the S-band's transmissions (`Activity::SbandTx`, frame by frame) for the EPS,
+    /// and follow its power channel (`Activity::SbandPowerOff`, posted by the twin from the
+    /// EPS): the transmitter notices a power change at its next frame boundary (a frame is
+    /// 10.2 ms at 1 Mbit/s); unpowered it behaves as switched off (the queue is kept).
+    pub fn with_activity(mut self, board: orbit::state::ActivityBoard) -> Self {
+        self.activity = Some(board);
+        self
+    }
+
+    fn tx_activity(&self, t: SimTime, on: bool) {
+        if let Some(a) = &self.activity {
+            a.set(orbit::state::Activity::SbandTx, t.as_ns(), on);
+        }
+    }
+
+    /// Follow the S-band power channel (see [`PcApp::with_activity`]).
+    fn follow_power(&mut self, t: SimTime) {
+        let Some(a) = &self.activity else { return };
+        let off = a.on_before(orbit::state::Activity::SbandPowerOff, t.as_ns());
+        if off && !self.unpowered {
+            self.unpowered = true;
+            if self.sband.is_transmitting() {
+                self.tx_activity(t, false);
+            }
+            self.sband.set_on(false);
+            self.log
+                .push((t, "pc: S-band power channel off".to_owned()));
+        } else if !off && self.unpowered {
+            self.unpowered = false;
+            self.sband.set_on(true);
+            self.log.push((t, "pc: S-band power channel on".to_owned()));
+        }
     }
 
     /// The configuration in use.
@@ -1072,6 +1112,7 @@ impl PcApp {
     /// Start an S-band frame if possible, first topping the transmitter's queue up to a
     /// frame's worth from the ACTIVE buffering session's file.
     fn kick(&mut self, node: &mut Node, t: SimTime) {
+        self.follow_power(t);
         if !self.sband.can_send() || self.sband.is_transmitting() {
             return;
         }
@@ -1102,7 +1143,9 @@ impl PcApp {
                 limit_reached = Some(a);
             }
         }
-        self.sband.start_frame(t);
+        if self.sband.start_frame(t) {
+            self.tx_activity(t, true);
+        }
         if let Some(a) = limit_reached {
             self.end_session(node, a, SessionResult::Done, t);
         }
@@ -1112,6 +1155,9 @@ impl PcApp {
         self.log.push((t, format!("pc: S-band event {ev:?}")));
         match ev {
             PcEvent::SbandFail => {
+                if self.sband.is_transmitting() {
+                    self.tx_activity(t, false);
+                }
                 for (slot, n) in self.sband.fail() {
                     let addr = self.payload_addr(slot);
                     self.drop_bytes(t, Some(slot), addr, DropReason::SbandFailure, n);
@@ -1121,7 +1167,12 @@ impl PcApp {
                 }
             }
             PcEvent::SbandRestore => self.sband.restore(),
-            PcEvent::SbandOff => self.sband.set_on(false),
+            PcEvent::SbandOff => {
+                if self.sband.is_transmitting() {
+                    self.tx_activity(t, false);
+                }
+                self.sband.set_on(false);
+            }
             PcEvent::SbandOn => self.sband.set_on(true),
         }
         self.kick(node, t);
@@ -1156,6 +1207,7 @@ impl PcApp {
             self.apply_event(node, ev.event, t);
         }
         while let Some(frame) = self.sband.complete(t) {
+            self.tx_activity(t, false);
             let n = frame.bytes.len() as u64;
             self.counters.frames_sent += 1;
             self.tm_sband_downlinked += n;
@@ -1463,6 +1515,11 @@ impl App for PcApp {
     }
 
     fn reset(&mut self, now: SimTime) {
+        if self.sband.is_transmitting() {
+            self.tx_activity(now, false);
+        }
+        // The transmitter comes back in its configured state; its power is followed anew.
+        self.unpowered = false;
         for i in 0..self.runs.len() {
             let n = self.runs.get_mut(i).map_or(0, |r| r.file.clear());
             if n > 0 {

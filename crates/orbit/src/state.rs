@@ -263,6 +263,9 @@ pub enum Activity {
     ThrusterHeater,
     /// The thruster is firing.
     Firing,
+    /// The EPS has switched the S-band transmitter's power channel off (a power state, not
+    /// a load: posted by the twin from the EPS's channel switches, read by the PC).
+    SbandPowerOff,
 }
 
 /// A log of [`Activity`] switches with their times; readers see the state **strictly

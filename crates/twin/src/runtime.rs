@@ -384,6 +384,13 @@ fn app_for(
                     .with_activity(boards.activity.clone())
                     .with_sink(nodes_eps::Sink::new(move |out| {
                         if let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = &out
+                            && *channel == nodes_eps::Channel::Sband
+                        {
+                            // The S-band transmitter is the PC's: it follows this at its next
+                            // frame boundary.
+                            activity.set(orbit::state::Activity::SbandPowerOff, t.as_ns(), !*on);
+                        }
+                        if let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = &out
                             && let Some(addr) = channel.node_addr()
                         {
                             // The node leaves (or rejoins) its buses at once; an ECU that
@@ -448,9 +455,11 @@ fn app_for(
         Role::Pc => {
             let tx = events.clone();
             Box::new(
-                nodes_pc::PcApp::new(opts.pc.clone()).with_sink(nodes_pc::Sink::new(move |out| {
-                    let _ = tx.send(RunEvent::Pc(Box::new(out)));
-                })),
+                nodes_pc::PcApp::new(opts.pc.clone())
+                    .with_activity(boards.activity.clone())
+                    .with_sink(nodes_pc::Sink::new(move |out| {
+                        let _ = tx.send(RunEvent::Pc(Box::new(out)));
+                    })),
             )
         }
         Role::Payload => {

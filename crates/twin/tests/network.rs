@@ -253,3 +253,72 @@ fn a_setup_for_session_1_on_the_default_scenario_polls_payload_12() {
     assert!(check.is_clean(), "{check:?}");
     assert_eq!(check.addr, Some(12));
 }
+
+/// The S-band's power on the EPS: transmitting frames costs power (the PC posts its
+/// transmissions), and switching the S-band channel off stops the transmitter and its
+/// standby load; switched on, it transmits again.
+#[test]
+fn the_eps_charges_the_s_band_and_its_channel_switches_the_transmitter() {
+    let loaded = m6p_twin::exec::load_default().unwrap();
+    let mut compiled = m6p_twin::exec::compile_loaded(&loaded);
+    m6p_twin::exec::with_duration(&mut compiled, Duration::from_secs(60));
+    for (at, on) in [(30, false), (40, true)] {
+        compiled.opts.eps.timeline.push(nodes_eps::TimedEpsEvent {
+            at: SimTime::from_secs(at),
+            event: nodes_eps::EpsEvent::Channel {
+                channel: nodes_eps::Channel::Sband,
+                on,
+            },
+        });
+    }
+    // SETUP: session 1, now, 30 s, no packet limit, 254-byte frames, no sync message.
+    let setup = vec![1, 1, 0, 0, 0, 0, 30, 0, 0, 0, 254];
+    compiled
+        .opts
+        .ground_plan
+        .entry(16)
+        .or_default()
+        .push(request(20, 6, 10, setup));
+    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let report = rt.block_on(run(compiled.opts, None)).unwrap();
+    let mean_load = |a: u64, b: u64| {
+        let v: Vec<f64> = report
+            .power
+            .iter()
+            .filter(|s| s.t > SimTime::from_secs(a) && s.t <= SimTime::from_secs(b))
+            .map(|s| s.load_w)
+            .collect();
+        assert!(!v.is_empty());
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let (idle, tx, off, back) = (
+        mean_load(10, 19),
+        mean_load(22, 29),
+        mean_load(32, 39),
+        mean_load(42, 49),
+    );
+    // A 1279-byte frame (10.2 ms at 1 Mbit/s) per POLL cycle: roughly a 10 % duty of 9 W,
+    // the wheels and magnetorquers aside (the ADCS is busy in all four windows).
+    assert!(
+        tx - idle > 0.3 && tx - idle < 2.0,
+        "idle {idle} W, transmitting {tx} W"
+    );
+    // Off: no standby (1.2 W) and no transmissions.
+    assert!(
+        off < idle - 0.8,
+        "idle {idle} W, S-band channel off {off} W"
+    );
+    // Back on: standby and transmissions again (the ADCS's own load varies between the
+    // windows, so only the step up is checked).
+    assert!(back > off + 0.8, "S-band off {off} W, back on {back} W");
+    // Nothing was lost: the queue waited while the transmitter was unpowered.
+    let run1 = &report.sessions.runs[0];
+    assert_eq!(run1.ended.map(|e| e.1), Some(0));
+    assert!(
+        run1.bytes.len() > 250 * 254,
+        "{:?} {} bytes {:?}",
+        run1.ended,
+        run1.bytes.len(),
+        report.sessions.dropped
+    );
+}
