@@ -298,10 +298,10 @@ fn a_real_recording_decodes_with_the_python_mcap_package() {
     );
 }
 
-#[test]
-fn a_run_with_outside_programs_replays_identically_from_its_recorded_input() {
+/// One real-time run with two outside connections, recorded, then replayed: the replay's
+/// verdict (`Ok` when identical) and the recording's summary.
+fn outside_run_and_replay(rec: &std::path::Path) -> (Result<(), String>, String) {
     use std::io::{BufRead, BufReader};
-    let rec = tmp("outside.mcap");
     let mut child = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
         .args([
             "run",
@@ -312,7 +312,7 @@ fn a_run_with_outside_programs_replays_identically_from_its_recorded_input() {
             "127.0.0.1:0",
             "--record",
         ])
-        .arg(&rec)
+        .arg(rec)
         .current_dir(repo())
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
@@ -353,14 +353,43 @@ fn a_run_with_outside_programs_replays_identically_from_its_recorded_input() {
     drain.join().unwrap();
     // Replay feeds the two connections' recorded bytes again, in virtual time.
     let (code, out, err) = twin(&["replay", rec.to_str().unwrap()]);
-    assert_eq!(code, 0, "{out}{err}");
-    assert!(out.starts_with("identical"), "{out}");
     let (_, summary, _) = twin(&["inspect", rec.to_str().unwrap()]);
-    assert!(
-        summary.contains("/kiss/listen_127.0.0.1:0_1/in")
-            && summary.contains("/kiss/listen_127.0.0.1:0_2/out"),
-        "{summary}"
-    );
+    let verdict = if code == 0 && out.starts_with("identical") {
+        Ok(())
+    } else {
+        Err(format!("{out}{err}"))
+    };
+    (verdict, summary)
+}
+
+#[test]
+fn a_run_with_outside_programs_replays_identically_from_its_recorded_input() {
+    // A real-time original stamps a frame when its task actually runs: when several nodes
+    // have work at the same instant (the FC's 10 Hz tick, say) a frame can be stamped a
+    // fraction of a millisecond later than in the virtual-time replay, where work takes no
+    // time (docs/recording.md, "Replay of outside input"). Such a run says so and is
+    // repeated; three timing-disturbed originals in a row fail the test.
+    let mut failures = Vec::new();
+    for attempt in 0..3 {
+        let rec = tmp(&format!("outside-{attempt}.mcap"));
+        let (verdict, summary) = outside_run_and_replay(&rec);
+        assert!(
+            summary.contains("/kiss/listen_127.0.0.1:0_1/in")
+                && summary.contains("/kiss/listen_127.0.0.1:0_2/out"),
+            "{summary}"
+        );
+        match verdict {
+            Ok(()) => return,
+            Err(why) => {
+                assert!(
+                    why.contains("first divergence"),
+                    "not a timing divergence: {why}"
+                );
+                failures.push(why);
+            }
+        }
+    }
+    panic!("three real-time originals diverged from their replays: {failures:#?}");
 }
 
 #[test]
