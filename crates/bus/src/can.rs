@@ -106,6 +106,8 @@ impl BusStats {
 struct Port {
     stats: PortStats,
     addrs: BTreeSet<u8>,
+    /// The addresses given at attach (never taken out by an alias).
+    own: BTreeSet<u8>,
     promiscuous: bool,
     enabled: bool,
     queue: VecDeque<(SimTime, CanFrame)>,
@@ -230,6 +232,7 @@ impl CanBus {
                 ..Default::default()
             },
             addrs: addrs.iter().copied().collect(),
+            own: addrs.iter().copied().collect(),
             promiscuous,
             enabled: true,
             queue: VecDeque::new(),
@@ -250,6 +253,20 @@ impl CanBus {
             p.enabled = enabled;
             if !enabled {
                 p.queue.clear();
+            }
+        }
+    }
+
+    /// Add `addr` to an endpoint's filter (`on`) or take it out again, without claiming it:
+    /// the secondary COMM answering to the primary's link address while it carries the
+    /// radio link. Its own address cannot be taken out this way.
+    pub fn set_alias(&self, port: &CanPort, addr: u8, on: bool) {
+        let mut st = self.lock();
+        if let Some(p) = st.ports.get_mut(port.idx) {
+            if on {
+                p.addrs.insert(addr);
+            } else if !p.own.contains(&addr) {
+                p.addrs.remove(&addr);
             }
         }
     }
@@ -569,6 +586,38 @@ mod tests {
         assert_eq!(s.frames, 3);
         assert_eq!(s.ports[0].frames_tx, 2);
         assert_eq!(s.ports[2].frames_rx, 2);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_alias_receives_another_link_address_until_taken_out() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let bus = CanBus::new(CanBusConfig::new("main"), 1);
+        let (tx_a, _ra) = inbox();
+        let (tx_b, mut rx_b) = inbox();
+        let a = bus.attach("FC", &[3], false, tx_a, 0);
+        let b = bus.attach("COMM2", &[2], false, tx_b, 0);
+        tokio::spawn(bus.clone().run(clock));
+        a.send(SimTime::ZERO, cfp_frame(3, 1, 1));
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert!(rx_b.try_recv().is_err(), "no alias yet");
+        bus.set_alias(&b, 1, true);
+        a.send(clock.now(), cfp_frame(3, 1, 2));
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert_eq!(
+            rx_b.recv().await.unwrap().what,
+            Arrival::Can(cfp_frame(3, 1, 2))
+        );
+        bus.set_alias(&b, 1, false);
+        // Its own address stays whatever is asked.
+        bus.set_alias(&b, 2, false);
+        a.send(clock.now(), cfp_frame(3, 1, 3));
+        a.send(clock.now(), cfp_frame(3, 2, 4));
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert_eq!(
+            rx_b.recv().await.unwrap().what,
+            Arrival::Can(cfp_frame(3, 2, 4))
+        );
+        assert!(rx_b.try_recv().is_err());
     }
 
     #[tokio::test(start_paused = true)]

@@ -39,6 +39,9 @@ pub enum NodeCtl {
     Power(bool),
     /// Hang: alive on the bus (frames are acknowledged) but silent; `false` recovers.
     Hang(bool),
+    /// Flip an application's hardware switch ([`csp::node::App::switch`]); applied whether
+    /// or not the node is powered (it is hardware state).
+    Switch(&'static str, bool),
     /// Stop the task and hand the host back.
     Stop,
 }
@@ -111,6 +114,7 @@ pub async fn run_node_logged<A: App>(
                         }
                     }
                     Some(NodeCtl::Hang(h)) => hung = h,
+                    Some(NodeCtl::Switch(name, on)) => host.switch(name, on, t),
                 }
             }
             m = inbox.recv() => {

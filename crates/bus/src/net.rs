@@ -11,7 +11,10 @@
 //!   radio endpoint occupies the channel for `(len + overhead) * 8 / rate` and arrives
 //!   `air_delay` after it leaves; traffic between ground endpoints is instantaneous;
 //! - impairments (drop, corrupt, delay, down) apply to the air channel, drawn from the
-//!   net's seeded generator.
+//!   net's seeded generator;
+//! - the default endpoint can move to another radio ([`PacketNet::set_default`]: the
+//!   secondary COMM taking the link over), and an [`AirTap`] hears every transmission by a
+//!   radio endpoint (its air time, for the power budget).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -47,6 +50,24 @@ impl PacketNetConfig {
             air_overhead_bytes: 0,
             air_delay: Duration::from_millis(3),
         }
+    }
+}
+
+/// Called with `(start, end)` of every transmission by a radio endpoint, when it is
+/// submitted (so the instants may lie in the future; they come in time order).
+#[derive(Clone)]
+pub struct AirTap(Arc<dyn Fn(SimTime, SimTime) + Send + Sync>);
+
+impl AirTap {
+    /// A tap calling `f(start, end)`.
+    pub fn new(f: impl Fn(SimTime, SimTime) + Send + Sync + 'static) -> Self {
+        AirTap(Arc::new(f))
+    }
+}
+
+impl std::fmt::Debug for AirTap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("AirTap")
     }
 }
 
@@ -98,6 +119,7 @@ struct State {
     impair: Impairments,
     rng: ImpairRng,
     trace: Option<TraceTx>,
+    air_tap: Option<AirTap>,
     /// Whether the radio link can close (a pass over a ground station); see
     /// [`PacketNet::set_contact`].
     contact: bool,
@@ -150,6 +172,7 @@ impl PacketNet {
                 seq: 0,
                 impair: Impairments::default(),
                 trace: None,
+                air_tap: None,
                 contact: true,
             })),
             wake: Arc::new(Notify::new()),
@@ -201,6 +224,11 @@ impl PacketNet {
         }
     }
 
+    /// Make `port` the default endpoint: the destination of every address nobody owns.
+    pub fn set_default(&self, port: &NetPort) {
+        self.lock().default_ep = Some(port.idx);
+    }
+
     /// Make `port` the only receiver of `addr` until released.
     pub fn claim(&self, port: &NetPort, addr: u8) {
         let mut st = self.lock();
@@ -235,6 +263,11 @@ impl PacketNet {
     /// Send every packet that crosses the network to `tx`.
     pub fn set_trace(&self, tx: TraceTx) {
         self.lock().trace = Some(tx);
+    }
+
+    /// Hand the air time of every radio endpoint's transmission to `tap`.
+    pub fn set_air_tap(&self, tap: AirTap) {
+        self.lock().air_tap = Some(tap);
     }
 
     /// A snapshot of the counters.
@@ -301,6 +334,11 @@ impl State {
             let start = t.max(self.air_busy_until);
             self.air_busy_until = start + dur;
             self.stats.air_busy += dur;
+            if self.eps[from].radio
+                && let Some(tap) = &self.air_tap
+            {
+                (tap.0)(start, self.air_busy_until);
+            }
             let fate = if self.contact {
                 self.rng.fate(&self.impair)
             } else {
@@ -399,6 +437,44 @@ mod tests {
         sat.send(b.t, Packet::new(Header::new(3, 19, 40, 1), vec![]));
         tokio::time::sleep(Duration::from_millis(10)).await;
         assert_eq!(net.stats().unroutable, 1);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_default_moves_to_another_radio_and_the_tap_hears_radios_only() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let net = PacketNet::new(PacketNetConfig::ground(), 1);
+        let (tx_gs, mut rx_gs) = inbox();
+        let (tx_1, mut rx_1) = inbox();
+        let (tx_2, mut rx_2) = inbox();
+        let gs = net.attach("GS16", &[16], false, false, tx_gs, 0);
+        let _r1 = net.attach("COMM1-uhf", &[], true, true, tx_1, 1);
+        let r2 = net.attach("COMM2-uhf", &[], true, false, tx_2, 1);
+        let heard = Arc::new(Mutex::new(Vec::new()));
+        {
+            let heard = heard.clone();
+            net.set_air_tap(AirTap::new(move |a, b| {
+                heard.lock().unwrap().push((a, b));
+            }));
+        }
+        tokio::spawn(net.clone().run(clock));
+        let up = |n| Packet::new(Header::new(16, 3, 1, 40), vec![n; 8]);
+        gs.send(SimTime::ZERO, up(1));
+        assert!(rx_1.recv().await.is_some());
+        net.set_default(&r2);
+        gs.send(clock.now(), up(2));
+        let a = rx_2.recv().await.unwrap();
+        assert!(matches!(a.what, crate::inbox::Arrival::Packet(ref p) if p.data == vec![2; 8]));
+        assert!(rx_1.try_recv().is_err());
+        // The ground's sends were not charged; the radio's one is, for its 12 bytes' air time.
+        assert!(heard.lock().unwrap().is_empty());
+        r2.send(a.t, Packet::new(Header::new(3, 16, 40, 1), vec![0; 8]));
+        assert!(rx_gs.recv().await.is_some());
+        let heard = heard.lock().unwrap().clone();
+        assert_eq!(heard.len(), 1);
+        assert_eq!(
+            heard[0].1 - heard[0].0,
+            Duration::from_nanos(12 * 8 * 1_000_000_000 / 9600)
+        );
     }
 
     #[tokio::test(start_paused = true)]

@@ -543,6 +543,9 @@ pub trait App: Send + 'static {
     fn handle_timeout(&mut self, _node: &mut Node, _now: SimTime) {}
     /// Forget volatile state (reboot or power cycle).
     fn reset(&mut self, _now: SimTime) {}
+    /// The run flipped one of the node's hardware switches (`radio` on a COMM: active or
+    /// standby). Applications ignore switches they do not have.
+    fn switch(&mut self, _node: &mut Node, _name: &str, _on: bool, _now: SimTime) {}
     /// The run ends at `now`: report final figures (accounting, counters) through the
     /// application's own outputs. Nothing is sent on the network any more.
     fn finish(&mut self, _node: &mut Node, _now: SimTime) {}
@@ -595,6 +598,11 @@ impl<A: App> Host<A> {
     pub fn handle_timeout(&mut self, now: SimTime) {
         self.node.handle_timeout(now);
         self.app.handle_timeout(&mut self.node, now);
+        self.after_input(now);
+    }
+    /// Flip the application's hardware switch `name` (see [`App::switch`]).
+    pub fn switch(&mut self, name: &str, on: bool, now: SimTime) {
+        self.app.switch(&mut self.node, name, on, now);
         self.after_input(now);
     }
     /// Reboot node and application (service port 4, or a scenario fault).
@@ -667,6 +675,9 @@ impl<T: App + ?Sized> App for Box<T> {
     }
     fn reset(&mut self, now: SimTime) {
         (**self).reset(now)
+    }
+    fn switch(&mut self, node: &mut Node, name: &str, on: bool, now: SimTime) {
+        (**self).switch(node, name, on, now)
     }
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         (**self).finish(node, now)

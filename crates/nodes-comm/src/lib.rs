@@ -12,9 +12,10 @@
 //! # Roles and the radio
 //! [`CommRole::Primary`] (COMM1) starts with its radio **active**; [`CommRole::Secondary`]
 //! (COMM2) starts on **standby**: it answers port 10 (TMCOMM says standby) and sends no
-//! beacon. [`CommApp::set_active`] is the switch the twin flips when COMM2 takes the radio
-//! route over (COMM1 powered off or failed); it is hardware state and survives reboots.
-//! Only an active radio beacons.
+//! beacon. The [`RADIO_SWITCH`] ([`App::switch`], or [`CommApp::set_active`] directly) is
+//! what the twin flips when COMM2 takes the radio link over (COMM1 powered off or failed;
+//! see `docs/platform.md`); it is hardware state and survives reboots. Only an active
+//! radio beacons.
 //!
 //! # Beacons
 //! An active radio sends a beacon every period (default 60 s, BEACONSET 0 = off, else
@@ -25,13 +26,12 @@
 //! station does not reply. Its data is `04 | 01 | Beacon` ([`wire::Beacon`], 171 + 2
 //! bytes): the BEACON 4 reply sent unsolicited.
 //!
-//! Each beacon puts [`Activity::UhfTx`] on for its air time,
-//! `(4 + data) bytes x 8 / rate` (CSP header and data; plus the configured framing
-//! overhead, 0 by default like `bus::net`), so the EPS charges the transmitter. Both
-//! switches are posted when the beacon is sent (the off one at its future instant), so no
-//! timer is needed and readers (which see only switches strictly before their instant) stay
-//! deterministic. Downlink traffic the node forwards (replies to the ground) is not the
-//! application's to see and is not charged here: the twin can post it from the air channel.
+//! The transmitter's air time ([`orbit::state::Activity::UhfTx`], for the EPS) is charged
+//! by the twin from the air channel (`bus::net`'s air tap): every packet a radio sends,
+//! beacons and forwarded downlink alike, at its real place on the half-duplex channel.
+//! The application only counts its beacons' air time (TMCOMM),
+//! `(4 + data) bytes x 8 / rate` (plus the configured framing overhead, 0 by default like
+//! `bus::net`).
 //!
 //! # Reboot
 //! Volatile ([`App::reset`]): the beacon sequence (restarts at 1), the period (back to the
@@ -48,7 +48,7 @@ use csp::reqrep::serve;
 use csp::{Header, Packet, SimTime};
 use orbit::geodetic::ecef_km_to_geodetic;
 use orbit::passes::GroundSite;
-use orbit::state::{Activity, ActivityBoard, TruthBoard, TruthSnapshot};
+use orbit::state::{TruthBoard, TruthSnapshot};
 
 pub use crate::link::{LinkBudget, LinkState, Station};
 use crate::wire::Repr;
@@ -202,13 +202,15 @@ pub struct CommCounters {
     pub refused: u64,
 }
 
+/// The name of the radio's hardware switch ([`App::switch`]): on = active, off = standby.
+pub const RADIO_SWITCH: &str = "radio";
+
 /// The COMM application (see the module doc).
 #[derive(Debug)]
 pub struct CommApp {
     cfg: CommConfig,
     sites: Vec<GroundSite>,
     truth: Option<TruthBoard>,
-    activity: Option<ActivityBoard>,
     active: bool,
     /// Became active since the last timer: arm the schedule at the next timeout.
     activation_pending: bool,
@@ -228,7 +230,6 @@ impl CommApp {
         CommApp {
             sites: cfg.stations.iter().map(Station::site).collect(),
             truth: None,
-            activity: None,
             active: cfg.role == CommRole::Primary,
             activation_pending: false,
             period: cfg.beacon_period,
@@ -245,12 +246,6 @@ impl CommApp {
     /// Read the FC's truth from `b` (position, attitude, link geometry).
     pub fn with_truth(mut self, b: TruthBoard) -> Self {
         self.truth = Some(b);
-        self
-    }
-
-    /// Post the transmitter's [`Activity::UhfTx`] switches on `b`.
-    pub fn with_activity(mut self, b: ActivityBoard) -> Self {
-        self.activity = Some(b);
         self
     }
 
@@ -426,10 +421,6 @@ impl CommApp {
                 self.air_since_boot += air;
                 self.counters.beacons_sent += 1;
                 self.counters.beacon_air += air;
-                if let Some(a) = &self.activity {
-                    a.set(Activity::UhfTx, now.as_ns(), true);
-                    a.set(Activity::UhfTx, (now + air).as_ns(), false);
-                }
             }
             Err(e) => {
                 self.counters.beacon_failures += 1;
@@ -519,6 +510,17 @@ impl App for CommApp {
             next = next + self.period;
         }
         self.next_beacon = Some(next);
+    }
+
+    fn switch(&mut self, _node: &mut Node, name: &str, on: bool, now: SimTime) {
+        if name == RADIO_SWITCH {
+            self.last_now = self.last_now.max(now);
+            self.set_active(on);
+            if self.activation_pending {
+                self.activation_pending = false;
+                self.arm(now);
+            }
+        }
     }
 
     fn reset(&mut self, now: SimTime) {

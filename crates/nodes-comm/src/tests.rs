@@ -1,4 +1,4 @@
-//! CommApp driven through a `Host`: beacons, port 10, link state, UHF activity.
+//! CommApp driven through a `Host`: beacons, port 10, link state, the radio switch.
 
 #![allow(clippy::unwrap_used)]
 
@@ -302,36 +302,43 @@ fn nearest_station_above_the_mask_is_reported() {
 }
 
 #[test]
-fn uhf_tx_duty_matches_the_beacon_air_time() {
+fn beacon_air_time_is_counted_at_the_radio_rate() {
     assert_eq!(air_time(173, 9600, 0), BEACON_AIR);
-    let act = ActivityBoard::new();
-    let mut h = host_with(
-        CommApp::new(CommConfig::default()).with_activity(act.clone()),
-        1,
-    );
+    let mut h = host_with(CommApp::new(CommConfig::default()), 1);
     drive(&mut h, SimTime::from_secs(600));
-    let end = SimTime::from_secs(601).as_ns();
-    let on_s = act.duty(Activity::UhfTx, 0, end) * 601.0;
-    assert!((on_s - 10.0 * 0.1475).abs() < 1e-9, "{on_s}");
-    let t60 = SimTime::from_secs(60).as_ns();
-    let air = BEACON_AIR.as_nanos() as u64;
-    assert!(!act.on_before(Activity::UhfTx, t60));
-    assert!(act.on_before(Activity::UhfTx, t60 + 1));
-    assert!(act.on_before(Activity::UhfTx, t60 + air));
-    assert!(!act.on_before(Activity::UhfTx, t60 + air + 1));
-    assert_eq!(act.duty(Activity::UhfTx, t60, t60 + air), 1.0);
     let tm = tmcomm(&mut h, SimTime::from_secs(601));
     assert_eq!(tm.beacon_air_ms, 1475);
     assert_eq!(h.app.counters().beacon_air, BEACON_AIR * 10);
     // A faster radio: air time scales with the rate.
-    let act = ActivityBoard::new();
     let cfg = CommConfig {
         air_rate_bps: 19_200,
         ..CommConfig::default()
     };
-    let mut h = host_with(CommApp::new(cfg).with_activity(act.clone()), 1);
+    let mut h = host_with(CommApp::new(cfg), 1);
     drive(&mut h, SimTime::from_secs(60));
-    assert!((act.duty(Activity::UhfTx, 0, end) * 601.0 - 0.07375).abs() < 1e-9);
+    assert_eq!(h.app.counters().beacon_air, BEACON_AIR / 2);
+}
+
+#[test]
+fn the_radio_switch_activates_the_secondary_at_its_instant() {
+    let cfg = CommConfig {
+        role: CommRole::Secondary,
+        ..CommConfig::default()
+    };
+    let mut h = host_with(CommApp::new(cfg), 2);
+    drive(&mut h, SimTime::from_secs(100));
+    assert_eq!(h.app.counters().beacons_sent, 0);
+    h.switch("not-a-switch", true, SimTime::from_secs(100));
+    assert!(!h.app.is_active());
+    h.switch(RADIO_SWITCH, true, SimTime::from_secs(105));
+    assert!(h.app.is_active());
+    assert_eq!(h.app.next_beacon(), Some(SimTime::from_secs(165)));
+    drive(&mut h, SimTime::from_secs(230));
+    assert_eq!(h.app.counters().beacons_sent, 2);
+    h.switch(RADIO_SWITCH, false, SimTime::from_secs(230));
+    assert_eq!(h.app.next_beacon(), None);
+    drive(&mut h, SimTime::from_secs(400));
+    assert_eq!(h.app.counters().beacons_sent, 2);
 }
 
 #[test]

@@ -283,7 +283,8 @@ impl ActivityBoard {
     }
 
     /// `what` switched on or off at `t_ns` (switches of one activity come in time order;
-    /// only the last 256 are kept).
+    /// between the last 2048 and 4096 are kept: readers look back one EPS step, which holds
+    /// far fewer even for UHF packets queued back to back).
     pub fn set(&self, what: Activity, t_ns: u64, on: bool) {
         let mut m = self
             .0
@@ -293,8 +294,8 @@ impl ActivityBoard {
         if v.last().is_some_and(|&(_, last)| last == on) {
             return;
         }
-        if v.len() >= 256 {
-            v.remove(0);
+        if v.len() >= 4096 {
+            v.drain(..2048);
         }
         v.push((t_ns, on));
     }

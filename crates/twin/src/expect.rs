@@ -212,8 +212,21 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
             );
             verdict(passed, t, observed)
         }
-        Check::Beacon { within, min, max } => {
-            let (passed, t, observed) = check_beacons(report, *within, *min, *max);
+        Check::Beacon {
+            within,
+            min,
+            max,
+            sender,
+            from,
+            to,
+        } => {
+            let (passed, t, observed) = check_beacons(
+                report,
+                *within,
+                (*min, *max),
+                *sender,
+                (*from, to.unwrap_or(report.sim_time)),
+            );
             verdict(passed, t, observed)
         }
         Check::Session { .. } | Check::Downlink { .. } | Check::Accounting { .. } => {
@@ -499,15 +512,28 @@ fn contact_windows(report: &RunReport) -> Vec<(SimTime, SimTime)> {
 fn check_beacons(
     report: &RunReport,
     within: Option<std::time::Duration>,
-    min: Option<u64>,
-    max: Option<u64>,
+    (min, max): (Option<u64>, Option<u64>),
+    sender: Option<u8>,
+    (from, to): (SimTime, SimTime),
 ) -> (bool, SimTime, String) {
-    let end = report.sim_time;
-    let n = report.beacons.len() as u64;
-    let windows = contact_windows(report);
+    let end = to;
+    let beacons: Vec<(SimTime, u8, u32)> = report
+        .beacons
+        .iter()
+        .copied()
+        .filter(|&(t, s, _)| t >= from && t <= to && sender.is_none_or(|w| w == s))
+        .collect();
+    let n = beacons.len() as u64;
+    // Contact windows cut to [from, to].
+    let windows: Vec<(SimTime, SimTime)> = contact_windows(report)
+        .into_iter()
+        .map(|(a, b)| (a.max(from), b.min(to)))
+        .filter(|(a, b)| b > a)
+        .collect();
     let contact_s: f64 = windows.iter().map(|(a, b)| (*b - *a).as_secs_f64()).sum();
     let mut seen = format!(
-        "{n} beacons on the ground over {:.0} s of contact in {} window(s)",
+        "{n} beacons{} on the ground over {:.0} s of contact in {} window(s)",
+        sender.map_or(String::new(), |a| format!(" from CSP {a}")),
         contact_s,
         windows.len()
     );
@@ -525,7 +551,7 @@ fn check_beacons(
                 continue;
             }
             let mut last = a;
-            for &(t, _, _) in report.beacons.iter().filter(|(t, _, _)| *t >= a && *t <= b) {
+            for &(t, _, _) in beacons.iter().filter(|(t, _, _)| *t >= a && *t <= b) {
                 if t - last > gap {
                     return (
                         false,
@@ -549,8 +575,7 @@ fn check_beacons(
         }
         seen.push_str(&format!("; every gap in contact within {gap:?}"));
     }
-    if let Some(&(t, _, _)) = report
-        .beacons
+    if let Some(&(t, _, _)) = beacons
         .iter()
         // A beacon sent just before the loss of contact lands up to its air time later.
         .find(|(t, _, _)| {

@@ -3,14 +3,20 @@
 //!
 //! ```text
 //!  ground segment (packet net)          main CAN bus                payload CAN bus
-//!  GS 16 ... ── UHF air ── COMM1 (1) ── COMM2 (2), FC (3), EPS (4), ECU (5) ── PC (6) ── payloads 12-15
+//!  GS 16 ... ── UHF air ─┬ COMM1 (1) ─┬ FC (3), EPS (4), ECU (5) ── PC (6) ── payloads 12-15
+//!                        └ COMM2 (2) ─┘   (COMM2's radio on standby)
 //! ```
 //!
-//! Routing (static for a run): main-bus nodes reach payloads through the PC (CFP next hop 6)
-//! and the ground through the primary COMM (next hop 1); the PC reaches payloads directly
-//! on the payload bus and everything else on the main bus; payloads reach everything off
-//! their bus through the PC; COMM1 sends ground traffic (16-20) over the UHF link. Ids 7-11
-//! are reserved: nobody answers there.
+//! Routing (static for a run, ICD 1.7): main-bus nodes reach payloads through the PC (CFP
+//! next hop 6) and the ground through the primary COMM (next hop 1); the PC reaches payloads
+//! directly on the payload bus and everything else on the main bus; payloads reach
+//! everything off their bus through the PC; each COMM sends ground traffic (16-20) over its
+//! own UHF radio. Ids 7-11 are reserved: nobody answers there.
+//!
+//! The ground's uplink reaches the *active* radio (COMM1's at the start). When COMM2 takes
+//! the link over (runtime's `RadioLink`), the tables stay as they are: COMM2 also answers
+//! to link address 1 on the main bus, so what the nodes route via COMM1 reaches COMM2, and
+//! the ground's uplink reaches COMM2's radio.
 
 use csp::node::{IfaceConfig, NodeConfig};
 use csp::router::{Route, RoutingTable};
@@ -40,7 +46,7 @@ pub const RESERVED: std::ops::RangeInclusive<u8> = 7..=11;
 pub enum Role {
     /// Primary COMM: main CAN bus and the UHF radio.
     CommPrimary,
-    /// Secondary COMM: main CAN bus (radio on standby).
+    /// Secondary COMM: main CAN bus and a UHF radio on standby.
     CommSecondary,
     /// Flight computer.
     Fc,
@@ -130,8 +136,12 @@ pub enum Medium {
     MainCan,
     /// The payload CAN bus.
     PayloadCan,
-    /// The ground segment, as the satellite's radio (behind the air channel).
+    /// The ground segment, as the satellite's active radio (behind the air channel; the
+    /// ground's default endpoint).
     GroundRadio,
+    /// The ground segment, as a satellite radio on standby (behind the air channel; sends,
+    /// but the ground's uplink goes to the active radio).
+    GroundRadioStandby,
     /// The ground segment, as a ground station.
     Ground,
 }
@@ -142,14 +152,19 @@ pub fn node_config(spec: &NodeSpec) -> (NodeConfig, Vec<Medium>) {
     cfg.service.uptime = spec.uptime;
     let mut rt = RoutingTable::new();
     let media = match spec.role {
-        Role::CommPrimary => {
+        Role::CommPrimary | Role::CommSecondary => {
             cfg.ifaces = vec![IfaceConfig::can("main-can"), IfaceConfig::packet("uhf")];
             rt.set_default(Route::direct(0))
                 .set_range(PAYLOADS, Route::via(0, PC))
                 .set_range(GROUND, Route::direct(1));
-            vec![Medium::MainCan, Medium::GroundRadio]
+            let radio = if spec.role == Role::CommPrimary {
+                Medium::GroundRadio
+            } else {
+                Medium::GroundRadioStandby
+            };
+            vec![Medium::MainCan, radio]
         }
-        Role::CommSecondary | Role::Fc | Role::Eps | Role::Ecu => {
+        Role::Fc | Role::Eps | Role::Ecu => {
             cfg.ifaces = vec![IfaceConfig::can("main-can")];
             rt.set_default(Route::direct(0))
                 .set_range(PAYLOADS, Route::via(0, PC))
@@ -204,6 +219,8 @@ mod tests {
         assert_eq!(route("FC", 12), Some(Some(Route::via(0, PC))));
         assert_eq!(route("FC", 16), Some(Some(Route::via(0, COMM1))));
         assert_eq!(route("COMM1", 16), Some(Some(Route::direct(1))));
+        assert_eq!(route("COMM2", 16), Some(Some(Route::direct(1))));
+        assert_eq!(route("COMM2", 3), Some(Some(Route::direct(0))));
         assert_eq!(route("PC", 13), Some(Some(Route::direct(1))));
         assert_eq!(route("PL12", 3), Some(Some(Route::via(0, PC))));
         assert_eq!(route("GS16", 3), Some(Some(Route::direct(0))));

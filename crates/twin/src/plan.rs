@@ -147,7 +147,8 @@ pub enum Check {
         /// `always`, `sunlit` (array power above zero) or `eclipse` (none).
         when: crate::scenario::When,
     },
-    /// Beacons on the ground: every `within` during contact, `min`..=`max` in all.
+    /// Beacons on the ground (from one COMM, in a window): every `within` during contact,
+    /// `min`..=`max` in all.
     Beacon {
         /// Longest gap in contact (from acquisition, between beacons, to loss).
         within: Option<Duration>,
@@ -155,6 +156,12 @@ pub enum Check {
         min: Option<u64>,
         /// Most beacons.
         max: Option<u64>,
+        /// Only beacons from this CSP address (COMM1 or COMM2); `None`: either.
+        sender: Option<u8>,
+        /// Window start.
+        from: SimTime,
+        /// Window end (default: the end of the run).
+        to: Option<SimTime>,
     },
     /// A counter at the end of the run.
     Counter {
@@ -597,6 +604,9 @@ fn compile_expectation(
             within: x.within.map(|d| d.0),
             min: x.min,
             max: x.max,
+            sender: x.target.as_ref().and_then(|r| net.resolve(r).ok()),
+            from: x.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),
+            to: x.to.map(|d| SimTime::ZERO + d.0),
         },
         ExpectKind::Counter => Check::Counter {
             target: match &x.target {

@@ -304,6 +304,153 @@ pub struct Boards {
     pub activity: orbit::state::ActivityBoard,
     /// The nodes' control channels by address, for the EPS's power switches.
     pub power: PowerSwitches,
+    /// Which COMM carries the radio link.
+    pub radio: RadioLink,
+}
+
+/// Which COMM carries the radio link, and the take-over: while COMM1 is powered off or
+/// failed (hung) and COMM2 is up, COMM2 carries it; when COMM1 is back, COMM1 does.
+///
+/// The routing tables stay as they are (ICD 1.7: the CSP network configuration cannot change
+/// at runtime). Taking over means, at the instant COMM1 goes down:
+/// - COMM2 answers to COMM1's link address (CFP destination 1) on the main bus as well as
+///   its own, so what the nodes route to the ground via COMM1 reaches COMM2, which sends it
+///   over its own radio by its static table (ground 16-20 direct on UHF); a packet for CSP
+///   1 itself that COMM2 receives this way is dropped (counted, "same iface");
+/// - the ground's uplink goes to COMM2's radio (the air channel's default endpoint);
+/// - COMM2's radio goes active (beacons from CSP 2) and COMM1's to standby.
+///
+/// Handing back undoes the three at the instant COMM1 is powered on or recovers.
+#[derive(Debug, Clone, Default)]
+pub struct RadioLink(Arc<Mutex<RadioLinkState>>);
+
+#[derive(Debug, Default)]
+struct RadioLinkState {
+    /// Powered and not hung, for COMM1 and COMM2.
+    powered: [bool; 2],
+    hung: [bool; 2],
+    secondary: bool,
+    main: Option<CanBus>,
+    ground: Option<PacketNet>,
+    can2: Option<bus::can::CanPort>,
+    uhf: [Option<bus::net::NetPort>; 2],
+    ctl: [Option<mpsc::UnboundedSender<NodeCtl>>; 2],
+    events: Option<mpsc::UnboundedSender<RunEvent>>,
+}
+
+impl RadioLink {
+    fn lock(&self) -> std::sync::MutexGuard<'_, RadioLinkState> {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Register COMM `addr`'s (1 or 2) control channel and attachments.
+    fn register(
+        &self,
+        addr: u8,
+        ctl: mpsc::UnboundedSender<NodeCtl>,
+        ports: &[Attachment],
+        segs: &Segments,
+        events: &mpsc::UnboundedSender<RunEvent>,
+    ) {
+        let Some(i) = Self::index(addr) else {
+            return;
+        };
+        let mut st = self.lock();
+        st.powered[i] = true;
+        st.ctl[i] = Some(ctl);
+        st.main = Some(segs.main.clone());
+        st.ground = Some(segs.ground.clone());
+        st.events = Some(events.clone());
+        for p in ports {
+            match p {
+                Attachment::Can(c) if i == 1 => st.can2 = Some(c.clone()),
+                Attachment::Net(n) => st.uhf[i] = Some(n.clone()),
+                Attachment::Can(_) => {}
+            }
+        }
+    }
+
+    fn index(addr: u8) -> Option<usize> {
+        match addr {
+            crate::network::COMM1 => Some(0),
+            crate::network::COMM2 => Some(1),
+            _ => None,
+        }
+    }
+
+    /// COMM `addr` was powered on or off at `t` (other addresses: nothing).
+    pub fn power(&self, addr: u8, on: bool, t: SimTime) {
+        if let Some(i) = Self::index(addr) {
+            let mut st = self.lock();
+            st.powered[i] = on;
+            // Power cycling ends a hang (as the node driver does).
+            st.hung[i] = false;
+            st.update(t);
+        }
+    }
+
+    /// COMM `addr` hung (failed) or recovered at `t`.
+    pub fn hang(&self, addr: u8, hung: bool, t: SimTime) {
+        if let Some(i) = Self::index(addr) {
+            let mut st = self.lock();
+            st.hung[i] = hung;
+            st.update(t);
+        }
+    }
+
+    /// Whether COMM2 carries the radio link now.
+    pub fn secondary(&self) -> bool {
+        self.lock().secondary
+    }
+}
+
+impl RadioLinkState {
+    fn up(&self, i: usize) -> bool {
+        self.powered[i] && !self.hung[i]
+    }
+
+    fn update(&mut self, t: SimTime) {
+        let want = !self.up(0) && self.up(1);
+        if want == self.secondary || self.uhf[0].is_none() || self.uhf[1].is_none() {
+            return;
+        }
+        self.secondary = want;
+        if let (Some(bus), Some(port)) = (&self.main, &self.can2) {
+            bus.set_alias(port, crate::network::COMM1, want);
+        }
+        if let (Some(net), Some(port)) = (&self.ground, &self.uhf[usize::from(want)]) {
+            net.set_default(port);
+        }
+        for (i, ctl) in self.ctl.iter().enumerate() {
+            if let Some(c) = ctl {
+                let active = (i == 1) == want;
+                let _ = c.send(NodeCtl::Switch(nodes_comm::RADIO_SWITCH, active));
+            }
+        }
+        let message = if want {
+            format!(
+                "COMM2 takes the radio link over (COMM1 {})",
+                if self.powered[0] {
+                    "failed"
+                } else {
+                    "powered off"
+                }
+            )
+        } else {
+            "COMM1 has the radio link back".to_owned()
+        };
+        tracing::info!(%t, "{message}");
+        if let Some(ev) = &self.events {
+            let _ = ev.send(RunEvent::Log {
+                t,
+                source: "radio".to_owned(),
+                level: Level::Info,
+                message,
+            });
+        }
+    }
 }
 
 /// The EPS's power switches: the control channel of every node by address, filled as the
@@ -352,11 +499,7 @@ fn app_for(
                 }
             };
             cfg.air_rate_bps = opts.network.uhf_rate_bps;
-            Box::new(
-                nodes_comm::CommApp::new(cfg)
-                    .with_truth(boards.truth.clone())
-                    .with_activity(boards.activity.clone()),
-            )
+            Box::new(nodes_comm::CommApp::new(cfg).with_truth(boards.truth.clone()))
         }
         Role::Fc => {
             let tx = events.clone();
@@ -376,6 +519,7 @@ fn app_for(
         Role::Eps => {
             let tx = events.clone();
             let power = boards.power.clone();
+            let radio = boards.radio.clone();
             let burns = boards.burns.clone();
             let activity = boards.activity.clone();
             Box::new(
@@ -396,6 +540,7 @@ fn app_for(
                             // The node leaves (or rejoins) its buses at once; an ECU that
                             // loses power stops firing.
                             power.set(addr, *on);
+                            radio.power(addr, *on, *t);
                             if addr == 5 && !*on {
                                 use orbit::state::Activity;
                                 burns.cut_all(t.as_ns());
@@ -558,6 +703,16 @@ pub async fn run_with(
         ..opts.fc.clone()
     };
     let boards = Boards::default();
+    {
+        // Every radio transmission is charged to the UHF transmitter, at its place on the air.
+        let activity = boards.activity.clone();
+        segs.ground
+            .set_air_tap(bus::net::AirTap::new(move |start, end| {
+                use orbit::state::Activity;
+                activity.set(Activity::UhfTx, start.as_ns(), true);
+                activity.set(Activity::UhfTx, end.as_ns(), false);
+            }));
+    }
     let mut nodes = Vec::new();
     for spec in &opts.network.nodes {
         let (mut cfg, media) = node_config(spec);
@@ -584,14 +739,16 @@ pub async fn run_with(
                     inbox_tx.clone(),
                     i,
                 )),
-                Medium::GroundRadio => Attachment::Net(segs.ground.attach(
-                    &format!("{}-uhf", spec.name),
-                    &[],
-                    true,
-                    true,
-                    inbox_tx.clone(),
-                    i,
-                )),
+                Medium::GroundRadio | Medium::GroundRadioStandby => {
+                    Attachment::Net(segs.ground.attach(
+                        &format!("{}-uhf", spec.name),
+                        &[],
+                        true,
+                        *m == Medium::GroundRadio,
+                        inbox_tx.clone(),
+                        i,
+                    ))
+                }
                 Medium::Ground => Attachment::Net(segs.ground.attach(
                     &spec.name,
                     &[spec.addr],
@@ -608,6 +765,11 @@ pub async fn run_with(
         let host = Host::new(cfg, app, clock.now());
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
         boards.power.insert(spec.addr, ctl_tx.clone());
+        if matches!(spec.role, Role::CommPrimary | Role::CommSecondary) {
+            boards
+                .radio
+                .register(spec.addr, ctl_tx.clone(), &ports, &segs, &ev_tx);
+        }
         let log = node_log.clone();
         let handle = tokio::spawn(async move {
             run_node_logged(host, ports, inbox_rx, ctl_rx, clock, Some(log)).await
@@ -781,7 +943,7 @@ pub async fn run_with(
                     break;
                 }
                 while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
-                    apply_fault(&f, &segs, &ctls);
+                    apply_fault(&f, &segs, &ctls, &boards.radio);
                     if let FaultAction::Contact(on) = f.action {
                         contact.push((f.at, on));
                     }
@@ -895,6 +1057,7 @@ fn apply_fault(
     f: &TimedFault,
     segs: &Segments,
     ctls: &BTreeMap<u8, mpsc::UnboundedSender<NodeCtl>>,
+    radio: &RadioLink,
 ) {
     let ctl = |addr: &u8, c: NodeCtl| {
         if let Some(tx) = ctls.get(addr) {
@@ -905,9 +1068,15 @@ fn apply_fault(
         FaultAction::Impair(MediumId::Main, imp) => segs.main.set_impairments(*imp),
         FaultAction::Impair(MediumId::Payload, imp) => segs.payload.set_impairments(*imp),
         FaultAction::Impair(MediumId::Uhf, imp) => segs.ground.set_impairments(*imp),
-        FaultAction::Power(a, on) => ctl(a, NodeCtl::Power(*on)),
+        FaultAction::Power(a, on) => {
+            ctl(a, NodeCtl::Power(*on));
+            radio.power(*a, *on, f.at);
+        }
         FaultAction::Reboot(a) => ctl(a, NodeCtl::Reboot),
-        FaultAction::Hang(a, h) => ctl(a, NodeCtl::Hang(*h)),
+        FaultAction::Hang(a, h) => {
+            ctl(a, NodeCtl::Hang(*h));
+            radio.hang(*a, *h, f.at);
+        }
         // The FC applies its own faults from its timeline at its ticks.
         FaultAction::Fc => {}
         FaultAction::Contact(on) => segs.ground.set_contact(*on),

@@ -1348,31 +1348,18 @@ impl Scenario {
         }
         for (i, x) in self.expectations.iter().enumerate() {
             let p = |n: &str| vec![key("expectations"), PathStep::Index(i), key(n)];
-            let pc_fields = [
-                ("session", x.session.is_some()),
-                ("session_result", x.session_result.is_some()),
-                ("intact", x.intact.is_some()),
-                ("payload", x.payload.is_some()),
-            ];
-            let allowed: &[&str] = match x.kind {
-                ExpectKind::Session => &["session", "session_result"],
-                ExpectKind::Downlink => &["session", "intact"],
-                ExpectKind::Accounting => &["payload"],
-                _ => &[],
-            };
-            for (f, present) in pc_fields {
+            let allowed = accepted_fields(x.kind);
+            for (f, present) in given_fields(x) {
                 if present && !allowed.contains(&f) {
                     err(
                         p(f),
-                        format!("a `{}` expectation takes no `{f}`", kebab(x.kind)),
+                        format!(
+                            "a `{}` expectation takes no `{f}` (it takes {})",
+                            kebab(x.kind),
+                            allowed.join(", ")
+                        ),
                     );
                 }
-            }
-            if x.statistic.is_some() && x.kind != ExpectKind::Power {
-                err(
-                    p("statistic"),
-                    "only a `power` expectation takes `statistic`".into(),
-                );
             }
             match x.kind {
                 ExpectKind::Beacon => {
@@ -1382,17 +1369,22 @@ impl Scenario {
                             "a `beacon` expectation needs `within`, `min` or `max`".into(),
                         );
                     }
-                    for (f, present) in [
-                        ("command", x.command.is_some()),
-                        ("target", x.target.is_some()),
-                        ("counter", x.counter.is_some()),
-                        ("quantity", x.quantity.is_some()),
-                        ("below", x.below.is_some()),
-                        ("above", x.above.is_some()),
-                    ] {
-                        if present {
-                            err(p(f), format!("a `beacon` expectation takes no `{f}`"));
-                        }
+                    if let Some(r) = &x.target
+                        && !matches!(
+                            net.resolve(r),
+                            Ok(crate::network::COMM1 | crate::network::COMM2)
+                        )
+                    {
+                        err(
+                            p("target"),
+                            "a `beacon` expectation's `target` is the sending COMM: COMM1 or COMM2"
+                                .into(),
+                        );
+                    }
+                    if let (Some(a), Some(b)) = (x.from, x.to)
+                        && b <= a
+                    {
+                        err(p("to"), "must be after `from`".into());
                     }
                 }
                 ExpectKind::Power => {
@@ -1421,18 +1413,6 @@ impl Scenario {
                     {
                         err(p("to"), "must be after `from`".into());
                     }
-                    for (f, present) in [
-                        ("command", x.command.is_some()),
-                        ("target", x.target.is_some()),
-                        ("counter", x.counter.is_some()),
-                        ("min", x.min.is_some()),
-                        ("max", x.max.is_some()),
-                        ("min_elevation_deg", x.min_elevation_deg.is_some()),
-                    ] {
-                        if present {
-                            err(p(f), format!("a `power` expectation takes no `{f}`"));
-                        }
-                    }
                 }
                 ExpectKind::Session | ExpectKind::Downlink | ExpectKind::Accounting => {
                     crate::sessions::validate_expectation(self, x, &p, &mut err);
@@ -1448,31 +1428,6 @@ impl Scenario {
                             ),
                         ),
                         Some(_) => {}
-                    }
-                    for (f, present) in [
-                        ("target", x.target.is_some()),
-                        ("counter", x.counter.is_some()),
-                        ("min", x.min.is_some()),
-                        ("max", x.max.is_some()),
-                    ] {
-                        if present {
-                            err(
-                                p(f),
-                                format!("a `{}` expectation takes no `{f}`", kebab(x.kind)),
-                            );
-                        }
-                    }
-                    if x.kind == ExpectKind::NoReply {
-                        for (f, present) in [
-                            ("within", x.within.is_some()),
-                            ("result", x.result.is_some()),
-                            ("data", x.data.is_some()),
-                            ("data_len", x.data_len.is_some()),
-                        ] {
-                            if present {
-                                err(p(f), format!("a `no-reply` expectation takes no `{f}`"));
-                            }
-                        }
                     }
                     if let Some(d) = &x.data
                         && let Err(e) = parse_hex(d)
@@ -1516,17 +1471,6 @@ impl Scenario {
                             p("min_elevation_deg"),
                             "only `when = \"target-visible\"` takes `min_elevation_deg`".into(),
                         );
-                    }
-                    for (f, present) in [
-                        ("command", x.command.is_some()),
-                        ("target", x.target.is_some()),
-                        ("counter", x.counter.is_some()),
-                        ("min", x.min.is_some()),
-                        ("max", x.max.is_some()),
-                    ] {
-                        if present {
-                            err(p(f), format!("an `attitude` expectation takes no `{f}`"));
-                        }
                     }
                 }
                 ExpectKind::Counter => {
@@ -1739,6 +1683,73 @@ pub const MEDIUM_COUNTERS: &[&str] = &[
     "corrupted",
     "no_contact",
 ];
+
+/// The optional fields an expectation of `kind` takes (`name` and `kind` always).
+fn accepted_fields(kind: ExpectKind) -> &'static [&'static str] {
+    match kind {
+        ExpectKind::Reply => &[
+            "command",
+            "occurrence",
+            "within",
+            "result",
+            "data",
+            "data_len",
+        ],
+        ExpectKind::NoReply => &["command", "occurrence"],
+        ExpectKind::Counter => &["target", "counter", "min", "max"],
+        ExpectKind::Attitude => &[
+            "quantity",
+            "occurrence",
+            "below",
+            "above",
+            "from",
+            "to",
+            "when",
+            "min_elevation_deg",
+        ],
+        ExpectKind::Session => &["session", "session_result", "occurrence", "min", "max"],
+        ExpectKind::Downlink => &["session", "intact", "min", "max"],
+        ExpectKind::Accounting => &["payload", "max"],
+        ExpectKind::Power => &[
+            "quantity",
+            "statistic",
+            "below",
+            "above",
+            "from",
+            "to",
+            "when",
+        ],
+        ExpectKind::Beacon => &["within", "min", "max", "target", "from", "to"],
+    }
+}
+
+/// Every optional field of an expectation, with whether the scenario gives it.
+fn given_fields(x: &ExpectationSpec) -> [(&'static str, bool); 22] {
+    [
+        ("command", x.command.is_some()),
+        ("occurrence", x.occurrence.is_some()),
+        ("within", x.within.is_some()),
+        ("result", x.result.is_some()),
+        ("data", x.data.is_some()),
+        ("data_len", x.data_len.is_some()),
+        ("target", x.target.is_some()),
+        ("counter", x.counter.is_some()),
+        ("min", x.min.is_some()),
+        ("max", x.max.is_some()),
+        ("quantity", x.quantity.is_some()),
+        ("below", x.below.is_some()),
+        ("above", x.above.is_some()),
+        ("from", x.from.is_some()),
+        ("to", x.to.is_some()),
+        ("when", x.when.is_some()),
+        ("min_elevation_deg", x.min_elevation_deg.is_some()),
+        ("session", x.session.is_some()),
+        ("session_result", x.session_result.is_some()),
+        ("intact", x.intact.is_some()),
+        ("payload", x.payload.is_some()),
+        ("statistic", x.statistic.is_some()),
+    ]
+}
 
 fn kebab(k: ExpectKind) -> &'static str {
     match k {

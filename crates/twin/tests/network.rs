@@ -322,3 +322,45 @@ fn the_eps_charges_the_s_band_and_its_channel_switches_the_transmitter() {
         report.sessions.dropped
     );
 }
+
+/// The UHF transmitter is charged for every packet the satellite's radio sends, not only
+/// for beacons: replies forwarded to the ground cost their air time at the transmit power.
+#[test]
+fn the_eps_charges_the_uhf_downlink_of_forwarded_replies() {
+    let mean_load = |pings: bool| {
+        let loaded = m6p_twin::exec::load_default().unwrap();
+        let mut compiled = m6p_twin::exec::compile_loaded(&loaded);
+        m6p_twin::exec::with_duration(&mut compiled, Duration::from_secs(40));
+        if pings {
+            // A 200-byte ping to the FC every second: a 204-byte reply, 170 ms on the air.
+            let plan = compiled.opts.ground_plan.entry(16).or_default();
+            plan.extend((10..40).map(|s| request(s, 3, 1, ping_payload(200))));
+        }
+        let rt = build_runtime(compiled.opts.clock).unwrap();
+        let report = rt.block_on(run(compiled.opts, None)).unwrap();
+        if pings {
+            let answered = report
+                .results
+                .iter()
+                .filter(|r| r.request.data.len() == 200)
+                .filter(|r| matches!(r.outcome, Outcome::Reply { .. }))
+                .count();
+            assert!(answered >= 30, "{answered} answered");
+        }
+        let v: Vec<f64> = report
+            .power
+            .iter()
+            .filter(|s| s.t > SimTime::from_secs(12) && s.t <= SimTime::from_secs(38))
+            .map(|s| s.load_w)
+            .collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let (quiet, busy) = (mean_load(false), mean_load(true));
+    // 3.5 W while transmitting, 17 % of the time.
+    let want = 3.5 * 204.0 * 8.0 / 9600.0;
+    assert!(
+        (busy - quiet - want).abs() < 0.02,
+        "quiet {quiet} W, pinged {busy} W: {} W more, want {want} W",
+        busy - quiet
+    );
+}

@@ -258,3 +258,39 @@ proptest::proptest! {
         let _ = Scenario::parse("fuzz.toml", &text);
     }
 }
+
+#[test]
+fn a_field_another_expectation_kind_takes_is_named_with_the_accepted_ones() {
+    let (l, f, m) = first_error(
+        "duration = \"1m\"\n[[expectations]]\nkind = \"beacon\"\nmin = 1\nquantity = \"soc\"\n",
+    );
+    assert_eq!(l, Some(5));
+    assert!(f.contains("expectations[0].quantity"), "{f}");
+    assert!(
+        m.contains("a `beacon` expectation takes no `quantity`")
+            && m.contains("within, min, max, target, from, to"),
+        "{m}"
+    );
+    assert_error(
+        "duration = \"1m\"\n[[commands]]\nname = \"p\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[expectations]]\nkind = \"no-reply\"\ncommand = \"p\"\nwithin = \"1s\"\n",
+        10,
+        "expectations[0].within",
+        "a `no-reply` expectation takes no `within`",
+    );
+}
+
+#[test]
+fn a_beacon_expectation_names_a_comm_as_its_sender() {
+    assert_error(
+        "duration = \"1m\"\n[[expectations]]\nkind = \"beacon\"\nmin = 1\ntarget = \"FC\"\n",
+        5,
+        "expectations[0].target",
+        "the sending COMM: COMM1 or COMM2",
+    );
+    assert_error(
+        "duration = \"1m\"\n[[expectations]]\nkind = \"beacon\"\nmin = 1\nfrom = \"60s\"\nto = \"30s\"\n",
+        6,
+        "expectations[0].to",
+        "must be after `from`",
+    );
+}
