@@ -149,6 +149,15 @@ pub async fn execute_recorded(
     execute_with(loaded, compiled, record, &mut |_| {}).await
 }
 
+/// [`execute_recorded`] without writing the S-band downlink files (the benchmark's runs).
+pub async fn execute_recorded_without_files(
+    loaded: &Loaded,
+    compiled: Compiled,
+    record: Option<&Path>,
+) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    execute_inner(loaded, compiled, record, false, &mut |_| {}).await
+}
+
 /// [`execute_recorded`], also handing every event to `live` after the recorder (the live
 /// view, `crate::live::LiveServer::publish`, with the `live` feature).
 pub async fn execute_with(
@@ -157,7 +166,17 @@ pub async fn execute_with(
     record: Option<&Path>,
     live: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
-    let downlink_dir = downlink_dir(loaded, record);
+    execute_inner(loaded, compiled, record, true, live).await
+}
+
+async fn execute_inner(
+    loaded: &Loaded,
+    compiled: Compiled,
+    record: Option<&Path>,
+    files: bool,
+    live: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    let downlink_dir = downlink_dir(loaded, record).filter(|_| files);
     let Some(path) = record else {
         let outcome = execute(compiled, live).await?;
         write_downlink(&outcome, downlink_dir.as_deref())?;

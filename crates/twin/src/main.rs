@@ -444,7 +444,7 @@ fn cmd_bench(
             compiled.opts.clock = bus::ClockMode::Virtual;
             let rt = build_runtime(compiled.opts.clock)?;
             let started = std::time::Instant::now();
-            let (_, stats) = rt.block_on(exec::execute_recorded(
+            let (_, stats) = rt.block_on(exec::execute_recorded_without_files(
                 &loaded,
                 compiled,
                 record.then_some(file.as_path()),

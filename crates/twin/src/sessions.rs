@@ -865,10 +865,12 @@ pub fn check(
             if let Some(strict) = intact {
                 // Each run is checked on its own (a run's stream ends where the next one's
                 // begins only if nothing was lost between them); the seqs lost between
-                // runs count as missing.
+                // runs count as missing. A frame cut by a run's end is whole when that
+                // run's tail and the next run's head join into it.
                 let (mut ok, mut bad, mut missing) = (0u64, 0u64, 0u64);
                 let (mut first, mut last) = (None, None::<u32>);
                 let mut examples = Vec::new();
+                let mut tail: &[u8] = &[];
                 for run in r.runs.iter().filter(|x| x.session == *session) {
                     let c = nodes_payload::check_counter_stream(&run.bytes);
                     ok += c.frames_ok;
@@ -876,14 +878,24 @@ pub fn check(
                     missing += c.missing_count;
                     examples.extend(c.missing_seqs.iter().take(8).copied());
                     if let (Some(prev), Some(a)) = (last, c.first_seq) {
-                        // The frame cut at the end of the previous run (its tail) is one
-                        // of the seqs in between.
+                        let head = &run.bytes[..(c.lead_bytes as usize).min(run.bytes.len())];
+                        let joined = nodes_payload::check_counter_stream(&[tail, head].concat());
+                        let spanned = a == prev.wrapping_add(2)
+                            && joined.frames_ok == 1
+                            && joined.first_seq == Some(prev.wrapping_add(1))
+                            && joined.lead_bytes == 0
+                            && joined.tail_bytes == 0
+                            && joined.skipped_bytes == 0;
                         let gap = u64::from(a.saturating_sub(prev).saturating_sub(1));
-                        missing += gap;
-                        if gap > 0 {
+                        if spanned {
+                            ok += 1;
+                        } else if gap > 0 {
+                            missing += gap;
                             examples.push(prev + 1);
                         }
                     }
+                    tail = &run.bytes
+                        [run.bytes.len() - (c.tail_bytes as usize).min(run.bytes.len())..];
                     first = first.or(c.first_seq);
                     last = c.last_seq.or(last);
                 }
@@ -1179,6 +1191,42 @@ mod tests {
         flipped[1500] ^= 1;
         let (ok, _, seen) = check(&lenient, &mk(flipped));
         assert!(!ok && seen.contains("1 damaged"), "{seen}");
+    }
+
+    #[test]
+    fn a_frame_cut_between_two_runs_is_whole_when_nothing_was_lost_between_them() {
+        let t = SimTime::from_secs(2);
+        let bytes = nodes_payload::counter_stream(12, 0, 3000);
+        let runs = |a: &[u8], b: &[u8]| {
+            let mut ev = Vec::new();
+            for part in [a, b] {
+                ev.push(pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }));
+                ev.push(pc(nodes_pc::PcOutput::Downlinked {
+                    t,
+                    session_id: 1,
+                    payload_addr: 12,
+                    bytes: part.to_vec(),
+                }));
+            }
+            report_of(ev)
+        };
+        let strict = crate::plan::Check::Downlink {
+            session: 1,
+            min: None,
+            max: None,
+            intact: Some(true),
+        };
+        // Split mid-frame (byte 1000 is inside a frame): every frame is intact.
+        let (ok, _, seen) = check(&strict, &runs(&bytes[..1000], &bytes[1000..]));
+        assert!(ok && seen.contains("0 missing"), "{seen}");
+        // 30 bytes lost between the runs: the frames they cut into are missing (13 and 14
+        // here), none is taken for damaged.
+        let (ok, _, seen) = check(&strict, &runs(&bytes[..1000], &bytes[1030..]));
+        assert!(!ok && seen.contains("0 damaged, 2 missing"), "{seen}");
+        // Split exactly between two frames: nothing to join, nothing missing.
+        let first = nodes_payload::stream::frame_len(0) + nodes_payload::stream::frame_len(1);
+        let (ok, _, seen) = check(&strict, &runs(&bytes[..first], &bytes[first..]));
+        assert!(ok && seen.contains("0 missing"), "{seen}");
     }
 
     #[test]

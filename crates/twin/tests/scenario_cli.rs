@@ -6,6 +6,17 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+/// The standard output of a finished process, after asserting it succeeded.
+fn succeeded(out: &std::process::Output) -> String {
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text
+}
+
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
@@ -286,12 +297,7 @@ fn a_real_recording_decodes_with_the_python_mcap_package() {
         .arg(&f)
         .output()
         .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = succeeded(&out);
     assert!(
         text.contains("/csp/packets") && text.trim_end().ends_with("ok"),
         "{text}"
@@ -442,4 +448,45 @@ fn ctrl_c_finishes_the_recording_cleanly() {
         "{summary}"
     );
     assert!(summary.contains("/expectations"), "{summary}");
+}
+
+/// `bench` measures and reports, and leaves nothing behind: no recording and no S-band
+/// downlink files from a scenario with a payload session (it left a `.downlink` folder of
+/// session files in the temp dir before).
+#[test]
+fn bench_reports_its_figures_and_leaves_no_files() {
+    let dir = tmp("bench-tmp");
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args([
+            "bench",
+            "scenarios/eps-pc-off.toml",
+            "--duration",
+            "200s",
+            "--runs",
+            "1",
+        ])
+        .current_dir(repo())
+        .env("TMPDIR", &dir)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for figure in [
+        "without recording",
+        "with recording",
+        "peak memory",
+        "MCAP:",
+    ] {
+        assert!(text.contains(figure), "{figure} missing from\n{text}");
+    }
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
 }
