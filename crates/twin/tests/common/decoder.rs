@@ -1,0 +1,76 @@
+//! Running an independent Python decoder (`tests/*_icd_decode.py`) against a twin in real
+//! time, as ground node 16 over a KISS/TCP socket, with the orbit and epoch (and the EPS,
+//! ECU and COMM settings) of `scenarios/default.toml` through the scenario compiler.
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Duration;
+
+use bus::ClockMode;
+use m6p_twin::network::NetworkSpec;
+use m6p_twin::plan::compile;
+use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
+use m6p_twin::scenario::Scenario;
+
+/// The repository root.
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Real-time options for `seconds` with the default scenario's epoch, TLE and platform
+/// settings, and a KISS/TCP server on a free local port.
+pub fn default_scenario_options(seconds: u64) -> RunOptions {
+    let file = repo_root().join("scenarios/default.toml");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let scenario = Scenario::parse("scenarios/default.toml", &text).unwrap();
+    let compiled = compile(&scenario).opts;
+    let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(seconds));
+    opts.clock = ClockMode::Realtime { speed: 1.0 };
+    opts.kiss_listen = vec!["127.0.0.1:0".parse().unwrap()];
+    opts.epoch_unix_s = compiled.epoch_unix_s;
+    opts.tle = compiled.tle.clone();
+    opts.eps = compiled.eps.clone();
+    opts.ecu = compiled.ecu.clone();
+    opts.comm = compiled.comm.clone();
+    opts
+}
+
+/// Run the twin with `opts` and `tests/<script>` connected to its KISS server with
+/// `--connect ADDR --as 16` and `args`; the script's output (stdout then stderr), after
+/// asserting it exited with success and printed no FAIL and at least `min_pass` PASS, and
+/// the run's report.
+pub fn run_decoder(
+    opts: RunOptions,
+    script: &str,
+    args: &[String],
+    min_pass: usize,
+) -> (String, RunReport) {
+    let script = repo_root().join("tests").join(script);
+    let args = args.to_vec();
+    let rt = build_runtime(opts.clock).unwrap();
+    let (out, report) = rt.block_on(async move {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let twin = tokio::spawn(run(opts, Some(tx)));
+        let addr = rx.await.unwrap()[0];
+        let client = tokio::task::spawn_blocking(move || {
+            Command::new("python3")
+                .arg(script)
+                .args(["--connect", &addr.to_string(), "--as", "16"])
+                .args(args)
+                .output()
+                .expect("python3 is needed for this test")
+        });
+        let out = client.await.unwrap();
+        (out, twin.await.unwrap().unwrap())
+    });
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    println!("{text}");
+    assert!(out.status.success(), "{text}");
+    assert!(!text.contains("FAIL"), "{text}");
+    assert!(text.matches("PASS").count() >= min_pass, "{text}");
+    (text, report)
+}
