@@ -30,6 +30,13 @@ impl Attachment {
     }
 }
 
+/// A node's control channel: each command with the simulated instant it takes effect
+/// (a fault's scheduled time, the EPS's switch), so that a real-time run applies it at that
+/// instant however late its task wakes, as the virtual-time replay does.
+pub type CtlTx = mpsc::UnboundedSender<(SimTime, NodeCtl)>;
+/// The receiving end of a [`CtlTx`].
+pub type CtlRx = mpsc::UnboundedReceiver<(SimTime, NodeCtl)>;
+
 /// Commands from the run (scenario faults, shutdown).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NodeCtl {
@@ -71,7 +78,7 @@ pub async fn run_node<A: App>(
     host: Host<A>,
     ports: Vec<Attachment>,
     inbox: InboxRx,
-    ctl: mpsc::UnboundedReceiver<NodeCtl>,
+    ctl: CtlRx,
     clock: Clock,
 ) -> Host<A> {
     run_node_logged(host, ports, inbox, ctl, clock, None).await
@@ -82,7 +89,7 @@ pub async fn run_node_logged<A: App>(
     mut host: Host<A>,
     ports: Vec<Attachment>,
     mut inbox: InboxRx,
-    mut ctl: mpsc::UnboundedReceiver<NodeCtl>,
+    mut ctl: CtlRx,
     clock: Clock,
     log: Option<NodeLogTx>,
 ) -> Host<A> {
@@ -99,7 +106,10 @@ pub async fn run_node_logged<A: App>(
         tokio::select! {
             biased;
             c = ctl.recv() => {
-                t = t.max(clock.now());
+                let c = c.map(|(at, c)| {
+                    t = t.max(at);
+                    c
+                });
                 match c {
                     None | Some(NodeCtl::Stop) => break,
                     Some(NodeCtl::Reboot) => if powered { host.reboot(t) },
@@ -162,5 +172,37 @@ fn flush<A: App>(host: &mut Host<A>, ports: &[Attachment], t: SimTime, log: Opti
         if let Some(l) = log {
             (l.0)(ev.t, host.node.name(), &ev.what);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::clock::ClockMode;
+    use crate::inbox::inbox;
+    use csp::node::{NoApp, NodeConfig};
+    use std::time::Duration;
+
+    /// A command takes effect at its own instant, not when the node's task gets to it (in
+    /// real time a busy task wakes late; the replay applies it at the instant).
+    #[tokio::test(start_paused = true)]
+    async fn a_command_takes_effect_at_its_instant_however_late_it_is_read() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let host = Host::new(NodeConfig::new("X", 3), NoApp, SimTime::ZERO);
+        let (_in_tx, in_rx) = inbox();
+        let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
+        let task = tokio::spawn(run_node(host, Vec::new(), in_rx, ctl_rx, clock));
+        tokio::time::sleep(Duration::from_secs(10)).await;
+        // Read at 10 s, meant for 4 s.
+        ctl_tx
+            .send((SimTime::from_secs(4), NodeCtl::Reboot))
+            .unwrap();
+        ctl_tx.send((SimTime::ZERO, NodeCtl::Stop)).unwrap();
+        let host = task.await.unwrap();
+        assert_eq!(
+            host.node.uptime(SimTime::from_secs(10)),
+            Duration::from_secs(6)
+        );
     }
 }

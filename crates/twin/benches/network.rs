@@ -100,8 +100,8 @@ fn round_trips(n: u64) -> (Duration, SimTime) {
         }
         let wall = start.elapsed();
         let sim = clock.now();
-        let _ = ca.send(NodeCtl::Stop);
-        let _ = cb.send(NodeCtl::Stop);
+        let _ = ca.send((SimTime::ZERO, NodeCtl::Stop));
+        let _ = cb.send((SimTime::ZERO, NodeCtl::Stop));
         let _ = ha.await;
         let _ = hb.await;
         (wall, sim)

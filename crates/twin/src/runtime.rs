@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use bus::can::BusStats;
-use bus::driver::{Attachment, NodeCtl, NodeLogTx, run_node_logged};
+use bus::driver::{Attachment, CtlTx, NodeCtl, NodeLogTx, run_node_logged};
 use bus::inbox::inbox;
 use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissTap};
 use bus::net::NetStats;
@@ -334,7 +334,7 @@ struct RadioLinkState {
     ground: Option<PacketNet>,
     can2: Option<bus::can::CanPort>,
     uhf: [Option<bus::net::NetPort>; 2],
-    ctl: [Option<mpsc::UnboundedSender<NodeCtl>>; 2],
+    ctl: [Option<CtlTx>; 2],
     events: Option<mpsc::UnboundedSender<RunEvent>>,
 }
 
@@ -349,7 +349,7 @@ impl RadioLink {
     fn register(
         &self,
         addr: u8,
-        ctl: mpsc::UnboundedSender<NodeCtl>,
+        ctl: CtlTx,
         ports: &[Attachment],
         segs: &Segments,
         events: &mpsc::UnboundedSender<RunEvent>,
@@ -426,7 +426,7 @@ impl RadioLinkState {
         for (i, ctl) in self.ctl.iter().enumerate() {
             if let Some(c) = ctl {
                 let active = (i == 1) == want;
-                let _ = c.send(NodeCtl::Switch(nodes_comm::RADIO_SWITCH, active));
+                let _ = c.send((t, NodeCtl::Switch(nodes_comm::RADIO_SWITCH, active)));
             }
         }
         let message = if want {
@@ -456,25 +456,25 @@ impl RadioLinkState {
 /// The EPS's power switches: the control channel of every node by address, filled as the
 /// nodes are created (all before the run starts).
 #[derive(Debug, Clone, Default)]
-pub struct PowerSwitches(Arc<Mutex<BTreeMap<u8, mpsc::UnboundedSender<NodeCtl>>>>);
+pub struct PowerSwitches(Arc<Mutex<BTreeMap<u8, CtlTx>>>);
 
 impl PowerSwitches {
-    fn insert(&self, addr: u8, tx: mpsc::UnboundedSender<NodeCtl>) {
+    fn insert(&self, addr: u8, tx: CtlTx) {
         self.0
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .insert(addr, tx);
     }
 
-    /// Power node `addr` on or off (a node the run does not have: nothing).
-    pub fn set(&self, addr: u8, on: bool) {
+    /// Power node `addr` on or off at `t` (a node the run does not have: nothing).
+    pub fn set(&self, addr: u8, on: bool, t: SimTime) {
         if let Some(tx) = self
             .0
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .get(&addr)
         {
-            let _ = tx.send(NodeCtl::Power(on));
+            let _ = tx.send((t, NodeCtl::Power(on)));
         }
     }
 }
@@ -539,7 +539,7 @@ fn app_for(
                         {
                             // The node leaves (or rejoins) its buses at once; an ECU that
                             // loses power stops firing.
-                            power.set(addr, *on);
+                            power.set(addr, *on, *t);
                             radio.power(addr, *on, *t);
                             if addr == 5 && !*on {
                                 use orbit::state::Activity;
@@ -858,7 +858,7 @@ pub async fn run_with(
 
     // Faults are applied by the main loop at their times, so that their events sit in the
     // stream exactly where they take effect.
-    let ctls: BTreeMap<u8, mpsc::UnboundedSender<NodeCtl>> = nodes
+    let ctls: BTreeMap<u8, CtlTx> = nodes
         .iter()
         .map(|(spec, ctl, _)| (spec.addr, ctl.clone()))
         .collect();
@@ -959,7 +959,7 @@ pub async fn run_with(
     };
 
     for (_, ctl, _) in &nodes {
-        let _ = ctl.send(NodeCtl::Stop);
+        let _ = ctl.send((SimTime::ZERO, NodeCtl::Stop));
     }
     let mut node_reports = Vec::new();
     for (spec, _, handle) in nodes {
@@ -1053,15 +1053,10 @@ fn snapshot<T: Clone>(stats: Vec<(String, Arc<Mutex<T>>)>) -> Vec<(String, T)> {
 }
 
 /// Apply one scenario fault to the media or a node.
-fn apply_fault(
-    f: &TimedFault,
-    segs: &Segments,
-    ctls: &BTreeMap<u8, mpsc::UnboundedSender<NodeCtl>>,
-    radio: &RadioLink,
-) {
+fn apply_fault(f: &TimedFault, segs: &Segments, ctls: &BTreeMap<u8, CtlTx>, radio: &RadioLink) {
     let ctl = |addr: &u8, c: NodeCtl| {
         if let Some(tx) = ctls.get(addr) {
-            let _ = tx.send(c);
+            let _ = tx.send((f.at, c));
         }
     };
     match &f.action {
