@@ -1781,10 +1781,22 @@ fn field_from_message(text: &str, span: Option<std::ops::Range<usize>>) -> Strin
         .unwrap_or("");
     let line = line.trim();
     if let Some((k, _)) = line.split_once('=') {
-        let header = text
-            .get(..line_start)
-            .and_then(|t| t.lines().rev().map(str::trim).find(|l| l.starts_with('[')))
-            .map(|h| h.trim_matches(|c| c == '[' || c == ']').to_owned());
+        let before = text.get(..line_start).unwrap_or("");
+        let header = before
+            .lines()
+            .rev()
+            .map(str::trim)
+            .find(|l| l.starts_with('['))
+            .map(|h| {
+                let name = h.trim_matches(|c| c == '[' || c == ']').trim();
+                if h.starts_with("[[") {
+                    // An array of tables: its index is how many such headers came before.
+                    let n = before.lines().filter(|l| l.trim() == h).count();
+                    format!("{name}[{}]", n.saturating_sub(1))
+                } else {
+                    name.to_owned()
+                }
+            });
         let k = k.trim().to_owned();
         return match header {
             Some(h) => format!("{h}.{k}"),

@@ -294,3 +294,19 @@ fn a_beacon_expectation_names_a_comm_as_its_sender() {
         "must be after `from`",
     );
 }
+
+#[test]
+fn a_type_error_in_an_array_of_tables_names_the_entry() {
+    assert_error(
+        "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[commands]]\nat = \"6 hours\"\nto = \"FC\"\nrequest = \"ping\"\n",
+        7,
+        "commands[1].at",
+        "unknown unit",
+    );
+    assert_error(
+        "duration = \"1m\"\n[[eps.events]]\nat = \"1s\"\nsoc = 0.5\n[[eps.events]]\nat = \"2s\"\nsoc = \"half\"\n",
+        7,
+        "eps.events[1].soc",
+        "invalid type",
+    );
+}
