@@ -53,14 +53,18 @@ impl PacketNetConfig {
     }
 }
 
-/// Called with `(start, end)` of every transmission by a radio endpoint, when it is
-/// submitted (so the instants may lie in the future; they come in time order).
+/// Called with `(radio endpoint name, start, end)` of every transmission by a radio
+/// endpoint, when it is submitted (so the instants may lie in the future; they come in time
+/// order, the air channel being one).
 #[derive(Clone)]
-pub struct AirTap(Arc<dyn Fn(SimTime, SimTime) + Send + Sync>);
+pub struct AirTap(Arc<AirFn>);
+
+/// The function behind an [`AirTap`].
+type AirFn = dyn Fn(&str, SimTime, SimTime) + Send + Sync;
 
 impl AirTap {
-    /// A tap calling `f(start, end)`.
-    pub fn new(f: impl Fn(SimTime, SimTime) + Send + Sync + 'static) -> Self {
+    /// A tap calling `f(radio, start, end)`.
+    pub fn new(f: impl Fn(&str, SimTime, SimTime) + Send + Sync + 'static) -> Self {
         AirTap(Arc::new(f))
     }
 }
@@ -337,7 +341,7 @@ impl State {
             if self.eps[from].radio
                 && let Some(tap) = &self.air_tap
             {
-                (tap.0)(start, self.air_busy_until);
+                (tap.0)(&self.eps[from].name, start, self.air_busy_until);
             }
             let fate = if self.contact {
                 self.rng.fate(&self.impair)
@@ -452,8 +456,8 @@ mod tests {
         let heard = Arc::new(Mutex::new(Vec::new()));
         {
             let heard = heard.clone();
-            net.set_air_tap(AirTap::new(move |a, b| {
-                heard.lock().unwrap().push((a, b));
+            net.set_air_tap(AirTap::new(move |radio, a, b| {
+                heard.lock().unwrap().push((radio.to_owned(), a, b));
             }));
         }
         tokio::spawn(net.clone().run(clock));
@@ -471,8 +475,9 @@ mod tests {
         assert!(rx_gs.recv().await.is_some());
         let heard = heard.lock().unwrap().clone();
         assert_eq!(heard.len(), 1);
+        assert_eq!(heard[0].0, "COMM2-uhf");
         assert_eq!(
-            heard[0].1 - heard[0].0,
+            heard[0].2 - heard[0].1,
             Duration::from_nanos(12 * 8 * 1_000_000_000 / 9600)
         );
     }

@@ -331,6 +331,7 @@ impl EpsApp {
             Some(a) => Duties {
                 sband_tx: a.duty(Activity::SbandTx, t0, t1),
                 uhf_tx: a.duty(Activity::UhfTx, t0, t1),
+                uhf_tx_secondary: a.duty(Activity::UhfTxSecondary, t0, t1),
                 thruster_heater: a.duty(Activity::ThrusterHeater, t0, t1),
                 firing: a.duty(Activity::Firing, t0, t1),
             },

@@ -130,8 +130,10 @@ impl Channel {
 pub struct Duties {
     /// S-band transmitting.
     pub sband_tx: f64,
-    /// UHF transmitting.
+    /// COMM1's UHF radio transmitting.
     pub uhf_tx: f64,
+    /// COMM2's UHF radio transmitting.
+    pub uhf_tx_secondary: f64,
     /// Thruster heaters on.
     pub thruster_heater: f64,
     /// Thruster firing.
@@ -245,27 +247,13 @@ impl LoadConfig {
             channel_w: [0.0; CHANNELS],
         };
         let d = &x.duties;
-        // The UHF transmitter in use: the primary when powered, else the secondary.
-        let uhf = if is_on(Channel::Comm1) {
-            Some(Channel::Comm1)
-        } else if is_on(Channel::Comm2) {
-            Some(Channel::Comm2)
-        } else {
-            None
-        };
         for c in Channel::ALL {
             if !is_on(c) {
                 continue;
             }
             let w = match c {
-                Channel::Comm1 | Channel::Comm2 => {
-                    self.comm_rx_w
-                        + if uhf == Some(c) {
-                            self.uhf_tx_w * duty(d.uhf_tx)
-                        } else {
-                            0.0
-                        }
-                }
+                Channel::Comm1 => self.comm_rx_w + self.uhf_tx_w * duty(d.uhf_tx),
+                Channel::Comm2 => self.comm_rx_w + self.uhf_tx_w * duty(d.uhf_tx_secondary),
                 Channel::Ecu => {
                     self.ecu_idle_w
                         + self.thruster_heater_w * duty(d.thruster_heater)
@@ -326,6 +314,7 @@ mod tests {
             duties: Duties {
                 sband_tx: 0.5,
                 uhf_tx: 1.0,
+                uhf_tx_secondary: 0.5,
                 thruster_heater: 1.0,
                 firing: 0.25,
             },
@@ -333,13 +322,14 @@ mod tests {
         let b = l.loads(ALL_CHANNELS, &x);
         assert!((b.fc_w - (1.6 + 0.4 + 2.0 * 1.5e-6 * 250_000.0 + 0.3)).abs() < 1e-12);
         assert!((b.channel_w[8] - (1.2 + 4.5)).abs() < 1e-12);
+        // Each radio's transmissions on its own channel.
         assert!((b.channel_w[0] - 4.0).abs() < 1e-12);
-        assert!((b.channel_w[1] - 0.5).abs() < 1e-12);
+        assert!((b.channel_w[1] - (0.5 + 1.75)).abs() < 1e-12);
         assert!((b.channel_w[2] - (0.3 + 6.0 + 1.0)).abs() < 1e-12);
-        // COMM1 off: the secondary transmits.
+        // COMM1 off: nothing on its channel; COMM2's own transmissions on its own.
         let b = l.loads(ALL_CHANNELS & !Channel::Comm1.bit(), &x);
         assert_eq!(b.channel_w[0], 0.0);
-        assert!((b.channel_w[1] - 4.0).abs() < 1e-12);
+        assert!((b.channel_w[1] - (0.5 + 1.75)).abs() < 1e-12);
         // ECU and S-band off: no heater, no firing, no S-band.
         let b = l.loads(
             ALL_CHANNELS & !Channel::Ecu.bit() & !Channel::Sband.bit(),

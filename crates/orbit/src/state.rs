@@ -257,8 +257,10 @@ impl BurnBoard {
 pub enum Activity {
     /// The S-band transmitter is sending a frame.
     SbandTx,
-    /// The UHF radio (COMM) is transmitting.
+    /// The primary COMM's UHF radio is transmitting.
     UhfTx,
+    /// The secondary COMM's UHF radio is transmitting.
+    UhfTxSecondary,
     /// The ECU's thruster heaters are on (armed).
     ThrusterHeater,
     /// The thruster is firing.

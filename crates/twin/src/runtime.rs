@@ -704,13 +704,19 @@ pub async fn run_with(
     };
     let boards = Boards::default();
     {
-        // Every radio transmission is charged to the UHF transmitter, at its place on the air.
+        // Every radio transmission is charged to its COMM's transmitter, at its place on the
+        // air.
         let activity = boards.activity.clone();
         segs.ground
-            .set_air_tap(bus::net::AirTap::new(move |start, end| {
+            .set_air_tap(bus::net::AirTap::new(move |radio, start, end| {
                 use orbit::state::Activity;
-                activity.set(Activity::UhfTx, start.as_ns(), true);
-                activity.set(Activity::UhfTx, end.as_ns(), false);
+                let what = if radio.starts_with("COMM2") {
+                    Activity::UhfTxSecondary
+                } else {
+                    Activity::UhfTx
+                };
+                activity.set(what, start.as_ns(), true);
+                activity.set(what, end.as_ns(), false);
             }));
     }
     let mut nodes = Vec::new();
