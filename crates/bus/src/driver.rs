@@ -32,7 +32,9 @@ impl Attachment {
 
 /// A node's control channel: each command with the simulated instant it takes effect
 /// (a fault's scheduled time, the EPS's switch), so that a real-time run applies it at that
-/// instant however late its task wakes, as the virtual-time replay does.
+/// instant however late its task wakes, as the virtual-time replay does. A command for
+/// instant T takes effect after the node's own timers due at or before T, whichever task
+/// ran first at T.
 pub type CtlTx = mpsc::UnboundedSender<(SimTime, NodeCtl)>;
 /// The receiving end of a [`CtlTx`].
 pub type CtlRx = mpsc::UnboundedReceiver<(SimTime, NodeCtl)>;
@@ -93,7 +95,8 @@ pub async fn run_node_logged<A: App>(
     clock: Clock,
     log: Option<NodeLogTx>,
 ) -> Host<A> {
-    let mut t = clock.now();
+    // Every stamp the node sees is at or after the start; its own time only moves forward.
+    let mut t = SimTime::ZERO;
     let mut powered = true;
     let mut hung = false;
     loop {
@@ -106,14 +109,27 @@ pub async fn run_node_logged<A: App>(
         tokio::select! {
             biased;
             c = ctl.recv() => {
-                let c = c.map(|(at, c)| {
-                    t = t.max(at);
-                    c
-                });
+                let Some((at, c)) = c else { break };
+                // The node's own timers due by the command's instant come first, so that a
+                // command meets the same node whichever task ran first at that instant
+                // (a beacon due at the instant the EPS switches its COMM off goes out).
+                // (Bounded: an application whose timer never moves on cannot hang the loop here.)
+                for _ in 0..10_000 {
+                    if !powered || hung || c == NodeCtl::Stop {
+                        break;
+                    }
+                    let Some(due) = host.poll_timeout().filter(|&d| d <= at) else {
+                        break;
+                    };
+                    t = t.max(due);
+                    host.handle_timeout(t);
+                    flush(&mut host, &ports, t, log.as_ref());
+                }
+                t = t.max(at);
                 match c {
-                    None | Some(NodeCtl::Stop) => break,
-                    Some(NodeCtl::Reboot) => if powered { host.reboot(t) },
-                    Some(NodeCtl::Power(on)) => {
+                    NodeCtl::Stop => break,
+                    NodeCtl::Reboot => if powered { host.reboot(t) },
+                    NodeCtl::Power(on) => {
                         if on != powered {
                             powered = on;
                             for p in &ports { p.set_enabled(on); }
@@ -123,8 +139,8 @@ pub async fn run_node_logged<A: App>(
                             }
                         }
                     }
-                    Some(NodeCtl::Hang(h)) => hung = h,
-                    Some(NodeCtl::Switch(name, on)) => host.switch(name, on, t),
+                    NodeCtl::Hang(h) => hung = h,
+                    NodeCtl::Switch(name, on) => host.switch(name, on, t),
                 }
             }
             m = inbox.recv() => {
@@ -204,5 +220,44 @@ mod tests {
             host.node.uptime(SimTime::from_secs(10)),
             Duration::from_secs(6)
         );
+    }
+
+    /// An application with one timer.
+    struct Timer {
+        at: SimTime,
+        fired: Vec<SimTime>,
+    }
+
+    impl csp::node::App for Timer {
+        fn start(&mut self, _: &mut csp::node::Node, _: SimTime) {}
+        fn handle_packet(&mut self, _: &mut csp::node::Node, _: csp::Packet, _: SimTime) {}
+        fn poll_timeout(&self) -> Option<SimTime> {
+            self.fired.is_empty().then_some(self.at)
+        }
+        fn handle_timeout(&mut self, _: &mut csp::node::Node, now: SimTime) {
+            self.fired.push(now);
+        }
+    }
+
+    /// A power-off for instant T read before the node's own timer at T has run (the other
+    /// task ran first at T): the timer still runs, before the power goes.
+    #[tokio::test(start_paused = true)]
+    async fn a_timer_due_at_a_commands_instant_runs_before_the_command() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let t5 = SimTime::from_secs(5);
+        let app = Timer {
+            at: t5,
+            fired: Vec::new(),
+        };
+        let host = Host::new(NodeConfig::new("X", 3), app, SimTime::ZERO);
+        let (_in_tx, in_rx) = inbox();
+        let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
+        // Queued before the task first runs: it reads the command before its timer is due.
+        ctl_tx.send((t5, NodeCtl::Power(false))).unwrap();
+        let task = tokio::spawn(run_node(host, Vec::new(), in_rx, ctl_rx, clock));
+        tokio::time::sleep(Duration::from_secs(10)).await;
+        ctl_tx.send((SimTime::ZERO, NodeCtl::Stop)).unwrap();
+        let host = task.await.unwrap();
+        assert_eq!(host.app.fired, vec![t5]);
     }
 }

@@ -205,16 +205,19 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
     n: u16,
 ) -> String {
     let (inbox_tx, mut inbox_rx) = inbox();
-    let mut endpoint: Option<OutsideEndpoint> = None;
+    // Released however this ends, also when the future is dropped (the connection's reader
+    // ended first): the twin's own node with a claimed address gets it back.
+    let mut claims = Claims(None);
+    let endpoint = &mut claims.0;
     for &a in &cfg.addrs {
-        if let Err(e) = claim(&mut endpoint, segs, name, a, &inbox_tx, n) {
+        if let Err(e) = claim(endpoint, segs, name, a, &inbox_tx, n) {
             tracing::warn!("{name}: cannot claim configured address {a}: {e}");
         }
     }
     let mut decoder = Decoder::new(cfg.decoder);
     let mut events = Vec::new();
     let mut out = Vec::new();
-    let why = loop {
+    loop {
         tokio::select! {
             biased;
             r = input.recv() => {
@@ -234,7 +237,7 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
                 for ev in events.drain(..) {
                     match ev {
                         KissEvent::Packet(p) => {
-                            let res = claim(&mut endpoint, segs, name, p.header.src, &inbox_tx, n)
+                            let res = claim(endpoint, segs, name, p.header.src, &inbox_tx, n)
                                 .and_then(|ep| ep.send(t, &p));
                             match res {
                                 Ok(()) => bump(stats, |s| s.packets_in += 1),
@@ -276,11 +279,18 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
                 }
             }
         }
-    };
-    if let Some(ep) = endpoint {
-        ep.release();
     }
-    why
+}
+
+/// An outside link's endpoint, released when dropped.
+struct Claims(Option<OutsideEndpoint>);
+
+impl Drop for Claims {
+    fn drop(&mut self) {
+        if let Some(ep) = &self.0 {
+            ep.release();
+        }
+    }
 }
 
 fn claim<'a>(

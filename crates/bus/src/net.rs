@@ -321,7 +321,13 @@ impl State {
         if !self.eps.get(from).is_some_and(|e| e.enabled) {
             return;
         }
-        let Some(to) = self.owner(packet.header.dst).filter(|&to| to != from) else {
+        // Never back to the sender, and never from one satellite radio to another (the
+        // default endpoint is a radio: a radio's packet for an address nobody on the ground
+        // owns has nowhere to go).
+        let Some(to) = self
+            .owner(packet.header.dst)
+            .filter(|&to| to != from && !(self.eps[from].radio && self.eps[to].radio))
+        else {
             self.stats.unroutable += 1;
             return;
         };
@@ -473,6 +479,11 @@ mod tests {
         assert!(heard.lock().unwrap().is_empty());
         r2.send(a.t, Packet::new(Header::new(3, 16, 40, 1), vec![0; 8]));
         assert!(rx_gs.recv().await.is_some());
+        // A radio's packet for a ground address nobody owns does not reach the other radio.
+        r2.send(a.t, Packet::new(Header::new(3, 19, 40, 1), vec![0; 8]));
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        assert!(rx_1.try_recv().is_err());
+        assert_eq!(net.stats().unroutable, 1);
         let heard = heard.lock().unwrap().clone();
         assert_eq!(heard.len(), 1);
         assert_eq!(heard[0].0, "COMM2-uhf");

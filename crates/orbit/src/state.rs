@@ -272,43 +272,66 @@ pub enum Activity {
 
 /// A log of [`Activity`] switches with their times; readers see the state **strictly
 /// before** their own instant (see [`TruthBoard`] for why).
+///
+/// Switches may be posted ahead of time (the air channel posts a queued transmission when
+/// it is submitted). The log forgets what no reader can ask for any more: switches more
+/// than [`ActivityBoard::KEEP_BEHIND_NS`] before the latest instant any reader has asked
+/// about (keeping the last one, which holds the state); only without readers does it fall
+/// back to a cap of [`ActivityBoard::MAX_SWITCHES`] per activity.
 #[derive(Debug, Clone, Default)]
 pub struct ActivityBoard(std::sync::Arc<std::sync::Mutex<ActivityLog>>);
 
-/// Each activity's switches: (time ns, on).
-type ActivityLog = std::collections::BTreeMap<Activity, Vec<(u64, bool)>>;
+/// Each activity's switches, (time ns, on), and the latest instant a reader asked about.
+#[derive(Debug, Default)]
+struct ActivityLog {
+    switches: std::collections::BTreeMap<Activity, Vec<(u64, bool)>>,
+    read_ns: u64,
+}
 
 impl ActivityBoard {
+    /// How far behind the most advanced reader switches are kept (readers run at the same
+    /// simulated instant within a tick; 10 s is ample).
+    pub const KEEP_BEHIND_NS: u64 = 10_000_000_000;
+    /// Switches kept per activity when nobody reads the board.
+    pub const MAX_SWITCHES: usize = 1 << 20;
+
     /// An empty board: every activity off.
     pub fn new() -> Self {
         Self::default()
     }
 
-    /// `what` switched on or off at `t_ns` (switches of one activity come in time order;
-    /// between the last 2048 and 4096 are kept: readers look back one EPS step, which holds
-    /// far fewer even for UHF packets queued back to back).
-    pub fn set(&self, what: Activity, t_ns: u64, on: bool) {
-        let mut m = self
-            .0
+    fn lock(&self) -> std::sync::MutexGuard<'_, ActivityLog> {
+        self.0
             .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let v = m.entry(what).or_default();
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// `what` switched on or off at `t_ns` (switches of one activity come in time order).
+    pub fn set(&self, what: Activity, t_ns: u64, on: bool) {
+        let mut log = self.lock();
+        let horizon = log.read_ns.saturating_sub(Self::KEEP_BEHIND_NS);
+        let v = log.switches.entry(what).or_default();
         if v.last().is_some_and(|&(_, last)| last == on) {
             return;
         }
         if v.len() >= 4096 {
-            v.drain(..2048);
+            // Everything before the last switch older than the horizon is unreachable.
+            let old = v.partition_point(|&(t, _)| t < horizon);
+            if old > 1 {
+                v.drain(..old - 1);
+            } else if v.len() >= Self::MAX_SWITCHES {
+                v.drain(..Self::MAX_SWITCHES / 2);
+            }
         }
         v.push((t_ns, on));
     }
 
     /// Whether `what` was on just before `t_ns`.
     pub fn on_before(&self, what: Activity, t_ns: u64) -> bool {
-        let m = self
-            .0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        m.get(&what)
+        let mut log = self.lock();
+        log.read_ns = log.read_ns.max(t_ns);
+        log.switches
+            .get(&what)
             .and_then(|v| v.iter().rev().find(|(t, _)| *t < t_ns))
             .is_some_and(|&(_, on)| on)
     }
@@ -319,11 +342,11 @@ impl ActivityBoard {
         if to_ns <= from_ns {
             return 0.0;
         }
-        let m = self
-            .0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        let Some(v) = m.get(&what) else { return 0.0 };
+        let mut log = self.lock();
+        log.read_ns = log.read_ns.max(from_ns);
+        let Some(v) = log.switches.get(&what) else {
+            return 0.0;
+        };
         let mut on_ns = 0u64;
         let mut state = v
             .iter()
@@ -342,6 +365,11 @@ impl ActivityBoard {
             on_ns += to_ns - since;
         }
         on_ns as f64 / (to_ns - from_ns) as f64
+    }
+
+    /// Switches held for `what` (for tests and memory checks).
+    pub fn held(&self, what: Activity) -> usize {
+        self.lock().switches.get(&what).map_or(0, Vec::len)
     }
 }
 
@@ -392,6 +420,30 @@ mod tests {
         assert_eq!(b.pending(101, 0)[0].end_ns, 5_000);
         b.forget_before(5_000);
         assert!(b.pending(u64::MAX, 0).is_empty());
+    }
+
+    /// A long backlog posted ahead of the reader (2100 transmissions queued back to back on
+    /// the air) is all there when the reader gets to it; once the reader has moved on, the
+    /// log forgets what lies behind it.
+    #[test]
+    fn a_backlog_posted_ahead_survives_until_read_and_is_then_forgotten() {
+        let a = ActivityBoard::new();
+        assert_eq!(a.duty(Activity::UhfTx, 0, 1), 0.0);
+        // 250 ms on, 250 ms off, for 2100 transmissions (1050 s).
+        let ms = 1_000_000u64;
+        for k in 0..2100u64 {
+            a.set(Activity::UhfTx, k * 500 * ms, true);
+            a.set(Activity::UhfTx, k * 500 * ms + 250 * ms, false);
+        }
+        assert_eq!(a.held(Activity::UhfTx), 4200);
+        assert_eq!(a.duty(Activity::UhfTx, 0, 1000 * ms), 0.5);
+        // The reader advances; the next posts forget what is more than 10 s behind it.
+        assert_eq!(a.duty(Activity::UhfTx, 1_040_000 * ms, 1_041_000 * ms), 0.5);
+        a.set(Activity::UhfTx, 1_100_000 * ms, true);
+        assert!(a.held(Activity::UhfTx) < 100, "{}", a.held(Activity::UhfTx));
+        assert_eq!(a.duty(Activity::UhfTx, 1_041_000 * ms, 1_042_000 * ms), 0.5);
+        assert!(!a.on_before(Activity::UhfTx, 1_050_100 * ms));
+        assert!(a.on_before(Activity::UhfTx, 1_100_000 * ms + 1));
     }
 
     #[test]

@@ -316,11 +316,14 @@ pub struct Boards {
 /// - COMM2 answers to COMM1's link address (CFP destination 1) on the main bus as well as
 ///   its own, so what the nodes route to the ground via COMM1 reaches COMM2, which sends it
 ///   over its own radio by its static table (ground 16-20 direct on UHF); a packet for CSP
-///   1 itself that COMM2 receives this way is dropped (counted, "same iface");
+///   1 itself that reaches COMM2 over the bus this way is dropped (counted, "same iface"),
+///   and one from the ground is forwarded onto the bus, where only a hung COMM1 takes it;
 /// - the ground's uplink goes to COMM2's radio (the air channel's default endpoint);
 /// - COMM2's radio goes active (beacons from CSP 2) and COMM1's to standby.
 ///
-/// Handing back undoes the three at the instant COMM1 is powered on or recovers.
+/// Handing back undoes the three at the instant COMM1 is powered on or recovers. While both
+/// are down nobody can carry the link and nothing is switched (the log says so); the first
+/// to come back carries it.
 #[derive(Debug, Clone, Default)]
 pub struct RadioLink(Arc<Mutex<RadioLinkState>>);
 
@@ -329,6 +332,9 @@ struct RadioLinkState {
     /// Powered and not hung, for COMM1 and COMM2.
     powered: [bool; 2],
     hung: [bool; 2],
+    /// Which COMM carries the link: 0 COMM1, 1 COMM2, 2 none (both down).
+    carrier: usize,
+    /// Whether COMM2's radio is the active one (the alias, the uplink, the switches).
     secondary: bool,
     main: Option<CanBus>,
     ground: Option<PacketNet>,
@@ -399,11 +405,6 @@ impl RadioLink {
             st.update(t);
         }
     }
-
-    /// Whether COMM2 carries the radio link now.
-    pub fn secondary(&self) -> bool {
-        self.lock().secondary
-    }
 }
 
 impl RadioLinkState {
@@ -411,36 +412,54 @@ impl RadioLinkState {
         self.powered[i] && !self.hung[i]
     }
 
+    /// Which COMM can carry the link: COMM1 when up, else COMM2 when up, else none (2).
+    fn carrier(&self) -> usize {
+        if self.up(0) {
+            0
+        } else if self.up(1) {
+            1
+        } else {
+            2
+        }
+    }
+
     fn update(&mut self, t: SimTime) {
-        let want = !self.up(0) && self.up(1);
-        if want == self.secondary || self.uhf[0].is_none() || self.uhf[1].is_none() {
+        if self.uhf[0].is_none() || self.uhf[1].is_none() {
             return;
         }
-        self.secondary = want;
-        if let (Some(bus), Some(port)) = (&self.main, &self.can2) {
-            bus.set_alias(port, crate::network::COMM1, want);
+        let carrier = self.carrier();
+        if carrier == self.carrier {
+            return;
         }
-        if let (Some(net), Some(port)) = (&self.ground, &self.uhf[usize::from(want)]) {
-            net.set_default(port);
-        }
-        for (i, ctl) in self.ctl.iter().enumerate() {
-            if let Some(c) = ctl {
-                let active = (i == 1) == want;
-                let _ = c.send((t, NodeCtl::Switch(nodes_comm::RADIO_SWITCH, active)));
-            }
-        }
-        let message = if want {
-            format!(
+        let message = match carrier {
+            0 => "COMM1 has the radio link back".to_owned(),
+            1 => format!(
                 "COMM2 takes the radio link over (COMM1 {})",
                 if self.powered[0] {
                     "failed"
                 } else {
                     "powered off"
                 }
-            )
-        } else {
-            "COMM1 has the radio link back".to_owned()
+            ),
+            // Nobody can carry it: the switches stay as they are until one comes back.
+            _ => "no COMM can carry the radio link (COMM1 and COMM2 down)".to_owned(),
         };
+        self.carrier = carrier;
+        if carrier < 2 && (carrier == 1) != self.secondary {
+            let want = carrier == 1;
+            self.secondary = want;
+            if let (Some(bus), Some(port)) = (&self.main, &self.can2) {
+                bus.set_alias(port, crate::network::COMM1, want);
+            }
+            if let (Some(net), Some(port)) = (&self.ground, &self.uhf[carrier]) {
+                net.set_default(port);
+            }
+            for (i, ctl) in self.ctl.iter().enumerate() {
+                if let Some(c) = ctl {
+                    let _ = c.send((t, NodeCtl::Switch(nodes_comm::RADIO_SWITCH, i == carrier)));
+                }
+            }
+        }
         tracing::info!(%t, "{message}");
         if let Some(ev) = &self.events {
             let _ = ev.send(RunEvent::Log {
@@ -768,7 +787,8 @@ pub async fn run_with(
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
         let app = app_for(spec.role, spec.addr, &opts, &boards, plan, &results, &ev_tx);
-        let host = Host::new(cfg, app, clock.now());
+        // Every node boots at the start of the run (in real time, not when its task is made).
+        let host = Host::new(cfg, app, SimTime::ZERO);
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
         boards.power.insert(spec.addr, ctl_tx.clone());
         if matches!(spec.role, Role::CommPrimary | Role::CommSecondary) {

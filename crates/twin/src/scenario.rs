@@ -641,7 +641,8 @@ pub struct ExpectationSpec {
     /// Name for reports (default `expectations[i]`).
     #[serde(default)]
     pub name: Option<String>,
-    /// `reply` (a command is answered), `no-reply` (it is not), or `counter`.
+    /// What is checked: `reply`, `no-reply`, `counter`, `attitude`, `power`, `beacon`,
+    /// `session`, `downlink` or `accounting` (docs/scenarios.md).
     pub kind: ExpectKind,
     /// The command (by name) for `reply` and `no-reply`.
     #[serde(default)]

@@ -72,25 +72,23 @@ fn python_peer_on_the_payload_bus_reaches_the_fc_through_the_pc() {
     assert!(pc.counters.forwarded >= 12, "{:?}", pc.counters);
 }
 
+/// `m6p-twin gs --connect ADDR ping 3 ARGS...`: its standard output, after asserting it
+/// succeeded.
+fn gs_ping_fc(addr: SocketAddr, args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args(["gs", "--connect", &addr.to_string(), "ping", "3"])
+        .args(args)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{text}");
+    text
+}
+
 #[test]
 fn gs_client_binary_pings_the_fc_over_a_real_socket() {
     with_twin(6, |addr| {
-        let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
-            .args([
-                "gs",
-                "--connect",
-                &addr.to_string(),
-                "ping",
-                "3",
-                "--count",
-                "2",
-                "--interval",
-                "100ms",
-            ])
-            .output()
-            .unwrap();
-        let text = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(out.status.success(), "{text}");
+        let text = gs_ping_fc(addr, &["--count", "2", "--interval", "100ms"]);
         assert!(text.contains("2 sent, 2 answered"), "{text}");
     });
 }
@@ -153,4 +151,61 @@ fn kiss_connect_reaches_the_payload_server_and_reconnects_after_a_drop() {
     let k = &report.kiss[0].1;
     assert!(k.connections >= 2 && k.disconnects >= 1, "{k:?}");
     assert_eq!(k.packets_in, 2);
+}
+
+/// An outside ground program joining as 16 takes the address from the twin's own ground
+/// station only while it is connected: after it leaves, GS16's replies reach GS16 again
+/// (they went to the closed link for the rest of the run before: the link's claims were
+/// not given back when the peer closed first).
+#[test]
+fn a_departed_outside_program_gives_its_address_back() {
+    use m6p_twin::ground::{Outcome, PlannedRequest, ping_payload};
+    let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(5));
+    opts.clock = ClockMode::Realtime { speed: 1.0 };
+    opts.kiss_listen = vec!["127.0.0.1:0".parse().unwrap()];
+    opts.ground_plan.insert(
+        16,
+        vec![PlannedRequest {
+            at: csp::SimTime::from_secs(4),
+            dst: 3,
+            dport: 1,
+            data: ping_payload(8),
+            timeout: Duration::from_millis(900),
+            label: "after".into(),
+            after: None,
+        }],
+    );
+    let rt = build_runtime(opts.clock).unwrap();
+    let report = rt.block_on(async move {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let twin = tokio::spawn(run(opts, Some(tx)));
+        let addr = rx.await.unwrap()[0];
+        let gs = tokio::task::spawn_blocking(move || {
+            Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+                .args([
+                    "gs",
+                    "--connect",
+                    &addr.to_string(),
+                    "ping",
+                    "3",
+                    "--count",
+                    "1",
+                ])
+                .output()
+                .unwrap()
+        });
+        let out = gs.await.unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        twin.await.unwrap().unwrap()
+    });
+    assert_eq!(report.results.len(), 1);
+    assert!(
+        matches!(report.results[0].outcome, Outcome::Reply { .. }),
+        "{:?}",
+        report.results[0].outcome
+    );
 }
