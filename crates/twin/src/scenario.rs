@@ -1105,7 +1105,8 @@ impl Scenario {
             }
         }
         let mut command_names = Vec::new();
-        let station = |c: &CommandSpec| c.from.as_ref().and_then(|r| net.resolve(r).ok());
+        // The sending station, GS16 when not given.
+        let station = |c: &CommandSpec| c.from.as_ref().map_or(Some(16), |r| net.resolve(r).ok());
         for (i, c) in self.commands.iter().enumerate() {
             if let Some(a) = &c.after {
                 let own = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));

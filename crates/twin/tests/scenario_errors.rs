@@ -310,3 +310,18 @@ fn a_type_error_in_an_array_of_tables_names_the_entry() {
         "invalid type",
     );
 }
+
+/// `after` needs both commands sent from one station; GS16 named or left to the default is
+/// the same station (it was taken for another one).
+#[test]
+fn after_across_gs16_named_and_gs16_by_default_is_accepted() {
+    let text = "duration = \"1m\"\n[[commands]]\nname = \"a\"\nfrom = \"GS16\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[commands]]\nafter = \"a\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n";
+    Scenario::parse("ok.toml", text).unwrap();
+    let other = "duration = \"1m\"\n[network]\nground_stations = [16, 17]\n[[commands]]\nname = \"a\"\nfrom = \"GS17\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[commands]]\nafter = \"a\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n";
+    assert_error(
+        other,
+        11,
+        "commands[1].after",
+        "sent from another ground station",
+    );
+}
