@@ -870,32 +870,44 @@ pub fn check(
                 let (mut ok, mut bad, mut missing) = (0u64, 0u64, 0u64);
                 let (mut first, mut last) = (None, None::<u32>);
                 let mut examples = Vec::new();
-                let mut tail: &[u8] = &[];
+                let mut tail: Vec<u8> = Vec::new();
                 for run in r.runs.iter().filter(|x| x.session == *session) {
                     let c = nodes_payload::check_counter_stream(&run.bytes);
+                    if c.first_seq.is_none() && c.frames_bad == 0 {
+                        // No whole frame: all of it belongs to the frame the runs around it
+                        // cut (a short run between two others).
+                        tail.extend_from_slice(&run.bytes);
+                        continue;
+                    }
                     ok += c.frames_ok;
                     bad += c.frames_bad;
                     missing += c.missing_count;
                     examples.extend(c.missing_seqs.iter().take(8).copied());
                     if let (Some(prev), Some(a)) = (last, c.first_seq) {
                         let head = &run.bytes[..(c.lead_bytes as usize).min(run.bytes.len())];
-                        let joined = nodes_payload::check_counter_stream(&[tail, head].concat());
-                        let spanned = a == prev.wrapping_add(2)
-                            && joined.frames_ok == 1
+                        let joined =
+                            nodes_payload::check_counter_stream(&[tail.as_slice(), head].concat());
+                        // Whole when the bytes between the runs' whole frames are exactly
+                        // the frames in between (one cut by a run's end, or more when a short
+                        // run in the middle held no whole frame).
+                        let gap = u64::from(a.saturating_sub(prev).saturating_sub(1));
+                        let spanned = gap > 0
+                            && joined.frames_ok == gap
                             && joined.first_seq == Some(prev.wrapping_add(1))
+                            && joined.missing_count == 0
                             && joined.lead_bytes == 0
                             && joined.tail_bytes == 0
                             && joined.skipped_bytes == 0;
-                        let gap = u64::from(a.saturating_sub(prev).saturating_sub(1));
                         if spanned {
-                            ok += 1;
+                            ok += gap;
                         } else if gap > 0 {
                             missing += gap;
                             examples.push(prev + 1);
                         }
                     }
-                    tail = &run.bytes
-                        [run.bytes.len() - (c.tail_bytes as usize).min(run.bytes.len())..];
+                    tail = run.bytes
+                        [run.bytes.len() - (c.tail_bytes as usize).min(run.bytes.len())..]
+                        .to_vec();
                     first = first.or(c.first_seq);
                     last = c.last_seq.or(last);
                 }
@@ -1223,6 +1235,25 @@ mod tests {
         // here), none is taken for damaged.
         let (ok, _, seen) = check(&strict, &runs(&bytes[..1000], &bytes[1030..]));
         assert!(!ok && seen.contains("0 damaged, 2 missing"), "{seen}");
+        // A short run holding no whole frame between two others: still whole.
+        let three = |a: &[u8], b: &[u8], c: &[u8]| {
+            let mut ev = Vec::new();
+            for part in [a, b, c] {
+                ev.push(pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }));
+                ev.push(pc(nodes_pc::PcOutput::Downlinked {
+                    t,
+                    session_id: 1,
+                    payload_addr: 12,
+                    bytes: part.to_vec(),
+                }));
+            }
+            report_of(ev)
+        };
+        let (ok, _, seen) = check(
+            &strict,
+            &three(&bytes[..1000], &bytes[1000..1060], &bytes[1060..]),
+        );
+        assert!(ok && seen.contains("0 missing"), "{seen}");
         // Split exactly between two frames: nothing to join, nothing missing.
         let first = nodes_payload::stream::frame_len(0) + nodes_payload::stream::frame_len(1);
         let (ok, _, seen) = check(&strict, &runs(&bytes[..first], &bytes[first..]));
