@@ -47,6 +47,7 @@ fn reply_problem(r: &RequestResult, check: &Check) -> Option<String> {
             secs(r.request.timeout)
         )),
         Outcome::SendFailed(e) => Some(format!("not sent: {e}")),
+        Outcome::Unfinished => Some(unfinished(r)),
         Outcome::Reply { data: got, rtt } => {
             if let Some(w) = within
                 && rtt > w
@@ -121,6 +122,7 @@ fn check(x: &Expectation, report: &RunReport) -> Verdict {
                                 secs(*rtt),
                                 hex::encode(data)
                             )),
+                            Outcome::Unfinished => Some(unfinished(r)),
                             _ => None,
                         }
                     } else {
@@ -508,6 +510,14 @@ fn contact_windows(report: &RunReport) -> Vec<(SimTime, SimTime)> {
     out
 }
 
+/// Why a request the run ended on is no verdict either way.
+fn unfinished(r: &RequestResult) -> String {
+    format!(
+        "sent, but the run ended before its reply or its {} timeout",
+        secs(r.request.timeout)
+    )
+}
+
 /// Judge a `beacon` expectation.
 fn check_beacons(
     report: &RunReport,
@@ -530,7 +540,12 @@ fn check_beacons(
         .map(|(a, b)| (a.max(from), b.min(to)))
         .filter(|(a, b)| b > a)
         .collect();
-    let contact_s: f64 = windows.iter().map(|(a, b)| (*b - *a).as_secs_f64()).sum();
+    // (+ 0.0: an empty sum is -0.0.)
+    let contact_s: f64 = windows
+        .iter()
+        .map(|(a, b)| (*b - *a).as_secs_f64())
+        .sum::<f64>()
+        + 0.0;
     let mut seen = format!(
         "{n} beacons{} on the ground over {:.0} s of contact in {} window(s)",
         sender.map_or(String::new(), |a| format!(" from CSP {a}")),
@@ -541,7 +556,7 @@ fn check_beacons(
         return (
             false,
             end,
-            format!("{seen} (expected {:?}..={:?})", min, max),
+            format!("{seen} (expected {})", crate::sessions::bounds(min, max)),
         );
     }
     if let Some(gap) = within {

@@ -43,6 +43,8 @@ pub enum Outcome {
     Timeout,
     /// The request could not be sent.
     SendFailed(String),
+    /// Sent, but the run ended before its reply arrived or its timeout ran out.
+    Unfinished,
 }
 
 /// A request and its outcome.
@@ -150,6 +152,21 @@ pub const BEACON_PORT: u8 = 10;
 impl App for GroundApp {
     fn start(&mut self, node: &mut Node, _now: SimTime) {
         node.bind(BEACON_PORT);
+    }
+
+    fn finish(&mut self, _node: &mut Node, _now: SimTime) {
+        // What is still waiting was sent: say so (no event: nothing was decided in the run).
+        let mut results = self
+            .results
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        for (_, (request, sent)) in std::mem::take(&mut self.in_flight) {
+            results.push(RequestResult {
+                request,
+                sent,
+                outcome: Outcome::Unfinished,
+            });
+        }
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {

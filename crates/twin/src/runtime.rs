@@ -1217,12 +1217,22 @@ impl RunReport {
                 .iter()
                 .filter(|r| matches!(r.outcome, crate::ground::Outcome::Reply { .. }))
                 .count();
+            let open = self
+                .results
+                .iter()
+                .filter(|r| matches!(r.outcome, crate::ground::Outcome::Unfinished))
+                .count();
             let _ = writeln!(
                 s,
-                "\nground requests: {} sent, {} answered, {} unanswered",
+                "\nground requests: {} sent, {} answered, {} unanswered{}",
                 self.results.len(),
                 ok,
-                self.results.len() - ok
+                self.results.len() - ok - open,
+                if open > 0 {
+                    format!(", {open} still waiting at the end")
+                } else {
+                    String::new()
+                }
             );
         }
         s

@@ -1363,6 +1363,17 @@ impl Scenario {
                     );
                 }
             }
+            if let Some(from) = x.from
+                && from.0 >= self.duration.0
+            {
+                err(
+                    p("from"),
+                    format!(
+                        "the window starts at or after the end of the run ({})",
+                        crate::duration::format_duration(self.duration.0)
+                    ),
+                );
+            }
             match x.kind {
                 ExpectKind::Beacon => {
                     if x.within.is_none() && x.min.is_none() && x.max.is_none() {

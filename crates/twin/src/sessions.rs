@@ -735,7 +735,7 @@ impl SessionsReport {
     }
 }
 
-fn bounds(min: Option<u64>, max: Option<u64>) -> String {
+pub(crate) fn bounds(min: Option<u64>, max: Option<u64>) -> String {
     match (min, max) {
         (Some(a), Some(b)) => format!("{a}..={b}"),
         (Some(a), None) => format!(">= {a}"),

@@ -436,3 +436,14 @@ fn in_real_time_the_nodes_boot_at_zero() {
     // 10 s, then 177 bytes at 9600 bit/s (147.5 ms) and 3 ms.
     assert_eq!(first, SimTime::from_ns(10_150_500_000));
 }
+
+/// A request sent before the end whose reply or timeout would come after it is reported as
+/// sent and unfinished (it was left out, and its expectation said "never sent").
+#[test]
+fn a_request_the_run_ends_on_is_sent_and_unfinished() {
+    let report = run_plan(vec![request(10, 9, 1, ping_payload(4))], 12, 1, false);
+    assert_eq!(report.results.len(), 1);
+    assert_eq!(report.results[0].sent, SimTime::from_secs(10));
+    assert_eq!(report.results[0].outcome, Outcome::Unfinished);
+    assert!(report.table().contains("1 still waiting at the end"));
+}

@@ -490,3 +490,34 @@ fn bench_reports_its_figures_and_leaves_no_files() {
         .collect();
     assert!(left.is_empty(), "{left:?}");
 }
+
+/// A beacon verdict reads like the others: bounds as `>= 2`, and no contact as `0 s` (it
+/// printed `Some(2)..=None` and `-0 s`).
+#[test]
+fn a_beacon_verdict_prints_plain_bounds_and_no_contact_as_zero() {
+    let f = tmp("beacon-verdict.toml");
+    std::fs::write(
+        &f,
+        r#"duration = "1300s"
+[satellite]
+tle = [
+  "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996",
+  "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009",
+]
+[fc]
+publish_hz = 0
+[comm]
+passes = true
+[[expectations]]
+kind = "beacon"
+min = 2
+"#,
+    )
+    .unwrap();
+    let (code, out, _) = twin(&["run", f.to_str().unwrap()]);
+    assert_eq!(code, 1, "{out}");
+    assert!(
+        out.contains("0 beacons on the ground over 0 s of contact in 0 window(s) (expected >= 2)"),
+        "{out}"
+    );
+}

@@ -325,3 +325,13 @@ fn after_across_gs16_named_and_gs16_by_default_is_accepted() {
         "sent from another ground station",
     );
 }
+
+#[test]
+fn an_expectation_window_after_the_end_of_the_run() {
+    assert_error(
+        "duration = \"1m\"\n[[expectations]]\nkind = \"beacon\"\nmin = 1\nfrom = \"300s\"\n",
+        5,
+        "expectations[0].from",
+        "after the end of the run (1m)",
+    );
+}
