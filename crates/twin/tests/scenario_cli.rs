@@ -521,3 +521,22 @@ min = 2
         "{out}"
     );
 }
+
+/// `m6p-twin run | head -1`: the reader goes away early and the twin ends quietly with
+/// the status of a process killed by SIGPIPE (it panicked with "failed printing to stdout").
+#[test]
+fn a_reader_that_stops_early_ends_the_twin_quietly() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args(["run", "--duration", "10m"])
+        .current_dir(repo())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reader goes away before the twin prints its table (a few hundred ms of run).
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(out.status.code(), Some(141), "{err}");
+}
