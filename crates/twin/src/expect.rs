@@ -64,13 +64,9 @@ fn reply_problem(r: &RequestResult, check: &Check) -> Option<String> {
                 ));
             }
             if let Some(want) = data
-                && got != want
+                && !want.matches(got)
             {
-                return Some(format!(
-                    "reply {} (expected {})",
-                    hex::encode(got),
-                    hex::encode(want)
-                ));
+                return Some(format!("reply {} (expected {want})", hex::encode(got)));
             }
             if let Some(n) = data_len
                 && got.len() != *n

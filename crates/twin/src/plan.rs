@@ -66,8 +66,8 @@ pub enum Check {
         within: Option<Duration>,
         /// Result code (reply byte 1).
         result: Option<u8>,
-        /// Exact reply bytes.
-        data: Option<Vec<u8>>,
+        /// The reply bytes (`??` any byte, a final `...` any further bytes).
+        data: Option<crate::scenario::ReplyPattern>,
         /// Reply length.
         data_len: Option<usize>,
     },
@@ -557,7 +557,10 @@ fn compile_expectation(
             occurrence,
             within: x.within.map(|d| d.0),
             result: x.result,
-            data: x.data.as_deref().and_then(|d| parse_hex(d).ok()),
+            data: x
+                .data
+                .as_deref()
+                .and_then(|d| crate::scenario::ReplyPattern::parse(d).ok()),
             data_len: x.data_len,
         },
         ExpectKind::NoReply => Check::NoReply {

@@ -1443,7 +1443,7 @@ impl Scenario {
                         Some(_) => {}
                     }
                     if let Some(d) = &x.data
-                        && let Err(e) = parse_hex(d)
+                        && let Err(e) = ReplyPattern::parse(d)
                     {
                         err(p("data"), e);
                     }
@@ -1819,6 +1819,69 @@ fn field_from_message(text: &str, span: Option<std::ops::Range<usize>>) -> Strin
     line.trim_matches(|c| c == '[' || c == ']').to_owned()
 }
 
+/// An expected reply: hex bytes where `??` stands for any byte, and a final `...` for any
+/// further bytes (`"01 01 02 01 ..."`: a TMCOMM reply from COMM2 with its radio active).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReplyPattern {
+    /// Each byte, `None` for any.
+    pub bytes: Vec<Option<u8>>,
+    /// Whether more bytes may follow.
+    pub open_end: bool,
+}
+
+impl ReplyPattern {
+    /// Parse `"01 ?? ff ..."`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
+        let (body, open_end) = match compact.strip_suffix("...") {
+            Some(b) => (b.to_owned(), true),
+            None => (compact, false),
+        };
+        if body.len() % 2 != 0 {
+            return Err(format!("`{s}` is not hex bytes: an odd number of digits"));
+        }
+        let bytes = (0..body.len() / 2)
+            .map(|i| match &body[2 * i..2 * i + 2] {
+                "??" => Ok(None),
+                pair => u8::from_str_radix(pair, 16)
+                    .map(Some)
+                    .map_err(|_| format!("`{s}` is not hex bytes: `{pair}` (use ?? for any byte)")),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(ReplyPattern { bytes, open_end })
+    }
+
+    /// Whether `got` matches.
+    pub fn matches(&self, got: &[u8]) -> bool {
+        let len_ok = if self.open_end {
+            got.len() >= self.bytes.len()
+        } else {
+            got.len() == self.bytes.len()
+        };
+        len_ok
+            && self
+                .bytes
+                .iter()
+                .zip(got)
+                .all(|(want, g)| want.is_none_or(|w| w == *g))
+    }
+}
+
+impl std::fmt::Display for ReplyPattern {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for b in &self.bytes {
+            match b {
+                Some(b) => write!(f, "{b:02x}")?,
+                None => f.write_str("??")?,
+            }
+        }
+        if self.open_end {
+            f.write_str("...")?;
+        }
+        Ok(())
+    }
+}
+
 /// Parse hex bytes, with optional spaces (`"06 01 00"` or `"060100"`).
 pub fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
     let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
@@ -1844,6 +1907,27 @@ impl crate::network::NetworkSpec {
                     let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
                     format!("unknown node `{name}` (nodes: {})", names.join(", "))
                 }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::ReplyPattern;
+
+    #[test]
+    fn a_reply_pattern_takes_any_bytes_and_an_open_end() {
+        let p = ReplyPattern::parse("01 01 ?? 01 ...").unwrap();
+        assert!(p.matches(&[1, 1, 2, 1]));
+        assert!(p.matches(&[1, 1, 9, 1, 7, 7]));
+        assert!(!p.matches(&[1, 1, 2, 0, 7]));
+        assert!(!p.matches(&[1, 1, 2]));
+        assert_eq!(p.to_string(), "0101??01...");
+        let exact = ReplyPattern::parse("ff00").unwrap();
+        assert!(exact.matches(&[0xff, 0]) && !exact.matches(&[0xff, 0, 0]));
+        for bad in ["0", "zz", "01 0?", "... 01"] {
+            assert!(ReplyPattern::parse(bad).is_err(), "{bad}");
         }
     }
 }
