@@ -26,9 +26,10 @@
 //! station does not reply. Its data is `04 | 01 | Beacon` ([`wire::Beacon`], 171 + 2
 //! bytes): the BEACON 4 reply sent unsolicited.
 //!
-//! The transmitter's air time ([`orbit::state::Activity::UhfTx`], for the EPS) is charged
-//! by the twin from the air channel (`bus::net`'s air tap): every packet a radio sends,
-//! beacons and forwarded downlink alike, at its real place on the half-duplex channel.
+//! The transmitter's air time ([`orbit::state::Activity::UhfTx`] for COMM1's radio,
+//! `UhfTxSecondary` for COMM2's, for the EPS) is charged by the twin from the air channel
+//! (`bus::net`'s air tap): every packet a radio sends, beacons and forwarded downlink alike,
+//! at its real place on the half-duplex channel.
 //! The application only counts its beacons' air time (TMCOMM),
 //! `(4 + data) bytes x 8 / rate` (plus the configured framing overhead, 0 by default like
 //! `bus::net`).

@@ -540,3 +540,31 @@ fn a_reader_that_stops_early_ends_the_twin_quietly() {
     assert!(!err.contains("panicked"), "{err}");
     assert_eq!(out.status.code(), Some(141), "{err}");
 }
+
+/// The first ```toml block after `heading` in docs/scenarios.md, with `header` in front.
+fn doc_example(heading: &str, header: &str) -> PathBuf {
+    let doc = std::fs::read_to_string(repo().join("docs/scenarios.md")).unwrap();
+    let from = doc.find(heading).unwrap();
+    let start = doc[from..].find("```toml\n").unwrap() + from + 8;
+    let end = doc[start..].find("```").unwrap() + start;
+    let f = tmp(&format!("doc-{}.toml", heading.len()));
+    std::fs::write(&f, format!("{header}{}", &doc[start..end])).unwrap();
+    f
+}
+
+/// The docs' examples stay true: the annotated example is a valid scenario, and the FC
+/// example passes with the start, duration and seed the text gives (it had rotted: its
+/// detumble window failed).
+#[test]
+fn the_scenario_docs_examples_check_and_the_fc_example_passes() {
+    let annotated = doc_example("## An annotated example", "");
+    let (code, out, err) = twin(&["check", annotated.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    let fc = doc_example(
+        "## The FC",
+        "start = \"2026-04-30T18:00:00Z\"\nduration = \"3h\"\nseed = 3\n",
+    );
+    let (code, out, err) = twin(&["run", fc.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("4 passed, 0 failed"), "{out}");
+}
