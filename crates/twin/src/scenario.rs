@@ -1792,31 +1792,50 @@ fn field_from_message(text: &str, span: Option<std::ops::Range<usize>>) -> Strin
         .get(line_start..)
         .and_then(|t| t.lines().next())
         .unwrap_or("");
-    let line = line.trim();
+    let before = text.get(..line_start).unwrap_or("");
+    // A table header as a path: `[[ commands ]]  # note` is the array `commands`, indexed by
+    // how many of its headers come up to `upto`.
+    let header_path = |h: &str, upto: &str| -> Option<String> {
+        let (name, array) = table_header(h)?;
+        Some(if array {
+            let n = upto
+                .lines()
+                .filter(|l| table_header(l) == Some((name.clone(), true)))
+                .count();
+            format!("{name}[{}]", n.saturating_sub(1))
+        } else {
+            name
+        })
+    };
+    if table_header(line).is_some() {
+        // The error points at a header (a missing field, say): that table, counted with it.
+        let upto = text.get(..line_start + line.len()).unwrap_or(before);
+        return header_path(line, upto).unwrap_or_default();
+    }
     if let Some((k, _)) = line.split_once('=') {
-        let before = text.get(..line_start).unwrap_or("");
         let header = before
             .lines()
             .rev()
-            .map(str::trim)
-            .find(|l| l.starts_with('['))
-            .map(|h| {
-                let name = h.trim_matches(|c| c == '[' || c == ']').trim();
-                if h.starts_with("[[") {
-                    // An array of tables: its index is how many such headers came before.
-                    let n = before.lines().filter(|l| l.trim() == h).count();
-                    format!("{name}[{}]", n.saturating_sub(1))
-                } else {
-                    name.to_owned()
-                }
-            });
+            .find(|l| table_header(l).is_some())
+            .and_then(|h| header_path(h, before));
         let k = k.trim().to_owned();
         return match header {
             Some(h) => format!("{h}.{k}"),
             None => k,
         };
     }
-    line.trim_matches(|c| c == '[' || c == ']').to_owned()
+    line.trim().to_owned()
+}
+
+/// `[name]` -> (`name`, false), `[[name]]` -> (`name`, true), with spaces and a trailing
+/// comment allowed; anything else -> `None`.
+fn table_header(line: &str) -> Option<(String, bool)> {
+    let l = line.split('#').next().unwrap_or("").trim();
+    if let Some(inner) = l.strip_prefix("[[").and_then(|r| r.strip_suffix("]]")) {
+        return Some((inner.trim().to_owned(), true));
+    }
+    let inner = l.strip_prefix('[')?.strip_suffix(']')?;
+    Some((inner.trim().to_owned(), false))
 }
 
 /// An expected reply: hex bytes where `??` stands for any byte, and a final `...` for any

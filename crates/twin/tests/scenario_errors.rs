@@ -288,7 +288,7 @@ fn a_beacon_expectation_names_a_comm_as_its_sender() {
         "the sending COMM: COMM1 or COMM2",
     );
     assert_error(
-        "duration = \"1m\"\n[[expectations]]\nkind = \"beacon\"\nmin = 1\nfrom = \"60s\"\nto = \"30s\"\n",
+        "duration = \"2m\"\n[[expectations]]\nkind = \"beacon\"\nmin = 1\nfrom = \"60s\"\nto = \"30s\"\n",
         6,
         "expectations[0].to",
         "must be after `from`",
@@ -334,4 +334,21 @@ fn an_expectation_window_after_the_end_of_the_run() {
         "expectations[0].from",
         "after the end of the run (1m)",
     );
+}
+
+#[test]
+fn array_entries_are_named_whatever_the_header_spacing_and_comments() {
+    // A comment after the header, spaces inside the brackets.
+    assert_error(
+        "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[ commands ]]   # second\nat = \"6 hours\"\nto = \"FC\"\nrequest = \"ping\"\n",
+        7,
+        "commands[1].at",
+        "unknown unit",
+    );
+    // A missing field: the error points at the entry's header.
+    let (_, f, m) = first_error(
+        "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[commands]]\nat = \"2s\"\nrequest = \"ping\"\n",
+    );
+    assert!(m.contains("missing field `to`"), "{m}");
+    assert_eq!(f, "commands[1]");
 }
