@@ -332,6 +332,10 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
         if a.forever && a.duration.is_none() {
             opts.duration = None;
         }
+    } else if a.forever {
+        eprintln!(
+            "note: --forever needs the wall clock (--realtime); running the scenario's duration"
+        );
     }
     let name = loaded.name();
     eprintln!(

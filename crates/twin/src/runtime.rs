@@ -694,15 +694,16 @@ pub async fn run_with(
     let node_log = {
         let tx = ev_tx.clone();
         NodeLogTx::new(move |t, node, what| {
+            // Drops are detail; what an application reports (FC modes, scripts, a refused
+            // request and why) is news, on the terminal too.
+            let drop = what.starts_with("drop");
+            if !drop {
+                tracing::info!(%t, "{node}: {what}");
+            }
             let _ = tx.send(RunEvent::Log {
                 t,
                 source: node.to_owned(),
-                // Drops are detail; what an application reports (FC modes, scripts) is news.
-                level: if what.starts_with("drop") {
-                    Level::Debug
-                } else {
-                    Level::Info
-                },
+                level: if drop { Level::Debug } else { Level::Info },
                 message: what.to_owned(),
             });
         })
@@ -729,7 +730,8 @@ pub async fn run_with(
         segs.ground
             .set_air_tap(bus::net::AirTap::new(move |radio, start, end| {
                 use orbit::state::Activity;
-                let what = if radio.starts_with("COMM2") {
+                // The radio endpoints are named `<node>-uhf` (see the attachments below).
+                let what = if radio == "COMM2-uhf" {
                     Activity::UhfTxSecondary
                 } else {
                     Activity::UhfTx

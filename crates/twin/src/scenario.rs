@@ -1935,6 +1935,28 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::ReplyPattern;
 
+    /// Every optional field of an expectation is in the validation's list (a field added to
+    /// the struct and not to `given_fields` would escape the per-kind check).
+    #[test]
+    fn every_expectation_field_is_validated() {
+        let schema = serde_json::to_value(schemars::schema_for!(super::ExpectationSpec)).unwrap();
+        let mut fields: Vec<String> = schema["properties"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .filter(|k| *k != "name" && *k != "kind")
+            .cloned()
+            .collect();
+        fields.sort();
+        let x: super::ExpectationSpec = toml::from_str("kind = \"reply\"").unwrap();
+        let mut listed: Vec<String> = super::given_fields(&x)
+            .iter()
+            .map(|(f, _)| (*f).to_owned())
+            .collect();
+        listed.sort();
+        assert_eq!(fields, listed);
+    }
+
     #[test]
     fn a_reply_pattern_takes_any_bytes_and_an_open_end() {
         let p = ReplyPattern::parse("01 01 ?? 01 ...").unwrap();
