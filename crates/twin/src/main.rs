@@ -259,10 +259,16 @@ fn quiet_on_broken_pipe() {
 fn main() -> ExitCode {
     quiet_on_broken_pipe();
     let cli = Cli::parse();
+    // A benchmark runs the scenario many times: only warnings, unless RUST_LOG says more.
+    let default_filter = if matches!(cli.command, Command::Bench { .. }) {
+        "warn"
+    } else {
+        "info,foxglove=warn"
+    };
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info,foxglove=warn".into()),
+                .unwrap_or_else(|_| default_filter.into()),
         )
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
