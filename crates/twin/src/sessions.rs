@@ -1209,9 +1209,10 @@ mod tests {
     fn a_frame_cut_between_two_runs_is_whole_when_nothing_was_lost_between_them() {
         let t = SimTime::from_secs(2);
         let bytes = nodes_payload::counter_stream(12, 0, 3000);
-        let runs = |a: &[u8], b: &[u8]| {
+        // Session 1 run once per part, each downlinking that part.
+        let runs = |parts: &[&[u8]]| {
             let mut ev = Vec::new();
-            for part in [a, b] {
+            for part in parts {
                 ev.push(pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }));
                 ev.push(pc(nodes_pc::PcOutput::Downlinked {
                     t,
@@ -1229,34 +1230,21 @@ mod tests {
             intact: Some(true),
         };
         // Split mid-frame (byte 1000 is inside a frame): every frame is intact.
-        let (ok, _, seen) = check(&strict, &runs(&bytes[..1000], &bytes[1000..]));
+        let (ok, _, seen) = check(&strict, &runs(&[&bytes[..1000], &bytes[1000..]]));
         assert!(ok && seen.contains("0 missing"), "{seen}");
         // 30 bytes lost between the runs: the frames they cut into are missing (13 and 14
         // here), none is taken for damaged.
-        let (ok, _, seen) = check(&strict, &runs(&bytes[..1000], &bytes[1030..]));
+        let (ok, _, seen) = check(&strict, &runs(&[&bytes[..1000], &bytes[1030..]]));
         assert!(!ok && seen.contains("0 damaged, 2 missing"), "{seen}");
         // A short run holding no whole frame between two others: still whole.
-        let three = |a: &[u8], b: &[u8], c: &[u8]| {
-            let mut ev = Vec::new();
-            for part in [a, b, c] {
-                ev.push(pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }));
-                ev.push(pc(nodes_pc::PcOutput::Downlinked {
-                    t,
-                    session_id: 1,
-                    payload_addr: 12,
-                    bytes: part.to_vec(),
-                }));
-            }
-            report_of(ev)
-        };
         let (ok, _, seen) = check(
             &strict,
-            &three(&bytes[..1000], &bytes[1000..1060], &bytes[1060..]),
+            &runs(&[&bytes[..1000], &bytes[1000..1060], &bytes[1060..]]),
         );
         assert!(ok && seen.contains("0 missing"), "{seen}");
         // Split exactly between two frames: nothing to join, nothing missing.
         let first = nodes_payload::stream::frame_len(0) + nodes_payload::stream::frame_len(1);
-        let (ok, _, seen) = check(&strict, &runs(&bytes[..first], &bytes[first..]));
+        let (ok, _, seen) = check(&strict, &runs(&[&bytes[..first], &bytes[first..]]));
         assert!(ok && seen.contains("0 missing"), "{seen}");
     }
 
