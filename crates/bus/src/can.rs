@@ -29,7 +29,7 @@ use csp::cfp::{CanFrame, CfpId};
 use tokio::sync::Notify;
 
 use crate::clock::Clock;
-use crate::impair::{Fate, ImpairRng, Impairments};
+use crate::impair::{Fate, ImpairRng, ImpairmentSet, Impairments};
 use crate::inbox::{Arrival, Inbound, InboxTx};
 use crate::trace::{TraceEvent, TraceFrame, TraceTx};
 
@@ -133,6 +133,7 @@ struct State {
     seq: u64,
     stats: BusStats,
     impair: Impairments,
+    faults: ImpairmentSet,
     rng: ImpairRng,
     trace: Option<TraceTx>,
 }
@@ -196,6 +197,7 @@ impl CanBus {
                 seq: 0,
                 stats,
                 impair: Impairments::default(),
+                faults: ImpairmentSet::default(),
                 rng,
                 trace: None,
             })),
@@ -291,9 +293,18 @@ impl CanBus {
         }
     }
 
-    /// Set the bus's impairments.
+    /// Set the bus's impairments (replacing every fault's).
     pub fn set_impairments(&self, imp: Impairments) {
         self.lock().impair = imp;
+    }
+
+    /// Fault `id` impairs the medium with `imp` (`Some`) or is lifted (`None`); the
+    /// impairments in force are every active fault's combined
+    /// ([`ImpairmentSet::combined`]).
+    pub fn set_fault(&self, id: u32, imp: Option<Impairments>) {
+        let mut st = self.lock();
+        st.faults.set(id, imp);
+        st.impair = st.faults.combined();
     }
 
     /// Send every frame that crosses the bus to `tx`.

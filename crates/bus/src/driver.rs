@@ -132,6 +132,11 @@ pub async fn run_node_logged<A: App>(
                     NodeCtl::Power(on) => {
                         if on != powered {
                             powered = on;
+                            if !on {
+                                // The core meets the loss at its instant (a burn stops there).
+                                host.power_lost(t);
+                                flush(&mut host, &[], t, log.as_ref());
+                            }
                             for p in &ports { p.set_enabled(on); }
                             if on {
                                 hung = false;

@@ -26,6 +26,50 @@ impl Impairments {
     }
 }
 
+/// The impairments of a medium's active faults, each under its own id, and what they make
+/// together: drop and corrupt probabilities combine as independent chances (a frame
+/// survives only if it survives every fault), delays add, and a fault that takes the medium
+/// down dominates. Lifting one fault leaves the others as they were.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ImpairmentSet {
+    active: std::collections::BTreeMap<u32, Impairments>,
+}
+
+impl ImpairmentSet {
+    /// Fault `id` impairs with `imp` (`Some`) or is lifted (`None`).
+    pub fn set(&mut self, id: u32, imp: Option<Impairments>) {
+        match imp {
+            Some(imp) => {
+                self.active.insert(id, imp);
+            }
+            None => {
+                self.active.remove(&id);
+            }
+        }
+    }
+
+    /// Whether no fault is active.
+    pub fn is_empty(&self) -> bool {
+        self.active.is_empty()
+    }
+
+    /// The combined impairments (exactly the fault's own when there is one).
+    pub fn combined(&self) -> Impairments {
+        let mut it = self.active.values();
+        let Some(first) = it.next() else {
+            return Impairments::default();
+        };
+        let mut c = *first;
+        for imp in it {
+            c.drop_prob = 1.0 - (1.0 - c.drop_prob) * (1.0 - imp.drop_prob);
+            c.corrupt_prob = 1.0 - (1.0 - c.corrupt_prob) * (1.0 - imp.corrupt_prob);
+            c.delay += imp.delay;
+            c.down |= imp.down;
+        }
+        c
+    }
+}
+
 /// What the impairments decided for one frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Fate {
@@ -85,6 +129,51 @@ mod tests {
     fn clear_impairments_always_deliver() {
         let mut r = ImpairRng::new(1, "main");
         assert!((0..1000).all(|_| r.fate(&Impairments::default()) == Fate::Deliver));
+    }
+
+    #[test]
+    fn faults_compose_and_lifting_one_leaves_the_others() {
+        let mut set = ImpairmentSet::default();
+        let drop = Impairments {
+            drop_prob: 0.5,
+            ..Default::default()
+        };
+        set.set(0, Some(drop));
+        assert_eq!(set.combined(), drop, "one fault: exactly its own");
+        set.set(
+            1,
+            Some(Impairments {
+                delay: Duration::from_millis(50),
+                drop_prob: 0.5,
+                ..Default::default()
+            }),
+        );
+        set.set(
+            2,
+            Some(Impairments {
+                delay: Duration::from_millis(20),
+                ..Default::default()
+            }),
+        );
+        let c = set.combined();
+        assert_eq!(c.drop_prob, 0.75);
+        assert_eq!(c.delay, Duration::from_millis(70));
+        assert!(!c.down);
+        set.set(
+            3,
+            Some(Impairments {
+                down: true,
+                ..Default::default()
+            }),
+        );
+        assert!(set.combined().down);
+        set.set(3, None);
+        set.set(1, None);
+        assert_eq!(set.combined().drop_prob, 0.5);
+        assert_eq!(set.combined().delay, Duration::from_millis(20));
+        set.set(0, None);
+        set.set(2, None);
+        assert!(set.is_empty() && set.combined().is_clear());
     }
 
     #[test]

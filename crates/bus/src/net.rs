@@ -24,7 +24,7 @@ use csp::{Packet, SimTime};
 use tokio::sync::Notify;
 
 use crate::clock::Clock;
-use crate::impair::{Fate, ImpairRng, Impairments};
+use crate::impair::{Fate, ImpairRng, ImpairmentSet, Impairments};
 use crate::inbox::{Arrival, Inbound, InboxTx};
 use crate::trace::{TraceEvent, TraceFrame, TraceTx};
 
@@ -121,6 +121,7 @@ struct State {
     seq: u64,
     stats: NetStats,
     impair: Impairments,
+    faults: ImpairmentSet,
     rng: ImpairRng,
     trace: Option<TraceTx>,
     air_tap: Option<AirTap>,
@@ -175,6 +176,7 @@ impl PacketNet {
                 in_flight: BTreeMap::new(),
                 seq: 0,
                 impair: Impairments::default(),
+                faults: ImpairmentSet::default(),
                 trace: None,
                 air_tap: None,
                 contact: true,
@@ -255,6 +257,15 @@ impl PacketNet {
     /// Set the air channel's impairments.
     pub fn set_impairments(&self, imp: Impairments) {
         self.lock().impair = imp;
+    }
+
+    /// Fault `id` impairs the medium with `imp` (`Some`) or is lifted (`None`); the
+    /// impairments in force are every active fault's combined
+    /// ([`ImpairmentSet::combined`]).
+    pub fn set_fault(&self, id: u32, imp: Option<Impairments>) {
+        let mut st = self.lock();
+        st.faults.set(id, imp);
+        st.impair = st.faults.combined();
     }
 
     /// Contact between the radios on the air (a pass) or none: out of contact every packet

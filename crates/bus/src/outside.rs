@@ -44,27 +44,8 @@ pub struct BridgeStats {
     pub ended: Option<String>,
 }
 
-/// Which medium an address belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SegmentKind {
-    /// Main CAN bus.
-    Main,
-    /// Payload CAN bus.
-    Payload,
-    /// Ground segment.
-    Ground,
-}
-
-impl SegmentKind {
-    /// The segment of `addr` by the default ranges.
-    pub fn of(addr: u8) -> Self {
-        match addr {
-            12..=15 => SegmentKind::Payload,
-            16..=20 => SegmentKind::Ground,
-            _ => SegmentKind::Main,
-        }
-    }
-}
+/// Which medium an address belongs to (the address table of `platform::addr`).
+pub use platform::addr::Segment as SegmentKind;
 
 #[derive(Debug)]
 enum Port {
@@ -184,12 +165,7 @@ impl OutsideEndpoint {
                 // The outside node is a CAN node of its own: CFP dst is the CSP destination
                 // unless it needs the PC as next hop (payload bus to anything off it).
                 let dst = packet.header.dst;
-                let via = match self.kind {
-                    SegmentKind::Payload if !(12..=15).contains(&dst) => 6,
-                    SegmentKind::Main if (12..=15).contains(&dst) => 6,
-                    SegmentKind::Main if (16..=20).contains(&dst) => 1,
-                    _ => dst,
-                };
+                let via = self.kind.next_hop(dst).unwrap_or(dst);
                 frag.fragment(packet, via, &mut frames)
                     .map_err(OutsideError::TooLong)?;
                 for f in frames {

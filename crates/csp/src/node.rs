@@ -492,6 +492,11 @@ impl Node {
         }
     }
 
+    /// Power is gone: nothing queued leaves any more, and nothing is delivered.
+    pub fn power_lost(&mut self) {
+        self.tx.clear();
+        self.rx.clear();
+    }
     /// Whether the service handler asked for a reboot (cleared by [`Node::reboot`]).
     pub fn reboot_requested(&self) -> bool {
         self.reboot_requested
@@ -541,8 +546,12 @@ pub trait App: Send + 'static {
     }
     /// Timers due at `now`.
     fn handle_timeout(&mut self, _node: &mut Node, _now: SimTime) {}
-    /// Forget volatile state (reboot or power cycle).
+    /// Forget volatile state (reboot, or power back after a loss).
     fn reset(&mut self, _now: SimTime) {}
+    /// The node loses power at `now`: apply the physical consequences at that instant (a
+    /// burn stops, heaters and transmitters go off, their activities end). Nothing can be
+    /// sent any more; [`App::reset`] and [`App::start`] follow when power returns.
+    fn power_lost(&mut self, _node: &mut Node, _now: SimTime) {}
     /// The run flipped one of the node's hardware switches (`radio` on a COMM: active or
     /// standby). Applications ignore switches they do not have.
     fn switch(&mut self, _node: &mut Node, _name: &str, _on: bool, _now: SimTime) {}
@@ -604,6 +613,12 @@ impl<A: App> Host<A> {
     pub fn switch(&mut self, name: &str, on: bool, now: SimTime) {
         self.app.switch(&mut self.node, name, on, now);
         self.after_input(now);
+    }
+    /// The node loses power at `now` ([`App::power_lost`]); what it had queued to send is
+    /// lost with it.
+    pub fn power_lost(&mut self, now: SimTime) {
+        self.app.power_lost(&mut self.node, now);
+        self.node.power_lost();
     }
     /// Reboot node and application (service port 4, or a scenario fault).
     pub fn reboot(&mut self, now: SimTime) {
@@ -675,6 +690,9 @@ impl<T: App + ?Sized> App for Box<T> {
     }
     fn reset(&mut self, now: SimTime) {
         (**self).reset(now)
+    }
+    fn power_lost(&mut self, node: &mut Node, now: SimTime) {
+        (**self).power_lost(node, now)
     }
     fn switch(&mut self, node: &mut Node, name: &str, on: bool, now: SimTime) {
         (**self).switch(node, name, on, now)

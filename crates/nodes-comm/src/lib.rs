@@ -26,7 +26,7 @@
 //! station does not reply. Its data is `04 | 01 | Beacon` ([`wire::Beacon`], 171 + 2
 //! bytes): the BEACON 4 reply sent unsolicited.
 //!
-//! The transmitter's air time ([`orbit::state::Activity::UhfTx`] for COMM1's radio,
+//! The transmitter's air time ([`platform::board::Activity::UhfTx`] for COMM1's radio,
 //! `UhfTxSecondary` for COMM2's, for the EPS) is charged by the twin from the air channel
 //! (`bus::net`'s air tap): every packet a radio sends, beacons and forwarded downlink alike,
 //! at its real place on the half-duplex channel.
@@ -49,7 +49,8 @@ use csp::reqrep::serve;
 use csp::{Header, Packet, SimTime};
 use orbit::geodetic::ecef_km_to_geodetic;
 use orbit::passes::GroundSite;
-use orbit::state::{TruthBoard, TruthSnapshot};
+use platform::board::TruthBoard;
+use platform::truth::TruthSnapshot;
 
 pub use crate::link::{LinkBudget, LinkState, Station};
 use crate::wire::Repr;
@@ -294,7 +295,7 @@ impl CommApp {
 
     /// The FC's latest truth strictly before `now`.
     pub fn truth_at(&self, now: SimTime) -> Option<TruthSnapshot> {
-        self.truth.as_ref()?.latest_before(now.as_ns())
+        self.truth.as_ref()?.latest_before(now)
     }
 
     /// The link state at `now` from the latest truth; `None` without truth or stations.

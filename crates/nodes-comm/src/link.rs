@@ -27,8 +27,8 @@
 use nalgebra::Vector3;
 use orbit::frames::a_ecef_from_eci;
 use orbit::passes::GroundSite;
-use orbit::state::TruthSnapshot;
 use orbit::time::UtcTime;
+use platform::truth::TruthSnapshot;
 
 /// Speed of light, m/s (SI definition).
 pub const C_M_S: f64 = 299_792_458.0;

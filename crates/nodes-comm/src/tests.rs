@@ -88,7 +88,7 @@ fn truth_seen_from_vilnius(el_deg: f64, az_deg: f64, range_km: f64) -> TruthSnap
     let unix_ns = EPOCH_UNIX_S as i64 * 1_000_000_000;
     let a = a_ecef_from_eci(UtcTime::from_unix_ns(unix_ns), None);
     TruthSnapshot {
-        t_ns: 0,
+        t: SimTime::ZERO,
         unix_ns,
         r_eci_m: a.transpose() * r_ecef_km * 1e3,
         v_eci_m_s: Vector3::new(0.0, 7600.0, 0.0),
@@ -104,7 +104,7 @@ fn truth_seen_from_vilnius(el_deg: f64, az_deg: f64, range_km: f64) -> TruthSnap
 
 fn board_with(t: &TruthSnapshot) -> TruthBoard {
     let b = TruthBoard::new();
-    b.publish(t);
+    b.publish(t).unwrap();
     b
 }
 

@@ -19,10 +19,10 @@
 //! counted in TMECU.
 //!
 //! # The burn reaches the true orbit
-//! A FIRE at `now` posts a [`Burn`] `{ posted_ns: now, start_ns: now, end_ns: now +
+//! A FIRE at `now` posts a [`Burn`] `{ posted: now, start: now, end: now +
 //! granted, thrust_n, mass_flow_kg_s, mass_kg: dry + propellant, dir_body: +Z }` on the
 //! [`BurnBoard`] the twin gives ([`EcuApp::with_burns`]); the FC applies it to the true
-//! orbit. SAFE during a burn re-posts it with `end_ns = now` and its original `posted_ns`,
+//! orbit. SAFE during a burn re-posts it with `end = now` and its original `posted`,
 //! so that the FC, which integrates thrust up to each tick from the burns posted strictly
 //! before the tick, gets the same answer whichever of the two nodes runs first at an
 //! instant. The [`ActivityBoard`] ([`EcuApp::with_activity`]) gets
@@ -38,11 +38,11 @@
 //! The tank's contents are physical and survive anything; the burn count, the last burn's
 //! duration and the total impulse are kept in non-volatile memory and survive too. The
 //! rest is volatile: the ECU comes back SAFE (heaters off, not armed, refusal counter 0).
-//! A burn in progress stops: the twin cuts the board at the power loss
-//! ([`BurnBoard::cut_all`]) and the node driver calls [`App::reset`] when power returns; the
-//! ECU then charges the burn up to the earliest of its planned end, the board's (cut) end
-//! and the reset, and re-posts it with that end (a software reboot while firing cuts the
-//! burn at the reboot this way).
+//! A burn in progress stops at the instant power goes: the node's task calls
+//! [`App::power_lost`], and the ECU charges the burn up to then, re-posts it with that end
+//! and switches its heater and firing activities off there (the EPS stops charging them).
+//! A software reboot while firing cuts the burn at the reboot the same way
+//! ([`App::reset`]).
 
 pub mod thruster;
 pub mod wire;
@@ -53,7 +53,7 @@ use std::time::Duration;
 use csp::node::{App, Node};
 use csp::reqrep::{RESULT_FAILURE, RESULT_SUCCESS, serve};
 use csp::{Packet, SimTime};
-use orbit::state::{Activity, ActivityBoard, Burn, BurnBoard};
+use platform::board::{Activity, ActivityBoard, Burn, BurnBoard};
 
 pub use crate::thruster::ThrusterConfig;
 use crate::wire::{ArmReply, EcuCommand, FireReply, Repr};
@@ -322,9 +322,11 @@ impl EcuApp {
         }
     }
 
-    fn set_activity(&self, what: Activity, t: SimTime, on: bool) {
-        if let Some(a) = &self.activity {
-            a.set(what, t.as_ns(), on);
+    fn set_activity(&mut self, what: Activity, t: SimTime, on: bool) {
+        if let Some(a) = &self.activity
+            && let Err(e) = a.set(what, t, on)
+        {
+            self.log.push((t, format!("ecu: activity {what:?}: {e}")));
         }
     }
 
@@ -342,12 +344,12 @@ impl EcuApp {
         self.propellant_kg = (self.propellant_kg - used).max(0.0);
         self.total_impulse_n_s += impulse;
         self.last_burn_ms = u32::try_from(dur.as_millis()).unwrap_or(u32::MAX);
-        if cut && let Some(b) = &self.burn_board {
-            // The original `posted_ns`: see the module doc.
-            b.post(Burn {
-                end_ns: end.as_ns(),
-                ..f.burn
-            });
+        if cut
+            && let Some(b) = &self.burn_board
+            && let Err(e) = b.post(Burn { end, ..f.burn })
+        {
+            // The original `posted`: see the module doc.
+            self.log.push((end, format!("ecu: cutting the burn: {e}")));
         }
         self.set_activity(Activity::Firing, end, false);
         self.log.push((
@@ -440,16 +442,18 @@ impl EcuApp {
         }
         let end = now + Duration::from_millis(u64::from(granted_ms));
         let burn = Burn {
-            posted_ns: now.as_ns(),
-            start_ns: now.as_ns(),
-            end_ns: end.as_ns(),
+            posted: now,
+            start: now,
+            end,
             thrust_n,
             mass_flow_kg_s: mdot,
             mass_kg: th.dry_mass_kg + self.propellant_kg,
             dir_body: th.dir_unit_body(),
         };
-        if let Some(b) = &self.burn_board {
-            b.post(burn);
+        if let Some(b) = &self.burn_board
+            && let Err(e) = b.post(burn)
+        {
+            self.log.push((now, format!("ecu: posting the burn: {e}")));
         }
         self.set_activity(Activity::Firing, now, true);
         self.firing = Some(Firing {
@@ -534,21 +538,28 @@ impl App for EcuApp {
         self.flush_log(node);
     }
 
+    fn power_lost(&mut self, node: &mut Node, now: SimTime) {
+        // The valves close and the heaters go cold at the instant power goes.
+        let firing = self.firing.is_some();
+        self.end_burn(now);
+        if self.armed_at.take().is_some() {
+            self.set_activity(Activity::ThrusterHeater, now, false);
+        }
+        self.log.push((
+            now,
+            format!(
+                "ecu: power lost{}: heaters off",
+                if firing { ", burn cut" } else { "" }
+            ),
+        ));
+        self.flush_log(node);
+    }
+
     fn reset(&mut self, now: SimTime) {
-        if let Some(f) = self.firing {
-            // The board's end is the power loss when the twin cut it there.
-            let board_end = self.burn_board.as_ref().and_then(|b| {
-                b.pending(u64::MAX, 0)
-                    .into_iter()
-                    .find(|x| x.start_ns == f.burn.start_ns)
-                    .map(|x| SimTime::from_ns(x.end_ns))
-            });
-            let end = board_end.map_or(now, |e| e.min(now)).min(f.end);
-            self.end_burn(end);
-            if self.armed_at.take().is_some() {
-                self.set_activity(Activity::ThrusterHeater, end, false);
-            }
-        } else if self.armed_at.take().is_some() {
+        // A software reboot while firing cuts the burn at the reboot (a loss of power has
+        // already ended it, in `power_lost`).
+        self.end_burn(now);
+        if self.armed_at.take().is_some() {
             self.set_activity(Activity::ThrusterHeater, now, false);
         }
         self.ready_logged = false;

@@ -11,7 +11,7 @@ use csp::{Header, Packet, SimTime};
 use m6p_nodes_ecu::wire::{ArmReply, FireReply, Repr, TmEcu};
 use m6p_nodes_ecu::{EcuApp, EcuConfig, EcuOutput, EcuState, Sink};
 use nalgebra::Vector3;
-use orbit::state::{Activity, ActivityBoard, BurnBoard};
+use platform::board::{Activity, ActivityBoard, BurnBoard};
 use proptest::prelude::*;
 
 const G0: f64 = 9.806_65;
@@ -164,10 +164,7 @@ fn refusals_fire_unarmed_warming_too_long_while_firing_empty() {
     assert_eq!(&s.fire(60_000)[..2], &[3, 1], "the maximum itself");
     assert_eq!(s.fire(1000), vec![3, 0], "while firing");
     assert_eq!(s.tm().refused, 5);
-    assert!(
-        s.burns.pending(u64::MAX, 0).len() == 1,
-        "refusals post nothing"
-    );
+    assert!(s.burns.all().len() == 1, "refusals post nothing");
 
     // An empty tank refuses.
     let mut e = Sim::new(EcuConfig {
@@ -179,7 +176,7 @@ fn refusals_fire_unarmed_warming_too_long_while_firing_empty() {
     });
     e.arm_and_warm();
     assert_eq!(e.fire(1000), vec![3, 0], "no propellant");
-    assert!(e.burns.pending(u64::MAX, 0).is_empty());
+    assert!(e.burns.all().is_empty());
 }
 
 #[test]
@@ -208,34 +205,41 @@ fn malformed_requests_get_failure_replies() {
 fn a_fire_posts_the_right_burn_and_activities() {
     let mut s = Sim::new(fast());
     s.arm_and_warm();
-    assert!(s.activity.on_before(Activity::ThrusterHeater, 1));
+    assert!(
+        s.activity
+            .on_before(Activity::ThrusterHeater, SimTime::from_ns(1))
+    );
     s.now = SimTime::from_ms(7_250);
     let r = s.fire(10_000);
     assert_eq!(FireReply::parse(&r[2..]).unwrap().granted_ms, 10_000);
-    let b = s.burns.pending(u64::MAX, 0);
+    let b = s.burns.all();
     assert_eq!(b.len(), 1);
     let b = b[0];
-    assert_eq!(b.posted_ns, 7_250_000_000);
-    assert_eq!(b.start_ns, 7_250_000_000);
-    assert_eq!(b.end_ns, 17_250_000_000);
+    assert_eq!(b.posted.as_ns(), 7_250_000_000);
+    assert_eq!(b.start.as_ns(), 7_250_000_000);
+    assert_eq!(b.end.as_ns(), 17_250_000_000);
     assert_eq!(b.thrust_n, 0.3);
     assert!((b.mass_flow_kg_s - 0.3 / (200.0 * G0)).abs() < 1e-15);
     assert_eq!(b.mass_kg, 12.5);
     assert_eq!(b.dir_body, Vector3::z());
     assert!(
-        s.burns.pending(7_250_000_000, 0).is_empty(),
+        s.burns
+            .pending(SimTime::from_ms(7_250), SimTime::ZERO)
+            .is_empty(),
         "the FC takes it after"
     );
+    assert!(
+        s.activity
+            .on_before(Activity::Firing, SimTime::from_ns(7_250_000_001))
+    );
     // Firing exactly over [start, end): 10 s of the 20 s window.
-    let duty = s
-        .activity
-        .duty(Activity::Firing, 7_250_000_000, 27_250_000_000);
     s.run_to(SimTime::from_secs(30));
-    let duty_after = s
-        .activity
-        .duty(Activity::Firing, 7_250_000_000, 27_250_000_000);
-    assert_eq!(duty, 1.0, "on and not yet switched off before the timer");
-    assert!((duty_after - 0.5).abs() < 1e-12, "{duty_after}");
+    let duty = s.activity.duty(
+        Activity::Firing,
+        SimTime::from_ms(7_250),
+        SimTime::from_ms(27_250),
+    );
+    assert!((duty - 0.5).abs() < 1e-12, "{duty}");
     let tm = s.tm();
     assert_eq!(
         tm.state,
@@ -255,23 +259,29 @@ fn safe_cuts_the_burn_and_keeps_when_it_was_posted() {
     s.fire(30_000);
     s.now = SimTime::from_ms(14_500);
     assert_eq!(s.ask(&[4]), vec![4, 1]);
-    let b = s.burns.pending(u64::MAX, 0);
+    let b = s.burns.all();
     assert_eq!(b.len(), 1, "re-posted, not added");
-    assert_eq!(b[0].end_ns, 14_500_000_000);
-    assert_eq!(b[0].posted_ns, 10_000_000_000);
+    assert_eq!(b[0].end.as_ns(), 14_500_000_000);
+    assert_eq!(b[0].posted.as_ns(), 10_000_000_000);
     let tm = s.tm();
     assert_eq!(tm.state, 0);
     assert_eq!(tm.heater, 0);
     assert_eq!(tm.last_burn_ms, 4_500);
-    assert!(!s.activity.on_before(Activity::Firing, 14_500_000_001));
     assert!(
         !s.activity
-            .on_before(Activity::ThrusterHeater, 14_500_000_001)
+            .on_before(Activity::Firing, SimTime::from_ns(14_500_000_001))
     );
-    assert!(s.activity.on_before(Activity::Firing, 14_500_000_000));
+    assert!(
+        !s.activity
+            .on_before(Activity::ThrusterHeater, SimTime::from_ns(14_500_000_001))
+    );
+    assert!(
+        s.activity
+            .on_before(Activity::Firing, SimTime::from_ns(14_500_000_000))
+    );
     // Nothing more happens at the planned end.
     s.run_to(SimTime::from_secs(60));
-    assert_eq!(s.burns.pending(u64::MAX, 0)[0].end_ns, 14_500_000_000);
+    assert_eq!(s.burns.all()[0].end.as_ns(), 14_500_000_000);
     let ended: Vec<_> = s
         .outputs
         .lock()
@@ -346,14 +356,14 @@ fn the_last_propellant_shortens_the_burn() {
 }
 
 #[test]
-fn power_loss_mid_burn_charges_up_to_the_cut_and_comes_back_safe() {
+fn power_loss_mid_burn_stops_it_at_that_instant_and_comes_back_safe() {
     let mut s = Sim::new(fast());
     s.arm_and_warm();
     s.now = SimTime::from_secs(10);
     s.fire(30_000);
-    // The twin cuts the board at the power loss (t = 12 s) and reboots the node at
-    // power-on (t = 100 s).
-    s.burns.cut_all(12_000_000_000);
+    // Power goes at 12 s (the node's task calls the power-loss hook at that instant) and
+    // comes back at 100 s (the node boots).
+    s.host.power_lost(SimTime::from_secs(12));
     s.host.reboot(SimTime::from_secs(100));
     s.now = SimTime::from_secs(100);
     let tm = s.tm();
@@ -364,11 +374,14 @@ fn power_loss_mid_burn_charges_up_to_the_cut_and_comes_back_safe() {
     let mdot = 0.3 / (200.0 * G0);
     assert!((f64::from(tm.propellant_kg) - (0.5 - 2.0 * mdot)).abs() < 1e-7);
     assert!((f64::from(tm.total_impulse_n_s) - 0.6).abs() < 1e-6);
-    assert_eq!(s.burns.pending(u64::MAX, 0)[0].end_ns, 12_000_000_000);
-    assert!(!s.activity.on_before(Activity::Firing, 12_000_000_001));
+    assert_eq!(s.burns.all()[0].end.as_ns(), 12_000_000_000);
     assert!(
         !s.activity
-            .on_before(Activity::ThrusterHeater, 12_000_000_001)
+            .on_before(Activity::Firing, SimTime::from_ns(12_000_000_001))
+    );
+    assert!(
+        !s.activity
+            .on_before(Activity::ThrusterHeater, SimTime::from_ns(12_000_000_001))
     );
     assert_eq!(s.fire(1000), vec![3, 0], "safe after boot");
     assert!(s.host.poll_timeout().is_none(), "no timer left");
@@ -380,7 +393,7 @@ fn power_loss_mid_burn_charges_up_to_the_cut_and_comes_back_safe() {
     r.fire(30_000);
     r.host.reboot(SimTime::from_secs(13));
     r.now = SimTime::from_secs(13);
-    assert_eq!(r.burns.pending(u64::MAX, 0)[0].end_ns, 13_000_000_000);
+    assert_eq!(r.burns.all()[0].end.as_ns(), 13_000_000_000);
     assert_eq!(r.tm().last_burn_ms, 3_000);
 }
 
@@ -451,8 +464,8 @@ proptest! {
             prop_assert!(tm.propellant_kg >= 0.0 && tm.propellant_kg <= last_prop);
             last_prop = tm.propellant_kg;
             let now_ns = s.now.as_ns();
-            let running = s.burns.pending(u64::MAX, 0).iter()
-                .filter(|b| b.start_ns <= now_ns && b.end_ns > now_ns).count();
+            let running = s.burns.all().iter()
+                .filter(|b| b.start.as_ns() <= now_ns && b.end.as_ns() > now_ns).count();
             prop_assert!(running <= 1);
         }
     }

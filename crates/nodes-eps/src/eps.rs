@@ -2,7 +2,7 @@
 //! inputs of one interval. No clock, no boards, no network: [`crate::EpsApp`] assembles
 //! [`EpsInputs`] and calls [`Eps::step`] and [`Eps::protect`].
 
-use orbit::state::TruthSnapshot;
+use platform::truth::TruthSnapshot;
 
 use crate::EpsConfig;
 use crate::battery::{Battery, BatteryStep};

@@ -15,7 +15,8 @@
 //!   dipoles. With no truth yet (no board, or nothing published before `t1`) the arrays
 //!   give nothing (as in umbra), the wheels are at rest and the magnetorquers off;
 //! - the activity duties `ActivityBoard::duty(what, t0, t1)`: S-band and UHF transmitting,
-//!   thruster heaters, firing;
+//!   thruster heaters, firing, and the time a power fault held each switched node off
+//!   (`Activity::PowerFault`: the node draws nothing meanwhile, whatever its channel says);
 //! - the channel states (a channel switched off draws nothing).
 //!
 //! At each tick, after the integration, the protection compares the state of charge with
@@ -47,7 +48,7 @@ use std::time::Duration;
 use csp::node::{App, Node};
 use csp::reqrep::serve;
 use csp::{Packet, SimTime};
-use orbit::state::{Activity, ActivityBoard, TruthBoard};
+use platform::board::{Activity, ActivityBoard, TruthBoard};
 
 pub use crate::battery::{Battery, BatteryConfig};
 pub use crate::eps::{Eps, EpsInputs, StepState, SwitchRefused};
@@ -325,7 +326,7 @@ impl EpsApp {
         if to <= self.last_t {
             return;
         }
-        let (t0, t1) = (self.last_t.as_ns(), to.as_ns());
+        let (t0, t1) = (self.last_t, to);
         let truth = self.truth.as_ref().and_then(|b| b.latest_before(t1));
         let duties = match &self.activity {
             Some(a) => Duties {
@@ -334,11 +335,19 @@ impl EpsApp {
                 uhf_tx_secondary: a.duty(Activity::UhfTxSecondary, t0, t1),
                 thruster_heater: a.duty(Activity::ThrusterHeater, t0, t1),
                 firing: a.duty(Activity::Firing, t0, t1),
+                fault_off: Channel::ALL.map(|c| {
+                    c.node_addr()
+                        .map_or(0.0, |addr| a.duty(Activity::PowerFault(addr), t0, t1))
+                }),
             },
             None => Duties::default(),
         };
         let x = EpsInputs::from_truth(truth.as_ref(), duties);
-        let unmet_w = self.eps.step(t1 - t0, &x).battery.unmet_w;
+        let unmet_w = self
+            .eps
+            .step((t1 - t0).as_nanos() as u64, &x)
+            .battery
+            .unmet_w;
         self.last_t = to;
         let cut_off = unmet_w > 0.0;
         if cut_off != self.cut_off {

@@ -125,7 +125,7 @@ impl Channel {
     }
 }
 
-/// The fraction of a step each switched activity was on (`orbit::state::ActivityBoard::duty`).
+/// The fraction of a step each switched activity was on (`platform::board::ActivityBoard::duty`).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Duties {
     /// S-band transmitting.
@@ -138,6 +138,9 @@ pub struct Duties {
     pub thruster_heater: f64,
     /// Thruster firing.
     pub firing: f64,
+    /// Each channel's node held off by a power fault (indexed by [`Channel::id`]): the
+    /// channel draws nothing for this fraction of the step.
+    pub fault_off: [f64; CHANNELS],
 }
 
 /// What the loads depend on, for one step (the EPS assembles it from the truth and the
@@ -266,8 +269,10 @@ impl LoadConfig {
                 Channel::Payload15 => self.payload_w[3],
                 Channel::Sband => self.sband_standby_w + self.sband_tx_w * duty(d.sband_tx),
             };
-            if let Some(slot) = b.channel_w.get_mut(usize::from(c.id())) {
-                *slot = w;
+            let id = usize::from(c.id());
+            let held = d.fault_off.get(id).copied().map_or(0.0, duty);
+            if let Some(slot) = b.channel_w.get_mut(id) {
+                *slot = if held > 0.0 { w * (1.0 - held) } else { w };
             }
         }
         b
@@ -317,6 +322,7 @@ mod tests {
                 uhf_tx_secondary: 0.5,
                 thruster_heater: 1.0,
                 firing: 0.25,
+                fault_off: [0.0; CHANNELS],
             },
         };
         let b = l.loads(ALL_CHANNELS, &x);

@@ -9,7 +9,8 @@ use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
 use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use nalgebra::{UnitQuaternion, Vector3};
-use orbit::state::{Activity, ActivityBoard, TruthBoard, TruthSnapshot};
+use platform::board::{Activity, ActivityBoard, TruthBoard};
+use platform::truth::TruthSnapshot;
 use proptest::prelude::*;
 
 use super::*;
@@ -100,7 +101,7 @@ fn snapshot(
     visible: f64,
 ) -> TruthSnapshot {
     TruthSnapshot {
-        t_ns: t_s * 1_000_000_000,
+        t: SimTime::from_secs(t_s),
         q_eci_from_body: q,
         sun_eci_unit: sun_eci,
         in_eclipse_fraction_visible: visible,
@@ -136,7 +137,7 @@ fn power_follows_the_attitude_and_the_eclipse_through_the_truth_board() {
         (12, UnitQuaternion::identity(), 0.0, 0.0),
     ];
     for (t, q, vis, want) in steps {
-        truth.publish(&snapshot(t, Vector3::x(), q, vis));
+        truth.publish(&snapshot(t, Vector3::x(), q, vis)).unwrap();
         run_until(&mut h, SimTime::from_secs(t + 3));
         let s = samples(&out);
         // The ticks after the snapshot (strictly after its instant) see it.
@@ -182,17 +183,21 @@ fn battery_integrates_the_balance_of_a_sunlit_and_a_dark_hour() {
     let (mut h, out) = host(EpsApp::new(cfg).with_truth(truth.clone()));
     // Sun on the wings from t = 0: 53.6 W of array power, 7.5 W of load; the 46.1 W surplus
     // is above the 40 W charge limit, so the battery takes 40 W (the rest is spilled).
-    truth.publish(&snapshot(0, Vector3::x(), UnitQuaternion::identity(), 1.0));
+    truth
+        .publish(&snapshot(0, Vector3::x(), UnitQuaternion::identity(), 1.0))
+        .unwrap();
     run_until(&mut h, SimTime::from_secs(3600));
     let wh = h.app.eps().battery().energy_wh();
     assert!((wh - (15.4 + 40.0 * 0.93)).abs() < 1e-6, "{wh}");
     // Dark: discharge at 7.5 W / 0.95 (the tick after the snapshot sees it).
-    truth.publish(&snapshot(
-        3600,
-        Vector3::x(),
-        UnitQuaternion::identity(),
-        0.0,
-    ));
+    truth
+        .publish(&snapshot(
+            3600,
+            Vector3::x(),
+            UnitQuaternion::identity(),
+            0.0,
+        ))
+        .unwrap();
     run_until(&mut h, SimTime::from_secs(7200));
     let wh2 = h.app.eps().battery().energy_wh();
     assert!((wh2 - (wh - 7.5 / 0.95)).abs() < 1e-6, "{wh2}");
@@ -263,12 +268,14 @@ fn shedding_and_restoration_with_hysteresis_emit_channel_outputs() {
     );
     // Sun on the wings: charging at ~40 W, from 30 % to 40 % in ~12 min; nothing comes back
     // before 40 %.
-    truth.publish(&snapshot(
-        403,
-        Vector3::x(),
-        UnitQuaternion::identity(),
-        1.0,
-    ));
+    truth
+        .publish(&snapshot(
+            403,
+            Vector3::x(),
+            UnitQuaternion::identity(),
+            1.0,
+        ))
+        .unwrap();
     run_until(&mut h, SimTime::from_secs(2000));
     let sw = switches(&out);
     let back: Vec<_> = sw.iter().filter(|x| x.2).collect();
@@ -400,9 +407,12 @@ fn thresholds_get_and_set_and_reboot_keeps_the_physics() {
 fn activities_draw_power_from_the_activity_board() {
     let act = ActivityBoard::new();
     let (mut h, out) = host(app().with_activity(act.clone()));
-    act.set(Activity::SbandTx, 2_500_000_000, true);
-    act.set(Activity::SbandTx, 4_000_000_000, false);
-    act.set(Activity::ThrusterHeater, 0, true);
+    act.set(Activity::SbandTx, SimTime::from_ns(2_500_000_000), true)
+        .unwrap();
+    act.set(Activity::SbandTx, SimTime::from_ns(4_000_000_000), false)
+        .unwrap();
+    act.set(Activity::ThrusterHeater, SimTime::from_ns(0), true)
+        .unwrap();
     run_until(&mut h, SimTime::from_secs(5));
     let s = samples(&out);
     let base = 7.5 + 6.0;
@@ -440,7 +450,9 @@ fn timeline_events_switch_fail_panels_and_set_the_charge() {
         ..EpsConfig::default()
     };
     let (mut h, out) = host(EpsApp::new(cfg).with_truth(truth.clone()));
-    truth.publish(&snapshot(0, Vector3::x(), UnitQuaternion::identity(), 1.0));
+    truth
+        .publish(&snapshot(0, Vector3::x(), UnitQuaternion::identity(), 1.0))
+        .unwrap();
     run_until(&mut h, SimTime::from_secs(5));
     let s = samples(&out);
     let wing = 1361.0 * 0.06 * 0.9 * 0.295;

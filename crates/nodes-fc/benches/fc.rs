@@ -25,7 +25,7 @@ use csp::{Header, Packet, SimTime};
 use m6p_nodes_fc::wire::{Repr, TargetMode, TmGen};
 use m6p_nodes_fc::{FcApp, FcConfig, InitialState, Publisher};
 use nalgebra::Vector3;
-use orbit::state::{AdcsSnapshot, TruthSnapshot};
+use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
 /// The default scenario's 6U TLE (scenarios/default.toml).
 const L1: &str = "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996";

@@ -40,8 +40,9 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 use orbit::cowell::{CowellConfig, Drag};
-use orbit::state::{Burn, BurnBoard};
 use orbit::tle::Tle;
+use platform::SimTime;
+use platform::board::{Burn, BurnBoard};
 
 use crate::environment::EnvModel;
 
@@ -67,7 +68,7 @@ pub struct Applied {
 /// Whether a burn's figures can be integrated: finite, thrust and mass flow >= 0, positive
 /// mass until its end, a non-zero direction, and an end not before its start.
 pub fn is_valid(b: &Burn) -> bool {
-    let dur_s = b.end_ns.saturating_sub(b.start_ns) as f64 * 1e-9;
+    let dur_s = b.end.as_ns().saturating_sub(b.start.as_ns()) as f64 * 1e-9;
     let finite = [b.thrust_n, b.mass_flow_kg_s, b.mass_kg]
         .iter()
         .chain(b.dir_body.iter())
@@ -76,7 +77,7 @@ pub fn is_valid(b: &Burn) -> bool {
         && b.thrust_n >= 0.0
         && b.mass_flow_kg_s >= 0.0
         && b.mass_kg > 0.0
-        && b.end_ns >= b.start_ns
+        && b.end.as_ns() >= b.start.as_ns()
         && b.mass_kg - b.mass_flow_kg_s * dur_s > 0.0
         && b.dir_body.norm() > 0.0
 }
@@ -84,11 +85,11 @@ pub fn is_valid(b: &Burn) -> bool {
 /// The speed the burn adds over `[from_ns, to_ns)` (clipped to the burn), m/s: the rocket
 /// equation on the burn's mass; 0 for an invalid burn or an empty interval.
 pub fn delta_v_m_s(b: &Burn, from_ns: u64, to_ns: u64) -> f64 {
-    let (lo, hi) = (from_ns.max(b.start_ns), to_ns.min(b.end_ns));
+    let (lo, hi) = (from_ns.max(b.start.as_ns()), to_ns.min(b.end.as_ns()));
     if hi <= lo || !is_valid(b) {
         return 0.0;
     }
-    let t = |ns: u64| (ns - b.start_ns) as f64 * 1e-9;
+    let t = |ns: u64| (ns - b.start.as_ns()) as f64 * 1e-9;
     let m1 = b.mass_kg - b.mass_flow_kg_s * t(lo);
     let m2 = b.mass_kg - b.mass_flow_kg_s * t(hi);
     if b.mass_flow_kg_s > 0.0 {
@@ -109,7 +110,7 @@ pub fn impulses(
 ) -> Vec<(u64, Vector3<f64>)> {
     let mut out = Vec::new();
     for b in burns.iter().filter(|b| is_valid(b)) {
-        let (lo, hi) = (from_ns.max(b.start_ns), to_ns.min(b.end_ns));
+        let (lo, hi) = (from_ns.max(b.start.as_ns()), to_ns.min(b.end.as_ns()));
         if hi <= lo {
             continue;
         }
@@ -156,7 +157,7 @@ pub fn apply(
         return Ok(Applied::default());
     }
     *applied_until_ns = now_ns;
-    let burns = board.pending(now_ns, from_ns);
+    let burns = board.pending(SimTime::from_ns(now_ns), SimTime::from_ns(from_ns));
     let mut applied = Applied {
         rejected: burns.iter().filter(|b| !is_valid(b)).count() as u32,
         ..Applied::default()
@@ -191,9 +192,9 @@ mod tests {
 
     fn burn() -> Burn {
         Burn {
-            posted_ns: 0,
-            start_ns: 1_000_000_000,
-            end_ns: 11_000_000_000,
+            posted: SimTime::from_ns(0),
+            start: SimTime::from_ns(1_000_000_000),
+            end: SimTime::from_ns(11_000_000_000),
             thrust_n: 0.3,
             mass_flow_kg_s: 0.3 / (200.0 * 9.806_65),
             mass_kg: 12.5,
@@ -258,7 +259,10 @@ mod tests {
                 dir_body: Vector3::zeros(),
                 ..b
             },
-            Burn { end_ns: 0, ..b },
+            Burn {
+                end: SimTime::from_ns(0),
+                ..b
+            },
         ] {
             assert!(!is_valid(&bad), "{bad:?}");
             assert_eq!(delta_v_m_s(&bad, 0, u64::MAX), 0.0);

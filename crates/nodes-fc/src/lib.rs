@@ -39,8 +39,8 @@ use csp::reqrep::{self, RESULT_FAILURE, RESULT_SUCCESS, serve};
 use csp::{Packet, SimTime};
 use nalgebra::{UnitQuaternion, Vector3};
 use orbit::propagate::Sgp4Propagator;
-use orbit::state::{AdcsSnapshot, TruthSnapshot};
 use orbit::tle::{ChecksumMode, Tle};
+use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
 use crate::adcs::{Adcs, AdcsConfig};
 use crate::environment::{DragConfig, EnvModel, Environment, SlowModels};
@@ -327,9 +327,9 @@ pub struct FcApp {
     refused: u64,
     log: Vec<(SimTime, String)>,
     publisher: Option<Publisher>,
-    truth_board: Option<orbit::state::TruthBoard>,
+    truth_board: Option<platform::board::TruthBoard>,
     // --- truth: the ECU's burns (not reset by a reboot) ---
-    burns: Option<orbit::state::BurnBoard>,
+    burns: Option<platform::board::BurnBoard>,
     burns_applied_until_ns: u64,
 }
 
@@ -429,13 +429,13 @@ impl FcApp {
     }
 
     /// Post the true state of every tick to `board` for the other nodes (EPS, COMM, ECU).
-    pub fn with_truth_board(mut self, board: orbit::state::TruthBoard) -> Self {
+    pub fn with_truth_board(mut self, board: platform::board::TruthBoard) -> Self {
         self.truth_board = Some(board);
         self
     }
 
     /// Apply the ECU's burns posted on `board` to the true orbit ([`burns`]).
-    pub fn with_burns(mut self, board: orbit::state::BurnBoard) -> Self {
+    pub fn with_burns(mut self, board: platform::board::BurnBoard) -> Self {
         self.burns = Some(board);
         self
     }
@@ -744,8 +744,10 @@ impl FcApp {
         }
         // The other nodes' view of the truth: every tick, whether the FC software runs or not
         // (the truth is physics).
-        if let Some(board) = &self.truth_board {
-            board.publish(&self.truth_snapshot(t, unix_ns));
+        if let Some(board) = &self.truth_board
+            && let Err(e) = board.publish(&self.truth_snapshot(t, unix_ns))
+        {
+            self.log.push((t, format!("truth not posted: {e}")));
         }
 
         // Truth step over [t, t + dt].
@@ -784,7 +786,7 @@ impl FcApp {
     fn truth_snapshot(&self, t: SimTime, unix_ns: i64) -> TruthSnapshot {
         let env = self.env;
         TruthSnapshot {
-            t_ns: t.as_ns(),
+            t,
             unix_ns,
             r_eci_m: env.map_or_else(Vector3::zeros, |e| e.r_eci_m),
             v_eci_m_s: env.map_or_else(Vector3::zeros, |e| e.v_eci_m_s),
@@ -809,7 +811,7 @@ impl FcApp {
         let est = self.fsw.adcs.estimate();
         let deg = f64::to_degrees;
         let adcs = AdcsSnapshot {
-            t_ns: t.as_ns(),
+            t,
             mode_in_effect: out.map_or(TargetMode::Detumble as u8, |o| o.mode_in_effect as u8),
             mode_commanded: self.fsw.request_mode.unwrap_or(self.fsw.target.mode) as u8,
             state: out.map_or(adcs::STATE_DETUMBLING, |o| o.state),
@@ -1487,9 +1489,7 @@ mod tests {
             ..FcConfig::default()
         })
         .with_publisher(Publisher::new(move |_, a| {
-            sink.lock()
-                .unwrap()
-                .push((a.t_ns / 1_000_000_000, a.mode_commanded));
+            sink.lock().unwrap().push((a.t.as_secs(), a.mode_commanded));
         }));
         let mut h = Host::new(node_cfg(), app, SimTime::ZERO);
         run_until(&mut h, SimTime::from_secs(25));
@@ -1529,7 +1529,7 @@ mod tests {
 
     #[test]
     fn tmatp_follows_the_orbit_after_a_burn() {
-        let board = orbit::state::BurnBoard::new();
+        let board = platform::board::BurnBoard::new();
         let app = FcApp::new(FcConfig {
             epoch_unix_s: START,
             tle: Some((L1.to_owned(), L2.to_owned())),
@@ -1551,15 +1551,17 @@ mod tests {
         let at10 = TmAtp::parse(&ask(&mut h, 10, &[2], SimTime::from_secs(10))[2..]).unwrap();
         assert_eq!(Vector3::from(at10.r_eci_m), sgp4_m(&mut prop, 10));
         // 0.3 N for 10 s on 12.5 kg (Isp 200 s) along body +Z, posted at 10 s.
-        board.post(orbit::state::Burn {
-            posted_ns: 10_000_000_000,
-            start_ns: 10_000_000_000,
-            end_ns: 20_000_000_000,
-            thrust_n: 0.3,
-            mass_flow_kg_s: 0.3 / (200.0 * 9.806_65),
-            mass_kg: 12.5,
-            dir_body: Vector3::z(),
-        });
+        board
+            .post(platform::board::Burn {
+                posted: SimTime::from_ns(10_000_000_000),
+                start: SimTime::from_ns(10_000_000_000),
+                end: SimTime::from_ns(20_000_000_000),
+                thrust_n: 0.3,
+                mass_flow_kg_s: 0.3 / (200.0 * 9.806_65),
+                mass_kg: 12.5,
+                dir_body: Vector3::z(),
+            })
+            .unwrap();
         let half_orbit_s = 2850;
         run_until(&mut h, SimTime::from_secs(half_orbit_s));
         let t = SimTime::from_secs(half_orbit_s);

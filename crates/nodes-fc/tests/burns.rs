@@ -13,8 +13,9 @@ use m6p_nodes_fc::environment::EnvModel;
 use nalgebra::{UnitQuaternion, Vector3};
 use orbit::cowell::{CowellConfig, MU_EARTH_KM3_S2};
 use orbit::propagate::{Sgp4Propagator, StateVector};
-use orbit::state::{Burn, BurnBoard};
 use orbit::tle::{ChecksumMode, Tle};
+use platform::SimTime;
+use platform::board::{Burn, BurnBoard};
 
 /// The default scenario's 6U TLE (scenarios/default.toml).
 const L1: &str = "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996";
@@ -55,9 +56,9 @@ fn z_along(dir_eci: &Vector3<f64>) -> UnitQuaternion<f64> {
 
 fn the_burn(posted_ns: u64, end_ns: u64) -> Burn {
     Burn {
-        posted_ns,
-        start_ns: BURN_START_NS,
-        end_ns,
+        posted: SimTime::from_ns(posted_ns),
+        start: SimTime::from_ns(BURN_START_NS),
+        end: SimTime::from_ns(end_ns),
         thrust_n: THRUST_N,
         mass_flow_kg_s: THRUST_N / (ISP_S * G0),
         mass_kg: MASS_KG,
@@ -115,7 +116,9 @@ fn a_10_s_burn_raises_the_semi_major_axis_as_gauss_says() {
     let mut m = sgp4_model().with_cowell_config(CowellConfig::two_body());
     let before = m.state_j2000(unix(BURN_START_NS)).unwrap();
     let board = BurnBoard::new();
-    board.post(the_burn(BURN_START_NS, BURN_START_NS + BURN_NS));
+    board
+        .post(the_burn(BURN_START_NS, BURN_START_NS + BURN_NS))
+        .unwrap();
     let q = prograde();
     // Ticks on the whole 0.1 s grid; the burn starts 30 ms after one.
     let mut applied_until = 598 * S;
@@ -167,7 +170,9 @@ fn rtn_m(s: &StateVector, reference: &StateVector) -> Vector3<f64> {
 fn after_the_burn_the_position_departs_from_sgp4_as_clohessy_wiltshire_says() {
     let mut m = sgp4_model().with_cowell_config(burns::cowell_config_for(&tle()));
     let board = BurnBoard::new();
-    board.post(the_burn(BURN_START_NS, BURN_START_NS + BURN_NS));
+    board
+        .post(the_burn(BURN_START_NS, BURN_START_NS + BURN_NS))
+        .unwrap();
     let q = prograde();
     let mut applied_until = 599 * S;
     drive(
@@ -239,7 +244,9 @@ fn a_cut_burn_is_applied_exactly_to_its_cut_whichever_task_runs_first() {
     let run = |cut: u64, ecu_first: bool| {
         let mut m = sgp4_model();
         let board = BurnBoard::new();
-        board.post(the_burn(BURN_START_NS, BURN_START_NS + BURN_NS));
+        board
+            .post(the_burn(BURN_START_NS, BURN_START_NS + BURN_NS))
+            .unwrap();
         let q = prograde();
         let mut applied_until = 599 * S;
         let mut posted_cut = false;
@@ -248,14 +255,14 @@ fn a_cut_burn_is_applied_exactly_to_its_cut_whichever_task_runs_first() {
         while t <= BURN_START_NS + 12 * S {
             let due = !posted_cut && t >= cut;
             if due && (ecu_first || t > cut) {
-                board.post(the_burn(BURN_START_NS, cut));
+                board.post(the_burn(BURN_START_NS, cut)).unwrap();
                 posted_cut = true;
             }
             let a = burns::apply(&mut m, &board, &q, t, unix(t), &mut applied_until).unwrap();
             dv += a.dv_eci_m_s;
             m.at(unix(t)).unwrap();
             if due && !posted_cut {
-                board.post(the_burn(BURN_START_NS, cut));
+                board.post(the_burn(BURN_START_NS, cut)).unwrap();
                 posted_cut = true;
             }
             t += TICK_NS;
@@ -298,12 +305,14 @@ fn no_burn_leaves_sgp4_alone_and_a_burn_posted_at_a_tick_waits_for_the_next() {
     assert!(!m.is_numerical());
     // Posted at a tick's instant: not taken at that tick, all of it at the next.
     let t = 50 * TICK_NS;
-    board.post(Burn {
-        posted_ns: t,
-        start_ns: t,
-        end_ns: t + 50_000_000,
-        ..the_burn(0, 0)
-    });
+    board
+        .post(Burn {
+            posted: SimTime::from_ns(t),
+            start: SimTime::from_ns(t),
+            end: SimTime::from_ns(t + 50_000_000),
+            ..the_burn(0, 0)
+        })
+        .unwrap();
     let a = burns::apply(&mut m, &board, &q, t, unix(t), &mut until).unwrap();
     assert_eq!(a.impulses, 0);
     let t2 = t + TICK_NS;

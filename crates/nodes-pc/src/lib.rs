@@ -633,7 +633,7 @@ pub struct PcApp {
     sink: Option<Sink>,
     log: Vec<(SimTime, String)>,
     /// Where the S-band's transmissions are posted for the EPS and its power is read.
-    activity: Option<orbit::state::ActivityBoard>,
+    activity: Option<platform::board::ActivityBoard>,
     /// The transmitter is off because its power channel is (not by a scenario event).
     unpowered: bool,
 }
@@ -681,21 +681,23 @@ impl PcApp {
     /// and follow its power channel (`Activity::SbandPowerOff`, posted by the twin from the
     /// EPS): the transmitter notices a power change at its next frame boundary (a frame is
     /// 10.2 ms at 1 Mbit/s); unpowered it behaves as switched off (the queue is kept).
-    pub fn with_activity(mut self, board: orbit::state::ActivityBoard) -> Self {
+    pub fn with_activity(mut self, board: platform::board::ActivityBoard) -> Self {
         self.activity = Some(board);
         self
     }
 
-    fn tx_activity(&self, t: SimTime, on: bool) {
-        if let Some(a) = &self.activity {
-            a.set(orbit::state::Activity::SbandTx, t.as_ns(), on);
+    fn tx_activity(&mut self, t: SimTime, on: bool) {
+        if let Some(a) = &self.activity
+            && let Err(e) = a.set(platform::board::Activity::SbandTx, t, on)
+        {
+            self.log.push((t, format!("pc: S-band activity: {e}")));
         }
     }
 
     /// Follow the S-band power channel (see [`PcApp::with_activity`]).
     fn follow_power(&mut self, t: SimTime) {
         let Some(a) = &self.activity else { return };
-        let off = a.on_before(orbit::state::Activity::SbandPowerOff, t.as_ns());
+        let off = a.on_before(platform::board::Activity::SbandPowerOff, t);
         if off && !self.unpowered {
             self.unpowered = true;
             if self.sband.is_transmitting() {
@@ -1514,7 +1516,26 @@ impl App for PcApp {
         self.flush_log(node);
     }
 
+    fn power_lost(&mut self, node: &mut Node, now: SimTime) {
+        // The buffer file, the S-band queue and the session table are volatile: they are
+        // lost at the instant power goes, and the transmitter stops with its data.
+        self.lose_volatile(now, "power lost");
+        self.flush_log(node);
+    }
+
     fn reset(&mut self, now: SimTime) {
+        self.lose_volatile(now, "reboot");
+        // The node unbinds every port at reboot.
+        self.ports.clear();
+        self.retired.clear();
+        self.tm_sband_downlinked = 0;
+    }
+}
+
+impl PcApp {
+    /// What a reboot or a loss of power takes: the buffered data (counted as dropped for
+    /// `PowerLoss`), the S-band queue, the sessions' state.
+    fn lose_volatile(&mut self, now: SimTime, why: &str) {
         if self.sband.is_transmitting() {
             self.tx_activity(now, false);
         }
@@ -1534,7 +1555,7 @@ impl App for PcApp {
         if let Some(a) = self.table.active() {
             let id = self.session_id(a);
             self.log
-                .push((now, format!("pc: reboot: ACTIVE session {id} lost")));
+                .push((now, format!("pc: {why}: ACTIVE session {id} lost")));
         }
         self.table.reset();
         for r in &mut self.runs {
@@ -1542,10 +1563,6 @@ impl App for PcApp {
             r.tm_downlinked = 0;
             r.tm_dropped = 0;
         }
-        // The node unbinds every port at reboot.
-        self.ports.clear();
-        self.retired.clear();
-        self.tm_sband_downlinked = 0;
     }
 }
 

@@ -11,7 +11,6 @@
 //! - [`sun`], [`eclipse`]: geometric sun vector; conical umbra/penumbra.
 //! - [`igrf`]: IGRF-14 main field, degree 13, with secular variation.
 //! - [`passes`]: azimuth, elevation, range and pass prediction for a ground site.
-//! - [`state`]: [`state::TruthSnapshot`], the FC's published truth for the other nodes.
 
 pub mod cowell;
 pub mod eclipse;
@@ -20,7 +19,6 @@ pub mod geodetic;
 pub mod igrf;
 pub mod passes;
 pub mod propagate;
-pub mod state;
 pub mod sun;
 pub mod time;
 pub mod tle;

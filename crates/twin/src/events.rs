@@ -89,9 +89,9 @@ pub enum RunEvent {
         /// When (equals `truth.t_ns`).
         t: SimTime,
         /// The true state.
-        truth: Box<orbit::state::TruthSnapshot>,
+        truth: Box<platform::truth::TruthSnapshot>,
         /// The ADCS's estimate, target and commands.
-        adcs: Box<orbit::state::AdcsSnapshot>,
+        adcs: Box<platform::truth::AdcsSnapshot>,
     },
     /// What the payload controller did: a session started or ended, bytes reached the
     /// ground, bytes were dropped, the final accounting.

@@ -257,3 +257,17 @@ fn write_downlink(outcome: &Outcome, dir: Option<&Path>) -> anyhow::Result<()> {
 pub fn compile_loaded(l: &Loaded) -> Compiled {
     compile(&l.scenario)
 }
+
+/// Compile a loaded scenario with the run's seed `seed` (`--seed`, or a recording's) in
+/// place of the file's: every random draw, the initial attitude and tumble axis included,
+/// derives from it (docs/scenarios.md, "Seeds").
+pub fn compile_seeded(l: &Loaded, seed: Option<u64>) -> Compiled {
+    match seed {
+        Some(seed) if seed != l.scenario.seed => {
+            let mut s = l.scenario.clone();
+            s.seed = seed;
+            compile(&s)
+        }
+        _ => compile(&l.scenario),
+    }
+}

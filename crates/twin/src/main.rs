@@ -303,11 +303,8 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
     };
-    let mut compiled = exec::compile_loaded(&loaded);
+    let mut compiled = exec::compile_seeded(&loaded, a.seed);
     let opts = &mut compiled.opts;
-    if let Some(s) = a.seed {
-        opts.seed = s;
-    }
     if let Some(d) = a.duration {
         opts.duration = Some(d);
     }
@@ -553,8 +550,7 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         text: meta.scenario_toml.clone(),
         scenario,
     };
-    let mut compiled = exec::compile_loaded(&loaded);
-    compiled.opts.seed = meta.seed;
+    let mut compiled = exec::compile_seeded(&loaded, Some(meta.seed));
     if let Some(d) = meta.duration_ns {
         compiled.opts.duration = Some(Duration::from_nanos(d));
     }
@@ -675,10 +671,7 @@ fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
             }
             Ok(loaded) => {
                 let name = loaded.name();
-                let mut compiled = exec::compile_loaded(&loaded);
-                if let Some(s) = a.seed {
-                    compiled.opts.seed = s;
-                }
+                let compiled = exec::compile_seeded(&loaded, a.seed);
                 let rt = build_runtime(compiled.opts.clock)?;
                 match rt.block_on(exec::execute(compiled, &mut |_| {})) {
                     Err(e) => {

@@ -22,24 +22,7 @@ use csp::node::{IfaceConfig, NodeConfig};
 use csp::router::{Route, RoutingTable};
 use csp::service::UptimeFormat;
 
-/// Address of the primary COMM.
-pub const COMM1: u8 = 1;
-/// Address of the secondary COMM.
-pub const COMM2: u8 = 2;
-/// Address of the flight computer.
-pub const FC: u8 = 3;
-/// Address of the EPS.
-pub const EPS: u8 = 4;
-/// Address of the ECU.
-pub const ECU: u8 = 5;
-/// Address of the payload controller.
-pub const PC: u8 = 6;
-/// Payload addresses.
-pub const PAYLOADS: std::ops::RangeInclusive<u8> = 12..=15;
-/// Ground segment addresses.
-pub const GROUND: std::ops::RangeInclusive<u8> = 16..=20;
-/// Reserved addresses (nothing answers).
-pub const RESERVED: std::ops::RangeInclusive<u8> = 7..=11;
+pub use platform::addr::{COMM1, COMM2, ECU, EPS, FC, GROUND, PAYLOADS, PC, RESERVED};
 
 /// What a node is, which decides its media and routes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]

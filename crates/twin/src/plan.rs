@@ -25,17 +25,39 @@ pub enum MediumId {
     Uhf,
 }
 
-/// One change the fault director applies at a time.
+/// One change the fault director applies at a time. `fault` is the scenario fault's index:
+/// faults on one medium or node compose, and each start or end changes only its own part.
 #[derive(Debug, Clone, PartialEq)]
 pub enum FaultAction {
-    /// Set a medium's impairments.
-    Impair(MediumId, Impairments),
-    /// Node power.
-    Power(u8, bool),
+    /// Fault `fault` starts impairing a medium (`Some`) or is lifted (`None`).
+    Impair {
+        /// The medium.
+        medium: MediumId,
+        /// The fault.
+        fault: u32,
+        /// Its impairments while active.
+        imp: Option<Impairments>,
+    },
+    /// Power fault `fault` holds node `addr` off (`off`) or releases it.
+    Power {
+        /// The node.
+        addr: u8,
+        /// The fault.
+        fault: u32,
+        /// Held off or released.
+        off: bool,
+    },
     /// Node reboot.
     Reboot(u8),
-    /// Node hang (or recovery).
-    Hang(u8, bool),
+    /// Hang fault `fault` starts (`hung`) or ends on node `addr`.
+    Hang {
+        /// The node.
+        addr: u8,
+        /// The fault.
+        fault: u32,
+        /// Hung or recovered.
+        hung: bool,
+    },
     /// A fault the FC applies itself from its timeline (sensors, wheels): recorded only.
     Fc,
     /// The UHF link's contact with the ground (a pass begins or ends).
@@ -339,26 +361,73 @@ pub fn compile(s: &Scenario) -> Compiled {
                         ..Default::default()
                     },
                 };
-                push(at, FaultAction::Impair(m, imp), "");
+                let fault = i as u32;
+                push(
+                    at,
+                    FaultAction::Impair {
+                        medium: m,
+                        fault,
+                        imp: Some(imp),
+                    },
+                    "",
+                );
                 if let Some(u) = until {
                     push(
                         u,
-                        FaultAction::Impair(m, Impairments::default()),
+                        FaultAction::Impair {
+                            medium: m,
+                            fault,
+                            imp: None,
+                        },
                         " (lifted)",
                     );
                 }
             }
-            (FaultKind::PowerOff, _, Some(a)) => {
-                push(at, FaultAction::Power(a, false), "");
+            (FaultKind::PowerOff, _, Some(addr)) => {
+                let fault = i as u32;
+                push(
+                    at,
+                    FaultAction::Power {
+                        addr,
+                        fault,
+                        off: true,
+                    },
+                    "",
+                );
                 if let Some(u) = until {
-                    push(u, FaultAction::Power(a, true), " (power on)");
+                    push(
+                        u,
+                        FaultAction::Power {
+                            addr,
+                            fault,
+                            off: false,
+                        },
+                        " (power on)",
+                    );
                 }
             }
             (FaultKind::Reboot, _, Some(a)) => push(at, FaultAction::Reboot(a), ""),
-            (FaultKind::Hang, _, Some(a)) => {
-                push(at, FaultAction::Hang(a, true), "");
+            (FaultKind::Hang, _, Some(addr)) => {
+                let fault = i as u32;
+                push(
+                    at,
+                    FaultAction::Hang {
+                        addr,
+                        fault,
+                        hung: true,
+                    },
+                    "",
+                );
                 if let Some(u) = until {
-                    push(u, FaultAction::Hang(a, false), " (recovered)");
+                    push(
+                        u,
+                        FaultAction::Hang {
+                            addr,
+                            fault,
+                            hung: false,
+                        },
+                        " (recovered)",
+                    );
                 }
             }
             _ => {}

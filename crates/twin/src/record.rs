@@ -90,8 +90,8 @@ use serde::{Deserialize, Serialize};
 
 use orbit::frames::{a_ecef_from_eci, eci_to_body};
 use orbit::geodetic::ecef_m_to_geodetic;
-use orbit::state::{AdcsSnapshot, TruthSnapshot};
 use orbit::time::UtcTime;
+use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
 use crate::events::{Direction, RunEvent};
 

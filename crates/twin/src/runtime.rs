@@ -28,6 +28,7 @@ use crate::events::{Direction, Level, RunEvent};
 use crate::ground::{GroundApp, PlannedRequest, RequestResult, Results};
 use crate::network::{Medium, NetworkSpec, Role, node_config};
 use crate::plan::{FaultAction, MediumId, TimedFault};
+use platform::board::Boards;
 
 /// Everything a run needs.
 #[derive(Debug, Clone)]
@@ -249,8 +250,8 @@ impl AttitudeSample {
     /// The sample of one published snapshot pair.
     pub fn of(
         t: SimTime,
-        truth: &orbit::state::TruthSnapshot,
-        adcs: &orbit::state::AdcsSnapshot,
+        truth: &platform::truth::TruthSnapshot,
+        adcs: &platform::truth::AdcsSnapshot,
     ) -> Self {
         AttitudeSample {
             t,
@@ -291,213 +292,6 @@ pub fn mix(seed: u64, salt: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// The meeting points between node applications (see `orbit::state`): the FC posts its
-/// truth and the nodes read it; the ECU posts burns and the FC applies them; nodes post
-/// power-relevant activities and the EPS reads them.
-#[derive(Debug, Clone, Default)]
-pub struct Boards {
-    /// The FC's true state, every tick.
-    pub truth: orbit::state::TruthBoard,
-    /// The ECU's firings.
-    pub burns: orbit::state::BurnBoard,
-    /// Switched activities (S-band and UHF transmitting, thruster heater, firing).
-    pub activity: orbit::state::ActivityBoard,
-    /// The nodes' control channels by address, for the EPS's power switches.
-    pub power: PowerSwitches,
-    /// Which COMM carries the radio link.
-    pub radio: RadioLink,
-}
-
-/// Which COMM carries the radio link, and the take-over: while COMM1 is powered off or
-/// failed (hung) and COMM2 is up, COMM2 carries it; when COMM1 is back, COMM1 does.
-///
-/// The routing tables stay as they are (ICD 1.7: the CSP network configuration cannot change
-/// at runtime). Taking over means, at the instant COMM1 goes down:
-/// - COMM2 answers to COMM1's link address (CFP destination 1) on the main bus as well as
-///   its own, so what the nodes route to the ground via COMM1 reaches COMM2, which sends it
-///   over its own radio by its static table (ground 16-20 direct on UHF); a packet for CSP
-///   1 itself that reaches COMM2 over the bus this way is dropped (counted, "same iface"),
-///   and one from the ground is forwarded onto the bus, where only a hung COMM1 takes it;
-/// - the ground's uplink goes to COMM2's radio (the air channel's default endpoint);
-/// - COMM2's radio goes active (beacons from CSP 2) and COMM1's to standby.
-///
-/// Handing back undoes the three at the instant COMM1 is powered on or recovers. While both
-/// are down nobody can carry the link and nothing is switched (the log says so); the first
-/// to come back carries it.
-#[derive(Debug, Clone, Default)]
-pub struct RadioLink(Arc<Mutex<RadioLinkState>>);
-
-#[derive(Debug, Default)]
-struct RadioLinkState {
-    /// Powered and not hung, for COMM1 and COMM2.
-    powered: [bool; 2],
-    hung: [bool; 2],
-    /// Which COMM carries the link: 0 COMM1, 1 COMM2, 2 none (both down).
-    carrier: usize,
-    /// Whether COMM2's radio is the active one (the alias, the uplink, the switches).
-    secondary: bool,
-    main: Option<CanBus>,
-    ground: Option<PacketNet>,
-    can2: Option<bus::can::CanPort>,
-    uhf: [Option<bus::net::NetPort>; 2],
-    ctl: [Option<CtlTx>; 2],
-    events: Option<mpsc::UnboundedSender<RunEvent>>,
-}
-
-impl RadioLink {
-    fn lock(&self) -> std::sync::MutexGuard<'_, RadioLinkState> {
-        self.0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-    }
-
-    /// Register COMM `addr`'s (1 or 2) control channel and attachments.
-    fn register(
-        &self,
-        addr: u8,
-        ctl: CtlTx,
-        ports: &[Attachment],
-        segs: &Segments,
-        events: &mpsc::UnboundedSender<RunEvent>,
-    ) {
-        let Some(i) = Self::index(addr) else {
-            return;
-        };
-        let mut st = self.lock();
-        st.powered[i] = true;
-        st.ctl[i] = Some(ctl);
-        st.main = Some(segs.main.clone());
-        st.ground = Some(segs.ground.clone());
-        st.events = Some(events.clone());
-        for p in ports {
-            match p {
-                Attachment::Can(c) if i == 1 => st.can2 = Some(c.clone()),
-                Attachment::Net(n) => st.uhf[i] = Some(n.clone()),
-                Attachment::Can(_) => {}
-            }
-        }
-    }
-
-    fn index(addr: u8) -> Option<usize> {
-        match addr {
-            crate::network::COMM1 => Some(0),
-            crate::network::COMM2 => Some(1),
-            _ => None,
-        }
-    }
-
-    /// COMM `addr` was powered on or off at `t` (other addresses: nothing).
-    pub fn power(&self, addr: u8, on: bool, t: SimTime) {
-        if let Some(i) = Self::index(addr) {
-            let mut st = self.lock();
-            st.powered[i] = on;
-            // Power cycling ends a hang (as the node driver does).
-            st.hung[i] = false;
-            st.update(t);
-        }
-    }
-
-    /// COMM `addr` hung (failed) or recovered at `t`.
-    pub fn hang(&self, addr: u8, hung: bool, t: SimTime) {
-        if let Some(i) = Self::index(addr) {
-            let mut st = self.lock();
-            st.hung[i] = hung;
-            st.update(t);
-        }
-    }
-}
-
-impl RadioLinkState {
-    fn up(&self, i: usize) -> bool {
-        self.powered[i] && !self.hung[i]
-    }
-
-    /// Which COMM can carry the link: COMM1 when up, else COMM2 when up, else none (2).
-    fn carrier(&self) -> usize {
-        if self.up(0) {
-            0
-        } else if self.up(1) {
-            1
-        } else {
-            2
-        }
-    }
-
-    fn update(&mut self, t: SimTime) {
-        if self.uhf[0].is_none() || self.uhf[1].is_none() {
-            return;
-        }
-        let carrier = self.carrier();
-        if carrier == self.carrier {
-            return;
-        }
-        let message = match carrier {
-            0 => "COMM1 has the radio link back".to_owned(),
-            1 => format!(
-                "COMM2 takes the radio link over (COMM1 {})",
-                if self.powered[0] {
-                    "failed"
-                } else {
-                    "powered off"
-                }
-            ),
-            // Nobody can carry it: the switches stay as they are until one comes back.
-            _ => "no COMM can carry the radio link (COMM1 and COMM2 down)".to_owned(),
-        };
-        self.carrier = carrier;
-        if carrier < 2 && (carrier == 1) != self.secondary {
-            let want = carrier == 1;
-            self.secondary = want;
-            if let (Some(bus), Some(port)) = (&self.main, &self.can2) {
-                bus.set_alias(port, crate::network::COMM1, want);
-            }
-            if let (Some(net), Some(port)) = (&self.ground, &self.uhf[carrier]) {
-                net.set_default(port);
-            }
-            for (i, ctl) in self.ctl.iter().enumerate() {
-                if let Some(c) = ctl {
-                    let _ = c.send((t, NodeCtl::Switch(nodes_comm::RADIO_SWITCH, i == carrier)));
-                }
-            }
-        }
-        tracing::info!(%t, "{message}");
-        if let Some(ev) = &self.events {
-            let _ = ev.send(RunEvent::Log {
-                t,
-                source: "radio".to_owned(),
-                level: Level::Info,
-                message,
-            });
-        }
-    }
-}
-
-/// The EPS's power switches: the control channel of every node by address, filled as the
-/// nodes are created (all before the run starts).
-#[derive(Debug, Clone, Default)]
-pub struct PowerSwitches(Arc<Mutex<BTreeMap<u8, CtlTx>>>);
-
-impl PowerSwitches {
-    fn insert(&self, addr: u8, tx: CtlTx) {
-        self.0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .insert(addr, tx);
-    }
-
-    /// Power node `addr` on or off at `t` (a node the run does not have: nothing).
-    pub fn set(&self, addr: u8, on: bool, t: SimTime) {
-        if let Some(tx) = self
-            .0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .get(&addr)
-        {
-            let _ = tx.send((t, NodeCtl::Power(on)));
-        }
-    }
-}
-
 fn app_for(
     role: Role,
     addr: u8,
@@ -528,7 +322,7 @@ fn app_for(
                     .with_burns(boards.burns.clone())
                     .with_publisher(nodes_fc::Publisher::new(move |truth, adcs| {
                         let _ = tx.send(RunEvent::Truth {
-                            t: SimTime::from_ns(truth.t_ns),
+                            t: truth.t,
                             truth: Box::new(truth.clone()),
                             adcs: Box::new(adcs.clone()),
                         });
@@ -536,37 +330,13 @@ fn app_for(
             )
         }
         Role::Eps => {
+            // Its channel switches go to the platform's power rules in the main loop.
             let tx = events.clone();
-            let power = boards.power.clone();
-            let radio = boards.radio.clone();
-            let burns = boards.burns.clone();
-            let activity = boards.activity.clone();
             Box::new(
                 nodes_eps::EpsApp::new(opts.eps.clone())
                     .with_truth(boards.truth.clone())
                     .with_activity(boards.activity.clone())
                     .with_sink(nodes_eps::Sink::new(move |out| {
-                        if let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = &out
-                            && *channel == nodes_eps::Channel::Sband
-                        {
-                            // The S-band transmitter is the PC's: it follows this at its next
-                            // frame boundary.
-                            activity.set(orbit::state::Activity::SbandPowerOff, t.as_ns(), !*on);
-                        }
-                        if let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = &out
-                            && let Some(addr) = channel.node_addr()
-                        {
-                            // The node leaves (or rejoins) its buses at once; an ECU that
-                            // loses power stops firing.
-                            power.set(addr, *on, *t);
-                            radio.power(addr, *on, *t);
-                            if addr == 5 && !*on {
-                                use orbit::state::Activity;
-                                burns.cut_all(t.as_ns());
-                                activity.set(Activity::ThrusterHeater, t.as_ns(), false);
-                                activity.set(Activity::Firing, t.as_ns(), false);
-                            }
-                        }
                         let _ = tx.send(RunEvent::Eps(Box::new(out)));
                     })),
             )
@@ -586,7 +356,7 @@ fn app_for(
                                 format!(
                                     "burn started: {:.3} N for {:.3} s, mass {:.3} kg",
                                     burn.thrust_n,
-                                    (burn.end_ns - burn.start_ns) as f64 * 1e-9,
+                                    (burn.end - burn.start).as_secs_f64(),
                                     burn.mass_kg
                                 ),
                             ),
@@ -723,21 +493,25 @@ pub async fn run_with(
         ..opts.fc.clone()
     };
     let boards = Boards::default();
+    let mut comm_ports = Vec::new();
     {
         // Every radio transmission is charged to its COMM's transmitter, at its place on the
         // air.
         let activity = boards.activity.clone();
         segs.ground
             .set_air_tap(bus::net::AirTap::new(move |radio, start, end| {
-                use orbit::state::Activity;
+                use platform::board::Activity;
                 // The radio endpoints are named `<node>-uhf` (see the attachments below).
                 let what = if radio == "COMM2-uhf" {
                     Activity::UhfTxSecondary
                 } else {
                     Activity::UhfTx
                 };
-                activity.set(what, start.as_ns(), true);
-                activity.set(what, end.as_ns(), false);
+                for (t, on) in [(start, true), (end, false)] {
+                    if let Err(e) = activity.set(what, t, on) {
+                        tracing::warn!(%t, "{radio}: air time not charged: {e}");
+                    }
+                }
             }));
     }
     let mut nodes = Vec::new();
@@ -792,11 +566,8 @@ pub async fn run_with(
         // Every node boots at the start of the run (in real time, not when its task is made).
         let host = Host::new(cfg, app, SimTime::ZERO);
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
-        boards.power.insert(spec.addr, ctl_tx.clone());
         if matches!(spec.role, Role::CommPrimary | Role::CommSecondary) {
-            boards
-                .radio
-                .register(spec.addr, ctl_tx.clone(), &ports, &segs, &ev_tx);
+            comm_ports.push((spec.addr, ports.clone()));
         }
         let log = node_log.clone();
         let handle = tokio::spawn(async move {
@@ -890,6 +661,13 @@ pub async fn run_with(
         .iter()
         .map(|(spec, ctl, _)| (spec.addr, ctl.clone()))
         .collect();
+    // One truth for power: the EPS's switches and the power and hang faults go through
+    // the platform's rules.
+    let mut power_shell =
+        crate::power::PowerShell::new(ctls.clone(), boards.activity.clone(), segs.clone());
+    for (addr, ports) in &comm_ports {
+        power_shell.register_comm(*addr, ports);
+    }
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let mut trace = Vec::new();
@@ -963,6 +741,15 @@ pub async fn run_with(
             }
             ev = ev_rx.recv() => {
                 if let Some(ev) = ev {
+                    // An EPS channel switch takes effect through the power rules, whose news
+                    // comes first.
+                    if let RunEvent::Eps(o) = &ev
+                        && let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = **o
+                    {
+                        for e in power_shell.eps_channel(t, channel, on) {
+                            handle_event(e, &mut trace);
+                        }
+                    }
                     handle_event(ev, &mut trace);
                 }
             }
@@ -971,12 +758,16 @@ pub async fn run_with(
                     break;
                 }
                 while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
-                    apply_fault(&f, &segs, &ctls, &boards.radio);
+                    let effects = apply_fault(&f, &segs, &ctls, &mut power_shell);
                     if let FaultAction::Contact(on) = f.action {
                         contact.push((f.at, on));
                     }
                     tracing::info!(t = %f.at, "fault: {}", f.what);
+                    // The fault, then what it did.
                     handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, &mut trace);
+                    for e in effects {
+                        handle_event(e, &mut trace);
+                    }
                 }
             }
         }
@@ -1080,29 +871,38 @@ fn snapshot<T: Clone>(stats: Vec<(String, Arc<Mutex<T>>)>) -> Vec<(String, T)> {
         .collect()
 }
 
-/// Apply one scenario fault to the media or a node.
-fn apply_fault(f: &TimedFault, segs: &Segments, ctls: &BTreeMap<u8, CtlTx>, radio: &RadioLink) {
-    let ctl = |addr: &u8, c: NodeCtl| {
-        if let Some(tx) = ctls.get(addr) {
-            let _ = tx.send((f.at, c));
-        }
-    };
+/// Apply one scenario fault to the media or a node; returns the log events of the power
+/// rules.
+fn apply_fault(
+    f: &TimedFault,
+    segs: &Segments,
+    ctls: &BTreeMap<u8, CtlTx>,
+    power: &mut crate::power::PowerShell,
+) -> Vec<RunEvent> {
     match &f.action {
-        FaultAction::Impair(MediumId::Main, imp) => segs.main.set_impairments(*imp),
-        FaultAction::Impair(MediumId::Payload, imp) => segs.payload.set_impairments(*imp),
-        FaultAction::Impair(MediumId::Uhf, imp) => segs.ground.set_impairments(*imp),
-        FaultAction::Power(a, on) => {
-            ctl(a, NodeCtl::Power(*on));
-            radio.power(*a, *on, f.at);
+        FaultAction::Impair { medium, fault, imp } => {
+            match medium {
+                MediumId::Main => segs.main.set_fault(*fault, *imp),
+                MediumId::Payload => segs.payload.set_fault(*fault, *imp),
+                MediumId::Uhf => segs.ground.set_fault(*fault, *imp),
+            }
+            Vec::new()
         }
-        FaultAction::Reboot(a) => ctl(a, NodeCtl::Reboot),
-        FaultAction::Hang(a, h) => {
-            ctl(a, NodeCtl::Hang(*h));
-            radio.hang(*a, *h, f.at);
+        FaultAction::Power { addr, fault, off } => power.power_fault(f.at, *addr, *fault, *off),
+        FaultAction::Reboot(a) => {
+            // A node that is off or hung does not reboot (the driver ignores it then).
+            if let Some(tx) = ctls.get(a) {
+                let _ = tx.send((f.at, NodeCtl::Reboot));
+            }
+            Vec::new()
         }
+        FaultAction::Hang { addr, fault, hung } => power.hang_fault(f.at, *addr, *fault, *hung),
         // The FC applies its own faults from its timeline at its ticks.
-        FaultAction::Fc => {}
-        FaultAction::Contact(on) => segs.ground.set_contact(*on),
+        FaultAction::Fc => Vec::new(),
+        FaultAction::Contact(on) => {
+            segs.ground.set_contact(*on);
+            Vec::new()
+        }
     }
 }
 

@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 
-use m6p_twin::exec::{compile_loaded, execute, load};
+use m6p_twin::exec::{compile_seeded, execute, load};
 use m6p_twin::runtime::build_runtime;
 
 fn repo() -> PathBuf {
@@ -17,12 +17,8 @@ fn detumble_failures(seeds: std::ops::RangeInclusive<u64>) -> Vec<String> {
     let loaded = load(&repo().join("scenarios/adcs-detumble.toml")).unwrap();
     let mut failures = Vec::new();
     for seed in seeds {
-        let mut compiled = compile_loaded(&loaded);
-        compiled.opts.seed = seed;
         // The seed also draws the FC's initial attitude and tumble axis.
-        let mut s = loaded.scenario.clone();
-        s.seed = seed;
-        compiled.opts.fc = m6p_twin::plan::compile(&s).opts.fc;
+        let compiled = compile_seeded(&loaded, Some(seed));
         let rt = build_runtime(compiled.opts.clock).unwrap();
         let outcome = rt.block_on(execute(compiled, &mut |_| {})).unwrap();
         for v in outcome.verdicts.iter().filter(|v| !v.passed) {

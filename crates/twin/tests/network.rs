@@ -374,7 +374,11 @@ fn with_both_comms_down_nobody_carries_the_link_until_one_comes_back() {
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(50));
     let fault = |s: u64, addr: u8, on: bool| TimedFault {
         at: SimTime::from_secs(s),
-        action: FaultAction::Power(addr, on),
+        action: FaultAction::Power {
+            addr,
+            fault: u32::from(addr),
+            off: !on,
+        },
         what: format!("power {addr} {on}"),
     };
     opts.faults = vec![

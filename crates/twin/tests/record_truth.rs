@@ -21,8 +21,8 @@ use m6p_twin::record::{
 use m6p_twin::recording::{self, DiffResult, RecordedMessage};
 use orbit::frames::{a_ecef_from_eci, q_eci_from_body_point_eci};
 use orbit::geodetic::Geodetic;
-use orbit::state::{AdcsSnapshot, TruthSnapshot};
 use orbit::time::UtcTime;
+use platform::truth::{AdcsSnapshot, TruthSnapshot};
 use serde_json::Value;
 
 const START_NS: u64 = 1_774_008_000_000_000_000; // 2026-03-20T12:00:00Z
@@ -48,7 +48,7 @@ const ALT_M: f64 = 500e3;
 /// snapshot carries them.)
 fn truth_z90(t_s: u64) -> TruthSnapshot {
     TruthSnapshot {
-        t_ns: t_s * 1_000_000_000,
+        t: csp::SimTime::from_ns(t_s * 1_000_000_000),
         unix_ns: (START_NS + t_s * 1_000_000_000) as i64,
         q_eci_from_body: q_eci_from_body_point_eci(FRAC_1_SQRT_2, 0.0, 0.0, FRAC_1_SQRT_2).unwrap(),
         ..TruthSnapshot::default()
@@ -75,7 +75,7 @@ fn samples() -> Vec<RunEvent> {
     truth.b_eci_nt.z = 30_000.0;
     truth.w_body_rad_s.z = 1f64.to_radians();
     let adcs = AdcsSnapshot {
-        t_ns: 1_000_000_000,
+        t: csp::SimTime::from_ns(1_000_000_000),
         mode_in_effect: 3,
         mode_commanded: 3,
         state: 2,
@@ -105,7 +105,7 @@ fn samples() -> Vec<RunEvent> {
         ..truth_z90(2)
     };
     let adcs = AdcsSnapshot {
-        t_ns: 2_000_000_000,
+        t: csp::SimTime::from_ns(2_000_000_000),
         q_eci_from_body_est: q_eci_from_body_point_eci(0.9, 0.1, -0.3, 0.2),
         estimation_error_deg: Some(0.25),
         ..AdcsSnapshot::default()
@@ -125,7 +125,7 @@ fn samples() -> Vec<RunEvent> {
     truth.sun_eci_unit.y = 1.0;
     truth.w_body_rad_s.x = f64::INFINITY;
     let adcs = AdcsSnapshot {
-        t_ns: 3_000_000_000,
+        t: csp::SimTime::from_ns(3_000_000_000),
         q_eci_from_body_est: Some(q_nan),
         pointing_error_deg: Some(f64::NAN),
         wheel_torque_cmd_nm: [f64::NEG_INFINITY, 0.0, 0.0, 0.0],
