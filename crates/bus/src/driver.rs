@@ -3,8 +3,10 @@
 //! sends what the host wants sent. All the behaviour is in the host; this loop only moves
 //! things and keeps the node's time (`t = max(t, event stamp)`, never the wake-up time).
 
+use std::sync::Arc;
+
 use csp::SimTime;
-use csp::node::{App, Host, Transmit};
+use csp::node::{App, Host, NodeEvent, Severity, Transmit};
 use tokio::sync::mpsc;
 
 use crate::can::CanPort;
@@ -55,27 +57,30 @@ pub enum NodeCtl {
     Stop,
 }
 
-/// Where a node's drops and events go besides the tracing log: `(time, node, text)`.
-#[derive(Clone)]
-pub struct NodeLogTx(std::sync::Arc<LogFn>);
+/// A node's drop or log line as the run receives it: with the node's name.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeLog {
+    /// The node's name.
+    pub node: Arc<str>,
+    /// What happened.
+    pub event: NodeEvent,
+}
 
-/// The function behind a [`NodeLogTx`]: `(time, node name, text)`.
-type LogFn = dyn Fn(SimTime, &str, &str) + Send + Sync;
-
-impl NodeLogTx {
-    /// A sink calling `f(time, node name, text)`.
-    pub fn new(f: impl Fn(SimTime, &str, &str) + Send + Sync + 'static) -> Self {
-        NodeLogTx(std::sync::Arc::new(f))
+impl From<std::convert::Infallible> for NodeLog {
+    fn from(never: std::convert::Infallible) -> Self {
+        match never {}
     }
 }
 
-impl std::fmt::Debug for NodeLogTx {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("NodeLogTx")
-    }
+/// What a node's task pulls out of its host after an input, in order: the application's
+/// events, then the node's drops and log lines.
+enum Output<E> {
+    App(E),
+    Node(NodeEvent),
 }
 
 /// Run a node until [`NodeCtl::Stop`] (or every sender of `ctl` is gone); returns the host.
+/// Its events go to the tracing log only.
 pub async fn run_node<A: App>(
     host: Host<A>,
     ports: Vec<Attachment>,
@@ -83,24 +88,72 @@ pub async fn run_node<A: App>(
     ctl: CtlRx,
     clock: Clock,
 ) -> Host<A> {
-    run_node_logged(host, ports, inbox, ctl, clock, None).await
+    run(host, ports, inbox, ctl, clock, Discard).await
 }
 
-/// [`run_node`], also handing every node event to `log`.
-pub async fn run_node_logged<A: App>(
+/// [`run_node`], handing the application's events and the node's drops and log lines to
+/// `out` in the order the host produced them (`E` gathers every node's events in one type).
+pub async fn run_node_with<A, E>(
+    host: Host<A>,
+    ports: Vec<Attachment>,
+    inbox: InboxRx,
+    ctl: CtlRx,
+    clock: Clock,
+    out: mpsc::UnboundedSender<E>,
+) -> Host<A>
+where
+    A: App,
+    E: From<NodeLog> + From<A::Event> + Send + 'static,
+{
+    let name: Arc<str> = host.node.name().into();
+    run(host, ports, inbox, ctl, clock, Channel { name, out }).await
+}
+
+/// Where a node's task hands what it pulls out of the host.
+trait Outputs<Ev>: Send {
+    fn emit(&mut self, o: Output<Ev>);
+}
+
+/// Nowhere (the tracing log has them already).
+struct Discard;
+
+impl<Ev> Outputs<Ev> for Discard {
+    fn emit(&mut self, _: Output<Ev>) {}
+}
+
+/// Into the run's event channel.
+struct Channel<E> {
+    name: Arc<str>,
+    out: mpsc::UnboundedSender<E>,
+}
+
+impl<Ev, E: From<NodeLog> + From<Ev> + Send> Outputs<Ev> for Channel<E> {
+    fn emit(&mut self, o: Output<Ev>) {
+        let e = match o {
+            Output::App(e) => E::from(e),
+            Output::Node(event) => E::from(NodeLog {
+                node: Arc::clone(&self.name),
+                event,
+            }),
+        };
+        let _ = self.out.send(e);
+    }
+}
+
+async fn run<A: App, O: Outputs<A::Event>>(
     mut host: Host<A>,
     ports: Vec<Attachment>,
     mut inbox: InboxRx,
     mut ctl: CtlRx,
     clock: Clock,
-    log: Option<NodeLogTx>,
+    mut out: O,
 ) -> Host<A> {
     // Every stamp the node sees is at or after the start; its own time only moves forward.
     let mut t = SimTime::ZERO;
     let mut powered = true;
     let mut hung = false;
     loop {
-        flush(&mut host, &ports, t, log.as_ref());
+        flush(&mut host, &ports, t, &mut out);
         let deadline = if powered && !hung {
             host.poll_timeout()
         } else {
@@ -123,7 +176,7 @@ pub async fn run_node_logged<A: App>(
                     };
                     t = t.max(due);
                     host.handle_timeout(t);
-                    flush(&mut host, &ports, t, log.as_ref());
+                    flush(&mut host, &ports, t, &mut out);
                 }
                 t = t.max(at);
                 match c {
@@ -135,7 +188,7 @@ pub async fn run_node_logged<A: App>(
                             if !on {
                                 // The core meets the loss at its instant (a burn stops there).
                                 host.power_lost(t);
-                                flush(&mut host, &[], t, log.as_ref());
+                                flush(&mut host, &[], t, &mut out);
                             }
                             for p in &ports { p.set_enabled(on); }
                             if on {
@@ -167,9 +220,14 @@ pub async fn run_node_logged<A: App>(
     host
 }
 
-fn flush<A: App>(host: &mut Host<A>, ports: &[Attachment], t: SimTime, log: Option<&NodeLogTx>) {
-    while let Some(out) = host.node.poll_transmit() {
-        match out {
+fn flush<A: App>(
+    host: &mut Host<A>,
+    ports: &[Attachment],
+    t: SimTime,
+    out: &mut impl Outputs<A::Event>,
+) {
+    while let Some(tx) = host.node.poll_transmit() {
+        match tx {
             Transmit::Can { iface, frame } => match ports.get(iface) {
                 Some(Attachment::Can(p)) => p.send(t, frame),
                 _ => tracing::warn!(
@@ -188,11 +246,22 @@ fn flush<A: App>(host: &mut Host<A>, ports: &[Attachment], t: SimTime, log: Opti
             },
         }
     }
+    while let Some(e) = host.app.poll_event() {
+        out.emit(Output::App(e));
+    }
     while let Some(ev) = host.node.poll_event() {
-        tracing::debug!(node = host.node.name(), t = %ev.t, "{}", ev.what);
-        if let Some(l) = log {
-            (l.0)(ev.t, host.node.name(), &ev.what);
+        let node = host.node.name();
+        match &ev {
+            NodeEvent::Drop { .. } => tracing::debug!(node, t = %ev.t(), "{ev}"),
+            // What an application reports (FC modes, scripts, a refused request and why) is
+            // news, on the terminal too.
+            NodeEvent::Log {
+                severity: Severity::Info,
+                ..
+            } => tracing::info!(t = %ev.t(), "{node}: {ev}"),
+            NodeEvent::Log { .. } => tracing::warn!(t = %ev.t(), "{node}: {ev}"),
         }
+        out.emit(Output::Node(ev));
     }
 }
 
@@ -234,6 +303,7 @@ mod tests {
     }
 
     impl csp::node::App for Timer {
+        type Event = std::convert::Infallible;
         fn start(&mut self, _: &mut csp::node::Node, _: SimTime) {}
         fn handle_packet(&mut self, _: &mut csp::node::Node, _: csp::Packet, _: SimTime) {}
         fn poll_timeout(&self) -> Option<SimTime> {

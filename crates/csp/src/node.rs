@@ -19,6 +19,7 @@
 //! [`Host`] pairs a node with an [`App`] (the node's own behaviour: FC, PC, payload...).
 
 use std::collections::{BTreeMap, VecDeque};
+use std::fmt;
 use std::time::Duration;
 
 use crate::cfp::{CanFrame, Fragmenter, Reassembler, ReassemblerConfig};
@@ -180,13 +181,130 @@ impl NodeCounters {
     }
 }
 
-/// A drop or event worth a log line, pulled with [`Node::poll_event`].
+/// How much a node's log line matters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Severity {
+    /// News: a mode, a session, a refused request and why.
+    Info,
+    /// Something went wrong but the node goes on (a late board write, a lost activity).
+    Warning,
+}
+
+/// A drop or a log line of a node, pulled with [`Node::poll_event`].
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct NodeEvent {
+pub enum NodeEvent {
+    /// A packet, frame or piece of data was dropped (the node's own drops are also
+    /// counted in [`NodeCounters::drops`]; an application counts its own).
+    Drop {
+        /// When.
+        t: SimTime,
+        /// The reason (`no route`, `crc32`, `cfp`, `pc buffer-full`, ...).
+        reason: std::borrow::Cow<'static, str>,
+        /// What was dropped.
+        detail: String,
+    },
+    /// A line from the node or its application.
+    Log {
+        /// When.
+        t: SimTime,
+        /// How much it matters.
+        severity: Severity,
+        /// The text.
+        text: String,
+    },
+}
+
+impl NodeEvent {
+    /// An application's news at `t`.
+    pub fn info(t: SimTime, text: String) -> Self {
+        NodeEvent::Log {
+            t,
+            severity: Severity::Info,
+            text,
+        }
+    }
+    /// An application's warning at `t`.
+    pub fn warning(t: SimTime, text: String) -> Self {
+        NodeEvent::Log {
+            t,
+            severity: Severity::Warning,
+            text,
+        }
+    }
+    /// Something an application dropped at `t` (it counts it itself).
+    pub fn dropped(
+        t: SimTime,
+        reason: impl Into<std::borrow::Cow<'static, str>>,
+        detail: String,
+    ) -> Self {
+        NodeEvent::Drop {
+            t,
+            reason: reason.into(),
+            detail,
+        }
+    }
     /// When it happened.
-    pub t: SimTime,
-    /// What happened.
-    pub what: String,
+    pub fn t(&self) -> SimTime {
+        match self {
+            NodeEvent::Drop { t, .. } | NodeEvent::Log { t, .. } => *t,
+        }
+    }
+}
+
+impl std::fmt::Display for NodeEvent {
+    /// `drop (reason): detail` or the log text, as the run's log shows them.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NodeEvent::Drop { reason, detail, .. } => write!(f, "drop ({reason}): {detail}"),
+            NodeEvent::Log { text, .. } => f.write_str(text),
+        }
+    }
+}
+
+/// A bounded queue of an application's outputs, pulled with [`App::poll_event`]: the
+/// node's task drains it after every input, so it holds only what one input produced; past
+/// `capacity` the oldest are dropped and counted.
+#[derive(Debug, Clone)]
+pub struct Outbox<E> {
+    queue: VecDeque<E>,
+    capacity: usize,
+    dropped: u64,
+}
+
+impl<E> Default for Outbox<E> {
+    fn default() -> Self {
+        Outbox::new(Outbox::<E>::DEFAULT_CAPACITY)
+    }
+}
+
+impl<E> Outbox<E> {
+    /// Room for the longest catch-up of one input (an EPS after a day-long hang at 1 Hz).
+    pub const DEFAULT_CAPACITY: usize = 1 << 20;
+
+    /// An outbox holding at most `capacity` outputs.
+    pub fn new(capacity: usize) -> Self {
+        Outbox {
+            queue: VecDeque::new(),
+            capacity: capacity.max(1),
+            dropped: 0,
+        }
+    }
+    /// Queue an output (the oldest is dropped and counted when full).
+    pub fn push(&mut self, e: E) {
+        if self.queue.len() >= self.capacity {
+            self.queue.pop_front();
+            self.dropped += 1;
+        }
+        self.queue.push_back(e);
+    }
+    /// The oldest output not yet pulled.
+    pub fn pop(&mut self) -> Option<E> {
+        self.queue.pop_front()
+    }
+    /// Outputs dropped because nobody pulled them in time.
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
 }
 
 /// The CSP part of a node (see the module doc).
@@ -515,27 +633,54 @@ impl Node {
 
     /// An application's log line (bounded like the node's own events; the driver hands them
     /// to the run's log).
-    pub fn log(&mut self, t: SimTime, what: String) {
+    pub fn log(&mut self, t: SimTime, text: String) {
+        self.log_at(t, Severity::Info, text);
+    }
+
+    /// An application's warning (a late board write, something it could not do).
+    pub fn warn(&mut self, t: SimTime, text: String) {
+        self.log_at(t, Severity::Warning, text);
+    }
+
+    fn log_at(&mut self, t: SimTime, severity: Severity, text: String) {
+        self.push_event(NodeEvent::Log { t, severity, text });
+    }
+
+    /// Something the application dropped (it counts it itself), for the run's log.
+    pub fn log_drop(
+        &mut self,
+        t: SimTime,
+        reason: impl Into<std::borrow::Cow<'static, str>>,
+        detail: String,
+    ) {
+        self.push_event(NodeEvent::dropped(t, reason, detail));
+    }
+
+    /// An application's event for the run's log (bounded like the node's own).
+    pub fn push_event(&mut self, e: NodeEvent) {
         if self.events.len() < MAX_EVENTS {
-            self.events.push_back(NodeEvent { t, what });
+            self.events.push_back(e);
         }
     }
 
     fn note_drop(&mut self, t: SimTime, reason: &'static str, detail: String) {
         self.counters.drop(reason);
-        if self.events.len() < MAX_EVENTS {
-            self.events.push_back(NodeEvent {
-                t,
-                what: format!("drop ({reason}): {detail}"),
-            });
-        }
+        self.push_event(NodeEvent::dropped(t, reason, detail));
     }
 }
 
 /// A node's own behaviour on top of CSP: the FC, the PC, a payload, a ground station.
 ///
-/// Pure like the node: it gets the node to send through and the simulated time.
+/// Pure like the node: it gets the node to send through and the simulated time, and what it
+/// tells the run (samples, sessions, burns) is pulled as typed events with
+/// [`App::poll_event`], as transmissions are pulled from the node.
 pub trait App: Send + 'static {
+    /// What the application tells the run (for the record and the expectations).
+    type Event: Send + 'static;
+    /// The next event not yet pulled (the node's task drains them after every input).
+    fn poll_event(&mut self) -> Option<Self::Event> {
+        None
+    }
     /// Called at boot and after every reboot: bind ports, arm timers.
     fn start(&mut self, node: &mut Node, now: SimTime);
     /// A packet arrived on a bound port.
@@ -565,6 +710,7 @@ pub trait App: Send + 'static {
 pub struct NoApp;
 
 impl App for NoApp {
+    type Event = std::convert::Infallible;
     fn start(&mut self, _node: &mut Node, _now: SimTime) {}
     fn handle_packet(&mut self, _node: &mut Node, _packet: Packet, _now: SimTime) {}
 }
@@ -608,6 +754,10 @@ impl<A: App> Host<A> {
         self.node.handle_timeout(now);
         self.app.handle_timeout(&mut self.node, now);
         self.after_input(now);
+    }
+    /// The application's next event not yet pulled ([`App::poll_event`]).
+    pub fn poll_event(&mut self) -> Option<A::Event> {
+        self.app.poll_event()
     }
     /// Flip the application's hardware switch `name` (see [`App::switch`]).
     pub fn switch(&mut self, name: &str, on: bool, now: SimTime) {
@@ -659,6 +809,7 @@ impl StubApp {
 }
 
 impl App for StubApp {
+    type Event = std::convert::Infallible;
     fn start(&mut self, node: &mut Node, _now: SimTime) {
         for &p in &self.ports {
             node.bind(p);
@@ -676,6 +827,10 @@ impl App for StubApp {
 }
 
 impl<T: App + ?Sized> App for Box<T> {
+    type Event = T::Event;
+    fn poll_event(&mut self) -> Option<T::Event> {
+        (**self).poll_event()
+    }
     fn start(&mut self, node: &mut Node, now: SimTime) {
         (**self).start(node, now)
     }
@@ -699,6 +854,141 @@ impl<T: App + ?Sized> App for Box<T> {
     }
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         (**self).finish(node, now)
+    }
+}
+
+/// An application whose events are mapped by `f` (for a run that gathers every node's
+/// events in one type): [`MapEvents::new`].
+pub struct MapEvents<A, F> {
+    app: A,
+    f: F,
+}
+
+impl<A: fmt::Debug, F> fmt::Debug for MapEvents<A, F> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("MapEvents")
+            .field("app", &self.app)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<A, F> MapEvents<A, F> {
+    /// `app`, its events mapped by `f`.
+    pub fn new(app: A, f: F) -> Self {
+        MapEvents { app, f }
+    }
+}
+
+impl<A, E, F> App for MapEvents<A, F>
+where
+    A: App,
+    E: Send + 'static,
+    F: FnMut(A::Event) -> E + Send + 'static,
+{
+    type Event = E;
+    fn poll_event(&mut self) -> Option<E> {
+        self.app.poll_event().map(&mut self.f)
+    }
+    fn start(&mut self, node: &mut Node, now: SimTime) {
+        self.app.start(node, now)
+    }
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        self.app.handle_packet(node, packet, now)
+    }
+    fn poll_timeout(&self) -> Option<SimTime> {
+        self.app.poll_timeout()
+    }
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        self.app.handle_timeout(node, now)
+    }
+    fn reset(&mut self, now: SimTime) {
+        self.app.reset(now)
+    }
+    fn power_lost(&mut self, node: &mut Node, now: SimTime) {
+        self.app.power_lost(node, now)
+    }
+    fn switch(&mut self, node: &mut Node, name: &str, on: bool, now: SimTime) {
+        self.app.switch(node, name, on, now)
+    }
+    fn finish(&mut self, node: &mut Node, now: SimTime) {
+        self.app.finish(node, now)
+    }
+}
+
+/// An application whose events are pulled after every call and kept in a shared list, for
+/// tests and tools that drive a [`Host`] by hand: [`Tap::new`] gives the list, and the tap
+/// derefs to the application.
+#[derive(Debug)]
+pub struct Tap<A: App> {
+    app: A,
+    events: std::sync::Arc<std::sync::Mutex<Vec<A::Event>>>,
+}
+
+/// The list a [`Tap`] fills.
+pub type Tapped<E> = std::sync::Arc<std::sync::Mutex<Vec<E>>>;
+
+impl<A: App> Tap<A> {
+    /// Tap `app`; its events go to the list returned with it.
+    pub fn new(app: A) -> (Self, Tapped<A::Event>) {
+        let events: Tapped<A::Event> = Default::default();
+        (
+            Tap {
+                app,
+                events: events.clone(),
+            },
+            events,
+        )
+    }
+    fn pull(&mut self) {
+        let mut v = self
+            .events
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        while let Some(e) = self.app.poll_event() {
+            v.push(e);
+        }
+    }
+}
+
+impl<A: App> std::ops::Deref for Tap<A> {
+    type Target = A;
+    fn deref(&self) -> &A {
+        &self.app
+    }
+}
+
+impl<A: App> App for Tap<A> {
+    type Event = std::convert::Infallible;
+    fn start(&mut self, node: &mut Node, now: SimTime) {
+        self.app.start(node, now);
+        self.pull();
+    }
+    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        self.app.handle_packet(node, packet, now);
+        self.pull();
+    }
+    fn poll_timeout(&self) -> Option<SimTime> {
+        self.app.poll_timeout()
+    }
+    fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        self.app.handle_timeout(node, now);
+        self.pull();
+    }
+    fn reset(&mut self, now: SimTime) {
+        self.app.reset(now);
+        self.pull();
+    }
+    fn power_lost(&mut self, node: &mut Node, now: SimTime) {
+        self.app.power_lost(node, now);
+        self.pull();
+    }
+    fn switch(&mut self, node: &mut Node, name: &str, on: bool, now: SimTime) {
+        self.app.switch(node, name, on, now);
+        self.pull();
+    }
+    fn finish(&mut self, node: &mut Node, now: SimTime) {
+        self.app.finish(node, now);
+        self.pull();
     }
 }
 

@@ -426,7 +426,7 @@ impl CommApp {
             }
             Err(e) => {
                 self.counters.beacon_failures += 1;
-                node.log(now, format!("drop (beacon {seq}): {e}"));
+                node.log_drop(now, format!("beacon {seq}"), e.to_string());
             }
         }
     }
@@ -461,6 +461,7 @@ fn station_u8(i: usize) -> u8 {
 }
 
 impl App for CommApp {
+    type Event = std::convert::Infallible;
     fn start(&mut self, node: &mut Node, now: SimTime) {
         node.bind(self.cfg.port);
         self.last_now = now;
@@ -481,7 +482,7 @@ impl App for CommApp {
             node.log(now, format!("comm port {}: refused: {e}", self.cfg.port));
         }
         if let Err(e) = node.send(Packet::new(packet.header.reply(node.addr()), reply), now) {
-            node.log(now, format!("drop (comm reply): {e}"));
+            node.log_drop(now, "comm reply", e.to_string());
         }
     }
 

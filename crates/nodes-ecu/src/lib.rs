@@ -47,10 +47,9 @@
 pub mod thruster;
 pub mod wire;
 
-use std::fmt;
 use std::time::Duration;
 
-use csp::node::{App, Node};
+use csp::node::{App, Node, NodeEvent, Outbox};
 use csp::reqrep::{RESULT_FAILURE, RESULT_SUCCESS, serve};
 use csp::{Packet, SimTime};
 use platform::board::{Activity, ActivityBoard, Burn, BurnBoard};
@@ -156,25 +155,6 @@ pub enum EcuOutput {
     },
 }
 
-/// The callback behind a [`Sink`].
-type SinkFn = dyn FnMut(EcuOutput) + Send;
-
-/// Where the ECU hands its [`EcuOutput`]s.
-pub struct Sink(Box<SinkFn>);
-
-impl Sink {
-    /// A sink calling `f` with every output.
-    pub fn new(f: impl FnMut(EcuOutput) + Send + 'static) -> Self {
-        Sink(Box::new(f))
-    }
-}
-
-impl fmt::Debug for Sink {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("Sink")
-    }
-}
-
 /// A burn in progress.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Firing {
@@ -189,7 +169,7 @@ pub struct EcuApp {
     cfg: EcuConfig,
     burn_board: Option<BurnBoard>,
     activity: Option<ActivityBoard>,
-    sink: Option<Sink>,
+    out: Outbox<EcuOutput>,
     // --- physical and non-volatile (survive reboots) ---
     propellant_kg: f64,
     total_impulse_n_s: f64,
@@ -200,7 +180,7 @@ pub struct EcuApp {
     ready_logged: bool,
     firing: Option<Firing>,
     refused: u32,
-    log: Vec<(SimTime, String)>,
+    log: Vec<NodeEvent>,
 }
 
 impl EcuApp {
@@ -211,7 +191,7 @@ impl EcuApp {
         let cfg = match cfg.validate() {
             Ok(()) => cfg,
             Err(why) => {
-                log.push((
+                log.push(NodeEvent::info(
                     SimTime::ZERO,
                     format!("ecu: config: {why}; using the default"),
                 ));
@@ -223,7 +203,7 @@ impl EcuApp {
             cfg,
             burn_board: None,
             activity: None,
-            sink: None,
+            out: Outbox::default(),
             total_impulse_n_s: 0.0,
             burns: 0,
             last_burn_ms: 0,
@@ -244,12 +224,6 @@ impl EcuApp {
     /// Post heater and firing switches on `a` (the EPS reads them).
     pub fn with_activity(mut self, a: ActivityBoard) -> Self {
         self.activity = Some(a);
-        self
-    }
-
-    /// Hand every [`EcuOutput`] to `s`.
-    pub fn with_sink(mut self, s: Sink) -> Self {
-        self.sink = Some(s);
         self
     }
 
@@ -317,16 +291,17 @@ impl EcuApp {
     }
 
     fn emit(&mut self, o: EcuOutput) {
-        if let Some(s) = self.sink.as_mut() {
-            (s.0)(o);
-        }
+        self.out.push(o);
     }
 
     fn set_activity(&mut self, what: Activity, t: SimTime, on: bool) {
         if let Some(a) = &self.activity
             && let Err(e) = a.set(what, t, on)
         {
-            self.log.push((t, format!("ecu: activity {what:?}: {e}")));
+            self.log.push(NodeEvent::warning(
+                t,
+                format!("ecu: activity {what:?}: {e}"),
+            ));
         }
     }
 
@@ -349,10 +324,13 @@ impl EcuApp {
             && let Err(e) = b.post(Burn { end, ..f.burn })
         {
             // The original `posted`: see the module doc.
-            self.log.push((end, format!("ecu: cutting the burn: {e}")));
+            self.log.push(NodeEvent::warning(
+                end,
+                format!("ecu: cutting the burn: {e}"),
+            ));
         }
         self.set_activity(Activity::Firing, end, false);
-        self.log.push((
+        self.log.push(NodeEvent::info(
             end,
             format!(
                 "ecu: burn {} after {} ms: {:.3} g used, {:.3} N s, {:.4} kg left",
@@ -373,7 +351,8 @@ impl EcuApp {
     }
 
     fn refuse(&mut self, now: SimTime, why: String) -> Result<Vec<u8>, u8> {
-        self.log.push((now, format!("ecu: refused: {why}")));
+        self.log
+            .push(NodeEvent::info(now, format!("ecu: refused: {why}")));
         Err(RESULT_FAILURE)
     }
 
@@ -385,8 +364,10 @@ impl EcuApp {
                     self.armed_at = Some(now);
                     self.ready_logged = false;
                     self.set_activity(Activity::ThrusterHeater, now, true);
-                    self.log
-                        .push((now, format!("ecu: armed, warm-up {:?}", self.cfg.warmup)));
+                    self.log.push(NodeEvent::info(
+                        now,
+                        format!("ecu: armed, warm-up {:?}", self.cfg.warmup),
+                    ));
                     self.emit(EcuOutput::Armed { t: now });
                 }
                 Ok(ArmReply {
@@ -401,7 +382,7 @@ impl EcuApp {
                 }
                 if self.armed_at.take().is_some() {
                     self.set_activity(Activity::ThrusterHeater, now, false);
-                    self.log.push((now, "ecu: safe".to_owned()));
+                    self.log.push(NodeEvent::info(now, "ecu: safe".to_owned()));
                     self.emit(EcuOutput::Safed { t: now });
                 }
                 Ok(Vec::new())
@@ -453,7 +434,10 @@ impl EcuApp {
         if let Some(b) = &self.burn_board
             && let Err(e) = b.post(burn)
         {
-            self.log.push((now, format!("ecu: posting the burn: {e}")));
+            self.log.push(NodeEvent::warning(
+                now,
+                format!("ecu: posting the burn: {e}"),
+            ));
         }
         self.set_activity(Activity::Firing, now, true);
         self.firing = Some(Firing {
@@ -462,7 +446,7 @@ impl EcuApp {
             burn,
         });
         self.burns = self.burns.saturating_add(1);
-        self.log.push((
+        self.log.push(NodeEvent::info(
             now,
             format!(
                 "ecu: FIRE {granted_ms} ms (asked {duration_ms}): {thrust_n:.4} N, {:.3e} kg/s, mass {:.4} kg",
@@ -489,13 +473,17 @@ impl EcuApp {
     }
 
     fn flush_log(&mut self, node: &mut Node) {
-        for (t, line) in self.log.drain(..) {
-            node.log(t, line);
+        for e in self.log.drain(..) {
+            node.push_event(e);
         }
     }
 }
 
 impl App for EcuApp {
+    type Event = EcuOutput;
+    fn poll_event(&mut self) -> Option<EcuOutput> {
+        self.out.pop()
+    }
     fn start(&mut self, node: &mut Node, _now: SimTime) {
         node.bind(self.cfg.port);
         self.flush_log(node);
@@ -507,7 +495,8 @@ impl App for EcuApp {
         }
         let (reply, malformed) = serve::<EcuCommand>(&packet.data, |c| self.command(c, now));
         if let Some(e) = malformed {
-            self.log.push((now, format!("ecu: request refused: {e}")));
+            self.log
+                .push(NodeEvent::info(now, format!("ecu: request refused: {e}")));
         }
         if reply.get(1) != Some(&RESULT_SUCCESS) {
             self.refused = self.refused.saturating_add(1);
@@ -532,8 +521,10 @@ impl App for EcuApp {
             && a + self.cfg.warmup <= now
         {
             self.ready_logged = true;
-            self.log
-                .push((a + self.cfg.warmup, "ecu: warm, ready to fire".to_owned()));
+            self.log.push(NodeEvent::info(
+                a + self.cfg.warmup,
+                "ecu: warm, ready to fire".to_owned(),
+            ));
         }
         self.flush_log(node);
     }
@@ -545,7 +536,7 @@ impl App for EcuApp {
         if self.armed_at.take().is_some() {
             self.set_activity(Activity::ThrusterHeater, now, false);
         }
-        self.log.push((
+        self.log.push(NodeEvent::info(
             now,
             format!(
                 "ecu: power lost{}: heaters off",
@@ -564,7 +555,7 @@ impl App for EcuApp {
         }
         self.ready_logged = false;
         self.refused = 0;
-        self.log.push((
+        self.log.push(NodeEvent::info(
             now,
             format!(
                 "ecu: boot: SAFE, {:.4} kg propellant, {} burns, {:.3} N s so far",
@@ -575,7 +566,7 @@ impl App for EcuApp {
 
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         let telemetry = self.telemetry(now);
-        self.log.push((
+        self.log.push(NodeEvent::info(
             now,
             format!(
                 "ecu: final: {:.4} kg propellant, {} burns, {:.3} N s",

@@ -9,7 +9,7 @@ use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
 use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use m6p_nodes_ecu::wire::{ArmReply, FireReply, Repr, TmEcu};
-use m6p_nodes_ecu::{EcuApp, EcuConfig, EcuOutput, EcuState, Sink};
+use m6p_nodes_ecu::{EcuApp, EcuConfig, EcuOutput, EcuState};
 use nalgebra::Vector3;
 use platform::board::{Activity, ActivityBoard, BurnBoard};
 use proptest::prelude::*;
@@ -32,11 +32,9 @@ impl Sim {
         let burns = BurnBoard::new();
         let activity = ActivityBoard::new();
         let outputs = Arc::new(Mutex::new(Vec::new()));
-        let o = outputs.clone();
         let app = EcuApp::new(cfg)
             .with_burns(burns.clone())
-            .with_activity(activity.clone())
-            .with_sink(Sink::new(move |x| o.lock().unwrap().push(x)));
+            .with_activity(activity.clone());
         Sim {
             host: Host::new(c, app, SimTime::ZERO),
             burns,
@@ -57,6 +55,7 @@ impl Sim {
             Packet::new(Header::new(16, 5, port, 40), req.to_vec()),
             self.now,
         );
+        self.drain();
         let Some(Transmit::Packet { packet, .. }) = self.host.node.poll_transmit() else {
             return None;
         };
@@ -72,7 +71,15 @@ impl Sim {
         while let Some(d) = self.host.poll_timeout().filter(|&d| d <= t) {
             self.host.handle_timeout(d);
         }
+        self.drain();
         self.now = t;
+    }
+
+    /// Pull the ECU's events into `outputs`.
+    fn drain(&mut self) {
+        while let Some(o) = self.host.poll_event() {
+            self.outputs.lock().unwrap().push(o);
+        }
     }
 
     fn tm(&mut self) -> TmEcu {

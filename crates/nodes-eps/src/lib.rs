@@ -42,10 +42,9 @@ pub mod protect;
 pub mod solar;
 pub mod wire;
 
-use std::fmt;
 use std::time::Duration;
 
-use csp::node::{App, Node};
+use csp::node::{App, Node, NodeEvent, Outbox};
 use csp::reqrep::serve;
 use csp::{Packet, SimTime};
 use platform::board::{Activity, ActivityBoard, TruthBoard};
@@ -214,25 +213,6 @@ pub enum EpsOutput {
     },
 }
 
-/// Where the EPS hands its [`EpsOutput`]s.
-pub struct Sink(Box<SinkFn>);
-
-/// The callback behind a [`Sink`].
-type SinkFn = dyn FnMut(EpsOutput) + Send;
-
-impl Sink {
-    /// A sink calling `f` with every output.
-    pub fn new(f: impl FnMut(EpsOutput) + Send + 'static) -> Self {
-        Sink(Box::new(f))
-    }
-}
-
-impl fmt::Debug for Sink {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("Sink")
-    }
-}
-
 /// The EPS's application (see the module doc).
 #[derive(Debug)]
 pub struct EpsApp {
@@ -240,7 +220,7 @@ pub struct EpsApp {
     eps: Eps,
     truth: Option<TruthBoard>,
     activity: Option<ActivityBoard>,
-    sink: Option<Sink>,
+    out: Outbox<EpsOutput>,
     /// The power system is integrated up to here.
     last_t: SimTime,
     next_tick: SimTime,
@@ -248,7 +228,7 @@ pub struct EpsApp {
     booted: bool,
     cut_off: bool,
     refused: u64,
-    log: Vec<(SimTime, String)>,
+    log: Vec<NodeEvent>,
 }
 
 impl EpsApp {
@@ -263,7 +243,7 @@ impl EpsApp {
             cfg,
             truth: None,
             activity: None,
-            sink: None,
+            out: Outbox::default(),
             last_t: SimTime::ZERO,
             next_tick: SimTime::ZERO,
             timeline_next: 0,
@@ -284,11 +264,6 @@ impl EpsApp {
         self.activity = Some(b);
         self
     }
-    /// Hand every [`EpsOutput`] to `s`.
-    pub fn with_sink(mut self, s: Sink) -> Self {
-        self.sink = Some(s);
-        self
-    }
 
     /// The configuration in use.
     pub fn config(&self) -> &EpsConfig {
@@ -304,14 +279,12 @@ impl EpsApp {
     }
 
     fn emit(&mut self, o: EpsOutput) {
-        if let Some(s) = &mut self.sink {
-            (s.0)(o);
-        }
+        self.out.push(o);
     }
 
     fn flush_log(&mut self, node: &mut Node) {
-        for (t, line) in self.log.drain(..) {
-            node.log(t, line);
+        for e in self.log.drain(..) {
+            node.push_event(e);
         }
     }
 
@@ -352,7 +325,7 @@ impl EpsApp {
         let cut_off = unmet_w > 0.0;
         if cut_off != self.cut_off {
             self.cut_off = cut_off;
-            self.log.push((
+            self.log.push(NodeEvent::info(
                 to,
                 if cut_off {
                     format!("eps: battery empty: {unmet_w:.2} W of load unsupplied")
@@ -364,7 +337,7 @@ impl EpsApp {
     }
 
     fn switched(&mut self, t: SimTime, channel: Channel, on: bool, cause: SwitchCause) {
-        self.log.push((
+        self.log.push(NodeEvent::info(
             t,
             format!(
                 "eps: channel {} {} ({cause:?}, soc {:.1} %)",
@@ -390,7 +363,7 @@ impl EpsApp {
             }
             Ok(false) => true,
             Err(SwitchRefused::GroupShed(g)) => {
-                self.log.push((
+                self.log.push(NodeEvent::info(
                     t,
                     format!(
                         "eps: refused to switch {} on: {g:?} group shed (soc {:.1} %)",
@@ -410,18 +383,20 @@ impl EpsApp {
             }
             EpsEvent::SetSoc(soc) => {
                 self.eps.set_soc(soc);
-                self.log.push((
+                self.log.push(NodeEvent::info(
                     t,
                     format!("eps: state of charge set to {:.1} %", soc * 100.0),
                 ));
             }
             EpsEvent::PanelFail(i) => {
                 self.eps.set_panel_failed(i, true);
-                self.log.push((t, format!("eps: panel {i} failed")));
+                self.log
+                    .push(NodeEvent::info(t, format!("eps: panel {i} failed")));
             }
             EpsEvent::PanelRestore(i) => {
                 self.eps.set_panel_failed(i, false);
-                self.log.push((t, format!("eps: panel {i} restored")));
+                self.log
+                    .push(NodeEvent::info(t, format!("eps: panel {i} restored")));
             }
         }
     }
@@ -470,8 +445,10 @@ impl EpsApp {
             EpsCommand::ThrGet => Ok(self.eps.thresholds().to_vec()),
             EpsCommand::ThrSet(t) => {
                 self.eps.set_thresholds(t);
-                self.log
-                    .push((now, format!("eps: thresholds set to {t:?}")));
+                self.log.push(NodeEvent::info(
+                    now,
+                    format!("eps: thresholds set to {t:?}"),
+                ));
                 Ok(Vec::new())
             }
         }
@@ -479,6 +456,10 @@ impl EpsApp {
 }
 
 impl App for EpsApp {
+    type Event = EpsOutput;
+    fn poll_event(&mut self) -> Option<EpsOutput> {
+        self.out.pop()
+    }
     fn start(&mut self, node: &mut Node, now: SimTime) {
         node.bind(self.cfg.port);
         if !self.booted {
@@ -501,7 +482,8 @@ impl App for EpsApp {
         self.advance(now);
         let (reply, refused) = serve::<EpsCommand>(&packet.data, |c| self.command(c, now));
         if let Some(e) = refused {
-            self.log.push((now, format!("eps: request refused: {e}")));
+            self.log
+                .push(NodeEvent::info(now, format!("eps: request refused: {e}")));
         }
         if reply.get(1) != Some(&csp::reqrep::RESULT_SUCCESS) {
             self.refused += 1;
@@ -540,14 +522,16 @@ impl App for EpsApp {
         self.advance(now);
         self.eps.reset_volatile();
         self.refused = 0;
-        self.log
-            .push((now, "eps: reboot: battery and channels kept".to_owned()));
+        self.log.push(NodeEvent::info(
+            now,
+            "eps: reboot: battery and channels kept".to_owned(),
+        ));
     }
 
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         self.advance(now);
         let (solar, load) = self.eps.energy_since_boot_wh();
-        self.log.push((
+        self.log.push(NodeEvent::info(
             now,
             format!(
                 "eps: final: soc {:.1} %, solar {solar:.1} Wh and load {load:.1} Wh since boot, channels {:#06x}",

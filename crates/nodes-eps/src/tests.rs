@@ -3,9 +3,8 @@
 #![allow(clippy::unwrap_used)]
 
 use std::f64::consts::PI;
-use std::sync::{Arc, Mutex};
 
-use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
+use csp::node::{Host, IfaceConfig, NodeConfig, Tap, Transmit};
 use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -18,19 +17,17 @@ use super::*;
 /// The main ground station, which sends the requests in these tests.
 const GS: u8 = 16;
 
-type Outputs = Arc<Mutex<Vec<EpsOutput>>>;
+type Outputs = csp::node::Tapped<EpsOutput>;
 
-fn host(app: EpsApp) -> (Host<EpsApp>, Outputs) {
-    let out: Outputs = Arc::default();
-    let o = out.clone();
-    let app = app.with_sink(Sink::new(move |x| o.lock().unwrap().push(x)));
+fn host(app: EpsApp) -> (Host<Tap<EpsApp>>, Outputs) {
+    let (app, out) = Tap::new(app);
     let mut c = NodeConfig::new("EPS", 4);
     c.ifaces = vec![IfaceConfig::packet("p")];
     c.routes.set_default(Route::direct(0));
     (Host::new(c, app, SimTime::ZERO), out)
 }
 
-fn run_until(h: &mut Host<EpsApp>, end: SimTime) {
+fn run_until(h: &mut Host<Tap<EpsApp>>, end: SimTime) {
     while let Some(t) = h.poll_timeout() {
         if t > end {
             break;
@@ -40,7 +37,7 @@ fn run_until(h: &mut Host<EpsApp>, end: SimTime) {
 }
 
 /// Send `req` to port 10 at `t`; every reply data that came out.
-fn request(h: &mut Host<EpsApp>, req: &[u8], t: SimTime) -> Vec<Vec<u8>> {
+fn request(h: &mut Host<Tap<EpsApp>>, req: &[u8], t: SimTime) -> Vec<Vec<u8>> {
     run_until(h, t);
     h.handle_packet(0, Packet::new(Header::new(GS, 4, 10, 40), req.to_vec()), t);
     std::iter::from_fn(|| h.node.poll_transmit())
@@ -54,7 +51,7 @@ fn request(h: &mut Host<EpsApp>, req: &[u8], t: SimTime) -> Vec<Vec<u8>> {
         .collect()
 }
 
-fn one_reply(h: &mut Host<EpsApp>, req: &[u8], t: SimTime) -> Vec<u8> {
+fn one_reply(h: &mut Host<Tap<EpsApp>>, req: &[u8], t: SimTime) -> Vec<u8> {
     let mut r = request(h, req, t);
     assert_eq!(r.len(), 1, "exactly one reply to {req:?}");
     r.remove(0)

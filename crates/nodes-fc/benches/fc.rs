@@ -15,7 +15,6 @@
 //!   throughput is in simulated seconds per wall second.
 
 use std::hint::black_box;
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
@@ -23,9 +22,8 @@ use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
 use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use m6p_nodes_fc::wire::{Repr, TargetMode, TmGen};
-use m6p_nodes_fc::{FcApp, FcConfig, InitialState, Publisher};
+use m6p_nodes_fc::{FcApp, FcConfig, InitialState};
 use nalgebra::Vector3;
-use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
 /// The default scenario's 6U TLE (scenarios/default.toml).
 const L1: &str = "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996";
@@ -127,22 +125,19 @@ fn bench_adcs_step(c: &mut Criterion) {
     g.finish();
 }
 
-/// The snapshot pairs a cloning publisher kept.
-type Kept = Arc<Mutex<Vec<(TruthSnapshot, AdcsSnapshot)>>>;
+/// A fresh FC in nadir publishing at `publish_hz` (0: nothing).
+fn fresh(publish_hz: u32) -> Host<FcApp> {
+    host(FcApp::new(config(TargetMode::Nadir, 0.2, publish_hz)))
+}
 
-/// A fresh FC in nadir with, for `publish_hz` > 0, a publisher cloning every pair.
-fn fresh(publish_hz: u32) -> (Host<FcApp>, Kept) {
-    let kept: Kept = Arc::default();
-    let mut app = FcApp::new(config(TargetMode::Nadir, 0.2, publish_hz));
-    if publish_hz > 0 {
-        let k = kept.clone();
-        app = app.with_publisher(Publisher::new(move |t, a| {
-            k.lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                .push((t.clone(), a.clone()));
-        }));
+/// Run to `end`, pulling the published pairs as the node's task does; returns them.
+fn run_pulling(h: &mut Host<FcApp>, end: SimTime) -> Vec<m6p_nodes_fc::Published> {
+    let mut kept = Vec::new();
+    while let Some(t) = h.poll_timeout().filter(|&t| t <= end) {
+        h.handle_timeout(t);
+        kept.extend(std::iter::from_fn(|| h.poll_event()));
     }
-    (host(app), kept)
+    kept
 }
 
 fn bench_sim_seconds(c: &mut Criterion) {
@@ -156,19 +151,15 @@ fn bench_sim_seconds(c: &mut Criterion) {
         ("600s_publish_1hz_clone", 1),
         ("600s_publish_10hz_clone", 10),
     ] {
-        // Once outside the measurement: the publisher sees every snapshot pair.
-        let (mut h, kept) = fresh(publish_hz);
-        run_until(&mut h, end);
-        let n = kept
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .len() as u64;
+        // Once outside the measurement: every snapshot pair is pulled.
+        let mut h = fresh(publish_hz);
+        let n = run_pulling(&mut h, end).len() as u64;
         assert_eq!(n, SIM_S * u64::from(publish_hz), "{name}");
         g.bench_function(name, |b| {
             b.iter_batched(
                 || fresh(publish_hz),
-                |(mut h, kept)| {
-                    run_until(&mut h, end);
+                |mut h| {
+                    let kept = run_pulling(&mut h, end);
                     // Returned, so that dropping the kept snapshots is not timed.
                     (h, kept)
                 },

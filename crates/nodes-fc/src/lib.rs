@@ -34,7 +34,7 @@ pub mod sensors;
 pub mod truth;
 pub mod wire;
 
-use csp::node::{App, Node};
+use csp::node::{App, Node, NodeEvent, Outbox};
 use csp::reqrep::{self, RESULT_FAILURE, RESULT_SUCCESS, serve};
 use csp::{Packet, SimTime};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -257,23 +257,14 @@ impl Default for Target {
     }
 }
 
-/// Where the FC hands its snapshots.
-pub struct Publisher(Box<PublishFn>);
-
-/// The callback behind a [`Publisher`].
-type PublishFn = dyn FnMut(&TruthSnapshot, &AdcsSnapshot) + Send;
-
-impl Publisher {
-    /// A publisher calling `f` with every snapshot pair.
-    pub fn new(f: impl FnMut(&TruthSnapshot, &AdcsSnapshot) + Send + 'static) -> Self {
-        Publisher(Box::new(f))
-    }
-}
-
-impl std::fmt::Debug for Publisher {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("Publisher")
-    }
+/// What the FC tells the run: every `publish_hz` the true state and what its ADCS believes
+/// and does at that instant (the twin records them and checks expectations against them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Published {
+    /// The true state.
+    pub truth: Box<TruthSnapshot>,
+    /// The ADCS's estimate, target and commands.
+    pub adcs: Box<AdcsSnapshot>,
 }
 
 /// The onboard orbit knowledge: the uploaded TLE.
@@ -325,8 +316,8 @@ pub struct FcApp {
     // --- flight software (volatile) ---
     fsw: Fsw,
     refused: u64,
-    log: Vec<(SimTime, String)>,
-    publisher: Option<Publisher>,
+    log: Vec<NodeEvent>,
+    out: Outbox<Published>,
     truth_board: Option<platform::board::TruthBoard>,
     // --- truth: the ECU's burns (not reset by a reboot) ---
     burns: Option<platform::board::BurnBoard>,
@@ -414,18 +405,12 @@ impl FcApp {
             fsw,
             refused: 0,
             log: Vec::new(),
-            publisher: None,
+            out: Outbox::default(),
             truth_board: None,
             burns: None,
             burns_applied_until_ns: 0,
             cfg,
         }
-    }
-
-    /// Hand every published snapshot pair to `p`.
-    pub fn with_publisher(mut self, p: Publisher) -> Self {
-        self.publisher = Some(p);
-        self
     }
 
     /// Post the true state of every tick to `board` for the other nodes (EPS, COMM, ECU).
@@ -472,8 +457,8 @@ impl FcApp {
 
     /// Hand the FC's log lines (script verdicts, mode changes, faults) to the node's log.
     fn flush_log(&mut self, node: &mut Node) {
-        for (t, line) in self.log.drain(..) {
-            node.log(t, line);
+        for e in self.log.drain(..) {
+            node.push_event(e);
         }
     }
 
@@ -616,7 +601,8 @@ impl FcApp {
             .scripts
             .add(script, now_s)
             .map_err(|e| e.to_string())?;
-        self.log.push((now, format!("script accepted: {script}")));
+        self.log
+            .push(NodeEvent::info(now, format!("script accepted: {script}")));
         Ok(())
     }
 
@@ -624,24 +610,31 @@ impl FcApp {
         match e {
             FcEvent::Script(line) if !fsw => {
                 // The FC is off or hung: nothing receives the line.
-                self.log
-                    .push((now, format!("script lost (FC not running): {line:?}")));
+                self.log.push(NodeEvent::info(
+                    now,
+                    format!("script lost (FC not running): {line:?}"),
+                ));
             }
             FcEvent::Script(line) => {
                 if let Err(why) = self.submit_script(line.as_bytes(), now) {
-                    self.log
-                        .push((now, format!("script rejected: {why}: {line:?}")));
+                    self.log.push(NodeEvent::info(
+                        now,
+                        format!("script rejected: {why}: {line:?}"),
+                    ));
                 }
             }
             FcEvent::Sensor(id, fault) => {
                 self.sensors.set_fault(id, fault);
-                self.log
-                    .push((now, format!("sensor fault {id:?}: {fault:?}")));
+                self.log.push(NodeEvent::info(
+                    now,
+                    format!("sensor fault {id:?}: {fault:?}"),
+                ));
             }
             FcEvent::Wheel(i, fault) => {
                 if let Some(slot) = self.wheel_fault.get_mut(i) {
                     *slot = fault;
-                    self.log.push((now, format!("wheel {i} fault: {fault:?}")));
+                    self.log
+                        .push(NodeEvent::info(now, format!("wheel {i} fault: {fault:?}")));
                 }
             }
         }
@@ -666,12 +659,14 @@ impl FcApp {
                 unix_ns,
                 &mut self.burns_applied_until_ns,
             ) {
-                Ok(a) if a.switched => self.log.push((
+                Ok(a) if a.switched => self.log.push(NodeEvent::info(
                     t,
                     "truth orbit: numerical (Cowell) from the first burn".to_owned(),
                 )),
                 Ok(_) => {}
-                Err(e) => self.log.push((t, format!("burn not applied: {e}"))),
+                Err(e) => self
+                    .log
+                    .push(NodeEvent::info(t, format!("burn not applied: {e}"))),
             }
         }
         let env = self
@@ -723,7 +718,7 @@ impl FcApp {
                     .adcs
                     .fallback_reason()
                     .map_or(String::new(), |r| format!(" (safe fallback: {r})"));
-                self.log.push((
+                self.log.push(NodeEvent::info(
                     t,
                     format!("ADCS mode in effect: {:?}{why}", out.mode_in_effect),
                 ));
@@ -747,7 +742,8 @@ impl FcApp {
         if let Some(board) = &self.truth_board
             && let Err(e) = board.publish(&self.truth_snapshot(t, unix_ns))
         {
-            self.log.push((t, format!("truth not posted: {e}")));
+            self.log
+                .push(NodeEvent::warning(t, format!("truth not posted: {e}")));
         }
 
         // Truth step over [t, t + dt].
@@ -801,9 +797,6 @@ impl FcApp {
     }
 
     fn publish(&mut self, t: SimTime, unix_ns: i64) {
-        if self.publisher.is_none() {
-            return;
-        }
         let truth = self.truth_snapshot(t, unix_ns);
         let q_true = self.att.q_eci_from_body;
         let out = self.fsw.output;
@@ -828,9 +821,10 @@ impl FcApp {
             mtq_dipole_cmd_am2: out.map_or([0.0; 3], |o| o.mtq_dipole_cmd_am2.into()),
             mtq_state: self.mtq_state(),
         };
-        if let Some(p) = self.publisher.as_mut() {
-            (p.0)(&truth, &adcs);
-        }
+        self.out.push(Published {
+            truth: Box::new(truth),
+            adcs: Box::new(adcs),
+        });
     }
 
     fn rw_state(&self) -> [u8; 4] {
@@ -1029,6 +1023,10 @@ fn sat_i8(x: f64) -> i8 {
 }
 
 impl App for FcApp {
+    type Event = Published;
+    fn poll_event(&mut self) -> Option<Published> {
+        self.out.pop()
+    }
     fn start(&mut self, node: &mut Node, now: SimTime) {
         self.power_on.get_or_insert(now);
         let p = self.cfg.ports;
@@ -1053,7 +1051,7 @@ impl App for FcApp {
             match self.submit_script(&packet.data, now) {
                 Ok(()) => (vec![command, RESULT_SUCCESS], None),
                 Err(why) => {
-                    self.log.push((
+                    self.log.push(NodeEvent::info(
                         now,
                         format!(
                             "script rejected: {why}: {:?}",
@@ -1472,8 +1470,6 @@ mod tests {
 
     #[test]
     fn the_published_commanded_mode_is_the_running_scripts() {
-        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let sink = seen.clone();
         let app = FcApp::new(FcConfig {
             epoch_unix_s: START,
             tle: Some((L1.to_owned(), L2.to_owned())),
@@ -1487,13 +1483,12 @@ mod tests {
                 )),
             }],
             ..FcConfig::default()
-        })
-        .with_publisher(Publisher::new(move |_, a| {
-            sink.lock().unwrap().push((a.t.as_secs(), a.mode_commanded));
-        }));
+        });
         let mut h = Host::new(node_cfg(), app, SimTime::ZERO);
         run_until(&mut h, SimTime::from_secs(25));
-        let seen = seen.lock().unwrap();
+        let seen: Vec<(u64, u8)> = std::iter::from_fn(|| h.poll_event())
+            .map(|p| (p.adcs.t.as_secs(), p.adcs.mode_commanded))
+            .collect();
         let at = |s: u64| seen.iter().find(|(t, _)| *t == s).map(|x| x.1);
         assert_eq!(at(8), Some(TargetMode::Nadir as u8));
         assert_eq!(at(15), Some(TargetMode::FixedLvlh as u8));
@@ -1522,7 +1517,7 @@ mod tests {
         assert_eq!(h.app.scripts().len(), 0);
         let mut lines = Vec::new();
         while let Some(e) = h.node.poll_event() {
-            lines.push(e.what);
+            lines.push(e.to_string());
         }
         assert!(lines.iter().any(|l| l.contains("script lost")), "{lines:?}");
     }

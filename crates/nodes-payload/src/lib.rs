@@ -49,7 +49,7 @@ pub mod wire;
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use csp::node::{App, Node};
+use csp::node::{App, Node, Outbox};
 use csp::reqrep::{self, RequestError};
 use csp::{Header, Packet, SimTime};
 use rand_chacha::ChaCha8Rng;
@@ -304,22 +304,6 @@ pub enum PayloadOutput {
     },
 }
 
-/// Where the payload hands its [`PayloadOutput`]s.
-pub struct Sink(Box<dyn FnMut(PayloadOutput) + Send>);
-
-impl Sink {
-    /// A sink calling `f` with every output.
-    pub fn new(f: impl FnMut(PayloadOutput) + Send + 'static) -> Self {
-        Sink(Box::new(f))
-    }
-}
-
-impl std::fmt::Debug for Sink {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("Sink")
-    }
-}
-
 /// The payload's counters.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct PayloadCounters {
@@ -382,7 +366,7 @@ pub struct PayloadApp {
     push_slot: u64,
     addr: u8,
     counters: PayloadCounters,
-    sink: Option<Sink>,
+    out: Outbox<PayloadOutput>,
 }
 
 impl PayloadApp {
@@ -404,15 +388,9 @@ impl PayloadApp {
             push_slot: 0,
             addr: 0,
             counters: PayloadCounters::default(),
-            sink: None,
+            out: Outbox::default(),
             cfg,
         }
-    }
-
-    /// Hand outputs to `s`.
-    pub fn with_sink(mut self, s: Sink) -> Self {
-        self.sink = Some(s);
-        self
     }
 
     /// The counters.
@@ -441,9 +419,7 @@ impl PayloadApp {
     }
 
     fn emit(&mut self, out: PayloadOutput) {
-        if let Some(s) = self.sink.as_mut() {
-            (s.0)(out);
-        }
+        self.out.push(out);
     }
 
     fn set_behaviour(&mut self, node: &mut Node, b: Behaviour, now: SimTime) {
@@ -475,7 +451,7 @@ impl PayloadApp {
     fn enqueue(&mut self, node: &mut Node, header: Header, kind: ReplyKind, now: SimTime) {
         if self.queue.len() >= MAX_QUEUED_REPLIES {
             self.counters.queue_full += 1;
-            node.log(now, format!("drop (payload reply queue full): {header}"));
+            node.log_drop(now, "payload reply queue full", header.to_string());
             return;
         }
         let earliest = now + self.latency();
@@ -578,7 +554,7 @@ impl PayloadApp {
             Err(e) => {
                 self.stream.untake(cut);
                 self.counters.send_failures += 1;
-                node.log(now, format!("drop (payload reply): {}: {e}", q.header));
+                node.log_drop(now, "payload reply", format!("{}: {e}", q.header));
             }
         }
     }
@@ -609,7 +585,7 @@ impl PayloadApp {
             Err(e) => {
                 self.stream.untake(n);
                 self.counters.send_failures += 1;
-                node.log(now, format!("drop (payload push): {header}: {e}"));
+                node.log_drop(now, "payload push", format!("{header}: {e}"));
             }
         }
     }
@@ -620,6 +596,10 @@ impl PayloadApp {
 }
 
 impl App for PayloadApp {
+    type Event = PayloadOutput;
+    fn poll_event(&mut self) -> Option<PayloadOutput> {
+        self.out.pop()
+    }
     fn start(&mut self, node: &mut Node, now: SimTime) {
         node.bind(self.cfg.port);
         self.addr = node.addr();

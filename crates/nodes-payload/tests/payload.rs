@@ -1,7 +1,7 @@
 //! The payload driven through `csp::node::Host` with hand-built requests from the PC (6).
 #![allow(clippy::unwrap_used)]
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
 use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
@@ -9,7 +9,7 @@ use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use m6p_nodes_payload::stream::frame_len;
 use m6p_nodes_payload::{
-    Behaviour, Generator, How, PayloadApp, PayloadConfig, PayloadOutput, PushConfig, Sink,
+    Behaviour, Generator, How, PayloadApp, PayloadConfig, PayloadOutput, PushConfig,
     check_counter_stream, counter_stream,
 };
 use proptest::prelude::*;
@@ -426,9 +426,7 @@ fn reboot_loses_queued_replies_but_not_the_stream() {
 }
 
 #[test]
-fn sink_sees_syncs_and_produced_bytes() {
-    let out = Arc::new(Mutex::new(Vec::new()));
-    let o = out.clone();
+fn its_events_are_the_syncs_and_produced_bytes() {
     let cfg = PayloadConfig {
         push: Some(PushConfig {
             packet_bytes: 50,
@@ -442,13 +440,14 @@ fn sink_sees_syncs_and_produced_bytes() {
     let mut c = NodeConfig::new("P13", ME);
     c.ifaces = vec![IfaceConfig::packet("p")];
     c.routes.set_default(Route::direct(0));
-    let app = PayloadApp::new(cfg).with_sink(Sink::new(move |x| o.lock().unwrap().push(x)));
+    let app = PayloadApp::new(cfg);
     let mut h = Host::new(c, app, SimTime::ZERO);
     request(&mut h, b"\x01go", ms(0));
     request(&mut h, &[2, 30], ms(10));
     assert_eq!(run_until(&mut h, ms(1000)).len(), 3);
+    let out: Vec<PayloadOutput> = std::iter::from_fn(|| h.poll_event()).collect();
     assert_eq!(
-        *out.lock().unwrap(),
+        out,
         vec![
             PayloadOutput::SyncReceived {
                 t: ms(0),

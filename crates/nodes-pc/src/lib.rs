@@ -64,7 +64,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::time::Duration;
 
-use csp::node::{App, Node};
+use csp::node::{App, Node, NodeEvent, Outbox};
 use csp::reqrep::{Reply, serve};
 use csp::{Header, Packet, SimTime};
 
@@ -455,25 +455,6 @@ pub enum PcOutput {
     },
 }
 
-/// Where the PC hands its [`PcOutput`]s.
-pub struct Sink(Box<SinkFn>);
-
-/// The callback behind a [`Sink`].
-type SinkFn = dyn FnMut(PcOutput) + Send;
-
-impl Sink {
-    /// A sink calling `f` with every output.
-    pub fn new(f: impl FnMut(PcOutput) + Send + 'static) -> Self {
-        Sink(Box::new(f))
-    }
-}
-
-impl fmt::Debug for Sink {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("Sink")
-    }
-}
-
 /// A session's state, as STATUS reports it plus what the twin wants to see.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SessionStatus {
@@ -630,8 +611,8 @@ pub struct PcApp {
     unattributed: RawLedger,
     tm_sband_downlinked: u64,
     counters: PcCounters,
-    sink: Option<Sink>,
-    log: Vec<(SimTime, String)>,
+    out: Outbox<PcOutput>,
+    log: Vec<NodeEvent>,
     /// Where the S-band's transmissions are posted for the EPS and its power is read.
     activity: Option<platform::board::ActivityBoard>,
     /// The transmitter is off because its power channel is (not by a scenario event).
@@ -643,7 +624,7 @@ impl PcApp {
     pub fn new(mut cfg: PcConfig) -> Self {
         let mut log = Vec::new();
         if cfg.sessions.len() > MAX_SESSIONS {
-            log.push((
+            log.push(NodeEvent::info(
                 SimTime::ZERO,
                 format!(
                     "config: {} sessions, only the first {MAX_SESSIONS} are served",
@@ -663,18 +644,12 @@ impl PcApp {
             unattributed: RawLedger::default(),
             tm_sband_downlinked: 0,
             counters: PcCounters::default(),
-            sink: None,
+            out: Outbox::default(),
             log,
             activity: None,
             unpowered: false,
             cfg,
         }
-    }
-
-    /// Hand every [`PcOutput`] to `s`.
-    pub fn with_sink(mut self, s: Sink) -> Self {
-        self.sink = Some(s);
-        self
     }
 
     /// Post the S-band's transmissions (`Activity::SbandTx`, frame by frame) for the EPS,
@@ -690,7 +665,8 @@ impl PcApp {
         if let Some(a) = &self.activity
             && let Err(e) = a.set(platform::board::Activity::SbandTx, t, on)
         {
-            self.log.push((t, format!("pc: S-band activity: {e}")));
+            self.log
+                .push(NodeEvent::warning(t, format!("pc: S-band activity: {e}")));
         }
     }
 
@@ -704,12 +680,15 @@ impl PcApp {
                 self.tx_activity(t, false);
             }
             self.sband.set_on(false);
-            self.log
-                .push((t, "pc: S-band power channel off".to_owned()));
+            self.log.push(NodeEvent::info(
+                t,
+                "pc: S-band power channel off".to_owned(),
+            ));
         } else if !off && self.unpowered {
             self.unpowered = false;
             self.sband.set_on(true);
-            self.log.push((t, "pc: S-band power channel on".to_owned()));
+            self.log
+                .push(NodeEvent::info(t, "pc: S-band power channel on".to_owned()));
         }
     }
 
@@ -788,9 +767,7 @@ impl PcApp {
     // ---- outputs and bookkeeping ----
 
     fn emit(&mut self, o: PcOutput) {
-        if let Some(s) = self.sink.as_mut() {
-            (s.0)(o);
-        }
+        self.out.push(o);
     }
 
     fn session_id(&self, i: usize) -> u8 {
@@ -828,10 +805,11 @@ impl PcApp {
             *d += n;
         }
         let session_id = slot.map(|i| self.session_id(i));
-        self.log.push((
+        self.log.push(NodeEvent::dropped(
             t,
+            format!("pc {reason}"),
             format!(
-                "drop (pc {reason}): {n} bytes from payload {payload_addr}{}",
+                "{n} bytes from payload {payload_addr}{}",
                 session_id.map_or(String::new(), |id| format!(", session {id}"))
             ),
         ));
@@ -847,8 +825,8 @@ impl PcApp {
     }
 
     fn flush_log(&mut self, node: &mut Node) {
-        for (t, line) in self.log.drain(..) {
-            node.log(t, line);
+        for e in self.log.drain(..) {
+            node.push_event(e);
         }
     }
 
@@ -872,8 +850,10 @@ impl PcApp {
             }
             // Every ephemeral port is taken: give up the oldest retired one.
             let Some(old) = self.retired.pop_front() else {
-                self.log
-                    .push((t, "pc: no free ephemeral port for a request".to_owned()));
+                self.log.push(NodeEvent::info(
+                    t,
+                    "pc: no free ephemeral port for a request".to_owned(),
+                ));
                 return None;
             };
             node.unbind(old);
@@ -888,8 +868,10 @@ impl PcApp {
             t,
         ) {
             // The request is lost; it times out like an unanswered one.
-            self.log
-                .push((t, format!("pc: request to {dst}:{dport} not sent: {e}")));
+            self.log.push(NodeEvent::info(
+                t,
+                format!("pc: request to {dst}:{dport} not sent: {e}"),
+            ));
         }
         self.ports.insert(
             port,
@@ -959,7 +941,8 @@ impl PcApp {
     fn activate(&mut self, node: &mut Node, i: usize, t: SimTime) {
         self.table.activate(i, t);
         let id = self.session_id(i);
-        self.log.push((t, format!("pc: session {id} ACTIVE")));
+        self.log
+            .push(NodeEvent::info(t, format!("pc: session {id} ACTIVE")));
         self.emit(PcOutput::SessionStarted { t, session_id: id });
         if self.table.slot(i).is_some_and(|s| s.end_at <= t) {
             self.end_session(node, i, SessionResult::Done, t);
@@ -1004,7 +987,7 @@ impl PcApp {
         self.table.finish(i, result);
         let id = self.session_id(i);
         let packets = self.table.slot(i).map_or(0, |s| s.packets);
-        self.log.push((
+        self.log.push(NodeEvent::info(
             t,
             format!("pc: session {id} ended {result:?} after {packets} packets"),
         ));
@@ -1154,7 +1137,8 @@ impl PcApp {
     }
 
     fn apply_event(&mut self, node: &mut Node, ev: PcEvent, t: SimTime) {
-        self.log.push((t, format!("pc: S-band event {ev:?}")));
+        self.log
+            .push(NodeEvent::info(t, format!("pc: S-band event {ev:?}")));
         match ev {
             PcEvent::SbandFail => {
                 if self.sband.is_transmitting() {
@@ -1234,7 +1218,8 @@ impl PcApp {
                 match self.phase(a) {
                     Phase::Sync { port, deadline } if deadline <= t => {
                         self.retire(node, port);
-                        self.log.push((t, "pc: no SYNC reply".to_owned()));
+                        self.log
+                            .push(NodeEvent::info(t, "pc: no SYNC reply".to_owned()));
                         self.end_session(node, a, SessionResult::NoAck, t);
                     }
                     Phase::Poll {
@@ -1268,14 +1253,15 @@ impl PcApp {
         start_now: &mut Option<usize>,
     ) -> Result<Vec<u8>, u8> {
         let refused = |this: &mut Self, why: Refusal| {
-            this.log.push((now, format!("pc: refused: {why}")));
+            this.log
+                .push(NodeEvent::info(now, format!("pc: refused: {why}")));
             csp::reqrep::RESULT_FAILURE
         };
         match c {
             ControlCommand::Setup(cfg) => {
                 match self.table.setup(&cfg, now, node.clock_unix_ns(now)) {
                     Ok((i, how)) => {
-                        self.log.push((
+                        self.log.push(NodeEvent::info(
                             now,
                             format!(
                                 "pc: session {} set up ({how:?}): start {} duration {} s, max {} packets of {} bytes, sync {} bytes",
@@ -1309,8 +1295,10 @@ impl PcApp {
                     Ok(Vec::new())
                 }
                 Ok(_) => {
-                    self.log
-                        .push((now, format!("pc: PENDING session {session_id} aborted")));
+                    self.log.push(NodeEvent::info(
+                        now,
+                        format!("pc: PENDING session {session_id} aborted"),
+                    ));
                     Ok(Vec::new())
                 }
                 Err(why) => Err(refused(self, why)),
@@ -1374,8 +1362,10 @@ impl PcApp {
             ReqKind::Sync => {
                 if !current {
                     self.counters.late_sync_replies += 1;
-                    self.log
-                        .push((now, format!("pc: late SYNC reply from {}", h.src)));
+                    self.log.push(NodeEvent::info(
+                        now,
+                        format!("pc: late SYNC reply from {}", h.src),
+                    ));
                     return;
                 }
                 self.retire(node, Some(port));
@@ -1387,7 +1377,8 @@ impl PcApp {
                     .unwrap_or_default();
                 match Reply::parse(&packet.data) {
                     Ok(r) if r.command == cmd::SYNC && r.data == msg.as_slice() => {
-                        self.log.push((now, "pc: SYNC acknowledged".to_owned()));
+                        self.log
+                            .push(NodeEvent::info(now, "pc: SYNC acknowledged".to_owned()));
                         self.set_phase(
                             i,
                             Phase::Poll {
@@ -1399,8 +1390,10 @@ impl PcApp {
                         self.start_cycle(node, i, now);
                     }
                     _ => {
-                        self.log
-                            .push((now, format!("pc: SYNC answered with {:02x?}", packet.data)));
+                        self.log.push(NodeEvent::info(
+                            now,
+                            format!("pc: SYNC answered with {:02x?}", packet.data),
+                        ));
                         self.end_session(node, i, SessionResult::NoAck, now);
                     }
                 }
@@ -1438,6 +1431,10 @@ impl PcApp {
 }
 
 impl App for PcApp {
+    type Event = PcOutput;
+    fn poll_event(&mut self) -> Option<PcOutput> {
+        self.out.pop()
+    }
     fn start(&mut self, node: &mut Node, _now: SimTime) {
         for p in [
             self.cfg.control_port,
@@ -1461,7 +1458,8 @@ impl App for PcApp {
                 serve::<TelemetryCommand>(&packet.data, |_| Ok(self.tmpc().to_vec()))
             };
             if let Some(e) = refused {
-                self.log.push((now, format!("pc: request refused: {e}")));
+                self.log
+                    .push(NodeEvent::info(now, format!("pc: request refused: {e}")));
             }
             if reply.get(1) != Some(&csp::reqrep::RESULT_SUCCESS) {
                 self.counters.refused += 1;
@@ -1496,7 +1494,7 @@ impl App for PcApp {
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         let accounting = self.accounting();
         let t = accounting.total();
-        self.log.push((
+        self.log.push(NodeEvent::info(
             now,
             format!(
                 "pc: final accounting: received {} = downlinked {} + dropped {} + buffered {} + queued {} ({})",
@@ -1554,8 +1552,10 @@ impl PcApp {
         }
         if let Some(a) = self.table.active() {
             let id = self.session_id(a);
-            self.log
-                .push((now, format!("pc: {why}: ACTIVE session {id} lost")));
+            self.log.push(NodeEvent::info(
+                now,
+                format!("pc: {why}: ACTIVE session {id} lost"),
+            ));
         }
         self.table.reset();
         for r in &mut self.runs {

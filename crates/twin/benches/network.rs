@@ -40,6 +40,7 @@ impl PingPong {
 }
 
 impl App for PingPong {
+    type Event = std::convert::Infallible;
     fn start(&mut self, node: &mut Node, now: SimTime) {
         self.fire(node, now);
     }

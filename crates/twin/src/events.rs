@@ -158,3 +158,87 @@ impl RunEvent {
         }
     }
 }
+
+impl From<bus::driver::NodeLog> for RunEvent {
+    /// A node's drop (debug detail) or log line (news, or a warning), under its name.
+    fn from(l: bus::driver::NodeLog) -> Self {
+        use csp::node::{NodeEvent, Severity};
+        let level = match &l.event {
+            NodeEvent::Drop { .. } => Level::Debug,
+            NodeEvent::Log {
+                severity: Severity::Info,
+                ..
+            } => Level::Info,
+            NodeEvent::Log { .. } => Level::Warning,
+        };
+        RunEvent::Log {
+            t: l.event.t(),
+            source: l.node.to_string(),
+            level,
+            message: l.event.to_string(),
+        }
+    }
+}
+
+impl From<nodes_fc::Published> for RunEvent {
+    fn from(p: nodes_fc::Published) -> Self {
+        RunEvent::Truth {
+            t: p.truth.t,
+            truth: p.truth,
+            adcs: p.adcs,
+        }
+    }
+}
+
+impl From<nodes_eps::EpsOutput> for RunEvent {
+    fn from(o: nodes_eps::EpsOutput) -> Self {
+        RunEvent::Eps(Box::new(o))
+    }
+}
+
+impl From<nodes_pc::PcOutput> for RunEvent {
+    fn from(o: nodes_pc::PcOutput) -> Self {
+        RunEvent::Pc(Box::new(o))
+    }
+}
+
+impl From<nodes_ecu::EcuOutput> for RunEvent {
+    /// The ECU's news as a log line of `ECU` (ARM, the burns, SAFE, the final telemetry).
+    fn from(out: nodes_ecu::EcuOutput) -> Self {
+        use nodes_ecu::EcuOutput as O;
+        let (t, message) = match &out {
+            O::Armed { t } => (*t, "armed: heaters on".to_owned()),
+            O::BurnStarted { t, burn } => (
+                *t,
+                format!(
+                    "burn started: {:.3} N for {:.3} s, mass {:.3} kg",
+                    burn.thrust_n,
+                    (burn.end - burn.start).as_secs_f64(),
+                    burn.mass_kg
+                ),
+            ),
+            O::BurnEnded {
+                t,
+                cut,
+                propellant_used_kg,
+                impulse_n_s,
+                ..
+            } => (
+                *t,
+                format!(
+                    "burn ended{}: {impulse_n_s:.4} N s, {:.3} g of propellant",
+                    if *cut { " (cut)" } else { "" },
+                    propellant_used_kg * 1e3
+                ),
+            ),
+            O::Safed { t } => (*t, "safe: heaters off".to_owned()),
+            O::Final { t, telemetry } => (*t, format!("at the end: {telemetry:?}")),
+        };
+        RunEvent::Log {
+            t,
+            source: "ECU".to_owned(),
+            level: Level::Info,
+            message,
+        }
+    }
+}

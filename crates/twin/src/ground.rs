@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use csp::node::{App, Node};
+use csp::node::{App, Node, Outbox};
 use csp::reqrep::Client;
 use csp::{Header, Packet, SimTime};
 
@@ -69,7 +69,7 @@ pub struct GroundApp {
     in_flight: BTreeMap<u64, (PlannedRequest, SimTime)>,
     next_tag: u64,
     results: Results,
-    events: Option<tokio::sync::mpsc::UnboundedSender<crate::events::RunEvent>>,
+    events: Outbox<crate::events::RunEvent>,
     /// Requests waiting for another request's outcome (`after`), in plan order.
     deferred: Vec<PlannedRequest>,
 }
@@ -86,24 +86,13 @@ impl GroundApp {
             in_flight: BTreeMap::new(),
             next_tag: 0,
             results,
-            events: None,
+            events: Outbox::default(),
             deferred,
         }
     }
 
-    /// Also report every command sent and every outcome as run events.
-    pub fn with_events(
-        mut self,
-        tx: tokio::sync::mpsc::UnboundedSender<crate::events::RunEvent>,
-    ) -> Self {
-        self.events = Some(tx);
-        self
-    }
-
-    fn emit(&self, ev: crate::events::RunEvent) {
-        if let Some(tx) = &self.events {
-            let _ = tx.send(ev);
-        }
+    fn emit(&mut self, ev: crate::events::RunEvent) {
+        self.events.push(ev);
     }
 
     fn record(&mut self, request: PlannedRequest, sent: SimTime, outcome: Outcome) {
@@ -149,7 +138,12 @@ impl GroundApp {
 /// The port where a ground station receives the COMM's beacons.
 pub const BEACON_PORT: u8 = 10;
 
+/// Every command sent, every decided outcome and every beacon received, as run events.
 impl App for GroundApp {
+    type Event = crate::events::RunEvent;
+    fn poll_event(&mut self) -> Option<Self::Event> {
+        self.events.pop()
+    }
     fn start(&mut self, node: &mut Node, _now: SimTime) {
         node.bind(BEACON_PORT);
     }

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use bus::can::BusStats;
-use bus::driver::{Attachment, CtlTx, NodeCtl, NodeLogTx, run_node_logged};
+use bus::driver::{Attachment, CtlTx, NodeCtl, run_node_with};
 use bus::inbox::inbox;
 use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissTap};
 use bus::net::NetStats;
@@ -21,10 +21,10 @@ use bus::outside::{BridgeStats, Segments};
 use bus::trace::{TraceEvent, TraceTx};
 use bus::{CanBus, CanBusConfig, Clock, ClockMode, PacketNet, PacketNetConfig};
 use csp::SimTime;
-use csp::node::{App, Host, NodeCounters};
+use csp::node::{App, Host, MapEvents, NodeCounters};
 use tokio::sync::{mpsc, oneshot};
 
-use crate::events::{Direction, Level, RunEvent};
+use crate::events::{Direction, RunEvent};
 use crate::ground::{GroundApp, PlannedRequest, RequestResult, Results};
 use crate::network::{Medium, NetworkSpec, Role, node_config};
 use crate::plan::{FaultAction, MediumId, TimedFault};
@@ -292,6 +292,9 @@ pub fn mix(seed: u64, salt: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// A node's application, its events turned into [`RunEvent`]s (`crate::events`).
+type NodeApp = Box<dyn App<Event = RunEvent>>;
+
 fn app_for(
     role: Role,
     addr: u8,
@@ -299,8 +302,7 @@ fn app_for(
     boards: &Boards,
     plan: Vec<PlannedRequest>,
     results: &Results,
-    events: &mpsc::UnboundedSender<RunEvent>,
-) -> Box<dyn App> {
+) -> NodeApp {
     match role {
         Role::CommPrimary | Role::CommSecondary => {
             let mut cfg = if role == Role::CommPrimary {
@@ -312,102 +314,40 @@ fn app_for(
                 }
             };
             cfg.air_rate_bps = opts.network.uhf_rate_bps;
-            Box::new(nodes_comm::CommApp::new(cfg).with_truth(boards.truth.clone()))
+            let app = nodes_comm::CommApp::new(cfg).with_truth(boards.truth.clone());
+            Box::new(MapEvents::new(app, |never| match never {}))
         }
-        Role::Fc => {
-            let tx = events.clone();
-            Box::new(
-                nodes_fc::FcApp::new(opts.fc.clone())
-                    .with_truth_board(boards.truth.clone())
-                    .with_burns(boards.burns.clone())
-                    .with_publisher(nodes_fc::Publisher::new(move |truth, adcs| {
-                        let _ = tx.send(RunEvent::Truth {
-                            t: truth.t,
-                            truth: Box::new(truth.clone()),
-                            adcs: Box::new(adcs.clone()),
-                        });
-                    })),
-            )
-        }
-        Role::Eps => {
-            // Its channel switches go to the platform's power rules in the main loop.
-            let tx = events.clone();
-            Box::new(
-                nodes_eps::EpsApp::new(opts.eps.clone())
-                    .with_truth(boards.truth.clone())
-                    .with_activity(boards.activity.clone())
-                    .with_sink(nodes_eps::Sink::new(move |out| {
-                        let _ = tx.send(RunEvent::Eps(Box::new(out)));
-                    })),
-            )
-        }
-        Role::Ecu => {
-            let tx = events.clone();
-            Box::new(
-                nodes_ecu::EcuApp::new(opts.ecu.clone())
-                    .with_burns(boards.burns.clone())
-                    .with_activity(boards.activity.clone())
-                    .with_sink(nodes_ecu::Sink::new(move |out| {
-                        use nodes_ecu::EcuOutput as O;
-                        let (t, message) = match &out {
-                            O::Armed { t } => (*t, "armed: heaters on".to_owned()),
-                            O::BurnStarted { t, burn } => (
-                                *t,
-                                format!(
-                                    "burn started: {:.3} N for {:.3} s, mass {:.3} kg",
-                                    burn.thrust_n,
-                                    (burn.end - burn.start).as_secs_f64(),
-                                    burn.mass_kg
-                                ),
-                            ),
-                            O::BurnEnded {
-                                t,
-                                cut,
-                                propellant_used_kg,
-                                impulse_n_s,
-                                ..
-                            } => (
-                                *t,
-                                format!(
-                                    "burn ended{}: {impulse_n_s:.4} N s, {:.3} g of propellant",
-                                    if *cut { " (cut)" } else { "" },
-                                    propellant_used_kg * 1e3
-                                ),
-                            ),
-                            O::Safed { t } => (*t, "safe: heaters off".to_owned()),
-                            O::Final { t, telemetry } => (*t, format!("at the end: {telemetry:?}")),
-                        };
-                        let _ = tx.send(RunEvent::Log {
-                            t,
-                            source: "ECU".to_owned(),
-                            level: Level::Info,
-                            message,
-                        });
-                    })),
-            )
-        }
-        Role::Pc => {
-            let tx = events.clone();
-            Box::new(
-                nodes_pc::PcApp::new(opts.pc.clone())
-                    .with_activity(boards.activity.clone())
-                    .with_sink(nodes_pc::Sink::new(move |out| {
-                        let _ = tx.send(RunEvent::Pc(Box::new(out)));
-                    })),
-            )
-        }
+        Role::Fc => Box::new(MapEvents::new(
+            nodes_fc::FcApp::new(opts.fc.clone())
+                .with_truth_board(boards.truth.clone())
+                .with_burns(boards.burns.clone()),
+            RunEvent::from,
+        )),
+        // Its channel switches go to the platform's power rules in the main loop.
+        Role::Eps => Box::new(MapEvents::new(
+            nodes_eps::EpsApp::new(opts.eps.clone())
+                .with_truth(boards.truth.clone())
+                .with_activity(boards.activity.clone()),
+            RunEvent::from,
+        )),
+        Role::Ecu => Box::new(MapEvents::new(
+            nodes_ecu::EcuApp::new(opts.ecu.clone())
+                .with_burns(boards.burns.clone())
+                .with_activity(boards.activity.clone()),
+            RunEvent::from,
+        )),
+        Role::Pc => Box::new(MapEvents::new(
+            nodes_pc::PcApp::new(opts.pc.clone()).with_activity(boards.activity.clone()),
+            RunEvent::from,
+        )),
         Role::Payload => {
-            let tx = events.clone();
             let cfg = opts.payloads.get(&addr).cloned().unwrap_or_default();
-            Box::new(
-                nodes_payload::PayloadApp::new(cfg).with_sink(nodes_payload::Sink::new(
-                    move |out| {
-                        let _ = tx.send(RunEvent::Payload { addr, out });
-                    },
-                )),
-            )
+            Box::new(MapEvents::new(
+                nodes_payload::PayloadApp::new(cfg),
+                move |out| RunEvent::Payload { addr, out },
+            ))
         }
-        Role::Ground => Box::new(GroundApp::new(plan, results.clone()).with_events(events.clone())),
+        Role::Ground => Box::new(GroundApp::new(plan, results.clone())),
     }
 }
 
@@ -461,23 +401,6 @@ pub async fn run_with(
     segs.main.set_trace(tracer.clone());
     segs.payload.set_trace(tracer.clone());
     segs.ground.set_trace(tracer);
-    let node_log = {
-        let tx = ev_tx.clone();
-        NodeLogTx::new(move |t, node, what| {
-            // Drops are detail; what an application reports (FC modes, scripts, a refused
-            // request and why) is news, on the terminal too.
-            let drop = what.starts_with("drop");
-            if !drop {
-                tracing::info!(%t, "{node}: {what}");
-            }
-            let _ = tx.send(RunEvent::Log {
-                t,
-                source: node.to_owned(),
-                level: if drop { Level::Debug } else { Level::Info },
-                message: what.to_owned(),
-            });
-        })
-    };
     let mut background = vec![
         tokio::spawn(segs.main.clone().run(clock)),
         tokio::spawn(segs.payload.clone().run(clock)),
@@ -562,17 +485,23 @@ pub async fn run_with(
             .collect();
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
-        let app = app_for(spec.role, spec.addr, &opts, &boards, plan, &results, &ev_tx);
+        let app = app_for(spec.role, spec.addr, &opts, &boards, plan, &results);
         // Every node boots at the start of the run (in real time, not when its task is made).
-        let host = Host::new(cfg, app, SimTime::ZERO);
+        let mut host = Host::new(cfg, app, SimTime::ZERO);
+        // What it reported at boot (the EPS's channels configured off) goes out now, in
+        // node order, before any task runs.
+        while let Some(e) = host.app.poll_event() {
+            let _ = ev_tx.send(e);
+        }
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
         if matches!(spec.role, Role::CommPrimary | Role::CommSecondary) {
             comm_ports.push((spec.addr, ports.clone()));
         }
-        let log = node_log.clone();
-        let handle = tokio::spawn(async move {
-            run_node_logged(host, ports, inbox_rx, ctl_rx, clock, Some(log)).await
-        });
+        let out = ev_tx.clone();
+        let handle =
+            tokio::spawn(
+                async move { run_node_with(host, ports, inbox_rx, ctl_rx, clock, out).await },
+            );
         nodes.push((spec.clone(), ctl_tx, handle));
     }
 
@@ -787,6 +716,9 @@ pub async fn run_with(
             .with_context(|| format!("node {} task failed", spec.name))?;
         // In node order, so that the final reports sit in the event stream deterministically.
         host.app.finish(&mut host.node, sim_time);
+        while let Some(e) = host.poll_event() {
+            let _ = ev_tx.send(e);
+        }
         node_reports.push(NodeReport {
             name: spec.name,
             addr: spec.addr,

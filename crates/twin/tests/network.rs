@@ -174,6 +174,7 @@ fn crc_flagged_request_gets_a_crc_flagged_reply() {
     cfg.routes.set_default(Route::direct(0));
     struct Nop;
     impl App for Nop {
+        type Event = std::convert::Infallible;
         fn start(&mut self, n: &mut Node, _: SimTime) {
             n.bind(40);
         }

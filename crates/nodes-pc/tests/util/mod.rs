@@ -12,7 +12,7 @@ use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
 use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use m6p_nodes_pc::wire::{self, SessionConfig, Status};
-use m6p_nodes_pc::{PcApp, PcConfig, PcOutput, SessionResult, Sink};
+use m6p_nodes_pc::{PcApp, PcConfig, PcOutput, SessionResult};
 
 /// The PC's address.
 pub const PC: u8 = 6;
@@ -213,8 +213,7 @@ impl Sim {
     /// A PC with `cfg` and the given payloads, booted at time zero.
     pub fn new(cfg: PcConfig, payloads: Vec<FakePayload>) -> Self {
         let out = Arc::new(Mutex::new(Vec::new()));
-        let o = out.clone();
-        let app = PcApp::new(cfg).with_sink(Sink::new(move |x| o.lock().unwrap().push(x)));
+        let app = PcApp::new(cfg);
         Sim {
             host: Host::new(node_cfg(), app, SimTime::ZERO),
             now: SimTime::ZERO,
@@ -229,6 +228,9 @@ impl Sim {
     }
 
     fn collect(&mut self) {
+        while let Some(o) = self.host.poll_event() {
+            self.out.lock().unwrap().push(o);
+        }
         while let Some(tx) = self.host.node.poll_transmit() {
             let Transmit::Packet { packet, .. } = tx else {
                 panic!("the PC's test node has no CAN interface")
@@ -255,6 +257,8 @@ impl Sim {
 
     /// Advance to `t`, running every timer and delivery on the way.
     pub fn run_until(&mut self, t: SimTime) {
+        // What a direct call on the host (a reboot) produced.
+        self.collect();
         for _ in 0..10_000_000 {
             let tp = self.host.poll_timeout();
             let td = self.in_flight.iter().map(|(a, s, _)| (*a, *s)).min();
@@ -284,6 +288,7 @@ impl Sim {
             }
             self.collect();
         }
+        self.collect();
         self.now = self.now.max(t);
     }
 
