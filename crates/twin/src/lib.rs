@@ -17,7 +17,6 @@ pub mod gs;
 pub mod live;
 pub mod network;
 pub mod plan;
-pub mod power;
 pub mod record;
 pub mod recording;
 pub mod runtime;

@@ -1,0 +1,261 @@
+//! Building the network of a run: the media (both CAN buses and the ground segment with the
+//! UHF air channel), the trace every medium hands the run, the boards, and every node of
+//! [`crate::network::NetworkSpec`] as its own task, its application's events turned into
+//! [`RunEvent`]s.
+
+use std::collections::BTreeMap;
+
+use bus::driver::{Attachment, CtlTx, run_node_with};
+use bus::inbox::inbox;
+use bus::outside::Segments;
+use bus::trace::TraceTx;
+use bus::{CanBus, CanBusConfig, Clock, PacketNet, PacketNetConfig};
+use csp::SimTime;
+use csp::node::{App, Host, MapEvents};
+use platform::board::Boards;
+use tokio::sync::mpsc;
+
+use super::{RunOptions, mix};
+use crate::events::RunEvent;
+use crate::ground::{GroundApp, PlannedRequest, Results};
+use crate::network::{Medium, NodeSpec, Role, node_config};
+
+/// The media of a run, with their tasks started and their trace going to `events`.
+pub(super) fn media(
+    opts: &RunOptions,
+    clock: Clock,
+    events: &mpsc::UnboundedSender<RunEvent>,
+) -> (Segments, Vec<tokio::task::JoinHandle<()>>) {
+    let ev_tx = events;
+    let segs = Segments {
+        main: CanBus::new(
+            CanBusConfig {
+                name: "main".into(),
+                bitrate_bps: opts.network.main_bitrate_bps,
+            },
+            mix(opts.seed, 0x100),
+        ),
+        payload: CanBus::new(
+            CanBusConfig {
+                name: "payload".into(),
+                bitrate_bps: opts.network.payload_bitrate_bps,
+            },
+            mix(opts.seed, 0x101),
+        ),
+        ground: PacketNet::new(
+            PacketNetConfig {
+                air_rate_bps: opts.network.uhf_rate_bps,
+                ..PacketNetConfig::ground()
+            },
+            mix(opts.seed, 0x102),
+        ),
+    };
+    let tracer = {
+        let tx = ev_tx.clone();
+        TraceTx::new(move |e| {
+            let _ = tx.send(RunEvent::Medium(e));
+        })
+    };
+    segs.main.set_trace(tracer.clone());
+    segs.payload.set_trace(tracer.clone());
+    segs.ground.set_trace(tracer);
+    let background = vec![
+        tokio::spawn(segs.main.clone().run(clock)),
+        tokio::spawn(segs.payload.clone().run(clock)),
+        tokio::spawn(segs.ground.clone().run(clock)),
+    ];
+    (segs, background)
+}
+
+/// A node's task: its spec, its control channel and the task that hands its host back.
+pub(super) type NodeTask = (NodeSpec, CtlTx, tokio::task::JoinHandle<Host<NodeApp>>);
+
+/// The nodes of a run, each booted and running as its own task.
+pub(super) struct Nodes {
+    /// In start order.
+    pub(super) tasks: Vec<NodeTask>,
+    /// The COMMs' attachments (for the radio take-over).
+    pub(super) comm_ports: Vec<(u8, Vec<Attachment>)>,
+}
+
+impl Nodes {
+    /// Every node's control channel by address.
+    pub(super) fn ctls(&self) -> BTreeMap<u8, CtlTx> {
+        self.tasks
+            .iter()
+            .map(|(spec, ctl, _)| (spec.addr, ctl.clone()))
+            .collect()
+    }
+}
+
+/// Boot every node of `opts.network` on `segs` and start its task; the ground stations
+/// record their requests' outcomes in `results`.
+pub(super) fn nodes(
+    opts: &mut RunOptions,
+    segs: &Segments,
+    clock: Clock,
+    boards: &Boards,
+    results: &Results,
+    events: &mpsc::UnboundedSender<RunEvent>,
+) -> Nodes {
+    let ev_tx = events;
+
+    opts.fc = nodes_fc::FcConfig {
+        epoch_unix_s: opts.epoch_unix_s,
+        tle: opts.tle.clone(),
+        seed: mix(opts.seed, 0x300),
+        ..opts.fc.clone()
+    };
+    let mut comm_ports = Vec::new();
+    {
+        // Every radio transmission is charged to its COMM's transmitter, at its place on the
+        // air.
+        let activity = boards.activity.clone();
+        segs.ground
+            .set_air_tap(bus::net::AirTap::new(move |radio, start, end| {
+                use platform::board::Activity;
+                // The radio endpoints are named `<node>-uhf` (see the attachments below).
+                let what = if radio == "COMM2-uhf" {
+                    Activity::UhfTxSecondary
+                } else {
+                    Activity::UhfTx
+                };
+                for (t, on) in [(start, true), (end, false)] {
+                    if let Err(e) = activity.set(what, t, on) {
+                        tracing::warn!(%t, "{radio}: air time not charged: {e}");
+                    }
+                }
+            }));
+    }
+    let mut nodes = Vec::new();
+    for spec in &opts.network.nodes {
+        let (mut cfg, media) = node_config(spec);
+        let salt = u64::from(spec.addr);
+        cfg.cfp_first_ident = (mix(opts.seed, salt) % 1024) as u16;
+        cfg.first_ephemeral_port = 32 + (mix(opts.seed, salt + 0x40) % 32) as u8;
+        cfg.epoch_unix_s = opts.epoch_unix_s;
+        let (inbox_tx, inbox_rx) = inbox();
+        let ports: Vec<Attachment> = media
+            .iter()
+            .enumerate()
+            .map(|(i, m)| match m {
+                Medium::MainCan => Attachment::Can(segs.main.attach(
+                    &spec.name,
+                    &[spec.addr],
+                    false,
+                    inbox_tx.clone(),
+                    i,
+                )),
+                Medium::PayloadCan => Attachment::Can(segs.payload.attach(
+                    &spec.name,
+                    &[spec.addr],
+                    false,
+                    inbox_tx.clone(),
+                    i,
+                )),
+                Medium::GroundRadio | Medium::GroundRadioStandby => {
+                    Attachment::Net(segs.ground.attach(
+                        &format!("{}-uhf", spec.name),
+                        &[],
+                        true,
+                        *m == Medium::GroundRadio,
+                        inbox_tx.clone(),
+                        i,
+                    ))
+                }
+                Medium::Ground => Attachment::Net(segs.ground.attach(
+                    &spec.name,
+                    &[spec.addr],
+                    false,
+                    false,
+                    inbox_tx.clone(),
+                    i,
+                )),
+            })
+            .collect();
+        drop(inbox_tx);
+        let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
+        let app = app_for(spec.role, spec.addr, opts, boards, plan, results);
+        // Every node boots at the start of the run (in real time, not when its task is made).
+        let mut host = Host::new(cfg, app, SimTime::ZERO);
+        // What it reported at boot (the EPS's channels configured off) goes out now, in
+        // node order, before any task runs.
+        while let Some(e) = host.app.poll_event() {
+            let _ = ev_tx.send(e);
+        }
+        let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
+        if matches!(spec.role, Role::CommPrimary | Role::CommSecondary) {
+            comm_ports.push((spec.addr, ports.clone()));
+        }
+        let out = ev_tx.clone();
+        let handle =
+            tokio::spawn(
+                async move { run_node_with(host, ports, inbox_rx, ctl_rx, clock, out).await },
+            );
+        nodes.push((spec.clone(), ctl_tx, handle));
+    }
+
+    Nodes {
+        tasks: nodes,
+        comm_ports,
+    }
+}
+
+/// A node's application, its events turned into [`RunEvent`]s (`crate::events`).
+type NodeApp = Box<dyn App<Event = RunEvent>>;
+
+fn app_for(
+    role: Role,
+    addr: u8,
+    opts: &RunOptions,
+    boards: &Boards,
+    plan: Vec<PlannedRequest>,
+    results: &Results,
+) -> NodeApp {
+    match role {
+        Role::CommPrimary | Role::CommSecondary => {
+            let mut cfg = if role == Role::CommPrimary {
+                opts.comm.clone()
+            } else {
+                nodes_comm::CommConfig {
+                    role: nodes_comm::CommRole::Secondary,
+                    ..opts.comm.clone()
+                }
+            };
+            cfg.air_rate_bps = opts.network.uhf_rate_bps;
+            let app = nodes_comm::CommApp::new(cfg).with_truth(boards.truth.clone());
+            Box::new(MapEvents::new(app, |never| match never {}))
+        }
+        Role::Fc => Box::new(MapEvents::new(
+            nodes_fc::FcApp::new(opts.fc.clone())
+                .with_truth_board(boards.truth.clone())
+                .with_burns(boards.burns.clone()),
+            RunEvent::from,
+        )),
+        // Its channel switches go to the platform's power rules in the main loop.
+        Role::Eps => Box::new(MapEvents::new(
+            nodes_eps::EpsApp::new(opts.eps.clone())
+                .with_truth(boards.truth.clone())
+                .with_activity(boards.activity.clone()),
+            RunEvent::from,
+        )),
+        Role::Ecu => Box::new(MapEvents::new(
+            nodes_ecu::EcuApp::new(opts.ecu.clone())
+                .with_burns(boards.burns.clone())
+                .with_activity(boards.activity.clone()),
+            RunEvent::from,
+        )),
+        Role::Pc => Box::new(MapEvents::new(
+            nodes_pc::PcApp::new(opts.pc.clone()).with_activity(boards.activity.clone()),
+            RunEvent::from,
+        )),
+        Role::Payload => {
+            let cfg = opts.payloads.get(&addr).cloned().unwrap_or_default();
+            Box::new(MapEvents::new(
+                nodes_payload::PayloadApp::new(cfg),
+                move |out| RunEvent::Payload { addr, out },
+            ))
+        }
+        Role::Ground => Box::new(GroundApp::new(plan, results.clone())),
+    }
+}

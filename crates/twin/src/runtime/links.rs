@@ -1,0 +1,179 @@
+//! Links to programs outside the twin: the KISS/TCP servers and clients (`bus::kiss_tcp`),
+//! the recorded input of a replayed run fed through the same link core, and the SocketCAN
+//! bridges (cargo feature `socketcan`). Each link is a background task; its counters are
+//! shared with the report.
+
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+
+use anyhow::Context as _;
+use bus::Clock;
+use bus::kiss_tcp::{self, KissLinkStats, KissTap};
+use bus::outside::{BridgeStats, Segments};
+use tokio::sync::mpsc;
+
+use super::{RunOptions, SocketCanBus};
+use crate::events::{Direction, RunEvent};
+
+/// The KISS links of a run: their counters by name and the addresses the servers listen on.
+pub(super) struct KissLinks {
+    /// Counters by link name.
+    pub(super) stats: Vec<(String, Arc<Mutex<KissLinkStats>>)>,
+    /// The bound addresses of the listening servers.
+    pub(super) bound: Vec<SocketAddr>,
+}
+
+/// Open every KISS link of `opts` (listen, connect, replayed input) on `segs`; the bytes
+/// that cross them go to `events`.
+pub(super) async fn kiss(
+    opts: &RunOptions,
+    segs: &Segments,
+    clock: Clock,
+    events: &mpsc::UnboundedSender<RunEvent>,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+) -> anyhow::Result<KissLinks> {
+    let ev_tx = events;
+    let mut kiss_cfg = opts.kiss.clone();
+    {
+        let tx = ev_tx.clone();
+        kiss_cfg.tap = Some(KissTap::new(move |t, link, into_twin, bytes| {
+            let _ = tx.send(RunEvent::Kiss {
+                t,
+                link: link.to_owned(),
+                dir: if into_twin {
+                    Direction::In
+                } else {
+                    Direction::Out
+                },
+                bytes: bytes.to_vec(),
+            });
+        }));
+    }
+    let mut kiss_stats = Vec::new();
+    let mut bound = Vec::new();
+    for addr in &opts.kiss_listen {
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("listening for KISS/TCP on {addr}"))?;
+        let local = listener.local_addr().context("reading the bound address")?;
+        bound.push(local);
+        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
+        kiss_stats.push((format!("listen {local}"), stats.clone()));
+        background.push(tokio::spawn(kiss_tcp::serve(
+            listener,
+            format!("listen {addr}"),
+            segs.clone(),
+            kiss_cfg.clone(),
+            stats,
+            clock,
+        )));
+    }
+    for addr in &opts.kiss_connect {
+        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
+        kiss_stats.push((format!("connect {addr}"), stats.clone()));
+        background.push(tokio::spawn(kiss_tcp::connect(
+            *addr,
+            format!("connect {addr}"),
+            segs.clone(),
+            kiss_cfg.clone(),
+            stats,
+            clock,
+        )));
+    }
+    for (n, input) in opts.kiss_replay.iter().enumerate() {
+        // Recorded outside input, fed through an in-memory pipe at its recorded times;
+        // what the twin answers is recorded again and compared by `replay`.
+        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
+        kiss_stats.push((format!("replayed {}", input.link), stats.clone()));
+        let (in_tx, in_rx) = mpsc::unbounded_channel();
+        let (segs2, cfg2, label) = (segs.clone(), kiss_cfg.clone(), input.link.clone());
+        background.push(tokio::spawn(async move {
+            let mut discard = tokio::io::sink();
+            // The connection number seeds its CFP ident as in the recorded run.
+            let conn = label
+                .rsplit_once('#')
+                .and_then(|(_, k)| k.parse().ok())
+                .unwrap_or(n as u16 + 1);
+            kiss_tcp::serve_link(in_rx, &mut discard, &label, &segs2, &cfg2, &stats, conn).await;
+        }));
+        let chunks = input.chunks.clone();
+        background.push(tokio::spawn(async move {
+            for (t, bytes) in chunks {
+                clock.sleep_until(t).await;
+                if in_tx.send((t, bytes)).is_err() {
+                    break;
+                }
+            }
+            // Keep the link open until the end of the run, as the recorded program was.
+            std::future::pending::<()>().await;
+        }));
+    }
+    Ok(KissLinks {
+        stats: kiss_stats,
+        bound,
+    })
+}
+
+/// Shared counters of the SocketCAN bridges, by name.
+pub(super) type BridgeStatsList = Vec<(String, Arc<Mutex<BridgeStats>>)>;
+
+/// Open every interface of `links` and spawn its bridge to the chosen bus.
+#[cfg(all(feature = "socketcan", target_os = "linux"))]
+pub(super) fn spawn_socketcan_bridges(
+    links: &[(String, SocketCanBus)],
+    segs: &Segments,
+    clock: Clock,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+) -> anyhow::Result<BridgeStatsList> {
+    let mut opened = Vec::new();
+    for (ifname, which) in links {
+        // The error names the interface and includes its OS cause (not chained: it would
+        // print twice).
+        let link = bus::socketcan::SocketCanLink::open(ifname)
+            .map_err(|e| anyhow::anyhow!("cannot bridge to a SocketCAN interface: {e}"))?;
+        opened.push((link, *which));
+    }
+    let mut stats = Vec::new();
+    for (link, which) in opened {
+        let can = match which {
+            SocketCanBus::Main => segs.main.clone(),
+            SocketCanBus::Payload => segs.payload.clone(),
+        };
+        let shared = Arc::new(Mutex::new(BridgeStats::default()));
+        stats.push((format!("{} ({which} bus)", link.ifname()), shared.clone()));
+        let task = bus::socketcan::bridge(can, link, clock, shared);
+        background.push(tokio::spawn(task));
+    }
+    Ok(stats)
+}
+
+/// The final values of shared counters, by link name.
+pub(super) fn snapshot<T: Clone>(stats: Vec<(String, Arc<Mutex<T>>)>) -> Vec<(String, T)> {
+    stats
+        .into_iter()
+        .map(|(n, s)| {
+            (
+                n,
+                s.lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .clone(),
+            )
+        })
+        .collect()
+}
+
+/// Without the `socketcan` feature there is nothing to bridge with.
+#[cfg(not(all(feature = "socketcan", target_os = "linux")))]
+pub(super) fn spawn_socketcan_bridges(
+    links: &[(String, SocketCanBus)],
+    _segs: &Segments,
+    _clock: Clock,
+    _background: &mut Vec<tokio::task::JoinHandle<()>>,
+) -> anyhow::Result<BridgeStatsList> {
+    match links.first() {
+        None => Ok(Vec::new()),
+        Some((ifname, _)) => anyhow::bail!(
+            "SocketCAN interface `{ifname}`: this m6p-twin was built without SocketCAN support; rebuild with --features socketcan (Linux only)"
+        ),
+    }
+}

@@ -1,0 +1,406 @@
+//! Build the network of [`NetworkSpec`] on its media, run every node as its own tokio task
+//! on one current-thread runtime, and report what happened.
+//!
+//! In virtual time the runtime's clock is paused and jumps to the next timer, so a run is
+//! deterministic (same options and seed, same trace) and as fast as the CPU allows. In real
+//! time the same tasks follow the wall clock, which is what outside programs need; a run
+//! with outside links is always in real time.
+//!
+//! - [`build`]: the media, the boards and the nodes, each node its own task.
+//! - [`links`]: programs outside the twin (KISS/TCP, replayed input, SocketCAN).
+//! - [`power`]: the shell around the platform's power rules (EPS channels, power and hang
+//!   faults, the radio take-over).
+//! - [`report`]: the report and the observer that gathers it from the events.
+//! - this module: the options and the main loop, which hands every event to the sink and
+//!   the observer in the order it happens and applies the faults at their instants.
+
+mod build;
+mod links;
+pub mod power;
+pub mod report;
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use bus::driver::{CtlTx, NodeCtl};
+use bus::kiss_tcp::KissLinkConfig;
+use bus::outside::Segments;
+use bus::{Clock, ClockMode};
+use csp::SimTime;
+use platform::board::Boards;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::events::RunEvent;
+use crate::ground::{PlannedRequest, Results};
+use crate::network::NetworkSpec;
+use crate::plan::{FaultAction, MediumId, TimedFault};
+pub use report::{AttitudeSample, NodeReport, Observed, Observer, PowerSample, RunReport};
+
+/// Everything a run needs.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// The network.
+    pub network: NetworkSpec,
+    /// Simulated duration; `None` runs until Ctrl-C.
+    pub duration: Option<Duration>,
+    /// Virtual or real time.
+    pub clock: ClockMode,
+    /// Seed of every random choice (CFP idents, ephemeral ports, impairments).
+    pub seed: u64,
+    /// KISS/TCP servers to open for outside nodes.
+    pub kiss_listen: Vec<SocketAddr>,
+    /// KISS/TCP servers of outside nodes to connect to.
+    pub kiss_connect: Vec<SocketAddr>,
+    /// Settings of every KISS link.
+    pub kiss: KissLinkConfig,
+    /// Requests each internal ground station sends, by station address.
+    pub ground_plan: BTreeMap<u8, Vec<PlannedRequest>>,
+    /// Real CAN interfaces (`can0`, `vcan0`) to bridge to a bus of the twin; needs the
+    /// `socketcan` cargo feature (Linux) when not empty.
+    pub socketcan: Vec<(String, SocketCanBus)>,
+    /// UTC unix seconds at simulated time zero.
+    pub epoch_unix_s: u64,
+    /// The satellite's two TLE lines (the FC propagates them); `None`: no orbit.
+    pub tle: Option<(String, String)>,
+    /// Keep the trace of every frame and packet in the report.
+    pub trace: bool,
+    /// Faults to apply, in time order.
+    pub faults: Vec<TimedFault>,
+    /// Recorded input of outside links to feed again (`replay`), one connection per link.
+    pub kiss_replay: Vec<KissReplay>,
+    /// The flight computer's models and timeline; its `epoch_unix_s`, `tle` and `seed` are
+    /// taken from this run's.
+    pub fc: nodes_fc::FcConfig,
+    /// The payload controller's sessions, S-band and events.
+    pub pc: nodes_pc::PcConfig,
+    /// The simulated payloads, by address (an address missing here gets the defaults).
+    pub payloads: BTreeMap<u8, nodes_payload::PayloadConfig>,
+    /// The EPS: arrays, battery, loads, channels, protection, events.
+    pub eps: nodes_eps::EpsConfig,
+    /// The ECU: thruster, tank, limits.
+    pub ecu: nodes_ecu::EcuConfig,
+    /// COMM1's configuration (COMM2 takes the same with the secondary role).
+    pub comm: nodes_comm::CommConfig,
+}
+
+/// What an outside program sent on one KISS link during a recorded run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KissReplay {
+    /// The link's name in the recording (for example `listen 127.0.0.1:52001`).
+    pub link: String,
+    /// The bytes read from the socket, with the times they were read.
+    pub chunks: Vec<(SimTime, Vec<u8>)>,
+}
+
+impl RunOptions {
+    /// The default network for `duration` of virtual time with seed 1.
+    pub fn new(network: NetworkSpec, duration: Duration) -> Self {
+        RunOptions {
+            network,
+            duration: Some(duration),
+            clock: ClockMode::Virtual,
+            seed: 1,
+            kiss_listen: Vec::new(),
+            kiss_connect: Vec::new(),
+            kiss: KissLinkConfig::default(),
+            ground_plan: BTreeMap::new(),
+            socketcan: Vec::new(),
+            epoch_unix_s: 1_577_836_800,
+            tle: None,
+            trace: false,
+            faults: Vec::new(),
+            kiss_replay: Vec::new(),
+            fc: nodes_fc::FcConfig::default(),
+            pc: nodes_pc::PcConfig::default(),
+            payloads: BTreeMap::new(),
+            eps: nodes_eps::EpsConfig::default(),
+            ecu: nodes_ecu::EcuConfig::default(),
+            comm: nodes_comm::CommConfig::default(),
+        }
+    }
+
+    /// Whether the run has links to programs outside the twin.
+    pub fn has_outside_links(&self) -> bool {
+        !self.kiss_listen.is_empty() || !self.kiss_connect.is_empty() || !self.socketcan.is_empty()
+    }
+}
+
+/// Which CAN bus of the twin a real CAN interface is bridged to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SocketCanBus {
+    /// The main CAN bus (COMM, FC, EPS, ECU, PC).
+    Main,
+    /// The payload CAN bus (PC, payloads).
+    Payload,
+}
+
+impl std::fmt::Display for SocketCanBus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SocketCanBus::Main => "main",
+            SocketCanBus::Payload => "payload",
+        })
+    }
+}
+
+impl SocketCanBus {
+    /// Parse the `--socketcan` argument `IFACE[:main|:payload]` (default: the main bus).
+    pub fn parse_arg(arg: &str) -> Result<(String, SocketCanBus), String> {
+        let (ifname, which) = match arg.rsplit_once(':') {
+            Some((i, "main")) => (i, SocketCanBus::Main),
+            Some((i, "payload")) => (i, SocketCanBus::Payload),
+            Some((_, other)) => {
+                return Err(format!(
+                    "unknown bus `{other}`: expected IFACE, IFACE:main or IFACE:payload"
+                ));
+            }
+            None => (arg, SocketCanBus::Main),
+        };
+        if ifname.is_empty() {
+            return Err("missing interface name: expected IFACE[:main|:payload]".to_owned());
+        }
+        Ok((ifname.to_owned(), which))
+    }
+}
+
+/// A tokio runtime for `mode`: current-thread, with a paused clock in virtual time.
+pub fn build_runtime(mode: ClockMode) -> anyhow::Result<tokio::runtime::Runtime> {
+    let mut b = tokio::runtime::Builder::new_current_thread();
+    b.enable_all();
+    if mode == ClockMode::Virtual {
+        b.start_paused(true);
+    }
+    b.build().context("building the tokio runtime")
+}
+
+/// A well-mixed 64-bit value from the run seed and a salt (splitmix64).
+pub fn mix(seed: u64, salt: u64) -> u64 {
+    let mut z = seed ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+/// Run the twin. `ready` receives the bound addresses of the KISS servers once they listen.
+pub async fn run(
+    opts: RunOptions,
+    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+) -> anyhow::Result<RunReport> {
+    run_with(opts, ready, &mut |_| {}).await
+}
+
+/// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder).
+pub async fn run_with(
+    mut opts: RunOptions,
+    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+    sink: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<RunReport> {
+    let wall_start = Instant::now();
+    let clock = Clock::new(opts.clock);
+    // Every event of the run goes through one channel, in the order it happens.
+    let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<RunEvent>();
+    let (segs, mut background) = build::media(&opts, clock, &ev_tx);
+    let socketcan_stats =
+        links::spawn_socketcan_bridges(&opts.socketcan, &segs, clock, &mut background)?;
+    let results: Results = Arc::new(Mutex::new(Vec::new()));
+    opts.fc = nodes_fc::FcConfig {
+        epoch_unix_s: opts.epoch_unix_s,
+        tle: opts.tle.clone(),
+        seed: mix(opts.seed, 0x300),
+        ..opts.fc.clone()
+    };
+    let boards = Boards::default();
+    let nodes = build::nodes(&mut opts, &segs, clock, &boards, &results, &ev_tx);
+    let kiss = links::kiss(&opts, &segs, clock, &ev_tx, &mut background).await?;
+    if let Some(r) = ready {
+        let _ = r.send(kiss.bound.clone());
+    }
+
+    // Faults are applied by the main loop at their times, so that their events sit in the
+    // stream exactly where they take effect.
+    let ctls = nodes.ctls();
+    // One truth for power: the EPS's switches and the power and hang faults go through
+    // the platform's rules.
+    let mut power_shell =
+        power::PowerShell::new(ctls.clone(), boards.activity.clone(), segs.clone());
+    for (addr, ports) in &nodes.comm_ports {
+        power_shell.register_comm(*addr, ports);
+    }
+    let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
+    let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
+    let mut observer = Observer::new(opts.trace, opts.tle.as_ref());
+    let mut handle_event = |ev: RunEvent, observer: &mut Observer| {
+        sink(&ev);
+        observer.observe(&ev);
+    };
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    loop {
+        let next_fault = faults.peek().map_or(SimTime::MAX, |f| f.at).min(end);
+        tokio::select! {
+            biased;
+            _ = &mut ctrl_c => {
+                tracing::info!("Ctrl-C: stopping");
+                break;
+            }
+            ev = ev_rx.recv() => {
+                if let Some(ev) = ev {
+                    // An EPS channel switch takes effect through the power rules, whose news
+                    // comes first.
+                    if let RunEvent::Eps(o) = &ev
+                        && let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = **o
+                    {
+                        for e in power_shell.eps_channel(t, channel, on) {
+                            handle_event(e, &mut observer);
+                        }
+                    }
+                    handle_event(ev, &mut observer);
+                }
+            }
+            () = clock.sleep_until(next_fault), if next_fault < SimTime::MAX => {
+                if next_fault >= end && faults.peek().is_none_or(|f| f.at >= end) {
+                    break;
+                }
+                while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
+                    let effects = apply_fault(&f, &segs, &ctls, &mut power_shell);
+                    if let FaultAction::Contact(on) = f.action {
+                        observer.contact(f.at, on);
+                    }
+                    tracing::info!(t = %f.at, "fault: {}", f.what);
+                    // The fault, then what it did.
+                    handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, &mut observer);
+                    for e in effects {
+                        handle_event(e, &mut observer);
+                    }
+                }
+            }
+        }
+    }
+    let sim_time = match opts.duration {
+        Some(d) if clock.is_virtual() => SimTime::ZERO + d,
+        _ => clock.now(),
+    };
+
+    for (_, ctl, _) in &nodes.tasks {
+        let _ = ctl.send((SimTime::ZERO, NodeCtl::Stop));
+    }
+    let mut node_reports = Vec::new();
+    for (spec, _, handle) in nodes.tasks {
+        let mut host = handle
+            .await
+            .with_context(|| format!("node {} task failed", spec.name))?;
+        // In node order, so that the final reports sit in the event stream deterministically.
+        host.app.finish(&mut host.node, sim_time);
+        while let Some(e) = host.poll_event() {
+            let _ = ev_tx.send(e);
+        }
+        node_reports.push(NodeReport {
+            name: spec.name,
+            addr: spec.addr,
+            counters: host.node.counters().clone(),
+        });
+    }
+    for h in background {
+        h.abort();
+    }
+    drop(ev_tx);
+    while let Ok(ev) = ev_rx.try_recv() {
+        handle_event(ev, &mut observer);
+    }
+    let results = std::mem::take(
+        &mut *results
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner),
+    );
+    let observed = observer.finish();
+    Ok(RunReport {
+        sim_time,
+        wall: wall_start.elapsed(),
+        nodes: node_reports,
+        buses: vec![segs.main.stats(), segs.payload.stats()],
+        ground: segs.ground.stats(),
+        kiss: links::snapshot(kiss.stats),
+        socketcan: links::snapshot(socketcan_stats),
+        results,
+        trace: observed.trace,
+        attitude: observed.attitude,
+        sessions: observed.sessions,
+        power: observed.power,
+        beacons: observed.beacons,
+        contact: observed.contact,
+    })
+}
+
+/// Apply one scenario fault to the media or a node; returns the log events of the power
+/// rules.
+fn apply_fault(
+    f: &TimedFault,
+    segs: &Segments,
+    ctls: &BTreeMap<u8, CtlTx>,
+    power: &mut power::PowerShell,
+) -> Vec<RunEvent> {
+    match &f.action {
+        FaultAction::Impair { medium, fault, imp } => {
+            match medium {
+                MediumId::Main => segs.main.set_fault(*fault, *imp),
+                MediumId::Payload => segs.payload.set_fault(*fault, *imp),
+                MediumId::Uhf => segs.ground.set_fault(*fault, *imp),
+            }
+            Vec::new()
+        }
+        FaultAction::Power { addr, fault, off } => power.power_fault(f.at, *addr, *fault, *off),
+        FaultAction::Reboot(a) => {
+            // A node that is off or hung does not reboot (the driver ignores it then).
+            if let Some(tx) = ctls.get(a) {
+                let _ = tx.send((f.at, NodeCtl::Reboot));
+            }
+            Vec::new()
+        }
+        FaultAction::Hang { addr, fault, hung } => power.hang_fault(f.at, *addr, *fault, *hung),
+        // The FC applies its own faults from its timeline at its ticks.
+        FaultAction::Fc => Vec::new(),
+        FaultAction::Contact(on) => {
+            segs.ground.set_contact(*on);
+            Vec::new()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn socketcan_argument_names_interface_and_bus() {
+        let parse = SocketCanBus::parse_arg;
+        assert_eq!(parse("vcan0"), Ok(("vcan0".to_owned(), SocketCanBus::Main)));
+        assert_eq!(
+            parse("can0:main"),
+            Ok(("can0".to_owned(), SocketCanBus::Main))
+        );
+        assert_eq!(
+            parse("can1:payload"),
+            Ok(("can1".to_owned(), SocketCanBus::Payload))
+        );
+        assert!(parse("can0:ground").is_err_and(|e| e.contains("ground")));
+        assert!(parse(":main").is_err());
+        assert!(parse("").is_err());
+    }
+
+    #[test]
+    fn unusable_socketcan_interface_fails_the_run_naming_it() {
+        let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(1));
+        opts.socketcan = vec![("m6pnosuch0".to_owned(), SocketCanBus::Main)];
+        let rt = build_runtime(opts.clock).expect("runtime");
+        let err = rt
+            .block_on(run(opts, None))
+            .expect_err("the interface does not exist");
+        let msg = format!("{err:#}");
+        assert!(msg.contains("m6pnosuch0"), "{msg}");
+        if cfg!(not(all(feature = "socketcan", target_os = "linux"))) {
+            assert!(msg.contains("rebuild with --features socketcan"), "{msg}");
+        }
+    }
+}

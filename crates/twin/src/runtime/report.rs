@@ -1,0 +1,377 @@
+//! What a run did: the report (counters of every node and medium, the ground stations'
+//! outcomes, the samples the expectations judge) and the [`Observer`] that gathers it from
+//! the run's events as they happen.
+
+use std::time::Duration;
+
+use bus::can::BusStats;
+use bus::kiss_tcp::KissLinkStats;
+use bus::net::NetStats;
+use bus::outside::BridgeStats;
+use bus::trace::TraceEvent;
+use csp::SimTime;
+use csp::node::NodeCounters;
+
+use crate::events::RunEvent;
+use crate::ground::RequestResult;
+
+/// Counters of one node at the end of a run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeReport {
+    /// Node name.
+    pub name: String,
+    /// CSP address.
+    pub addr: u8,
+    /// Its counters.
+    pub counters: NodeCounters,
+}
+
+/// What a run did.
+#[derive(Debug, Clone)]
+pub struct RunReport {
+    /// Simulated time reached.
+    pub sim_time: SimTime,
+    /// Wall-clock time taken.
+    pub wall: Duration,
+    /// Per-node counters, in start order.
+    pub nodes: Vec<NodeReport>,
+    /// Main and payload CAN bus counters.
+    pub buses: Vec<BusStats>,
+    /// Ground segment counters.
+    pub ground: NetStats,
+    /// KISS/TCP link counters, by link.
+    pub kiss: Vec<(String, KissLinkStats)>,
+    /// SocketCAN bridge counters, by interface and bus (`vcan0 (main bus)`).
+    pub socketcan: Vec<(String, BridgeStats)>,
+    /// Outcomes of the ground stations' requests.
+    pub results: Vec<RequestResult>,
+    /// Every frame and packet, when tracing was asked for.
+    pub trace: Vec<TraceEvent>,
+    /// The FC's published attitude samples, in time order (for expectations).
+    pub attitude: Vec<AttitudeSample>,
+    /// The PC's sessions, downlinked and dropped bytes, and what the payloads produced.
+    pub sessions: crate::sessions::SessionsReport,
+    /// The EPS's samples, in time order (for expectations).
+    pub power: Vec<PowerSample>,
+    /// Beacons received on the ground: (time, sending COMM, sequence number).
+    pub beacons: Vec<(SimTime, u8, u32)>,
+    /// UHF contact switches applied (pass modelling): (time, in contact).
+    pub contact: Vec<(SimTime, bool)>,
+}
+
+/// The figures of one EPS sample that expectations check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PowerSample {
+    /// When.
+    pub t: SimTime,
+    /// State of charge, 0..1.
+    pub soc: f64,
+    /// Battery voltage, V.
+    pub battery_v: f64,
+    /// Battery current, A (positive charging).
+    pub battery_a: f64,
+    /// Solar array power, W.
+    pub solar_w: f64,
+    /// Total load, W.
+    pub load_w: f64,
+}
+
+/// The figures of one published FC snapshot that expectations check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeSample {
+    /// When.
+    pub t: SimTime,
+    /// True body rate magnitude, deg/s.
+    pub rate_deg_s: f64,
+    /// True attitude to target attitude, deg.
+    pub pointing_error_deg: Option<f64>,
+    /// The mode's pointing axis to its target direction, deg.
+    pub axis_error_deg: Option<f64>,
+    /// True attitude to estimate, deg.
+    pub estimation_error_deg: Option<f64>,
+    /// Elevation of the satellite at the ground target, deg.
+    pub target_elevation_deg: Option<f64>,
+    /// Fastest wheel, rpm (magnitude).
+    pub max_wheel_rpm: f64,
+    /// Visible fraction of the sun.
+    pub sun_visible_fraction: f64,
+    /// Mode in effect.
+    pub mode: u8,
+    /// Distance of the true position from the scenario TLE's SGP4 position, m (grows after
+    /// a burn, when the truth follows the numerical orbit).
+    pub tle_offset_m: Option<f64>,
+    /// ADCS state.
+    pub state: u8,
+}
+
+impl AttitudeSample {
+    /// The sample of one published snapshot pair.
+    pub fn of(
+        t: SimTime,
+        truth: &platform::truth::TruthSnapshot,
+        adcs: &platform::truth::AdcsSnapshot,
+    ) -> Self {
+        AttitudeSample {
+            t,
+            rate_deg_s: truth.w_body_rad_s.norm().to_degrees(),
+            pointing_error_deg: adcs.pointing_error_deg,
+            axis_error_deg: adcs.axis_error_deg,
+            estimation_error_deg: adcs.estimation_error_deg,
+            target_elevation_deg: adcs.target_elevation_deg,
+            max_wheel_rpm: truth
+                .wheel_speed_rad_s
+                .iter()
+                .fold(0.0_f64, |m, w| m.max(w.abs()))
+                * 60.0
+                / std::f64::consts::TAU,
+            sun_visible_fraction: truth.in_eclipse_fraction_visible,
+            mode: adcs.mode_in_effect,
+            state: adcs.state,
+            tle_offset_m: None,
+        }
+    }
+}
+
+/// Gathers the report's samples from the run's events, one event at a time in the order
+/// they happen (the main loop hands it every event after the sink).
+pub struct Observer {
+    trace: Option<Vec<TraceEvent>>,
+    attitude: Vec<AttitudeSample>,
+    sessions: crate::sessions::SessionsReport,
+    power: Vec<PowerSample>,
+    beacons: Vec<(SimTime, u8, u32)>,
+    contact: Vec<(SimTime, bool)>,
+    /// The scenario TLE's own SGP4 orbit, to measure how far the truth has left it.
+    tle_orbit: Option<orbit::propagate::Sgp4Propagator>,
+}
+
+impl std::fmt::Debug for Observer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Observer").finish_non_exhaustive()
+    }
+}
+
+/// What an [`Observer`] gathered.
+#[derive(Debug, Clone, Default)]
+pub struct Observed {
+    /// Every frame and packet, when kept.
+    pub trace: Vec<TraceEvent>,
+    /// The FC's published attitude samples.
+    pub attitude: Vec<AttitudeSample>,
+    /// The PC's sessions and the payloads' bytes.
+    pub sessions: crate::sessions::SessionsReport,
+    /// The EPS's samples.
+    pub power: Vec<PowerSample>,
+    /// Beacons received on the ground.
+    pub beacons: Vec<(SimTime, u8, u32)>,
+    /// UHF contact switches.
+    pub contact: Vec<(SimTime, bool)>,
+}
+
+impl Observer {
+    /// An observer keeping the trace of every frame when `keep_trace`; `tle` is the
+    /// scenario's orbit (for the truth's distance from it).
+    pub fn new(keep_trace: bool, tle: Option<&(String, String)>) -> Self {
+        Observer {
+            trace: keep_trace.then(Vec::new),
+            attitude: Vec::new(),
+            sessions: crate::sessions::SessionsReport::default(),
+            power: Vec::new(),
+            beacons: Vec::new(),
+            contact: Vec::new(),
+            tle_orbit: tle.and_then(|(l1, l2)| {
+                orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
+                    .ok()
+                    .and_then(|t| orbit::propagate::Sgp4Propagator::new(&t).ok())
+            }),
+        }
+    }
+
+    /// Take in one event.
+    pub fn observe(&mut self, ev: &RunEvent) {
+        self.sessions.observe(ev);
+        match ev {
+            RunEvent::Medium(m) => {
+                if let Some(trace) = self.trace.as_mut() {
+                    trace.push(m.clone());
+                }
+            }
+            RunEvent::Truth { t, truth, adcs } => {
+                let mut sample = AttitudeSample::of(*t, truth, adcs);
+                if let Some(p) = self.tle_orbit.as_mut() {
+                    use orbit::propagate::Propagator as _;
+                    sample.tle_offset_m = p
+                        .state_j2000(orbit::time::UtcTime::from_unix_ns(truth.unix_ns))
+                        .ok()
+                        .map(|s| (truth.r_eci_m - s.r_km * 1e3).norm());
+                }
+                self.attitude.push(sample);
+            }
+            RunEvent::Beacon { t, from, data } => {
+                let seq = data
+                    .get(2..6)
+                    .and_then(|b| <[u8; 4]>::try_from(b).ok())
+                    .map_or(0, u32::from_le_bytes);
+                self.beacons.push((*t, *from, seq));
+            }
+            RunEvent::Eps(o) => {
+                if let nodes_eps::EpsOutput::Sample {
+                    t,
+                    soc,
+                    battery_v,
+                    battery_a,
+                    solar_w,
+                    load_w,
+                    ..
+                } = **o
+                {
+                    self.power.push(PowerSample {
+                        t,
+                        soc,
+                        battery_v,
+                        battery_a,
+                        solar_w,
+                        load_w,
+                    });
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// The UHF link's contact with the ground switched at `t` (a pass began or ended).
+    pub fn contact(&mut self, t: SimTime, on: bool) {
+        self.contact.push((t, on));
+    }
+
+    /// Everything gathered.
+    pub fn finish(self) -> Observed {
+        Observed {
+            trace: self.trace.unwrap_or_default(),
+            attitude: self.attitude,
+            sessions: self.sessions,
+            power: self.power,
+            beacons: self.beacons,
+            contact: self.contact,
+        }
+    }
+}
+
+impl RunReport {
+    /// The end-of-run table: per node packets in/out, forwarded, drops; per bus load.
+    pub fn table(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let elapsed = self.sim_time - SimTime::ZERO;
+        let _ = writeln!(
+            s,
+            "simulated {:.3} s in {:.3} s wall ({:.0}x real time)",
+            self.sim_time.as_secs_f64(),
+            self.wall.as_secs_f64(),
+            self.sim_time.as_secs_f64() / self.wall.as_secs_f64().max(1e-9)
+        );
+        let _ = writeln!(
+            s,
+            "\n{:<7} {:>3} {:>9} {:>9} {:>9} {:>9} {:>7}  drops by reason",
+            "node", "id", "pkts in", "pkts out", "forwarded", "to app", "drops"
+        );
+        for n in &self.nodes {
+            let c = &n.counters;
+            let reasons: Vec<String> = c.drops.iter().map(|(k, v)| format!("{k}: {v}")).collect();
+            let _ = writeln!(
+                s,
+                "{:<7} {:>3} {:>9} {:>9} {:>9} {:>9} {:>7}  {}",
+                n.name,
+                n.addr,
+                c.rx_packets,
+                c.tx_packets,
+                c.forwarded,
+                c.delivered + c.service_replies,
+                c.total_drops(),
+                reasons.join(", ")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\n{:<8} {:>10} {:>11} {:>9} {:>8} {:>8}",
+            "bus", "frames", "data bytes", "load %", "dropped", "corrupt"
+        );
+        for b in &self.buses {
+            let _ = writeln!(
+                s,
+                "{:<8} {:>10} {:>11} {:>9.3} {:>8} {:>8}",
+                b.name,
+                b.frames,
+                b.bytes,
+                100.0 * b.load(elapsed),
+                b.dropped,
+                b.corrupted
+            );
+        }
+        let g = &self.ground;
+        let _ = writeln!(
+            s,
+            "{:<8} {:>10} {:>11} {:>9.3} {:>8} {:>8}  (packets; UHF air load)",
+            g.name,
+            g.packets,
+            g.bytes,
+            100.0 * g.air_busy.as_secs_f64() / elapsed.as_secs_f64().max(1e-9),
+            g.dropped,
+            "-"
+        );
+        for (name, k) in &self.kiss {
+            let _ = writeln!(
+                s,
+                "\nKISS/TCP {name}: {} connections, {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused",
+                k.connections,
+                k.packets_in,
+                k.packets_out,
+                k.garbage_bytes,
+                k.bad_crc,
+                k.short,
+                k.oversize,
+                k.refused
+            );
+        }
+        for (name, b) in &self.socketcan {
+            let _ = writeln!(
+                s,
+                "\nSocketCAN {name}: {} frames in, {} out, {} skipped, {} receive errors, {} send errors{}",
+                b.frames_in,
+                b.frames_out,
+                b.skipped,
+                b.recv_errors,
+                b.send_errors,
+                b.ended
+                    .as_ref()
+                    .map(|why| format!("; stopped: {why}"))
+                    .unwrap_or_default()
+            );
+        }
+        if !self.results.is_empty() {
+            let ok = self
+                .results
+                .iter()
+                .filter(|r| matches!(r.outcome, crate::ground::Outcome::Reply { .. }))
+                .count();
+            let open = self
+                .results
+                .iter()
+                .filter(|r| matches!(r.outcome, crate::ground::Outcome::Unfinished))
+                .count();
+            let _ = writeln!(
+                s,
+                "\nground requests: {} sent, {} answered, {} unanswered{}",
+                self.results.len(),
+                ok,
+                self.results.len() - ok - open,
+                if open > 0 {
+                    format!(", {open} still waiting at the end")
+                } else {
+                    String::new()
+                }
+            );
+        }
+        s
+    }
+}
