@@ -55,6 +55,12 @@ impl CanBusConfig {
     }
 }
 
+/// A fault of the bus as CAN fails (set with [`CanBus::set_can_fault`], by fault id): each
+/// variant is added by the scenario fault kind that needs it.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum CanFault {}
+
 /// Counters of one attached endpoint.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct PortStats {
@@ -134,6 +140,7 @@ struct State {
     stats: BusStats,
     impair: Impairments,
     faults: ImpairmentSet,
+    can_faults: BTreeMap<u32, CanFault>,
     rng: ImpairRng,
     trace: Option<TraceTx>,
 }
@@ -198,6 +205,7 @@ impl CanBus {
                 stats,
                 impair: Impairments::default(),
                 faults: ImpairmentSet::default(),
+                can_faults: BTreeMap::new(),
                 rng,
                 trace: None,
             })),
@@ -305,6 +313,19 @@ impl CanBus {
         let mut st = self.lock();
         st.faults.set(id, imp);
         st.impair = st.faults.combined();
+    }
+
+    /// Fault `id` acts on the bus as CAN faults do (`Some`) or is lifted (`None`).
+    pub fn set_can_fault(&self, id: u32, fault: Option<CanFault>) {
+        let mut st = self.lock();
+        match fault {
+            Some(f) => {
+                st.can_faults.insert(id, f);
+            }
+            None => {
+                st.can_faults.remove(&id);
+            }
+        }
     }
 
     /// Send every frame that crosses the bus to `tx`.

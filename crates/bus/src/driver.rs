@@ -42,7 +42,7 @@ pub type CtlTx = mpsc::UnboundedSender<(SimTime, NodeCtl)>;
 pub type CtlRx = mpsc::UnboundedReceiver<(SimTime, NodeCtl)>;
 
 /// Commands from the run (scenario faults, shutdown).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum NodeCtl {
     /// Reboot the node (uptime from zero, volatile state lost).
     Reboot,
@@ -53,6 +53,9 @@ pub enum NodeCtl {
     /// Flip an application's hardware switch ([`csp::node::App::switch`]); applied whether
     /// or not the node is powered (it is hardware state).
     Switch(&'static str, bool),
+    /// Fault `id` acts on the node's core (`Some`) or is lifted ([`Host::fault`]); applied
+    /// whether or not the node is powered (its clock keeps its error).
+    Fault(u32, Option<csp::node::NodeFault>),
     /// Stop the task and hand the host back.
     Stop,
 }
@@ -199,6 +202,7 @@ async fn run<A: App, O: Outputs<A::Event>>(
                     }
                     NodeCtl::Hang(h) => hung = h,
                     NodeCtl::Switch(name, on) => host.switch(name, on, t),
+                    NodeCtl::Fault(id, f) => host.fault(id, f, t),
                 }
             }
             m = inbox.recv() => {

@@ -261,6 +261,12 @@ impl std::fmt::Display for NodeEvent {
     }
 }
 
+/// A fault of a node's core (set with [`Node::set_fault`], by fault id): each variant is
+/// added by the scenario fault kind that needs it.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum NodeFault {}
+
 /// A bounded queue of an application's outputs, pulled with [`App::poll_event`]: the
 /// node's task drains it after every input, so it holds only what one input produced; past
 /// `capacity` the oldest are dropped and counted.
@@ -323,6 +329,7 @@ pub struct Node {
     reboot_requested: bool,
     counters: NodeCounters,
     frames: Vec<CanFrame>,
+    faults: BTreeMap<u32, NodeFault>,
 }
 
 /// Keep at most this many unread events (older ones are counted, not kept).
@@ -344,6 +351,7 @@ impl Node {
             reboot_requested: false,
             counters: NodeCounters::default(),
             frames: Vec::new(),
+            faults: BTreeMap::new(),
             cfg,
         };
         node.reset_links();
@@ -610,6 +618,18 @@ impl Node {
         }
     }
 
+    /// Fault `id` acts on the node (`Some`) from `now`, or is lifted (`None`).
+    pub fn set_fault(&mut self, id: u32, fault: Option<NodeFault>, now: SimTime) {
+        let _ = now;
+        match fault {
+            Some(f) => {
+                self.faults.insert(id, f);
+            }
+            None => {
+                self.faults.remove(&id);
+            }
+        }
+    }
     /// Power is gone: nothing queued leaves any more, and nothing is delivered.
     pub fn power_lost(&mut self) {
         self.tx.clear();
@@ -753,6 +773,11 @@ impl<A: App> Host<A> {
     pub fn handle_timeout(&mut self, now: SimTime) {
         self.node.handle_timeout(now);
         self.app.handle_timeout(&mut self.node, now);
+        self.after_input(now);
+    }
+    /// Fault `id` acts on the node's core from `now` (`Some`) or is lifted.
+    pub fn fault(&mut self, id: u32, fault: Option<NodeFault>, now: SimTime) {
+        self.node.set_fault(id, fault, now);
         self.after_input(now);
     }
     /// The application's next event not yet pulled ([`App::poll_event`]).

@@ -8,7 +8,7 @@ use anyhow::Context as _;
 use csp::SimTime;
 
 use crate::events::RunEvent;
-use crate::expect::{Verdict, check_all};
+use crate::expectations::{Verdict, check_all};
 use crate::plan::{Compiled, compile};
 use crate::runtime::{RunReport, run_with};
 use crate::scenario::Scenario;
@@ -115,9 +115,10 @@ pub async fn execute(
             }
         }
     };
+    let net = compiled.opts.network.clone();
     let (report, ()) = tokio::join!(run_with(compiled.opts, Some(tx), sink), print_listen);
     let report = report?;
-    let verdicts = check_all(&compiled.expectations, &report);
+    let verdicts = check_all(&compiled.expectations, &report, &net);
     for v in &verdicts {
         sink(&RunEvent::Expectation {
             t: v.t.min(report.sim_time),

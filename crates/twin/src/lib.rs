@@ -7,10 +7,16 @@
 //! - [`record`] and [`recording`]: write a run to MCAP; read, summarize and compare recordings.
 //! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
+pub mod adcs;
+pub mod comm;
+pub mod commands;
+pub mod counters;
 pub mod duration;
+pub mod eps;
 pub mod events;
 pub mod exec;
-pub mod expect;
+pub mod expectations;
+pub mod faults;
 pub mod ground;
 pub mod gs;
 #[cfg(feature = "live")]
@@ -22,6 +28,7 @@ pub mod recording;
 pub mod runtime;
 pub mod scenario;
 pub mod sessions;
+pub mod tagged;
 pub mod timefmt;
 
 use std::time::Duration;

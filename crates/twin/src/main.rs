@@ -765,7 +765,7 @@ fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
             GsRequest::Uptime { node, icd } => gs::uptime(&mut client, node, a.timeout, icd).await,
             GsRequest::Ident { node } => gs::ident(&mut client, node, a.timeout).await,
             GsRequest::Raw { node, port, data } => {
-                let bytes = m6p_twin::scenario::parse_hex(&data).map_err(anyhow::Error::msg)?;
+                let bytes = m6p_twin::commands::parse_hex(&data).map_err(anyhow::Error::msg)?;
                 gs::raw(&mut client, node, port, bytes, a.timeout).await
             }
             GsRequest::Setup {

@@ -13,6 +13,7 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, bounds};
 use crate::scenario::{Dur, PathStep, Scenario};
 
 /// The payload controller (`[pc]`).
@@ -175,6 +176,27 @@ pub struct PushSpec {
     /// No packet from this time on (default: never stops).
     #[serde(default)]
     pub stop: Option<Dur>,
+}
+
+/// Session results by name (ICD 3.1.6 table 3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum SessionResultName {
+    /// 0: finished (or never executed).
+    Done,
+    /// 1: ABORT command.
+    Aborted,
+    /// 2: the payload did not acknowledge the SYNC.
+    NoAck,
+    /// 3: the S-band transmitter failed.
+    SBandFailure,
+}
+
+impl SessionResultName {
+    /// The wire value.
+    pub fn value(self) -> u8 {
+        self as u8
+    }
 }
 
 /// Parse a payload behaviour name (see [`PayloadSpec::behaviour`]).
@@ -518,68 +540,6 @@ pub fn session_ids(s: &Scenario) -> Vec<(u8, u8)> {
     }
 }
 
-/// Check a `session`, `downlink` or `accounting` expectation.
-pub fn validate_expectation(
-    s: &Scenario,
-    x: &crate::scenario::ExpectationSpec,
-    p: &impl Fn(&str) -> Vec<PathStep>,
-    err: &mut impl FnMut(Vec<PathStep>, String),
-) {
-    use crate::scenario::ExpectKind;
-    let kind = match x.kind {
-        ExpectKind::Session => "session",
-        ExpectKind::Downlink => "downlink",
-        _ => "accounting",
-    };
-    let ids = session_ids(s);
-    if x.kind != ExpectKind::Accounting {
-        match x.session {
-            None => err(p("kind"), format!("a `{kind}` expectation needs `session`")),
-            Some(id) if !ids.iter().any(|(i, _)| *i == id) => err(
-                p("session"),
-                format!(
-                    "the PC has no session {id} (sessions: {})",
-                    ids.iter()
-                        .map(|(i, a)| format!("{i} for payload {a}"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            ),
-            Some(_) => {}
-        }
-    }
-    match x.kind {
-        ExpectKind::Session if x.session_result.is_none() && x.min.is_none() && x.max.is_none() => {
-            err(
-                p("kind"),
-                "a `session` expectation needs `session_result`, `min` or `max`".into(),
-            );
-        }
-        ExpectKind::Downlink if x.intact.is_none() && x.min.is_none() && x.max.is_none() => {
-            err(
-                p("kind"),
-                "a `downlink` expectation needs `min`, `max` or `intact`".into(),
-            );
-        }
-        ExpectKind::Accounting => {
-            if let Some(a) = x.payload
-                && !s.network.payloads.contains(&a)
-            {
-                err(
-                    p("payload"),
-                    format!("{a} is not a simulated payload ({:?})", s.network.payloads),
-                );
-            }
-        }
-        _ => {}
-    }
-    if let (Some(a), Some(b)) = (x.min, x.max)
-        && a > b
-    {
-        err(p("min"), format!("min {a} is above max {b}"));
-    }
-}
-
 /// One run of a session, as the PC reported it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SessionRun {
@@ -735,12 +695,362 @@ impl SessionsReport {
     }
 }
 
-pub(crate) fn bounds(min: Option<u64>, max: Option<u64>) -> String {
-    match (min, max) {
-        (Some(a), Some(b)) => format!("{a}..={b}"),
-        (Some(a), None) => format!(">= {a}"),
-        (None, Some(b)) => format!("<= {b}"),
-        (None, None) => "any".into(),
+/// `session`: every (or any) run of a PC session ended with `session_result`, counting
+/// `min`..=`max` packets.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SessionExpect {
+    /// The session id.
+    pub session: u8,
+    /// The result every (or any) run ended with: `done`, `aborted`, `no-ack`,
+    /// `s-band-failure`.
+    #[serde(default)]
+    pub session_result: Option<SessionResultName>,
+    /// `every` run (default) or `any`.
+    #[serde(default)]
+    pub occurrence: Option<Occurrence>,
+    /// Fewest packets counted.
+    #[serde(default)]
+    pub min: Option<u64>,
+    /// Most packets counted.
+    #[serde(default)]
+    pub max: Option<u64>,
+}
+
+/// `downlink`: a PC session's bytes at the ground over the whole run, `min`..=`max`, and
+/// with `intact` the payload's counter frames undamaged (`true`: none missing either).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DownlinkExpect {
+    /// The session id.
+    pub session: u8,
+    /// `false`: no damaged frame; `true`: also no missing sequence number.
+    #[serde(default)]
+    pub intact: Option<bool>,
+    /// Fewest bytes.
+    #[serde(default)]
+    pub min: Option<u64>,
+    /// Most bytes.
+    #[serde(default)]
+    pub max: Option<u64>,
+}
+
+/// `accounting`: every byte a payload produced was downlinked, dropped with a reason, or is
+/// still held by the PC at the end (at most `max` dropped, if given).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AccountingExpect {
+    /// The payload (default every simulated payload).
+    #[serde(default)]
+    pub payload: Option<u8>,
+    /// Most bytes dropped.
+    #[serde(default)]
+    pub max: Option<u64>,
+}
+
+/// The session must be one of the PC's.
+fn known_session(id: u8, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+    let ids = session_ids(cx.scenario);
+    if !ids.iter().any(|(i, _)| *i == id) {
+        err(
+            "session",
+            format!(
+                "the PC has no session {id} (sessions: {})",
+                ids.iter()
+                    .map(|(i, a)| format!("{i} for payload {a}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        );
+    }
+}
+
+fn min_max(min: Option<u64>, max: Option<u64>, err: &mut dyn FnMut(&str, String)) {
+    if let (Some(a), Some(b)) = (min, max)
+        && a > b
+    {
+        err("min", format!("min {a} is above max {b}"));
+    }
+}
+
+impl ExpectKind for SessionExpect {
+    const NAME: &'static str = "session";
+    const ABOUT: &'static str = "a PC session's runs ended with a result (and a packet count)";
+
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        known_session(self.session, cx, err);
+        if self.session_result.is_none() && self.min.is_none() && self.max.is_none() {
+            err(
+                "kind",
+                "a `session` expectation needs `session_result`, `min` or `max`".into(),
+            );
+        }
+        min_max(self.min, self.max, err);
+    }
+
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        let report = cx.report;
+        let r = &report.sessions;
+        let end = report.sim_time;
+        let session = &self.session;
+        let result = &self.session_result.map(SessionResultName::value);
+        let occurrence = &self.occurrence.unwrap_or(Occurrence::Every);
+        let (min, max) = (&self.min, &self.max);
+
+        let ended: Vec<(SimTime, u8, u32)> = r
+            .runs
+            .iter()
+            .filter(|x| x.session == *session)
+            .filter_map(|x| x.ended)
+            .collect();
+        if ended.is_empty() {
+            let started = r.runs.iter().any(|x| x.session == *session);
+            return (
+                false,
+                end,
+                format!(
+                    "session {session} never ended{}",
+                    if started {
+                        " (still ACTIVE at the end of the run)"
+                    } else {
+                        " (it never started)"
+                    }
+                ),
+            );
+        }
+        let problem = |(_, res, packets): &(SimTime, u8, u32)| -> Option<String> {
+            if let Some(want) = result
+                && res != want
+            {
+                return Some(format!(
+                    "ended {} (expected {})",
+                    result_name(*res),
+                    result_name(*want)
+                ));
+            }
+            let p = u64::from(*packets);
+            if min.is_some_and(|m| p < m) || max.is_some_and(|m| p > m) {
+                return Some(format!("{p} packets (expected {})", bounds(*min, *max)));
+            }
+            None
+        };
+        let describe = |e: &(SimTime, u8, u32)| {
+            format!(
+                "ended {} at {} after {} packets",
+                result_name(e.1),
+                e.0,
+                e.2
+            )
+        };
+        let bad: Vec<_> = ended
+            .iter()
+            .filter_map(|e| problem(e).map(|p| (e.0, p)))
+            .collect();
+        let n = ended.len();
+        match occurrence {
+            Occurrence::Every => match bad.first() {
+                Some((t, p)) => (
+                    false,
+                    *t,
+                    format!("{} of {n} runs failed; first, at {t}: {p}", bad.len()),
+                ),
+                None => (
+                    true,
+                    ended[n - 1].0,
+                    format!("{n} of {n} runs held; last {}", describe(&ended[n - 1])),
+                ),
+            },
+            Occurrence::Any => match ended.iter().find(|e| problem(e).is_none()) {
+                Some(e) => (
+                    true,
+                    e.0,
+                    format!("{} of {n} runs held; {}", n - bad.len(), describe(e)),
+                ),
+                None => (
+                    false,
+                    ended[n - 1].0,
+                    format!("none of {n} runs held; last: {}", bad[n - 1].1),
+                ),
+            },
+        }
+    }
+}
+
+impl ExpectKind for DownlinkExpect {
+    const NAME: &'static str = "downlink";
+    const ABOUT: &'static str =
+        "a PC session downlinked `min`..`max` bytes over the run (intact, if asked)";
+
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        known_session(self.session, cx, err);
+        if self.intact.is_none() && self.min.is_none() && self.max.is_none() {
+            err(
+                "kind",
+                "a `downlink` expectation needs `min`, `max` or `intact`".into(),
+            );
+        }
+        min_max(self.min, self.max, err);
+    }
+
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        let report = cx.report;
+        let r = &report.sessions;
+        let end = report.sim_time;
+        let session = &self.session;
+        let (min, max, intact) = (&self.min, &self.max, &self.intact);
+
+        let bytes = r.session_bytes(*session);
+        let n = bytes.len() as u64;
+        let mut why = Vec::new();
+        if min.is_some_and(|m| n < m) || max.is_some_and(|m| n > m) {
+            why.push(format!("expected {} bytes", bounds(*min, *max)));
+        }
+        let mut seen = format!("session {session}: {n} bytes downlinked");
+        if let Some(strict) = intact {
+            // Each run is checked on its own (a run's stream ends where the next one's
+            // begins only if nothing was lost between them); the seqs lost between
+            // runs count as missing. A frame cut by a run's end is whole when that
+            // run's tail and the next run's head join into it.
+            let (mut ok, mut bad, mut missing) = (0u64, 0u64, 0u64);
+            let (mut first, mut last) = (None, None::<u32>);
+            let mut examples = Vec::new();
+            let mut tail: Vec<u8> = Vec::new();
+            for run in r.runs.iter().filter(|x| x.session == *session) {
+                let c = nodes_payload::check_counter_stream(&run.bytes);
+                if c.first_seq.is_none() && c.frames_bad == 0 {
+                    // No whole frame: all of it belongs to the frame the runs around it
+                    // cut (a short run between two others).
+                    tail.extend_from_slice(&run.bytes);
+                    continue;
+                }
+                ok += c.frames_ok;
+                bad += c.frames_bad;
+                missing += c.missing_count;
+                examples.extend(c.missing_seqs.iter().take(8).copied());
+                if let (Some(prev), Some(a)) = (last, c.first_seq) {
+                    let head = &run.bytes[..(c.lead_bytes as usize).min(run.bytes.len())];
+                    let joined =
+                        nodes_payload::check_counter_stream(&[tail.as_slice(), head].concat());
+                    // Whole when the bytes between the runs' whole frames are exactly
+                    // the frames in between (one cut by a run's end, or more when a short
+                    // run in the middle held no whole frame).
+                    let gap = u64::from(a.saturating_sub(prev).saturating_sub(1));
+                    let spanned = gap > 0
+                        && joined.frames_ok == gap
+                        && joined.first_seq == Some(prev.wrapping_add(1))
+                        && joined.missing_count == 0
+                        && joined.lead_bytes == 0
+                        && joined.tail_bytes == 0
+                        && joined.skipped_bytes == 0;
+                    if spanned {
+                        ok += gap;
+                    } else if gap > 0 {
+                        missing += gap;
+                        examples.push(prev + 1);
+                    }
+                }
+                tail = run.bytes[run.bytes.len() - (c.tail_bytes as usize).min(run.bytes.len())..]
+                    .to_vec();
+                first = first.or(c.first_seq);
+                last = c.last_seq.or(last);
+            }
+            seen.push_str(&format!(
+                "; {ok} frames intact, {bad} damaged, {missing} missing"
+            ));
+            if let (Some(a), Some(b)) = (first, last) {
+                seen.push_str(&format!(" (seq {a}..={b})"));
+            }
+            if bad > 0 {
+                why.push("damaged frames".to_owned());
+            }
+            if *strict && missing > 0 {
+                why.push(format!(
+                    "missing seqs, from {:?}",
+                    &examples[..examples.len().min(8)]
+                ));
+            }
+            if ok == 0 {
+                why.push("no intact frame".to_owned());
+            }
+        }
+        if why.is_empty() {
+            (true, end, seen)
+        } else {
+            (false, end, format!("{seen} ({})", why.join("; ")))
+        }
+    }
+}
+
+impl ExpectKind for AccountingExpect {
+    const NAME: &'static str = "accounting";
+    const ABOUT: &'static str =
+        "every byte a payload produced was downlinked, dropped with a reason, or is held";
+
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        let s = cx.scenario;
+        if let Some(a) = self.payload
+            && !s.network.payloads.contains(&a)
+        {
+            err(
+                "payload",
+                format!("{a} is not a simulated payload ({:?})", s.network.payloads),
+            );
+        }
+    }
+
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        let report = cx.report;
+        let r = &report.sessions;
+        let end = report.sim_time;
+        let (payload, max) = (&self.payload, &self.max);
+
+        let Some(held) = &r.held else {
+            return (
+                false,
+                end,
+                "the PC gave no final accounting (was it running?)".to_owned(),
+            );
+        };
+        let addrs: Vec<u8> = match payload {
+            Some(a) => vec![*a],
+            None => r.produced.keys().copied().collect(),
+        };
+        let mut lines = Vec::new();
+        let mut ok = r.pc_balanced != Some(false);
+        if !ok {
+            lines.push("the PC's own ledgers do not balance".to_owned());
+        }
+        for a in addrs {
+            let produced = r.produced.get(&a).copied().unwrap_or(0);
+            let down = r.downlinked.get(&a).copied().unwrap_or(0);
+            let dropped = r.dropped_total(a);
+            let h = held.get(&a).copied().unwrap_or(0);
+            let missing = produced as i128 - (down + dropped + h) as i128;
+            let reasons: Vec<String> = r
+                .dropped
+                .iter()
+                .filter(|((x, _), _)| *x == a)
+                .map(|((_, why), n)| format!("{why} {n}"))
+                .collect();
+            let mut line = format!(
+                "payload {a}: produced {produced} = downlinked {down} + dropped {dropped}{} + held {h}",
+                if reasons.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", reasons.join(", "))
+                }
+            );
+            if missing != 0 {
+                ok = false;
+                line.push_str(&format!(" -- {missing} bytes unaccounted for"));
+            }
+            if max.is_some_and(|m| dropped > m) {
+                ok = false;
+                line.push_str(&format!(" -- more than {} dropped", max.unwrap_or(0)));
+            }
+            lines.push(line);
+        }
+        (ok, end, lines.join("; "))
     }
 }
 
@@ -755,246 +1065,20 @@ pub fn result_name(r: u8) -> &'static str {
     }
 }
 
-/// Judge a `session`, `downlink` or `accounting` check: (held, when, what was observed).
-pub fn check(
-    check: &crate::plan::Check,
-    report: &crate::runtime::RunReport,
-) -> (bool, SimTime, String) {
-    use crate::plan::Check;
-    use crate::scenario::Occurrence;
-    let r = &report.sessions;
-    let end = report.sim_time;
-    match check {
-        Check::Session {
-            session,
-            result,
-            occurrence,
-            min,
-            max,
-        } => {
-            let ended: Vec<(SimTime, u8, u32)> = r
-                .runs
-                .iter()
-                .filter(|x| x.session == *session)
-                .filter_map(|x| x.ended)
-                .collect();
-            if ended.is_empty() {
-                let started = r.runs.iter().any(|x| x.session == *session);
-                return (
-                    false,
-                    end,
-                    format!(
-                        "session {session} never ended{}",
-                        if started {
-                            " (still ACTIVE at the end of the run)"
-                        } else {
-                            " (it never started)"
-                        }
-                    ),
-                );
-            }
-            let problem = |(_, res, packets): &(SimTime, u8, u32)| -> Option<String> {
-                if let Some(want) = result
-                    && res != want
-                {
-                    return Some(format!(
-                        "ended {} (expected {})",
-                        result_name(*res),
-                        result_name(*want)
-                    ));
-                }
-                let p = u64::from(*packets);
-                if min.is_some_and(|m| p < m) || max.is_some_and(|m| p > m) {
-                    return Some(format!("{p} packets (expected {})", bounds(*min, *max)));
-                }
-                None
-            };
-            let describe = |e: &(SimTime, u8, u32)| {
-                format!(
-                    "ended {} at {} after {} packets",
-                    result_name(e.1),
-                    e.0,
-                    e.2
-                )
-            };
-            let bad: Vec<_> = ended
-                .iter()
-                .filter_map(|e| problem(e).map(|p| (e.0, p)))
-                .collect();
-            let n = ended.len();
-            match occurrence {
-                Occurrence::Every => match bad.first() {
-                    Some((t, p)) => (
-                        false,
-                        *t,
-                        format!("{} of {n} runs failed; first, at {t}: {p}", bad.len()),
-                    ),
-                    None => (
-                        true,
-                        ended[n - 1].0,
-                        format!("{n} of {n} runs held; last {}", describe(&ended[n - 1])),
-                    ),
-                },
-                Occurrence::Any => match ended.iter().find(|e| problem(e).is_none()) {
-                    Some(e) => (
-                        true,
-                        e.0,
-                        format!("{} of {n} runs held; {}", n - bad.len(), describe(e)),
-                    ),
-                    None => (
-                        false,
-                        ended[n - 1].0,
-                        format!("none of {n} runs held; last: {}", bad[n - 1].1),
-                    ),
-                },
-            }
-        }
-        Check::Downlink {
-            session,
-            min,
-            max,
-            intact,
-        } => {
-            let bytes = r.session_bytes(*session);
-            let n = bytes.len() as u64;
-            let mut why = Vec::new();
-            if min.is_some_and(|m| n < m) || max.is_some_and(|m| n > m) {
-                why.push(format!("expected {} bytes", bounds(*min, *max)));
-            }
-            let mut seen = format!("session {session}: {n} bytes downlinked");
-            if let Some(strict) = intact {
-                // Each run is checked on its own (a run's stream ends where the next one's
-                // begins only if nothing was lost between them); the seqs lost between
-                // runs count as missing. A frame cut by a run's end is whole when that
-                // run's tail and the next run's head join into it.
-                let (mut ok, mut bad, mut missing) = (0u64, 0u64, 0u64);
-                let (mut first, mut last) = (None, None::<u32>);
-                let mut examples = Vec::new();
-                let mut tail: Vec<u8> = Vec::new();
-                for run in r.runs.iter().filter(|x| x.session == *session) {
-                    let c = nodes_payload::check_counter_stream(&run.bytes);
-                    if c.first_seq.is_none() && c.frames_bad == 0 {
-                        // No whole frame: all of it belongs to the frame the runs around it
-                        // cut (a short run between two others).
-                        tail.extend_from_slice(&run.bytes);
-                        continue;
-                    }
-                    ok += c.frames_ok;
-                    bad += c.frames_bad;
-                    missing += c.missing_count;
-                    examples.extend(c.missing_seqs.iter().take(8).copied());
-                    if let (Some(prev), Some(a)) = (last, c.first_seq) {
-                        let head = &run.bytes[..(c.lead_bytes as usize).min(run.bytes.len())];
-                        let joined =
-                            nodes_payload::check_counter_stream(&[tail.as_slice(), head].concat());
-                        // Whole when the bytes between the runs' whole frames are exactly
-                        // the frames in between (one cut by a run's end, or more when a short
-                        // run in the middle held no whole frame).
-                        let gap = u64::from(a.saturating_sub(prev).saturating_sub(1));
-                        let spanned = gap > 0
-                            && joined.frames_ok == gap
-                            && joined.first_seq == Some(prev.wrapping_add(1))
-                            && joined.missing_count == 0
-                            && joined.lead_bytes == 0
-                            && joined.tail_bytes == 0
-                            && joined.skipped_bytes == 0;
-                        if spanned {
-                            ok += gap;
-                        } else if gap > 0 {
-                            missing += gap;
-                            examples.push(prev + 1);
-                        }
-                    }
-                    tail = run.bytes
-                        [run.bytes.len() - (c.tail_bytes as usize).min(run.bytes.len())..]
-                        .to_vec();
-                    first = first.or(c.first_seq);
-                    last = c.last_seq.or(last);
-                }
-                seen.push_str(&format!(
-                    "; {ok} frames intact, {bad} damaged, {missing} missing"
-                ));
-                if let (Some(a), Some(b)) = (first, last) {
-                    seen.push_str(&format!(" (seq {a}..={b})"));
-                }
-                if bad > 0 {
-                    why.push("damaged frames".to_owned());
-                }
-                if *strict && missing > 0 {
-                    why.push(format!(
-                        "missing seqs, from {:?}",
-                        &examples[..examples.len().min(8)]
-                    ));
-                }
-                if ok == 0 {
-                    why.push("no intact frame".to_owned());
-                }
-            }
-            if why.is_empty() {
-                (true, end, seen)
-            } else {
-                (false, end, format!("{seen} ({})", why.join("; ")))
-            }
-        }
-        Check::Accounting { payload, max } => {
-            let Some(held) = &r.held else {
-                return (
-                    false,
-                    end,
-                    "the PC gave no final accounting (was it running?)".to_owned(),
-                );
-            };
-            let addrs: Vec<u8> = match payload {
-                Some(a) => vec![*a],
-                None => r.produced.keys().copied().collect(),
-            };
-            let mut lines = Vec::new();
-            let mut ok = r.pc_balanced != Some(false);
-            if !ok {
-                lines.push("the PC's own ledgers do not balance".to_owned());
-            }
-            for a in addrs {
-                let produced = r.produced.get(&a).copied().unwrap_or(0);
-                let down = r.downlinked.get(&a).copied().unwrap_or(0);
-                let dropped = r.dropped_total(a);
-                let h = held.get(&a).copied().unwrap_or(0);
-                let missing = produced as i128 - (down + dropped + h) as i128;
-                let reasons: Vec<String> = r
-                    .dropped
-                    .iter()
-                    .filter(|((x, _), _)| *x == a)
-                    .map(|((_, why), n)| format!("{why} {n}"))
-                    .collect();
-                let mut line = format!(
-                    "payload {a}: produced {produced} = downlinked {down} + dropped {dropped}{} + held {h}",
-                    if reasons.is_empty() {
-                        String::new()
-                    } else {
-                        format!(" ({})", reasons.join(", "))
-                    }
-                );
-                if missing != 0 {
-                    ok = false;
-                    line.push_str(&format!(" -- {missing} bytes unaccounted for"));
-                }
-                if max.is_some_and(|m| dropped > m) {
-                    ok = false;
-                    line.push_str(&format!(" -- more than {} dropped", max.unwrap_or(0)));
-                }
-                lines.push(line);
-            }
-            (ok, end, lines.join("; "))
-        }
-        _ => (false, end, "not a session check".to_owned()),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
     use crate::events::RunEvent;
     use nodes_payload::Behaviour as B;
+
+    /// The verdict of `k` on `report` in the default network.
+    fn check<K: ExpectKind>(k: &K, report: &crate::runtime::RunReport) -> Judged {
+        k.check(&CheckCx {
+            report,
+            net: &crate::network::NetworkSpec::default_m6p(),
+        })
+    }
 
     #[test]
     fn behaviour_names() {
@@ -1111,7 +1195,7 @@ mod tests {
             final_held(12, 50),
         ];
         let report = report_of(events);
-        let acc = crate::plan::Check::Accounting {
+        let acc = AccountingExpect {
             payload: Some(12),
             max: None,
         };
@@ -1147,13 +1231,13 @@ mod tests {
         ]);
         let report = report_of(events2);
         assert!(check(&acc, &report).0, "{}", check(&acc, &report).2);
-        let strict = crate::plan::Check::Accounting {
+        let strict = AccountingExpect {
             payload: Some(12),
             max: Some(49),
         };
         assert!(!check(&strict, &report).0);
         // The downlinked counter stream is intact.
-        let dl = crate::plan::Check::Downlink {
+        let dl = DownlinkExpect {
             session: 1,
             min: Some(500),
             max: Some(500),
@@ -1179,13 +1263,13 @@ mod tests {
                 }),
             ])
         };
-        let strict = crate::plan::Check::Downlink {
+        let strict = DownlinkExpect {
             session: 1,
             min: None,
             max: None,
             intact: Some(true),
         };
-        let lenient = crate::plan::Check::Downlink {
+        let lenient = DownlinkExpect {
             session: 1,
             min: None,
             max: None,
@@ -1223,7 +1307,7 @@ mod tests {
             }
             report_of(ev)
         };
-        let strict = crate::plan::Check::Downlink {
+        let strict = DownlinkExpect {
             session: 1,
             min: None,
             max: None,
@@ -1251,10 +1335,10 @@ mod tests {
     #[test]
     fn a_session_that_never_ran_fails_its_expectation() {
         let report = report_of(Vec::new());
-        let c = crate::plan::Check::Session {
+        let c = SessionExpect {
             session: 1,
-            result: Some(0),
-            occurrence: crate::scenario::Occurrence::Every,
+            session_result: Some(SessionResultName::Done),
+            occurrence: Some(Occurrence::Every),
             min: None,
             max: None,
         };

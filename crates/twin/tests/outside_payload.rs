@@ -11,7 +11,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use m6p_twin::expect::check_all;
+use m6p_twin::expectations::check_all;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::{RunReport, build_runtime, run};
 use m6p_twin::scenario::Scenario;
@@ -164,7 +164,8 @@ fn python_payload_over_kiss_serves_a_polling_session_and_its_bytes_reach_the_gro
     );
 
     // And the README's own expectations.
-    let verdicts = check_all(&compiled.expectations, &report);
+    let net = m6p_twin::network::NetworkSpec::default_m6p();
+    let verdicts = check_all(&compiled.expectations, &report, &net);
     assert_eq!(verdicts.len(), 3);
     for v in &verdicts {
         assert!(v.passed, "{} failed: {}", v.name, v.observed);

@@ -25,19 +25,20 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use bus::driver::{CtlTx, NodeCtl};
+use bus::driver::NodeCtl;
 use bus::kiss_tcp::KissLinkConfig;
-use bus::outside::Segments;
 use bus::{Clock, ClockMode};
 use csp::SimTime;
 use platform::board::Boards;
 use tokio::sync::{mpsc, oneshot};
 
+pub use crate::adcs::AttitudeSample;
+pub use crate::eps::PowerSample;
 use crate::events::RunEvent;
+use crate::faults::{FaultAction, TimedFault};
 use crate::ground::{PlannedRequest, Results};
 use crate::network::NetworkSpec;
-use crate::plan::{FaultAction, MediumId, TimedFault};
-pub use report::{AttitudeSample, NodeReport, Observed, Observer, PowerSample, RunReport};
+pub use report::{NodeReport, Observed, Observer, RunReport};
 
 /// Everything a run needs.
 #[derive(Debug, Clone)]
@@ -264,7 +265,12 @@ pub async fn run_with(
                     break;
                 }
                 while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
-                    let effects = apply_fault(&f, &segs, &ctls, &mut power_shell);
+                    let effects = crate::faults::Director {
+                        segs: &segs,
+                        ctls: &ctls,
+                        power: &mut power_shell,
+                    }
+                    .apply(&f);
                     if let FaultAction::Contact(on) = f.action {
                         observer.contact(f.at, on);
                     }
@@ -331,41 +337,6 @@ pub async fn run_with(
         beacons: observed.beacons,
         contact: observed.contact,
     })
-}
-
-/// Apply one scenario fault to the media or a node; returns the log events of the power
-/// rules.
-fn apply_fault(
-    f: &TimedFault,
-    segs: &Segments,
-    ctls: &BTreeMap<u8, CtlTx>,
-    power: &mut power::PowerShell,
-) -> Vec<RunEvent> {
-    match &f.action {
-        FaultAction::Impair { medium, fault, imp } => {
-            match medium {
-                MediumId::Main => segs.main.set_fault(*fault, *imp),
-                MediumId::Payload => segs.payload.set_fault(*fault, *imp),
-                MediumId::Uhf => segs.ground.set_fault(*fault, *imp),
-            }
-            Vec::new()
-        }
-        FaultAction::Power { addr, fault, off } => power.power_fault(f.at, *addr, *fault, *off),
-        FaultAction::Reboot(a) => {
-            // A node that is off or hung does not reboot (the driver ignores it then).
-            if let Some(tx) = ctls.get(a) {
-                let _ = tx.send((f.at, NodeCtl::Reboot));
-            }
-            Vec::new()
-        }
-        FaultAction::Hang { addr, fault, hung } => power.hang_fault(f.at, *addr, *fault, *hung),
-        // The FC applies its own faults from its timeline at its ticks.
-        FaultAction::Fc => Vec::new(),
-        FaultAction::Contact(on) => {
-            segs.ground.set_contact(*on);
-            Vec::new()
-        }
-    }
 }
 
 #[cfg(test)]

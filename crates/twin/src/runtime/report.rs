@@ -12,6 +12,8 @@ use bus::trace::TraceEvent;
 use csp::SimTime;
 use csp::node::NodeCounters;
 
+use crate::adcs::AttitudeSample;
+use crate::eps::PowerSample;
 use crate::events::RunEvent;
 use crate::ground::RequestResult;
 
@@ -59,96 +61,16 @@ pub struct RunReport {
     pub contact: Vec<(SimTime, bool)>,
 }
 
-/// The figures of one EPS sample that expectations check.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PowerSample {
-    /// When.
-    pub t: SimTime,
-    /// State of charge, 0..1.
-    pub soc: f64,
-    /// Battery voltage, V.
-    pub battery_v: f64,
-    /// Battery current, A (positive charging).
-    pub battery_a: f64,
-    /// Solar array power, W.
-    pub solar_w: f64,
-    /// Total load, W.
-    pub load_w: f64,
-}
-
-/// The figures of one published FC snapshot that expectations check.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AttitudeSample {
-    /// When.
-    pub t: SimTime,
-    /// True body rate magnitude, deg/s.
-    pub rate_deg_s: f64,
-    /// True attitude to target attitude, deg.
-    pub pointing_error_deg: Option<f64>,
-    /// The mode's pointing axis to its target direction, deg.
-    pub axis_error_deg: Option<f64>,
-    /// True attitude to estimate, deg.
-    pub estimation_error_deg: Option<f64>,
-    /// Elevation of the satellite at the ground target, deg.
-    pub target_elevation_deg: Option<f64>,
-    /// Fastest wheel, rpm (magnitude).
-    pub max_wheel_rpm: f64,
-    /// Visible fraction of the sun.
-    pub sun_visible_fraction: f64,
-    /// Mode in effect.
-    pub mode: u8,
-    /// Distance of the true position from the scenario TLE's SGP4 position, m (grows after
-    /// a burn, when the truth follows the numerical orbit).
-    pub tle_offset_m: Option<f64>,
-    /// ADCS state.
-    pub state: u8,
-}
-
-impl AttitudeSample {
-    /// The sample of one published snapshot pair.
-    pub fn of(
-        t: SimTime,
-        truth: &platform::truth::TruthSnapshot,
-        adcs: &platform::truth::AdcsSnapshot,
-    ) -> Self {
-        AttitudeSample {
-            t,
-            rate_deg_s: truth.w_body_rad_s.norm().to_degrees(),
-            pointing_error_deg: adcs.pointing_error_deg,
-            axis_error_deg: adcs.axis_error_deg,
-            estimation_error_deg: adcs.estimation_error_deg,
-            target_elevation_deg: adcs.target_elevation_deg,
-            max_wheel_rpm: truth
-                .wheel_speed_rad_s
-                .iter()
-                .fold(0.0_f64, |m, w| m.max(w.abs()))
-                * 60.0
-                / std::f64::consts::TAU,
-            sun_visible_fraction: truth.in_eclipse_fraction_visible,
-            mode: adcs.mode_in_effect,
-            state: adcs.state,
-            tle_offset_m: None,
-        }
-    }
-}
-
 /// Gathers the report's samples from the run's events, one event at a time in the order
-/// they happen (the main loop hands it every event after the sink).
+/// they happen (the main loop hands it every event after the sink): each domain slice
+/// observes what its expectations judge.
+#[derive(Debug)]
 pub struct Observer {
     trace: Option<Vec<TraceEvent>>,
-    attitude: Vec<AttitudeSample>,
+    attitude: crate::adcs::AttitudeObserver,
+    power: crate::eps::PowerObserver,
+    link: crate::comm::LinkObserver,
     sessions: crate::sessions::SessionsReport,
-    power: Vec<PowerSample>,
-    beacons: Vec<(SimTime, u8, u32)>,
-    contact: Vec<(SimTime, bool)>,
-    /// The scenario TLE's own SGP4 orbit, to measure how far the truth has left it.
-    tle_orbit: Option<orbit::propagate::Sgp4Propagator>,
-}
-
-impl std::fmt::Debug for Observer {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Observer").finish_non_exhaustive()
-    }
 }
 
 /// What an [`Observer`] gathered.
@@ -174,85 +96,39 @@ impl Observer {
     pub fn new(keep_trace: bool, tle: Option<&(String, String)>) -> Self {
         Observer {
             trace: keep_trace.then(Vec::new),
-            attitude: Vec::new(),
+            attitude: crate::adcs::AttitudeObserver::new(tle),
+            power: crate::eps::PowerObserver::default(),
+            link: crate::comm::LinkObserver::default(),
             sessions: crate::sessions::SessionsReport::default(),
-            power: Vec::new(),
-            beacons: Vec::new(),
-            contact: Vec::new(),
-            tle_orbit: tle.and_then(|(l1, l2)| {
-                orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
-                    .ok()
-                    .and_then(|t| orbit::propagate::Sgp4Propagator::new(&t).ok())
-            }),
         }
     }
 
     /// Take in one event.
     pub fn observe(&mut self, ev: &RunEvent) {
-        self.sessions.observe(ev);
-        match ev {
-            RunEvent::Medium(m) => {
-                if let Some(trace) = self.trace.as_mut() {
-                    trace.push(m.clone());
-                }
-            }
-            RunEvent::Truth { t, truth, adcs } => {
-                let mut sample = AttitudeSample::of(*t, truth, adcs);
-                if let Some(p) = self.tle_orbit.as_mut() {
-                    use orbit::propagate::Propagator as _;
-                    sample.tle_offset_m = p
-                        .state_j2000(orbit::time::UtcTime::from_unix_ns(truth.unix_ns))
-                        .ok()
-                        .map(|s| (truth.r_eci_m - s.r_km * 1e3).norm());
-                }
-                self.attitude.push(sample);
-            }
-            RunEvent::Beacon { t, from, data } => {
-                let seq = data
-                    .get(2..6)
-                    .and_then(|b| <[u8; 4]>::try_from(b).ok())
-                    .map_or(0, u32::from_le_bytes);
-                self.beacons.push((*t, *from, seq));
-            }
-            RunEvent::Eps(o) => {
-                if let nodes_eps::EpsOutput::Sample {
-                    t,
-                    soc,
-                    battery_v,
-                    battery_a,
-                    solar_w,
-                    load_w,
-                    ..
-                } = **o
-                {
-                    self.power.push(PowerSample {
-                        t,
-                        soc,
-                        battery_v,
-                        battery_a,
-                        solar_w,
-                        load_w,
-                    });
-                }
-            }
-            _ => {}
+        if let (RunEvent::Medium(m), Some(trace)) = (ev, self.trace.as_mut()) {
+            trace.push(m.clone());
         }
+        self.attitude.observe(ev);
+        self.power.observe(ev);
+        self.link.observe(ev);
+        self.sessions.observe(ev);
     }
 
     /// The UHF link's contact with the ground switched at `t` (a pass began or ended).
     pub fn contact(&mut self, t: SimTime, on: bool) {
-        self.contact.push((t, on));
+        self.link.contact(t, on);
     }
 
     /// Everything gathered.
     pub fn finish(self) -> Observed {
+        let (beacons, contact) = self.link.finish();
         Observed {
             trace: self.trace.unwrap_or_default(),
-            attitude: self.attitude,
+            attitude: self.attitude.finish(),
             sessions: self.sessions,
-            power: self.power,
-            beacons: self.beacons,
-            contact: self.contact,
+            power: self.power.finish(),
+            beacons,
+            contact,
         }
     }
 }

@@ -1,0 +1,764 @@
+//! The flight computer and its ADCS in a scenario: the `[fc]` table (initial state,
+//! models, scripts, sensor and wheel faults), its validation and compilation into the FC's
+//! configuration, the attitude samples a run publishes, and the `attitude` expectation.
+//!
+//! See docs/scenarios.md ("The FC") and docs/adcs.md.
+
+use csp::SimTime;
+use schemars::JsonSchema;
+use serde::Deserialize;
+
+use crate::events::RunEvent;
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, When};
+use crate::faults::{FaultAction, TimedFault};
+use crate::runtime::RunReport;
+use crate::scenario::{Dur, PathStep, Scenario};
+
+fn key(k: &str) -> PathStep {
+    PathStep::Key(k.to_owned())
+}
+
+/// The flight computer's settings (docs/scenarios.md, "The FC").
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcSpec {
+    /// ADCS loop rate, Hz (default 10).
+    #[serde(default)]
+    pub adcs_hz: Option<u32>,
+    /// Truth and ADCS snapshot rate for recording and expectations, Hz (default 1; 0: none).
+    #[serde(default)]
+    pub publish_hz: Option<u32>,
+    /// Target mode commanded at the start (as by ATCMDSET at time zero; default `detumble`).
+    #[serde(default)]
+    pub mode: Option<ModeName>,
+    /// Target attitude (r, i, j, k) for the fixed-quaternion modes (as by ATCATSET).
+    #[serde(default)]
+    pub target_attitude: Option<[f64; 4]>,
+    /// Target point (as by ATCPTSET): lat deg, lon deg, alt m for `earth-target`, an ECI
+    /// direction for `eci-vector`.
+    #[serde(default)]
+    pub target_point: Option<[f64; 3]>,
+    /// Whether the FC holds the satellite's TLE at boot (default true).
+    #[serde(default)]
+    pub tle_uploaded: Option<bool>,
+    /// Whether the GPS receiver gives fixes (default false).
+    #[serde(default)]
+    pub gps: Option<bool>,
+    /// Initial body rate magnitude, deg/s (default 0).
+    #[serde(default)]
+    pub initial_rate_deg_s: Option<f64>,
+    /// Axis of the initial rate, body frame (default: a random axis drawn from the seed).
+    #[serde(default)]
+    pub initial_rate_axis: Option<[f64; 3]>,
+    /// Initial attitude, body in ECI (r, i, j, k) (default: drawn from the seed).
+    #[serde(default)]
+    pub initial_attitude: Option<[f64; 4]>,
+    /// Initial wheel speeds, rpm (default 0).
+    #[serde(default)]
+    pub initial_wheel_rpm: Option<[f64; 4]>,
+    /// Inertia tensor, kg m^2, rows (default the 6U box diag(0.10, 0.13, 0.05)).
+    #[serde(default)]
+    pub inertia_kg_m2: Option<[[f64; 3]; 3]>,
+    /// Residual magnetic dipole, body frame, A m^2 (default [0.002, 0.002, 0.005]).
+    #[serde(default)]
+    pub residual_dipole_am2: Option<[f64; 3]>,
+    /// Aerodynamic drag torque (default true).
+    #[serde(default)]
+    pub drag: Option<bool>,
+    /// Gravity-gradient torque (default true).
+    #[serde(default)]
+    pub gravity_gradient: Option<bool>,
+    /// Solar panel normal for sun max power, body frame (default +X).
+    #[serde(default)]
+    pub panel_normal_body: Option<[f64; 3]>,
+    /// Port numbers of the FC's services.
+    #[serde(default)]
+    pub ports: Option<FcPortsSpec>,
+    /// Mission-controller script lines (ICD 1.5) submitted onboard at their times.
+    #[serde(default)]
+    pub scripts: Vec<FcScriptSpec>,
+    /// Sensor and wheel faults.
+    #[serde(default)]
+    pub faults: Vec<FcFaultSpec>,
+}
+
+/// Target modes by name (docs/protocol.md, "Target modes").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModeName {
+    /// 0.
+    Idle,
+    /// 1.
+    Detumble,
+    /// 2.
+    Velocity,
+    /// 3.
+    Nadir,
+    /// 4.
+    SunMaxPower,
+    /// 5.
+    EarthTarget,
+    /// 6.
+    EciVector,
+    /// 7.
+    FixedEci,
+    /// 8.
+    FixedLvlh,
+    /// 9.
+    FixedTnw,
+}
+
+impl ModeName {
+    /// The wire enumeration value.
+    pub fn mode(self) -> nodes_fc::wire::TargetMode {
+        use nodes_fc::wire::TargetMode as M;
+        match self {
+            ModeName::Idle => M::Idle,
+            ModeName::Detumble => M::Detumble,
+            ModeName::Velocity => M::VelocityPointing,
+            ModeName::Nadir => M::Nadir,
+            ModeName::SunMaxPower => M::SunMaxPower,
+            ModeName::EarthTarget => M::EarthTarget,
+            ModeName::EciVector => M::EciVector,
+            ModeName::FixedEci => M::FixedEci,
+            ModeName::FixedLvlh => M::FixedLvlh,
+            ModeName::FixedTnw => M::FixedTnw,
+        }
+    }
+}
+
+/// FC port overrides (INTERPRETATION.md section 4: every port overridable).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcPortsSpec {
+    /// Telemetry (default 10).
+    #[serde(default)]
+    pub telemetry: Option<u8>,
+    /// RTC (default 11).
+    #[serde(default)]
+    pub rtc: Option<u8>,
+    /// Attitude target control (default 12).
+    #[serde(default)]
+    pub attitude: Option<u8>,
+    /// Mission-controller scripts (default 13).
+    #[serde(default)]
+    pub scripts: Option<u8>,
+}
+
+/// A script line submitted onboard at a time.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcScriptSpec {
+    /// When it is submitted (simulated time since the start).
+    pub at: Dur,
+    /// The ICD 1.5 line, for example `adcs 1577836800 1577836920 pointECI 1 0 0 0`.
+    pub line: String,
+}
+
+/// A sensor or wheel fault.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcFaultSpec {
+    /// When it starts.
+    pub at: Dur,
+    /// When it is cleared (default: never).
+    #[serde(default)]
+    pub until: Option<Dur>,
+    /// The sensor: `gyro`, `magnetometer`, `sun-sensors`, `css+x` ... `css-z`,
+    /// `accelerometer`, `gps`.
+    #[serde(default)]
+    pub sensor: Option<String>,
+    /// The wheel, 0-3.
+    #[serde(default)]
+    pub wheel: Option<u8>,
+    /// Sensors: `dead`, `stuck`, `bias:<value>`, `noisy:<factor>`; wheels: `stuck`, `off`.
+    pub fault: String,
+}
+
+/// Check the `[fc]` table.
+pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    let fc = &s.fc;
+    let p = |n: &str| vec![key("fc"), key(n)];
+    if fc.adcs_hz.is_some_and(|h| !(1..=100).contains(&h)) {
+        err(p("adcs_hz"), "must be 1-100".into());
+    }
+    if let Some(h) = fc.publish_hz
+        && h > fc.adcs_hz.unwrap_or(10)
+    {
+        err(p("publish_hz"), "must not exceed `adcs_hz`".into());
+    }
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    let nonzero = |v: &[f64]| finite(v) && v.iter().any(|x| *x != 0.0);
+    if fc
+        .initial_rate_deg_s
+        .is_some_and(|r| !(r.is_finite() && (0.0..=360.0).contains(&r)))
+    {
+        err(p("initial_rate_deg_s"), "must be 0-360 deg/s".into());
+    }
+    for (f, v) in [
+        (
+            "initial_rate_axis",
+            fc.initial_rate_axis.map(|a| a.to_vec()),
+        ),
+        ("initial_attitude", fc.initial_attitude.map(|a| a.to_vec())),
+        ("target_attitude", fc.target_attitude.map(|a| a.to_vec())),
+        (
+            "panel_normal_body",
+            fc.panel_normal_body.map(|a| a.to_vec()),
+        ),
+    ] {
+        if v.is_some_and(|v| !nonzero(&v)) {
+            err(p(f), "must be finite and not all zero".into());
+        }
+    }
+    for (f, v) in [
+        (
+            "initial_wheel_rpm",
+            fc.initial_wheel_rpm.map(|a| a.to_vec()),
+        ),
+        (
+            "residual_dipole_am2",
+            fc.residual_dipole_am2.map(|a| a.to_vec()),
+        ),
+        ("target_point", fc.target_point.map(|a| a.to_vec())),
+    ] {
+        if v.is_some_and(|v| !finite(&v)) {
+            err(p(f), "must be finite".into());
+        }
+    }
+    if let Some(rpm) = fc.initial_wheel_rpm
+        && rpm.iter().any(|r| r.abs() > 6000.0)
+    {
+        err(
+            p("initial_wheel_rpm"),
+            "the wheels' limit is 6000 rpm".into(),
+        );
+    }
+    if let Some(m) = fc.inertia_kg_m2 {
+        let i = nalgebra::Matrix3::from_fn(|r, c| m[r][c]);
+        let symmetric = (i - i.transpose()).abs().max() <= 1e-12 * i.abs().max();
+        let positive = i.iter().all(|x| x.is_finite())
+            && symmetric
+            && i.symmetric_eigenvalues().iter().all(|&e| e > 0.0);
+        if !positive {
+            err(
+                p("inertia_kg_m2"),
+                "must be a symmetric positive-definite 3x3 matrix (rows)".into(),
+            );
+        }
+    }
+    for (i, sc) in fc.scripts.iter().enumerate() {
+        if let Err(e) = nodes_fc::scripts::Script::parse(&sc.line) {
+            err(
+                vec![key("fc"), key("scripts"), PathStep::Index(i), key("line")],
+                format!("the script does not parse: {e}"),
+            );
+        }
+    }
+    for (i, f) in fc.faults.iter().enumerate() {
+        let q = |n: &str| vec![key("fc"), key("faults"), PathStep::Index(i), key(n)];
+        if f.until.is_some_and(|u| u <= f.at) {
+            err(q("until"), "must be after `at`".into());
+        }
+        match (&f.sensor, f.wheel) {
+            (Some(name), None) => {
+                if let Err(e) = name.parse::<nodes_fc::sensors::SensorId>() {
+                    err(q("sensor"), e.to_string());
+                }
+                if let Err(e) = f.fault.parse::<nodes_fc::sensors::SensorFault>() {
+                    err(q("fault"), e.to_string());
+                }
+            }
+            (None, Some(w)) => {
+                if w > 3 {
+                    err(q("wheel"), format!("wheel {w} is not 0-3"));
+                }
+                if let Err(e) = f.fault.parse::<nodes_fc::WheelFault>() {
+                    err(q("fault"), e);
+                }
+            }
+            _ => err(
+                q("fault"),
+                "give exactly one of `sensor` and `wheel`".into(),
+            ),
+        }
+    }
+}
+
+/// A unit vector drawn from `seed` (uniform on the sphere).
+fn random_unit(seed: u64, salt: u64) -> nalgebra::Vector3<f64> {
+    let u = |k: u64| (crate::runtime::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
+    let z = 2.0 * u(0) - 1.0;
+    let phi = std::f64::consts::TAU * u(1);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    nalgebra::Vector3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// A rotation drawn uniformly from SO(3) (Shoemake, "Uniform random rotations", Graphics
+/// Gems III, 1992): three uniforms from the seed.
+fn random_rotation(seed: u64, salt: u64) -> nalgebra::UnitQuaternion<f64> {
+    let u = |k: u64| (crate::runtime::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
+    let (u1, u2, u3) = (u(0), u(1), u(2));
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    let tau = std::f64::consts::TAU;
+    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        b * (tau * u3).cos(),
+        a * (tau * u2).sin(),
+        a * (tau * u2).cos(),
+        b * (tau * u3).sin(),
+    ))
+}
+
+/// The FC's configuration from the `[fc]` table (validated), its faults added to the
+/// recorded fault timeline.
+pub fn compile(s: &Scenario, faults: &mut Vec<TimedFault>) -> nodes_fc::FcConfig {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    use nodes_fc::{FcEvent, TimedFcEvent};
+    let f = &s.fc;
+    let mut c = nodes_fc::FcConfig::default();
+    if let Some(h) = f.adcs_hz {
+        c.adcs_hz = h;
+    }
+    if let Some(h) = f.publish_hz {
+        c.publish_hz = h;
+    }
+    if let Some(m) = f.mode {
+        c.initial_mode = m.mode();
+    }
+    if let Some(q) = f.target_attitude {
+        let n = (q.iter().map(|x| x * x).sum::<f64>()).sqrt();
+        c.initial_target_attitude = Some(q.map(|x| x / n));
+    }
+    c.initial_target_point = f.target_point;
+    c.tle_uploaded = f.tle_uploaded.unwrap_or(true);
+    c.sensors.gps_enabled = f.gps.unwrap_or(false);
+    let axis = f
+        .initial_rate_axis
+        .map(|a| Vector3::from(a).normalize())
+        .unwrap_or_else(|| random_unit(s.seed, 0x310));
+    c.initial.w_body_rad_s = axis * f.initial_rate_deg_s.unwrap_or(0.0).to_radians();
+    c.initial.q_eci_from_body = match f.initial_attitude {
+        Some([r, i, j, k]) => UnitQuaternion::from_quaternion(Quaternion::new(r, i, j, k)),
+        None => random_rotation(s.seed, 0x320),
+    };
+    if let Some(rpm) = f.initial_wheel_rpm {
+        c.initial.wheel_speed_rad_s = rpm.map(|r| r * std::f64::consts::TAU / 60.0);
+    }
+    if let Some(m) = f.inertia_kg_m2 {
+        c.body.inertia_kg_m2 = nalgebra::Matrix3::from_fn(|r, k| m[r][k]);
+        // The gains follow the body (and the orbit's rate), as the default's do.
+        let n_rad_s = match s.satellite.tle.as_slice() {
+            [.., l1, l2] => orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
+                .map(|t| t.mean_motion_rev_day * std::f64::consts::TAU / 86_400.0)
+                .unwrap_or(nodes_fc::control::DEFAULT_MEAN_MOTION_RAD_S),
+            _ => nodes_fc::control::DEFAULT_MEAN_MOTION_RAD_S,
+        };
+        c.adcs.control = nodes_fc::control::ControlConfig::for_body(&c.body, n_rad_s);
+    }
+    if let Some(d) = f.residual_dipole_am2 {
+        c.residual_dipole_am2 = Vector3::from(d);
+    }
+    if f.drag == Some(false) {
+        c.drag = None;
+    }
+    if let Some(g) = f.gravity_gradient {
+        c.gravity_gradient = g;
+    }
+    if let Some(n) = f.panel_normal_body {
+        c.adcs.panel_normal_body = Vector3::from(n).normalize();
+    }
+    if let Some(p) = f.ports {
+        let d = nodes_fc::FcPorts::default();
+        c.ports = nodes_fc::FcPorts {
+            telemetry: p.telemetry.unwrap_or(d.telemetry),
+            rtc: p.rtc.unwrap_or(d.rtc),
+            attitude: p.attitude.unwrap_or(d.attitude),
+            scripts: p.scripts.unwrap_or(d.scripts),
+        };
+    }
+    for sc in &f.scripts {
+        c.timeline.push(TimedFcEvent {
+            at: SimTime::ZERO + sc.at.0,
+            event: FcEvent::Script(sc.line.clone()),
+        });
+    }
+    for (i, fault) in f.faults.iter().enumerate() {
+        let (set, clear) = match (&fault.sensor, fault.wheel) {
+            (Some(name), _) => {
+                let (Ok(id), Ok(kind)) = (
+                    name.parse::<nodes_fc::sensors::SensorId>(),
+                    fault.fault.parse::<nodes_fc::sensors::SensorFault>(),
+                ) else {
+                    continue;
+                };
+                (FcEvent::Sensor(id, Some(kind)), FcEvent::Sensor(id, None))
+            }
+            (None, Some(w)) => {
+                let Ok(kind) = fault.fault.parse::<nodes_fc::WheelFault>() else {
+                    continue;
+                };
+                (
+                    FcEvent::Wheel(usize::from(w), Some(kind)),
+                    FcEvent::Wheel(usize::from(w), None),
+                )
+            }
+            (None, None) => continue,
+        };
+        let what = match (&fault.sensor, fault.wheel) {
+            (Some(n), _) => format!("fc.faults[{i}]: {n} {}", fault.fault),
+            _ => format!(
+                "fc.faults[{i}]: wheel {} {}",
+                fault.wheel.unwrap_or(0),
+                fault.fault
+            ),
+        };
+        let at = SimTime::ZERO + fault.at.0;
+        c.timeline.push(TimedFcEvent { at, event: set });
+        faults.push(TimedFault {
+            at,
+            action: FaultAction::Record,
+            what: what.clone(),
+        });
+        if let Some(u) = fault.until {
+            let until = SimTime::ZERO + u.0;
+            c.timeline.push(TimedFcEvent {
+                at: until,
+                event: clear,
+            });
+            faults.push(TimedFault {
+                at: until,
+                action: FaultAction::Record,
+                what: format!("{what} (cleared)"),
+            });
+        }
+    }
+    c
+}
+
+/// The figures of one published FC snapshot that expectations check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeSample {
+    /// When.
+    pub t: SimTime,
+    /// True body rate magnitude, deg/s.
+    pub rate_deg_s: f64,
+    /// True attitude to target attitude, deg.
+    pub pointing_error_deg: Option<f64>,
+    /// The mode's pointing axis to its target direction, deg.
+    pub axis_error_deg: Option<f64>,
+    /// True attitude to estimate, deg.
+    pub estimation_error_deg: Option<f64>,
+    /// Elevation of the satellite at the ground target, deg.
+    pub target_elevation_deg: Option<f64>,
+    /// Fastest wheel, rpm (magnitude).
+    pub max_wheel_rpm: f64,
+    /// Visible fraction of the sun.
+    pub sun_visible_fraction: f64,
+    /// Mode in effect.
+    pub mode: u8,
+    /// Distance of the true position from the scenario TLE's SGP4 position, m (grows after
+    /// a burn, when the truth follows the numerical orbit).
+    pub tle_offset_m: Option<f64>,
+    /// ADCS state.
+    pub state: u8,
+}
+
+impl AttitudeSample {
+    /// The sample of one published snapshot pair.
+    pub fn of(
+        t: SimTime,
+        truth: &platform::truth::TruthSnapshot,
+        adcs: &platform::truth::AdcsSnapshot,
+    ) -> Self {
+        AttitudeSample {
+            t,
+            rate_deg_s: truth.w_body_rad_s.norm().to_degrees(),
+            pointing_error_deg: adcs.pointing_error_deg,
+            axis_error_deg: adcs.axis_error_deg,
+            estimation_error_deg: adcs.estimation_error_deg,
+            target_elevation_deg: adcs.target_elevation_deg,
+            max_wheel_rpm: truth
+                .wheel_speed_rad_s
+                .iter()
+                .fold(0.0_f64, |m, w| m.max(w.abs()))
+                * 60.0
+                / std::f64::consts::TAU,
+            sun_visible_fraction: truth.in_eclipse_fraction_visible,
+            mode: adcs.mode_in_effect,
+            state: adcs.state,
+            tle_offset_m: None,
+        }
+    }
+}
+
+/// The FC's published samples of a run, gathered from its events.
+#[derive(Default)]
+pub struct AttitudeObserver {
+    samples: Vec<AttitudeSample>,
+    /// The scenario TLE's own SGP4 orbit, to measure how far the truth has left it.
+    tle_orbit: Option<orbit::propagate::Sgp4Propagator>,
+}
+
+impl std::fmt::Debug for AttitudeObserver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AttitudeObserver")
+            .field("samples", &self.samples.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl AttitudeObserver {
+    /// An observer measuring the truth's distance from the orbit of `tle` (if any).
+    pub fn new(tle: Option<&(String, String)>) -> Self {
+        AttitudeObserver {
+            samples: Vec::new(),
+            tle_orbit: tle.and_then(|(l1, l2)| {
+                orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
+                    .ok()
+                    .and_then(|t| orbit::propagate::Sgp4Propagator::new(&t).ok())
+            }),
+        }
+    }
+
+    /// Take in one event.
+    pub fn observe(&mut self, ev: &RunEvent) {
+        if let RunEvent::Truth { t, truth, adcs } = ev {
+            let mut sample = AttitudeSample::of(*t, truth, adcs);
+            if let Some(p) = self.tle_orbit.as_mut() {
+                use orbit::propagate::Propagator as _;
+                sample.tle_offset_m = p
+                    .state_j2000(orbit::time::UtcTime::from_unix_ns(truth.unix_ns))
+                    .ok()
+                    .map(|s| (truth.r_eci_m - s.r_km * 1e3).norm());
+            }
+            self.samples.push(sample);
+        }
+    }
+
+    /// The samples, in time order.
+    pub fn finish(self) -> Vec<AttitudeSample> {
+        self.samples
+    }
+}
+
+/// The figures an `attitude` expectation can check (each published FC snapshot).
+pub const ATTITUDE_QUANTITIES: &[&str] = &[
+    "rate_deg_s",
+    "pointing_error_deg",
+    "axis_error_deg",
+    "estimation_error_deg",
+    "max_wheel_rpm",
+    "mode",
+    "state",
+    "tle_offset_m",
+];
+
+/// `attitude`: every FC snapshot in a window (or, with `occurrence = "any"`, one) has a
+/// figure below / above a bound.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AttitudeExpect {
+    /// The figure checked (see [`ATTITUDE_QUANTITIES`]).
+    pub quantity: String,
+    /// Every selected sample (default) or at least one (`any`) must be within bounds.
+    #[serde(default)]
+    pub occurrence: Option<Occurrence>,
+    /// Every sample in the window must be below this.
+    #[serde(default)]
+    pub below: Option<f64>,
+    /// Every sample in the window must be above this.
+    #[serde(default)]
+    pub above: Option<f64>,
+    /// Start of the window (default: the start of the run).
+    #[serde(default)]
+    pub from: Option<Dur>,
+    /// End of the window (default: the end of the run).
+    #[serde(default)]
+    pub to: Option<Dur>,
+    /// Which samples count: `always` (default), `sunlit`, `eclipse`, `target-visible`.
+    #[serde(default)]
+    pub when: Option<When>,
+    /// Elevation for `target-visible`, deg (default 10).
+    #[serde(default)]
+    pub min_elevation_deg: Option<f64>,
+}
+
+impl ExpectKind for AttitudeExpect {
+    const NAME: &'static str = "attitude";
+    const ABOUT: &'static str = "every FC snapshot in a window has a figure below / above a bound";
+
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        if !ATTITUDE_QUANTITIES.contains(&self.quantity.as_str()) {
+            err(
+                "quantity",
+                format!(
+                    "unknown quantity `{}` ({})",
+                    self.quantity,
+                    ATTITUDE_QUANTITIES.join(", ")
+                ),
+            );
+        }
+        if self.below.is_none() && self.above.is_none() {
+            err(
+                "kind",
+                "an `attitude` expectation needs `below` or `above`".into(),
+            );
+        }
+        for (f, v) in [("below", self.below), ("above", self.above)] {
+            if v.is_some_and(|v| !v.is_finite()) {
+                err(f, "must be a finite number".into());
+            }
+        }
+        cx.window(self.from, self.to, err);
+        if self.min_elevation_deg.is_some() && self.when != Some(When::TargetVisible) {
+            err(
+                "min_elevation_deg",
+                "only `when = \"target-visible\"` takes `min_elevation_deg`".into(),
+            );
+        }
+    }
+
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        let report = cx.report;
+        let to = self.to.map_or(report.sim_time, |d| SimTime::ZERO + d.0);
+        match check_attitude(
+            report,
+            AttitudeCheck {
+                quantity: &self.quantity,
+                occurrence: self.occurrence.unwrap_or(Occurrence::Every),
+                below: self.below,
+                above: self.above,
+                from: self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),
+                to,
+                when: self.when.unwrap_or(When::Always),
+                min_elevation_deg: self.min_elevation_deg.unwrap_or(10.0),
+            },
+        ) {
+            Ok((t, ok)) => (true, t, ok),
+            Err((t, why)) => (false, t, why),
+        }
+    }
+}
+
+struct AttitudeCheck<'a> {
+    quantity: &'a str,
+    occurrence: Occurrence,
+    below: Option<f64>,
+    above: Option<f64>,
+    from: SimTime,
+    to: SimTime,
+    when: When,
+    min_elevation_deg: f64,
+}
+
+/// The named figure of a sample (`None`: it does not apply, for example no target).
+fn quantity(s: &AttitudeSample, name: &str) -> Option<f64> {
+    match name {
+        "rate_deg_s" => Some(s.rate_deg_s),
+        "pointing_error_deg" => s.pointing_error_deg,
+        "axis_error_deg" => s.axis_error_deg,
+        "estimation_error_deg" => s.estimation_error_deg,
+        "max_wheel_rpm" => Some(s.max_wheel_rpm),
+        "mode" => Some(f64::from(s.mode)),
+        "state" => Some(f64::from(s.state)),
+        "tle_offset_m" => s.tle_offset_m,
+        _ => None,
+    }
+}
+
+/// Every selected sample in the window within bounds: `Ok((end, summary))` or
+/// `Err((first failing time, why))`.
+fn check_attitude(
+    report: &RunReport,
+    c: AttitudeCheck<'_>,
+) -> Result<(SimTime, String), (SimTime, String)> {
+    let selected = report.attitude.iter().filter(|s| {
+        s.t >= c.from
+            && s.t <= c.to
+            && match c.when {
+                When::Always => true,
+                When::Sunlit => s.sun_visible_fraction >= 1.0,
+                When::Eclipse => s.sun_visible_fraction <= 0.0,
+                When::TargetVisible => s
+                    .target_elevation_deg
+                    .is_some_and(|e| e >= c.min_elevation_deg),
+            }
+    });
+    let (mut n, mut lo, mut hi) = (0usize, f64::INFINITY, f64::NEG_INFINITY);
+    let mut failures = 0usize;
+    let mut first: Option<(SimTime, String)> = None;
+    for s in selected {
+        n += 1;
+        let v = quantity(s, c.quantity);
+        let problem = match v {
+            None => Some(format!("no `{}` at this time", c.quantity)),
+            Some(v) if c.below.is_some_and(|b| v.is_nan() || v >= b) => Some(format!(
+                "{} = {v:.4} (expected below {})",
+                c.quantity,
+                c.below.unwrap_or_default()
+            )),
+            Some(v) if c.above.is_some_and(|a| v.is_nan() || v <= a) => Some(format!(
+                "{} = {v:.4} (expected above {})",
+                c.quantity,
+                c.above.unwrap_or_default()
+            )),
+            Some(_) => None,
+        };
+        if let Some(v) = v {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        if let Some(p) = problem {
+            failures += 1;
+            first.get_or_insert((s.t, p));
+        }
+    }
+    let window = format!("{} to {} ({:?})", c.from, c.to, c.when);
+    if n == 0 {
+        return Err((c.to, format!("no FC samples in {window}")));
+    }
+    let range = format!(
+        "{n} samples in {window}, {} from {lo:.4} to {hi:.4}",
+        c.quantity
+    );
+    if c.occurrence == Occurrence::Any {
+        return if failures < n {
+            Ok((c.to, format!("{} of {range} within bounds", n - failures)))
+        } else {
+            Err((c.to, format!("none of {range} within bounds")))
+        };
+    }
+    match first {
+        Some((t, p)) => Err((t, format!("{failures} of {range}; first at {t}: {p}"))),
+        None => Ok((c.to, range)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seeded_initial_attitudes_are_uniform_over_rotations() {
+        // For rotations uniform on SO(3) every quaternion component has E[x^2] = 1/4, and
+        // the rotation angle has density (1 - cos a) / pi: mean angle pi/2 + 2/pi.
+        let n = 4000;
+        let mut sq = [0.0f64; 4];
+        let mut angle = 0.0;
+        for seed in 0..n {
+            let q = random_rotation(seed, 0x320);
+            for (k, x) in [q.w, q.i, q.j, q.k].into_iter().enumerate() {
+                sq[k] += x * x / n as f64;
+            }
+            angle += q.angle() / n as f64;
+        }
+        for (k, m) in sq.iter().enumerate() {
+            assert!((m - 0.25).abs() < 0.02, "component {k}: E[x^2] = {m}");
+        }
+        let want = std::f64::consts::FRAC_PI_2 + 2.0 / std::f64::consts::PI;
+        assert!(
+            (angle - want).abs() < 0.03,
+            "mean angle {angle}, want {want}"
+        );
+    }
+}

@@ -1,0 +1,593 @@
+//! The ground's requests in a scenario: the `[[commands]]` (pings, services, raw ICD
+//! requests from a ground station at times, or after another command's outcome), their
+//! validation and compilation into the stations' plans, and the `reply` and `no-reply`
+//! expectations on their outcomes.
+//!
+//! See docs/scenarios.md ("Commands").
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use csp::SimTime;
+use schemars::JsonSchema;
+use serde::Deserialize;
+
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence};
+use crate::ground::{Outcome, PlannedRequest, RequestResult};
+use crate::network::NetworkSpec;
+use crate::runtime::RunReport;
+use crate::scenario::{Dur, NodeRef, PathStep, Scenario};
+
+fn key(k: &str) -> PathStep {
+    PathStep::Key(k.to_owned())
+}
+
+/// A request sent during the run.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CommandSpec {
+    /// Name for expectations and reports (default `commands[i]`).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// When to send it: simulated time since the start, or, with `after`, since that
+    /// command's first outcome.
+    pub at: Dur,
+    /// Send it only after the first outcome (reply or timeout) of this command, which must
+    /// come from the same ground station.
+    #[serde(default)]
+    pub after: Option<String>,
+    /// Repeat every this long (with `count`).
+    #[serde(default)]
+    pub every: Option<Dur>,
+    /// How many times in all (default 1; with `every`).
+    #[serde(default)]
+    pub count: Option<u32>,
+    /// The sending node (a ground station; default GS16).
+    #[serde(default)]
+    pub from: Option<NodeRef>,
+    /// The destination node.
+    pub to: NodeRef,
+    /// `ping`, `uptime`, `ident`, `memfree`, `buf-free`, `ps`, `reboot` or `raw`.
+    pub request: RequestKind,
+    /// Ping payload size in bytes (default 16).
+    #[serde(default)]
+    pub size: Option<usize>,
+    /// Destination port (`raw` only).
+    #[serde(default)]
+    pub port: Option<u8>,
+    /// Request bytes as hex (`raw` only), for example `"01"` or `"06 01 00"`.
+    #[serde(default)]
+    pub data: Option<String>,
+    /// Request bytes as text (`raw` only, instead of `data`), for example an ICD 1.5 script
+    /// line for FC port 13.
+    #[serde(default)]
+    pub text: Option<String>,
+    /// How long to wait for the reply.
+    #[serde(default)]
+    pub timeout: Option<Dur>,
+}
+
+/// Request kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum RequestKind {
+    /// CSP ping (port 1).
+    Ping,
+    /// CSP uptime (port 6).
+    Uptime,
+    /// CMP ident (port 0).
+    Ident,
+    /// CSP memfree (port 3).
+    Memfree,
+    /// CSP buf_free (port 5).
+    BufFree,
+    /// CSP ps (port 2).
+    Ps,
+    /// CSP reboot (port 4, magic 0x80078007).
+    Reboot,
+    /// Raw bytes to a port.
+    Raw,
+}
+
+/// The names of the commands (`name`, default `commands[i]`), in file order.
+pub fn names(s: &Scenario) -> Vec<String> {
+    s.commands
+        .iter()
+        .enumerate()
+        .map(|(i, c)| c.name.clone().unwrap_or_else(|| format!("commands[{i}]")))
+        .collect()
+}
+
+/// Check the `[[commands]]`.
+pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    let mut command_names = Vec::new();
+    // The sending station, GS16 when not given.
+    let station = |c: &CommandSpec| c.from.as_ref().map_or(Some(16), |r| net.resolve(r).ok());
+    for (i, c) in s.commands.iter().enumerate() {
+        if let Some(a) = &c.after {
+            let own = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));
+            match s
+                .commands
+                .iter()
+                .enumerate()
+                .find(|(j, o)| o.name.clone().unwrap_or_else(|| format!("commands[{j}]")) == *a)
+            {
+                None => err(
+                    vec![key("commands"), PathStep::Index(i), key("after")],
+                    format!("no command is named `{a}`"),
+                ),
+                Some(_) if *a == own => err(
+                    vec![key("commands"), PathStep::Index(i), key("after")],
+                    "a command cannot wait for itself".into(),
+                ),
+                Some((_, o)) if station(o) != station(c) => err(
+                    vec![key("commands"), PathStep::Index(i), key("after")],
+                    format!("`{a}` is sent from another ground station"),
+                ),
+                Some(_) => {}
+            }
+        }
+    }
+    for (i, c) in s.commands.iter().enumerate() {
+        let p = |f: &str| vec![key("commands"), PathStep::Index(i), key(f)];
+        let name = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));
+        if command_names.contains(&name) {
+            err(
+                p("name"),
+                format!("another command is already named `{name}`"),
+            );
+        }
+        command_names.push(name);
+        match c.from.as_ref().map(|r| net.resolve(r)) {
+            None => {
+                if !net
+                    .nodes
+                    .iter()
+                    .any(|n| n.role == crate::network::Role::Ground)
+                {
+                    err(p("to"), "there is no ground station to send from (network.ground_stations is empty)".into());
+                }
+            }
+            Some(Err(e)) => err(p("from"), e),
+            Some(Ok(a)) if !(16..=20).contains(&a) => err(
+                p("from"),
+                format!("commands are sent from a ground station (16-20), not from {a}"),
+            ),
+            Some(Ok(_)) => {}
+        }
+        match &c.to {
+            NodeRef::Addr(a) if *a >= 31 => {
+                err(p("to"), format!("{a} is not a unicast CSP address"))
+            }
+            NodeRef::Addr(_) => {}
+            r @ NodeRef::Name(_) => {
+                if let Err(e) = net.resolve(r) {
+                    err(p("to"), e);
+                }
+            }
+        }
+        if c.every.is_some() != c.count.is_some() {
+            err(
+                p(if c.every.is_some() { "every" } else { "count" }),
+                "`every` and `count` go together".into(),
+            );
+        }
+        if c.every.is_some_and(|e| e.0.is_zero()) {
+            err(p("every"), "must be longer than zero".into());
+        }
+        if c.count == Some(0) {
+            err(p("count"), "must be at least 1".into());
+        }
+        if c.count.unwrap_or(1) > 1_000_000 {
+            err(p("count"), "at most 1000000 repetitions".into());
+        }
+        let raw = c.request == RequestKind::Raw;
+        if raw && c.port.is_none() {
+            err(p("request"), "a `raw` request needs `port`".into());
+        }
+        if !raw && (c.port.is_some() || c.data.is_some() || c.text.is_some()) {
+            err(
+                p(if c.port.is_some() {
+                    "port"
+                } else if c.data.is_some() {
+                    "data"
+                } else {
+                    "text"
+                }),
+                "only a `raw` request takes `port`, `data` and `text`".into(),
+            );
+        }
+        if c.data.is_some() && c.text.is_some() {
+            err(p("text"), "give `data` or `text`, not both".into());
+        }
+        if c.text.as_ref().is_some_and(|t| t.len() > 256) {
+            err(p("text"), "more than the CSP MTU of 256 bytes".into());
+        }
+        if c.port.is_some_and(|port| port > 63) {
+            err(
+                p("port"),
+                format!("{} is not a CSP port (0-63)", c.port.unwrap_or(0)),
+            );
+        }
+        if let Some(d) = &c.data
+            && let Err(e) = parse_hex(d)
+        {
+            err(p("data"), e);
+        }
+        if c.size.is_some() && c.request != RequestKind::Ping {
+            err(p("size"), "only a `ping` takes `size`".into());
+        }
+        if c.size.is_some_and(|s| s > 256) {
+            err(
+                p("size"),
+                format!("{} bytes exceed the CSP MTU of 256", c.size.unwrap_or(0)),
+            );
+        }
+    }
+}
+
+/// The ground stations' plans of a validated scenario's `[[commands]]`, by station address.
+pub fn compile(s: &Scenario, net: &NetworkSpec) -> BTreeMap<u8, Vec<PlannedRequest>> {
+    let mut plans: BTreeMap<u8, Vec<PlannedRequest>> = BTreeMap::new();
+    let default_gs = net
+        .nodes
+        .iter()
+        .find(|n| n.role == crate::network::Role::Ground)
+        .map(|n| n.addr);
+    for (i, c) in s.commands.iter().enumerate() {
+        let name = c.name.clone().unwrap_or_else(|| format!("commands[{i}]"));
+        let from = c
+            .from
+            .as_ref()
+            .and_then(|r| net.resolve(r).ok())
+            .or(default_gs)
+            .unwrap_or(16);
+        let to = match &c.to {
+            NodeRef::Addr(a) => *a,
+            r => net.resolve(r).unwrap_or(0),
+        };
+        let (dport, data) = match c.request {
+            RequestKind::Ping => (1, crate::ground::ping_payload(c.size.unwrap_or(16))),
+            RequestKind::Uptime => (6, vec![]),
+            RequestKind::Ident => (0, vec![0x00, 0x01]),
+            RequestKind::Memfree => (3, vec![]),
+            RequestKind::BufFree => (5, vec![]),
+            RequestKind::Ps => (2, vec![]),
+            RequestKind::Reboot => (4, csp::service::REBOOT_MAGIC.to_be_bytes().to_vec()),
+            RequestKind::Raw => (
+                c.port.unwrap_or(0),
+                match &c.text {
+                    Some(t) => t.as_bytes().to_vec(),
+                    None => c
+                        .data
+                        .as_deref()
+                        .map(parse_hex)
+                        .and_then(Result::ok)
+                        .unwrap_or_default(),
+                },
+            ),
+        };
+        let timeout = c.timeout.map_or(Duration::from_secs(5), |d| d.0);
+        let every = c.every.map_or(Duration::ZERO, |d| d.0);
+        let plan = plans.entry(from).or_default();
+        for k in 0..c.count.unwrap_or(1) {
+            plan.push(PlannedRequest {
+                at: SimTime::ZERO + c.at.0 + every * k,
+                dst: to,
+                dport,
+                data: data.clone(),
+                timeout,
+                label: name.clone(),
+                after: c.after.clone(),
+            });
+        }
+    }
+    plans
+}
+
+/// An expected reply: hex bytes where `??` stands for any byte, and a final `...` for any
+/// further bytes (`"01 01 02 01 ..."`: a TMCOMM reply from COMM2 with its radio active).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReplyPattern {
+    /// Each byte, `None` for any.
+    pub bytes: Vec<Option<u8>>,
+    /// Whether more bytes may follow.
+    pub open_end: bool,
+}
+
+impl ReplyPattern {
+    /// Parse `"01 ?? ff ..."`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
+        let (body, open_end) = match compact.strip_suffix("...") {
+            Some(b) => (b.to_owned(), true),
+            None => (compact, false),
+        };
+        if body.len() % 2 != 0 {
+            return Err(format!("`{s}` is not hex bytes: an odd number of digits"));
+        }
+        let bytes = (0..body.len() / 2)
+            .map(|i| match &body[2 * i..2 * i + 2] {
+                "??" => Ok(None),
+                pair => u8::from_str_radix(pair, 16)
+                    .map(Some)
+                    .map_err(|_| format!("`{s}` is not hex bytes: `{pair}` (use ?? for any byte)")),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(ReplyPattern { bytes, open_end })
+    }
+
+    /// Whether `got` matches.
+    pub fn matches(&self, got: &[u8]) -> bool {
+        let len_ok = if self.open_end {
+            got.len() >= self.bytes.len()
+        } else {
+            got.len() == self.bytes.len()
+        };
+        len_ok
+            && self
+                .bytes
+                .iter()
+                .zip(got)
+                .all(|(want, g)| want.is_none_or(|w| w == *g))
+    }
+}
+
+impl std::fmt::Display for ReplyPattern {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for b in &self.bytes {
+            match b {
+                Some(b) => write!(f, "{b:02x}")?,
+                None => f.write_str("??")?,
+            }
+        }
+        if self.open_end {
+            f.write_str("...")?;
+        }
+        Ok(())
+    }
+}
+
+/// Parse hex bytes, with optional spaces (`"06 01 00"` or `"060100"`).
+pub fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
+    let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
+    hex::decode(&compact).map_err(|e| format!("`{s}` is not hex bytes: {e}"))
+}
+
+/// `reply`: every (or any) occurrence of a command is answered, within `within`, with
+/// `result`, `data` and `data_len` if given.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ReplyExpect {
+    /// The command, by name.
+    pub command: String,
+    /// For repeated commands: `every` occurrence must hold (default), or `any`.
+    #[serde(default)]
+    pub occurrence: Option<Occurrence>,
+    /// Longest acceptable round trip.
+    #[serde(default)]
+    pub within: Option<Dur>,
+    /// Result code (second reply byte) for ICD requests.
+    #[serde(default)]
+    pub result: Option<u8>,
+    /// The reply bytes as hex (`??` any byte, a final `...` any further bytes).
+    #[serde(default)]
+    pub data: Option<String>,
+    /// Reply length in bytes (the two head bytes included).
+    #[serde(default)]
+    pub data_len: Option<usize>,
+}
+
+/// `no-reply`: every (or any) occurrence of a command goes unanswered.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NoReplyExpect {
+    /// The command, by name.
+    pub command: String,
+    /// For repeated commands: `every` occurrence must hold (default), or `any`.
+    #[serde(default)]
+    pub occurrence: Option<Occurrence>,
+}
+
+/// The command must exist.
+fn known_command(command: &str, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+    let names = names(cx.scenario);
+    if !names.iter().any(|n| n == command) {
+        err(
+            "command",
+            format!(
+                "no command is named `{command}` (commands: {})",
+                names.join(", ")
+            ),
+        );
+    }
+}
+
+impl ExpectKind for ReplyExpect {
+    const NAME: &'static str = "reply";
+    const ABOUT: &'static str =
+        "the command is answered (within `within`, with `result` and `data` if given)";
+
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        known_command(&self.command, cx, err);
+        if let Some(d) = &self.data
+            && let Err(e) = ReplyPattern::parse(d)
+        {
+            err("data", e);
+        }
+    }
+
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        judge(
+            cx.report,
+            &self.command,
+            self.occurrence.unwrap_or(Occurrence::Every),
+            |r| reply_problem(r, self),
+        )
+    }
+}
+
+impl ExpectKind for NoReplyExpect {
+    const NAME: &'static str = "no-reply";
+    const ABOUT: &'static str = "the command is not answered";
+
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        known_command(&self.command, cx, err);
+    }
+
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        judge(
+            cx.report,
+            &self.command,
+            self.occurrence.unwrap_or(Occurrence::Every),
+            |r| match &r.outcome {
+                Outcome::Reply { data, rtt } => Some(format!(
+                    "answered after {}: {}",
+                    secs(*rtt),
+                    hex::encode(data)
+                )),
+                Outcome::Unfinished => Some(unfinished(r)),
+                _ => None,
+            },
+        )
+    }
+}
+
+/// Judge every occurrence of `command` with `problem` (`None`: it held).
+fn judge(
+    report: &RunReport,
+    command: &str,
+    occurrence: Occurrence,
+    problem: impl Fn(&RequestResult) -> Option<String>,
+) -> Judged {
+    let mut runs: Vec<&RequestResult> = report
+        .results
+        .iter()
+        .filter(|r| r.request.label == command)
+        .collect();
+    runs.sort_by_key(|r| r.sent);
+    if runs.is_empty() {
+        return (
+            false,
+            report.sim_time,
+            format!("command `{command}` was never sent before the end of the run"),
+        );
+    }
+    let problems: Vec<(SimTime, String)> = runs
+        .iter()
+        .filter_map(|r| problem(r).map(|p| (r.sent, p)))
+        .collect();
+    let n = runs.len();
+    match occurrence {
+        Occurrence::Every => match problems.first() {
+            Some((t, p)) => (
+                false,
+                *t,
+                format!(
+                    "{} of {n} occurrences failed; first, sent at {t}: {p}",
+                    problems.len()
+                ),
+            ),
+            None => (
+                true,
+                report.sim_time,
+                format!("{n} of {n} occurrences held"),
+            ),
+        },
+        Occurrence::Any => {
+            if problems.len() < n {
+                (
+                    true,
+                    report.sim_time,
+                    format!("{} of {n} occurrences held", n - problems.len()),
+                )
+            } else {
+                let (t, p) = problems
+                    .last()
+                    .cloned()
+                    .unwrap_or((report.sim_time, String::new()));
+                (
+                    false,
+                    t,
+                    format!("none of {n} occurrences held; last, sent at {t}: {p}"),
+                )
+            }
+        }
+    }
+}
+
+fn secs(d: std::time::Duration) -> String {
+    format!("{:.3} s", d.as_secs_f64())
+}
+
+/// Why one occurrence fails a reply check, or `None` if it passes.
+fn reply_problem(r: &RequestResult, x: &ReplyExpect) -> Option<String> {
+    let within = x.within.map(|d| d.0);
+    let result = x.result;
+    let data = x.data.as_deref().and_then(|d| ReplyPattern::parse(d).ok());
+    let data_len = x.data_len;
+    match &r.outcome {
+        Outcome::Timeout => Some(format!(
+            "no reply within the {} timeout",
+            secs(r.request.timeout)
+        )),
+        Outcome::SendFailed(e) => Some(format!("not sent: {e}")),
+        Outcome::Unfinished => Some(unfinished(r)),
+        Outcome::Reply { data: got, rtt } => {
+            if let Some(w) = within
+                && *rtt > w
+            {
+                return Some(format!("reply after {} (limit {})", secs(*rtt), secs(w)));
+            }
+            if let Some(code) = result
+                && got.get(1) != Some(&code)
+            {
+                return Some(format!(
+                    "result code {} (expected {code}), reply {}",
+                    got.get(1).map_or("missing".to_owned(), u8::to_string),
+                    hex::encode(got)
+                ));
+            }
+            if let Some(want) = &data
+                && !want.matches(got)
+            {
+                return Some(format!("reply {} (expected {want})", hex::encode(got)));
+            }
+            if let Some(n) = data_len
+                && got.len() != n
+            {
+                return Some(format!("reply of {} bytes (expected {n})", got.len()));
+            }
+            None
+        }
+    }
+}
+
+/// Why a request the run ended on is no verdict either way.
+fn unfinished(r: &RequestResult) -> String {
+    format!(
+        "sent, but the run ended before its reply or its {} timeout",
+        secs(r.request.timeout)
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::ReplyPattern;
+
+    #[test]
+    fn a_reply_pattern_takes_any_bytes_and_an_open_end() {
+        let p = ReplyPattern::parse("01 01 ?? 01 ...").unwrap();
+        assert!(p.matches(&[1, 1, 2, 1]));
+        assert!(p.matches(&[1, 1, 9, 1, 7, 7]));
+        assert!(!p.matches(&[1, 1, 2, 0, 7]));
+        assert!(!p.matches(&[1, 1, 2]));
+        assert_eq!(p.to_string(), "0101??01...");
+        let exact = ReplyPattern::parse("ff00").unwrap();
+        assert!(exact.matches(&[0xff, 0]) && !exact.matches(&[0xff, 0, 0]));
+        for bad in ["0", "zz", "01 0?", "... 01"] {
+            assert!(ReplyPattern::parse(bad).is_err(), "{bad}");
+        }
+    }
+}

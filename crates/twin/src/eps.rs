@@ -1,0 +1,366 @@
+//! The EPS in a scenario: the `[eps]` table (state of charge, channels, events), its
+//! validation and compilation into the EPS's configuration, the power samples a run
+//! publishes, and the `power` expectation.
+//!
+//! See docs/scenarios.md ("The EPS") and docs/platform.md.
+
+use csp::SimTime;
+use schemars::JsonSchema;
+use serde::Deserialize;
+
+use crate::events::RunEvent;
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, When};
+use crate::runtime::RunReport;
+use crate::scenario::{Dur, PathStep, Scenario};
+
+fn key(k: &str) -> PathStep {
+    PathStep::Key(k.to_owned())
+}
+
+/// The EPS (`[eps]`).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EpsSpec {
+    /// State of charge at the start, 0-1 (default 0.8).
+    #[serde(default)]
+    pub initial_soc: Option<f64>,
+    /// Channels off at the start (`COMM1`, `COMM2`, `ECU`, `PC`, `PL12`-`PL15`, `SBAND`).
+    #[serde(default)]
+    pub channels_off: Vec<String>,
+    /// Events (`[[eps.events]]`): `at` with `channel` and `on`, or `soc`.
+    #[serde(default)]
+    pub events: Vec<EpsEventSpec>,
+}
+
+/// An EPS event at a time: switch a channel (as the CHSET command would) or set the state
+/// of charge.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EpsEventSpec {
+    /// When.
+    pub at: Dur,
+    /// The channel to switch.
+    #[serde(default)]
+    pub channel: Option<String>,
+    /// On or off (with `channel`).
+    #[serde(default)]
+    pub on: Option<bool>,
+    /// Set the state of charge, 0-1.
+    #[serde(default)]
+    pub soc: Option<f64>,
+}
+
+/// Check the `[eps]` table.
+pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    let e = &s.eps;
+    if e.initial_soc
+        .is_some_and(|x| !(x.is_finite() && (0.0..=1.0).contains(&x)))
+    {
+        err(vec![key("eps"), key("initial_soc")], "must be 0-1".into());
+    }
+    let channel_names = "COMM1, COMM2, ECU, PC, PL12, PL13, PL14, PL15, SBAND";
+    for (i, c) in e.channels_off.iter().enumerate() {
+        if nodes_eps::Channel::from_name(c).is_none() {
+            err(
+                vec![key("eps"), key("channels_off"), PathStep::Index(i)],
+                format!("unknown channel `{c}` ({channel_names})"),
+            );
+        }
+    }
+    for (i, ev) in e.events.iter().enumerate() {
+        let q = |n: &str| vec![key("eps"), key("events"), PathStep::Index(i), key(n)];
+        match (&ev.channel, ev.on, ev.soc) {
+            (Some(c), Some(_), None) => {
+                if nodes_eps::Channel::from_name(c).is_none() {
+                    err(
+                        q("channel"),
+                        format!("unknown channel `{c}` ({channel_names})"),
+                    );
+                }
+            }
+            (None, None, Some(x)) => {
+                if !(x.is_finite() && (0.0..=1.0).contains(&x)) {
+                    err(q("soc"), "must be 0-1".into());
+                }
+            }
+            _ => err(
+                q("at"),
+                "an EPS event is `channel` with `on`, or `soc`".into(),
+            ),
+        }
+    }
+}
+
+/// The EPS's configuration from the `[eps]` table (validated).
+pub fn compile(s: &Scenario) -> nodes_eps::EpsConfig {
+    use nodes_eps::{Channel, EpsEvent, TimedEpsEvent};
+    let mut c = nodes_eps::EpsConfig::default();
+    let e = &s.eps;
+    // A payload the network does not have draws nothing: its channel starts off.
+    for addr in 12..=15u8 {
+        if !s.network.payloads.contains(&addr)
+            && let Some(ch) = Channel::of_node(addr)
+        {
+            c.channels_on &= !ch.bit();
+        }
+    }
+    if let Some(x) = e.initial_soc {
+        c.initial_soc = x;
+    }
+    for name in &e.channels_off {
+        if let Some(ch) = Channel::from_name(name) {
+            c.channels_on &= !ch.bit();
+        }
+    }
+    for ev in &e.events {
+        let event = match (&ev.channel, ev.on, ev.soc) {
+            (Some(name), Some(on), _) => match Channel::from_name(name) {
+                Some(channel) => EpsEvent::Channel { channel, on },
+                None => continue,
+            },
+            (_, _, Some(x)) => EpsEvent::SetSoc(x),
+            _ => continue,
+        };
+        c.timeline.push(TimedEpsEvent {
+            at: SimTime::ZERO + ev.at.0,
+            event,
+        });
+    }
+    c.timeline.sort_by_key(|e| e.at);
+    c
+}
+
+/// The figures of one EPS sample that expectations check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PowerSample {
+    /// When.
+    pub t: SimTime,
+    /// State of charge, 0..1.
+    pub soc: f64,
+    /// Battery voltage, V.
+    pub battery_v: f64,
+    /// Battery current, A (positive charging).
+    pub battery_a: f64,
+    /// Solar array power, W.
+    pub solar_w: f64,
+    /// Total load, W.
+    pub load_w: f64,
+}
+
+/// The EPS's samples of a run, gathered from its events.
+#[derive(Debug, Default)]
+pub struct PowerObserver {
+    samples: Vec<PowerSample>,
+}
+
+impl PowerObserver {
+    /// Take in one event.
+    pub fn observe(&mut self, ev: &RunEvent) {
+        if let RunEvent::Eps(o) = ev
+            && let nodes_eps::EpsOutput::Sample {
+                t,
+                soc,
+                battery_v,
+                battery_a,
+                solar_w,
+                load_w,
+                ..
+            } = **o
+        {
+            self.samples.push(PowerSample {
+                t,
+                soc,
+                battery_v,
+                battery_a,
+                solar_w,
+                load_w,
+            });
+        }
+    }
+
+    /// The samples, in time order.
+    pub fn finish(self) -> Vec<PowerSample> {
+        self.samples
+    }
+}
+
+/// Which figure of a window a `power` expectation bounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Statistic {
+    /// Every sample.
+    Every,
+    /// The time mean over the window.
+    Mean,
+    /// The smallest sample.
+    Min,
+    /// The largest sample.
+    Max,
+}
+
+/// The figures a `power` expectation can check (each EPS sample).
+pub const POWER_QUANTITIES: &[&str] = &[
+    "soc",
+    "battery_v",
+    "battery_a",
+    "solar_w",
+    "load_w",
+    "net_w",
+];
+
+/// `power`: EPS samples in a window (each, or their mean, min or max) below / above a
+/// bound.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PowerExpect {
+    /// The figure checked (see [`POWER_QUANTITIES`]).
+    pub quantity: String,
+    /// What `below`/`above` bound: `every` sample (default), or the window's `mean`, `min`
+    /// or `max`.
+    #[serde(default)]
+    pub statistic: Option<Statistic>,
+    /// Upper bound (exclusive).
+    #[serde(default)]
+    pub below: Option<f64>,
+    /// Lower bound (exclusive).
+    #[serde(default)]
+    pub above: Option<f64>,
+    /// Start of the window (default: the start of the run).
+    #[serde(default)]
+    pub from: Option<Dur>,
+    /// End of the window (default: the end of the run).
+    #[serde(default)]
+    pub to: Option<Dur>,
+    /// Which samples count: `always` (default), `sunlit` (array power above zero) or
+    /// `eclipse` (none).
+    #[serde(default)]
+    pub when: Option<When>,
+}
+
+impl ExpectKind for PowerExpect {
+    const NAME: &'static str = "power";
+    const ABOUT: &'static str =
+        "EPS samples in a window (each, or their mean, min or max) below / above a bound";
+
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        if !POWER_QUANTITIES.contains(&self.quantity.as_str()) {
+            err(
+                "quantity",
+                format!(
+                    "unknown quantity `{}` ({})",
+                    self.quantity,
+                    POWER_QUANTITIES.join(", ")
+                ),
+            );
+        }
+        if self.below.is_none() && self.above.is_none() {
+            err(
+                "kind",
+                "a `power` expectation needs `below` or `above`".into(),
+            );
+        }
+        if self.when == Some(When::TargetVisible) {
+            err(
+                "when",
+                "a `power` expectation takes `always`, `sunlit` or `eclipse`".into(),
+            );
+        }
+        cx.window(self.from, self.to, err);
+    }
+
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        let report = cx.report;
+        check_power(
+            report,
+            &self.quantity,
+            (
+                self.statistic.unwrap_or(Statistic::Every),
+                self.when.unwrap_or(When::Always),
+            ),
+            (self.below, self.above),
+            self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),
+            self.to.map_or(report.sim_time, |d| SimTime::ZERO + d.0),
+        )
+    }
+}
+
+/// Judge a `power` expectation over the EPS samples in `[from, to]`.
+fn check_power(
+    report: &RunReport,
+    quantity: &str,
+    (statistic, when): (Statistic, When),
+    (below, above): (Option<f64>, Option<f64>),
+    from: SimTime,
+    to: SimTime,
+) -> (bool, SimTime, String) {
+    let value = |s: &PowerSample| match quantity {
+        "soc" => s.soc,
+        "battery_v" => s.battery_v,
+        "battery_a" => s.battery_a,
+        "solar_w" => s.solar_w,
+        "load_w" => s.load_w,
+        _ => s.solar_w - s.load_w,
+    };
+    let samples: Vec<(SimTime, f64)> = report
+        .power
+        .iter()
+        .filter(|s| s.t >= from && s.t <= to)
+        .filter(|s| match when {
+            When::Sunlit => s.solar_w > 0.0,
+            When::Eclipse => s.solar_w <= 0.0,
+            _ => true,
+        })
+        .map(|s| (s.t, value(s)))
+        .collect();
+    if samples.is_empty() {
+        return (
+            false,
+            to,
+            format!("no EPS sample ({when:?}) between {from} and {to} (is the EPS running?)"),
+        );
+    }
+    let ok = |v: f64| below.is_none_or(|b| v < b) && above.is_none_or(|a| v > a);
+    let (lo, hi) = samples
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(_, v)| {
+            (a.min(v), b.max(v))
+        });
+    let mean = samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64;
+    let n = samples.len();
+    let range = format!(
+        "{n} samples in {from} to {to}, {quantity} from {lo:.4} to {hi:.4}, mean {mean:.4}"
+    );
+    let bounds = match (above, below) {
+        (Some(a), Some(b)) => format!("within ({a}, {b})"),
+        (Some(a), None) => format!("above {a}"),
+        (None, Some(b)) => format!("below {b}"),
+        (None, None) => "any".into(),
+    };
+    match statistic {
+        Statistic::Every => match samples.iter().find(|s| !ok(s.1)) {
+            Some(&(t, v)) => (
+                false,
+                t,
+                format!("{range}; first at {t}: {quantity} = {v:.4} (expected {bounds})"),
+            ),
+            None => (true, to, range),
+        },
+        Statistic::Mean | Statistic::Min | Statistic::Max => {
+            let (name, v) = match statistic {
+                Statistic::Mean => ("mean", mean),
+                Statistic::Min => ("min", lo),
+                _ => ("max", hi),
+            };
+            let held = ok(v);
+            (
+                held,
+                to,
+                if held {
+                    range
+                } else {
+                    format!("{range} ({name} {v:.4}, expected {bounds})")
+                },
+            )
+        }
+    }
+}

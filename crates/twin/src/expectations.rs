@@ -1,0 +1,313 @@
+//! Expectations: the `[[expectations]]` of a scenario, a registry of kinds, and their
+//! verdicts on a run.
+//!
+//! Each kind is a struct of its own fields in the domain slice it judges (`crate::commands`
+//! the replies, `crate::adcs` the attitude, `crate::eps` the power, `crate::comm` the
+//! beacons, `crate::sessions` the payload data, `crate::counters` the counters), with its
+//! meaning (`validate`) and its verdict (`check`) ([`ExpectKind`]); the registry at the
+//! bottom of this file names it. Every expectation takes a `name` (default
+//! `expectations[i]`). Adding a kind is its struct and code in its slice and one line here.
+
+use csp::SimTime;
+use schemars::JsonSchema;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Deserializer};
+
+use crate::network::NetworkSpec;
+use crate::runtime::RunReport;
+use crate::scenario::{Dur, PathStep, Scenario};
+use crate::tagged::Tagged;
+
+/// The verdict on one expectation.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Verdict {
+    /// The expectation's name.
+    pub name: String,
+    /// Whether it held.
+    pub passed: bool,
+    /// The simulated time the verdict refers to (the failing occurrence, or the end).
+    pub t: SimTime,
+    /// What was observed, for example `reply after 1.204 s (limit 1.000 s)`.
+    pub observed: String,
+}
+
+/// What a check found: whether it held, when (the failing occurrence, or the end), and what
+/// was observed.
+pub type Judged = (bool, SimTime, String);
+
+/// Which occurrences of a repeated command (or which samples) an expectation covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Occurrence {
+    /// Every occurrence must satisfy it.
+    Every,
+    /// At least one must.
+    Any,
+}
+
+/// Which samples a window of samples looks at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum When {
+    /// Every sample.
+    Always,
+    /// Sun fully visible.
+    Sunlit,
+    /// Sun not visible at all.
+    Eclipse,
+    /// The ground target at or above `min_elevation_deg`.
+    TargetVisible,
+}
+
+/// Where an expectation is judged for its meaning: the scenario and its network.
+#[derive(Debug)]
+pub struct ExpectCx<'a> {
+    /// The whole scenario.
+    pub scenario: &'a Scenario,
+    /// The network.
+    pub net: &'a NetworkSpec,
+}
+
+impl ExpectCx<'_> {
+    /// A window `from`..`to`: `from` before the end of the run, `to` after `from`.
+    pub fn window(&self, from: Option<Dur>, to: Option<Dur>, err: &mut dyn FnMut(&str, String)) {
+        let end = self.scenario.duration.0;
+        if let Some(from) = from
+            && from.0 >= end
+        {
+            err(
+                "from",
+                format!(
+                    "the window starts at or after the end of the run ({})",
+                    crate::duration::format_duration(end)
+                ),
+            );
+        }
+        if let (Some(a), Some(b)) = (from, to)
+            && b <= a
+        {
+            err("to", "must be after `from`".into());
+        }
+    }
+}
+
+/// Where an expectation is checked: the run's report and the network.
+#[derive(Debug)]
+pub struct CheckCx<'a> {
+    /// What the run did.
+    pub report: &'a RunReport,
+    /// The network.
+    pub net: &'a NetworkSpec,
+}
+
+/// A kind of expectation (see the module doc).
+pub trait ExpectKind:
+    DeserializeOwned + JsonSchema + std::fmt::Debug + Clone + Send + Sync + 'static
+{
+    /// Its name in scenarios (`reply`).
+    const NAME: &'static str;
+    /// One line on what it checks.
+    const ABOUT: &'static str;
+    /// Check its meaning in the scenario; `err(field, message)`.
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String));
+    /// Judge the run.
+    fn check(&self, cx: &CheckCx<'_>) -> Judged;
+}
+
+/// An expectation of any kind.
+trait AnyExpect: std::fmt::Debug + Send + Sync {
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String));
+    fn check(&self, cx: &CheckCx<'_>) -> Judged;
+}
+
+impl<K: ExpectKind> AnyExpect for K {
+    fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        ExpectKind::validate(self, cx, err)
+    }
+    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+        ExpectKind::check(self, cx)
+    }
+}
+
+/// The fields every expectation takes.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Common {
+    /// Name for reports (default `expectations[i]`).
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
+/// The names of [`Common`]'s fields.
+pub const COMMON: &[&str] = &["name"];
+
+/// One `[[expectations]]` entry as written (typed through the registry).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ExpectEntry(pub Tagged);
+
+impl<'de> Deserialize<'de> for ExpectEntry {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        Tagged::deserialize(d).map(ExpectEntry)
+    }
+}
+
+/// A compiled expectation: its name and its kind's check.
+#[derive(Debug, Clone)]
+pub struct Expectation {
+    /// Its name.
+    pub name: String,
+    kind: std::sync::Arc<dyn AnyExpect>,
+}
+
+impl Expectation {
+    /// An expectation of kind `K` named `name`.
+    pub fn new<K: ExpectKind>(name: &str, kind: K) -> Self {
+        Expectation {
+            name: name.to_owned(),
+            kind: std::sync::Arc::new(kind),
+        }
+    }
+
+    /// The verdict on `report`.
+    pub fn check(&self, report: &RunReport, net: &NetworkSpec) -> Verdict {
+        let (passed, t, observed) = self.kind.check(&CheckCx { report, net });
+        Verdict {
+            name: self.name.clone(),
+            passed,
+            t,
+            observed,
+        }
+    }
+}
+
+fn typed<K: ExpectKind>(e: &Tagged) -> Result<std::sync::Arc<dyn AnyExpect>, (String, String)> {
+    let what = format!(
+        "{} `{}` expectation",
+        if K::NAME.starts_with(['a', 'e', 'i', 'o', 'u']) {
+            "an"
+        } else {
+            "a"
+        },
+        K::NAME
+    );
+    e.params::<K>(&what, COMMON)
+        .map(|k| std::sync::Arc::new(k) as std::sync::Arc<dyn AnyExpect>)
+}
+
+/// The registry: every expectation kind, by name (see the module doc).
+macro_rules! registry {
+    ($($kind:ty),* $(,)?) => {
+        /// The kinds' names.
+        pub const KINDS: &[&str] = &[$(<$kind as ExpectKind>::NAME),*];
+
+        fn parse_kind(e: &Tagged) -> Result<std::sync::Arc<dyn AnyExpect>, (String, String)> {
+            let kind = e.kind().unwrap_or("");
+            $(if kind == <$kind as ExpectKind>::NAME {
+                return typed::<$kind>(e);
+            })*
+            Err((
+                "kind".to_owned(),
+                if e.0.contains_key("kind") {
+                    format!("unknown expectation kind `{kind}` (kinds: {})", KINDS.join(", "))
+                } else {
+                    format!("an expectation needs `kind` ({})", KINDS.join(", "))
+                },
+            ))
+        }
+
+        impl JsonSchema for ExpectEntry {
+            fn schema_name() -> std::borrow::Cow<'static, str> {
+                "Expectation".into()
+            }
+            fn json_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+                let common = serde_json::to_value(schemars::schema_for!(Common))
+                    .unwrap_or_default();
+                let kinds = vec![$((
+                    <$kind as ExpectKind>::NAME,
+                    <$kind as ExpectKind>::ABOUT,
+                    serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
+                )),*];
+                crate::tagged::one_of(generator, common, kinds)
+            }
+        }
+    };
+}
+
+registry! {
+    crate::commands::ReplyExpect,
+    crate::commands::NoReplyExpect,
+    crate::counters::CounterExpect,
+    crate::adcs::AttitudeExpect,
+    crate::sessions::SessionExpect,
+    crate::sessions::DownlinkExpect,
+    crate::sessions::AccountingExpect,
+    crate::eps::PowerExpect,
+    crate::comm::BeaconExpect,
+}
+
+type Parsed = (Common, std::sync::Arc<dyn AnyExpect>);
+
+fn parse(e: &ExpectEntry) -> Result<Parsed, Vec<(String, String)>> {
+    let kind = parse_kind(&e.0);
+    let common = e.0.common::<Common>(COMMON);
+    match (common, kind) {
+        (Ok(c), Ok(k)) => Ok((c, k)),
+        (c, k) => Err([c.err(), k.err()].into_iter().flatten().collect()),
+    }
+}
+
+/// Check every `[[expectations]]` entry; `err(path, message)` for each problem.
+pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    let cx = ExpectCx { scenario: s, net };
+    for (i, e) in s.expectations.iter().enumerate() {
+        let p = |f: &str| {
+            vec![
+                PathStep::Key("expectations".into()),
+                PathStep::Index(i),
+                PathStep::Key(f.into()),
+            ]
+        };
+        match parse(e) {
+            Ok((_, kind)) => kind.validate(&cx, &mut |f, m| err(p(f), m)),
+            Err(errs) => {
+                for (f, m) in errs {
+                    err(p(&f), m);
+                }
+            }
+        }
+    }
+}
+
+/// The expectations of a validated scenario, in file order.
+pub fn compile(s: &Scenario) -> Vec<Expectation> {
+    s.expectations
+        .iter()
+        .enumerate()
+        .filter_map(|(i, e)| {
+            let (common, kind) = parse(e).ok()?;
+            Some(Expectation {
+                name: common.name.unwrap_or_else(|| format!("expectations[{i}]")),
+                kind,
+            })
+        })
+        .collect()
+}
+
+/// Check every expectation.
+pub fn check_all(
+    expectations: &[Expectation],
+    report: &RunReport,
+    net: &NetworkSpec,
+) -> Vec<Verdict> {
+    expectations.iter().map(|x| x.check(report, net)).collect()
+}
+
+/// `a..=b`, `>= a`, `<= b` or `any`.
+pub fn bounds(min: Option<u64>, max: Option<u64>) -> String {
+    match (min, max) {
+        (Some(a), Some(b)) => format!("{a}..={b}"),
+        (Some(a), None) => format!(">= {a}"),
+        (None, Some(b)) => format!("<= {b}"),
+        (None, None) => "any".into(),
+    }
+}

@@ -1,0 +1,457 @@
+//! Faults: the `[[faults]]` of a scenario, a registry of kinds, and the few mechanisms the
+//! runtime applies them with.
+//!
+//! # A fault kind
+//! Each kind is a struct of its own fields ([`FaultKind`]) in one file of this module, with
+//! its meaning (`validate`) and what it does (`compile`: actions at instants on the fault
+//! timeline, or events on a node's own timeline); the registry at the bottom of this file
+//! names it. The fields every fault takes are [`Common`]: `at`, `until` (when it is lifted;
+//! default never) and `target` (a medium or a node). Adding a kind is its file, one line in
+//! the registry, and its effect where it happens (the medium, the node's core).
+//!
+//! # Mechanisms ([`FaultAction`])
+//! - media impairments, each fault under its own id: faults on one medium compose
+//!   (`bus::impair::ImpairmentSet`);
+//! - CAN faults of a bus (`bus::can::CanFault`), by id;
+//! - power and hang holds, through the platform's power rules (`platform::power`);
+//! - a reboot; a fault of a node's core (`csp::node::NodeFault`);
+//! - the UHF link's contact (passes, `crate::comm`);
+//! - record only: a fault that a node applies from its own timeline (the FC's sensor and
+//!   wheel faults, the EPS's), put on the fault timeline so that the run's log and
+//!   recording say when.
+
+pub mod media;
+pub mod node;
+
+use std::collections::BTreeMap;
+
+use bus::driver::{CtlTx, NodeCtl};
+use bus::impair::Impairments;
+use bus::outside::Segments;
+use csp::SimTime;
+use schemars::JsonSchema;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Deserializer};
+
+use crate::events::RunEvent;
+use crate::network::NetworkSpec;
+use crate::runtime::RunOptions;
+use crate::runtime::power::PowerShell;
+use crate::scenario::{Dur, NodeRef, PathStep, Scenario};
+use crate::tagged::Tagged;
+
+/// A medium a fault applies to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MediumId {
+    /// Main CAN bus.
+    Main,
+    /// Payload CAN bus.
+    Payload,
+    /// The UHF air channel of the ground segment.
+    Uhf,
+}
+
+impl MediumId {
+    /// The medium a fault's `target` names (`main`, `payload`, `uhf`).
+    pub fn of(target: &NodeRef) -> Option<MediumId> {
+        match target {
+            NodeRef::Name(n) if n == "main" => Some(MediumId::Main),
+            NodeRef::Name(n) if n == "payload" => Some(MediumId::Payload),
+            NodeRef::Name(n) if n == "uhf" => Some(MediumId::Uhf),
+            _ => None,
+        }
+    }
+}
+
+/// One change the fault director applies at an instant. `fault` is the scenario fault's
+/// index: faults on one medium or node compose, and each start or end changes only its own
+/// part.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FaultAction {
+    /// Fault `fault` starts impairing a medium (`Some`) or is lifted (`None`).
+    Impair {
+        /// The medium.
+        medium: MediumId,
+        /// The fault.
+        fault: u32,
+        /// Its impairments while active.
+        imp: Option<Impairments>,
+    },
+    /// Fault `fault` starts acting on a CAN bus as CAN faults do (`Some`) or is lifted.
+    Can {
+        /// The bus (`Main` or `Payload`).
+        medium: MediumId,
+        /// The fault.
+        fault: u32,
+        /// What it does while active.
+        can: Option<bus::can::CanFault>,
+    },
+    /// Power fault `fault` holds node `addr` off (`off`) or releases it.
+    Power {
+        /// The node.
+        addr: u8,
+        /// The fault.
+        fault: u32,
+        /// Held off or released.
+        off: bool,
+    },
+    /// Node reboot.
+    Reboot(u8),
+    /// Hang fault `fault` starts (`hung`) or ends on node `addr`.
+    Hang {
+        /// The node.
+        addr: u8,
+        /// The fault.
+        fault: u32,
+        /// Hung or recovered.
+        hung: bool,
+    },
+    /// A fault of node `addr`'s core starts (`Some`) or ends, under fault id `fault`.
+    Node {
+        /// The node.
+        addr: u8,
+        /// The fault.
+        fault: u32,
+        /// What it does while active.
+        what: Option<csp::node::NodeFault>,
+    },
+    /// A fault a node applies itself from its own timeline: recorded only.
+    Record,
+    /// The UHF link's contact with the ground (a pass begins or ends).
+    Contact(bool),
+}
+
+/// A fault action at a time, with a description for logs and recordings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimedFault {
+    /// When.
+    pub at: SimTime,
+    /// What.
+    pub action: FaultAction,
+    /// Human-readable, for example `faults[0]: Drop on main`.
+    pub what: String,
+}
+
+/// The fields every fault takes.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Common {
+    /// When it starts.
+    pub at: Dur,
+    /// When it is lifted (default: never).
+    #[serde(default)]
+    pub until: Option<Dur>,
+    /// The medium (`main`, `payload`, `uhf`) or node it acts on.
+    pub target: NodeRef,
+}
+
+/// The names of [`Common`]'s fields.
+pub const COMMON: &[&str] = &["at", "until", "target"];
+
+/// Where a fault is judged and compiled: its place in the scenario and its common fields.
+#[derive(Debug)]
+pub struct FaultCx<'a> {
+    /// Its index in `[[faults]]` (also its id: faults compose by id).
+    pub index: usize,
+    /// `at`, `until`, `target`.
+    pub common: &'a Common,
+    /// The network.
+    pub net: &'a NetworkSpec,
+    /// The whole scenario.
+    pub scenario: &'a Scenario,
+    label: &'static str,
+}
+
+impl FaultCx<'_> {
+    /// The fault's id.
+    pub fn id(&self) -> u32 {
+        u32::try_from(self.index).unwrap_or(u32::MAX)
+    }
+    /// When it starts.
+    pub fn at(&self) -> SimTime {
+        SimTime::ZERO + self.common.at.0
+    }
+    /// When it is lifted.
+    pub fn until(&self) -> Option<SimTime> {
+        self.common.until.map(|u| SimTime::ZERO + u.0)
+    }
+    /// The medium `target` names, if it names one.
+    pub fn medium(&self) -> Option<MediumId> {
+        MediumId::of(&self.common.target)
+    }
+    /// The node `target` names, if it names one.
+    pub fn node(&self) -> Result<u8, String> {
+        self.net.resolve(&self.common.target)
+    }
+    /// The description of the fault in the run's log (`faults[0]: Drop on main`).
+    pub fn what(&self) -> String {
+        format!(
+            "faults[{}]: {} on {}",
+            self.index, self.label, self.common.target
+        )
+    }
+}
+
+/// What compiling a fault produces: actions on the fault timeline, and changes to the
+/// run's options (a node's own timeline).
+#[derive(Debug)]
+pub struct FaultPlan<'a> {
+    timeline: &'a mut Vec<TimedFault>,
+    /// The run's options, for faults a node applies from its own timeline.
+    pub opts: &'a mut RunOptions,
+    what: String,
+}
+
+impl FaultPlan<'_> {
+    /// `action` at `t`; `suffix` is added to the fault's description (` (lifted)`).
+    pub fn at(&mut self, t: SimTime, action: FaultAction, suffix: &str) {
+        self.timeline.push(TimedFault {
+            at: t,
+            action,
+            what: format!("{}{suffix}", self.what),
+        });
+    }
+}
+
+/// A kind of fault (see the module doc).
+pub trait FaultKind: DeserializeOwned + JsonSchema + std::fmt::Debug + 'static {
+    /// Its name in scenarios (`drop`).
+    const NAME: &'static str;
+    /// Its name in the run's log and recording (`Drop`).
+    const LABEL: &'static str;
+    /// One line on what it does.
+    const ABOUT: &'static str;
+    /// Whether it lasts until `until` (`false`: instantaneous, no `until`).
+    const LASTS: bool = true;
+    /// Check its meaning; `err(field, message)`.
+    fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String));
+    /// Its actions.
+    fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>);
+}
+
+/// A fault of any kind.
+trait AnyFault: std::fmt::Debug {
+    fn label(&self) -> &'static str;
+    fn lasts(&self) -> bool;
+    fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String));
+    fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>);
+}
+
+impl<K: FaultKind> AnyFault for K {
+    fn label(&self) -> &'static str {
+        K::LABEL
+    }
+    fn lasts(&self) -> bool {
+        K::LASTS
+    }
+    fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        FaultKind::validate(self, cx, err)
+    }
+    fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
+        FaultKind::compile(self, cx, plan)
+    }
+}
+
+/// One `[[faults]]` entry as written (typed through the registry).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FaultEntry(pub Tagged);
+
+impl<'de> Deserialize<'de> for FaultEntry {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        Tagged::deserialize(d).map(FaultEntry)
+    }
+}
+
+type Parsed = (Common, Box<dyn AnyFault>);
+
+fn typed<K: FaultKind>(e: &Tagged) -> Result<Box<dyn AnyFault>, (String, String)> {
+    e.params::<K>(&format!("a `{}` fault", K::NAME), COMMON)
+        .map(|k| Box::new(k) as Box<dyn AnyFault>)
+}
+
+/// The registry: every fault kind, by name (see the module doc).
+macro_rules! registry {
+    ($($kind:ty),* $(,)?) => {
+        /// The kinds' names.
+        pub const KINDS: &[&str] = &[$(<$kind as FaultKind>::NAME),*];
+
+        fn parse_kind(e: &Tagged) -> Result<Box<dyn AnyFault>, (String, String)> {
+            let kind = e.kind().unwrap_or("");
+            $(if kind == <$kind as FaultKind>::NAME {
+                return typed::<$kind>(e);
+            })*
+            Err((
+                "kind".to_owned(),
+                if e.0.contains_key("kind") {
+                    format!("unknown fault kind `{kind}` (kinds: {})", KINDS.join(", "))
+                } else {
+                    format!("a fault needs `kind` ({})", KINDS.join(", "))
+                },
+            ))
+        }
+
+        impl JsonSchema for FaultEntry {
+            fn schema_name() -> std::borrow::Cow<'static, str> {
+                "Fault".into()
+            }
+            fn json_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+                let common = serde_json::to_value(schemars::schema_for!(Common))
+                    .unwrap_or_default();
+                let kinds = vec![$((
+                    <$kind as FaultKind>::NAME,
+                    <$kind as FaultKind>::ABOUT,
+                    serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
+                )),*];
+                crate::tagged::one_of(generator, common, kinds)
+            }
+        }
+    };
+}
+
+registry! {
+    media::Drop,
+    media::Corrupt,
+    media::Delay,
+    media::LinkDown,
+    node::PowerOff,
+    node::Reboot,
+    node::Hang,
+}
+
+fn parse(e: &FaultEntry) -> Result<Parsed, Vec<(String, String)>> {
+    let kind = parse_kind(&e.0);
+    let common = e.0.common::<Common>(COMMON);
+    match (common, kind) {
+        (Ok(c), Ok(k)) => Ok((c, k)),
+        (c, k) => Err([c.err(), k.err()].into_iter().flatten().collect()),
+    }
+}
+
+/// Check every `[[faults]]` entry; `err(path, message)` for each problem.
+pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    for (i, e) in s.faults.iter().enumerate() {
+        let p = |f: &str| {
+            vec![
+                PathStep::Key("faults".into()),
+                PathStep::Index(i),
+                PathStep::Key(f.into()),
+            ]
+        };
+        let (common, kind) = match parse(e) {
+            Ok(x) => x,
+            Err(errs) => {
+                for (f, m) in errs {
+                    err(p(&f), m);
+                }
+                continue;
+            }
+        };
+        if common.until.is_some_and(|u| u <= common.at) {
+            err(p("until"), "must be after `at`".into());
+        }
+        if !kind.lasts() && common.until.is_some() {
+            err(
+                p("until"),
+                format!(
+                    "a `{}` fault is instantaneous: it takes no `until`",
+                    e.0.kind().unwrap_or("")
+                ),
+            );
+        }
+        let cx = FaultCx {
+            index: i,
+            common: &common,
+            net,
+            scenario: s,
+            label: kind.label(),
+        };
+        kind.validate(&cx, &mut |f, m| err(p(f), m));
+    }
+}
+
+/// The fault timeline of a validated scenario's `[[faults]]`, in file order (the caller
+/// sorts the whole timeline by time); faults a node applies itself go on its own timeline
+/// in `opts`.
+pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) -> Vec<TimedFault> {
+    let mut timeline = Vec::new();
+    for (i, e) in s.faults.iter().enumerate() {
+        let Ok((common, kind)) = parse(e) else {
+            continue;
+        };
+        let cx = FaultCx {
+            index: i,
+            common: &common,
+            net,
+            scenario: s,
+            label: kind.label(),
+        };
+        let mut plan = FaultPlan {
+            timeline: &mut timeline,
+            opts,
+            what: cx.what(),
+        };
+        kind.compile(&cx, &mut plan);
+    }
+    timeline
+}
+
+/// What the runtime's fault director acts on.
+#[derive(Debug)]
+pub struct Director<'a> {
+    /// The media.
+    pub segs: &'a Segments,
+    /// Every node's control channel.
+    pub ctls: &'a BTreeMap<u8, CtlTx>,
+    /// The power rules.
+    pub power: &'a mut PowerShell,
+}
+
+impl Director<'_> {
+    /// Apply one fault action at its instant; returns the events of the power rules.
+    pub fn apply(&mut self, f: &TimedFault) -> Vec<RunEvent> {
+        let ctl = |addr: &u8, c: NodeCtl| {
+            if let Some(tx) = self.ctls.get(addr) {
+                let _ = tx.send((f.at, c));
+            }
+        };
+        match &f.action {
+            FaultAction::Impair { medium, fault, imp } => {
+                match medium {
+                    MediumId::Main => self.segs.main.set_fault(*fault, *imp),
+                    MediumId::Payload => self.segs.payload.set_fault(*fault, *imp),
+                    MediumId::Uhf => self.segs.ground.set_fault(*fault, *imp),
+                }
+                Vec::new()
+            }
+            FaultAction::Can { medium, fault, can } => {
+                match medium {
+                    MediumId::Main => self.segs.main.set_can_fault(*fault, can.clone()),
+                    MediumId::Payload => self.segs.payload.set_can_fault(*fault, can.clone()),
+                    MediumId::Uhf => {}
+                }
+                Vec::new()
+            }
+            FaultAction::Power { addr, fault, off } => {
+                self.power.power_fault(f.at, *addr, *fault, *off)
+            }
+            FaultAction::Reboot(a) => {
+                // A node that is off or hung does not reboot (its task ignores it then).
+                ctl(a, NodeCtl::Reboot);
+                Vec::new()
+            }
+            FaultAction::Hang { addr, fault, hung } => {
+                self.power.hang_fault(f.at, *addr, *fault, *hung)
+            }
+            FaultAction::Node { addr, fault, what } => {
+                ctl(addr, NodeCtl::Fault(*fault, what.clone()));
+                Vec::new()
+            }
+            // The node applies it from its own timeline.
+            FaultAction::Record => Vec::new(),
+            FaultAction::Contact(on) => {
+                self.segs.ground.set_contact(*on);
+                Vec::new()
+            }
+        }
+    }
+}
