@@ -995,74 +995,115 @@ pub fn begin_fields(f: &CanFrame) -> Option<BeginFields> {
     })
 }
 
-/// Which kind of channel a message goes to; each kind has one schema.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ChannelKind {
-    /// `/can/<bus>/frames` (`m6p.CanFrame`), keyed by bus.
-    Can,
-    /// `/<network>/packets` (`m6p.NetPacket`), keyed by network.
-    Net,
-    /// `/csp/packets` (`m6p.CspPacket`).
-    Csp,
-    /// `/kiss/<link>/in|out` (`m6p.KissFrame`), keyed by `<link name>/<dir>`.
-    Kiss,
-    /// `/log` (`foxglove.Log`).
-    Log,
-    /// `/faults` (`m6p.Fault`).
-    Fault,
-    /// `/commands` (`m6p.Command`).
-    Command,
-    /// `/expectations` (`m6p.Expectation`).
-    Expectation,
-    /// `/fc/truth/tf` (`foxglove.FrameTransform`).
-    TruthTf,
-    /// `/fc/estimate/tf` (`foxglove.FrameTransform`).
-    EstimateTf,
-    /// `/fc/truth/location` (`foxglove.LocationFix`).
-    TruthLocation,
-    /// `/fc/truth/state` (`m6p.TruthState`).
-    TruthState,
-    /// `/fc/adcs` (`m6p.Adcs`).
-    Adcs,
-    /// `/fc/scene` (`foxglove.SceneUpdate`).
-    Scene,
-    /// `/pc/sessions` (`m6p.PcSession`).
-    PcSession,
-    /// `/pc/downlink` (`m6p.Downlink`).
-    Downlink,
-    /// `/payloads` (`m6p.Payload`).
-    Payload,
-    /// `/eps/power` (`m6p.EpsPower`).
-    EpsPower,
-    /// `/eps/channels` (`m6p.EpsChannel`).
-    EpsChannel,
-    /// `/ground/beacons` (`m6p.Beacon`).
-    Beacon,
+/// The recorded channels, one row each: the kind, its schema's name, the schema (a message
+/// type's JSON Schema, or one of Foxglove's), its topic (from the key: the bus, network or
+/// `<link>/<dir>`; fixed kinds ignore it) and the metadata name of its key. Adding a
+/// channel is a row here, its message type, and the line of [`EventEncoder`] that emits it.
+macro_rules! channels {
+    ($($kind:ident => ($schema_name:expr, $schema:expr, $topic:expr, $meta:expr): $doc:literal,)*) => {
+        /// Which kind of channel a message goes to; each kind has one schema.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        pub enum ChannelKind {
+            $(#[doc = $doc] $kind,)*
+        }
+
+        /// Every kind, in declaration order (`kind as usize` indexes it).
+        pub const CHANNEL_KINDS: &[ChannelKind] = &[$(ChannelKind::$kind,)*];
+
+        impl ChannelKind {
+            /// The schema's name.
+            pub fn schema_name(self) -> &'static str {
+                match self {
+                    $(ChannelKind::$kind => $schema_name,)*
+                }
+            }
+
+            /// The JSON Schema of the messages (schema encoding [`SCHEMA_ENCODING`]).
+            pub fn schema_json(self) -> anyhow::Result<Vec<u8>> {
+                match self {
+                    $(ChannelKind::$kind => $schema,)*
+                }
+            }
+
+            /// The topic of this kind's channel for `key` (the bus, network or
+            /// `<link>/<dir>`; ignored by the fixed kinds).
+            pub fn topic(self, key: &str) -> String {
+                let topic: fn(&str) -> String = match self {
+                    $(ChannelKind::$kind => $topic,)*
+                };
+                topic(key)
+            }
+
+            /// The channel's metadata: `bus`, `link` or `medium` = `key` when there is a key.
+            pub fn metadata(self, key: &str) -> BTreeMap<String, String> {
+                let name: &str = match self {
+                    $(ChannelKind::$kind => $meta,)*
+                };
+                let mut metadata = BTreeMap::new();
+                if !key.is_empty() {
+                    metadata.insert(name.to_owned(), key.to_owned());
+                }
+                metadata
+            }
+        }
+    };
 }
 
-/// Every kind, in declaration order (`kind as usize` indexes it).
-pub const CHANNEL_KINDS: [ChannelKind; 20] = [
-    ChannelKind::Can,
-    ChannelKind::Net,
-    ChannelKind::Csp,
-    ChannelKind::Kiss,
-    ChannelKind::Log,
-    ChannelKind::Fault,
-    ChannelKind::Command,
-    ChannelKind::Expectation,
-    ChannelKind::TruthTf,
-    ChannelKind::EstimateTf,
-    ChannelKind::TruthLocation,
-    ChannelKind::TruthState,
-    ChannelKind::Adcs,
-    ChannelKind::Scene,
-    ChannelKind::PcSession,
-    ChannelKind::Downlink,
-    ChannelKind::Payload,
-    ChannelKind::EpsPower,
-    ChannelKind::EpsChannel,
-    ChannelKind::Beacon,
-];
+/// The JSON Schema of message type `T`.
+fn schema_of<T: JsonSchema>() -> anyhow::Result<Vec<u8>> {
+    Ok(serde_json::to_vec(&schemars::schema_for!(T))?)
+}
+
+/// A fixed topic.
+fn fixed(topic: &'static str) -> String {
+    topic.to_owned()
+}
+
+channels! {
+    Can => ("m6p.CanFrame", schema_of::<CanFrameMsg>(), |k| format!("/can/{k}/frames"), "bus"):
+        "`/can/<bus>/frames` (`m6p.CanFrame`), keyed by bus.",
+    Net => ("m6p.NetPacket", schema_of::<NetPacketMsg>(), |k| format!("/{k}/packets"), "medium"):
+        "`/<network>/packets` (`m6p.NetPacket`), keyed by network.",
+    Csp => ("m6p.CspPacket", schema_of::<CspPacketMsg>(), |_| fixed(TOPIC_CSP), "medium"):
+        "`/csp/packets` (`m6p.CspPacket`).",
+    Kiss => ("m6p.KissFrame", schema_of::<KissFrameMsg>(), |k| match k.rsplit_once('/') {
+            Some((link, dir)) => format!("{}/{dir}", kiss_topic(link)),
+            None => kiss_topic(k),
+        }, "link"):
+        "`/kiss/<link>/in|out` (`m6p.KissFrame`), keyed by `<link name>/<dir>`.",
+    Log => ("foxglove.Log", Ok(FOXGLOVE_LOG_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_LOG), "medium"):
+        "`/log` (`foxglove.Log`).",
+    Fault => ("m6p.Fault", schema_of::<FaultMsg>(), |_| fixed(TOPIC_FAULTS), "medium"):
+        "`/faults` (`m6p.Fault`).",
+    Command => ("m6p.Command", schema_of::<CommandMsg>(), |_| fixed(TOPIC_COMMANDS), "medium"):
+        "`/commands` (`m6p.Command`).",
+    Expectation => ("m6p.Expectation", schema_of::<ExpectationMsg>(), |_| fixed(TOPIC_EXPECTATIONS), "medium"):
+        "`/expectations` (`m6p.Expectation`).",
+    TruthTf => ("foxglove.FrameTransform", Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_TRUTH_TF), "medium"):
+        "`/fc/truth/tf` (`foxglove.FrameTransform`).",
+    EstimateTf => ("foxglove.FrameTransform", Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_ESTIMATE_TF), "medium"):
+        "`/fc/estimate/tf` (`foxglove.FrameTransform`).",
+    TruthLocation => ("foxglove.LocationFix", Ok(FOXGLOVE_LOCATION_FIX_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_TRUTH_LOCATION), "medium"):
+        "`/fc/truth/location` (`foxglove.LocationFix`).",
+    TruthState => ("m6p.TruthState", schema_of::<TruthStateMsg>(), |_| fixed(TOPIC_TRUTH_STATE), "medium"):
+        "`/fc/truth/state` (`m6p.TruthState`).",
+    Adcs => ("m6p.Adcs", schema_of::<AdcsMsg>(), |_| fixed(TOPIC_ADCS), "medium"):
+        "`/fc/adcs` (`m6p.Adcs`).",
+    Scene => ("foxglove.SceneUpdate", Ok(FOXGLOVE_SCENE_UPDATE_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_SCENE), "medium"):
+        "`/fc/scene` (`foxglove.SceneUpdate`).",
+    PcSession => ("m6p.PcSession", schema_of::<PcSessionMsg>(), |_| fixed(TOPIC_PC_SESSIONS), "medium"):
+        "`/pc/sessions` (`m6p.PcSession`).",
+    Downlink => ("m6p.Downlink", schema_of::<DownlinkMsg>(), |_| fixed(TOPIC_PC_DOWNLINK), "medium"):
+        "`/pc/downlink` (`m6p.Downlink`).",
+    Payload => ("m6p.Payload", schema_of::<PayloadMsg>(), |_| fixed(TOPIC_PAYLOADS), "medium"):
+        "`/payloads` (`m6p.Payload`).",
+    EpsPower => ("m6p.EpsPower", schema_of::<EpsPowerMsg>(), |_| fixed(TOPIC_EPS), "medium"):
+        "`/eps/power` (`m6p.EpsPower`).",
+    EpsChannel => ("m6p.EpsChannel", schema_of::<EpsChannelMsg>(), |_| fixed(TOPIC_EPS_CHANNELS), "medium"):
+        "`/eps/channels` (`m6p.EpsChannel`).",
+    Beacon => ("m6p.Beacon", schema_of::<BeaconMsg>(), |_| fixed(TOPIC_BEACONS), "medium"):
+        "`/ground/beacons` (`m6p.Beacon`).",
+}
 
 /// The channels every run has, as (kind, key), in registration order; others (another
 /// bus, a KISS link) are registered when their first message comes.
@@ -1076,107 +1117,6 @@ pub const FIXED_CHANNELS: [(ChannelKind, &str); 8] = [
     (ChannelKind::Command, ""),
     (ChannelKind::Expectation, ""),
 ];
-
-impl ChannelKind {
-    /// The schema's name.
-    pub fn schema_name(self) -> &'static str {
-        match self {
-            ChannelKind::Can => "m6p.CanFrame",
-            ChannelKind::Net => "m6p.NetPacket",
-            ChannelKind::Csp => "m6p.CspPacket",
-            ChannelKind::Kiss => "m6p.KissFrame",
-            ChannelKind::Log => "foxglove.Log",
-            ChannelKind::Fault => "m6p.Fault",
-            ChannelKind::Command => "m6p.Command",
-            ChannelKind::Expectation => "m6p.Expectation",
-            ChannelKind::TruthTf | ChannelKind::EstimateTf => "foxglove.FrameTransform",
-            ChannelKind::TruthLocation => "foxglove.LocationFix",
-            ChannelKind::TruthState => "m6p.TruthState",
-            ChannelKind::Adcs => "m6p.Adcs",
-            ChannelKind::Scene => "foxglove.SceneUpdate",
-            ChannelKind::PcSession => "m6p.PcSession",
-            ChannelKind::Downlink => "m6p.Downlink",
-            ChannelKind::Payload => "m6p.Payload",
-            ChannelKind::EpsPower => "m6p.EpsPower",
-            ChannelKind::EpsChannel => "m6p.EpsChannel",
-            ChannelKind::Beacon => "m6p.Beacon",
-        }
-    }
-
-    /// The JSON Schema of the messages (schema encoding [`SCHEMA_ENCODING`]).
-    pub fn schema_json(self) -> anyhow::Result<Vec<u8>> {
-        fn gen_schema<T: JsonSchema>() -> anyhow::Result<Vec<u8>> {
-            Ok(serde_json::to_vec(&schemars::schema_for!(T))?)
-        }
-        match self {
-            ChannelKind::Can => gen_schema::<CanFrameMsg>(),
-            ChannelKind::Net => gen_schema::<NetPacketMsg>(),
-            ChannelKind::Csp => gen_schema::<CspPacketMsg>(),
-            ChannelKind::Kiss => gen_schema::<KissFrameMsg>(),
-            ChannelKind::Log => Ok(FOXGLOVE_LOG_SCHEMA.as_bytes().to_vec()),
-            ChannelKind::Fault => gen_schema::<FaultMsg>(),
-            ChannelKind::Command => gen_schema::<CommandMsg>(),
-            ChannelKind::Expectation => gen_schema::<ExpectationMsg>(),
-            ChannelKind::TruthTf | ChannelKind::EstimateTf => {
-                Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec())
-            }
-            ChannelKind::TruthLocation => Ok(FOXGLOVE_LOCATION_FIX_SCHEMA.as_bytes().to_vec()),
-            ChannelKind::TruthState => gen_schema::<TruthStateMsg>(),
-            ChannelKind::Adcs => gen_schema::<AdcsMsg>(),
-            ChannelKind::Scene => Ok(FOXGLOVE_SCENE_UPDATE_SCHEMA.as_bytes().to_vec()),
-            ChannelKind::PcSession => gen_schema::<PcSessionMsg>(),
-            ChannelKind::Downlink => gen_schema::<DownlinkMsg>(),
-            ChannelKind::Payload => gen_schema::<PayloadMsg>(),
-            ChannelKind::EpsPower => gen_schema::<EpsPowerMsg>(),
-            ChannelKind::EpsChannel => gen_schema::<EpsChannelMsg>(),
-            ChannelKind::Beacon => gen_schema::<BeaconMsg>(),
-        }
-    }
-
-    /// The topic of this kind's channel for `key` (the bus, network or `<link>/<dir>`;
-    /// ignored by the fixed kinds).
-    pub fn topic(self, key: &str) -> String {
-        match self {
-            ChannelKind::Can => format!("/can/{key}/frames"),
-            ChannelKind::Net => format!("/{key}/packets"),
-            ChannelKind::Kiss => match key.rsplit_once('/') {
-                Some((link, dir)) => format!("{}/{dir}", kiss_topic(link)),
-                None => kiss_topic(key),
-            },
-            ChannelKind::Csp => TOPIC_CSP.to_owned(),
-            ChannelKind::Log => TOPIC_LOG.to_owned(),
-            ChannelKind::Fault => TOPIC_FAULTS.to_owned(),
-            ChannelKind::Command => TOPIC_COMMANDS.to_owned(),
-            ChannelKind::Expectation => TOPIC_EXPECTATIONS.to_owned(),
-            ChannelKind::TruthTf => TOPIC_TRUTH_TF.to_owned(),
-            ChannelKind::EstimateTf => TOPIC_ESTIMATE_TF.to_owned(),
-            ChannelKind::TruthLocation => TOPIC_TRUTH_LOCATION.to_owned(),
-            ChannelKind::TruthState => TOPIC_TRUTH_STATE.to_owned(),
-            ChannelKind::Adcs => TOPIC_ADCS.to_owned(),
-            ChannelKind::Scene => TOPIC_SCENE.to_owned(),
-            ChannelKind::PcSession => TOPIC_PC_SESSIONS.to_owned(),
-            ChannelKind::Downlink => TOPIC_PC_DOWNLINK.to_owned(),
-            ChannelKind::Payload => TOPIC_PAYLOADS.to_owned(),
-            ChannelKind::EpsPower => TOPIC_EPS.to_owned(),
-            ChannelKind::EpsChannel => TOPIC_EPS_CHANNELS.to_owned(),
-            ChannelKind::Beacon => TOPIC_BEACONS.to_owned(),
-        }
-    }
-
-    /// The channel's metadata: `bus`, `link` or `medium` = `key` when there is a key.
-    pub fn metadata(self, key: &str) -> BTreeMap<String, String> {
-        let mut metadata = BTreeMap::new();
-        if !key.is_empty() {
-            let name = match self {
-                ChannelKind::Can => "bus",
-                ChannelKind::Kiss => "link",
-                _ => "medium",
-            };
-            metadata.insert(name.to_owned(), key.to_owned());
-        }
-        metadata
-    }
-}
 
 /// One encoded message, as [`EventEncoder::encode`] hands it out.
 #[derive(Debug, Clone, Copy)]
@@ -1982,7 +1922,7 @@ struct McapOut {
     writer: Writer<BufWriter<File>>,
     path: PathBuf,
     /// Schema id per kind (`kind as usize`), once written.
-    schema_ids: [Option<u16>; CHANNEL_KINDS.len()],
+    schema_ids: Vec<Option<u16>>,
     chans: Vec<Chan>,
 }
 
@@ -2113,7 +2053,7 @@ impl Recorder {
         let mut out = McapOut {
             writer,
             path: path.to_owned(),
-            schema_ids: [None; CHANNEL_KINDS.len()],
+            schema_ids: vec![None; CHANNEL_KINDS.len()],
             chans: Vec::new(),
         };
         for (kind, key) in FIXED_CHANNELS {
@@ -2250,7 +2190,7 @@ mod tests {
 
     #[test]
     fn every_kind_has_a_json_schema_titled_with_its_name() {
-        for kind in CHANNEL_KINDS {
+        for &kind in CHANNEL_KINDS {
             let schema: serde_json::Value =
                 serde_json::from_slice(&kind.schema_json().unwrap()).unwrap();
             assert_eq!(schema["title"], kind.schema_name(), "{kind:?}");
