@@ -14,7 +14,23 @@
 //!   never receives its own frame. An outside program can claim an address exclusively
 //!   ([`CanBus::claim`]): while it holds the claim, the internal node with that address no
 //!   longer receives its frames;
-//! - impairments (drop, corrupt, delay, down) are drawn from the bus's seeded generator.
+//! - impairments (drop, corrupt, delay, down) are drawn from the bus's seeded generator;
+//! - **CAN fails as CAN does** (ISO 11898-1, fault confinement): a frame hit by a bit error
+//!   (`corrupt`, or a scenario's CAN faults) is never delivered. Every node detects the
+//!   error at a bit drawn uniformly over the frame (before its end of frame) and the bus
+//!   carries an error frame (6-bit error flag, 8-bit delimiter, 3-bit intermission) after
+//!   it; the transmitter's transmit error counter (TEC) rises by 8 and every other
+//!   controller's receive error counter (REC) by 1, and the frame stays at the head of the
+//!   transmitter's queue: it is retransmitted automatically, entering arbitration again
+//!   when the bus is free. A frame sent well takes 1 off the transmitter's TEC and off every
+//!   receiver's REC (one above 127 goes back to 120). A controller with TEC or REC above
+//!   127 is error-passive; with TEC above 255 it goes bus-off: its queue is lost, it neither
+//!   sends nor receives (frames queued meanwhile are dropped and counted), and it recovers
+//!   (error-active, both counters 0) after 128 occurrences of 11 consecutive recessive bits
+//!   on the bus (each frame's or error frame's end gives one; an idle bus one per 11 bit
+//!   times). Every error frame and change of state is a [`CanErrorEvent`] in the trace, and
+//!   counted ([`PortStats`], [`BusStats::error_frames`]). Not modelled: the error-passive
+//!   transmitter's 8-bit suspend, overload frames, a receiver's +8 for being first to flag.
 //!
 //! Time: frames carry exact nanosecond stamps (see [`crate::clock`]). The bus task picks
 //! frames ahead of its tokio wake-ups by at most [`LOOKAHEAD`], so arbitration happens
@@ -61,6 +77,55 @@ impl CanBusConfig {
 #[non_exhaustive]
 pub enum CanFault {}
 
+/// A CAN controller's fault confinement state (ISO 11898-1).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, PartialOrd, Ord)]
+pub enum ErrorState {
+    /// TEC and REC at most 127: it signals errors with active (dominant) error flags.
+    #[default]
+    Active,
+    /// TEC or REC above 127.
+    Passive,
+    /// TEC above 255: off the bus until it has seen 128 x 11 recessive bits.
+    BusOff,
+}
+
+impl ErrorState {
+    /// A short name (`error-active`, `error-passive`, `bus-off`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorState::Active => "error-active",
+            ErrorState::Passive => "error-passive",
+            ErrorState::BusOff => "bus-off",
+        }
+    }
+}
+
+/// What happened to a controller, for the trace (`/can/<bus>/errors`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CanErrorKind {
+    /// An error frame destroyed its transmission of frame `can_id` (it is retransmitted
+    /// unless the controller went bus-off).
+    ErrorFrame {
+        /// The destroyed frame's id.
+        can_id: u32,
+    },
+    /// Its state changed (to error-passive, bus-off, or back to error-active).
+    State(ErrorState),
+}
+
+/// An error frame or a change of a controller's state, with its counters after it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CanErrorEvent {
+    /// The controller (the endpoint's name).
+    pub node: Arc<str>,
+    /// What happened.
+    pub kind: CanErrorKind,
+    /// Its transmit error counter after it.
+    pub tec: u16,
+    /// Its receive error counter after it.
+    pub rec: u16,
+}
+
 /// Counters of one attached endpoint.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct PortStats {
@@ -74,6 +139,36 @@ pub struct PortStats {
     pub bytes_tx: u64,
     /// Data bytes received.
     pub bytes_rx: u64,
+    /// Transmit error counter now.
+    pub tec: u16,
+    /// Receive error counter now.
+    pub rec: u16,
+    /// Fault confinement state now.
+    pub state: ErrorState,
+    /// Highest TEC reached.
+    pub tec_max: u16,
+    /// Its transmissions destroyed by error frames.
+    pub tx_errors: u64,
+    /// Times it went error-passive.
+    pub passive_count: u64,
+    /// Times it went bus-off.
+    pub bus_off_count: u64,
+    /// Times it recovered from bus-off.
+    pub recoveries: u64,
+    /// Frames it lost by going, or being, bus-off.
+    pub bus_off_drops: u64,
+}
+
+impl PortStats {
+    fn state_after_counters(&self) -> ErrorState {
+        if self.tec > 255 {
+            ErrorState::BusOff
+        } else if self.tec > 127 || self.rec > 127 {
+            ErrorState::Passive
+        } else {
+            ErrorState::Active
+        }
+    }
 }
 
 /// Counters of a bus.
@@ -91,8 +186,13 @@ pub struct BusStats {
     pub busy: Duration,
     /// Frames lost to impairments.
     pub dropped: u64,
-    /// Frames corrupted by impairments.
+    /// Frames corrupted by the `corrupt` impairment (each destroyed by an error frame and
+    /// retransmitted).
     pub corrupted: u64,
+    /// Error frames (every destroyed transmission, whatever hit it).
+    pub error_frames: u64,
+    /// Times a controller went bus-off.
+    pub bus_off: u64,
     /// Per-endpoint counters, in attachment order.
     pub ports: Vec<PortStats>,
 }
@@ -122,11 +222,24 @@ struct Port {
 }
 
 #[derive(Debug)]
-struct Delivery {
-    from: usize,
-    frame: CanFrame,
-    fate: Fate,
+enum Delivery {
+    /// A frame, at the end of its last bit (plus any delay).
+    Frame {
+        from: usize,
+        frame: CanFrame,
+        fate: Fate,
+    },
+    /// An error frame or a change of a controller's state, for the trace.
+    Error(CanErrorEvent),
 }
+
+/// Bits of an error frame after the bit where the error was detected: a 6-bit error flag,
+/// the 8-bit error delimiter and the 3-bit intermission.
+const ERROR_FRAME_BITS: u64 = 6 + 8 + 3;
+/// Consecutive recessive bits a bus-off controller must see 128 times to recover.
+const RECOVERY_BITS: u64 = 11;
+/// How many times.
+const RECOVERY_SEQUENCES: u64 = 128;
 
 #[derive(Debug)]
 struct State {
@@ -135,6 +248,13 @@ struct State {
     ports: Vec<Port>,
     claims: BTreeMap<u8, usize>,
     busy_until: SimTime,
+    /// Sequences of 11 recessive bits the bus has shown (for bus-off recovery), counted up
+    /// to `busy_until`.
+    recessive_seqs: u64,
+    /// Per bus-off port, the count of `recessive_seqs` when it went bus-off.
+    bus_off_since: BTreeMap<usize, u64>,
+    /// Whether any error frame has happened (until then no counter moves).
+    errors_seen: bool,
     in_flight: BTreeMap<(SimTime, u64), Delivery>,
     seq: u64,
     stats: BusStats,
@@ -200,6 +320,9 @@ impl CanBus {
                 ports: Vec::new(),
                 claims: BTreeMap::new(),
                 busy_until: SimTime::ZERO,
+                recessive_seqs: 0,
+                bus_off_since: BTreeMap::new(),
+                errors_seen: false,
                 in_flight: BTreeMap::new(),
                 seq: 0,
                 stats,
@@ -366,6 +489,125 @@ impl State {
         1_000_000_000 / u64::from(self.cfg.bitrate_bps.max(1))
     }
 
+    fn bits(&self, n: u64) -> Duration {
+        Duration::from_nanos(n * self.ns_per_bit())
+    }
+
+    /// Queue a trace entry for `t`.
+    fn push_event(&mut self, t: SimTime, port: usize, kind: CanErrorKind) {
+        let Some(p) = self.ports.get(port) else {
+            return;
+        };
+        let ev = CanErrorEvent {
+            node: p.stats.name.as_str().into(),
+            kind,
+            tec: p.stats.tec,
+            rec: p.stats.rec,
+        };
+        self.seq += 1;
+        self.in_flight.insert((t, self.seq), Delivery::Error(ev));
+    }
+
+    /// Port `i`'s counters changed at `t`: move it to the state they say, with its events;
+    /// going bus-off loses its queue.
+    fn update_state(&mut self, i: usize, t: SimTime) {
+        let Some(p) = self.ports.get_mut(i) else {
+            return;
+        };
+        let was = p.stats.state;
+        let now = p.stats.state_after_counters();
+        if now == was {
+            return;
+        }
+        p.stats.state = now;
+        match now {
+            ErrorState::Passive => p.stats.passive_count += 1,
+            ErrorState::BusOff => {
+                p.stats.bus_off_count += 1;
+                p.stats.bus_off_drops += p.queue.len() as u64;
+                p.queue.clear();
+                self.stats.bus_off += 1;
+                self.bus_off_since.insert(i, self.recessive_seqs);
+            }
+            ErrorState::Active => {}
+        }
+        self.push_event(t, i, CanErrorKind::State(now));
+    }
+
+    /// The bus shows `n` more sequences of 11 recessive bits, the last ending at `t` (and,
+    /// when idle from `idle_from`, one every 11 bits from there): bus-off controllers that
+    /// have seen 128 recover, at the instant they saw the 128th.
+    fn recessive(&mut self, n: u64, t: SimTime, idle_from: Option<SimTime>) {
+        let before = self.recessive_seqs;
+        self.recessive_seqs += n;
+        let recovered: Vec<(usize, SimTime)> = self
+            .bus_off_since
+            .iter()
+            .filter(|&(_, since)| self.recessive_seqs - since >= RECOVERY_SEQUENCES)
+            .map(|(&i, since)| {
+                let at = match idle_from {
+                    // The k-th sequence of an idle stretch ends 11 k bits into it.
+                    Some(from) => {
+                        let k = (since + RECOVERY_SEQUENCES).saturating_sub(before);
+                        from + self.bits(k * RECOVERY_BITS)
+                    }
+                    None => t,
+                };
+                (i, at)
+            })
+            .collect();
+        for (i, at) in recovered {
+            self.bus_off_since.remove(&i);
+            if let Some(p) = self.ports.get_mut(i) {
+                p.stats.tec = 0;
+                p.stats.rec = 0;
+                p.stats.recoveries += 1;
+            }
+            self.update_state(i, at);
+        }
+    }
+
+    /// The instant the next bus-off controller recovers if the bus stays idle from
+    /// `busy_until`.
+    fn idle_recovery(&self) -> Option<SimTime> {
+        let needed = self
+            .bus_off_since
+            .values()
+            .map(|since| (since + RECOVERY_SEQUENCES).saturating_sub(self.recessive_seqs))
+            .min()?;
+        Some(self.busy_until + self.bits(needed * RECOVERY_BITS))
+    }
+
+    /// The bus is idle from `busy_until` to `t`: count its recessive sequences.
+    fn idle_until(&mut self, t: SimTime) {
+        if t <= self.busy_until {
+            return;
+        }
+        let idle_bits = (t - self.busy_until).as_nanos() as u64 / self.ns_per_bit().max(1);
+        let n = idle_bits / RECOVERY_BITS;
+        if n > 0 {
+            let from = self.busy_until;
+            self.recessive(n, t, Some(from));
+            self.busy_until = self.busy_until.max(from + self.bits(n * RECOVERY_BITS));
+            // The bus is still idle up to `t`; what is left of the stretch counts later.
+            self.busy_until = self.busy_until.min(t);
+        }
+    }
+
+    /// Drop what bus-off controllers have queued up to `t`.
+    fn purge_bus_off(&mut self, t: SimTime) {
+        for p in self
+            .ports
+            .iter_mut()
+            .filter(|p| p.stats.state == ErrorState::BusOff)
+        {
+            while p.queue.front().is_some_and(|(r, _)| *r <= t) {
+                p.queue.pop_front();
+                p.stats.bus_off_drops += 1;
+            }
+        }
+    }
+
     /// Pick and schedule frames while the bus is free within the lookahead.
     fn schedule(&mut self, now: SimTime) {
         let horizon = now + LOOKAHEAD;
@@ -373,18 +615,34 @@ impl State {
             let earliest = self
                 .ports
                 .iter()
+                .filter(|p| p.stats.state != ErrorState::BusOff)
                 .filter_map(|p| p.queue.front().map(|(t, _)| *t))
                 .min();
-            let Some(earliest) = earliest else { return };
+            // Recoveries due on an idle bus before the next frame (or the horizon).
+            if let Some(r) = self.idle_recovery()
+                && r <= horizon
+                && earliest.is_none_or(|e| r <= e.max(self.busy_until))
+            {
+                self.idle_until(r);
+                self.purge_bus_off(r);
+                continue;
+            }
+            let Some(earliest) = earliest else {
+                self.purge_bus_off(horizon);
+                return;
+            };
             let start = earliest.max(self.busy_until);
             if start > horizon {
+                self.purge_bus_off(horizon);
                 return;
             }
+            self.purge_bus_off(start);
             // Arbitration among the frames ready when the bus becomes free.
             let Some(winner) = self
                 .ports
                 .iter()
                 .enumerate()
+                .filter(|(_, p)| p.stats.state != ErrorState::BusOff)
                 .filter_map(|(i, p)| {
                     p.queue
                         .front()
@@ -396,11 +654,20 @@ impl State {
             else {
                 return;
             };
-            let Some((_, frame)) = self.ports[winner].queue.pop_front() else {
+            if !self.bus_off_since.is_empty() {
+                self.idle_until(start);
+            }
+            let Some((ready, frame)) = self.ports[winner].queue.pop_front() else {
                 return;
             };
             let bits = frame_bits(&frame);
-            let end = start + Duration::from_nanos(u64::from(bits) * self.ns_per_bit());
+            let fate = self.rng.fate(&self.impair);
+            if let Fate::Corrupt { bit } = fate {
+                self.stats.corrupted += 1;
+                self.error_frame(winner, (ready, frame), start, bits, bit);
+                continue;
+            }
+            let end = start + self.bits(u64::from(bits));
             self.busy_until = end;
             self.stats.frames += 1;
             self.stats.bytes += u64::from(frame.dlc);
@@ -409,17 +676,82 @@ impl State {
             let port = &mut self.ports[winner].stats;
             port.frames_tx += 1;
             port.bytes_tx += u64::from(frame.dlc);
-            let fate = self.rng.fate(&self.impair);
+            if self.errors_seen {
+                // A good frame: one off the transmitter's TEC and every receiver's REC.
+                for (i, p) in self.ports.iter_mut().enumerate() {
+                    let c = &mut p.stats;
+                    if i == winner {
+                        c.tec = c.tec.saturating_sub(1);
+                    } else if c.state != ErrorState::BusOff {
+                        c.rec = if c.rec > 127 {
+                            120
+                        } else {
+                            c.rec.saturating_sub(1)
+                        };
+                    }
+                }
+                for i in 0..self.ports.len() {
+                    self.update_state(i, end);
+                }
+            }
             let at = end + self.impair.delay;
             self.seq += 1;
             self.in_flight.insert(
                 (at, self.seq),
-                Delivery {
+                Delivery::Frame {
                     from: winner,
                     frame,
                     fate,
                 },
             );
+            if !self.bus_off_since.is_empty() {
+                self.recessive(1, end, None);
+            }
+        }
+    }
+
+    /// An error destroys `winner`'s transmission of `frame` begun at `start`: the error is
+    /// detected at a bit drawn from `draw` over the frame before its end of frame, an error
+    /// frame follows, the counters move, and the frame goes back to the head of the queue.
+    fn error_frame(
+        &mut self,
+        winner: usize,
+        (ready, frame): (SimTime, CanFrame),
+        start: SimTime,
+        bits: u32,
+        draw: u32,
+    ) {
+        // The last 10 bits are the ACK delimiter and the end of frame.
+        let span = u64::from(bits.saturating_sub(10).max(1));
+        let at_bit = 1 + u64::from(draw) % span;
+        let used = at_bit + ERROR_FRAME_BITS;
+        let end = start + self.bits(used);
+        self.busy_until = end;
+        self.stats.bits += used;
+        self.stats.busy += end - start;
+        self.stats.error_frames += 1;
+        let can_id = frame.id;
+        self.errors_seen = true;
+        let p = &mut self.ports[winner];
+        p.stats.tx_errors += 1;
+        p.stats.tec = p.stats.tec.saturating_add(8);
+        p.stats.tec_max = p.stats.tec_max.max(p.stats.tec);
+        p.queue.push_front((ready, frame));
+        for (i, p) in self.ports.iter_mut().enumerate() {
+            if i != winner && p.stats.state != ErrorState::BusOff {
+                p.stats.rec = p.stats.rec.saturating_add(1).min(255);
+            }
+        }
+        self.push_event(end, winner, CanErrorKind::ErrorFrame { can_id });
+        // The error frame's tail counts for those already bus-off, not for one going
+        // bus-off by it.
+        if !self.bus_off_since.is_empty() {
+            self.recessive(1, end, None);
+        }
+        // The transmitter first (it may go bus-off), then the receivers.
+        self.update_state(winner, end);
+        for i in (0..self.ports.len()).filter(|&i| i != winner) {
+            self.update_state(i, end);
         }
     }
 
@@ -429,27 +761,29 @@ impl State {
                 return;
             }
             let ((t, _), d) = entry.remove_entry();
-            let mut frame = d.frame;
-            let dropped = match d.fate {
-                Fate::Drop => {
-                    self.stats.dropped += 1;
-                    true
-                }
-                Fate::Corrupt { bit } => {
-                    self.stats.corrupted += 1;
-                    let nbits = u32::from(frame.dlc) * 8;
-                    if nbits > 0 {
-                        let b = bit % nbits;
-                        frame.data[(b / 8) as usize] ^= 1 << (b % 8);
+            let (from, frame, fate) = match d {
+                Delivery::Frame { from, frame, fate } => (from, frame, fate),
+                Delivery::Error(ev) => {
+                    if let Some(tr) = &self.trace {
+                        tr.emit(TraceEvent {
+                            t,
+                            medium: self.name.clone(),
+                            from: ev.node.clone(),
+                            frame: TraceFrame::CanError(ev),
+                            dropped: false,
+                        });
                     }
-                    false
+                    continue;
                 }
-                Fate::Deliver => false,
             };
+            let dropped = matches!(fate, Fate::Drop);
+            if dropped {
+                self.stats.dropped += 1;
+            }
             if let Some(tr) = &self.trace {
                 let from = self
                     .ports
-                    .get(d.from)
+                    .get(from)
                     .map_or("?", |p| p.stats.name.as_str())
                     .into();
                 tr.emit(TraceEvent {
@@ -466,7 +800,7 @@ impl State {
             let dst = CfpId::from_can_id(frame.id).dst;
             let claimed_by = self.claims.get(&dst).copied();
             for (i, p) in self.ports.iter_mut().enumerate() {
-                if i == d.from || !p.enabled {
+                if i == from || !p.enabled || p.stats.state == ErrorState::BusOff {
                     continue;
                 }
                 let wants =
@@ -489,7 +823,11 @@ impl State {
         let pick = self
             .ports
             .iter()
+            .filter(|p| p.stats.state != ErrorState::BusOff)
             .filter_map(|p| p.queue.front().map(|(t, _)| *t))
+            .min()
+            .into_iter()
+            .chain(self.idle_recovery())
             .min()
             .map(|t| {
                 let start = t.max(self.busy_until);
@@ -681,5 +1019,131 @@ mod tests {
         a.send(clock.now(), cfp_frame(6, 12, 2));
         tokio::time::sleep(Duration::from_millis(2)).await;
         assert!(rx_int.try_recv().is_ok());
+    }
+
+    /// A sender whose every frame is destroyed (`corrupt` at 1.0): no frame reaches the
+    /// receiver, the sender retransmits, its TEC climbs by 8 per error frame to
+    /// error-passive (above 127) and bus-off (above 255), its queue is lost, and on the idle
+    /// bus it recovers 128 x 11 bit times later; with the fault lifted, frames flow again.
+    #[tokio::test(start_paused = true)]
+    async fn a_corrupted_frame_is_never_delivered_and_its_sender_goes_bus_off_and_recovers() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let bus = CanBus::new(CanBusConfig::new("main"), 1);
+        let (trace_tx, mut trace_rx) = tokio::sync::mpsc::unbounded_channel();
+        bus.set_trace(TraceTx::channel(trace_tx));
+        let (tx_a, _ra) = inbox();
+        let (tx_b, mut rx_b) = inbox();
+        let a = bus.attach("A", &[1], false, tx_a, 0);
+        let _b = bus.attach("B", &[2], false, tx_b, 0);
+        tokio::spawn(bus.clone().run(clock));
+        bus.set_fault(
+            0,
+            Some(Impairments {
+                corrupt_prob: 1.0,
+                ..Default::default()
+            }),
+        );
+        a.send(SimTime::ZERO, cfp_frame(1, 2, 7));
+        a.send(SimTime::ZERO, cfp_frame(1, 2, 8));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        assert!(rx_b.try_recv().is_err(), "a corrupted frame reached B");
+        let s = bus.stats();
+        let (pa, pb) = (&s.ports[0], &s.ports[1]);
+        // 32 error frames take TEC from 0 to 256: bus-off, and both frames are lost.
+        assert_eq!(
+            (s.error_frames, s.corrupted, s.frames, s.bus_off),
+            (32, 32, 0, 1)
+        );
+        assert_eq!((pa.tx_errors, pa.tec_max), (32, 256));
+        assert_eq!(
+            (pa.passive_count, pa.bus_off_count, pa.bus_off_drops),
+            (1, 1, 2)
+        );
+        assert_eq!(pb.rec, 32);
+        let mut events = Vec::new();
+        while let Ok(e) = trace_rx.try_recv() {
+            if let TraceFrame::CanError(c) = e.frame {
+                events.push((e.t, c));
+            }
+        }
+        assert_eq!(
+            events
+                .iter()
+                .filter(|(_, c)| matches!(c.kind, CanErrorKind::ErrorFrame { .. }))
+                .count(),
+            32
+        );
+        let states: Vec<(SimTime, ErrorState, u16)> = events
+            .iter()
+            .filter_map(|(t, c)| match c.kind {
+                CanErrorKind::State(s) => Some((*t, s, c.tec)),
+                CanErrorKind::ErrorFrame { .. } => None,
+            })
+            .collect();
+        assert_eq!(states.len(), 3, "{states:?}");
+        assert_eq!((states[0].1, states[0].2), (ErrorState::Passive, 128));
+        assert_eq!((states[1].1, states[1].2), (ErrorState::BusOff, 256));
+        // Recovered on the idle bus after 128 x 11 bits (1.408 ms at 1 Mbit/s).
+        assert_eq!((states[2].1, states[2].2), (ErrorState::Active, 0));
+        assert_eq!(states[2].0, states[1].0 + Duration::from_micros(128 * 11));
+        assert_eq!(
+            (pa.state, pa.tec, pa.rec, pa.recoveries),
+            (ErrorState::Active, 0, 0, 1)
+        );
+        // With the fault lifted, frames flow again.
+        bus.set_fault(0, None);
+        a.send(clock.now(), cfp_frame(1, 2, 9));
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert_eq!(
+            rx_b.recv().await.unwrap().what,
+            Arrival::Can(cfp_frame(1, 2, 9))
+        );
+    }
+
+    /// Error frames cost bus time: a half-corrupted bus carries every frame in the end
+    /// (retransmitted), takes longer than a clean one, and each good frame takes one off
+    /// the sender's TEC.
+    #[tokio::test(start_paused = true)]
+    async fn retransmissions_deliver_everything_at_the_cost_of_bus_time() {
+        let run = |p: f64| async move {
+            let clock = Clock::new(ClockMode::Virtual);
+            let bus = CanBus::new(CanBusConfig::new("main"), 3);
+            let (tx_a, _ra) = inbox();
+            let (tx_b, mut rx_b) = inbox();
+            let a = bus.attach("A", &[1], false, tx_a, 0);
+            let _b = bus.attach("B", &[2], false, tx_b, 0);
+            tokio::spawn(bus.clone().run(clock));
+            bus.set_fault(
+                0,
+                Some(Impairments {
+                    corrupt_prob: p,
+                    ..Default::default()
+                }),
+            );
+            for k in 0..20 {
+                a.send(SimTime::ZERO, cfp_frame(1, 2, k));
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+            let mut got = Vec::new();
+            while let Ok(x) = rx_b.try_recv() {
+                got.push((x.t, x.what));
+            }
+            (got, bus.stats())
+        };
+        let (clean, s0) = run(0.0).await;
+        let (noisy, s1) = run(0.3).await;
+        assert_eq!(clean.len(), 20);
+        let frames = |v: &[(SimTime, Arrival)]| v.iter().map(|x| x.1.clone()).collect::<Vec<_>>();
+        assert_eq!(
+            frames(&noisy),
+            frames(&clean),
+            "every frame, in order, intact"
+        );
+        assert!(s1.error_frames > 0 && s1.ports[0].state == ErrorState::Active);
+        assert!(noisy.last().unwrap().0 > clean.last().unwrap().0);
+        assert!(s1.busy > s0.busy);
+        // TEC: +8 per error, -1 per good frame, never below zero.
+        let tec = s1.ports[0].tec;
+        assert!(tec <= 8 * s1.error_frames as u16, "{tec}");
     }
 }

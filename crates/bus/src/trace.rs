@@ -14,6 +14,8 @@ pub enum TraceFrame {
     Can(CanFrame),
     /// A CSP packet's wire bytes (`header | data`).
     Packet(Vec<u8>),
+    /// An error frame or a change of a CAN controller's error state.
+    CanError(crate::can::CanErrorEvent),
 }
 
 /// One frame or packet on a medium.
@@ -41,6 +43,17 @@ impl TraceEvent {
                 v
             }
             TraceFrame::Packet(p) => p.clone(),
+            TraceFrame::CanError(e) => {
+                let (what, id) = match &e.kind {
+                    crate::can::CanErrorKind::ErrorFrame { can_id } => (0u8, *can_id),
+                    crate::can::CanErrorKind::State(s) => (1 + *s as u8, 0),
+                };
+                let mut v = vec![what];
+                v.extend_from_slice(&id.to_be_bytes());
+                v.extend_from_slice(&e.tec.to_be_bytes());
+                v.extend_from_slice(&e.rec.to_be_bytes());
+                v
+            }
         }
     }
 }

@@ -24,6 +24,8 @@ pub const MEDIUM_COUNTERS: &[&str] = &[
     "bytes",
     "dropped",
     "corrupted",
+    "error_frames",
+    "bus_off",
     "no_contact",
 ];
 
@@ -45,7 +47,7 @@ pub struct CounterExpect {
     pub target: NodeRef,
     /// Node: `rx_packets`, `tx_packets`, `forwarded`, `delivered`, `service_replies`,
     /// `reboots`, `drops`, `drops.<reason>`; medium: `frames`, `packets`, `bytes`,
-    /// `dropped`, `corrupted` (ground also `no_contact`).
+    /// `dropped`, `corrupted`, CAN `error_frames` and `bus_off` (ground also `no_contact`).
     pub counter: String,
     /// Smallest acceptable value.
     #[serde(default)]
@@ -164,6 +166,8 @@ pub fn counter_value(report: &RunReport, target: &CounterTarget, counter: &str) 
                 "bytes" => Some(b.bytes),
                 "dropped" => Some(b.dropped),
                 "corrupted" => Some(b.corrupted),
+                "error_frames" => Some(b.error_frames),
+                "bus_off" => Some(b.bus_off),
                 _ => None,
             }
         }

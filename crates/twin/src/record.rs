@@ -1103,6 +1103,8 @@ channels! {
         "`/eps/channels` (`m6p.EpsChannel`).",
     Beacon => ("m6p.Beacon", schema_of::<BeaconMsg>(), |_| fixed(TOPIC_BEACONS), "medium"):
         "`/ground/beacons` (`m6p.Beacon`).",
+    CanError => ("m6p.CanError", schema_of::<CanErrorMsg>(), |k| format!("/can/{k}/errors"), "bus"):
+        "`/can/<bus>/errors` (`m6p.CanError`), keyed by bus.",
 }
 
 /// The channels every run has, as (kind, key), in registration order; others (another
@@ -1117,6 +1119,25 @@ pub const FIXED_CHANNELS: [(ChannelKind, &str); 8] = [
     (ChannelKind::Command, ""),
     (ChannelKind::Expectation, ""),
 ];
+
+/// An error frame or a CAN controller's change of error state (`/can/<bus>/errors`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(title = "m6p.CanError")]
+pub struct CanErrorMsg {
+    /// Simulated ns since the start (the end of the error frame, or the change).
+    pub t_ns: u64,
+    /// The controller (node or outside endpoint).
+    pub node: String,
+    /// `error-frame` (its transmission destroyed), `error-passive`, `bus-off` or
+    /// `error-active` (back, or recovered from bus-off).
+    pub event: String,
+    /// The destroyed frame's CAN id (`error-frame` only).
+    pub can_id: Option<u32>,
+    /// Its transmit error counter after the event.
+    pub tec: u16,
+    /// Its receive error counter after the event.
+    pub rec: u16,
+}
 
 /// One encoded message, as [`EventEncoder::encode`] hands it out.
 #[derive(Debug, Clone, Copy)]
@@ -1832,6 +1853,22 @@ impl EventEncoder {
                     }
                     None => Ok(()),
                 }
+            }
+            TraceFrame::CanError(e) => {
+                let (event, can_id) = match &e.kind {
+                    bus::can::CanErrorKind::ErrorFrame { can_id } => ("error-frame", Some(*can_id)),
+                    bus::can::CanErrorKind::State(s) => (s.name(), None),
+                };
+                let msg = CanErrorMsg {
+                    t_ns,
+                    node: e.node.to_string(),
+                    event: event.to_owned(),
+                    can_id,
+                    tec: e.tec,
+                    rec: e.rec,
+                };
+                let chan = (ChannelKind::CanError, &*m.medium);
+                emit_json(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)
             }
             TraceFrame::Packet(bytes) => {
                 let h = Header::parse(bytes).ok();

@@ -820,10 +820,11 @@ pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::R
     Ok(rows)
 }
 
-/// Whether `topic` is a medium channel, the ones `diff` compares: `/can/*/frames`, packet
+/// Whether `topic` is a medium channel, the ones `diff` compares: `/can/*/frames` and
+/// `/can/*/errors`, packet
 /// networks (`/ground/packets`) and `/kiss/*`.
 pub fn is_medium_topic(topic: &str) -> bool {
-    (topic.starts_with("/can/") && topic.ends_with("/frames"))
+    (topic.starts_with("/can/") && (topic.ends_with("/frames") || topic.ends_with("/errors")))
         || topic.starts_with("/kiss/")
         || (topic.ends_with("/packets") && topic != TOPIC_CSP)
 }

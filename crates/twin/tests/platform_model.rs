@@ -297,3 +297,57 @@ fn the_seed_on_the_command_line_draws_the_initial_attitude() {
     assert_eq!(plain, one, "the file's seed is 1");
     assert_ne!(one, two, "seeds 1 and 2 start from the same attitude {one}");
 }
+
+/// A `corrupt` on the main bus: CAN's CRC-15 catches every flipped bit, so no corrupted
+/// frame reaches a node (no CFP or CRC32 drop anywhere, every ping echo intact); the
+/// transmitters retransmit, the bus counts error frames. At 5 % per frame the error
+/// counters fall back faster than they rise (+8 per error, -1 per good frame): nobody goes
+/// bus-off and every ping is answered. (Before, the corrupted frames were delivered.)
+#[test]
+fn a_corrupted_can_frame_never_reaches_a_node() {
+    let text = r#"
+name = "can-corrupt"
+duration = "120s"
+
+[[commands]]
+name = "ping-eps"
+at = "5s"
+every = "1s"
+count = 100
+to = "EPS"
+request = "ping"
+size = 100
+timeout = "2s"
+
+[[faults]]
+at = "1s"
+until = "110s"
+kind = "corrupt"
+target = "main"
+probability = 0.05
+"#;
+    let (out, _) = run(text);
+    let pings = answered(&out, "ping-eps");
+    assert_eq!(pings.len(), 100);
+    assert!(pings.iter().all(|(_, ok)| *ok), "{pings:?}");
+    for r in out.report.results.iter() {
+        if let Outcome::Reply { data, .. } = &r.outcome {
+            assert_eq!(data, &r.request.data, "a ping echo came back changed");
+        }
+    }
+    for n in &out.report.nodes {
+        for reason in ["cfp", "crc32"] {
+            assert_eq!(
+                n.counters.drops.get(reason).copied().unwrap_or(0),
+                0,
+                "{}: {:?}",
+                n.name,
+                n.counters.drops
+            );
+        }
+    }
+    let main = &out.report.buses[0];
+    assert!(main.error_frames > 20, "{main:?}");
+    assert_eq!(main.error_frames, main.corrupted);
+    assert_eq!(main.bus_off, 0);
+}

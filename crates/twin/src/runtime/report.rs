@@ -195,6 +195,42 @@ impl RunReport {
             g.dropped,
             "-"
         );
+        for b in self.buses.iter().filter(|b| b.error_frames > 0) {
+            let troubled: Vec<String> = b
+                .ports
+                .iter()
+                .filter(|p| p.tx_errors > 0 || p.bus_off_count > 0 || p.passive_count > 0)
+                .map(|p| {
+                    format!(
+                        "{} {} errors, TEC up to {}{}{} (now {})",
+                        p.name,
+                        p.tx_errors,
+                        p.tec_max,
+                        if p.passive_count > 0 {
+                            format!(", error-passive {}x", p.passive_count)
+                        } else {
+                            String::new()
+                        },
+                        if p.bus_off_count > 0 {
+                            format!(
+                                ", bus-off {}x ({} frames lost, {} recoveries)",
+                                p.bus_off_count, p.bus_off_drops, p.recoveries
+                            )
+                        } else {
+                            String::new()
+                        },
+                        p.state.name()
+                    )
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                "{:<8} CAN errors: {} error frames; {}",
+                b.name,
+                b.error_frames,
+                troubled.join("; ")
+            );
+        }
         for (name, k) in &self.kiss {
             let _ = writeln!(
                 s,
