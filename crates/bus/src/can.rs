@@ -75,7 +75,22 @@ impl CanBusConfig {
 /// variant is added by the scenario fault kind that needs it.
 #[derive(Debug, Clone, PartialEq)]
 #[non_exhaustive]
-pub enum CanFault {}
+pub enum CanFault {
+    /// Bit errors at rate `ber` (per bit) on the frames that start in `[from, until)`, of
+    /// every transmitter or only `node`'s (its transceiver is bad): a frame of `n` bits is
+    /// hit with chance `1 - (1 - ber)^n`, and a hit frame gives an error frame (see the
+    /// module doc).
+    BitErrors {
+        /// The chance that a bit is wrong, 0-1.
+        ber: f64,
+        /// Only this endpoint's transmissions (`None`: all).
+        node: Option<String>,
+        /// First instant.
+        from: SimTime,
+        /// Last instant (exclusive; `None`: until lifted).
+        until: Option<SimTime>,
+    },
+}
 
 /// A CAN controller's fault confinement state (ISO 11898-1).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, PartialOrd, Ord)]
@@ -664,6 +679,35 @@ impl State {
             let fate = self.rng.fate(&self.impair);
             if let Fate::Corrupt { bit } = fate {
                 self.stats.corrupted += 1;
+                self.error_frame(winner, (ready, frame), start, bits, bit);
+                continue;
+            }
+            // Bit errors: the chance that at least one of the frame's bits is wrong.
+            let name = self.ports[winner].stats.name.as_str();
+            let survive: f64 = self
+                .can_faults
+                .values()
+                .map(|f| match f {
+                    CanFault::BitErrors {
+                        ber,
+                        node,
+                        from,
+                        until,
+                    } if start >= *from
+                        && until.is_none_or(|u| start < u)
+                        && node.as_deref().is_none_or(|n| n == name) =>
+                    {
+                        (1.0 - ber.clamp(0.0, 1.0)).powi(bits as i32)
+                    }
+                    _ => 1.0,
+                })
+                .product();
+            if survive < 1.0
+                && let Fate::Corrupt { bit } = self.rng.fate(&Impairments {
+                    corrupt_prob: 1.0 - survive,
+                    ..Impairments::default()
+                })
+            {
                 self.error_frame(winner, (ready, frame), start, bits, bit);
                 continue;
             }

@@ -351,3 +351,121 @@ probability = 0.05
     assert_eq!(main.error_frames, main.corrupted);
     assert_eq!(main.bus_off, 0);
 }
+
+/// `bit-errors` at 1 % per bit on the ECU's frames from 10 s to 20 s while the ground asks
+/// it for TMECU twice a second: its frames fail (about 73 % of a 130-bit frame), each error
+/// frame is retransmitted, its TEC climbs to error-passive and bus-off (its replies are
+/// lost), it recovers after 128 x 11 recessive bits and goes round again until the window
+/// ends; afterwards it answers every request. The other controllers count the errors as
+/// receivers (they may go error-passive, never bus-off). No damaged reply reaches the
+/// ground: every TMECU reply that arrives is whole.
+#[test]
+fn bit_errors_drive_a_node_bus_off_and_it_recovers() {
+    use bus::can::{CanErrorKind, ErrorState};
+    use bus::trace::TraceFrame;
+    let text = r#"
+name = "bit-errors"
+duration = "40s"
+
+[[commands]]
+name = "tmecu"
+at = "1s"
+every = "500ms"
+count = 70
+to = "ECU"
+request = "raw"
+port = 10
+data = "01"
+timeout = "400ms"
+
+[[faults]]
+at = "10s"
+until = "20s"
+kind = "bit-errors"
+target = "main"
+node = "ECU"
+ber = 0.01
+"#;
+    let (out, events) = run(text);
+    // What the ECU's controller went through, in order.
+    let mut states = Vec::new();
+    let mut error_frames = 0;
+    for e in &events {
+        if let RunEvent::Medium(m) = e
+            && let TraceFrame::CanError(c) = &m.frame
+        {
+            match c.kind {
+                CanErrorKind::ErrorFrame { .. } => {
+                    assert_eq!(&*c.node, "ECU", "only the ECU's frames fail: {c:?}");
+                    error_frames += 1;
+                }
+                CanErrorKind::State(s) if &*c.node == "ECU" => {
+                    states.push((m.t.as_secs_f64(), s, c.tec));
+                }
+                // The receivers count the errors too (REC +1 each): they may go
+                // error-passive, never bus-off.
+                CanErrorKind::State(s) => assert_ne!(s, ErrorState::BusOff, "{c:?}"),
+            }
+        }
+    }
+    assert!(error_frames > 100, "{error_frames} error frames");
+    let ecu = out.report.buses[0]
+        .ports
+        .iter()
+        .find(|p| p.name == "ECU")
+        .unwrap();
+    eprintln!(
+        "ECU: {error_frames} error frames, states {states:?}, stats {ecu:?}, main bus {:?}",
+        (
+            out.report.buses[0].error_frames,
+            out.report.buses[0].bus_off
+        )
+    );
+    assert!(ecu.passive_count >= 1 && ecu.bus_off_count >= 1, "{ecu:?}");
+    assert_eq!(ecu.recoveries, ecu.bus_off_count, "it came back every time");
+    assert!(ecu.tec_max > 255, "{ecu:?}");
+    assert_eq!(ecu.state, ErrorState::Active);
+    // The order of states: error-passive before each bus-off, recovery after it.
+    let first_passive = states.iter().position(|s| s.1 == ErrorState::Passive);
+    let first_off = states.iter().position(|s| s.1 == ErrorState::BusOff);
+    assert!(first_passive < first_off, "{states:?}");
+    let off = states[first_off.unwrap()];
+    let back = states[first_off.unwrap() + 1];
+    assert_eq!((back.1, back.2), (ErrorState::Active, 0), "{states:?}");
+    assert!(
+        off.0 >= 10.0 && back.0 > off.0 && back.0 < 20.5,
+        "{states:?}"
+    );
+    // Every state change within the window (and the recovery just after it at most).
+    assert!(
+        states.iter().all(|s| s.0 >= 10.0 && s.0 < 20.5),
+        "{states:?}"
+    );
+    // Replies: all before and after the window, every one that arrived whole.
+    let replies: Vec<(u64, bool)> = answered(&out, "tmecu");
+    assert!(
+        replies
+            .iter()
+            .filter(|(t, _)| *t < 10 || *t >= 21)
+            .all(|(_, ok)| *ok),
+        "{replies:?}"
+    );
+    assert!(
+        replies.iter().any(|(_, ok)| !ok),
+        "bus-off lost some replies"
+    );
+    for r in &out.report.results {
+        if let Outcome::Reply { data, .. } = &r.outcome {
+            assert_eq!(data.len(), 44, "a TMECU reply arrived damaged: {data:02x?}");
+            assert_eq!(&data[..2], &[1, 1]);
+        }
+    }
+    for n in &out.report.nodes {
+        assert_eq!(
+            n.counters.drops.get("crc32").copied().unwrap_or(0),
+            0,
+            "{}",
+            n.name
+        );
+    }
+}

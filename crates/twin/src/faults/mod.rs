@@ -20,6 +20,7 @@
 //!   wheel faults, the EPS's), put on the fault timeline so that the run's log and
 //!   recording say when.
 
+pub mod bit_errors;
 pub mod media;
 pub mod node;
 
@@ -316,6 +317,7 @@ registry! {
     node::PowerOff,
     node::Reboot,
     node::Hang,
+    bit_errors::BitErrors,
 }
 
 fn parse(e: &FaultEntry) -> Result<Parsed, Vec<(String, String)>> {

@@ -1,0 +1,105 @@
+//! `bit-errors`: a CAN bus suffers bit errors at a rate over a window, on every
+//! transmitter's frames or on one node's (its transceiver is failing). Each hit frame is an
+//! error frame and a retransmission, and the error counters move as ISO 11898-1 says:
+//! a node whose frames fail often enough goes error-passive, then bus-off, and recovers
+//! (docs/platform.md, "CAN errors").
+
+use bus::can::CanFault;
+use schemars::JsonSchema;
+use serde::Deserialize;
+
+use super::{FaultAction, FaultCx, FaultKind, FaultPlan, MediumId};
+use crate::network::Role;
+use crate::scenario::NodeRef;
+
+/// `bit-errors`: `target` is the bus (`main` or `payload`).
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BitErrors {
+    /// Bit error rate: the chance that a bit on the wire is wrong, above 0 and at most 1
+    /// (1e-3 hits about 12 % of 130-bit frames; above about 1e-3 a busy transmitter's TEC
+    /// climbs to bus-off).
+    pub ber: f64,
+    /// Only the frames this node transmits; default every transmitter's.
+    #[serde(default)]
+    pub node: Option<NodeRef>,
+}
+
+/// Whether the node at `addr` sits on `bus`.
+fn on_bus(cx: &FaultCx<'_>, addr: u8, bus: MediumId) -> bool {
+    let role = cx.net.nodes.iter().find(|n| n.addr == addr).map(|n| n.role);
+    match (bus, role) {
+        (_, Some(Role::Pc)) => true,
+        (MediumId::Payload, Some(Role::Payload)) => true,
+        (MediumId::Main, Some(r)) => !matches!(r, Role::Payload | Role::Ground),
+        _ => false,
+    }
+}
+
+impl FaultKind for BitErrors {
+    const NAME: &'static str = "bit-errors";
+    const LABEL: &'static str = "BitErrors";
+    const ABOUT: &'static str = "bit errors at a rate on a CAN bus (or on one node's frames)";
+
+    fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
+        let bus = cx.medium().filter(|m| *m != MediumId::Uhf);
+        if bus.is_none() {
+            err(
+                "target",
+                format!("`{}` is not a CAN bus (main, payload)", cx.common.target),
+            );
+        }
+        if !(self.ber > 0.0 && self.ber <= 1.0) {
+            err("ber", format!("{} is not in (0, 1]", self.ber));
+        }
+        if let Some(n) = &self.node {
+            match cx.net.resolve(n) {
+                Err(e) => err("node", e),
+                Ok(a) if bus.is_some_and(|b| !on_bus(cx, a, b)) => err(
+                    "node",
+                    format!("{n} is not on the `{}` bus", cx.common.target),
+                ),
+                Ok(_) => {}
+            }
+        }
+    }
+
+    fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
+        let Some(medium) = cx.medium() else { return };
+        let node = self.node.as_ref().and_then(|n| {
+            let a = cx.net.resolve(n).ok()?;
+            cx.net
+                .nodes
+                .iter()
+                .find(|x| x.addr == a)
+                .map(|x| x.name.clone())
+        });
+        let can = CanFault::BitErrors {
+            ber: self.ber,
+            node,
+            from: cx.at(),
+            until: cx.until(),
+        };
+        let fault = cx.id();
+        plan.at(
+            cx.at(),
+            FaultAction::Can {
+                medium,
+                fault,
+                can: Some(can),
+            },
+            "",
+        );
+        if let Some(u) = cx.until() {
+            plan.at(
+                u,
+                FaultAction::Can {
+                    medium,
+                    fault,
+                    can: None,
+                },
+                " (lifted)",
+            );
+        }
+    }
+}
