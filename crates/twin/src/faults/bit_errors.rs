@@ -9,7 +9,6 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use super::{FaultAction, FaultCx, FaultKind, FaultPlan, MediumId};
-use crate::network::Role;
 use crate::scenario::NodeRef;
 
 /// `bit-errors`: `target` is the bus (`main` or `payload`).
@@ -23,17 +22,6 @@ pub struct BitErrors {
     /// Only the frames this node transmits; default every transmitter's.
     #[serde(default)]
     pub node: Option<NodeRef>,
-}
-
-/// Whether the node at `addr` sits on `bus`.
-fn on_bus(cx: &FaultCx<'_>, addr: u8, bus: MediumId) -> bool {
-    let role = cx.net.nodes.iter().find(|n| n.addr == addr).map(|n| n.role);
-    match (bus, role) {
-        (_, Some(Role::Pc)) => true,
-        (MediumId::Payload, Some(Role::Payload)) => true,
-        (MediumId::Main, Some(r)) => !matches!(r, Role::Payload | Role::Ground),
-        _ => false,
-    }
 }
 
 impl FaultKind for BitErrors {
@@ -55,7 +43,7 @@ impl FaultKind for BitErrors {
         if let Some(n) = &self.node {
             match cx.net.resolve(n) {
                 Err(e) => err("node", e),
-                Ok(a) if bus.is_some_and(|b| !on_bus(cx, a, b)) => err(
+                Ok(a) if bus.is_some_and(|b| !cx.on_bus(a, b)) => err(
                     "node",
                     format!("{n} is not on the `{}` bus", cx.common.target),
                 ),

@@ -184,6 +184,22 @@ impl FaultCx<'_> {
     pub fn node(&self) -> Result<u8, String> {
         self.net.resolve(&self.common.target)
     }
+    /// Whether the node at `addr` sits on CAN bus `bus` (the PC on both).
+    pub fn on_bus(&self, addr: u8, bus: MediumId) -> bool {
+        use crate::network::Role;
+        let role = self
+            .net
+            .nodes
+            .iter()
+            .find(|n| n.addr == addr)
+            .map(|n| n.role);
+        match (bus, role) {
+            (_, Some(Role::Pc)) => true,
+            (MediumId::Payload, Some(Role::Payload)) => true,
+            (MediumId::Main, Some(r)) => !matches!(r, Role::Payload | Role::Ground),
+            _ => false,
+        }
+    }
     /// The description of the fault in the run's log (`faults[0]: Drop on main`).
     pub fn what(&self) -> String {
         format!(
