@@ -90,6 +90,31 @@ pub enum CanFault {
         /// Last instant (exclusive; `None`: until lifted).
         until: Option<SimTime>,
     },
+    /// A babbling idiot: `node`'s controller sends frame `can_id` (8 zero bytes) over and
+    /// over from `from` to `until`, back to back (or every `period`), entering arbitration
+    /// like any frame: it starves every frame with a higher id and none with a lower one.
+    Babble {
+        /// The babbling endpoint.
+        node: String,
+        /// Its frame's 29-bit id (0: it wins every arbitration).
+        can_id: u32,
+        /// Time between two of its frames' starts (`None`: as often as the bus allows).
+        period: Option<Duration>,
+        /// First instant.
+        from: SimTime,
+        /// Last instant (exclusive; `None`: until lifted).
+        until: Option<SimTime>,
+    },
+}
+
+/// A frame that can enter arbitration: from a port's queue, or a babbler's next frame.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    ready: SimTime,
+    id: u32,
+    port: usize,
+    /// The babble fault's id, for a babbler's frame.
+    babble: Option<u32>,
 }
 
 /// A CAN controller's fault confinement state (ISO 11898-1).
@@ -276,6 +301,8 @@ struct State {
     impair: Impairments,
     faults: ImpairmentSet,
     can_faults: BTreeMap<u32, CanFault>,
+    /// When each babbler may start its next frame, by fault id.
+    babble_next: BTreeMap<u32, SimTime>,
     rng: ImpairRng,
     trace: Option<TraceTx>,
 }
@@ -344,6 +371,7 @@ impl CanBus {
                 impair: Impairments::default(),
                 faults: ImpairmentSet::default(),
                 can_faults: BTreeMap::new(),
+                babble_next: BTreeMap::new(),
                 rng,
                 trace: None,
             })),
@@ -462,8 +490,11 @@ impl CanBus {
             }
             None => {
                 st.can_faults.remove(&id);
+                st.babble_next.remove(&id);
             }
         }
+        drop(st);
+        self.wake.notify_one();
     }
 
     /// Send every frame that crosses the bus to `tx`.
@@ -623,16 +654,52 @@ impl State {
         }
     }
 
+    /// Every frame that can enter arbitration next: each port's first, and each active
+    /// babbler's.
+    fn candidates(&self) -> impl Iterator<Item = Candidate> + '_ {
+        let queued = self
+            .ports
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.stats.state != ErrorState::BusOff)
+            .filter_map(|(i, p)| {
+                p.queue.front().map(|(t, f)| Candidate {
+                    ready: *t,
+                    id: f.id,
+                    port: i,
+                    babble: None,
+                })
+            });
+        let babblers = self.can_faults.iter().filter_map(|(&fid, f)| {
+            let CanFault::Babble {
+                node,
+                can_id,
+                from,
+                until,
+                ..
+            } = f
+            else {
+                return None;
+            };
+            let port = self.ports.iter().position(|p| p.stats.name == *node)?;
+            let p = &self.ports[port];
+            let ready = (*from).max(self.babble_next.get(&fid).copied().unwrap_or(*from));
+            (p.enabled && p.stats.state != ErrorState::BusOff && until.is_none_or(|u| ready < u))
+                .then_some(Candidate {
+                    ready,
+                    id: *can_id & csp::cfp::CAN_EFF_MASK,
+                    port,
+                    babble: Some(fid),
+                })
+        });
+        queued.chain(babblers)
+    }
+
     /// Pick and schedule frames while the bus is free within the lookahead.
     fn schedule(&mut self, now: SimTime) {
         let horizon = now + LOOKAHEAD;
         loop {
-            let earliest = self
-                .ports
-                .iter()
-                .filter(|p| p.stats.state != ErrorState::BusOff)
-                .filter_map(|p| p.queue.front().map(|(t, _)| *t))
-                .min();
+            let earliest = self.candidates().map(|c| c.ready).min();
             // Recoveries due on an idle bus before the next frame (or the horizon).
             if let Some(r) = self.idle_recovery()
                 && r <= horizon
@@ -652,34 +719,48 @@ impl State {
                 return;
             }
             self.purge_bus_off(start);
-            // Arbitration among the frames ready when the bus becomes free.
-            let Some(winner) = self
-                .ports
-                .iter()
-                .enumerate()
-                .filter(|(_, p)| p.stats.state != ErrorState::BusOff)
-                .filter_map(|(i, p)| {
-                    p.queue
-                        .front()
-                        .filter(|(t, _)| *t <= start)
-                        .map(|(_, f)| (f.id, i))
-                })
-                .min()
-                .map(|(_, i)| i)
+            // Arbitration among the frames ready when the bus becomes free: the lowest id
+            // wins (ties, impossible on a real bus, by attachment order, a port's own queue
+            // before its babble).
+            let Some(w) = self
+                .candidates()
+                .filter(|c| c.ready <= start)
+                .min_by_key(|c| (c.id, c.port, c.babble.is_some()))
             else {
                 return;
             };
+            let winner = w.port;
             if !self.bus_off_since.is_empty() {
                 self.idle_until(start);
             }
-            let Some((ready, frame)) = self.ports[winner].queue.pop_front() else {
-                return;
+            let (ready, frame) = match w.babble {
+                None => match self.ports[winner].queue.pop_front() {
+                    Some(x) => x,
+                    None => return,
+                },
+                Some(fid) => {
+                    let period = match self.can_faults.get(&fid) {
+                        Some(CanFault::Babble { period, .. }) => *period,
+                        _ => None,
+                    };
+                    let Some(frame) = CanFrame::new(w.id, &[0; 8]) else {
+                        return;
+                    };
+                    let next = match period {
+                        Some(p) => start + p,
+                        // Back to back: ready again as the bus frees.
+                        None => start + self.bits(u64::from(frame_bits(&frame))),
+                    };
+                    self.babble_next.insert(fid, next);
+                    (start, frame)
+                }
             };
+            let requeue = w.babble.is_none();
             let bits = frame_bits(&frame);
             let fate = self.rng.fate(&self.impair);
             if let Fate::Corrupt { bit } = fate {
                 self.stats.corrupted += 1;
-                self.error_frame(winner, (ready, frame), start, bits, bit);
+                self.error_frame(winner, (ready, frame), start, bits, bit, requeue);
                 continue;
             }
             // Bit errors: the chance that at least one of the frame's bits is wrong.
@@ -708,7 +789,7 @@ impl State {
                     ..Impairments::default()
                 })
             {
-                self.error_frame(winner, (ready, frame), start, bits, bit);
+                self.error_frame(winner, (ready, frame), start, bits, bit, requeue);
                 continue;
             }
             let end = start + self.bits(u64::from(bits));
@@ -756,7 +837,8 @@ impl State {
 
     /// An error destroys `winner`'s transmission of `frame` begun at `start`: the error is
     /// detected at a bit drawn from `draw` over the frame before its end of frame, an error
-    /// frame follows, the counters move, and the frame goes back to the head of the queue.
+    /// frame follows, the counters move, and the frame goes back to the head of the queue
+    /// (`requeue`; a babbler just babbles on).
     fn error_frame(
         &mut self,
         winner: usize,
@@ -764,6 +846,7 @@ impl State {
         start: SimTime,
         bits: u32,
         draw: u32,
+        requeue: bool,
     ) {
         // The last 10 bits are the ACK delimiter and the end of frame.
         let span = u64::from(bits.saturating_sub(10).max(1));
@@ -780,7 +863,9 @@ impl State {
         p.stats.tx_errors += 1;
         p.stats.tec = p.stats.tec.saturating_add(8);
         p.stats.tec_max = p.stats.tec_max.max(p.stats.tec);
-        p.queue.push_front((ready, frame));
+        if requeue {
+            p.queue.push_front((ready, frame));
+        }
         for (i, p) in self.ports.iter_mut().enumerate() {
             if i != winner && p.stats.state != ErrorState::BusOff {
                 p.stats.rec = p.stats.rec.saturating_add(1).min(255);
@@ -865,10 +950,8 @@ impl State {
     fn next_wake(&self) -> SimTime {
         let delivery = self.in_flight.first_key_value().map(|((t, _), _)| *t);
         let pick = self
-            .ports
-            .iter()
-            .filter(|p| p.stats.state != ErrorState::BusOff)
-            .filter_map(|p| p.queue.front().map(|(t, _)| *t))
+            .candidates()
+            .map(|c| c.ready)
             .min()
             .into_iter()
             .chain(self.idle_recovery())
@@ -1189,5 +1272,59 @@ mod tests {
         // TEC: +8 per error, -1 per good frame, never below zero.
         let tec = s1.ports[0].tec;
         assert!(tec <= 8 * s1.error_frames as u16, "{tec}");
+    }
+
+    /// A babbler with id between two senders' ids: the lower one's frames win every
+    /// arbitration and flow on time, the higher one's wait for the babble to stop, and the
+    /// babbler fills every gap in between.
+    #[tokio::test(start_paused = true)]
+    async fn a_babbler_starves_higher_ids_only() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let bus = CanBus::new(CanBusConfig::new("main"), 1);
+        let (tx_a, _ra) = inbox();
+        let (tx_b, _rb) = inbox();
+        let (tx_c, _rc) = inbox();
+        let (tx_d, mut rx_d) = inbox();
+        let a = bus.attach("A", &[1], false, tx_a, 0);
+        let _b = bus.attach("B", &[5], false, tx_b, 0);
+        let c = bus.attach("C", &[9], false, tx_c, 0);
+        let _d = bus.attach("D", &[20], false, tx_d, 0);
+        tokio::spawn(bus.clone().run(clock));
+        let ms = SimTime::from_ms;
+        bus.set_can_fault(
+            3,
+            Some(CanFault::Babble {
+                node: "B".into(),
+                can_id: 5 << 24,
+                period: None,
+                from: ms(5),
+                until: Some(ms(15)),
+            }),
+        );
+        for k in 0..20u32 {
+            a.send(ms(u64::from(k)), cfp_frame(1, 20, k));
+            c.send(ms(u64::from(k)), cfp_frame(9, 20, k));
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        let mut got = Vec::new();
+        while let Ok(x) = rx_d.try_recv() {
+            if let Arrival::Can(f) = x.what {
+                got.push((x.t, CfpId::from_can_id(f.id).src, f.id & 0x3ff));
+            }
+        }
+        for (t, src, k) in &got {
+            let sent = ms(u64::from(*k));
+            let late = *t - sent;
+            match src {
+                1 => assert!(late < Duration::from_micros(500), "A's {k} waited {late:?}"),
+                _ if (5..15).contains(k) => assert!(*t >= ms(15), "C's {k} got through at {t}"),
+                _ => {}
+            }
+        }
+        assert_eq!(got.len(), 40, "everything arrives in the end");
+        let s = bus.stats();
+        // The babbler's frames (149 bits) fill the 10 ms but for A's 10 frames: 57.
+        assert_eq!(s.ports[1].frames_tx, 57, "{:?}", s.ports[1]);
     }
 }

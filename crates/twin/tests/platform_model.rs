@@ -469,3 +469,96 @@ ber = 0.01
         );
     }
 }
+
+/// A babbling ECU floods the main bus from 10 s to 20 s with frame id 0x11000000 (CFP
+/// source 17): arbitration is by id, and libcsp 1.4's CFP id begins with the source
+/// address, so ground station 16's requests (forwarded by COMM1 with source 16, a lower
+/// id) still get through while station 18's (source 18) never win the bus until the
+/// babble stops; the EPS's replies (source 4) always win. The bus is saturated meanwhile.
+/// COMM1 sends its frames in order (one transmit queue, as libcsp 1.4's CAN driver): once a
+/// frame of station 18's waits at its head, station 16's wait behind it.
+#[test]
+fn a_babbling_node_starves_exactly_the_frames_with_higher_ids() {
+    use bus::trace::TraceFrame;
+    let scenario = |stations: &[u8]| {
+        let mut text = String::from(
+            "name = \"babble\"\nduration = \"30s\"\n\n[network]\nground_stations = [16, 18]\n",
+        );
+        for &gs in stations {
+            text.push_str(&format!(
+                "\n[[commands]]\nname = \"from-{gs}\"\nfrom = \"GS{gs}\"\nat = \"{}ms\"\nevery = \"1s\"\ncount = 20\nto = \"EPS\"\nrequest = \"ping\"\ntimeout = \"900ms\"\n",
+                if gs == 16 { 5000 } else { 5500 }
+            ));
+        }
+        text.push_str(
+            "\n[[faults]]\nat = \"10s\"\nuntil = \"20s\"\nkind = \"babble\"\ntarget = \"main\"\nnode = \"ECU\"\ncan_id = 0x11000000\n",
+        );
+        run(&text)
+    };
+    // A request starves when the babble lasts past its 900 ms timeout: those sent in
+    // [10 s, 19.1 s). Station 18's go at x.5 s.
+    let in_window = |t: &u64| (10..19).contains(t);
+    // Station 16 alone: every ping answered through the babble.
+    let (out, events) = scenario(&[16]);
+    let from16 = answered(&out, "from-16");
+    assert!(from16.iter().all(|(_, ok)| *ok), "{from16:?}");
+    // The babble: frames from the ECU with its id, back to back in the window.
+    let (mut n, mut busy_ns, mut first, mut last) = (0u64, 0u64, f64::MAX, 0f64);
+    for e in &events {
+        if let RunEvent::Medium(m) = e
+            && let TraceFrame::Can(f) = &m.frame
+            && &*m.medium == "main"
+        {
+            let t = m.t.as_secs_f64();
+            if f.id == 0x1100_0000 {
+                assert_eq!(&*m.from, "ECU");
+                n += 1;
+                first = first.min(t);
+                last = last.max(t);
+            }
+            if (10.0..20.0).contains(&t) {
+                busy_ns += u64::from(bus::can::frame_bits(f)) * 1000;
+            }
+        }
+    }
+    let load = busy_ns as f64 / 10e9;
+    let bits = bus::can::frame_bits(&csp::cfp::CanFrame::new(0x1100_0000, &[0; 8]).unwrap());
+    let max = 10_000_000 / u64::from(bits);
+    // Station 18 alone: none of its pings in the window wins the bus.
+    let (out18, _) = scenario(&[18]);
+    let from18 = answered(&out18, "from-18");
+    for (t, ok) in &from18 {
+        assert_eq!(*ok, !in_window(t), "GS18 ping at {t} s: answered {ok}");
+    }
+    // Both: station 16's frames queue behind station 18's at COMM1.
+    let (both, _) = scenario(&[16, 18]);
+    let (b16, b18) = (answered(&both, "from-16"), answered(&both, "from-18"));
+    eprintln!(
+        "babble: {n} frames of {bits} bits (at most {max} in 10 s) from {first:.6} s to {last:.6} s; \
+         main bus load in the window {:.4} %; GS16 alone {}/{} answered; GS18 alone {}/{} answered \
+         ({} of 9 in the window); both: GS16 {}/{}, GS18 {}/{}",
+        load * 100.0,
+        from16.iter().filter(|x| x.1).count(),
+        from16.len(),
+        from18.iter().filter(|x| x.1).count(),
+        from18.len(),
+        from18.iter().filter(|x| x.1 && in_window(&x.0)).count(),
+        b16.iter().filter(|x| x.1).count(),
+        b16.len(),
+        b18.iter().filter(|x| x.1).count(),
+        b18.len(),
+    );
+    assert!(load > 0.999, "load {load}");
+    assert!(first >= 10.0 && last <= 20.0 + 1e-3, "{first} {last}");
+    assert!(n > max * 99 / 100 && n <= max, "{n} of at most {max}");
+    assert!(b18.iter().all(|(t, ok)| *ok != in_window(t)), "{b18:?}");
+    // From station 18's first starved request (10.5 s) to the end of the babble, station
+    // 16's wait behind it: those sent at 11 s to 19 s time out.
+    for (t, ok) in &b16 {
+        assert_eq!(
+            *ok,
+            !(11..20).contains(t),
+            "GS16 ping at {t} s behind GS18's"
+        );
+    }
+}

@@ -20,6 +20,7 @@
 //!   wheel faults, the EPS's), put on the fault timeline so that the run's log and
 //!   recording say when.
 
+pub mod babble;
 pub mod bit_errors;
 pub mod media;
 pub mod node;
@@ -334,6 +335,7 @@ registry! {
     node::Reboot,
     node::Hang,
     bit_errors::BitErrors,
+    babble::Babble,
 }
 
 fn parse(e: &FaultEntry) -> Result<Parsed, Vec<(String, String)>> {
