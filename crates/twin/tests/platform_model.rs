@@ -562,3 +562,63 @@ fn a_babbling_node_starves_exactly_the_frames_with_higher_ids() {
         );
     }
 }
+
+/// `panel-loss` of wing+Y from 1 h to 1 h 20 m in sun-max-power pointing: that panel gives
+/// nothing meanwhile (the others as before), and the arrays' power in sunlight drops by its
+/// share; back afterwards.
+#[test]
+fn a_lost_panel_gives_nothing_until_restored() {
+    let text = format!(
+        r#"
+name = "panel-loss"
+duration = "6000s"
+start = "2026-04-30T18:00:00Z"
+seed = 3
+{TLE}
+[fc]
+mode = "sun-max-power"
+initial_rate_deg_s = 0.5
+
+[[faults]]
+at = "3600s"
+until = "4800s"
+kind = "panel-loss"
+target = "EPS"
+panel = "wing+Y"
+"#
+    );
+    let (_, events) = run(&text);
+    let mut lost = (0, 0.0, 0.0);
+    let mut kept = (0, 0.0, 0.0);
+    for e in &events {
+        if let RunEvent::Eps(o) = e
+            && let nodes_eps::EpsOutput::Sample {
+                t,
+                solar_w,
+                panels_w,
+                ..
+            } = &**o
+            && *solar_w > 30.0
+        {
+            let s = t.as_secs();
+            let wing = panels_w[1];
+            if (3601..4800).contains(&s) {
+                assert_eq!(wing, 0.0, "wing+Y gives {wing} W at {s} s");
+                lost = (lost.0 + 1, lost.1 + solar_w, lost.2);
+            } else if s > 4800 {
+                assert!(wing > 10.0, "wing+Y back: {wing} W at {s} s");
+                kept = (kept.0 + 1, kept.1 + solar_w, kept.2 + wing);
+            }
+        }
+    }
+    let (mean_lost, mean_kept) = (lost.1 / lost.0 as f64, kept.1 / kept.0 as f64);
+    let wing_share = kept.2 / kept.1;
+    eprintln!(
+        "panel-loss: sunlit array power {mean_lost:.2} W without wing+Y ({} samples), {mean_kept:.2} W with it ({} samples, wing {:.1} %)",
+        lost.0,
+        kept.0,
+        wing_share * 100.0
+    );
+    assert!(lost.0 > 100 && kept.0 > 100);
+    assert!((mean_lost / mean_kept - (1.0 - wing_share)).abs() < 0.05);
+}

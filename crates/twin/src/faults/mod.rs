@@ -24,6 +24,7 @@ pub mod babble;
 pub mod bit_errors;
 pub mod media;
 pub mod node;
+pub mod panel_loss;
 
 use std::collections::BTreeMap;
 
@@ -336,6 +337,7 @@ registry! {
     node::Hang,
     bit_errors::BitErrors,
     babble::Babble,
+    panel_loss::PanelLoss,
 }
 
 fn parse(e: &FaultEntry) -> Result<Parsed, Vec<(String, String)>> {
