@@ -191,6 +191,18 @@ impl Battery {
     pub fn set_soc(&mut self, soc: f64) {
         *self = Battery::new(self.cfg.clone(), soc);
     }
+    /// The cells lose `fraction` (0..1) of their capacity (lithium inventory lost to
+    /// ageing, a failed cell string): the energy they hold shrinks in proportion, so the
+    /// state of charge is unchanged at that instant, and from then on the battery fills and
+    /// empties that much sooner. A fraction outside 0..1 changes nothing.
+    pub fn fade(&mut self, fraction: f64) {
+        if !(fraction.is_finite() && (0.0..1.0).contains(&fraction)) {
+            return;
+        }
+        let keep = 1.0 - fraction;
+        self.cfg.capacity_wh *= keep;
+        self.energy_wh *= keep;
+    }
     /// Open-circuit voltage now, V.
     pub fn ocv_v(&self) -> f64 {
         self.cfg.ocv_v(self.soc())
@@ -321,5 +333,26 @@ mod tests {
         let s = b.step(-10.0, 1.0);
         assert_eq!((s.terminal_w, s.unmet_w), (0.0, 10.0));
         assert_eq!(s.current_a, 0.0);
+    }
+
+    #[test]
+    fn a_faded_battery_keeps_its_charge_and_fills_and_empties_sooner() {
+        let mut b = Battery::new(BatteryConfig::default(), 0.8);
+        let full = b.config().capacity_wh;
+        b.fade(0.25);
+        assert!((b.soc() - 0.8).abs() < 1e-12);
+        assert!((b.config().capacity_wh - 0.75 * full).abs() < 1e-9);
+        assert!((b.energy_wh() - 0.6 * full).abs() < 1e-9);
+        // The same 10 W for an hour takes 10/0.95 Wh out of a smaller battery.
+        let mut fresh = Battery::new(BatteryConfig::default(), 0.8);
+        b.step(-10.0, 3600.0);
+        fresh.step(-10.0, 3600.0);
+        assert!(b.soc() < fresh.soc());
+        assert!(((0.8 - b.soc()) * 0.75 - (0.8 - fresh.soc())).abs() < 1e-9);
+        // Nonsense changes nothing.
+        let before = b.clone();
+        b.fade(1.5);
+        b.fade(f64::NAN);
+        assert_eq!(b, before);
     }
 }

@@ -173,6 +173,10 @@ impl Eps {
     pub fn set_soc(&mut self, soc: f64) {
         self.battery.set_soc(soc);
     }
+    /// The battery loses `fraction` of its capacity ([`Battery::fade`]).
+    pub fn fade_battery(&mut self, fraction: f64) {
+        self.battery.fade(fraction);
+    }
 
     /// The EPS software rebooted: thresholds back to the configuration, energy counters
     /// from zero. Battery, channels and the protection's memory are physical or

@@ -83,6 +83,9 @@ pub enum EpsEvent {
     PanelFail(usize),
     /// Panel `i` works again.
     PanelRestore(usize),
+    /// The battery loses this fraction (0..1) of its capacity, for good
+    /// ([`Battery::fade`]).
+    BatteryFade(f64),
 }
 
 /// An [`EpsEvent`] at a simulated time.
@@ -397,6 +400,18 @@ impl EpsApp {
                 self.eps.set_panel_failed(i, false);
                 self.log
                     .push(NodeEvent::info(t, format!("eps: panel {i} restored")));
+            }
+            EpsEvent::BatteryFade(f) => {
+                self.eps.fade_battery(f);
+                self.log.push(NodeEvent::info(
+                    t,
+                    format!(
+                        "eps: battery lost {:.1} % of its capacity: {:.1} Wh left at {:.1} %",
+                        f * 100.0,
+                        self.eps.battery().config().capacity_wh,
+                        self.eps.soc() * 100.0
+                    ),
+                ));
             }
         }
     }
