@@ -622,3 +622,62 @@ panel = "wing+Y"
     assert!(lost.0 > 100 && kept.0 > 100);
     assert!((mean_lost / mean_kept - (1.0 - wing_share)).abs() < 0.05);
 }
+
+/// `battery-fade` of half the capacity at 10 min: the state of charge is kept at that
+/// instant, and every eclipse afterwards takes twice as much of it as it takes from the
+/// fresh battery (the same energy out of half the capacity).
+#[test]
+fn a_faded_battery_drains_faster_in_eclipse() {
+    let scenario = |fault: &str| {
+        format!(
+            r#"
+name = "battery-fade"
+duration = "7200s"
+start = "2026-04-30T18:00:00Z"
+seed = 3
+{TLE}
+[fc]
+mode = "nadir"
+initial_rate_deg_s = 0.5
+{fault}
+"#
+        )
+    };
+    let eclipse_drop = |text: &str| {
+        let (_, events) = run(text);
+        let samples: Vec<(u64, f64, f64)> = events
+            .iter()
+            .filter_map(|e| match e {
+                RunEvent::Eps(o) => match &**o {
+                    nodes_eps::EpsOutput::Sample {
+                        t, soc, solar_w, ..
+                    } => Some((t.as_secs(), *soc, *solar_w)),
+                    _ => None,
+                },
+                _ => None,
+            })
+            .collect();
+        let at_fade = samples.iter().find(|s| s.0 == 600).map(|s| s.1);
+        let before = samples.iter().find(|s| s.0 == 599).map(|s| s.1);
+        let drop: f64 = samples
+            .windows(2)
+            .filter(|w| w[0].0 > 700 && w[0].2 == 0.0 && w[1].2 == 0.0)
+            .map(|w| w[0].1 - w[1].1)
+            .sum();
+        (before, at_fade, drop)
+    };
+    let (b0, a0, fresh) = eclipse_drop(&scenario(""));
+    let (b1, a1, faded) = eclipse_drop(&scenario(
+        "\n[[faults]]\nat = \"600s\"\nkind = \"battery-fade\"\ntarget = \"EPS\"\nfraction = 0.5\n",
+    ));
+    eprintln!(
+        "battery-fade: SOC taken by eclipses after 700 s: fresh {fresh:.5}, half capacity {faded:.5}"
+    );
+    assert_eq!(
+        (b0, a0),
+        (b1, a1),
+        "the state of charge is kept at the fade"
+    );
+    assert!(fresh > 0.02, "an eclipse in the window: {fresh}");
+    assert!((faded / fresh - 2.0).abs() < 0.01, "{faded} / {fresh}");
+}

@@ -21,6 +21,7 @@
 //!   recording say when.
 
 pub mod babble;
+pub mod battery_fade;
 pub mod bit_errors;
 pub mod media;
 pub mod node;
@@ -338,6 +339,7 @@ registry! {
     bit_errors::BitErrors,
     babble::Babble,
     panel_loss::PanelLoss,
+    battery_fade::BatteryFade,
 }
 
 fn parse(e: &FaultEntry) -> Result<Parsed, Vec<(String, String)>> {
