@@ -261,6 +261,47 @@ impl std::fmt::Display for NodeEvent {
     }
 }
 
+/// One error of a node's clock: a jump, and a drift from the instant it began.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockError {
+    /// The step the clock took when it began, ns (positive: the clock is ahead).
+    pub jump_ns: i64,
+    /// How fast it runs wrong since, parts per million (positive: it gains).
+    pub drift_ppm: f64,
+    /// When it began.
+    pub since: SimTime,
+}
+
+/// The errors of a node's clock, by id (a scenario's clock faults): the node's clock reads
+/// its true time (and any offset set through CSP) plus their sum. They are hardware's: a
+/// reboot keeps them.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ClockErrors(BTreeMap<u32, ClockError>);
+
+impl ClockErrors {
+    /// Error `id` begins (`Some`) or is corrected (`None`).
+    pub fn set(&mut self, id: u32, error: Option<ClockError>) {
+        match error {
+            Some(e) => {
+                self.0.insert(id, e);
+            }
+            None => {
+                self.0.remove(&id);
+            }
+        }
+    }
+    /// How far ahead of true time the clock is at `now`, ns.
+    pub fn error_ns(&self, now: SimTime) -> i128 {
+        self.0
+            .values()
+            .map(|e| {
+                let since_ns = now.as_ns().saturating_sub(e.since.as_ns()) as f64;
+                i128::from(e.jump_ns) + (e.drift_ppm * 1e-6 * since_ns).round() as i128
+            })
+            .sum()
+    }
+}
+
 /// A fault of a node's core (set with [`Node::set_fault`], by fault id): each variant is
 /// added by the scenario fault kind that needs it.
 #[derive(Debug, Clone, PartialEq)]
@@ -330,6 +371,7 @@ pub struct Node {
     counters: NodeCounters,
     frames: Vec<CanFrame>,
     faults: BTreeMap<u32, NodeFault>,
+    clock_errors: ClockErrors,
 }
 
 /// Keep at most this many unread events (older ones are counted, not kept).
@@ -352,6 +394,7 @@ impl Node {
             counters: NodeCounters::default(),
             frames: Vec::new(),
             faults: BTreeMap::new(),
+            clock_errors: ClockErrors::default(),
             cfg,
         };
         node.reset_links();
@@ -398,11 +441,21 @@ impl Node {
     pub fn uptime(&self, now: SimTime) -> Duration {
         service::uptime(self.boot, now)
     }
-    /// UTC unix time of the node's clock, in nanoseconds.
+    /// UTC unix time of the node's clock, in nanoseconds: true time, the offset set
+    /// through CSP, and the clock's errors ([`ClockErrors`]).
     pub fn clock_unix_ns(&self, now: SimTime) -> i128 {
         i128::from(self.cfg.epoch_unix_s) * 1_000_000_000
             + i128::from(now.as_ns())
             + self.clock_offset_ns
+            + self.clock_errors.error_ns(now)
+    }
+    /// The errors of the node's clock.
+    pub fn clock_errors(&self) -> &ClockErrors {
+        &self.clock_errors
+    }
+    /// Clock error `id` begins (`Some`) or is corrected (`None`).
+    pub fn set_clock_error(&mut self, id: u32, error: Option<ClockError>) {
+        self.clock_errors.set(id, error);
     }
 
     /// Bind `port` so packets to it are delivered to the application.
@@ -1199,5 +1252,39 @@ mod tests {
             assert_eq!(packet.data, want);
             assert_eq!(packet.header, Header::new(4, 16, 40, 10));
         }
+    }
+
+    #[test]
+    fn a_clock_error_jumps_and_drifts_and_errors_add_up() {
+        let mut n = router_node();
+        let t0 = SimTime::from_secs(100);
+        let base = n.clock_unix_ns(t0);
+        n.set_clock_error(
+            1,
+            Some(ClockError {
+                jump_ns: 5_000_000_000,
+                drift_ppm: 0.0,
+                since: t0,
+            }),
+        );
+        n.set_clock_error(
+            2,
+            Some(ClockError {
+                jump_ns: 0,
+                drift_ppm: 100.0,
+                since: t0,
+            }),
+        );
+        // 1000 s later: +5 s jump, +100 ppm x 1000 s = +0.1 s.
+        let t1 = SimTime::from_secs(1100);
+        assert_eq!(
+            n.clock_unix_ns(t1) - base,
+            1_000_000_000_000 + 5_000_000_000 + 100_000_000
+        );
+        n.set_clock_error(1, None);
+        assert_eq!(n.clock_unix_ns(t1) - base, 1_000_000_000_000 + 100_000_000);
+        // A reboot keeps the oscillator's error.
+        n.reboot(t1);
+        assert_eq!(n.clock_errors().error_ns(t1), 100_000_000);
     }
 }

@@ -311,6 +311,8 @@ pub struct FcApp {
     onboard: Option<OnboardOrbit>,
     gps_models: SlowModels,
     rtc_offset_ns: i128,
+    /// The errors of the node's clock (its oscillator's), refreshed at every entry.
+    clock: csp::node::ClockErrors,
     power_on: Option<SimTime>,
     reset_cause: u8,
     // --- flight software (volatile) ---
@@ -400,6 +402,7 @@ impl FcApp {
             onboard,
             gps_models: SlowModels::default(),
             rtc_offset_ns: 0,
+            clock: csp::node::ClockErrors::default(),
             power_on: None,
             reset_cause: RESET_POWER_ON,
             fsw,
@@ -471,15 +474,21 @@ impl FcApp {
         i64::try_from(self.true_unix_ns(now)).unwrap_or(i64::MAX)
     }
 
+    /// The RTC at `now`, UTC unix nanoseconds: true time, the offset RTCSTMSET set, and
+    /// the node's clock errors.
+    fn rtc_unix_ns(&self, now: SimTime) -> i128 {
+        self.true_unix_ns(now) + self.rtc_offset_ns + self.clock.error_ns(now)
+    }
+
     /// The RTC at `now`, UTC unix seconds (saturating to the u32 range).
     pub fn rtc_unix_s(&self, now: SimTime) -> u32 {
-        let s = (self.true_unix_ns(now) + self.rtc_offset_ns).div_euclid(1_000_000_000);
+        let s = self.rtc_unix_ns(now).div_euclid(1_000_000_000);
         u32::try_from(s.max(0)).unwrap_or(u32::MAX)
     }
 
     /// The RTC at `now` as UTC unix seconds with its fraction (scripts run on it).
     fn rtc_unix_s_f64(&self, now: SimTime) -> f64 {
-        (self.true_unix_ns(now) + self.rtc_offset_ns) as f64 * 1e-9
+        self.rtc_unix_ns(now) as f64 * 1e-9
     }
 
     /// The FC's knowledge of its ECI J2000 position in metres at `now`: the latest GPS fix
@@ -957,8 +966,10 @@ impl FcApp {
     fn rtc(&mut self, c: RtcCommand, now: SimTime) -> Vec<u8> {
         match c {
             RtcCommand::Set(t) => {
-                self.rtc_offset_ns =
-                    i128::from(t.rtc_timestamp) * 1_000_000_000 - self.true_unix_ns(now);
+                // Set against the clock as it runs (its errors keep running).
+                self.rtc_offset_ns = i128::from(t.rtc_timestamp) * 1_000_000_000
+                    - self.true_unix_ns(now)
+                    - self.clock.error_ns(now);
                 Vec::new()
             }
             RtcCommand::Get => RtcTimestamp {
@@ -1028,6 +1039,7 @@ impl App for FcApp {
         self.out.pop()
     }
     fn start(&mut self, node: &mut Node, now: SimTime) {
+        self.clock = node.clock_errors().clone();
         self.power_on.get_or_insert(now);
         let p = self.cfg.ports;
         for port in [p.telemetry, p.rtc, p.attitude, p.scripts] {
@@ -1037,6 +1049,7 @@ impl App for FcApp {
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        self.clock = node.clock_errors().clone();
         let p = self.cfg.ports;
         let dport = packet.header.dport;
         let (reply, refused) = if dport == p.telemetry {
@@ -1077,6 +1090,7 @@ impl App for FcApp {
     }
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        self.clock = node.clock_errors().clone();
         self.catch_up(now);
         while let Some(t) = self.next_tick.filter(|&t| t <= now) {
             self.tick(t, true);
