@@ -306,7 +306,16 @@ impl ClockErrors {
 /// added by the scenario fault kind that needs it.
 #[derive(Debug, Clone, PartialEq)]
 #[non_exhaustive]
-pub enum NodeFault {}
+pub enum NodeFault {
+    /// The node's clock jumps by `jump_ns` and drifts by `drift_ppm` from the fault's
+    /// instant ([`ClockError`]) until the fault is lifted (the clock is corrected).
+    Clock {
+        /// The step, ns (positive: ahead).
+        jump_ns: i64,
+        /// The drift, parts per million (positive: it gains).
+        drift_ppm: f64,
+    },
+}
 
 /// A bounded queue of an application's outputs, pulled with [`App::poll_event`]: the
 /// node's task drains it after every input, so it holds only what one input produced; past
@@ -673,13 +682,24 @@ impl Node {
 
     /// Fault `id` acts on the node (`Some`) from `now`, or is lifted (`None`).
     pub fn set_fault(&mut self, id: u32, fault: Option<NodeFault>, now: SimTime) {
-        let _ = now;
         match fault {
             Some(f) => {
+                match &f {
+                    NodeFault::Clock { jump_ns, drift_ppm } => self.set_clock_error(
+                        id,
+                        Some(ClockError {
+                            jump_ns: *jump_ns,
+                            drift_ppm: *drift_ppm,
+                            since: now,
+                        }),
+                    ),
+                }
                 self.faults.insert(id, f);
             }
             None => {
-                self.faults.remove(&id);
+                if let Some(NodeFault::Clock { .. }) = self.faults.remove(&id) {
+                    self.set_clock_error(id, None);
+                }
             }
         }
     }

@@ -681,3 +681,107 @@ initial_rate_deg_s = 0.5
     assert!(fresh > 0.02, "an eclipse in the window: {fresh}");
     assert!((faded / fresh - 2.0).abs() < 0.01, "{faded} / {fresh}");
 }
+
+/// A `clock` fault on the FC: its RTC jumps 60 s ahead at 100 s, so a script the ground
+/// timed for 300 s..400 s (true UTC) runs from 240 s to 340 s; the RTC it reports is 60 s
+/// ahead; once corrected (500 s) it reads true time again. The PC's clock, 30 s ahead from
+/// 100 s, starts a session SETUP timed for 400 s at 370 s (ICD 3.1: the PC's clock).
+#[test]
+fn a_clock_fault_moves_what_runs_on_that_clock() {
+    // 2026-04-30T18:00:00Z.
+    let start = 1_777_572_000u64;
+    let text = format!(
+        r#"
+name = "clock"
+duration = "600s"
+start = "2026-04-30T18:00:00Z"
+{TLE}
+[fc]
+mode = "nadir"
+initial_rate_deg_s = 0.5
+
+[[fc.scripts]]
+at = "10s"
+line = "adcs {} {} pointLVLH 1 0 0 0"
+
+[[commands]]
+name = "rtc"
+at = "200s"
+to = "FC"
+request = "raw"
+port = 11
+data = "02"
+
+[[commands]]
+name = "rtc-corrected"
+at = "550s"
+to = "FC"
+request = "raw"
+port = 11
+data = "02"
+
+[[commands]]
+name = "setup"
+at = "150s"
+to = "PC"
+request = "raw"
+port = 10
+data = "0101{}1e000000c8676f"
+
+[[faults]]
+at = "100s"
+kind = "clock"
+target = "PC"
+jump_s = 30
+
+[[faults]]
+at = "100s"
+until = "500s"
+kind = "clock"
+target = "FC"
+jump_s = 60
+"#,
+        start + 300,
+        start + 400,
+        hex::encode(u32::try_from(start + 400).unwrap().to_le_bytes())
+    );
+    let (out, events) = run(&text);
+    // The script's mode (fixed LVLH, 8) while it runs, by the published samples.
+    let running: Vec<u64> = events
+        .iter()
+        .filter_map(|e| match e {
+            RunEvent::Truth { t, adcs, .. } if adcs.mode_commanded == 8 => Some(t.as_secs()),
+            _ => None,
+        })
+        .collect();
+    eprintln!(
+        "clock: the script ran from {:?} s to {:?} s",
+        running.first(),
+        running.last()
+    );
+    assert_eq!(running.first(), Some(&240));
+    assert_eq!(running.last(), Some(&339));
+    let rtc = |name: &str| {
+        let r = out
+            .report
+            .results
+            .iter()
+            .find(|r| r.request.label == name)
+            .unwrap();
+        let Outcome::Reply { data, .. } = &r.outcome else {
+            panic!("{name}: {:?}", r.outcome)
+        };
+        u64::from(u32::from_le_bytes(data[2..6].try_into().unwrap()))
+    };
+    let session_start = events.iter().find_map(|e| match e {
+        RunEvent::Pc(o) => match &**o {
+            nodes_pc::PcOutput::SessionStarted { t, .. } => Some(t.as_secs()),
+            _ => None,
+        },
+        _ => None,
+    });
+    eprintln!("clock: the PC's session timed for 400 s started at {session_start:?} s");
+    assert_eq!(session_start, Some(370));
+    assert_eq!(rtc("rtc"), start + 200 + 60);
+    assert_eq!(rtc("rtc-corrected"), start + 550);
+}

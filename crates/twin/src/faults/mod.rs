@@ -23,6 +23,7 @@
 pub mod babble;
 pub mod battery_fade;
 pub mod bit_errors;
+pub mod clock;
 pub mod media;
 pub mod node;
 pub mod panel_loss;
@@ -340,6 +341,7 @@ registry! {
     babble::Babble,
     panel_loss::PanelLoss,
     battery_fade::BatteryFade,
+    clock::Clock,
 }
 
 fn parse(e: &FaultEntry) -> Result<Parsed, Vec<(String, String)>> {
