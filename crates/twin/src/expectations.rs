@@ -243,6 +243,7 @@ registry! {
     crate::sessions::AccountingExpect,
     crate::eps::PowerExpect,
     crate::comm::BeaconExpect,
+    crate::can::CanExpect,
 }
 
 type Parsed = (Common, std::sync::Arc<dyn AnyExpect>);

@@ -8,6 +8,7 @@
 //! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
 pub mod adcs;
+pub mod can;
 pub mod comm;
 pub mod commands;
 pub mod counters;

@@ -385,8 +385,28 @@ kind = "bit-errors"
 target = "main"
 node = "ECU"
 ber = 0.01
+
+[[expectations]]
+name = "ecu-went-bus-off-and-came-back"
+kind = "can"
+bus = "main"
+node = "ECU"
+state = "bus-off"
+min = 1
+end_state = "error-active"
+
+[[expectations]]
+name = "the-fc-never-went-bus-off"
+kind = "can"
+bus = "main"
+node = "FC"
+max = 0
 "#;
     let (out, events) = run(text);
+    for v in &out.verdicts {
+        assert!(v.passed, "{}: {}", v.name, v.observed);
+    }
+    assert_eq!(out.verdicts.len(), 2);
     // What the ECU's controller went through, in order.
     let mut states = Vec::new();
     let mut error_frames = 0;
