@@ -467,11 +467,6 @@ impl CanBus {
         }
     }
 
-    /// Set the bus's impairments (replacing every fault's).
-    pub fn set_impairments(&self, imp: Impairments) {
-        self.lock().impair = imp;
-    }
-
     /// Fault `id` impairs the medium with `imp` (`Some`) or is lifted (`None`); the
     /// impairments in force are every active fault's combined
     /// ([`ImpairmentSet::combined`]).
@@ -1134,15 +1129,18 @@ mod tests {
         assert!(rx_out.try_recv().is_ok());
         assert!(rx_int.try_recv().is_err());
         bus.release(&outside);
-        bus.set_impairments(Impairments {
-            down: true,
-            ..Default::default()
-        });
+        bus.set_fault(
+            0,
+            Some(Impairments {
+                down: true,
+                ..Default::default()
+            }),
+        );
         a.send(clock.now(), cfp_frame(6, 12, 1));
         tokio::time::sleep(Duration::from_millis(2)).await;
         assert!(rx_int.try_recv().is_err());
         assert_eq!(bus.stats().dropped, 1);
-        bus.set_impairments(Impairments::default());
+        bus.set_fault(0, None);
         a.send(clock.now(), cfp_frame(6, 12, 2));
         tokio::time::sleep(Duration::from_millis(2)).await;
         assert!(rx_int.try_recv().is_ok());

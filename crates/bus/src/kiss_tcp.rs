@@ -19,6 +19,7 @@ use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
 use crate::clock::Clock;
+use crate::gate::{DelayLine, LinkGate, Passage};
 use crate::inbox::inbox;
 use crate::outside::{OutsideEndpoint, Segments};
 
@@ -31,6 +32,8 @@ pub struct KissLinkConfig {
     pub decoder: DecoderConfig,
     /// Where the raw bytes crossing the socket go (the recorder).
     pub tap: Option<KissTap>,
+    /// The link's faults and power ([`crate::gate`]); `None`: everything crosses.
+    pub gate: Option<LinkGate>,
 }
 
 /// Receives every chunk read from and every frame written to a link's socket:
@@ -186,7 +189,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
     };
     tokio::select! {
         biased;
-        why = serve_link(in_rx, &mut wr, name, segs, cfg, stats, n) => why,
+        why = serve_link(in_rx, &mut wr, name, segs, cfg, stats, n, clock) => why,
         why = reader => why,
     }
 }
@@ -194,6 +197,11 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
 /// The link's core: time-stamped input chunks in, KISS frames out to `stream`. Every
 /// connection has its own name (`listen 127.0.0.1:52001#2` for the second one). `replay` feeds
 /// it recorded chunks with their recorded times. Ends when the input ends or a write fails.
+///
+/// Every packet crossing, in either direction, passes the link's gate (`cfg.gate`): it
+/// crosses now, waits out a delay, or is lost (counted by the gate). The bytes read are
+/// recorded whatever the gate decides; a packet towards the outside is written (and
+/// recorded) when it crosses.
 #[allow(clippy::too_many_arguments)]
 pub async fn serve_link<W: AsyncWrite + Unpin>(
     mut input: tokio::sync::mpsc::UnboundedReceiver<(SimTime, Vec<u8>)>,
@@ -203,6 +211,7 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
     cfg: &KissLinkConfig,
     stats: &SharedStats,
     n: u16,
+    clock: Clock,
 ) -> String {
     let (inbox_tx, mut inbox_rx) = inbox();
     // Released however this ends, also when the future is dropped (the connection's reader
@@ -217,9 +226,27 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
     let mut decoder = Decoder::new(cfg.decoder);
     let mut events = Vec::new();
     let mut out = Vec::new();
+    // Packets waiting out a `delay` fault, into the twin and out of it.
+    let mut delayed_in: DelayLine<csp::Packet> = DelayLine::default();
+    let mut delayed_out: DelayLine<Vec<u8>> = DelayLine::default();
     loop {
+        let next_due = [delayed_in.next_due(), delayed_out.next_due()]
+            .into_iter()
+            .flatten()
+            .min();
         tokio::select! {
             biased;
+            () = clock.sleep_until(next_due.unwrap_or(SimTime::MAX)), if next_due.is_some() => {
+                let now = next_due.unwrap_or(SimTime::MAX);
+                while let Some((t, p)) = delayed_in.pop_due(now) {
+                    take_in(endpoint, segs, name, &inbox_tx, n, stats, t, &p);
+                }
+                while let Some((t, bytes)) = delayed_out.pop_due(now) {
+                    if let Err(e) = write_out(stream, name, cfg, stats, t, &bytes).await {
+                        return e;
+                    }
+                }
+            }
             r = input.recv() => {
                 let Some((t, chunk)) = r else { break "peer closed".to_owned() };
                 let chunk = chunk.as_slice();
@@ -236,17 +263,19 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
                 });
                 for ev in events.drain(..) {
                     match ev {
-                        KissEvent::Packet(p) => {
-                            let res = claim(endpoint, segs, name, p.header.src, &inbox_tx, n)
-                                .and_then(|ep| ep.send(t, &p));
-                            match res {
-                                Ok(()) => bump(stats, |s| s.packets_in += 1),
-                                Err(e) => {
-                                    tracing::debug!("{name}: refused packet {}: {e}", p.header);
-                                    bump(stats, |s| s.refused += 1);
+                        KissEvent::Packet(p) => match gate(cfg) {
+                            Passage::Now => {
+                                take_in(endpoint, segs, name, &inbox_tx, n, stats, t, &p);
+                            }
+                            Passage::After(d) => {
+                                if delayed_in.push(t + d, p).is_err() {
+                                    overflow(cfg, name);
                                 }
                             }
-                        }
+                            Passage::Lost(why) => {
+                                tracing::debug!("{name}: packet {} from the outside lost at the link: {why:?}", p.header);
+                            }
+                        },
                         KissEvent::Dropped(d) => {
                             tracing::debug!("{name}: dropped KISS frame: {d}");
                             bump(stats, |s| match d {
@@ -266,13 +295,21 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
                     Some(Ok(p)) => {
                         out.clear();
                         kiss::encode(&p, &mut out);
-                        if let Some(tap) = &cfg.tap {
-                            (tap.0)(a_t, name, false, &out);
+                        match gate(cfg) {
+                            Passage::Now => {
+                                if let Err(e) = write_out(stream, name, cfg, stats, a_t, &out).await {
+                                    break e;
+                                }
+                            }
+                            Passage::After(d) => {
+                                if delayed_out.push(a_t + d, out.clone()).is_err() {
+                                    overflow(cfg, name);
+                                }
+                            }
+                            Passage::Lost(why) => {
+                                tracing::debug!("{name}: packet {} to the outside lost at the link: {why:?}", p.header);
+                            }
                         }
-                        if let Err(e) = stream.write_all(&out).await {
-                            break format!("write error: {e}");
-                        }
-                        bump(stats, |s| { s.packets_out += 1; s.bytes_out += out.len() as u64; });
                     }
                     Some(Err(e)) => tracing::debug!("{name}: CFP drop towards outside: {e}"),
                     None => {}
@@ -280,6 +317,63 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
             }
         }
     }
+}
+
+/// The passage of one packet through the link's gate (everything crosses without one).
+fn gate(cfg: &KissLinkConfig) -> Passage {
+    cfg.gate.as_ref().map_or(Passage::Now, LinkGate::pass)
+}
+
+fn overflow(cfg: &KissLinkConfig, name: &str) {
+    if let Some(g) = &cfg.gate {
+        g.overflowed();
+    }
+    tracing::warn!("{name}: delay line full: packet lost");
+}
+
+/// Take a packet from the outside into the twin at `t`.
+#[allow(clippy::too_many_arguments)]
+fn take_in(
+    endpoint: &mut Option<OutsideEndpoint>,
+    segs: &Segments,
+    name: &str,
+    inbox: &crate::inbox::InboxTx,
+    n: u16,
+    stats: &SharedStats,
+    t: SimTime,
+    p: &csp::Packet,
+) {
+    let res = claim(endpoint, segs, name, p.header.src, inbox, n).and_then(|ep| ep.send(t, p));
+    match res {
+        Ok(()) => bump(stats, |s| s.packets_in += 1),
+        Err(e) => {
+            tracing::debug!("{name}: refused packet {}: {e}", p.header);
+            bump(stats, |s| s.refused += 1);
+        }
+    }
+}
+
+/// Write one KISS frame to the outside program at `t`; the error ends the link.
+async fn write_out<W: AsyncWrite + Unpin>(
+    stream: &mut W,
+    name: &str,
+    cfg: &KissLinkConfig,
+    stats: &SharedStats,
+    t: SimTime,
+    frame: &[u8],
+) -> Result<(), String> {
+    if let Some(tap) = &cfg.tap {
+        (tap.0)(t, name, false, frame);
+    }
+    stream
+        .write_all(frame)
+        .await
+        .map_err(|e| format!("write error: {e}"))?;
+    bump(stats, |s| {
+        s.packets_out += 1;
+        s.bytes_out += frame.len() as u64;
+    });
+    Ok(())
 }
 
 /// An outside link's endpoint, released when dropped.

@@ -5,11 +5,13 @@
 //! - [`net`]: a packet network (the ground segment and the UHF air channel).
 //! - [`driver`]: the task that runs one node.
 //! - [`outside`], [`kiss_tcp`]: programs outside the twin over KISS/TCP.
+//! - [`gate`]: what the twin lets across an outside link (its faults and power).
 //! - `socketcan` (cargo feature `socketcan`, Linux): a bridge to a real CAN interface.
 
 pub mod can;
 pub mod clock;
 pub mod driver;
+pub mod gate;
 pub mod impair;
 pub mod inbox;
 pub mod kiss_tcp;

@@ -254,11 +254,6 @@ impl PacketNet {
         }
     }
 
-    /// Set the air channel's impairments.
-    pub fn set_impairments(&self, imp: Impairments) {
-        self.lock().impair = imp;
-    }
-
     /// Fault `id` impairs the medium with `imp` (`Some`) or is lifted (`None`); the
     /// impairments in force are every active fault's combined
     /// ([`ImpairmentSet::combined`]).

@@ -30,7 +30,8 @@ pub struct Segments {
 /// that run reports can carry them whatever the build.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct BridgeStats {
-    /// Extended data frames read from the interface and put on the segment.
+    /// Extended data frames read from the interface (put on the segment unless the link's
+    /// gate holds them back: `crate::gate`).
     pub frames_in: u64,
     /// Frames of the segment written to the interface.
     pub frames_out: u64,

@@ -30,11 +30,13 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use csp::SimTime;
 use csp::cfp::{CAN_EFF_MASK, CAN_MAX_DLC, CanFrame};
 use socketcan::{EmbeddedFrame, ExtendedId, Frame, Id};
 
 use crate::can::CanBus;
 use crate::clock::Clock;
+use crate::gate::{DelayLine, LinkGate, Passage};
 use crate::inbox::{Arrival, inbox};
 pub use crate::outside::BridgeStats;
 
@@ -358,7 +360,16 @@ impl ErrorLog {
 /// is down (`ENETDOWN`) is waited for. When the interface is deleted (seen at the next
 /// write, or within 250 ms on a quiet bus) the bridge logs it, records it in
 /// [`BridgeStats::ended`], leaves the bus and returns.
-pub async fn bridge(bus: CanBus, mut link: SocketCanLink, clock: Clock, stats: SharedBridgeStats) {
+///
+/// Every frame crossing, in either direction, passes `gate` (the link's faults and power,
+/// [`crate::gate`]): it crosses now, waits out a delay, or is lost (counted by the gate).
+pub async fn bridge(
+    bus: CanBus,
+    mut link: SocketCanLink,
+    clock: Clock,
+    stats: SharedBridgeStats,
+    gate: Option<LinkGate>,
+) {
     let ifname = link.ifname().to_owned();
     let name = format!("socketcan:{ifname}");
     let (inbox_tx, mut inbox_rx) = inbox();
@@ -374,13 +385,51 @@ pub async fn bridge(bus: CanBus, mut link: SocketCanLink, clock: Clock, stats: S
     };
     let mut poll = tokio::time::interval(ERROR_POLL);
     poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let pass = || gate.as_ref().map_or(Passage::Now, LinkGate::pass);
+    let overflow = || {
+        if let Some(g) = &gate {
+            g.overflowed();
+        }
+        tracing::warn!("{name}: delay line full: frame lost");
+    };
+    // Frames waiting out a `delay` fault, into the twin and out of it.
+    let mut delayed_in: DelayLine<CanFrame> = DelayLine::default();
+    let mut delayed_out: DelayLine<CanFrame> = DelayLine::default();
     let why = loop {
+        let next_due = [delayed_in.next_due(), delayed_out.next_due()]
+            .into_iter()
+            .flatten()
+            .min();
         tokio::select! {
             biased;
+            () = clock.sleep_until(next_due.unwrap_or(SimTime::MAX)), if next_due.is_some() => {
+                let now = next_due.unwrap_or(SimTime::MAX);
+                while let Some((t, frame)) = delayed_in.pop_due(now) {
+                    port.send(t, frame);
+                }
+                while let Some((_, frame)) = delayed_out.pop_due(now) {
+                    match link.send(&frame).await {
+                        Ok(()) => bump(&stats, |s| s.frames_out += 1),
+                        Err(e) => {
+                            bump(&stats, |s| s.send_errors += 1);
+                            send_log.error(&name, &e);
+                        }
+                    }
+                }
+            }
             // From the interface first: frames are stamped with the time they are read.
             r = link.recv() => match r {
                 Ok(frame) => {
-                    port.send(clock.now(), frame);
+                    let t = clock.now();
+                    match pass() {
+                        Passage::Now => port.send(t, frame),
+                        Passage::After(d) => {
+                            if delayed_in.push(t + d, frame).is_err() {
+                                overflow();
+                            }
+                        }
+                        Passage::Lost(_) => {}
+                    }
                     let skipped = link.stats().skipped();
                     bump(&stats, |s| { s.frames_in += 1; s.skipped = skipped; });
                     recv_log.ok(&name);
@@ -398,6 +447,16 @@ pub async fn bridge(bus: CanBus, mut link: SocketCanLink, clock: Clock, stats: S
                 // The bus keeps a sender for as long as it exists: `None` means it is gone.
                 let Some(a) = a else { break "the in-process bus was dropped".to_owned() };
                 let Arrival::Can(frame) = a.what else { continue };
+                match pass() {
+                    Passage::Now => {}
+                    Passage::After(d) => {
+                        if delayed_out.push(a.t + d, frame).is_err() {
+                            overflow();
+                        }
+                        continue;
+                    }
+                    Passage::Lost(_) => continue,
+                }
                 match link.send(&frame).await {
                     Ok(()) => {
                         bump(&stats, |s| s.frames_out += 1);

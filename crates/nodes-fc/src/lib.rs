@@ -12,8 +12,9 @@
 //!    else the ATCMDSET mode);
 //! 4. steps the rigid-body truth ([`truth`]) over the tick with the commanded actuators and
 //!    the disturbances (gravity gradient, residual dipole, drag);
-//! 5. every `adcs_hz / publish_hz` ticks hands a [`TruthSnapshot`] and an [`AdcsSnapshot`]
-//!    to its [`Publisher`] (the twin records them and checks expectations against them).
+//! 5. every `adcs_hz / publish_hz` ticks puts a [`TruthSnapshot`] and an [`AdcsSnapshot`]
+//!    in its outbox as a [`Published`] event (`App::poll_event`; the twin records them and
+//!    checks expectations against them).
 //!
 //! The truth (orbit, attitude, wheels) survives FC reboots; the flight software (estimate,
 //! mode, target, scripts) does not. While the FC is off or hung nothing runs; when it comes

@@ -61,6 +61,14 @@ pub enum Effect {
         /// On or off.
         on: bool,
     },
+    /// Outside link `link` (its index among the run's outside links) gains (`on`) or
+    /// loses power now.
+    LinkPower {
+        /// The link.
+        link: u16,
+        /// Powered or not.
+        on: bool,
+    },
     /// A line for the run's log (source `radio`).
     Log(String),
 }
@@ -95,6 +103,8 @@ pub struct PowerRules {
     carrier: u8,
     /// Whose radio is the active one (1 or 2): the switches as they stand.
     active: u8,
+    /// Outside links powered by a channel: the channel's node address, and whether on.
+    links: BTreeMap<u16, (u8, bool)>,
 }
 
 impl PowerRules {
@@ -108,7 +118,19 @@ impl PowerRules {
             radio,
             carrier: COMM1,
             active: COMM1,
+            links: BTreeMap::new(),
         }
+    }
+
+    /// Outside link `link` is powered by the EPS channel of node `channel_of`, which is on
+    /// (`on`) or off now.
+    pub fn power_link(&mut self, link: u16, channel_of: u8, on: bool) {
+        self.links.insert(link, (channel_of, on));
+    }
+
+    /// Whether outside link `link` is powered (links without a channel always are).
+    pub fn link_powered(&self, link: u16) -> bool {
+        self.links.get(&link).is_none_or(|(_, on)| *on)
     }
 
     /// Whether node `addr` is powered (unknown nodes: no).
@@ -126,9 +148,16 @@ impl PowerRules {
         self.carrier
     }
 
-    /// Node `addr`'s EPS channel switched on or off.
+    /// Node `addr`'s EPS channel switched on or off (and the outside links it powers).
     pub fn channel(&mut self, addr: u8, on: bool) -> Vec<Effect> {
-        self.change(addr, |s| s.channel_off = !on)
+        let mut out = self.change(addr, |s| s.channel_off = !on);
+        for (link, (of, powered)) in &mut self.links {
+            if *of == addr && *powered != on {
+                *powered = on;
+                out.push(Effect::LinkPower { link: *link, on });
+            }
+        }
+        out
     }
 
     /// Power fault `fault` starts holding node `addr` off.
@@ -288,6 +317,40 @@ mod tests {
             vec![Effect::Power { addr: PC, on: true }]
         );
         assert!(r.powered(PC));
+    }
+
+    #[test]
+    fn an_outside_link_follows_only_the_channel_that_powers_it() {
+        let mut r = rules();
+        r.power_link(0, 12, true);
+        // Link 1 has no channel: nothing switches it.
+        assert!(r.link_powered(0) && r.link_powered(1));
+        assert_eq!(
+            r.channel(12, false),
+            vec![
+                Effect::Power {
+                    addr: 12,
+                    on: false
+                },
+                Effect::LinkPower { link: 0, on: false }
+            ]
+        );
+        assert!(!r.link_powered(0) && r.link_powered(1));
+        assert_eq!(r.channel(12, false), vec![], "no change");
+        assert_eq!(
+            r.channel(ECU, false).len(),
+            1,
+            "another channel: the ECU only"
+        );
+        // A power fault on the twin's own node 12 leaves the outside program alone.
+        r.channel(12, true);
+        let effects = r.hold(12, 3);
+        assert!(
+            !effects
+                .iter()
+                .any(|e| matches!(e, Effect::LinkPower { .. }))
+        );
+        assert!(r.link_powered(0));
     }
 
     #[test]

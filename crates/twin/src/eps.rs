@@ -96,10 +96,15 @@ pub fn compile(s: &Scenario) -> nodes_eps::EpsConfig {
     use nodes_eps::{Channel, EpsEvent, TimedEpsEvent};
     let mut c = nodes_eps::EpsConfig::default();
     let e = &s.eps;
-    // A payload the network does not have draws nothing: its channel starts off.
+    // A payload the network does not have draws nothing, unless a program outside the twin
+    // is powered by its channel: its channel starts off.
     for addr in 12..=15u8 {
-        if !s.network.payloads.contains(&addr)
-            && let Some(ch) = Channel::of_node(addr)
+        if let Some(ch) = Channel::of_node(addr)
+            && !s.network.payloads.contains(&addr)
+            && !s
+                .links
+                .iter()
+                .any(|l| l.powered_by.as_deref().and_then(Channel::from_name) == Some(ch))
         {
             c.channels_on &= !ch.bit();
         }

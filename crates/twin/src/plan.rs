@@ -38,19 +38,40 @@ pub fn compile(s: &Scenario) -> Compiled {
         opts.tle = Some((l1.clone(), l2.clone()));
     }
     for l in &s.links {
-        match l.kind {
-            LinkKind::KissListen => opts
-                .kiss_listen
-                .extend(l.addr.parse::<std::net::SocketAddr>().ok()),
-            LinkKind::KissConnect => opts
-                .kiss_connect
-                .extend(l.addr.parse::<std::net::SocketAddr>().ok()),
-            LinkKind::Socketcan => {
-                if let Ok(link) = crate::runtime::SocketCanBus::parse_arg(&l.addr) {
-                    opts.socketcan.push(link);
-                }
+        // Every link gets its place in `opts.outside` (faults name it by its index).
+        let label = match l.kind {
+            LinkKind::KissListen | LinkKind::KissConnect => {
+                let addr = l.addr.parse::<std::net::SocketAddr>().ok();
+                let list = if l.kind == LinkKind::KissListen {
+                    &mut opts.kiss_listen
+                } else {
+                    &mut opts.kiss_connect
+                };
+                list.extend(addr);
+                let verb = if l.kind == LinkKind::KissListen {
+                    "listen"
+                } else {
+                    "connect"
+                };
+                format!("{verb} {}", addr.map_or(l.addr.clone(), |a| a.to_string()))
             }
-        }
+            LinkKind::Socketcan => match crate::runtime::SocketCanBus::parse_arg(&l.addr) {
+                Ok(link) => {
+                    let label = format!("socketcan {}", link.0);
+                    opts.socketcan.push(link);
+                    label
+                }
+                Err(_) => format!("socketcan {}", l.addr),
+            },
+        };
+        opts.outside.push(crate::runtime::OutsideLink {
+            name: l.name.clone().unwrap_or_else(|| label.clone()),
+            label,
+            powered_by: l
+                .powered_by
+                .as_deref()
+                .and_then(nodes_eps::Channel::from_name),
+        });
         opts.kiss.addrs.extend(&l.addrs);
         opts.kiss.decoder.libcsp14_rx_limit |= l.libcsp14_rx_limit;
     }

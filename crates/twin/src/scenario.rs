@@ -255,6 +255,13 @@ pub struct LinkSpec {
     /// Apply libcsp 1.4's 248-byte KISS receive limit.
     #[serde(default)]
     pub libcsp14_rx_limit: bool,
+    /// The link's name, for faults to target (`target = "payload-sw"`).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// The EPS channel that powers the program behind the link (`PL14`): while it is off,
+    /// the twin forwards nothing to or from it. Default: no channel switches it.
+    #[serde(default)]
+    pub powered_by: Option<String>,
 }
 
 /// Link kinds.
@@ -544,6 +551,38 @@ impl Scenario {
                     }
                 }
             }
+            if let Some(name) = &l.name {
+                let taken = ["main", "payload", "uhf"]
+                    .iter()
+                    .any(|m| m.eq_ignore_ascii_case(name))
+                    || net.nodes.iter().any(|n| n.name.eq_ignore_ascii_case(name));
+                if name.is_empty() || taken {
+                    err(
+                        p("name"),
+                        format!(
+                            "`{name}` names a node or a medium: a link needs a name of its own"
+                        ),
+                    );
+                } else if self.links[..i].iter().any(|o| {
+                    o.name
+                        .as_deref()
+                        .is_some_and(|n| n.eq_ignore_ascii_case(name))
+                }) {
+                    err(p("name"), format!("another link is named `{name}`"));
+                }
+            }
+            if let Some(c) = &l.powered_by
+                && nodes_eps::Channel::from_name(c)
+                    .and_then(nodes_eps::Channel::node_addr)
+                    .is_none()
+            {
+                err(
+                    p("powered_by"),
+                    format!(
+                        "`{c}` is not an EPS channel that powers a node (COMM1, COMM2, ECU, PC, PL12, PL13, PL14, PL15)"
+                    ),
+                );
+            }
             for (j, &a) in l.addrs.iter().enumerate() {
                 if a >= 31 {
                     err(
@@ -570,6 +609,15 @@ impl Scenario {
         } else {
             Err(ScenarioErrors(errs))
         }
+    }
+
+    /// The index in `[[links]]` of the link named `name`.
+    pub fn link_named(&self, name: &str) -> Option<usize> {
+        self.links.iter().position(|l| {
+            l.name
+                .as_deref()
+                .is_some_and(|n| n.eq_ignore_ascii_case(name))
+        })
     }
 
     /// The network the scenario describes (call after validation).

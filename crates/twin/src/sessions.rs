@@ -1128,6 +1128,7 @@ mod tests {
             ground: Default::default(),
             kiss: Vec::new(),
             socketcan: Vec::new(),
+            links: Vec::new(),
             results: Vec::new(),
             trace: Vec::new(),
             attitude: Vec::new(),

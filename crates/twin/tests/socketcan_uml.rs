@@ -19,6 +19,8 @@ use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use bus::gate::LinkGate;
+use bus::impair::Impairments;
 use bus::outside::BridgeStats;
 use bus::socketcan::{SocketCanLink, bridge};
 use bus::{CanBus, CanBusConfig, Clock, ClockMode};
@@ -261,6 +263,42 @@ fn guest_twin_over_vcan() {
     let pl = node(&report, "PL12");
     assert!(pl.service_replies >= 1, "PL12 {pl:?}");
 
+    // A link-down fault on a bridge (its gate, as a scenario's `link-down` on a named
+    // SocketCAN link sets it): a frame from the interface stops at the link, counted, and
+    // crosses again once the fault is lifted.
+    let (held, passed) = rt.block_on(async {
+        let clock = Clock::new(ClockMode::Realtime { speed: 1.0 });
+        let can = CanBus::new(CanBusConfig::new("main"), 1);
+        tokio::spawn(can.clone().run(clock));
+        let gate = LinkGate::new(1);
+        let down = Impairments {
+            down: true,
+            ..Default::default()
+        };
+        gate.set_fault(0, Some(down));
+        let link = SocketCanLink::open(&ifname).expect("reopen the interface");
+        let stats = Arc::new(Mutex::new(BridgeStats::default()));
+        let task = tokio::spawn(bridge(can.clone(), link, clock, stats, Some(gate.clone())));
+        let writer = SocketCanLink::open(&ifname).expect("a second socket");
+        let frame = CanFrame::new(0x0012_3456, &[1, 2, 3]).expect("valid frame");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        writer.send(&frame).await.expect("send");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let held = (gate.stats().down, can.stats().frames);
+        gate.set_fault(0, None);
+        writer.send(&frame).await.expect("send");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let passed = can.stats().frames;
+        task.abort();
+        (held, passed)
+    });
+    assert_eq!(
+        held,
+        (1, 0),
+        "(lost at the gate, frames on the bus) while down"
+    );
+    assert_eq!(passed, 1, "frames on the bus once lifted");
+
     // A bridge whose interface is deleted stops and says why.
     let ended = rt.block_on(async {
         let clock = Clock::new(ClockMode::Realtime { speed: 1.0 });
@@ -268,7 +306,7 @@ fn guest_twin_over_vcan() {
         tokio::spawn(can.clone().run(clock));
         let link = SocketCanLink::open(&ifname).expect("reopen the interface");
         let stats = Arc::new(Mutex::new(BridgeStats::default()));
-        let task = tokio::spawn(bridge(can, link, clock, stats.clone()));
+        let task = tokio::spawn(bridge(can, link, clock, stats.clone(), None));
         tokio::time::sleep(Duration::from_millis(50)).await;
         let st = Command::new("ip")
             .args(["link", "del", "dev", &ifname])

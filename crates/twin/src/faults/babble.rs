@@ -10,7 +10,7 @@ use bus::can::CanFault;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use super::{FaultAction, FaultCx, FaultKind, FaultPlan, MediumId};
+use super::{FaultAction, FaultCx, FaultKind, FaultPlan};
 use crate::scenario::{Dur, NodeRef};
 
 /// `babble`: `target` is the bus (`main` or `payload`).
@@ -35,7 +35,7 @@ impl FaultKind for Babble {
     const ABOUT: &'static str = "a node's CAN controller floods its bus with one frame";
 
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
-        let bus = cx.medium().filter(|m| *m != MediumId::Uhf);
+        let bus = cx.medium().filter(|m| m.is_can());
         if bus.is_none() {
             err(
                 "target",

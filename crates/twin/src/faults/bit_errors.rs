@@ -8,7 +8,7 @@ use bus::can::CanFault;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use super::{FaultAction, FaultCx, FaultKind, FaultPlan, MediumId};
+use super::{FaultAction, FaultCx, FaultKind, FaultPlan};
 use crate::scenario::NodeRef;
 
 /// `bit-errors`: `target` is the bus (`main` or `payload`).
@@ -30,7 +30,7 @@ impl FaultKind for BitErrors {
     const ABOUT: &'static str = "bit errors at a rate on a CAN bus (or on one node's frames)";
 
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
-        let bus = cx.medium().filter(|m| *m != MediumId::Uhf);
+        let bus = cx.medium().filter(|m| m.is_can());
         if bus.is_none() {
             err(
                 "target",

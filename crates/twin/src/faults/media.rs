@@ -3,6 +3,9 @@
 //! impairments (`bus::impair::ImpairmentSet`): they compose while they overlap, and lifting
 //! one leaves the others. The chances are drawn from the medium's generator, seeded from the
 //! run's seed.
+//!
+//! `drop`, `delay` and `link-down` also act on an outside link (`target` = the link's
+//! `name`): the twin holds back what crosses it in either direction (`bus::gate`).
 
 use bus::impair::Impairments;
 use schemars::JsonSchema;
@@ -11,13 +14,13 @@ use serde::Deserialize;
 use super::{FaultAction, FaultCx, FaultKind, FaultPlan};
 use crate::scenario::Dur;
 
-/// The target must be a medium.
+/// The target must be a medium or an outside link.
 fn medium_target(cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
     if cx.medium().is_none() {
         err(
             "target",
             format!(
-                "`{}` is not a medium (main, payload, uhf)",
+                "`{}` is not a medium (main, payload, uhf) or a named link",
                 cx.common.target
             ),
         );
@@ -99,7 +102,17 @@ impl FaultKind for Corrupt {
     const LABEL: &'static str = "Corrupt";
     const ABOUT: &'static str = "flip one bit of frames or packets of a medium with a probability";
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
-        medium_target(cx, err);
+        if cx.link().is_some() {
+            err(
+                "target",
+                format!(
+                    "`{}` is an outside link: the twin does not corrupt what crosses one (drop, delay, link-down or hang do act on it)",
+                    cx.common.target
+                ),
+            );
+        } else {
+            medium_target(cx, err);
+        }
         probability(self.probability, err);
     }
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {

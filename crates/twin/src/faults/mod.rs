@@ -6,7 +6,7 @@
 //! its meaning (`validate`) and what it does (`compile`: actions at instants on the fault
 //! timeline, or events on a node's own timeline); the registry at the bottom of this file
 //! names it. The fields every fault takes are [`Common`]: `at`, `until` (when it is lifted;
-//! default never) and `target` (a medium or a node). Adding a kind is its file, one line in
+//! default never) and `target` (a medium, a node, or a named outside link). Adding a kind is its file, one line in
 //! the registry, and its effect where it happens (the medium, the node's core).
 //!
 //! # Mechanisms ([`FaultAction`])
@@ -54,6 +54,8 @@ pub enum MediumId {
     Payload,
     /// The UHF air channel of the ground segment.
     Uhf,
+    /// The scenario's outside link `[[links]][i]` (faults act on its gate, `bus::gate`).
+    Link(u16),
 }
 
 impl MediumId {
@@ -65,6 +67,11 @@ impl MediumId {
             NodeRef::Name(n) if n == "uhf" => Some(MediumId::Uhf),
             _ => None,
         }
+    }
+
+    /// Whether it is a CAN bus of the twin.
+    pub fn is_can(self) -> bool {
+        matches!(self, MediumId::Main | MediumId::Payload)
     }
 }
 
@@ -99,6 +106,16 @@ pub enum FaultAction {
         fault: u32,
         /// Held off or released.
         off: bool,
+    },
+    /// Hang fault `fault` starts (`hung`) or ends on outside link `link`: the twin
+    /// forwards nothing to or from it.
+    LinkHang {
+        /// The link (`MediumId::Link`'s index).
+        link: u16,
+        /// The fault.
+        fault: u32,
+        /// Hung or recovered.
+        hung: bool,
     },
     /// Node reboot.
     Reboot(u8),
@@ -146,7 +163,7 @@ pub struct Common {
     /// When it is lifted (default: never).
     #[serde(default)]
     pub until: Option<Dur>,
-    /// The medium (`main`, `payload`, `uhf`) or node it acts on.
+    /// The medium (`main`, `payload`, `uhf`), node, or named outside link it acts on.
     pub target: NodeRef,
 }
 
@@ -180,9 +197,20 @@ impl FaultCx<'_> {
     pub fn until(&self) -> Option<SimTime> {
         self.common.until.map(|u| SimTime::ZERO + u.0)
     }
-    /// The medium `target` names, if it names one.
+    /// The medium `target` names, if it names one (a medium of the twin or a named
+    /// outside link).
     pub fn medium(&self) -> Option<MediumId> {
-        MediumId::of(&self.common.target)
+        MediumId::of(&self.common.target).or_else(|| self.link().map(MediumId::Link))
+    }
+    /// The outside link `target` names, if it names one (by its `name`).
+    pub fn link(&self) -> Option<u16> {
+        match &self.common.target {
+            NodeRef::Name(n) => self
+                .scenario
+                .link_named(n)
+                .and_then(|i| u16::try_from(i).ok()),
+            NodeRef::Addr(_) => None,
+        }
     }
     /// The node `target` names, if it names one.
     pub fn node(&self) -> Result<u8, String> {
@@ -430,6 +458,8 @@ pub struct Director<'a> {
     pub ctls: &'a BTreeMap<u8, CtlTx>,
     /// The power rules.
     pub power: &'a mut PowerShell,
+    /// The gates of the outside links, by index.
+    pub links: &'a [bus::gate::LinkGate],
 }
 
 impl Director<'_> {
@@ -446,6 +476,17 @@ impl Director<'_> {
                     MediumId::Main => self.segs.main.set_fault(*fault, *imp),
                     MediumId::Payload => self.segs.payload.set_fault(*fault, *imp),
                     MediumId::Uhf => self.segs.ground.set_fault(*fault, *imp),
+                    MediumId::Link(i) => {
+                        if let Some(g) = self.links.get(usize::from(*i)) {
+                            g.set_fault(*fault, *imp);
+                        }
+                    }
+                }
+                Vec::new()
+            }
+            FaultAction::LinkHang { link, fault, hung } => {
+                if let Some(g) = self.links.get(usize::from(*link)) {
+                    g.set_hang(*fault, *hung);
                 }
                 Vec::new()
             }
@@ -453,7 +494,7 @@ impl Director<'_> {
                 match medium {
                     MediumId::Main => self.segs.main.set_can_fault(*fault, can.clone()),
                     MediumId::Payload => self.segs.payload.set_can_fault(*fault, can.clone()),
-                    MediumId::Uhf => {}
+                    MediumId::Uhf | MediumId::Link(_) => {}
                 }
                 Vec::new()
             }

@@ -75,7 +75,9 @@ impl FaultKind for Reboot {
 }
 
 /// `hang`: the node stays on its buses (frames are acknowledged) but does nothing until
-/// `until` or a power cycle.
+/// `until` or a power cycle. On an outside link (`target` = its `name`), the twin forwards
+/// nothing to or from the program behind it, until `until` or a power cycle of the channel
+/// that powers it (`powered_by`).
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Hang {}
@@ -86,11 +88,21 @@ impl FaultKind for Hang {
     const ABOUT: &'static str =
         "the node is alive on the bus but silent (until `until` or a power cycle)";
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
-        node_target(cx, err);
+        if cx.link().is_none() {
+            node_target(cx, err);
+        }
     }
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
-        let Ok(addr) = cx.node() else { return };
         let fault = cx.id();
+        if let Some(link) = cx.link() {
+            let hang = |hung| FaultAction::LinkHang { link, fault, hung };
+            plan.at(cx.at(), hang(true), "");
+            if let Some(u) = cx.until() {
+                plan.at(u, hang(false), " (recovered)");
+            }
+            return;
+        }
+        let Ok(addr) = cx.node() else { return };
         plan.at(
             cx.at(),
             FaultAction::Hang {

@@ -8,12 +8,30 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::Context as _;
 use bus::Clock;
+use bus::gate::LinkGate;
+use bus::kiss_tcp::KissLinkConfig;
 use bus::kiss_tcp::{self, KissLinkStats, KissTap};
 use bus::outside::{BridgeStats, Segments};
 use tokio::sync::mpsc;
 
-use super::{RunOptions, SocketCanBus};
+use super::{RunOptions, mix};
 use crate::events::{Direction, RunEvent};
+
+/// The gates of the scenario's outside links (`opts.outside`), each drawing its chances
+/// from its own stream of the run's seed (salt 0x700 + its index).
+pub(super) fn gates(opts: &RunOptions) -> Vec<LinkGate> {
+    (0..opts.outside.len())
+        .map(|i| LinkGate::new(mix(opts.seed, 0x700 + i as u64)))
+        .collect()
+}
+
+/// The gate of the runtime's link `label`, if it is one of the scenario's.
+fn gate_of(opts: &RunOptions, gates: &[LinkGate], label: &str) -> Option<LinkGate> {
+    opts.outside
+        .iter()
+        .position(|l| l.is(label))
+        .and_then(|i| gates.get(i).cloned())
+}
 
 /// The KISS links of a run: their counters by name and the addresses the servers listen on.
 pub(super) struct KissLinks {
@@ -29,6 +47,7 @@ pub(super) async fn kiss(
     opts: &RunOptions,
     segs: &Segments,
     clock: Clock,
+    gates: &[LinkGate],
     events: &mpsc::UnboundedSender<RunEvent>,
     background: &mut Vec<tokio::task::JoinHandle<()>>,
 ) -> anyhow::Result<KissLinks> {
@@ -59,11 +78,16 @@ pub(super) async fn kiss(
         bound.push(local);
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         kiss_stats.push((format!("listen {local}"), stats.clone()));
+        let label = format!("listen {addr}");
+        let cfg = KissLinkConfig {
+            gate: gate_of(opts, gates, &label),
+            ..kiss_cfg.clone()
+        };
         background.push(tokio::spawn(kiss_tcp::serve(
             listener,
-            format!("listen {addr}"),
+            label,
             segs.clone(),
-            kiss_cfg.clone(),
+            cfg,
             stats,
             clock,
         )));
@@ -71,11 +95,16 @@ pub(super) async fn kiss(
     for addr in &opts.kiss_connect {
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         kiss_stats.push((format!("connect {addr}"), stats.clone()));
+        let label = format!("connect {addr}");
+        let cfg = KissLinkConfig {
+            gate: gate_of(opts, gates, &label),
+            ..kiss_cfg.clone()
+        };
         background.push(tokio::spawn(kiss_tcp::connect(
             *addr,
-            format!("connect {addr}"),
+            label,
             segs.clone(),
-            kiss_cfg.clone(),
+            cfg,
             stats,
             clock,
         )));
@@ -86,7 +115,11 @@ pub(super) async fn kiss(
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         kiss_stats.push((format!("replayed {}", input.link), stats.clone()));
         let (in_tx, in_rx) = mpsc::unbounded_channel();
-        let (segs2, cfg2, label) = (segs.clone(), kiss_cfg.clone(), input.link.clone());
+        let cfg2 = KissLinkConfig {
+            gate: gate_of(opts, gates, &input.link),
+            ..kiss_cfg.clone()
+        };
+        let (segs2, label) = (segs.clone(), input.link.clone());
         background.push(tokio::spawn(async move {
             let mut discard = tokio::io::sink();
             // The connection number seeds its CFP ident as in the recorded run.
@@ -94,7 +127,17 @@ pub(super) async fn kiss(
                 .rsplit_once('#')
                 .and_then(|(_, k)| k.parse().ok())
                 .unwrap_or(n as u16 + 1);
-            kiss_tcp::serve_link(in_rx, &mut discard, &label, &segs2, &cfg2, &stats, conn).await;
+            kiss_tcp::serve_link(
+                in_rx,
+                &mut discard,
+                &label,
+                &segs2,
+                &cfg2,
+                &stats,
+                conn,
+                clock,
+            )
+            .await;
         }));
         let chunks = input.chunks.clone();
         background.push(tokio::spawn(async move {
@@ -120,11 +163,13 @@ pub(super) type BridgeStatsList = Vec<(String, Arc<Mutex<BridgeStats>>)>;
 /// Open every interface of `links` and spawn its bridge to the chosen bus.
 #[cfg(all(feature = "socketcan", target_os = "linux"))]
 pub(super) fn spawn_socketcan_bridges(
-    links: &[(String, SocketCanBus)],
+    opts: &RunOptions,
     segs: &Segments,
     clock: Clock,
+    gates: &[LinkGate],
     background: &mut Vec<tokio::task::JoinHandle<()>>,
 ) -> anyhow::Result<BridgeStatsList> {
+    let links = &opts.socketcan;
     let mut opened = Vec::new();
     for (ifname, which) in links {
         // The error names the interface and includes its OS cause (not chained: it would
@@ -136,12 +181,13 @@ pub(super) fn spawn_socketcan_bridges(
     let mut stats = Vec::new();
     for (link, which) in opened {
         let can = match which {
-            SocketCanBus::Main => segs.main.clone(),
-            SocketCanBus::Payload => segs.payload.clone(),
+            super::SocketCanBus::Main => segs.main.clone(),
+            super::SocketCanBus::Payload => segs.payload.clone(),
         };
         let shared = Arc::new(Mutex::new(BridgeStats::default()));
         stats.push((format!("{} ({which} bus)", link.ifname()), shared.clone()));
-        let task = bus::socketcan::bridge(can, link, clock, shared);
+        let gate = gate_of(opts, gates, &format!("socketcan {}", link.ifname()));
+        let task = bus::socketcan::bridge(can, link, clock, shared, gate);
         background.push(tokio::spawn(task));
     }
     Ok(stats)
@@ -165,12 +211,13 @@ pub(super) fn snapshot<T: Clone>(stats: Vec<(String, Arc<Mutex<T>>)>) -> Vec<(St
 /// Without the `socketcan` feature there is nothing to bridge with.
 #[cfg(not(all(feature = "socketcan", target_os = "linux")))]
 pub(super) fn spawn_socketcan_bridges(
-    links: &[(String, SocketCanBus)],
+    opts: &RunOptions,
     _segs: &Segments,
     _clock: Clock,
+    _gates: &[LinkGate],
     _background: &mut Vec<tokio::task::JoinHandle<()>>,
 ) -> anyhow::Result<BridgeStatsList> {
-    match links.first() {
+    match opts.socketcan.first() {
         None => Ok(Vec::new()),
         Some((ifname, _)) => anyhow::bail!(
             "SocketCAN interface `{ifname}`: this m6p-twin was built without SocketCAN support; rebuild with --features socketcan (Linux only)"

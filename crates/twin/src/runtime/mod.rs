@@ -72,6 +72,9 @@ pub struct RunOptions {
     pub faults: Vec<TimedFault>,
     /// Recorded input of outside links to feed again (`replay`), one connection per link.
     pub kiss_replay: Vec<KissReplay>,
+    /// The scenario's outside links, which faults and power act on (`MediumId::Link(i)`
+    /// is `outside[i]`).
+    pub outside: Vec<OutsideLink>,
     /// The flight computer's models and timeline; its `epoch_unix_s`, `tle` and `seed` are
     /// taken from this run's.
     pub fc: nodes_fc::FcConfig,
@@ -85,6 +88,26 @@ pub struct RunOptions {
     pub ecu: nodes_ecu::EcuConfig,
     /// COMM1's configuration (COMM2 takes the same with the secondary role).
     pub comm: nodes_comm::CommConfig,
+}
+
+/// A link of the scenario to a program outside the twin, which faults and power act on
+/// through its gate (`bus::gate`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OutsideLink {
+    /// Its name in the scenario (for the log).
+    pub name: String,
+    /// The runtime's name of the link: `listen 127.0.0.1:52001`, `connect 127.0.0.1:52002`
+    /// or `socketcan vcan0` (each KISS connection adds `#n` to it).
+    pub label: String,
+    /// The EPS channel that powers the program behind it.
+    pub powered_by: Option<nodes_eps::Channel>,
+}
+
+impl OutsideLink {
+    /// Whether the runtime's link or connection `label` is this one.
+    pub fn is(&self, label: &str) -> bool {
+        label.split_once('#').map_or(label, |(l, _)| l) == self.label
+    }
 }
 
 /// What an outside program sent on one KISS link during a recorded run.
@@ -114,6 +137,7 @@ impl RunOptions {
             trace: false,
             faults: Vec::new(),
             kiss_replay: Vec::new(),
+            outside: Vec::new(),
             fc: nodes_fc::FcConfig::default(),
             pc: nodes_pc::PcConfig::default(),
             payloads: BTreeMap::new(),
@@ -203,18 +227,14 @@ pub async fn run_with(
     // Every event of the run goes through one channel, in the order it happens.
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<RunEvent>();
     let (segs, mut background) = build::media(&opts, clock, &ev_tx);
+    // The gates of the scenario's outside links: their faults and power.
+    let gates = links::gates(&opts);
     let socketcan_stats =
-        links::spawn_socketcan_bridges(&opts.socketcan, &segs, clock, &mut background)?;
+        links::spawn_socketcan_bridges(&opts, &segs, clock, &gates, &mut background)?;
     let results: Results = Arc::new(Mutex::new(Vec::new()));
-    opts.fc = nodes_fc::FcConfig {
-        epoch_unix_s: opts.epoch_unix_s,
-        tle: opts.tle.clone(),
-        seed: mix(opts.seed, 0x300),
-        ..opts.fc.clone()
-    };
     let boards = Boards::default();
     let nodes = build::nodes(&mut opts, &segs, clock, &boards, &results, &ev_tx);
-    let kiss = links::kiss(&opts, &segs, clock, &ev_tx, &mut background).await?;
+    let kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
     if let Some(r) = ready {
         let _ = r.send(kiss.bound.clone());
     }
@@ -228,6 +248,12 @@ pub async fn run_with(
         power::PowerShell::new(ctls.clone(), boards.activity.clone(), segs.clone());
     for (addr, ports) in &nodes.comm_ports {
         power_shell.register_comm(*addr, ports);
+    }
+    for (i, (link, gate)) in opts.outside.iter().zip(&gates).enumerate() {
+        if let Some(ch) = link.powered_by {
+            let on = opts.eps.channels_on & ch.bit() != 0;
+            power_shell.power_link(i, link.name.clone(), ch, gate.clone(), on);
+        }
     }
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
@@ -269,6 +295,7 @@ pub async fn run_with(
                         segs: &segs,
                         ctls: &ctls,
                         power: &mut power_shell,
+                        links: &gates,
                     }
                     .apply(&f);
                     if let FaultAction::Contact(on) = f.action {
@@ -329,6 +356,12 @@ pub async fn run_with(
         ground: segs.ground.stats(),
         kiss: links::snapshot(kiss.stats),
         socketcan: links::snapshot(socketcan_stats),
+        links: opts
+            .outside
+            .iter()
+            .zip(&gates)
+            .map(|(l, g)| (l.name.clone(), g.stats()))
+            .collect(),
         results,
         trace: observed.trace,
         attitude: observed.attitude,

@@ -11,6 +11,7 @@ use std::collections::BTreeMap;
 
 use bus::can::CanPort;
 use bus::driver::{Attachment, CtlTx, NodeCtl};
+use bus::gate::LinkGate;
 use bus::net::NetPort;
 use bus::outside::Segments;
 use csp::SimTime;
@@ -31,6 +32,8 @@ pub struct PowerShell {
     comm2_can: Option<CanPort>,
     /// COMM1's and COMM2's radio endpoints.
     radios: [Option<NetPort>; 2],
+    /// The outside links powered by a channel: name and gate, by link index.
+    links: BTreeMap<u16, (String, nodes_eps::Channel, LinkGate)>,
 }
 
 impl PowerShell {
@@ -43,7 +46,26 @@ impl PowerShell {
             segs,
             comm2_can: None,
             radios: [None, None],
+            links: BTreeMap::new(),
         }
+    }
+
+    /// Outside link `link` (named `name`, behind `gate`) is powered by EPS channel
+    /// `channel`, which is on (`on`) at the start.
+    pub fn power_link(
+        &mut self,
+        link: usize,
+        name: String,
+        channel: nodes_eps::Channel,
+        gate: LinkGate,
+        on: bool,
+    ) {
+        let (Ok(link), Some(addr)) = (u16::try_from(link), channel.node_addr()) else {
+            return;
+        };
+        gate.set_powered(on);
+        self.rules.power_link(link, addr, on);
+        self.links.insert(link, (name, channel, gate));
     }
 
     /// Register a COMM's attachments (for the take-over).
@@ -139,6 +161,27 @@ impl PowerShell {
                             message: format!("activity {what:?}: {e}"),
                         });
                     }
+                }
+                Effect::LinkPower { link, on } => {
+                    let Some((name, channel, gate)) = self.links.get(&link) else {
+                        continue;
+                    };
+                    gate.set_powered(on);
+                    let message = if on {
+                        format!("link {name}: powered again ({} on)", channel.name())
+                    } else {
+                        format!(
+                            "link {name}: unpowered ({} off): the twin forwards nothing to or from it",
+                            channel.name()
+                        )
+                    };
+                    tracing::info!(%t, "{message}");
+                    events.push(RunEvent::Log {
+                        t,
+                        source: "power".to_owned(),
+                        level: Level::Info,
+                        message,
+                    });
                 }
                 Effect::Log(message) => {
                     tracing::info!(%t, "{message}");

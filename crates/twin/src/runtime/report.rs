@@ -43,6 +43,9 @@ pub struct RunReport {
     pub ground: NetStats,
     /// KISS/TCP link counters, by link.
     pub kiss: Vec<(String, KissLinkStats)>,
+    /// What the gates of the scenario's outside links held back (their faults and power),
+    /// by link name.
+    pub links: Vec<(String, bus::gate::GateStats)>,
     /// SocketCAN bridge counters, by interface and bus (`vcan0 (main bus)`).
     pub socketcan: Vec<(String, BridgeStats)>,
     /// Outcomes of the ground stations' requests.
@@ -258,6 +261,23 @@ impl RunReport {
                     .as_ref()
                     .map(|why| format!("; stopped: {why}"))
                     .unwrap_or_default()
+            );
+        }
+        for (name, g) in self
+            .links
+            .iter()
+            .filter(|(_, g)| *g != bus::gate::GateStats::default())
+        {
+            let _ = writeln!(
+                s,
+                "\nlink {name}: {} lost at the link ({} dropped, {} while down, {} while hung, {} while unpowered, {} over the delay line), {} delayed",
+                g.lost(),
+                g.dropped,
+                g.down,
+                g.hung,
+                g.unpowered,
+                g.overflow,
+                g.delayed
             );
         }
         if !self.results.is_empty() {
