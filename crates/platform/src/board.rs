@@ -1,8 +1,8 @@
 //! The boards: the deterministic meeting points between nodes that the bus does not carry
-//! (physics and power, not packets). The FC posts its truth and the EPS, COMM and the
-//! recorder read it; the ECU posts burns and the FC applies them to the true orbit; nodes
-//! (and the air channel, and the platform rules) post switched activities and the EPS
-//! charges them, the PC follows its S-band power.
+//! (physics and power, not packets). The FC posts its truth and the EPS and COMM read it;
+//! the ECU posts burns and the FC applies them to the true orbit; nodes (and the air
+//! channel, and the runtime's power shell) post switched activities and the EPS charges
+//! them, the PC follows its S-band power.
 //!
 //! # Determinism: readers see only what came strictly before their instant
 //! Nodes run as concurrent tasks, and at an instant where one posts and another reads,

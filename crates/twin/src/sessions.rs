@@ -1128,6 +1128,7 @@ mod tests {
             ground: Default::default(),
             kiss: Vec::new(),
             socketcan: Vec::new(),
+            boards: Default::default(),
             links: Vec::new(),
             results: Vec::new(),
             trace: Vec::new(),

@@ -111,6 +111,7 @@ pub(super) fn nodes(
         // Every radio transmission is charged to its COMM's transmitter, at its place on the
         // air.
         let activity = boards.activity.clone();
+        let log = ev_tx.clone();
         segs.ground
             .set_air_tap(bus::net::AirTap::new(move |radio, start, end| {
                 use platform::board::Activity;
@@ -123,6 +124,12 @@ pub(super) fn nodes(
                 for (t, on) in [(start, true), (end, false)] {
                     if let Err(e) = activity.set(what, t, on) {
                         tracing::warn!(%t, "{radio}: air time not charged: {e}");
+                        let _ = log.send(RunEvent::Log {
+                            t,
+                            source: "run".to_owned(),
+                            level: crate::events::Level::Warning,
+                            message: format!("{radio}: air time: {e}"),
+                        });
                     }
                 }
             }));

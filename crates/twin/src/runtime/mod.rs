@@ -6,8 +6,8 @@
 //! time the same tasks follow the wall clock, which is what outside programs need; a run
 //! with outside links is always in real time.
 //!
-//! - [`build`]: the media, the boards and the nodes, each node its own task.
-//! - [`links`]: programs outside the twin (KISS/TCP, replayed input, SocketCAN).
+//! - `build`: the media, the boards and the nodes, each node its own task.
+//! - `links`: programs outside the twin (KISS/TCP, replayed input, SocketCAN).
 //! - [`power`]: the shell around the platform's power rules (EPS channels, power and hang
 //!   faults, the radio take-over).
 //! - [`report`]: the report and the observer that gathers it from the events.
@@ -356,6 +356,7 @@ pub async fn run_with(
         ground: segs.ground.stats(),
         kiss: links::snapshot(kiss.stats),
         socketcan: links::snapshot(socketcan_stats),
+        boards: boards.stats(),
         links: opts
             .outside
             .iter()

@@ -43,6 +43,8 @@ pub struct RunReport {
     pub ground: NetStats,
     /// KISS/TCP link counters, by link.
     pub kiss: Vec<(String, KissLinkStats)>,
+    /// The boards' writes and refused writes (a write behind a reader's horizon), by board.
+    pub boards: [(&'static str, platform::board::BoardStats); 3],
     /// What the gates of the scenario's outside links held back (their faults and power),
     /// by link name.
     pub links: Vec<(String, bus::gate::GateStats)>,
@@ -261,6 +263,19 @@ impl RunReport {
                     .as_ref()
                     .map(|why| format!("; stopped: {why}"))
                     .unwrap_or_default()
+            );
+        }
+        let refused: Vec<String> = self
+            .boards
+            .iter()
+            .filter(|(_, b)| b.refused > 0)
+            .map(|(name, b)| format!("{name} {} of {} writes", b.refused, b.writes))
+            .collect();
+        if !refused.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nboards: refused behind a reader's horizon (applied there): {}",
+                refused.join(", ")
             );
         }
         for (name, g) in self
