@@ -997,10 +997,11 @@ pub fn begin_fields(f: &CanFrame) -> Option<BeginFields> {
 
 /// The recorded channels, one row each: the kind, its schema's name, the schema (a message
 /// type's JSON Schema, or one of Foxglove's), its topic (from the key: the bus, network or
-/// `<link>/<dir>`; fixed kinds ignore it) and the metadata name of its key. Adding a
-/// channel is a row here, its message type, and the line of [`EventEncoder`] that emits it.
+/// `<link>/<dir>`; fixed kinds ignore it), the metadata name of its key, and whether it is a
+/// medium channel (`diff` compares those). Adding a channel is a row here, its message type,
+/// and the arm of [`EventEncoder`] that emits it.
 macro_rules! channels {
-    ($($kind:ident => ($schema_name:expr, $schema:expr, $topic:expr, $meta:expr): $doc:literal,)*) => {
+    ($($kind:ident => ($schema_name:expr, $schema:expr, $topic:expr, $meta:expr, $medium:expr): $doc:literal,)*) => {
         /// Which kind of channel a message goes to; each kind has one schema.
         #[derive(Debug, Clone, Copy, PartialEq, Eq)]
         pub enum ChannelKind {
@@ -1034,6 +1035,14 @@ macro_rules! channels {
                 topic(key)
             }
 
+            /// Whether its messages are what crossed a medium (a bus, a network, an outside
+            /// link): the channels `diff` compares.
+            pub fn is_medium(self) -> bool {
+                match self {
+                    $(ChannelKind::$kind => $medium,)*
+                }
+            }
+
             /// The channel's metadata: `bus`, `link` or `medium` = `key` when there is a key.
             pub fn metadata(self, key: &str) -> BTreeMap<String, String> {
                 let name: &str = match self {
@@ -1049,6 +1058,14 @@ macro_rules! channels {
     };
 }
 
+/// Whether a recorded channel with schema `schema` is a medium channel (what crossed a
+/// bus, a network or an outside link: the channels `diff` compares), from the table.
+pub fn is_medium_schema(schema: &str) -> bool {
+    CHANNEL_KINDS
+        .iter()
+        .any(|k| k.is_medium() && k.schema_name() == schema)
+}
+
 /// The JSON Schema of message type `T`.
 fn schema_of<T: JsonSchema>() -> anyhow::Result<Vec<u8>> {
     Ok(serde_json::to_vec(&schemars::schema_for!(T))?)
@@ -1060,50 +1077,50 @@ fn fixed(topic: &'static str) -> String {
 }
 
 channels! {
-    Can => ("m6p.CanFrame", schema_of::<CanFrameMsg>(), |k| format!("/can/{k}/frames"), "bus"):
+    Can => ("m6p.CanFrame", schema_of::<CanFrameMsg>(), |k| format!("/can/{k}/frames"), "bus", true):
         "`/can/<bus>/frames` (`m6p.CanFrame`), keyed by bus.",
-    Net => ("m6p.NetPacket", schema_of::<NetPacketMsg>(), |k| format!("/{k}/packets"), "medium"):
+    Net => ("m6p.NetPacket", schema_of::<NetPacketMsg>(), |k| format!("/{k}/packets"), "medium", true):
         "`/<network>/packets` (`m6p.NetPacket`), keyed by network.",
-    Csp => ("m6p.CspPacket", schema_of::<CspPacketMsg>(), |_| fixed(TOPIC_CSP), "medium"):
+    Csp => ("m6p.CspPacket", schema_of::<CspPacketMsg>(), |_| fixed(TOPIC_CSP), "medium", false):
         "`/csp/packets` (`m6p.CspPacket`).",
     Kiss => ("m6p.KissFrame", schema_of::<KissFrameMsg>(), |k| match k.rsplit_once('/') {
             Some((link, dir)) => format!("{}/{dir}", kiss_topic(link)),
             None => kiss_topic(k),
-        }, "link"):
+        }, "link", true):
         "`/kiss/<link>/in|out` (`m6p.KissFrame`), keyed by `<link name>/<dir>`.",
-    Log => ("foxglove.Log", Ok(FOXGLOVE_LOG_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_LOG), "medium"):
+    Log => ("foxglove.Log", Ok(FOXGLOVE_LOG_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_LOG), "medium", false):
         "`/log` (`foxglove.Log`).",
-    Fault => ("m6p.Fault", schema_of::<FaultMsg>(), |_| fixed(TOPIC_FAULTS), "medium"):
+    Fault => ("m6p.Fault", schema_of::<FaultMsg>(), |_| fixed(TOPIC_FAULTS), "medium", false):
         "`/faults` (`m6p.Fault`).",
-    Command => ("m6p.Command", schema_of::<CommandMsg>(), |_| fixed(TOPIC_COMMANDS), "medium"):
+    Command => ("m6p.Command", schema_of::<CommandMsg>(), |_| fixed(TOPIC_COMMANDS), "medium", false):
         "`/commands` (`m6p.Command`).",
-    Expectation => ("m6p.Expectation", schema_of::<ExpectationMsg>(), |_| fixed(TOPIC_EXPECTATIONS), "medium"):
+    Expectation => ("m6p.Expectation", schema_of::<ExpectationMsg>(), |_| fixed(TOPIC_EXPECTATIONS), "medium", false):
         "`/expectations` (`m6p.Expectation`).",
-    TruthTf => ("foxglove.FrameTransform", Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_TRUTH_TF), "medium"):
+    TruthTf => ("foxglove.FrameTransform", Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_TRUTH_TF), "medium", false):
         "`/fc/truth/tf` (`foxglove.FrameTransform`).",
-    EstimateTf => ("foxglove.FrameTransform", Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_ESTIMATE_TF), "medium"):
+    EstimateTf => ("foxglove.FrameTransform", Ok(FOXGLOVE_FRAME_TRANSFORM_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_ESTIMATE_TF), "medium", false):
         "`/fc/estimate/tf` (`foxglove.FrameTransform`).",
-    TruthLocation => ("foxglove.LocationFix", Ok(FOXGLOVE_LOCATION_FIX_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_TRUTH_LOCATION), "medium"):
+    TruthLocation => ("foxglove.LocationFix", Ok(FOXGLOVE_LOCATION_FIX_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_TRUTH_LOCATION), "medium", false):
         "`/fc/truth/location` (`foxglove.LocationFix`).",
-    TruthState => ("m6p.TruthState", schema_of::<TruthStateMsg>(), |_| fixed(TOPIC_TRUTH_STATE), "medium"):
+    TruthState => ("m6p.TruthState", schema_of::<TruthStateMsg>(), |_| fixed(TOPIC_TRUTH_STATE), "medium", false):
         "`/fc/truth/state` (`m6p.TruthState`).",
-    Adcs => ("m6p.Adcs", schema_of::<AdcsMsg>(), |_| fixed(TOPIC_ADCS), "medium"):
+    Adcs => ("m6p.Adcs", schema_of::<AdcsMsg>(), |_| fixed(TOPIC_ADCS), "medium", false):
         "`/fc/adcs` (`m6p.Adcs`).",
-    Scene => ("foxglove.SceneUpdate", Ok(FOXGLOVE_SCENE_UPDATE_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_SCENE), "medium"):
+    Scene => ("foxglove.SceneUpdate", Ok(FOXGLOVE_SCENE_UPDATE_SCHEMA.as_bytes().to_vec()), |_| fixed(TOPIC_SCENE), "medium", false):
         "`/fc/scene` (`foxglove.SceneUpdate`).",
-    PcSession => ("m6p.PcSession", schema_of::<PcSessionMsg>(), |_| fixed(TOPIC_PC_SESSIONS), "medium"):
+    PcSession => ("m6p.PcSession", schema_of::<PcSessionMsg>(), |_| fixed(TOPIC_PC_SESSIONS), "medium", false):
         "`/pc/sessions` (`m6p.PcSession`).",
-    Downlink => ("m6p.Downlink", schema_of::<DownlinkMsg>(), |_| fixed(TOPIC_PC_DOWNLINK), "medium"):
+    Downlink => ("m6p.Downlink", schema_of::<DownlinkMsg>(), |_| fixed(TOPIC_PC_DOWNLINK), "medium", false):
         "`/pc/downlink` (`m6p.Downlink`).",
-    Payload => ("m6p.Payload", schema_of::<PayloadMsg>(), |_| fixed(TOPIC_PAYLOADS), "medium"):
+    Payload => ("m6p.Payload", schema_of::<PayloadMsg>(), |_| fixed(TOPIC_PAYLOADS), "medium", false):
         "`/payloads` (`m6p.Payload`).",
-    EpsPower => ("m6p.EpsPower", schema_of::<EpsPowerMsg>(), |_| fixed(TOPIC_EPS), "medium"):
+    EpsPower => ("m6p.EpsPower", schema_of::<EpsPowerMsg>(), |_| fixed(TOPIC_EPS), "medium", false):
         "`/eps/power` (`m6p.EpsPower`).",
-    EpsChannel => ("m6p.EpsChannel", schema_of::<EpsChannelMsg>(), |_| fixed(TOPIC_EPS_CHANNELS), "medium"):
+    EpsChannel => ("m6p.EpsChannel", schema_of::<EpsChannelMsg>(), |_| fixed(TOPIC_EPS_CHANNELS), "medium", false):
         "`/eps/channels` (`m6p.EpsChannel`).",
-    Beacon => ("m6p.Beacon", schema_of::<BeaconMsg>(), |_| fixed(TOPIC_BEACONS), "medium"):
+    Beacon => ("m6p.Beacon", schema_of::<BeaconMsg>(), |_| fixed(TOPIC_BEACONS), "medium", false):
         "`/ground/beacons` (`m6p.Beacon`).",
-    CanError => ("m6p.CanError", schema_of::<CanErrorMsg>(), |k| format!("/can/{k}/errors"), "bus"):
+    CanError => ("m6p.CanError", schema_of::<CanErrorMsg>(), |k| format!("/can/{k}/errors"), "bus", true):
         "`/can/<bus>/errors` (`m6p.CanError`), keyed by bus.",
 }
 
@@ -2223,6 +2240,30 @@ mod tests {
                 assert!((got[i] - d[i]).abs() < 1e-9, "{d:?}: {got:?}");
             }
         }
+    }
+
+    #[test]
+    fn the_medium_channels_are_what_crossed_a_medium() {
+        let medium: Vec<&str> = CHANNEL_KINDS
+            .iter()
+            .filter(|k| k.is_medium())
+            .map(|k| k.schema_name())
+            .collect();
+        assert_eq!(
+            medium,
+            [
+                "m6p.CanFrame",
+                "m6p.NetPacket",
+                "m6p.KissFrame",
+                "m6p.CanError"
+            ]
+        );
+        assert!(is_medium_schema("m6p.CanError"));
+        assert!(
+            !is_medium_schema("m6p.CspPacket"),
+            "decoded, not on the wire"
+        );
+        assert!(!is_medium_schema("foxglove.Log"));
     }
 
     #[test]

@@ -820,15 +820,6 @@ pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::R
     Ok(rows)
 }
 
-/// Whether `topic` is a medium channel, the ones `diff` compares: `/can/*/frames` and
-/// `/can/*/errors`, packet
-/// networks (`/ground/packets`) and `/kiss/*`.
-pub fn is_medium_topic(topic: &str) -> bool {
-    (topic.starts_with("/can/") && (topic.ends_with("/frames") || topic.ends_with("/errors")))
-        || topic.starts_with("/kiss/")
-        || (topic.ends_with("/packets") && topic != TOPIC_CSP)
-}
-
 /// The outcome of comparing two recordings.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum DiffResult {
@@ -886,7 +877,9 @@ impl fmt::Display for DiffResult {
 fn next_medium(r: &mut Reader, role: &str) -> anyhow::Result<Option<RecordedMessage>> {
     while let Some(m) = r.next_message() {
         let m = m.with_context(|| format!("reading the {role} recording"))?;
-        if is_medium_topic(&m.topic) {
+        // The medium channels (`/can/*/frames` and `/errors`, `/ground/packets`, `/kiss/*`)
+        // are the table's (`record::is_medium_schema`).
+        if crate::record::is_medium_schema(&m.schema) {
             return Ok(Some(m));
         }
     }
