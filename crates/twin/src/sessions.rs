@@ -1122,21 +1122,8 @@ mod tests {
         }
         crate::runtime::RunReport {
             sim_time: SimTime::from_secs(100),
-            wall: Duration::ZERO,
-            nodes: Vec::new(),
-            buses: Vec::new(),
-            ground: Default::default(),
-            kiss: Vec::new(),
-            socketcan: Vec::new(),
-            boards: Default::default(),
-            links: Vec::new(),
-            results: Vec::new(),
-            trace: Vec::new(),
-            attitude: Vec::new(),
             sessions: r,
-            power: Vec::new(),
-            beacons: Vec::new(),
-            contact: Vec::new(),
+            ..Default::default()
         }
     }
 

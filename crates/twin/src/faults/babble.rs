@@ -62,13 +62,7 @@ impl FaultKind for Babble {
 
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
         let Some(medium) = cx.medium() else { return };
-        let Some(node) = cx
-            .net
-            .resolve(&self.node)
-            .ok()
-            .and_then(|a| cx.net.nodes.iter().find(|n| n.addr == a))
-            .map(|n| n.name.clone())
-        else {
+        let Some(node) = cx.node_name(&self.node) else {
             return;
         };
         let can = CanFault::Babble {
@@ -79,25 +73,10 @@ impl FaultKind for Babble {
             until: cx.until(),
         };
         let fault = cx.id();
-        plan.at(
-            cx.at(),
-            FaultAction::Can {
-                medium,
-                fault,
-                can: Some(can),
-            },
-            "",
-        );
-        if let Some(u) = cx.until() {
-            plan.at(
-                u,
-                FaultAction::Can {
-                    medium,
-                    fault,
-                    can: None,
-                },
-                " (lifted)",
-            );
-        }
+        plan.window(cx, " (lifted)", |on| FaultAction::Can {
+            medium,
+            fault,
+            can: on.then(|| can.clone()),
+        });
     }
 }

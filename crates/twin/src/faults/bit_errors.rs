@@ -54,14 +54,7 @@ impl FaultKind for BitErrors {
 
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
         let Some(medium) = cx.medium() else { return };
-        let node = self.node.as_ref().and_then(|n| {
-            let a = cx.net.resolve(n).ok()?;
-            cx.net
-                .nodes
-                .iter()
-                .find(|x| x.addr == a)
-                .map(|x| x.name.clone())
-        });
+        let node = self.node.as_ref().and_then(|n| cx.node_name(n));
         let can = CanFault::BitErrors {
             ber: self.ber,
             node,
@@ -69,25 +62,10 @@ impl FaultKind for BitErrors {
             until: cx.until(),
         };
         let fault = cx.id();
-        plan.at(
-            cx.at(),
-            FaultAction::Can {
-                medium,
-                fault,
-                can: Some(can),
-            },
-            "",
-        );
-        if let Some(u) = cx.until() {
-            plan.at(
-                u,
-                FaultAction::Can {
-                    medium,
-                    fault,
-                    can: None,
-                },
-                " (lifted)",
-            );
-        }
+        plan.window(cx, " (lifted)", |on| FaultAction::Can {
+            medium,
+            fault,
+            can: on.then(|| can.clone()),
+        });
     }
 }

@@ -57,25 +57,10 @@ impl FaultKind for Clock {
             drift_ppm: self.drift_ppm.unwrap_or(0.0),
         };
         let fault = cx.id();
-        plan.at(
-            cx.at(),
-            FaultAction::Node {
-                addr,
-                fault,
-                what: Some(what),
-            },
-            "",
-        );
-        if let Some(u) = cx.until() {
-            plan.at(
-                u,
-                FaultAction::Node {
-                    addr,
-                    fault,
-                    what: None,
-                },
-                " (corrected)",
-            );
-        }
+        plan.window(cx, " (corrected)", |on| FaultAction::Node {
+            addr,
+            fault,
+            what: on.then(|| what.clone()),
+        });
     }
 }

@@ -37,26 +37,11 @@ fn probability(p: f64, err: &mut dyn FnMut(&str, String)) {
 fn impair(cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>, imp: Impairments) {
     let Some(medium) = cx.medium() else { return };
     let fault = cx.id();
-    plan.at(
-        cx.at(),
-        FaultAction::Impair {
-            medium,
-            fault,
-            imp: Some(imp),
-        },
-        "",
-    );
-    if let Some(u) = cx.until() {
-        plan.at(
-            u,
-            FaultAction::Impair {
-                medium,
-                fault,
-                imp: None,
-            },
-            " (lifted)",
-        );
-    }
+    plan.window(cx, " (lifted)", |on| FaultAction::Impair {
+        medium,
+        fault,
+        imp: on.then_some(imp),
+    });
 }
 
 /// `drop`: every frame or packet is lost with `probability`.

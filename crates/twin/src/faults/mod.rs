@@ -232,6 +232,15 @@ impl FaultCx<'_> {
             _ => false,
         }
     }
+    /// The name of the node `r` names, if it names one (a CAN controller's name).
+    pub fn node_name(&self, r: &NodeRef) -> Option<String> {
+        let a = self.net.resolve(r).ok()?;
+        self.net
+            .nodes
+            .iter()
+            .find(|n| n.addr == a)
+            .map(|n| n.name.clone())
+    }
     /// The description of the fault in the run's log (`faults[0]: Drop on main`).
     pub fn what(&self) -> String {
         format!(
@@ -259,6 +268,15 @@ impl FaultPlan<'_> {
             action,
             what: format!("{}{suffix}", self.what),
         });
+    }
+
+    /// A fault that lasts: `action(true)` at its `at` and, if it is lifted, `action(false)`
+    /// at its `until`, described with `lifted` (` (lifted)`).
+    pub fn window(&mut self, cx: &FaultCx<'_>, lifted: &str, action: impl Fn(bool) -> FaultAction) {
+        self.at(cx.at(), action(true), "");
+        if let Some(u) = cx.until() {
+            self.at(u, action(false), lifted);
+        }
     }
 }
 

@@ -31,26 +31,11 @@ impl FaultKind for PowerOff {
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
         let Ok(addr) = cx.node() else { return };
         let fault = cx.id();
-        plan.at(
-            cx.at(),
-            FaultAction::Power {
-                addr,
-                fault,
-                off: true,
-            },
-            "",
-        );
-        if let Some(u) = cx.until() {
-            plan.at(
-                u,
-                FaultAction::Power {
-                    addr,
-                    fault,
-                    off: false,
-                },
-                " (power on)",
-            );
-        }
+        plan.window(cx, " (power on)", |off| FaultAction::Power {
+            addr,
+            fault,
+            off,
+        });
     }
 }
 
@@ -95,33 +80,18 @@ impl FaultKind for Hang {
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
         let fault = cx.id();
         if let Some(link) = cx.link() {
-            let hang = |hung| FaultAction::LinkHang { link, fault, hung };
-            plan.at(cx.at(), hang(true), "");
-            if let Some(u) = cx.until() {
-                plan.at(u, hang(false), " (recovered)");
-            }
+            plan.window(cx, " (recovered)", |hung| FaultAction::LinkHang {
+                link,
+                fault,
+                hung,
+            });
             return;
         }
         let Ok(addr) = cx.node() else { return };
-        plan.at(
-            cx.at(),
-            FaultAction::Hang {
-                addr,
-                fault,
-                hung: true,
-            },
-            "",
-        );
-        if let Some(u) = cx.until() {
-            plan.at(
-                u,
-                FaultAction::Hang {
-                    addr,
-                    fault,
-                    hung: false,
-                },
-                " (recovered)",
-            );
-        }
+        plan.window(cx, " (recovered)", |hung| FaultAction::Hang {
+            addr,
+            fault,
+            hung,
+        });
     }
 }

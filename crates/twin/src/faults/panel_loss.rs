@@ -63,9 +63,6 @@ impl FaultKind for PanelLoss {
                 event: EpsEvent::PanelRestore(i),
             });
         }
-        plan.at(cx.at(), FaultAction::Record, "");
-        if let Some(u) = cx.until() {
-            plan.at(u, FaultAction::Record, " (restored)");
-        }
+        plan.window(cx, " (restored)", |_| FaultAction::Record);
     }
 }

@@ -29,7 +29,7 @@ pub struct NodeReport {
 }
 
 /// What a run did.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct RunReport {
     /// Simulated time reached.
     pub sim_time: SimTime,
@@ -320,5 +320,41 @@ impl RunReport {
             );
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_table_says_what_the_boards_refused_and_the_links_held_back() {
+        let mut r = RunReport::default();
+        assert!(!r.table().contains("boards:"), "nothing refused, no line");
+        r.boards[2] = (
+            "activity",
+            platform::board::BoardStats {
+                writes: 8024,
+                refused: 2,
+            },
+        );
+        r.links = vec![(
+            "payload-sw".to_owned(),
+            bus::gate::GateStats {
+                dropped: 2,
+                unpowered: 3,
+                delayed: 1,
+                ..Default::default()
+            },
+        )];
+        let t = r.table();
+        assert!(
+            t.contains("boards: refused behind a reader's horizon (applied there): activity 2 of 8024 writes"),
+            "{t}"
+        );
+        assert!(
+            t.contains("link payload-sw: 5 lost at the link (2 dropped, 0 while down, 0 while hung, 3 while unpowered, 0 over the delay line), 1 delayed"),
+            "{t}"
+        );
     }
 }
