@@ -381,10 +381,29 @@ pub struct Node {
     frames: Vec<CanFrame>,
     faults: BTreeMap<u32, NodeFault>,
     clock_errors: ClockErrors,
+    /// Packets this node sent to itself, waiting to be routed in (libcsp's loopback
+    /// interface puts them on the router's queue; nothing is handled by recursion).
+    loopback: VecDeque<Packet>,
+    /// Whether the loopback queue is being worked (a packet sent to itself meanwhile only
+    /// joins the queue).
+    looping: bool,
 }
 
 /// Keep at most this many unread events (older ones are counted, not kept).
 const MAX_EVENTS: usize = 1024;
+
+/// The interface index of the loopback (a packet this node sent to itself).
+const LOOPBACK_IFACE: IfaceId = usize::MAX;
+
+/// At most this many packets a node sends to itself wait in its loopback queue (libcsp
+/// 1.4's router FIFO, `CSP_FIFO_INPUT`, holds 10); more are dropped (`loopback full`).
+pub const LOOPBACK_QUEUE: usize = 16;
+
+/// At most this many loopback packets are routed in for one input (a packet, a frame, a
+/// timer): a node's services answering each other through its own address (a ping from
+/// service port 1 to service port 1 of itself) stop there, the rest dropped
+/// (`loopback budget`), instead of ping-ponging for ever.
+pub const LOOPBACK_PER_INPUT: usize = 64;
 
 impl Node {
     /// A node booting at `now`.
@@ -404,6 +423,8 @@ impl Node {
             frames: Vec::new(),
             faults: BTreeMap::new(),
             clock_errors: ClockErrors::default(),
+            loopback: VecDeque::new(),
+            looping: false,
             cfg,
         };
         node.reset_links();
@@ -607,11 +628,35 @@ impl Node {
         let dst = packet.header.dst;
         if dst == self.cfg.addr {
             self.counters.tx_packets += 1;
-            self.route_in(usize::MAX, packet, now);
+            if self.loopback.len() >= LOOPBACK_QUEUE {
+                self.note_drop(now, "loopback full", packet.header.to_string());
+                return Ok(());
+            }
+            self.loopback.push_back(packet);
+            if !self.looping {
+                self.run_loopback(now);
+            }
             return Ok(());
         }
         let route = self.cfg.routes.lookup(dst).ok_or(SendError::NoRoute(dst))?;
         self.transmit(route, &packet)
+    }
+
+    /// Route in what this node sent to itself, in order, at most [`LOOPBACK_PER_INPUT`]
+    /// packets; whatever their handling sends to this node again joins the queue (no
+    /// recursion), and what is left over the budget is dropped.
+    fn run_loopback(&mut self, now: SimTime) {
+        self.looping = true;
+        let mut budget = LOOPBACK_PER_INPUT;
+        while let Some(packet) = self.loopback.pop_front() {
+            if budget == 0 {
+                self.note_drop(now, "loopback budget", packet.header.to_string());
+                continue;
+            }
+            budget -= 1;
+            self.route_in(LOOPBACK_IFACE, packet, now);
+        }
+        self.looping = false;
     }
 
     fn transmit(&mut self, route: Route, packet: &Packet) -> Result<(), SendError> {
@@ -1177,6 +1222,43 @@ mod tests {
         n.handle_packet(0, Packet::new(h, vec![9, 0, 0, 0, 0]), SimTime::ZERO);
         assert!(drain(&mut n).is_empty());
         assert_eq!(n.counters().drops.get("crc32"), Some(&1));
+    }
+
+    #[test]
+    fn a_self_addressed_service_packet_ping_pongs_through_the_queue_not_the_stack() {
+        // Source and destination the node's own address, service port to service port: each
+        // answer is a new request to itself. Found by fuzzing: it used to recurse
+        // (send -> route_in -> deliver_local -> serve -> send) until the stack overflowed.
+        for port in 0..=6u8 {
+            let mut n = router_node();
+            let mut h = Header::new(6, 6, port, port);
+            h.flags = 0;
+            n.handle_packet(0, Packet::new(h, vec![0x5a; 8]), SimTime::ZERO);
+            let c = n.counters();
+            // Answered (ports 1, 2, 3, 5, 6 reply) a bounded number of times, the rest dropped.
+            assert!(
+                c.service_replies <= LOOPBACK_PER_INPUT as u64 + 1,
+                "port {port}: {c:?}"
+            );
+            if matches!(port, 1 | 2 | 3 | 5 | 6) {
+                let dropped = c.drops.get("loopback budget").copied().unwrap_or(0)
+                    + c.drops.get("loopback full").copied().unwrap_or(0);
+                assert!(dropped >= 1, "port {port}: {c:?}");
+            }
+            // Nothing went out on a bus, and the node still answers others.
+            assert!(drain(&mut n).is_empty(), "port {port}");
+            n.handle_packet(
+                0,
+                Packet::new(Header::new(3, 6, 1, 40), vec![1]),
+                SimTime::ZERO,
+            );
+            let out = reassemble(&drain(&mut n));
+            assert!(
+                out.iter()
+                    .any(|(_, p)| p.header.dst == 3 && p.data == vec![1]),
+                "port {port}: {out:?}"
+            );
+        }
     }
 
     #[test]
