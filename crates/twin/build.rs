@@ -1,6 +1,13 @@
-//! The User-Mode Linux probe of `crates/bus/build.rs`, shared rather than copied: emits
-//! `cfg(uml_available)` for `tests/socketcan_uml.rs` under the same conditions as for the
-//! bus crate's `tests/vcan_uml.rs` (see `tools/uml/README.md`).
+//! Probes for what some tests need outside Rust, so that a test whose prerequisite is
+//! missing is compiled as ignored with the reason instead of passing without checking:
+//!
+//! - the User-Mode Linux probe of `crates/bus/build.rs`, shared rather than copied: emits
+//!   `cfg(uml_available)` for `tests/socketcan_uml.rs` under the same conditions as for the
+//!   bus crate's `tests/vcan_uml.rs` (see `tools/uml/README.md`);
+//! - `cfg(python_mcap)`: `python3` can import the `mcap` package (the generic reader the
+//!   recording tests decode with). Under `CI` it is always set, so a missing package fails
+//!   those tests there (`.ci/run` installs it) instead of ignoring them. Set
+//!   `M6P_PYTHON_PROBE=off` to force "not available" outside CI.
 
 #[path = "../bus/build.rs"]
 mod uml_probe;
@@ -8,4 +15,47 @@ mod uml_probe;
 fn main() {
     println!("cargo::rerun-if-changed=../bus/build.rs");
     uml_probe::main();
+    python_probe();
+}
+
+fn python_probe() {
+    println!("cargo::rustc-check-cfg=cfg(python_mcap)");
+    println!("cargo::rerun-if-env-changed=CI");
+    println!("cargo::rerun-if-env-changed=M6P_PYTHON_PROBE");
+    if std::env::var_os("CI").is_some() {
+        println!("cargo::rustc-cfg=python_mcap");
+        return;
+    }
+    if std::env::var("M6P_PYTHON_PROBE").is_ok_and(|v| v == "off") {
+        return;
+    }
+    // Where the package is, or the directories `pip install` would put it in: watched so
+    // that installing or removing it probes again.
+    let out = std::process::Command::new("python3")
+        .args([
+            "-c",
+            "import site, sys\n\
+             try:\n    import mcap.reader, os\n    print('found', os.path.dirname(mcap.__file__))\n\
+             except Exception:\n    print('missing')\n\
+             for d in site.getsitepackages() + [site.getusersitepackages()]:\n    print('dir', d)",
+        ])
+        .output();
+    let Ok(out) = out else {
+        return;
+    };
+    let text = String::from_utf8_lossy(&out.stdout);
+    let mut found = false;
+    for line in text.lines() {
+        if let Some(dir) = line.strip_prefix("found ") {
+            found = true;
+            println!("cargo::rerun-if-changed={dir}");
+        } else if let Some(dir) = line.strip_prefix("dir ")
+            && std::path::Path::new(dir).is_dir()
+        {
+            println!("cargo::rerun-if-changed={dir}");
+        }
+    }
+    if found {
+        println!("cargo::rustc-cfg=python_mcap");
+    }
 }

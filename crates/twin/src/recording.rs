@@ -27,9 +27,14 @@ use crate::record::{
     TOPIC_CSP, TOPIC_EXPECTATIONS, TOPIC_TRUTH_STATE, TruthStateMsg, service_name,
 };
 
-/// Largest record the reader accepts (a chunk is about 1 MiB; this only guards against a
-/// corrupt length making it allocate without bound).
-const RECORD_LIMIT: usize = 256 * 1024 * 1024;
+/// Largest record the reader accepts, compressed or not: four times the recorder's chunk
+/// (a chunk passes its size by at most one message). A corrupt length beyond it is an error,
+/// never an allocation.
+const RECORD_LIMIT: usize = 4 * crate::record::CHUNK_SIZE as usize;
+
+/// The reader asks for at most this many bytes of the file at a time, so a record length
+/// beyond the end of the file costs a read to the end, not an allocation of that length.
+const READ_STEP: usize = 1 << 20;
 
 /// One message of a recording.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -60,6 +65,92 @@ enum Item {
     Summary,
 }
 
+/// The records the reader decodes: header, schema, channel, message, attachment,
+/// metadata, data end.
+const USED_OPCODES: [u8; 7] = [0x01, 0x03, 0x04, 0x05, 0x09, 0x0c, 0x0f];
+
+/// Check every length prefix of a record the reader decodes (MCAP spec, records section)
+/// against the bytes the record has, before the decoder trusts them.
+fn check_lengths(opcode: u8, data: &[u8]) -> Result<(), String> {
+    struct Body<'a>(&'a [u8]);
+    impl Body<'_> {
+        fn skip(&mut self, n: usize, what: &str) -> Result<(), String> {
+            if n > self.0.len() {
+                return Err(format!(
+                    "{what} claims {n} bytes, {} are left in the record",
+                    self.0.len()
+                ));
+            }
+            self.0 = &self.0[n..];
+            Ok(())
+        }
+        fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], String> {
+            let b: [u8; N] = self
+                .0
+                .get(..N)
+                .and_then(|b| b.try_into().ok())
+                .ok_or_else(|| format!("{what}: record too short for its length"))?;
+            self.0 = &self.0[N..];
+            Ok(b)
+        }
+        fn len32(&mut self, what: &str) -> Result<usize, String> {
+            Ok(u32::from_le_bytes(self.take(what)?) as usize)
+        }
+        fn len64(&mut self, what: &str) -> Result<usize, String> {
+            usize::try_from(u64::from_le_bytes(self.take(what)?))
+                .map_err(|_| format!("{what}: length overflow"))
+        }
+        fn string(&mut self, what: &str) -> Result<(), String> {
+            let n = self.len32(what)?;
+            self.skip(n, what)
+        }
+        fn string_map(&mut self, what: &str) -> Result<(), String> {
+            let n = self.len32(what)?;
+            if n > self.0.len() {
+                return self.skip(n, what);
+            }
+            let mut inner = Body(&self.0[..n]);
+            while !inner.0.is_empty() {
+                inner.string(what)?;
+                inner.string(what)?;
+            }
+            self.skip(n, what)
+        }
+    }
+    let mut b = Body(data);
+    match opcode {
+        0x01 => {
+            b.string("header profile")?;
+            b.string("header library")
+        }
+        0x03 => {
+            b.skip(2, "schema id")?;
+            b.string("schema name")?;
+            b.string("schema encoding")?;
+            let n = b.len32("schema data")?;
+            b.skip(n, "schema data")
+        }
+        0x04 => {
+            b.skip(4, "channel ids")?;
+            b.string("channel topic")?;
+            b.string("channel message encoding")?;
+            b.string_map("channel metadata")
+        }
+        0x09 => {
+            b.skip(16, "attachment times")?;
+            b.string("attachment name")?;
+            b.string("attachment media type")?;
+            let n = b.len64("attachment data")?;
+            b.skip(n, "attachment data")
+        }
+        0x0c => {
+            b.string("metadata name")?;
+            b.string_map("metadata")
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Whether `file` ends with the MCAP magic; leaves it positioned at its start.
 fn ends_with_magic(file: &mut File) -> std::io::Result<bool> {
     let len = file.metadata()?.len();
@@ -88,6 +179,10 @@ struct Reader {
     /// Whether the file ends with the MCAP magic (a writer finished it).
     finished: bool,
     done: bool,
+    /// Bytes of the file read so far (where an error was met, within a chunk's length).
+    offset: u64,
+    /// The file's length.
+    file_len: u64,
 }
 
 impl Reader {
@@ -95,6 +190,7 @@ impl Reader {
         let ctx = || format!("opening recording {}", path.display());
         let mut file = File::open(path).with_context(ctx)?;
         let finished = ends_with_magic(&mut file).with_context(ctx)?;
+        let file_len = file.metadata().with_context(ctx)?.len();
         let options = LinearReaderOptions::default()
             .with_prevalidate_chunk_crcs(true)
             .with_validate_data_section_crc(true)
@@ -111,6 +207,8 @@ impl Reader {
             past_data_end: false,
             finished,
             done: false,
+            offset: 0,
+            file_len,
         })
     }
 
@@ -123,7 +221,18 @@ impl Reader {
     fn error(&self, e: McapError) -> anyhow::Error {
         let path = self.path.display();
         let n = self.messages;
+        let at = format!("byte offset {} of {}", self.offset, self.file_len);
         match e {
+            McapError::UnexpectedEof if self.finished => {
+                anyhow!(
+                    "{path}: a record runs past the end of the file at {at} (a damaged length; \
+                     {n} messages read)"
+                )
+            }
+            McapError::RecordTooLarge { opcode, len } => anyhow!(
+                "{path}: a record (opcode {opcode:#04x}) near {at} claims {len} bytes, more \
+                 than the {RECORD_LIMIT} a recording holds (a damaged length; {n} messages read)"
+            ),
             McapError::BadMagic if self.records == 0 => {
                 anyhow!("{path}: not an MCAP file (bad magic)")
             }
@@ -136,10 +245,10 @@ impl Reader {
             // A file that does not end with the magic was never finished: a killed writer
             // leaves its open chunk with placeholder lengths, or the copy was cut.
             e if !self.finished && self.records > 0 => anyhow!(
-                "{path}: truncated (a killed run?): {e}; read up to the last complete chunk, \
-                 {n} messages"
+                "{path}: truncated (a killed run?): {e} at {at}; read up to the last complete \
+                 chunk, {n} messages"
             ),
-            e => anyhow!("{path}: malformed MCAP after {n} messages: {e}"),
+            e => anyhow!("{path}: malformed MCAP after {n} messages, near {at}: {e}"),
         }
     }
 
@@ -166,7 +275,7 @@ impl Reader {
             };
             let (opcode, data) = match event {
                 LinearReadEvent::ReadRequest(need) => {
-                    let buf = self.reader.insert(need);
+                    let buf = self.reader.insert(need.min(READ_STEP));
                     let n = loop {
                         match self.file.read(buf) {
                             Ok(n) => break n,
@@ -180,10 +289,32 @@ impl Reader {
                         }
                     };
                     self.reader.notify_read(n);
+                    self.offset += n as u64;
                     continue;
                 }
                 LinearReadEvent::Record { opcode, data } => (opcode, data),
             };
+            // The summary section repeats what was read; records this reader does not use
+            // are not decoded. The others' length prefixes are checked first: the decoder
+            // reserves what a string's prefix claims.
+            if self.past_data_end {
+                self.records += 1;
+                return Some(Ok(Item::Summary));
+            }
+            if !USED_OPCODES.contains(&opcode) {
+                self.records += 1;
+                continue;
+            }
+            if let Err(why) = check_lengths(opcode, data) {
+                return Some(Err(anyhow!(
+                    "{}: malformed MCAP after {} messages, near byte offset {} of {}: record \
+                     {opcode:#04x}: {why}",
+                    self.path.display(),
+                    self.messages,
+                    self.offset,
+                    self.file_len
+                )));
+            }
             let record = match mcap::parse_record(opcode, data) {
                 Ok(r) => r,
                 Err(e) => {
@@ -198,7 +329,6 @@ impl Reader {
                     self.past_data_end = true;
                     continue;
                 }
-                _ if self.past_data_end => Item::Summary,
                 Record::Schema { header, .. } => {
                     self.schemas.insert(header.id, header.name.into());
                     continue;

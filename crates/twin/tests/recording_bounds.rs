@@ -1,0 +1,184 @@
+//! Reading a damaged recording is bounded: a truncated file or one whose length fields were
+//! mutated gives an error (or the part that could be read), never a huge allocation. A
+//! global allocator wrapper notes, per thread, the largest single request while reading.
+#![allow(clippy::unwrap_used)]
+// The only unsafe code of the project: a test's allocator that forwards to the system's and
+// notes sizes; nothing else can see an allocation's size.
+#![allow(unsafe_code)]
+
+#[allow(dead_code)]
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::path::Path;
+
+use bus::trace::{TraceEvent, TraceFrame};
+use common::TempFile;
+use csp::cfp::fragment_with_ident;
+use csp::{Header, Packet, SimTime};
+use m6p_twin::events::RunEvent;
+use m6p_twin::record::{Recorder, RecordingMeta};
+use m6p_twin::recording;
+
+struct Tracking;
+
+thread_local! {
+    static LARGEST: Cell<usize> = const { Cell::new(0) };
+}
+
+// SAFETY: every call is forwarded to the system allocator unchanged; the wrapper only reads
+// the layout's size into a thread-local `Cell` (no allocation, no reentrancy).
+unsafe impl GlobalAlloc for Tracking {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note(layout.size());
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note(layout.size());
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note(new_size);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+fn note(size: usize) {
+    let _ = LARGEST.try_with(|l| l.set(l.get().max(size)));
+}
+
+#[global_allocator]
+static ALLOC: Tracking = Tracking;
+
+/// Read `path` every way the CLI does (inspect's summary, meta, messages, CSV, diff with
+/// itself); the largest single allocation made meanwhile.
+fn largest_allocation_reading(path: &Path) -> usize {
+    LARGEST.with(|l| l.set(0));
+    let _ = recording::read_summary(path);
+    let _ = recording::load_meta(path);
+    if let Ok(msgs) = recording::messages(path) {
+        for m in msgs {
+            if m.is_err() {
+                break;
+            }
+        }
+    }
+    LARGEST.with(Cell::get)
+}
+
+/// The same, also through CSV export and diff (the same reader underneath).
+fn largest_allocation_every_way(path: &Path) -> usize {
+    let first = largest_allocation_reading(path);
+    LARGEST.with(|l| l.set(0));
+    let _ = recording::export_csv(path, "/can/main/frames", &mut std::io::sink());
+    let _ = recording::diff(path, path);
+    first.max(LARGEST.with(Cell::get))
+}
+
+fn small_recording(path: &Path) {
+    let meta = RecordingMeta {
+        scenario_name: "bounds".into(),
+        scenario_toml: "name = \"bounds\"\nduration = \"1s\"\n".into(),
+        seed: 7,
+        start_utc: "2026-01-01T00:00:00Z".into(),
+        twin_version: "test".into(),
+        duration_ns: Some(1_000_000_000),
+    };
+    let mut r = Recorder::create(path, meta).unwrap();
+    let mut t = SimTime::ZERO;
+    for i in 0..20u8 {
+        let p = Packet::new(Header::new(16, 3, 1, 40), vec![i; 20]);
+        let mut frames = Vec::new();
+        fragment_with_ident(&p, 3, u16::from(i), &mut frames).unwrap();
+        for f in frames {
+            t = t + std::time::Duration::from_micros(130);
+            r.write(&RunEvent::Medium(TraceEvent {
+                t,
+                medium: "main".into(),
+                from: "COMM1".into(),
+                frame: TraceFrame::Can(f),
+                dropped: false,
+            }))
+            .unwrap();
+        }
+    }
+    r.finish().unwrap();
+}
+
+/// 4-byte windows of a small recording overwritten with huge lengths (all ones, 2 GiB,
+/// 256 MiB, 64 MiB, 16 MiB): each read ends in an error or a partial read, and no single
+/// allocation exceeds 8 MiB (the file is a few KB; a chunk is at most about 1 MiB). The
+/// reader used to trust a string's length prefix inside a record and ask for 4 GiB.
+#[test]
+fn mutated_length_fields_give_errors_not_allocations() {
+    let f = TempFile::new("bounds-src");
+    small_recording(f.path());
+    let bytes = std::fs::read(f.path()).unwrap();
+    assert!(bytes.len() < 32 * 1024, "{}", bytes.len());
+    let clean = largest_allocation_reading(f.path());
+    let m = TempFile::new("bounds-mut");
+    let mut worst = (0usize, 0usize, [0u8; 4]);
+    // Every window over the records before the first chunk (header, metadata, scenario
+    // attachment) and the chunk headers; every seventh one further on (a chunk's body is
+    // guarded by its CRC).
+    let windows = (8..bytes.len().saturating_sub(4)).filter(|&o| o < 1500 || o % 7 == 0);
+    for off in windows {
+        for val in [
+            [0xff, 0xff, 0xff, 0xff],
+            [0x00, 0x00, 0x00, 0x80],
+            [0x00, 0x00, 0x00, 0x10],
+            [0x00, 0x00, 0x00, 0x04],
+            [0x00, 0x00, 0x00, 0x01],
+        ] {
+            let mut b = bytes.clone();
+            b[off..off + 4].copy_from_slice(&val);
+            std::fs::write(m.path(), &b).unwrap();
+            let largest = largest_allocation_reading(m.path());
+            if largest > worst.0 {
+                worst = (largest, off, val);
+            }
+        }
+    }
+    assert!(
+        worst.0 <= 8 << 20,
+        "largest allocation {} bytes with {:02x?} at offset {} (clean file: {clean})",
+        worst.0,
+        worst.2,
+        worst.1
+    );
+}
+
+/// A recording cut anywhere, and one whose record length points far beyond its end: errors
+/// naming where, and no allocation of the claimed length.
+#[test]
+fn a_record_length_beyond_the_file_is_an_error_naming_the_offset() {
+    let f = TempFile::new("bounds-len");
+    small_recording(f.path());
+    let mut bytes = std::fs::read(f.path()).unwrap();
+    // The header record: opcode at 8, its u64 length at 9..17. Claim 100 MiB.
+    bytes[9..17].copy_from_slice(&(100u64 << 20).to_le_bytes());
+    std::fs::write(f.path(), &bytes).unwrap();
+    let largest = largest_allocation_every_way(f.path());
+    assert!(largest <= 8 << 20, "largest allocation {largest}");
+    let e = format!("{:#}", recording::load_meta(f.path()).unwrap_err());
+    assert!(e.contains("offset"), "{e}");
+    let cut = TempFile::new("bounds-cut");
+    small_recording(cut.path());
+    let whole = std::fs::read(cut.path()).unwrap();
+    for len in (0..whole.len()).step_by(7) {
+        std::fs::write(cut.path(), &whole[..len]).unwrap();
+        let largest = largest_allocation_reading(cut.path());
+        assert!(
+            largest <= 8 << 20,
+            "cut at {len}: largest allocation {largest}"
+        );
+    }
+}
