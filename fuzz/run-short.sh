@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# A short fuzz pass over every target: fuzz/run-short.sh [SECONDS_PER_TARGET] (default 20).
+#
+# Builds all targets (`cargo +nightly fuzz build -O -a -s none`: optimised, debug assertions
+# and overflow checks on, no sanitizer: the workspace denies unsafe code), then runs each for
+# the given time on a temporary copy of its committed corpus (fuzz/corpus/<target>/ is never
+# grown; minimise and commit new seeds by hand). Prints per target the executions done and
+# the rate; exits non-zero naming every target that crashed and its artifact
+# (fuzz/artifacts/<target>/). Without a nightly toolchain it says so and exits 0.
+set -uo pipefail
+
+secs=${1:-20}
+case $secs in
+'' | *[!0-9]*)
+    echo "usage: $0 [SECONDS_PER_TARGET]" >&2
+    exit 2
+    ;;
+esac
+fuzz=$(cd "$(dirname "$0")" && pwd)
+cd "$fuzz" || exit 1
+
+if ! cargo +nightly --version >/dev/null 2>&1; then
+    echo "fuzz: no nightly toolchain here; the fuzz pass was not run"
+    exit 0
+fi
+if ! cargo +nightly fuzz --version >/dev/null 2>&1; then
+    echo "fuzz: installing cargo-fuzz"
+    if ! cargo install cargo-fuzz --locked; then
+        echo "fuzz: cargo-fuzz could not be installed; the fuzz pass was not run" >&2
+        exit 1
+    fi
+fi
+
+flags=(-O -a -s none)
+if ! nice -n 19 cargo +nightly fuzz build "${flags[@]}"; then
+    echo "fuzz: the fuzz targets do not build" >&2
+    exit 1
+fi
+
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+crashed=()
+printf '%-16s %12s %10s  %s\n' target executions exec/s result
+for t in $(cargo +nightly fuzz list); do
+    mkdir -p "$work/corpus/$t" "$fuzz/artifacts/$t"
+    if [ -d "corpus/$t" ]; then
+        cp -R "corpus/$t/." "$work/corpus/$t/"
+    fi
+    log=$work/$t.log
+    # -timeout: one input running longer than 60 s is a hang, reported like a crash.
+    timeout $((secs + 300)) nice -n 19 cargo +nightly fuzz run "${flags[@]}" "$t" "$work/corpus/$t" -- \
+        -max_total_time="$secs" -print_final_stats=1 -timeout=60 \
+        -artifact_prefix="$fuzz/artifacts/$t/" >"$log" 2>&1
+    rc=$?
+    execs=$(sed -n 's/^stat::number_of_executed_units: *\([0-9]*\).*/\1/p' "$log" | tail -1)
+    rate=$(sed -n 's/^stat::average_exec_per_sec: *\([0-9]*\).*/\1/p' "$log" | tail -1)
+    if [ "$rc" -eq 0 ]; then
+        result=ok
+    else
+        artifact=$(sed -n 's/.*Test unit written to \([^ ]*\).*/\1/p' "$log" | tail -1)
+        result="CRASH (exit $rc) ${artifact:-no artifact written}"
+        crashed+=("$t: ${artifact:-exit $rc, no artifact (see the log above)}")
+    fi
+    printf '%-16s %12s %10s  %s\n' "$t" "${execs:-?}" "${rate:-?}" "$result"
+    if [ "$rc" -ne 0 ]; then
+        echo "---- $t: the end of libFuzzer's output"
+        tail -n 60 "$log"
+        echo "----"
+    fi
+done
+
+if [ ${#crashed[@]} -gt 0 ]; then
+    echo "fuzz: ${#crashed[@]} target(s) crashed:" >&2
+    for c in "${crashed[@]}"; do
+        echo "  $c" >&2
+    done
+    echo "fuzz: reproduce with: cargo +nightly fuzz run ${flags[*]} <target> <artifact>" >&2
+    exit 1
+fi
+echo "fuzz: every target ran ${secs} s without a crash"
