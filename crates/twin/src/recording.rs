@@ -69,54 +69,60 @@ enum Item {
 /// metadata, data end.
 const USED_OPCODES: [u8; 7] = [0x01, 0x03, 0x04, 0x05, 0x09, 0x0c, 0x0f];
 
+/// The unread rest of a record's body, read with its lengths checked.
+struct Body<'a>(&'a [u8]);
+impl<'a> Body<'a> {
+    fn skip(&mut self, n: usize, what: &str) -> Result<(), String> {
+        self.bytes(n, what).map(drop)
+    }
+    fn bytes(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+        if n > self.0.len() {
+            return Err(format!(
+                "{what} claims {n} bytes, {} are left in the record",
+                self.0.len()
+            ));
+        }
+        let (b, rest) = self.0.split_at(n);
+        self.0 = rest;
+        Ok(b)
+    }
+    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], String> {
+        let b: [u8; N] = self
+            .0
+            .get(..N)
+            .and_then(|b| b.try_into().ok())
+            .ok_or_else(|| format!("{what}: record too short for its length"))?;
+        self.0 = &self.0[N..];
+        Ok(b)
+    }
+    fn len32(&mut self, what: &str) -> Result<usize, String> {
+        Ok(u32::from_le_bytes(self.take(what)?) as usize)
+    }
+    fn len64(&mut self, what: &str) -> Result<usize, String> {
+        usize::try_from(u64::from_le_bytes(self.take(what)?))
+            .map_err(|_| format!("{what}: length overflow"))
+    }
+    fn string(&mut self, what: &str) -> Result<(), String> {
+        let n = self.len32(what)?;
+        self.skip(n, what)
+    }
+    fn string_map(&mut self, what: &str) -> Result<(), String> {
+        let n = self.len32(what)?;
+        if n > self.0.len() {
+            return self.skip(n, what);
+        }
+        let mut inner = Body(&self.0[..n]);
+        while !inner.0.is_empty() {
+            inner.string(what)?;
+            inner.string(what)?;
+        }
+        self.skip(n, what)
+    }
+}
+
 /// Check every length prefix of a record the reader decodes (MCAP spec, records section)
 /// against the bytes the record has, before the decoder trusts them.
 fn check_lengths(opcode: u8, data: &[u8]) -> Result<(), String> {
-    struct Body<'a>(&'a [u8]);
-    impl Body<'_> {
-        fn skip(&mut self, n: usize, what: &str) -> Result<(), String> {
-            if n > self.0.len() {
-                return Err(format!(
-                    "{what} claims {n} bytes, {} are left in the record",
-                    self.0.len()
-                ));
-            }
-            self.0 = &self.0[n..];
-            Ok(())
-        }
-        fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], String> {
-            let b: [u8; N] = self
-                .0
-                .get(..N)
-                .and_then(|b| b.try_into().ok())
-                .ok_or_else(|| format!("{what}: record too short for its length"))?;
-            self.0 = &self.0[N..];
-            Ok(b)
-        }
-        fn len32(&mut self, what: &str) -> Result<usize, String> {
-            Ok(u32::from_le_bytes(self.take(what)?) as usize)
-        }
-        fn len64(&mut self, what: &str) -> Result<usize, String> {
-            usize::try_from(u64::from_le_bytes(self.take(what)?))
-                .map_err(|_| format!("{what}: length overflow"))
-        }
-        fn string(&mut self, what: &str) -> Result<(), String> {
-            let n = self.len32(what)?;
-            self.skip(n, what)
-        }
-        fn string_map(&mut self, what: &str) -> Result<(), String> {
-            let n = self.len32(what)?;
-            if n > self.0.len() {
-                return self.skip(n, what);
-            }
-            let mut inner = Body(&self.0[..n]);
-            while !inner.0.is_empty() {
-                inner.string(what)?;
-                inner.string(what)?;
-            }
-            self.skip(n, what)
-        }
-    }
     let mut b = Body(data);
     match opcode {
         0x01 => {
@@ -151,6 +157,91 @@ fn check_lengths(opcode: u8, data: &[u8]) -> Result<(), String> {
     }
 }
 
+/// The MCAP opcode of a chunk.
+const OP_CHUNK: u8 = 0x06;
+
+/// The records of a chunk record's body (MCAP spec: start and end time, uncompressed size
+/// and CRC, compression, the records' length, the records), decompressed and checked
+/// against the sizes and the CRC the chunk states, into `out` (its buffer reused). At most
+/// [`RECORD_LIMIT`] bytes.
+fn unpack_chunk(
+    data: &[u8],
+    zstd: &mut Option<zstd::bulk::Decompressor<'static>>,
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
+    let mut b = Body(data);
+    b.skip(16, "chunk times")?;
+    let size = u64::from_le_bytes(b.take("chunk uncompressed size")?);
+    let crc = u32::from_le_bytes(b.take("chunk uncompressed crc")?);
+    let n = b.len32("chunk compression")?;
+    let compression = b.bytes(n, "chunk compression")?.to_vec();
+    let n = b.len64("chunk records")?;
+    let records = b.bytes(n, "chunk records")?;
+    let size = usize::try_from(size)
+        .ok()
+        .filter(|&n| n <= RECORD_LIMIT)
+        .ok_or_else(|| {
+            format!("chunk claims {size} uncompressed bytes, more than the {RECORD_LIMIT} a recording holds")
+        })?;
+    out.clear();
+    match compression.as_slice() {
+        b"" => out.extend_from_slice(records),
+        b"zstd" => {
+            let z = match zstd {
+                Some(z) => z,
+                None => zstd.insert(
+                    zstd::bulk::Decompressor::new()
+                        .map_err(|e| format!("zstd decompressor: {e}"))?,
+                ),
+            };
+            out.reserve_exact(size);
+            z.decompress_to_buffer(records, out)
+                .map_err(|e| format!("chunk does not decompress (zstd): {e}"))?;
+        }
+        other => {
+            return Err(format!(
+                "chunk compression {:?} is not supported (zstd or none)",
+                String::from_utf8_lossy(other)
+            ));
+        }
+    }
+    if out.len() != size {
+        return Err(format!(
+            "chunk holds {} bytes of records, it claims {size}",
+            out.len()
+        ));
+    }
+    // A CRC of 0 means none was computed (MCAP spec).
+    let calculated = crc32fast::hash(out);
+    if crc != 0 && calculated != crc {
+        return Err(format!(
+            "chunk CRC mismatch (saved {crc:#010x}, calculated {calculated:#010x})"
+        ));
+    }
+    Ok(())
+}
+
+/// The next record of a chunk's `records` from `*pos`: its opcode and body, `*pos` moved
+/// past it. A record header or body running past the chunk is an error.
+fn next_chunk_record<'a>(records: &'a [u8], pos: &mut usize) -> Result<(u8, &'a [u8]), String> {
+    let rest = &records[*pos..];
+    let mut b = Body(rest);
+    let [opcode] = b
+        .take::<1>("chunk record opcode")
+        .map_err(|_| "the chunk ends inside a record's header".to_owned())?;
+    let len = b
+        .len64("chunk record")
+        .map_err(|_| "the chunk ends inside a record's header".to_owned())?;
+    let body = b.bytes(len, "").map_err(|_| {
+        format!(
+            "a record (opcode {opcode:#04x}) claims {len} bytes, {} are left in its chunk",
+            rest.len() - 9
+        )
+    })?;
+    *pos += 9 + len;
+    Ok((opcode, body))
+}
+
 /// Whether `file` ends with the MCAP magic; leaves it positioned at its start.
 fn ends_with_magic(file: &mut File) -> std::io::Result<bool> {
     let len = file.metadata()?.len();
@@ -183,6 +274,11 @@ struct Reader {
     offset: u64,
     /// The file's length.
     file_len: u64,
+    /// The records of the chunk being read (decompressed), and where the next one starts.
+    chunk: Vec<u8>,
+    chunk_pos: usize,
+    /// The zstd context, made at the first compressed chunk and reused.
+    zstd: Option<zstd::bulk::Decompressor<'static>>,
 }
 
 impl Reader {
@@ -195,7 +291,10 @@ impl Reader {
             .with_prevalidate_chunk_crcs(true)
             .with_validate_data_section_crc(true)
             .with_validate_summary_section_crc(true)
-            .with_record_length_limit(RECORD_LIMIT);
+            .with_record_length_limit(RECORD_LIMIT)
+            // Chunks are unpacked here: mcap 0.26's reader trusts the length of a record
+            // inside an uncompressed chunk (an overflow past the chunk's end).
+            .with_emit_chunks(true);
         Ok(Reader {
             path: path.to_owned(),
             file,
@@ -209,6 +308,9 @@ impl Reader {
             done: false,
             offset: 0,
             file_len,
+            chunk: Vec::new(),
+            chunk_pos: 0,
+            zstd: None,
         })
     }
 
@@ -229,10 +331,6 @@ impl Reader {
                      {n} messages read)"
                 )
             }
-            McapError::RecordTooLarge { opcode, len } => anyhow!(
-                "{path}: a record (opcode {opcode:#04x}) near {at} claims {len} bytes, more \
-                 than the {RECORD_LIMIT} a recording holds (a damaged length; {n} messages read)"
-            ),
             McapError::BadMagic if self.records == 0 => {
                 anyhow!("{path}: not an MCAP file (bad magic)")
             }
@@ -247,6 +345,10 @@ impl Reader {
             e if !self.finished && self.records > 0 => anyhow!(
                 "{path}: truncated (a killed run?): {e} at {at}; read up to the last complete \
                  chunk, {n} messages"
+            ),
+            McapError::RecordTooLarge { opcode, len } => anyhow!(
+                "{path}: a record (opcode {opcode:#04x}) near {at} claims {len} bytes, more \
+                 than the {RECORD_LIMIT} a recording holds (a damaged length; {n} messages read)"
             ),
             e => anyhow!("{path}: malformed MCAP after {n} messages, near {at}: {e}"),
         }
@@ -266,6 +368,18 @@ impl Reader {
 
     fn next_inner(&mut self) -> Option<anyhow::Result<Item>> {
         loop {
+            if self.chunk_pos < self.chunk.len() {
+                let chunk = std::mem::take(&mut self.chunk);
+                let r = match next_chunk_record(&chunk, &mut self.chunk_pos) {
+                    Ok((opcode, data)) => self.decode(opcode, data),
+                    Err(why) => Some(Err(self.malformed(&why))),
+                };
+                self.chunk = chunk;
+                match r {
+                    Some(r) => return Some(r),
+                    None => continue,
+                }
+            }
             let event = match self.reader.next_event()? {
                 Ok(ev) => ev,
                 Err(e) => {
@@ -294,80 +408,107 @@ impl Reader {
                 }
                 LinearReadEvent::Record { opcode, data } => (opcode, data),
             };
-            // The summary section repeats what was read; records this reader does not use
-            // are not decoded. The others' length prefixes are checked first: the decoder
-            // reserves what a string's prefix claims.
-            if self.past_data_end {
-                self.records += 1;
-                return Some(Ok(Item::Summary));
+            if opcode == OP_CHUNK && !self.past_data_end {
+                match unpack_chunk(data, &mut self.zstd, &mut self.chunk) {
+                    Ok(()) => {
+                        self.records += 1;
+                        self.chunk_pos = 0;
+                        continue;
+                    }
+                    Err(why) => {
+                        self.chunk.clear();
+                        return Some(Err(self.malformed(&why)));
+                    }
+                }
             }
-            if !USED_OPCODES.contains(&opcode) {
+            if !self.past_data_end && !USED_OPCODES.contains(&opcode) {
                 self.records += 1;
                 continue;
             }
-            if let Err(why) = check_lengths(opcode, data) {
-                return Some(Err(anyhow!(
-                    "{}: malformed MCAP after {} messages, near byte offset {} of {}: record \
-                     {opcode:#04x}: {why}",
-                    self.path.display(),
-                    self.messages,
-                    self.offset,
-                    self.file_len
-                )));
+            let data = data.to_vec();
+            if let Some(r) = self.decode(opcode, &data) {
+                return Some(r);
             }
-            let record = match mcap::parse_record(opcode, data) {
-                Ok(r) => r,
-                Err(e) => {
-                    let err = self.error(e);
-                    return Some(Err(err));
-                }
-            };
-            self.records += 1;
-            let item = match record {
-                Record::Header(h) => Item::Header { library: h.library },
-                Record::DataEnd(_) => {
-                    self.past_data_end = true;
-                    continue;
-                }
-                Record::Schema { header, .. } => {
-                    self.schemas.insert(header.id, header.name.into());
-                    continue;
-                }
-                Record::Channel(c) => {
-                    let schema = self
-                        .schemas
-                        .get(&c.schema_id)
-                        .cloned()
-                        .unwrap_or_else(|| Arc::from(""));
-                    self.channels.insert(c.id, (c.topic.into(), schema));
-                    continue;
-                }
-                Record::Message { header, data } => {
-                    let Some((topic, schema)) = self.channels.get(&header.channel_id) else {
-                        return Some(Err(anyhow!(
-                            "{}: malformed MCAP: message {} on unknown channel {}",
-                            self.path.display(),
-                            self.messages,
-                            header.channel_id
-                        )));
-                    };
-                    self.messages += 1;
-                    Item::Message(RecordedMessage {
-                        topic: topic.clone(),
-                        schema: schema.clone(),
-                        log_time: header.log_time,
-                        data: data.into_owned(),
-                    })
-                }
-                Record::Metadata(m) => Item::Metadata(m),
-                Record::Attachment { header, data, .. } => Item::Attachment {
-                    name: header.name,
-                    data: data.into_owned(),
-                },
-                _ => continue,
-            };
-            return Some(Ok(item));
         }
+    }
+
+    /// An error in the record read last, with where.
+    fn malformed(&self, why: &str) -> anyhow::Error {
+        anyhow!(
+            "{}: malformed MCAP after {} messages, near byte offset {} of {}: {why}",
+            self.path.display(),
+            self.messages,
+            self.offset,
+            self.file_len
+        )
+    }
+
+    /// Decode one record, of the file or of a chunk: the item it is, `None` for a record
+    /// that only updates the reader (schema, channel, data end) or that it does not use.
+    fn decode(&mut self, opcode: u8, data: &[u8]) -> Option<anyhow::Result<Item>> {
+        // The summary section repeats what was read; records this reader does not use
+        // are not decoded. The others' length prefixes are checked first: the decoder
+        // reserves what a string's prefix claims.
+        if self.past_data_end {
+            self.records += 1;
+            return Some(Ok(Item::Summary));
+        }
+        if !USED_OPCODES.contains(&opcode) {
+            self.records += 1;
+            return None;
+        }
+        if let Err(why) = check_lengths(opcode, data) {
+            return Some(Err(self.malformed(&format!("record {opcode:#04x}: {why}"))));
+        }
+        let record = match mcap::parse_record(opcode, data) {
+            Ok(r) => r,
+            Err(e) => return Some(Err(self.error(e))),
+        };
+        self.records += 1;
+        let item = match record {
+            Record::Header(h) => Item::Header { library: h.library },
+            Record::DataEnd(_) => {
+                self.past_data_end = true;
+                return None;
+            }
+            Record::Schema { header, .. } => {
+                self.schemas.insert(header.id, header.name.into());
+                return None;
+            }
+            Record::Channel(c) => {
+                let schema = self
+                    .schemas
+                    .get(&c.schema_id)
+                    .cloned()
+                    .unwrap_or_else(|| Arc::from(""));
+                self.channels.insert(c.id, (c.topic.into(), schema));
+                return None;
+            }
+            Record::Message { header, data } => {
+                let Some((topic, schema)) = self.channels.get(&header.channel_id) else {
+                    return Some(Err(anyhow!(
+                        "{}: malformed MCAP: message {} on unknown channel {}",
+                        self.path.display(),
+                        self.messages,
+                        header.channel_id
+                    )));
+                };
+                self.messages += 1;
+                Item::Message(RecordedMessage {
+                    topic: topic.clone(),
+                    schema: schema.clone(),
+                    log_time: header.log_time,
+                    data: data.into_owned(),
+                })
+            }
+            Record::Metadata(m) => Item::Metadata(m),
+            Record::Attachment { header, data, .. } => Item::Attachment {
+                name: header.name,
+                data: data.into_owned(),
+            },
+            _ => return None,
+        };
+        Some(Ok(item))
     }
 
     /// The next message, `None` at the end.

@@ -182,3 +182,100 @@ fn a_record_length_beyond_the_file_is_an_error_naming_the_offset() {
         );
     }
 }
+
+/// A small MCAP file written by the mcap crate with uncompressed chunks (the recorder's
+/// are zstd): a JSON channel and five messages.
+fn uncompressed_recording(path: &Path) {
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut w = mcap::WriteOptions::new()
+        .compression(None)
+        .create(file)
+        .unwrap();
+    let schema = w.add_schema("m6p.Test", "jsonschema", b"{}").unwrap();
+    let channel = w
+        .add_channel(schema, "/test", "json", &Default::default())
+        .unwrap();
+    for i in 0..5u32 {
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: i,
+            log_time: u64::from(i) * 1000,
+            publish_time: u64::from(i) * 1000,
+        };
+        w.write_to_known_channel(&header, format!("{{\"i\":{i}}}").as_bytes())
+            .unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// Every message of `path` up to the first error, and that error.
+fn read_all(path: &Path) -> (Vec<recording::RecordedMessage>, Option<String>) {
+    let mut got = Vec::new();
+    for m in recording::messages(path).unwrap() {
+        match m {
+            Ok(m) => got.push(m),
+            Err(e) => return (got, Some(format!("{e:#}"))),
+        }
+    }
+    (got, None)
+}
+
+/// Uncompressed chunks are read like compressed ones.
+#[test]
+fn uncompressed_chunks_are_read() {
+    let f = TempFile::new("bounds-plain");
+    uncompressed_recording(f.path());
+    let (got, err) = read_all(f.path());
+    assert_eq!(err, None);
+    let data: Vec<_> = got.iter().map(|m| m.data.as_slice()).collect();
+    assert_eq!(data[0], b"{\"i\":0}");
+    assert_eq!(data.len(), 5);
+    assert!(
+        got.iter()
+            .all(|m| &*m.topic == "/test" && &*m.schema == "m6p.Test")
+    );
+}
+
+/// A record inside an uncompressed chunk whose length runs past the end of its chunk is an
+/// error naming where. The mcap crate's reader subtracted the record's length from what is
+/// left of the chunk without a check: an overflow panic in debug builds (`m6p-twin inspect`
+/// exited 101), a read past the chunk in release builds. Found by `fuzz/`'s `mcap_reader`;
+/// its two inputs are in tests/data/mcap.
+#[test]
+fn a_chunk_record_running_past_its_chunk_is_an_error() {
+    let f = TempFile::new("bounds-chunk");
+    uncompressed_recording(f.path());
+    let mut bytes = std::fs::read(f.path()).unwrap();
+    // The chunk: opcode 0x06 after the header record; its records follow a fixed part of
+    // 8 + 8 + 8 + 4 bytes, the compression string (empty: 4 bytes) and the records' u64
+    // length. The first inner record's length claims 64 bytes more than the chunk has.
+    let header_len = u64::from_le_bytes(bytes[9..17].try_into().unwrap()) as usize;
+    let chunk = 8 + 1 + 8 + header_len;
+    assert_eq!(bytes[chunk], 0x06);
+    let records = chunk + 1 + 8 + 8 + 8 + 8 + 4 + 4 + 8;
+    let records_len = u64::from_le_bytes(bytes[records - 8..records].try_into().unwrap());
+    let inner_len = records_len - 9 + 64;
+    bytes[records + 1..records + 9].copy_from_slice(&inner_len.to_le_bytes());
+    // The chunk's CRC (over its uncompressed records) would catch the change; 0 means none.
+    bytes[chunk + 1 + 8 + 24..chunk + 1 + 8 + 28].copy_from_slice(&[0; 4]);
+    std::fs::write(f.path(), &bytes).unwrap();
+    let (got, err) = read_all(f.path());
+    assert!(got.is_empty());
+    let err = err.expect("an error");
+    assert!(err.contains("chunk") && err.contains("offset"), "{err}");
+    assert!(recording::load_meta(f.path()).is_err());
+    let summary = recording::read_summary(f.path()).unwrap();
+    assert!(summary.incomplete.is_some_and(|e| e.contains("chunk")));
+
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mcap");
+    for name in [
+        "fuzz-chunk-record-past-chunk.mcap",
+        "fuzz-chunk-record-past-chunk-2.mcap",
+    ] {
+        let path = dir.join(name);
+        let (_, err) = read_all(&path);
+        assert!(err.is_some(), "{name}");
+        assert!(recording::load_meta(&path).is_err(), "{name}");
+        let _ = recording::read_summary(&path);
+    }
+}
