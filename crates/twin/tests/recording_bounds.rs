@@ -269,8 +269,8 @@ fn a_chunk_record_running_past_its_chunk_is_an_error() {
 
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mcap");
     for name in [
-        "fuzz-chunk-record-past-chunk.mcap",
-        "fuzz-chunk-record-past-chunk-2.mcap",
+        "fuzz-chunk-record-past-chunk.bin",
+        "fuzz-chunk-record-past-chunk-2.bin",
     ] {
         let path = dir.join(name);
         let (_, err) = read_all(&path);
