@@ -41,7 +41,7 @@ PORT_TM, PORT_RTC, PORT_ATC = 10, 11, 12
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", required=True)
-    ap.add_argument("--as", dest="me", type=int, default=16)
+    ap.add_argument("--as", dest="me", type=int, default=17)
     ap.add_argument("--fc", type=int, default=3)
     ap.add_argument("--start", type=int, required=True, help="scenario start, UTC unix s")
     ap.add_argument("--rmin-km", type=float, default=6600.0)

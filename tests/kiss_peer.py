@@ -146,7 +146,7 @@ class Checks:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", required=True)
-    ap.add_argument("--as", dest="me", type=int, default=16)
+    ap.add_argument("--as", dest="me", type=int, default=17)
     ap.add_argument("--targets", default="3,12")
     ap.add_argument("--garbage", type=float, default=0.0)
     a = ap.parse_args()

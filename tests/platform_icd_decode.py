@@ -97,7 +97,7 @@ def norm(v):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", required=True)
-    ap.add_argument("--as", dest="me", type=int, default=16)
+    ap.add_argument("--as", dest="me", type=int, default=17)
     ap.add_argument("--eps", type=int, default=4)
     ap.add_argument("--ecu", type=int, default=5)
     ap.add_argument("--comm", default="1,2")

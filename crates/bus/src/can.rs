@@ -59,7 +59,15 @@ pub struct CanBusConfig {
     pub name: String,
     /// Bit rate in bit/s (default 1 Mbit/s).
     pub bitrate_bps: u32,
+    /// Frames a controller's transmit queue holds ([`TX_QUEUE_FRAMES`] by default); a frame
+    /// queued beyond it is lost and counted (`tx_overflow`).
+    pub tx_queue_frames: usize,
 }
+
+/// The default depth of a controller's transmit queue: Linux's `txqueuelen` of a CAN
+/// interface set to 1000 (the kernel's default of 10 makes libcsp 1.4's driver retry on
+/// `ENOBUFS`), a little more so that a node's longest burst fits.
+pub const TX_QUEUE_FRAMES: usize = 1024;
 
 impl CanBusConfig {
     /// A 1 Mbit/s bus.
@@ -67,6 +75,7 @@ impl CanBusConfig {
         CanBusConfig {
             name: name.to_owned(),
             bitrate_bps: 1_000_000,
+            tx_queue_frames: TX_QUEUE_FRAMES,
         }
     }
 }
@@ -197,6 +206,12 @@ pub struct PortStats {
     pub recoveries: u64,
     /// Frames it lost by going, or being, bus-off.
     pub bus_off_drops: u64,
+    /// Frames lost because its transmit queue was full.
+    pub tx_overflow: u64,
+    /// Frames lost because its inbox was full (it did not take them in time).
+    pub rx_overflow: u64,
+    /// The most frames its transmit queue held.
+    pub tx_queue_max: u64,
 }
 
 impl PortStats {
@@ -326,15 +341,33 @@ impl CanPort {
     pub fn send(&self, t: SimTime, frame: CanFrame) {
         {
             let mut st = self.bus.lock();
+            let limit = st.cfg.tx_queue_frames;
             let Some(port) = st.ports.get_mut(self.idx) else {
                 return;
             };
             if !port.enabled {
                 return;
             }
+            if port.queue.len() >= limit {
+                let name = &port.stats.name;
+                crate::count_loss(&mut port.stats.tx_overflow, |n| {
+                    format!("{name}: transmit queue full ({limit} frames): frame lost ({n} so far)")
+                });
+                return;
+            }
             port.queue.push_back((t, frame));
+            port.stats.tx_queue_max = port.stats.tx_queue_max.max(port.queue.len() as u64);
         }
         self.bus.wake.notify_one();
+    }
+    /// Frames the transmit queue can still take (a sender that must not lose part of a
+    /// packet checks this first).
+    pub fn room(&self) -> usize {
+        let st = self.bus.lock();
+        let limit = st.cfg.tx_queue_frames;
+        st.ports
+            .get(self.idx)
+            .map_or(0, |p| limit.saturating_sub(p.queue.len()))
     }
     /// Index of this endpoint on its bus.
     pub fn index(&self) -> usize {
@@ -447,13 +480,19 @@ impl CanBus {
         }
     }
 
-    /// Add `addr` to an endpoint's filter and make it the only internal receiver of it.
-    pub fn claim(&self, port: &CanPort, addr: u8) {
+    /// Add `addr` to an endpoint's filter and make it its only receiver, unless another
+    /// endpoint holds it: a node of the twin attached with it, or another claim. Refused
+    /// with the holder's name.
+    pub fn claim(&self, port: &CanPort, addr: u8) -> Result<(), String> {
         let mut st = self.lock();
+        if let Some(holder) = st.holder(addr).filter(|&i| i != port.idx) {
+            return Err(st.ports[holder].stats.name.clone());
+        }
         st.claims.insert(addr, port.idx);
         if let Some(p) = st.ports.get_mut(port.idx) {
             p.addrs.insert(addr);
         }
+        Ok(())
     }
 
     /// Give back every claim of an endpoint and disable it (an outside link went away).
@@ -526,6 +565,14 @@ impl CanBus {
 }
 
 impl State {
+    /// The endpoint holding `addr`: its claimant, or a node attached with it.
+    fn holder(&self, addr: u8) -> Option<usize> {
+        self.claims
+            .get(&addr)
+            .copied()
+            .or_else(|| self.ports.iter().position(|p| p.own.contains(&addr)))
+    }
+
     fn ns_per_bit(&self) -> u64 {
         1_000_000_000 / u64::from(self.cfg.bitrate_bps.max(1))
     }
@@ -932,11 +979,17 @@ impl State {
                 if wants {
                     p.stats.frames_rx += 1;
                     p.stats.bytes_rx += u64::from(frame.dlc);
-                    let _ = p.inbox.send(Inbound {
+                    let sent = p.inbox.send(Inbound {
                         t,
                         iface: p.iface,
                         what: Arrival::Can(frame),
                     });
+                    if sent == Err(crate::inbox::InboxError::Full) {
+                        let name = &p.stats.name;
+                        crate::count_loss(&mut p.stats.rx_overflow, |n| {
+                            format!("{name}: inbox full: frame lost ({n} so far)")
+                        });
+                    }
                 }
             }
         }
@@ -1113,22 +1166,35 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
-    async fn claims_shadow_internal_nodes_and_down_drops() {
+    async fn claims_of_held_addresses_are_refused_free_ones_are_exclusive_and_down_drops() {
         let clock = Clock::new(ClockMode::Virtual);
         let bus = CanBus::new(CanBusConfig::new("payload"), 1);
         let (tx_a, _ra) = inbox();
         let (tx_int, mut rx_int) = inbox();
         let (tx_out, mut rx_out) = inbox();
+        let (tx_out2, mut rx_out2) = inbox();
         let a = bus.attach("PC", &[6], false, tx_a, 0);
         let _internal = bus.attach("payload12", &[12], false, tx_int, 0);
         let outside = bus.attach("kiss", &[], false, tx_out, 0);
+        let outside2 = bus.attach("kiss#2", &[], false, tx_out2, 0);
         tokio::spawn(bus.clone().run(clock));
-        bus.claim(&outside, 12);
+        // The twin's payload 12 keeps its address; 14 is free and becomes the link's only.
+        assert_eq!(bus.claim(&outside, 12), Err("payload12".to_owned()));
+        assert_eq!(bus.claim(&outside, 14), Ok(()));
+        assert_eq!(bus.claim(&outside2, 14), Err("kiss".to_owned()));
         a.send(SimTime::ZERO, cfp_frame(6, 12, 0));
+        a.send(SimTime::ZERO, cfp_frame(6, 14, 1));
         tokio::time::sleep(Duration::from_millis(2)).await;
-        assert!(rx_out.try_recv().is_ok());
-        assert!(rx_int.try_recv().is_err());
+        assert!(
+            matches!(rx_int.try_recv().unwrap().what, Arrival::Can(f) if f == cfp_frame(6, 12, 0))
+        );
+        assert!(
+            matches!(rx_out.try_recv().unwrap().what, Arrival::Can(f) if f == cfp_frame(6, 14, 1))
+        );
+        assert!(rx_out.try_recv().is_err());
+        assert!(rx_out2.try_recv().is_err());
         bus.release(&outside);
+        assert_eq!(bus.claim(&outside2, 14), Ok(()));
         bus.set_fault(
             0,
             Some(Impairments {

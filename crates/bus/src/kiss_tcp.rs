@@ -4,8 +4,15 @@
 //! - [`serve`] listens (127.0.0.1 by default) and accepts any number of outside nodes, one
 //!   connection each; [`connect`] is the platform's side of ICD 2.3, a client that connects
 //!   to the payload's server and reconnects with back-off (0.5 s doubling to 10 s).
-//! - The CSP addresses behind a connection are configured, or learned from the source of
-//!   the first packets; the segment follows the address range ([`crate::outside`]).
+//! - The CSP addresses behind a connection are the link's configured ones, claimed when it
+//!   connects (so a program that only answers is reachable), or, on a link without any,
+//!   learned from the source of its packets; the segment follows the address range
+//!   ([`crate::outside`]). An address held by a node of the twin or by another connection
+//!   cannot be claimed: the packet is refused, counted and logged (WARN, once per address
+//!   and connection), and on a link with configured addresses any other source is refused.
+//! - Everything is bounded ([`KissLimits`]): connections per listener, chunks read ahead of
+//!   the twin (the reader then stops reading: TCP back-pressure), frames waiting for a slow
+//!   reader (dropped and counted, never stalling the twin or other connections).
 //! - Garbage bytes, bad CRCs, short and oversize frames and disconnects are counted and
 //!   logged; the twin keeps running and accepts new connections.
 
@@ -21,13 +28,61 @@ use tokio::net::{TcpListener, TcpStream};
 use crate::clock::Clock;
 use crate::gate::{DelayLine, LinkGate, Passage};
 use crate::inbox::inbox;
-use crate::outside::{OutsideEndpoint, Segments};
+use crate::outside::{OutsideEndpoint, OutsideError, Segments};
+
+/// The bounds of a KISS/TCP link, each with the real-world thing it models.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct KissLimits {
+    /// Connections a listener serves at once (more are accepted, logged and closed).
+    pub max_connections: usize,
+    /// Chunks (of up to 4 KiB) read from a connection ahead of the twin: a serial port's
+    /// receive buffer. When full the reader stops reading and TCP holds the sender back.
+    pub input_chunks: usize,
+    /// KISS frames waiting for a connection's reader: a UART's transmit FIFO. A frame
+    /// that finds it full is dropped and counted (`out_dropped`); the twin never waits for
+    /// a program that does not read.
+    pub output_frames: usize,
+}
+
+impl Default for KissLimits {
+    fn default() -> Self {
+        KissLimits {
+            max_connections: 16,
+            input_chunks: 16,
+            output_frames: 256,
+        }
+    }
+}
+
+/// Receives a link's warnings for the run's log: `(time, link or connection name, text)`.
+#[derive(Clone)]
+pub struct KissLog(Arc<LogFn>);
+
+type LogFn = dyn Fn(SimTime, &str, String) + Send + Sync;
+
+impl KissLog {
+    /// A log calling `f`.
+    pub fn new(f: impl Fn(SimTime, &str, String) + Send + Sync + 'static) -> Self {
+        KissLog(Arc::new(f))
+    }
+}
+
+impl std::fmt::Debug for KissLog {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("KissLog")
+    }
+}
 
 /// Settings of a KISS/TCP link.
 #[derive(Debug, Clone, Default)]
 pub struct KissLinkConfig {
-    /// Addresses behind the link; empty = learn them from received packets.
+    /// Addresses behind the link, claimed when a connection opens; packets from any other
+    /// source are refused. Empty: learn them from the sources of received packets.
     pub addrs: Vec<u8>,
+    /// Its bounds.
+    pub limits: KissLimits,
+    /// Where its warnings go besides `tracing` (the run's log).
+    pub log: Option<KissLog>,
     /// Receiver settings (the v1.4 248-byte limit is off by default).
     pub decoder: DecoderConfig,
     /// Where the raw bytes crossing the socket go (the recorder).
@@ -38,15 +93,35 @@ pub struct KissLinkConfig {
 
 /// Receives every chunk read from and every frame written to a link's socket:
 /// `(time, link name, true = into the twin, bytes)`.
+///
+/// With a budget ([`KissTap::with_budget`]) a link takes a permit before it hands a chunk
+/// read from its socket to the tap, and whoever consumes the tapped chunks gives permits
+/// back: a link reads no faster than the run records (TCP holds the program back).
 #[derive(Clone)]
-pub struct KissTap(Arc<TapFn>);
+pub struct KissTap(Arc<TapFn>, Option<Arc<tokio::sync::Semaphore>>);
 
 type TapFn = dyn Fn(SimTime, &str, bool, &[u8]) + Send + Sync;
 
 impl KissTap {
     /// A tap calling `f`.
     pub fn new(f: impl Fn(SimTime, &str, bool, &[u8]) + Send + Sync + 'static) -> Self {
-        KissTap(Arc::new(f))
+        KissTap(Arc::new(f), None)
+    }
+    /// A tap calling `f` for at most `budget`'s permits of chunks into the twin not yet
+    /// consumed (the consumer calls `budget.add_permits(1)` for each).
+    pub fn with_budget(
+        f: impl Fn(SimTime, &str, bool, &[u8]) + Send + Sync + 'static,
+        budget: Arc<tokio::sync::Semaphore>,
+    ) -> Self {
+        KissTap(Arc::new(f), Some(budget))
+    }
+    /// Wait for a permit to tap a chunk into the twin.
+    async fn admit(&self) {
+        if let Some(b) = &self.1
+            && let Ok(p) = b.acquire().await
+        {
+            p.forget();
+        }
     }
 }
 
@@ -79,8 +154,18 @@ pub struct KissLinkStats {
     pub short: u64,
     /// Frames over the MTU.
     pub oversize: u64,
-    /// Packets refused (bad source address, wrong segment, too long for CAN).
+    /// Packets refused (bad source address, wrong segment, too long for CAN, an address
+    /// held by someone else, a full transmit queue).
     pub refused: u64,
+    /// Of those, packets whose source address is held by a node of the twin or another
+    /// connection, or is not one of the link's configured addresses.
+    pub claims_refused: u64,
+    /// Of those, packets the CAN transmit queue could not take whole.
+    pub queue_full: u64,
+    /// Frames to the outside program dropped because it did not read them in time.
+    pub out_dropped: u64,
+    /// Connections refused because the listener already served `max_connections`.
+    pub connections_refused: u64,
 }
 
 /// Shared counters of a link.
@@ -92,7 +177,8 @@ fn bump(stats: &SharedStats, f: impl FnOnce(&mut KissLinkStats)) {
         .unwrap_or_else(std::sync::PoisonError::into_inner));
 }
 
-/// Accept outside nodes on `listener` forever.
+/// Accept outside nodes on `listener` forever, at most `cfg.limits.max_connections` at a
+/// time.
 pub async fn serve(
     listener: TcpListener,
     label: String,
@@ -102,18 +188,41 @@ pub async fn serve(
     clock: Clock,
 ) {
     let mut n = 0u16;
+    let active = Arc::new(std::sync::atomic::AtomicUsize::new(0));
     loop {
         match listener.accept().await {
             Ok((stream, peer)) => {
+                let limit = cfg.limits.max_connections;
+                if active.load(std::sync::atomic::Ordering::Relaxed) >= limit {
+                    bump(&stats, |s| s.connections_refused += 1);
+                    warn(
+                        &cfg,
+                        clock.now(),
+                        &label,
+                        format!("connection from {peer} refused: {limit} connections already"),
+                    );
+                    drop(stream);
+                    continue;
+                }
                 n = n.wrapping_add(1);
                 tracing::info!(%peer, "KISS/TCP: outside node connected");
                 bump(&stats, |s| s.connections += 1);
                 let (segs, cfg, stats, label) =
                     (segs.clone(), cfg.clone(), stats.clone(), label.clone());
                 let _ = stream.set_nodelay(true);
+                let guard = ActiveGuard::new(active.clone());
                 tokio::spawn(async move {
+                    let _guard = guard;
                     let conn = format!("{label}#{n}");
-                    let why = run_connection(stream, &conn, &segs, &cfg, &stats, clock, n).await;
+                    let k = Connection {
+                        name: &conn,
+                        segs: &segs,
+                        cfg: &cfg,
+                        stats: &stats,
+                        n,
+                        clock,
+                    };
+                    let why = run_connection(stream, k).await;
                     tracing::info!(%peer, "KISS/TCP: connection closed: {why}");
                     bump(&stats, |s| s.disconnects += 1);
                 });
@@ -123,6 +232,30 @@ pub async fn serve(
                 tokio::time::sleep(Duration::from_millis(100)).await;
             }
         }
+    }
+}
+
+/// Counts a connection as active while it lives.
+struct ActiveGuard(Arc<std::sync::atomic::AtomicUsize>);
+
+impl ActiveGuard {
+    fn new(n: Arc<std::sync::atomic::AtomicUsize>) -> Self {
+        n.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        ActiveGuard(n)
+    }
+}
+
+impl Drop for ActiveGuard {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// A warning of link `name` at `t`: to `tracing` and to the run's log.
+fn warn(cfg: &KissLinkConfig, t: SimTime, name: &str, text: String) {
+    tracing::warn!("{name}: {text}");
+    if let Some(log) = &cfg.log {
+        (log.0)(t, name, text);
     }
 }
 
@@ -146,7 +279,15 @@ pub async fn connect(
                 bump(&stats, |s| s.connections += 1);
                 let _ = stream.set_nodelay(true);
                 let conn = format!("{label}#{n}");
-                let why = run_connection(stream, &conn, &segs, &cfg, &stats, clock, n).await;
+                let k = Connection {
+                    name: &conn,
+                    segs: &segs,
+                    cfg: &cfg,
+                    stats: &stats,
+                    n,
+                    clock,
+                };
+                let why = run_connection(stream, k).await;
                 tracing::info!(%addr, "KISS/TCP: connection closed: {why}");
                 bump(&stats, |s| s.disconnects += 1);
             }
@@ -161,23 +302,26 @@ pub async fn connect(
 /// the stream; the bytes read are stamped with the clock's time as they arrive.
 pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
     stream: S,
-    name: &str,
-    segs: &Segments,
-    cfg: &KissLinkConfig,
-    stats: &SharedStats,
-    clock: Clock,
-    n: u16,
+    k: Connection<'_>,
 ) -> String {
+    let (cfg, clock) = (k.cfg, k.clock);
     let (mut rd, mut wr) = tokio::io::split(stream);
-    let (in_tx, in_rx) = tokio::sync::mpsc::unbounded_channel();
+    // Bounded: when the twin has not taken `input_chunks` chunks yet, the reader waits and
+    // TCP holds the sender back.
+    let (in_tx, in_rx) = tokio::sync::mpsc::channel(cfg.limits.input_chunks.max(1));
     let reader = async move {
         let mut buf = vec![0u8; 4096];
         loop {
             match rd.read(&mut buf).await {
-                Ok(0) => return "peer closed".to_owned(),
+                Ok(0) => {
+                    // The close, stamped when it was seen: an empty chunk.
+                    let _ = in_tx.send((clock.now(), Vec::new())).await;
+                    return "peer closed".to_owned();
+                }
                 Ok(k) => {
                     if in_tx
                         .send((clock.now(), buf.get(..k).unwrap_or_default().to_vec()))
+                        .await
                         .is_err()
                     {
                         return "link closed".to_owned();
@@ -187,10 +331,17 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
             }
         }
     };
+    let link = serve_link(in_rx, &mut wr, k);
+    tokio::pin!(link);
     tokio::select! {
         biased;
-        why = serve_link(in_rx, &mut wr, name, segs, cfg, stats, n, clock) => why,
-        why = reader => why,
+        why = &mut link => why,
+        why = reader => {
+            // The reader's end closed the link's input: let the link take what was read and
+            // record the close before it gives its addresses back.
+            let _ = link.await;
+            why
+        }
     }
 }
 
@@ -201,31 +352,94 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
 /// Every packet crossing, in either direction, passes the link's gate (`cfg.gate`): it
 /// crosses now, waits out a delay, or is lost (counted by the gate). The bytes read are
 /// recorded whatever the gate decides; a packet towards the outside is written (and
-/// recorded) when it crosses.
-#[allow(clippy::too_many_arguments)]
+/// recorded) when it crosses. Frames towards the outside wait in a queue of
+/// `cfg.limits.output_frames` for the socket: when the program does not read, they are
+/// dropped and counted, and the twin goes on.
 pub async fn serve_link<W: AsyncWrite + Unpin>(
-    mut input: tokio::sync::mpsc::UnboundedReceiver<(SimTime, Vec<u8>)>,
+    input: tokio::sync::mpsc::Receiver<(SimTime, Vec<u8>)>,
     stream: &mut W,
-    name: &str,
-    segs: &Segments,
-    cfg: &KissLinkConfig,
-    stats: &SharedStats,
-    n: u16,
-    clock: Clock,
+    k: Connection<'_>,
 ) -> String {
+    let (name, cfg, stats) = (k.name, k.cfg, k.stats);
+    let (out_tx, mut out_rx) =
+        tokio::sync::mpsc::channel::<(SimTime, Vec<u8>)>(cfg.limits.output_frames.max(1));
+    let writer = async {
+        while let Some((t, frame)) = out_rx.recv().await {
+            if let Err(e) = write_out(stream, name, cfg, stats, t, &frame).await {
+                return e;
+            }
+        }
+        "link closed".to_owned()
+    };
+    let core = link_core(input, out_tx, k);
+    tokio::select! {
+        biased;
+        why = core => why,
+        why = writer => why,
+    }
+}
+
+/// One connection of a link: what its tasks share.
+#[derive(Debug, Clone, Copy)]
+pub struct Connection<'a> {
+    /// The link's name and the connection's number: `listen 127.0.0.1:52001#2`.
+    pub name: &'a str,
+    /// The twin's segments it joins.
+    pub segs: &'a Segments,
+    /// The link's configuration.
+    pub cfg: &'a KissLinkConfig,
+    /// The link's counters.
+    pub stats: &'a SharedStats,
+    /// The connection's number (it seeds the connection's CFP idents).
+    pub n: u16,
+    /// The run's clock.
+    pub clock: Clock,
+}
+
+/// What a connection learned or refused so far.
+struct Conn<'a> {
+    k: Connection<'a>,
+    inbox: crate::inbox::InboxTx,
+    /// Released however the link ends (the future dropped too): the addresses go back.
+    claims: Claims,
+    /// Addresses whose refusal was logged already (once per address and connection).
+    warned: std::collections::BTreeSet<u8>,
+    /// Whether the output queue's overflow was logged in this episode.
+    out_full: bool,
+}
+
+async fn link_core(
+    mut input: tokio::sync::mpsc::Receiver<(SimTime, Vec<u8>)>,
+    out: tokio::sync::mpsc::Sender<(SimTime, Vec<u8>)>,
+    k: Connection<'_>,
+) -> String {
+    let Connection {
+        name,
+        cfg,
+        stats,
+        clock,
+        ..
+    } = k;
     let (inbox_tx, mut inbox_rx) = inbox();
-    // Released however this ends, also when the future is dropped (the connection's reader
-    // ended first): the twin's own node with a claimed address gets it back.
-    let mut claims = Claims(None);
-    let endpoint = &mut claims.0;
+    let mut c = Conn {
+        k,
+        inbox: inbox_tx,
+        claims: Claims(None),
+        warned: std::collections::BTreeSet::new(),
+        out_full: false,
+    };
     for &a in &cfg.addrs {
-        if let Err(e) = claim(endpoint, segs, name, a, &inbox_tx, n) {
-            tracing::warn!("{name}: cannot claim configured address {a}: {e}");
+        if let Err(e) = c.claim(a) {
+            c.refused(
+                clock.now(),
+                a,
+                &format!("cannot claim configured address {a}: {e}"),
+            );
         }
     }
     let mut decoder = Decoder::new(cfg.decoder);
     let mut events = Vec::new();
-    let mut out = Vec::new();
+    let mut frame = Vec::new();
     // Packets waiting out a `delay` fault, into the twin and out of it.
     let mut delayed_in: DelayLine<csp::Packet> = DelayLine::default();
     let mut delayed_out: DelayLine<Vec<u8>> = DelayLine::default();
@@ -239,34 +453,43 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
             () = clock.sleep_until(next_due.unwrap_or(SimTime::MAX)), if next_due.is_some() => {
                 let now = next_due.unwrap_or(SimTime::MAX);
                 while let Some((t, p)) = delayed_in.pop_due(now) {
-                    take_in(endpoint, segs, name, &inbox_tx, n, stats, t, &p);
+                    c.take_in(t, &p);
                 }
                 while let Some((t, bytes)) = delayed_out.pop_due(now) {
-                    if let Err(e) = write_out(stream, name, cfg, stats, t, &bytes).await {
-                        return e;
-                    }
+                    c.put_out(&out, t, bytes);
                 }
             }
             r = input.recv() => {
-                let Some((t, chunk)) = r else { break "peer closed".to_owned() };
+                // The input's end (an empty chunk, at the time the close was seen, or the
+                // channel's end) is recorded as an empty chunk: a replay closes the
+                // connection at that time, giving its addresses back as the original did.
+                let (t, chunk) = match r {
+                    Some((t, chunk)) if !chunk.is_empty() => (t, chunk),
+                    r => {
+                        if let Some(tap) = &cfg.tap {
+                            tap.admit().await;
+                            let t = r.map_or_else(|| clock.now(), |(t, _)| t);
+                            (tap.0)(t, name, true, &[]);
+                        }
+                        break "peer closed".to_owned();
+                    }
+                };
                 let chunk = chunk.as_slice();
-                let n_read = chunk.len();
                 if let Some(tap) = &cfg.tap {
+                    tap.admit().await;
                     (tap.0)(t, name, true, chunk);
                 }
                 let before = decoder.stats();
                 decoder.push(chunk, &mut events);
                 let after = decoder.stats();
                 bump(stats, |s| {
-                    s.bytes_in += n_read as u64;
+                    s.bytes_in += chunk.len() as u64;
                     s.garbage_bytes += after.discarded_bytes - before.discarded_bytes;
                 });
                 for ev in events.drain(..) {
                     match ev {
                         KissEvent::Packet(p) => match gate(cfg) {
-                            Passage::Now => {
-                                take_in(endpoint, segs, name, &inbox_tx, n, stats, t, &p);
-                            }
+                            Passage::Now => c.take_in(t, &p),
                             Passage::After(d) => {
                                 if delayed_in.push(t + d, p).is_err() {
                                     overflow(cfg, name);
@@ -290,19 +513,15 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
             a = inbox_rx.recv() => {
                 let Some(a) = a else { break "inbox closed".to_owned() };
                 let a_t = a.t;
-                let Some(ep) = endpoint.as_mut() else { continue };
+                let Some(ep) = c.claims.0.as_mut() else { continue };
                 match ep.receive(a) {
                     Some(Ok(p)) => {
-                        out.clear();
-                        kiss::encode(&p, &mut out);
+                        frame.clear();
+                        kiss::encode(&p, &mut frame);
                         match gate(cfg) {
-                            Passage::Now => {
-                                if let Err(e) = write_out(stream, name, cfg, stats, a_t, &out).await {
-                                    break e;
-                                }
-                            }
+                            Passage::Now => c.put_out(&out, a_t, frame.clone()),
                             Passage::After(d) => {
-                                if delayed_out.push(a_t + d, out.clone()).is_err() {
+                                if delayed_out.push(a_t + d, frame.clone()).is_err() {
                                     overflow(cfg, name);
                                 }
                             }
@@ -319,6 +538,102 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
     }
 }
 
+impl Conn<'_> {
+    /// Take a packet from the outside into the twin at `t`: its source must be one of the
+    /// link's configured addresses, or, on a link without any, an address it can claim.
+    fn take_in(&mut self, t: SimTime, p: &csp::Packet) {
+        let src = p.header.src;
+        let res = if !self.k.cfg.addrs.is_empty() && !self.k.cfg.addrs.contains(&src) {
+            Err(OutsideError::NotConfigured(src))
+        } else {
+            self.claim(src).and_then(|ep| ep.send(t, p))
+        };
+        match res {
+            Ok(()) => bump(self.k.stats, |s| s.packets_in += 1),
+            Err(e @ (OutsideError::Held { .. } | OutsideError::NotConfigured(_))) => {
+                bump(self.k.stats, |s| {
+                    s.refused += 1;
+                    s.claims_refused += 1;
+                });
+                self.refused(t, src, &format!("refused packet {}: {e}", p.header));
+            }
+            Err(e @ OutsideError::QueueFull { .. }) => {
+                bump(self.k.stats, |s| {
+                    s.refused += 1;
+                    s.queue_full += 1;
+                });
+                tracing::debug!("{}: dropped packet {}: {e}", self.k.name, p.header);
+            }
+            Err(e) => {
+                tracing::debug!("{}: refused packet {}: {e}", self.k.name, p.header);
+                bump(self.k.stats, |s| s.refused += 1);
+            }
+        }
+    }
+
+    /// Log a refused address, once per address and connection.
+    fn refused(&mut self, t: SimTime, addr: u8, text: &str) {
+        if self.warned.insert(addr) {
+            warn(
+                self.k.cfg,
+                t,
+                self.k.name,
+                format!("{text} (further packets from {addr} are counted, not logged)"),
+            );
+        }
+    }
+
+    /// Queue a frame for the socket; dropped and counted when the program does not read.
+    fn put_out(
+        &mut self,
+        out: &tokio::sync::mpsc::Sender<(SimTime, Vec<u8>)>,
+        t: SimTime,
+        frame: Vec<u8>,
+    ) {
+        match out.try_send((t, frame)) {
+            Ok(()) => self.out_full = false,
+            Err(_) => {
+                bump(self.k.stats, |s| s.out_dropped += 1);
+                if !self.out_full {
+                    self.out_full = true;
+                    warn(
+                        self.k.cfg,
+                        t,
+                        self.k.name,
+                        format!(
+                            "the outside program does not read: {} frames wait; frames to it are dropped and counted",
+                            self.k.cfg.limits.output_frames
+                        ),
+                    );
+                }
+            }
+        }
+    }
+
+    /// The connection's endpoint with `addr` claimed (attaching it on the first claim).
+    fn claim(&mut self, addr: u8) -> Result<&mut OutsideEndpoint, OutsideError> {
+        match &mut self.claims.0 {
+            Some(ep) => ep.claim(addr)?,
+            slot @ None => {
+                let ep = OutsideEndpoint::attach(
+                    self.k.segs,
+                    self.k.name,
+                    addr,
+                    self.inbox.clone(),
+                    self.k.n.wrapping_mul(97),
+                )?;
+                tracing::info!(
+                    "{}: outside node {addr} joined the {:?} segment",
+                    self.k.name,
+                    ep.kind()
+                );
+                *slot = Some(ep);
+            }
+        }
+        self.claims.0.as_mut().ok_or(OutsideError::BadSource(addr))
+    }
+}
+
 /// The passage of one packet through the link's gate (everything crosses without one).
 fn gate(cfg: &KissLinkConfig) -> Passage {
     cfg.gate.as_ref().map_or(Passage::Now, LinkGate::pass)
@@ -329,28 +644,6 @@ fn overflow(cfg: &KissLinkConfig, name: &str) {
         g.overflowed();
     }
     tracing::warn!("{name}: delay line full: packet lost");
-}
-
-/// Take a packet from the outside into the twin at `t`.
-#[allow(clippy::too_many_arguments)]
-fn take_in(
-    endpoint: &mut Option<OutsideEndpoint>,
-    segs: &Segments,
-    name: &str,
-    inbox: &crate::inbox::InboxTx,
-    n: u16,
-    stats: &SharedStats,
-    t: SimTime,
-    p: &csp::Packet,
-) {
-    let res = claim(endpoint, segs, name, p.header.src, inbox, n).and_then(|ep| ep.send(t, p));
-    match res {
-        Ok(()) => bump(stats, |s| s.packets_in += 1),
-        Err(e) => {
-            tracing::debug!("{name}: refused packet {}: {e}", p.header);
-            bump(stats, |s| s.refused += 1);
-        }
-    }
 }
 
 /// Write one KISS frame to the outside program at `t`; the error ends the link.
@@ -385,30 +678,4 @@ impl Drop for Claims {
             ep.release();
         }
     }
-}
-
-fn claim<'a>(
-    endpoint: &'a mut Option<OutsideEndpoint>,
-    segs: &Segments,
-    name: &str,
-    addr: u8,
-    inbox: &crate::inbox::InboxTx,
-    n: u16,
-) -> Result<&'a mut OutsideEndpoint, crate::outside::OutsideError> {
-    match endpoint {
-        Some(ep) => {
-            ep.claim(addr)?;
-        }
-        None => {
-            let ep = OutsideEndpoint::attach(segs, name, addr, inbox.clone(), n.wrapping_mul(97))?;
-            tracing::info!(
-                "{name}: outside node {addr} joined the {:?} segment",
-                ep.kind()
-            );
-            *endpoint = Some(ep);
-        }
-    }
-    endpoint
-        .as_mut()
-        .ok_or(crate::outside::OutsideError::BadSource(addr))
 }

@@ -24,3 +24,12 @@ pub mod trace;
 pub use can::{CanBus, CanBusConfig, CanPort};
 pub use clock::{Clock, ClockMode};
 pub use net::{NetPort, PacketNet, PacketNetConfig};
+
+/// Count a loss in `counter` and log it at WARN the 1st, 2nd, 4th, 8th, ... time, so that
+/// a flood logs a few lines, not one per loss; `what` describes it given the count so far.
+pub(crate) fn count_loss(counter: &mut u64, what: impl FnOnce(u64) -> String) {
+    *counter += 1;
+    if counter.is_power_of_two() {
+        tracing::warn!("{}", what(*counter));
+    }
+}

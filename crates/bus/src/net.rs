@@ -39,7 +39,14 @@ pub struct PacketNetConfig {
     pub air_overhead_bytes: u32,
     /// Propagation and modem delay on the air.
     pub air_delay: Duration,
+    /// Bytes waiting for the air that each sender's transmit buffer holds (a radio's or a
+    /// ground modem's); a packet that does not fit is lost (`air_overflow`).
+    pub air_buffer_bytes: u32,
 }
+
+/// The default transmit buffer of a sender on the air: 4 KiB, about 3.4 s of a 9600 bit/s
+/// channel (the time a ground client waits behind another's flood at most).
+pub const AIR_BUFFER_BYTES: u32 = 4096;
 
 impl PacketNetConfig {
     /// The ground segment with a 9600 bit/s UHF channel.
@@ -49,6 +56,7 @@ impl PacketNetConfig {
             air_rate_bps: 9600,
             air_overhead_bytes: 0,
             air_delay: Duration::from_millis(3),
+            air_buffer_bytes: AIR_BUFFER_BYTES,
         }
     }
 }
@@ -95,12 +103,23 @@ pub struct NetStats {
     pub no_contact: u64,
     /// Per-endpoint (name, packets sent, packets received).
     pub endpoints: Vec<(String, u64, u64)>,
+    /// Packets lost because their sender's transmit buffer was full (the air was busy).
+    pub air_overflow: u64,
+    /// Packets lost because the receiver's inbox was full.
+    pub rx_overflow: u64,
+    /// The most bytes any sender had waiting for the air.
+    pub air_backlog_max: u64,
 }
 
 #[derive(Debug)]
 struct Endpoint {
     name: String,
     addrs: BTreeSet<u8>,
+    /// The addresses given at attach (a node of the twin).
+    own: BTreeSet<u8>,
+    /// Its packets waiting for the air: (when each starts, its bytes).
+    air_queue: std::collections::VecDeque<(SimTime, u64)>,
+    air_queued: u64,
     radio: bool,
     enabled: bool,
     inbox: InboxTx,
@@ -206,6 +225,9 @@ impl PacketNet {
         st.eps.push(Endpoint {
             name: name.to_owned(),
             addrs: addrs.iter().copied().collect(),
+            own: addrs.iter().copied().collect(),
+            air_queue: std::collections::VecDeque::new(),
+            air_queued: 0,
             radio,
             enabled: true,
             inbox,
@@ -235,13 +257,24 @@ impl PacketNet {
         self.lock().default_ep = Some(port.idx);
     }
 
-    /// Make `port` the only receiver of `addr` until released.
-    pub fn claim(&self, port: &NetPort, addr: u8) {
+    /// Make `port` the only receiver of `addr` until released, unless another endpoint
+    /// holds it (a node of the twin attached with it, or another claim): refused with the
+    /// holder's name.
+    pub fn claim(&self, port: &NetPort, addr: u8) -> Result<(), String> {
         let mut st = self.lock();
+        let holder = st
+            .claims
+            .get(&addr)
+            .copied()
+            .or_else(|| st.eps.iter().position(|e| e.own.contains(&addr)));
+        if let Some(h) = holder.filter(|&h| h != port.idx) {
+            return Err(st.eps[h].name.clone());
+        }
         st.claims.insert(addr, port.idx);
         if let Some(e) = st.eps.get_mut(port.idx) {
             e.addrs.insert(addr);
         }
+        Ok(())
     }
 
     /// Give back an endpoint's claims and disable it.
@@ -342,6 +375,16 @@ impl State {
         self.stats.packets += 1;
         self.stats.bytes += len;
         let over_air = self.eps[from].radio || self.eps[to].radio;
+        if over_air && !self.air_buffer_takes(from, t, len) {
+            let (net, sender, size) = (&self.name, &self.eps[from].name, self.cfg.air_buffer_bytes);
+            crate::count_loss(&mut self.stats.air_overflow, |n| {
+                format!(
+                    "{net}: {sender}: transmit buffer full ({size} bytes): packet {} lost ({n} so far)",
+                    packet.header
+                )
+            });
+            return;
+        }
         let (at, fate) = if over_air {
             let bits = (len + u64::from(self.cfg.air_overhead_bytes)) * 8;
             let dur = Duration::from_nanos(
@@ -349,6 +392,9 @@ impl State {
             );
             let start = t.max(self.air_busy_until);
             self.air_busy_until = start + dur;
+            let ep = &mut self.eps[from];
+            ep.air_queue.push_back((start, len));
+            ep.air_queued += len;
             self.stats.air_busy += dur;
             if self.eps[from].radio
                 && let Some(tap) = &self.air_tap
@@ -371,6 +417,24 @@ impl State {
         self.seq += 1;
         self.in_flight
             .insert((at, self.seq), (from, to, packet, fate));
+    }
+
+    /// Whether sender `from`'s transmit buffer has room at `t` for `len` more bytes (what
+    /// has started on the air by `t` has left it). Counts the fullest backlog seen.
+    fn air_buffer_takes(&mut self, from: usize, t: SimTime, len: u64) -> bool {
+        let ep = &mut self.eps[from];
+        while let Some(&(start, n)) = ep.air_queue.front() {
+            if start > t {
+                break;
+            }
+            ep.air_queue.pop_front();
+            ep.air_queued -= n;
+        }
+        if ep.air_queued + len > u64::from(self.cfg.air_buffer_bytes) {
+            return false;
+        }
+        self.stats.air_backlog_max = self.stats.air_backlog_max.max(ep.air_queued + len);
+        true
     }
 
     fn deliver_due(&mut self, now: SimTime) {
@@ -411,11 +475,17 @@ impl State {
             let ep = &mut self.eps[to];
             if ep.enabled {
                 ep.rx += 1;
-                let _ = ep.inbox.send(Inbound {
+                let sent = ep.inbox.send(Inbound {
                     t,
                     iface: ep.iface,
                     what: Arrival::Packet(packet),
                 });
+                if sent == Err(crate::inbox::InboxError::Full) {
+                    let (net, to) = (&self.name, &ep.name);
+                    crate::count_loss(&mut self.stats.rx_overflow, |n| {
+                        format!("{net}: {to}: inbox full: packet lost ({n} so far)")
+                    });
+                }
             }
         }
     }

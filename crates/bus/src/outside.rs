@@ -4,8 +4,9 @@
 //! section 1): 12-15 the payload CAN bus, 16-20 the ground segment, anything else the main
 //! CAN bus. On a CAN bus the outside endpoint fragments and reassembles with CFP like any
 //! libcsp CAN interface; on the ground segment it exchanges whole packets. An outside
-//! address is claimed exclusively: while the link is up, an internal node with the same
-//! address no longer receives its traffic.
+//! address is claimed exclusively, and only if nobody holds it: a node of the twin (unless
+//! the scenario replaced it, so it was never attached) or another outside connection keeps
+//! its address, and the claim is refused ([`OutsideError::Held`]).
 
 use csp::cfp::{Fragmenter, Reassembler, ReassemblerConfig};
 use csp::{Packet, SimTime};
@@ -81,9 +82,30 @@ pub enum OutsideError {
     /// Broadcast or out of range source.
     #[error("source address {0} cannot be claimed")]
     BadSource(u8),
+    /// The link has configured addresses and this is not one of them.
+    #[error("source address {0} is not one of the link's addresses")]
+    NotConfigured(u8),
     /// The packet does not fit the CAN MTU.
     #[error("packet does not fit the CAN MTU: {0}")]
     TooLong(csp::Error),
+    /// Another endpoint holds the address: a node of the twin or another outside
+    /// connection.
+    #[error("address {addr} is held by {holder}")]
+    Held {
+        /// The address.
+        addr: u8,
+        /// Who holds it.
+        holder: String,
+    },
+    /// The link's CAN transmit queue cannot take the whole packet now: it is dropped rather
+    /// than sent in part.
+    #[error("transmit queue full ({room} frames free, {need} needed)")]
+    QueueFull {
+        /// Frames the queue could still take.
+        room: usize,
+        /// Frames of the packet.
+        need: usize,
+    },
 }
 
 impl OutsideEndpoint {
@@ -107,7 +129,10 @@ impl OutsideEndpoint {
                     &segs.payload
                 };
                 let port = bus.attach(name, &[], false, inbox, 0);
-                bus.claim(&port, addr);
+                if let Err(holder) = bus.claim(&port, addr) {
+                    bus.release(&port);
+                    return Err(OutsideError::Held { addr, holder });
+                }
                 Port::Can {
                     port,
                     frag: Fragmenter::new(seed_ident % 1024, csp::cfp::CSP_CAN_MTU),
@@ -116,7 +141,10 @@ impl OutsideEndpoint {
             }
             SegmentKind::Ground => {
                 let port = segs.ground.attach(name, &[], false, false, inbox, 0);
-                segs.ground.claim(&port, addr);
+                if let Err(holder) = segs.ground.claim(&port, addr) {
+                    segs.ground.release(&port);
+                    return Err(OutsideError::Held { addr, holder });
+                }
                 Port::Net(port)
             }
         };
@@ -154,6 +182,7 @@ impl OutsideEndpoint {
             Port::Can { port, .. } => port.bus().claim(port, addr),
             Port::Net(p) => p.net().claim(p, addr),
         }
+        .map_err(|holder| OutsideError::Held { addr, holder })?;
         self.addrs.push(addr);
         Ok(())
     }
@@ -169,6 +198,13 @@ impl OutsideEndpoint {
                 let via = self.kind.next_hop(dst).unwrap_or(dst);
                 frag.fragment(packet, via, &mut frames)
                     .map_err(OutsideError::TooLong)?;
+                let room = port.room();
+                if room < frames.len() {
+                    return Err(OutsideError::QueueFull {
+                        room,
+                        need: frames.len(),
+                    });
+                }
                 for f in frames {
                     port.send(t, f);
                 }

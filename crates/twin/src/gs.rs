@@ -1,5 +1,5 @@
 //! `m6p-twin gs`: a small ground-station client that joins a running twin over KISS/TCP
-//! (as node 16 by default) and sends service requests, printing round-trip times. It is
+//! (as node 17 by default: 16 is the scenario's own GS16) and sends service requests, printing round-trip times. It is
 //! the first piece of the ground console.
 
 use std::net::SocketAddr;

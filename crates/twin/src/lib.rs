@@ -23,6 +23,7 @@ pub mod gs;
 #[cfg(feature = "live")]
 pub mod live;
 pub mod network;
+pub mod outside;
 pub mod plan;
 pub mod record;
 pub mod recording;

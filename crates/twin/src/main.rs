@@ -99,9 +99,14 @@ struct RunArgs {
     /// Connect to an outside KISS/TCP server, as the platform does in ICD 2.3.
     #[arg(long = "kiss-connect", value_name = "ADDR")]
     kiss_connect: Vec<SocketAddr>,
-    /// CSP addresses behind the KISS links (default: learned from the packets they send).
+    /// A CSP address behind the --kiss-listen or --kiss-connect before it (repeat for more);
+    /// claimed when a program connects, and the only sources that link accepts. A link
+    /// without any learns them from the packets it receives.
     #[arg(long = "kiss-addr", value_name = "ID")]
     kiss_addr: Vec<u8>,
+    /// Connections each --kiss-listen serves at once; more are refused and logged.
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    kiss_max_connections: usize,
     /// Apply libcsp 1.4's KISS receive limit (at most 248 data bytes) to the twin's receiver.
     #[arg(long)]
     libcsp14_kiss_limit: bool,
@@ -159,7 +164,7 @@ struct GsArgs {
     #[arg(long, value_name = "ADDR")]
     connect: SocketAddr,
     /// This ground node's CSP address.
-    #[arg(long = "as", default_value_t = 16, value_name = "ID")]
+    #[arg(long = "as", default_value_t = 17, value_name = "ID")]
     as_addr: u8,
     /// How long to wait for each reply.
     #[arg(long, default_value = "2s", value_parser = parse_duration)]
@@ -258,7 +263,9 @@ fn quiet_on_broken_pipe() {
 
 fn main() -> ExitCode {
     quiet_on_broken_pipe();
-    let cli = Cli::parse();
+    let matches = <Cli as clap::CommandFactory>::command().get_matches();
+    let cli =
+        <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     // A benchmark runs the scenario many times: only warnings, unless RUST_LOG says more.
     let default_filter = if matches!(cli.command, Command::Bench { .. }) {
         "warn"
@@ -274,7 +281,11 @@ fn main() -> ExitCode {
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let res = match cli.command {
-        Command::Run(a) => cmd_run(a),
+        Command::Run(a) => matches
+            .subcommand_matches("run")
+            .ok_or_else(|| anyhow::anyhow!("no run arguments"))
+            .and_then(|m| cli_kiss_links(m, &a))
+            .and_then(|links| cmd_run(a, links)),
         Command::Test(a) => cmd_test(a),
         Command::Check { files } => cmd_check(&files),
         Command::Schema => cmd_schema(),
@@ -298,7 +309,59 @@ fn main() -> ExitCode {
     }
 }
 
-fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
+/// The command line's KISS links, in order, each with the `--kiss-addr`s that follow it.
+fn cli_kiss_links(
+    m: &clap::ArgMatches,
+    a: &RunArgs,
+) -> anyhow::Result<Vec<m6p_twin::runtime::KissLink>> {
+    use m6p_twin::runtime::KissLink;
+    let at =
+        |id: &str| -> Vec<usize> { m.indices_of(id).map(Iterator::collect).unwrap_or_default() };
+    let mut links: Vec<(usize, KissLink)> = at("kiss_listen")
+        .into_iter()
+        .zip(&a.kiss_listen)
+        .map(|(i, &addr)| (i, KissLink::listen(addr)))
+        .chain(
+            at("kiss_connect")
+                .into_iter()
+                .zip(&a.kiss_connect)
+                .map(|(i, &addr)| (i, KissLink::connect(addr))),
+        )
+        .collect();
+    links.sort_by_key(|(i, _)| *i);
+    for (i, &id) in at("kiss_addr").into_iter().zip(&a.kiss_addr) {
+        if id >= 31 {
+            anyhow::bail!("--kiss-addr {id}: not a unicast CSP address (0-30)");
+        }
+        let Some((_, link)) = links.iter_mut().rev().find(|(j, _)| *j < i) else {
+            anyhow::bail!(
+                "--kiss-addr {id} comes before any --kiss-listen or --kiss-connect: it names an \
+                 address of the link before it"
+            );
+        };
+        let first = link.cfg.addrs.first().copied();
+        if let Some(f) = first
+            && platform::addr::Segment::of(f) != platform::addr::Segment::of(id)
+        {
+            anyhow::bail!(
+                "--kiss-addr {f} and {id} for {}: a KISS link joins one segment (12-15 payload \
+                 bus, 16-20 ground, others main bus)",
+                link.label()
+            );
+        }
+        link.cfg.addrs.push(id);
+    }
+    Ok(links
+        .into_iter()
+        .map(|(_, mut l)| {
+            l.cfg.decoder.libcsp14_rx_limit |= a.libcsp14_kiss_limit;
+            l.cfg.limits.max_connections = a.kiss_max_connections.max(1);
+            l
+        })
+        .collect())
+}
+
+fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::Result<bool> {
     let loaded = match &a.scenario {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
@@ -308,10 +371,7 @@ fn cmd_run(a: RunArgs) -> anyhow::Result<bool> {
     if let Some(d) = a.duration {
         opts.duration = Some(d);
     }
-    opts.kiss_listen.extend(a.kiss_listen);
-    opts.kiss_connect.extend(a.kiss_connect);
-    opts.kiss.addrs.extend(a.kiss_addr);
-    opts.kiss.decoder.libcsp14_rx_limit |= a.libcsp14_kiss_limit;
+    opts.kiss_links.extend(cli_links);
     opts.socketcan.extend(a.socketcan);
     if cfg!(not(feature = "live")) && a.live.is_some() {
         anyhow::bail!(
@@ -437,7 +497,11 @@ fn recorded_kiss_input(
     }
     Ok(links
         .into_iter()
-        .map(|(link, chunks)| m6p_twin::runtime::KissReplay { link, chunks })
+        .map(|(link, chunks)| m6p_twin::runtime::KissReplay {
+            link,
+            chunks,
+            cfg: Default::default(),
+        })
         .collect())
 }
 
@@ -561,10 +625,16 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
     }
     // What outside programs sent (from the scenario's links or the command line's) is in
     // the recording: feed it again in virtual time instead of opening sockets.
-    let input = recorded_kiss_input(&a.file)?;
+    let mut input = recorded_kiss_input(&a.file)?;
     if compiled.opts.has_outside_links() || !input.is_empty() {
-        compiled.opts.kiss_listen.clear();
-        compiled.opts.kiss_connect.clear();
+        // Each recorded connection with its link's settings (its addresses above all).
+        for r in &mut input {
+            let link = r.link.split_once('#').map_or(r.link.as_str(), |(l, _)| l);
+            if let Some(k) = compiled.opts.kiss_links.iter().find(|k| k.label() == link) {
+                r.cfg = k.cfg.clone();
+            }
+        }
+        compiled.opts.kiss_links.clear();
         compiled.opts.clock = bus::ClockMode::Virtual;
         compiled.opts.kiss_replay = input;
         if compiled.opts.duration.is_none() {

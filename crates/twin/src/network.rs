@@ -69,6 +69,10 @@ pub struct NetworkSpec {
     pub payload_bitrate_bps: u32,
     /// UHF air data rate, bit/s.
     pub uhf_rate_bps: u32,
+    /// Depth of each CAN controller's transmit queue, frames.
+    pub can_tx_queue_frames: usize,
+    /// Each sender's transmit buffer on the UHF air, bytes.
+    pub uhf_tx_buffer_bytes: u32,
 }
 
 impl NetworkSpec {
@@ -103,6 +107,8 @@ impl NetworkSpec {
             main_bitrate_bps: 1_000_000,
             payload_bitrate_bps: 1_000_000,
             uhf_rate_bps: 9600,
+            can_tx_queue_frames: bus::can::TX_QUEUE_FRAMES,
+            uhf_tx_buffer_bytes: bus::net::AIR_BUFFER_BYTES,
         }
     }
 

@@ -5,7 +5,7 @@ use bus::ClockMode;
 
 use crate::expectations::Expectation;
 use crate::runtime::RunOptions;
-use crate::scenario::{LinkKind, Scenario};
+use crate::scenario::Scenario;
 
 pub use crate::faults::{FaultAction, MediumId, TimedFault};
 
@@ -37,44 +37,7 @@ pub fn compile(s: &Scenario) -> Compiled {
     if let [.., l1, l2] = s.satellite.tle.as_slice() {
         opts.tle = Some((l1.clone(), l2.clone()));
     }
-    for l in &s.links {
-        // Every link gets its place in `opts.outside` (faults name it by its index).
-        let label = match l.kind {
-            LinkKind::KissListen | LinkKind::KissConnect => {
-                let addr = l.addr.parse::<std::net::SocketAddr>().ok();
-                let list = if l.kind == LinkKind::KissListen {
-                    &mut opts.kiss_listen
-                } else {
-                    &mut opts.kiss_connect
-                };
-                list.extend(addr);
-                let verb = if l.kind == LinkKind::KissListen {
-                    "listen"
-                } else {
-                    "connect"
-                };
-                format!("{verb} {}", addr.map_or(l.addr.clone(), |a| a.to_string()))
-            }
-            LinkKind::Socketcan => match crate::runtime::SocketCanBus::parse_arg(&l.addr) {
-                Ok(link) => {
-                    let label = format!("socketcan {}", link.0);
-                    opts.socketcan.push(link);
-                    label
-                }
-                Err(_) => format!("socketcan {}", l.addr),
-            },
-        };
-        opts.outside.push(crate::runtime::OutsideLink {
-            name: l.name.clone().unwrap_or_else(|| label.clone()),
-            label,
-            powered_by: l
-                .powered_by
-                .as_deref()
-                .and_then(nodes_eps::Channel::from_name),
-        });
-        opts.kiss.addrs.extend(&l.addrs);
-        opts.kiss.decoder.libcsp14_rx_limit |= l.libcsp14_rx_limit;
-    }
+    crate::outside::compile(s, &net, &mut opts);
     if opts.has_outside_links() && opts.clock == ClockMode::Virtual {
         opts.clock = ClockMode::Realtime { speed: 1.0 };
     }

@@ -195,6 +195,21 @@ pub struct NetworkCfg {
     /// UHF data rate.
     #[serde(default = "default_uhf_rate")]
     pub uhf_rate_bps: u32,
+    /// Frames each CAN controller's transmit queue holds (Linux `txqueuelen`); more are
+    /// lost and counted.
+    #[serde(default = "default_can_tx_queue")]
+    pub can_tx_queue_frames: usize,
+    /// Bytes each sender's transmit buffer on the UHF air holds (a radio's or a ground
+    /// modem's); a packet that does not fit is lost and counted.
+    #[serde(default = "default_uhf_tx_buffer")]
+    pub uhf_tx_buffer_bytes: u32,
+}
+
+fn default_can_tx_queue() -> usize {
+    bus::can::TX_QUEUE_FRAMES
+}
+fn default_uhf_tx_buffer() -> u32 {
+    bus::net::AIR_BUFFER_BYTES
 }
 
 fn default_payloads() -> Vec<u8> {
@@ -218,6 +233,8 @@ impl Default for NetworkCfg {
             main_bitrate_bps: default_can_rate(),
             payload_bitrate_bps: default_can_rate(),
             uhf_rate_bps: default_uhf_rate(),
+            can_tx_queue_frames: default_can_tx_queue(),
+            uhf_tx_buffer_bytes: default_uhf_tx_buffer(),
         }
     }
 }
@@ -262,6 +279,22 @@ pub struct LinkSpec {
     /// the twin forwards nothing to or from it. Default: no channel switches it.
     #[serde(default)]
     pub powered_by: Option<String>,
+    /// Nodes of the twin the program behind the link takes the place of (`["PC"]`, your own
+    /// flight software): they are not started, and on a KISS link their addresses become
+    /// the link's.
+    #[serde(default)]
+    pub replaces: Vec<String>,
+    /// KISS: connections a `kiss-listen` link serves at once (default 16).
+    #[serde(default)]
+    pub max_connections: Option<usize>,
+    /// KISS: 4 KiB chunks read ahead of the twin per connection before TCP holds the
+    /// program back (default 16).
+    #[serde(default)]
+    pub input_chunks: Option<usize>,
+    /// KISS: frames waiting for a connection's reader before more are dropped (default
+    /// 256).
+    #[serde(default)]
+    pub output_frames: Option<usize>,
 }
 
 /// Link kinds.
@@ -517,6 +550,31 @@ impl Scenario {
                 );
             }
         }
+        for (field, v, min, max) in [
+            (
+                "can_tx_queue_frames",
+                self.network.can_tx_queue_frames as u64,
+                33,
+                65_536,
+            ),
+            (
+                "uhf_tx_buffer_bytes",
+                u64::from(self.network.uhf_tx_buffer_bytes),
+                260,
+                1 << 20,
+            ),
+        ] {
+            // At least one whole packet (33 frames, 260 bytes); at most what is still a
+            // bound.
+            if !(min..=max).contains(&v) {
+                err(
+                    vec![key("network"), key(field)],
+                    format!(
+                        "{v} is out of range {min}..={max} (room for one whole packet at least)"
+                    ),
+                );
+            }
+        }
         let net = self.network_spec_unchecked();
         let names: Vec<String> = net.nodes.iter().map(|n| n.name.clone()).collect();
         for name in self.nodes.keys() {
@@ -583,19 +641,7 @@ impl Scenario {
                     ),
                 );
             }
-            for (j, &a) in l.addrs.iter().enumerate() {
-                if a >= 31 {
-                    err(
-                        vec![
-                            key("links"),
-                            PathStep::Index(i),
-                            key("addrs"),
-                            PathStep::Index(j),
-                        ],
-                        format!("{a} is not a unicast CSP address"),
-                    );
-                }
-            }
+            crate::outside::validate(self, &net, i, &mut err);
         }
         crate::commands::validate(self, &net, &mut err);
         crate::faults::validate(self, &net, &mut err);
@@ -627,6 +673,8 @@ impl Scenario {
         net.main_bitrate_bps = self.network.main_bitrate_bps;
         net.payload_bitrate_bps = self.network.payload_bitrate_bps;
         net.uhf_rate_bps = self.network.uhf_rate_bps;
+        net.can_tx_queue_frames = self.network.can_tx_queue_frames;
+        net.uhf_tx_buffer_bytes = self.network.uhf_tx_buffer_bytes;
         for n in &mut net.nodes {
             if let Some(o) = self.nodes.get(&n.name)
                 && let Some(u) = o.uptime

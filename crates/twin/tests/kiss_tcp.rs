@@ -21,7 +21,9 @@ fn repo_root() -> PathBuf {
 fn with_twin(secs: u64, client: impl FnOnce(SocketAddr) + Send + 'static) -> RunReport {
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(secs));
     opts.clock = ClockMode::Realtime { speed: 1.0 };
-    opts.kiss_listen = vec!["127.0.0.1:0".parse().unwrap()];
+    opts.kiss_links = vec![m6p_twin::runtime::KissLink::listen(
+        "127.0.0.1:0".parse().unwrap(),
+    )];
     let rt = build_runtime(opts.clock).unwrap();
     rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
@@ -52,7 +54,7 @@ fn python_peer(addr: SocketAddr, extra: &[&str]) -> (bool, String) {
 #[test]
 fn libcsp_style_python_peer_pings_fc_and_payload_from_the_ground() {
     let report = with_twin(12, |addr| {
-        let (ok, text) = python_peer(addr, &["--as", "16", "--targets", "3,12"]);
+        let (ok, text) = python_peer(addr, &["--as", "17", "--targets", "3,12"]);
         println!("{text}");
         assert!(ok, "{text}");
         assert_eq!(text.matches("PASS").count(), 12, "{text}");
@@ -117,7 +119,7 @@ fn kiss_connect_reaches_the_payload_server_and_reconnects_after_a_drop() {
     let server = listener.local_addr().unwrap();
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(6));
     opts.clock = ClockMode::Realtime { speed: 1.0 };
-    opts.kiss_connect = vec![server];
+    opts.kiss_links = vec![m6p_twin::runtime::KissLink::connect(server)];
     let rt = build_runtime(opts.clock).unwrap();
     let report = rt.block_on(async move {
         let twin = tokio::spawn(run(opts, None));
@@ -125,7 +127,7 @@ fn kiss_connect_reaches_the_payload_server_and_reconnects_after_a_drop() {
             for round in 0..2u8 {
                 let (mut s, _) = listener.accept().unwrap();
                 s.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
-                let ping = Packet::new(Header::new(12, 3, 1, 40 + round), vec![round, 0xc0, 0xdb]);
+                let ping = Packet::new(Header::new(14, 3, 1, 40 + round), vec![round, 0xc0, 0xdb]);
                 let mut wire = Vec::new();
                 csp::kiss::encode(&ping, &mut wire);
                 s.write_all(&wire).unwrap();
@@ -140,7 +142,7 @@ fn kiss_connect_reaches_the_payload_server_and_reconnects_after_a_drop() {
                         break p;
                     }
                 };
-                assert_eq!(reply.header, Header::new(3, 12, 40 + round, 1));
+                assert_eq!(reply.header, Header::new(3, 14, 40 + round, 1));
                 assert_eq!(reply.data, ping.data);
                 // Dropping the stream closes the connection; the twin must come back.
             }
@@ -153,16 +155,17 @@ fn kiss_connect_reaches_the_payload_server_and_reconnects_after_a_drop() {
     assert_eq!(k.packets_in, 2);
 }
 
-/// An outside ground program joining as 16 takes the address from the twin's own ground
-/// station only while it is connected: after it leaves, GS16's replies reach GS16 again
-/// (they went to the closed link for the rest of the run before: the link's claims were
-/// not given back when the peer closed first).
+/// An outside ground program's address is its own only while it is connected: after it
+/// leaves, another program can claim it (the claims were once not given back when the peer
+/// closed first), and the twin's own GS16 is answered throughout.
 #[test]
 fn a_departed_outside_program_gives_its_address_back() {
     use m6p_twin::ground::{Outcome, PlannedRequest, ping_payload};
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(5));
     opts.clock = ClockMode::Realtime { speed: 1.0 };
-    opts.kiss_listen = vec!["127.0.0.1:0".parse().unwrap()];
+    opts.kiss_links = vec![m6p_twin::runtime::KissLink::listen(
+        "127.0.0.1:0".parse().unwrap(),
+    )];
     opts.ground_plan.insert(
         16,
         vec![PlannedRequest {
@@ -181,25 +184,30 @@ fn a_departed_outside_program_gives_its_address_back() {
         let twin = tokio::spawn(run(opts, Some(tx)));
         let addr = rx.await.unwrap()[0];
         let gs = tokio::task::spawn_blocking(move || {
-            Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
-                .args([
-                    "gs",
-                    "--connect",
-                    &addr.to_string(),
-                    "ping",
-                    "3",
-                    "--count",
-                    "1",
-                ])
-                .output()
-                .unwrap()
+            (0..2)
+                .map(|_| {
+                    Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+                        .args([
+                            "gs",
+                            "--connect",
+                            &addr.to_string(),
+                            "ping",
+                            "3",
+                            "--count",
+                            "1",
+                        ])
+                        .output()
+                        .unwrap()
+                })
+                .collect::<Vec<_>>()
         });
-        let out = gs.await.unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stdout)
-        );
+        for out in gs.await.unwrap() {
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stdout)
+            );
+        }
         twin.await.unwrap().unwrap()
     });
     assert_eq!(report.results.len(), 1);

@@ -46,7 +46,7 @@ payloads = [12]
     let s = Scenario::parse("t.toml", &text).unwrap();
     let mut compiled = compile(&s);
     // As `replay` does: the recorded input instead of a socket, in virtual time.
-    compiled.opts.kiss_listen.clear();
+    let link_cfg = compiled.opts.kiss_links.remove(0).cfg;
     compiled.opts.clock = ClockMode::Virtual;
     let sends: Vec<u64> = (0..30).map(|k| 5 + 10 * k).collect();
     compiled.opts.kiss_replay = vec![KissReplay {
@@ -60,6 +60,7 @@ payloads = [12]
                 (SimTime::from_secs(s), bytes)
             })
             .collect(),
+        cfg: link_cfg,
     }];
     let rt = build_runtime(compiled.opts.clock).unwrap();
     let mut events = Vec::new();

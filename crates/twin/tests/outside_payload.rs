@@ -65,9 +65,9 @@ fn python_payload_over_kiss_serves_a_polling_session_and_its_bytes_reach_the_gro
     let mut opts = compiled.opts;
     // The README's link claims CSP 12 before the payload has sent anything; here it listens
     // on an ephemeral port instead of 52001.
-    assert_eq!(opts.kiss.addrs, vec![12]);
-    assert_eq!(opts.kiss_listen.len(), 1);
-    opts.kiss_listen = vec!["127.0.0.1:0".parse().unwrap()];
+    assert_eq!(opts.kiss_links.len(), 1);
+    assert_eq!(opts.kiss_links[0].cfg.addrs, vec![12]);
+    opts.kiss_links[0].addr = "127.0.0.1:0".parse().unwrap();
     assert!(matches!(opts.clock, bus::ClockMode::Realtime { .. }));
 
     let dir = std::env::temp_dir().join(format!("m6p-outside-payload-{}", std::process::id()));

@@ -32,6 +32,7 @@ pub(super) fn media(
             CanBusConfig {
                 name: "main".into(),
                 bitrate_bps: opts.network.main_bitrate_bps,
+                tx_queue_frames: opts.network.can_tx_queue_frames,
             },
             mix(opts.seed, 0x100),
         ),
@@ -39,12 +40,14 @@ pub(super) fn media(
             CanBusConfig {
                 name: "payload".into(),
                 bitrate_bps: opts.network.payload_bitrate_bps,
+                tx_queue_frames: opts.network.can_tx_queue_frames,
             },
             mix(opts.seed, 0x101),
         ),
         ground: PacketNet::new(
             PacketNetConfig {
                 air_rate_bps: opts.network.uhf_rate_bps,
+                air_buffer_bytes: opts.network.uhf_tx_buffer_bytes,
                 ..PacketNetConfig::ground()
             },
             mix(opts.seed, 0x102),
@@ -136,6 +139,12 @@ pub(super) fn nodes(
     }
     let mut nodes = Vec::new();
     for spec in &opts.network.nodes {
+        if opts.replaced.contains(&spec.addr) {
+            // An outside program takes its place (`replaces` on a link): never attached, so
+            // its address is free for that link to claim.
+            tracing::info!("{}: replaced by an outside program, not started", spec.name);
+            continue;
+        }
         let (mut cfg, media) = node_config(spec);
         let salt = u64::from(spec.addr);
         cfg.cfp_first_ident = (mix(opts.seed, salt) % 1024) as u16;

@@ -9,13 +9,12 @@ use std::sync::{Arc, Mutex};
 use anyhow::Context as _;
 use bus::Clock;
 use bus::gate::LinkGate;
-use bus::kiss_tcp::KissLinkConfig;
-use bus::kiss_tcp::{self, KissLinkStats, KissTap};
+use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissLog, KissTap};
 use bus::outside::{BridgeStats, Segments};
 use tokio::sync::mpsc;
 
-use super::{RunOptions, mix};
-use crate::events::{Direction, RunEvent};
+use super::{KissMode, RunOptions, mix};
+use crate::events::{Direction, Level, RunEvent};
 
 /// The gates of the scenario's outside links (`opts.outside`), each drawing its chances
 /// from its own stream of the run's seed (salt 0x700 + its index).
@@ -39,10 +38,17 @@ pub(super) struct KissLinks {
     pub(super) stats: Vec<(String, Arc<Mutex<KissLinkStats>>)>,
     /// The bound addresses of the listening servers.
     pub(super) bound: Vec<SocketAddr>,
+    /// Chunks read from outside programs that the run may hold before it has handled
+    /// them: the main loop gives a permit back for each `RunEvent::Kiss` into the twin.
+    pub(super) budget: Arc<tokio::sync::Semaphore>,
 }
 
+/// Chunks read from outside (up to 4 KiB each) waiting for the run's main loop, over all
+/// links: 256 KiB.
+const KISS_EVENT_BUDGET: usize = 64;
+
 /// Open every KISS link of `opts` (listen, connect, replayed input) on `segs`; the bytes
-/// that cross them go to `events`.
+/// that cross them and their warnings go to `events`.
 pub(super) async fn kiss(
     opts: &RunOptions,
     segs: &Segments,
@@ -51,74 +57,101 @@ pub(super) async fn kiss(
     events: &mpsc::UnboundedSender<RunEvent>,
     background: &mut Vec<tokio::task::JoinHandle<()>>,
 ) -> anyhow::Result<KissLinks> {
-    let ev_tx = events;
-    let mut kiss_cfg = opts.kiss.clone();
-    {
-        let tx = ev_tx.clone();
-        kiss_cfg.tap = Some(KissTap::new(move |t, link, into_twin, bytes| {
-            let _ = tx.send(RunEvent::Kiss {
+    let budget = Arc::new(tokio::sync::Semaphore::new(KISS_EVENT_BUDGET));
+    let tap = {
+        let tx = events.clone();
+        KissTap::with_budget(
+            move |t, link, into_twin, bytes| {
+                let _ = tx.send(RunEvent::Kiss {
+                    t,
+                    link: link.to_owned(),
+                    dir: if into_twin {
+                        Direction::In
+                    } else {
+                        Direction::Out
+                    },
+                    bytes: bytes.to_vec(),
+                });
+            },
+            budget.clone(),
+        )
+    };
+    let log = {
+        let tx = events.clone();
+        KissLog::new(move |t, link, message| {
+            let _ = tx.send(RunEvent::Log {
                 t,
-                link: link.to_owned(),
-                dir: if into_twin {
-                    Direction::In
-                } else {
-                    Direction::Out
-                },
-                bytes: bytes.to_vec(),
+                source: link.to_owned(),
+                level: Level::Warning,
+                message,
             });
-        }));
-    }
+        })
+    };
+    // The run's tap, log and gate on a link's own settings.
+    let wire = |cfg: &KissLinkConfig, label: &str| KissLinkConfig {
+        tap: Some(tap.clone()),
+        log: Some(log.clone()),
+        gate: gate_of(opts, gates, label),
+        ..cfg.clone()
+    };
     let mut kiss_stats = Vec::new();
     let mut bound = Vec::new();
-    for addr in &opts.kiss_listen {
-        let listener = tokio::net::TcpListener::bind(addr)
-            .await
-            .with_context(|| format!("listening for KISS/TCP on {addr}"))?;
-        let local = listener.local_addr().context("reading the bound address")?;
-        bound.push(local);
+    for link in &opts.kiss_links {
+        let label = link.label();
+        let cfg = wire(&link.cfg, &label);
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
-        kiss_stats.push((format!("listen {local}"), stats.clone()));
-        let label = format!("listen {addr}");
-        let cfg = KissLinkConfig {
-            gate: gate_of(opts, gates, &label),
-            ..kiss_cfg.clone()
-        };
-        background.push(tokio::spawn(kiss_tcp::serve(
-            listener,
-            label,
-            segs.clone(),
-            cfg,
-            stats,
-            clock,
-        )));
-    }
-    for addr in &opts.kiss_connect {
-        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
-        kiss_stats.push((format!("connect {addr}"), stats.clone()));
-        let label = format!("connect {addr}");
-        let cfg = KissLinkConfig {
-            gate: gate_of(opts, gates, &label),
-            ..kiss_cfg.clone()
-        };
-        background.push(tokio::spawn(kiss_tcp::connect(
-            *addr,
-            label,
-            segs.clone(),
-            cfg,
-            stats,
-            clock,
-        )));
+        match link.mode {
+            KissMode::Listen => {
+                let addr = link.addr;
+                let listener = tokio::net::TcpListener::bind(addr)
+                    .await
+                    .with_context(|| format!("listening for KISS/TCP on {addr}"))?;
+                let local = listener.local_addr().context("reading the bound address")?;
+                if !local.ip().is_loopback() {
+                    let text = format!(
+                        "KISS/TCP server on {local}: not a loopback address, so programs on \
+                         other machines can connect and claim addresses of the twin"
+                    );
+                    tracing::warn!("{text}");
+                    let _ = events.send(RunEvent::Log {
+                        t: clock.now(),
+                        source: label.clone(),
+                        level: Level::Warning,
+                        message: text,
+                    });
+                }
+                bound.push(local);
+                kiss_stats.push((format!("listen {local}"), stats.clone()));
+                background.push(tokio::spawn(kiss_tcp::serve(
+                    listener,
+                    label,
+                    segs.clone(),
+                    cfg,
+                    stats,
+                    clock,
+                )));
+            }
+            KissMode::Connect => {
+                kiss_stats.push((label.clone(), stats.clone()));
+                background.push(tokio::spawn(kiss_tcp::connect(
+                    link.addr,
+                    label,
+                    segs.clone(),
+                    cfg,
+                    stats,
+                    clock,
+                )));
+            }
+        }
     }
     for (n, input) in opts.kiss_replay.iter().enumerate() {
         // Recorded outside input, fed through an in-memory pipe at its recorded times;
         // what the twin answers is recorded again and compared by `replay`.
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         kiss_stats.push((format!("replayed {}", input.link), stats.clone()));
-        let (in_tx, in_rx) = mpsc::unbounded_channel();
-        let cfg2 = KissLinkConfig {
-            gate: gate_of(opts, gates, &input.link),
-            ..kiss_cfg.clone()
-        };
+        // Never full: the recorded input is fed at its times, not as fast as it can.
+        let (in_tx, in_rx) = mpsc::channel(input.chunks.len().max(1));
+        let cfg2 = wire(&input.cfg, &input.link);
         let (segs2, label) = (segs.clone(), input.link.clone());
         background.push(tokio::spawn(async move {
             let mut discard = tokio::io::sink();
@@ -127,24 +160,24 @@ pub(super) async fn kiss(
                 .rsplit_once('#')
                 .and_then(|(_, k)| k.parse().ok())
                 .unwrap_or(n as u16 + 1);
-            kiss_tcp::serve_link(
-                in_rx,
-                &mut discard,
-                &label,
-                &segs2,
-                &cfg2,
-                &stats,
-                conn,
+            let k = kiss_tcp::Connection {
+                name: &label,
+                segs: &segs2,
+                cfg: &cfg2,
+                stats: &stats,
+                n: conn,
                 clock,
-            )
-            .await;
+            };
+            kiss_tcp::serve_link(in_rx, &mut discard, k).await;
         }));
         let chunks = input.chunks.clone();
         background.push(tokio::spawn(async move {
             for (t, bytes) in chunks {
                 clock.sleep_until(t).await;
-                if in_tx.send((t, bytes)).is_err() {
-                    break;
+                // An empty chunk is the recorded close: the link ends there.
+                let close = bytes.is_empty();
+                if in_tx.send((t, bytes)).await.is_err() || close {
+                    return;
                 }
             }
             // Keep the link open until the end of the run, as the recorded program was.
@@ -154,6 +187,7 @@ pub(super) async fn kiss(
     Ok(KissLinks {
         stats: kiss_stats,
         bound,
+        budget,
     })
 }
 

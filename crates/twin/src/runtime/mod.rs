@@ -51,12 +51,12 @@ pub struct RunOptions {
     pub clock: ClockMode,
     /// Seed of every random choice (CFP idents, ephemeral ports, impairments).
     pub seed: u64,
-    /// KISS/TCP servers to open for outside nodes.
-    pub kiss_listen: Vec<SocketAddr>,
-    /// KISS/TCP servers of outside nodes to connect to.
-    pub kiss_connect: Vec<SocketAddr>,
-    /// Settings of every KISS link.
-    pub kiss: KissLinkConfig,
+    /// KISS/TCP links to programs outside the twin, each with its own addresses and
+    /// limits.
+    pub kiss_links: Vec<KissLink>,
+    /// Nodes of the network not started because an outside program takes their place
+    /// (`replaces` on a link), by address.
+    pub replaced: std::collections::BTreeSet<u8>,
     /// Requests each internal ground station sends, by station address.
     pub ground_plan: BTreeMap<u8, Vec<PlannedRequest>>,
     /// Real CAN interfaces (`can0`, `vcan0`) to bridge to a bus of the twin; needs the
@@ -111,12 +111,65 @@ impl OutsideLink {
 }
 
 /// What an outside program sent on one KISS link during a recorded run.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone)]
 pub struct KissReplay {
-    /// The link's name in the recording (for example `listen 127.0.0.1:52001`).
+    /// The link's name in the recording (for example `listen 127.0.0.1:52001#1`).
     pub link: String,
     /// The bytes read from the socket, with the times they were read.
     pub chunks: Vec<(SimTime, Vec<u8>)>,
+    /// The link's settings in the recorded run (its addresses, receiver, limits).
+    pub cfg: KissLinkConfig,
+}
+
+/// Whether a KISS link listens for outside programs or connects to one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum KissMode {
+    /// A server for outside programs (`--kiss-listen`, `kind = "kiss-listen"`).
+    Listen,
+    /// A client of an outside server, as the platform in ICD 2.3 (`--kiss-connect`).
+    Connect,
+}
+
+/// A KISS/TCP link of the run.
+#[derive(Debug, Clone)]
+pub struct KissLink {
+    /// Listen or connect.
+    pub mode: KissMode,
+    /// The address to listen on or connect to.
+    pub addr: SocketAddr,
+    /// Its addresses, receiver and limits (the tap, log and gate are the run's).
+    pub cfg: KissLinkConfig,
+}
+
+impl KissLink {
+    /// A server on `addr`, learning its addresses.
+    pub fn listen(addr: SocketAddr) -> Self {
+        KissLink {
+            mode: KissMode::Listen,
+            addr,
+            cfg: KissLinkConfig::default(),
+        }
+    }
+    /// A client of `addr`, learning its addresses.
+    pub fn connect(addr: SocketAddr) -> Self {
+        KissLink {
+            mode: KissMode::Connect,
+            ..KissLink::listen(addr)
+        }
+    }
+    /// With these CSP addresses behind it.
+    pub fn with_addrs(mut self, addrs: &[u8]) -> Self {
+        self.cfg.addrs = addrs.to_vec();
+        self
+    }
+    /// The runtime's name of the link: `listen 127.0.0.1:52001` or `connect ...`.
+    pub fn label(&self) -> String {
+        let verb = match self.mode {
+            KissMode::Listen => "listen",
+            KissMode::Connect => "connect",
+        };
+        format!("{verb} {}", self.addr)
+    }
 }
 
 impl RunOptions {
@@ -127,9 +180,8 @@ impl RunOptions {
             duration: Some(duration),
             clock: ClockMode::Virtual,
             seed: 1,
-            kiss_listen: Vec::new(),
-            kiss_connect: Vec::new(),
-            kiss: KissLinkConfig::default(),
+            kiss_links: Vec::new(),
+            replaced: std::collections::BTreeSet::new(),
             ground_plan: BTreeMap::new(),
             socketcan: Vec::new(),
             epoch_unix_s: 1_577_836_800,
@@ -149,7 +201,7 @@ impl RunOptions {
 
     /// Whether the run has links to programs outside the twin.
     pub fn has_outside_links(&self) -> bool {
-        !self.kiss_listen.is_empty() || !self.kiss_connect.is_empty() || !self.socketcan.is_empty()
+        !self.kiss_links.is_empty() || !self.socketcan.is_empty()
     }
 }
 
@@ -258,9 +310,18 @@ pub async fn run_with(
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let mut observer = Observer::new(opts.trace, opts.tle.as_ref());
+    let kiss_budget = kiss.budget.clone();
     let mut handle_event = |ev: RunEvent, observer: &mut Observer| {
         sink(&ev);
         observer.observe(&ev);
+        if let RunEvent::Kiss {
+            dir: crate::events::Direction::In,
+            ..
+        } = ev
+        {
+            // The chunk is recorded: its link may read another.
+            kiss_budget.add_permits(1);
+        }
     };
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);

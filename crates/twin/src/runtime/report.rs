@@ -239,16 +239,40 @@ impl RunReport {
         for (name, k) in &self.kiss {
             let _ = writeln!(
                 s,
-                "\nKISS/TCP {name}: {} connections, {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused",
+                "\nKISS/TCP {name}: {} connections ({} refused), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
                 k.connections,
+                k.connections_refused,
                 k.packets_in,
                 k.packets_out,
                 k.garbage_bytes,
                 k.bad_crc,
                 k.short,
                 k.oversize,
-                k.refused
+                k.refused,
+                k.claims_refused,
+                k.queue_full,
+                k.out_dropped
             );
+        }
+        let mut lost = Vec::new();
+        for b in &self.buses {
+            for p in &b.ports {
+                if p.tx_overflow + p.rx_overflow > 0 {
+                    lost.push(format!(
+                        "{} {}: {} frames (transmit queue full), {} (inbox full)",
+                        b.name, p.name, p.tx_overflow, p.rx_overflow
+                    ));
+                }
+            }
+        }
+        if self.ground.air_overflow + self.ground.rx_overflow > 0 {
+            lost.push(format!(
+                "ground: {} packets (transmit buffer full), {} (inbox full)",
+                self.ground.air_overflow, self.ground.rx_overflow
+            ));
+        }
+        if !lost.is_empty() {
+            let _ = writeln!(s, "\nlost to full queues: {}", lost.join("; "));
         }
         for (name, b) in &self.socketcan {
             let _ = writeln!(

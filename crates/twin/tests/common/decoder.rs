@@ -26,7 +26,9 @@ pub fn default_scenario_options(seconds: u64) -> RunOptions {
     let compiled = compile(&scenario).opts;
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(seconds));
     opts.clock = ClockMode::Realtime { speed: 1.0 };
-    opts.kiss_listen = vec!["127.0.0.1:0".parse().unwrap()];
+    opts.kiss_links = vec![m6p_twin::runtime::KissLink::listen(
+        "127.0.0.1:0".parse().unwrap(),
+    )];
     opts.epoch_unix_s = compiled.epoch_unix_s;
     opts.tle = compiled.tle.clone();
     opts.eps = compiled.eps.clone();
@@ -36,7 +38,7 @@ pub fn default_scenario_options(seconds: u64) -> RunOptions {
 }
 
 /// Run the twin with `opts` and `tests/<script>` connected to its KISS server with
-/// `--connect ADDR --as 16` and `args`; the script's output (stdout then stderr), after
+/// `--connect ADDR --as 17` and `args`; the script's output (stdout then stderr), after
 /// asserting it exited with success and printed no FAIL and at least `min_pass` PASS, and
 /// the run's report.
 pub fn run_decoder(
@@ -55,7 +57,7 @@ pub fn run_decoder(
         let client = tokio::task::spawn_blocking(move || {
             Command::new("python3")
                 .arg(script)
-                .args(["--connect", &addr.to_string(), "--as", "16"])
+                .args(["--connect", &addr.to_string(), "--as", "17"])
                 .args(args)
                 .output()
                 .expect("python3 is needed for this test")

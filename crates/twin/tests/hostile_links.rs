@@ -1,0 +1,496 @@
+//! Outside links tried as a hostile or simply buggy client would: impostors claiming
+//! addresses of the twin or of another client, two links with their own addresses, a
+//! passive payload, floods at TCP speed on the ground segment and the main bus, and a client
+//! that never reads. The twin runs as the `m6p-twin` binary in real time (its memory is its
+//! own, measured from /proc); `M6P_TWIN_BIN` runs another build instead (an older one, to
+//! see these tests fail there). Each test takes 5-20 s of wall clock.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use csp::kiss::{Decoder, DecoderConfig, KissEvent};
+use csp::{Header, Packet};
+
+fn twin_bin() -> PathBuf {
+    std::env::var_os("M6P_TWIN_BIN")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_m6p-twin")))
+}
+
+/// A running twin: the process, its KISS servers' addresses (in link order) and what it
+/// printed.
+struct Twin {
+    child: Child,
+    addrs: Vec<SocketAddr>,
+    stderr: Arc<Mutex<String>>,
+    stdout: Arc<Mutex<String>>,
+}
+
+impl Twin {
+    /// `m6p-twin run` with `args`, waiting until `listeners` KISS servers listen.
+    fn start(args: &[&str], listeners: usize) -> Twin {
+        let mut child = Command::new(twin_bin())
+            .arg("run")
+            .args(args)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stderr = Arc::new(Mutex::new(String::new()));
+        let stdout = Arc::new(Mutex::new(String::new()));
+        let (tx, rx) = std::sync::mpsc::channel();
+        {
+            let err = BufReader::new(child.stderr.take().unwrap());
+            let log = stderr.clone();
+            std::thread::spawn(move || {
+                for line in err.lines().map_while(Result::ok) {
+                    if let Some(rest) = line.strip_prefix("KISS/TCP: listening on ") {
+                        let addr = rest.split_whitespace().next().unwrap_or_default();
+                        let _ = tx.send(addr.parse::<SocketAddr>().unwrap());
+                    }
+                    log.lock().unwrap().push_str(&line);
+                    log.lock().unwrap().push('\n');
+                }
+            });
+        }
+        {
+            let mut out = child.stdout.take().unwrap();
+            let log = stdout.clone();
+            std::thread::spawn(move || {
+                let mut s = String::new();
+                let _ = out.read_to_string(&mut s);
+                log.lock().unwrap().push_str(&s);
+            });
+        }
+        let addrs = (0..listeners)
+            .map(|_| rx.recv_timeout(Duration::from_secs(20)).unwrap())
+            .collect();
+        Twin {
+            child,
+            addrs,
+            stderr,
+            stdout,
+        }
+    }
+
+    /// Resident memory now, KiB.
+    fn rss_kib(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
+            .unwrap_or_default();
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.split_whitespace().next()?.parse().ok())
+            .unwrap_or(0)
+    }
+
+    /// Wait for the run to end; (exit success, stdout, stderr).
+    fn finish(mut self) -> (bool, String, String) {
+        let ok = self.child.wait().unwrap().success();
+        std::thread::sleep(Duration::from_millis(200));
+        let out = self.stdout.lock().unwrap().clone();
+        let err = self.stderr.lock().unwrap().clone();
+        (ok, out, err)
+    }
+}
+
+impl Drop for Twin {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+    }
+}
+
+/// A KISS client speaking CSP as an outside node.
+struct Client {
+    s: TcpStream,
+    dec: Decoder,
+    got: VecDeque<Packet>,
+}
+
+impl Client {
+    fn connect(addr: SocketAddr) -> Client {
+        let s = TcpStream::connect(addr).unwrap();
+        s.set_nodelay(true).unwrap();
+        Client {
+            s,
+            dec: Decoder::new(DecoderConfig::default()),
+            got: VecDeque::new(),
+        }
+    }
+
+    fn send(&mut self, p: &Packet) {
+        let mut bytes = Vec::new();
+        csp::kiss::encode(p, &mut bytes);
+        self.s.write_all(&bytes).unwrap();
+    }
+
+    /// The first packet (read within `timeout`) that `want` accepts; the others read meanwhile
+    /// are kept.
+    fn wait(&mut self, timeout: Duration, want: impl Fn(&Packet) -> bool) -> Option<Packet> {
+        let end = Instant::now() + timeout;
+        loop {
+            if let Some(i) = self.got.iter().position(&want) {
+                return self.got.remove(i);
+            }
+            let left = end.checked_duration_since(Instant::now())?;
+            self.s
+                .set_read_timeout(Some(left.max(Duration::from_millis(1))))
+                .unwrap();
+            let mut buf = [0u8; 4096];
+            match self.s.read(&mut buf) {
+                Ok(0) => return None,
+                Ok(n) => {
+                    let mut ev = Vec::new();
+                    self.dec.push(&buf[..n], &mut ev);
+                    self.got.extend(ev.into_iter().filter_map(|e| match e {
+                        KissEvent::Packet(p) => Some(p),
+                        KissEvent::Dropped(_) => None,
+                    }));
+                }
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ) => {}
+                Err(_) => return None,
+            }
+        }
+    }
+
+    /// Ping `dst` from `src` with a tag; the round trip when answered within `timeout`.
+    fn ping(&mut self, src: u8, dst: u8, tag: u32, timeout: Duration) -> Option<Duration> {
+        let t0 = Instant::now();
+        self.send(&ping(src, dst, tag));
+        self.wait(timeout, |p| is_reply(p, dst, src, tag))
+            .map(|_| t0.elapsed())
+    }
+
+    /// Every packet read within `d`.
+    fn drain(&mut self, d: Duration) -> Vec<Packet> {
+        let _ = self.wait(d, |_| false);
+        self.got.drain(..).collect()
+    }
+}
+
+fn ping(src: u8, dst: u8, tag: u32) -> Packet {
+    Packet::new(Header::new(src, dst, 1, 40), tag.to_le_bytes().to_vec())
+}
+
+fn is_reply(p: &Packet, from: u8, to: u8, tag: u32) -> bool {
+    p.header.src == from && p.header.dst == to && p.data == tag.to_le_bytes()
+}
+
+/// A scenario with the default network and nothing else for `secs` (the default scenario's
+/// expectations need its full duration).
+fn bare(name: &str, secs: u64) -> PathBuf {
+    write_scenario(
+        name,
+        &format!("name = \"{name}\"\nduration = \"{secs}s\"\n"),
+    )
+}
+
+fn write_scenario(name: &str, text: &str) -> PathBuf {
+    let p = std::env::temp_dir().join(format!("m6p-hostile-{}-{name}.toml", std::process::id()));
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// The ground client that took an address first keeps it: a second one claiming it is
+/// refused and logged, and gets nothing meant for the first.
+#[test]
+fn two_clients_claiming_one_address_the_first_keeps_its_replies() {
+    let scenario = bare("claims", 8);
+    let twin = Twin::start(
+        &[scenario.to_str().unwrap(), "--kiss-listen", "127.0.0.1:0"],
+        1,
+    );
+    let mut a = Client::connect(twin.addrs[0]);
+    let mut b = Client::connect(twin.addrs[0]);
+    assert!(
+        a.ping(17, 3, 1, Duration::from_secs(3)).is_some(),
+        "A's first ping"
+    );
+    assert!(
+        b.ping(17, 3, 2, Duration::from_secs(2)).is_none(),
+        "B, claiming A's address 17, was answered"
+    );
+    assert!(
+        a.ping(17, 3, 3, Duration::from_secs(3)).is_some(),
+        "A's ping after B's claim"
+    );
+    // Nothing reached B, and A never saw B's tag.
+    assert!(b.drain(Duration::from_millis(500)).is_empty());
+    assert!(
+        a.drain(Duration::from_millis(200))
+            .iter()
+            .all(|p| p.data != 2u32.to_le_bytes())
+    );
+    let (ok, out, err) = twin.finish();
+    assert!(ok, "{out}{err}");
+    assert!(
+        err.contains("WARN") && err.contains("#2") && err.contains("address 17 is held by"),
+        "{err}"
+    );
+    assert!(out.contains("(1 claims"), "{out}");
+}
+
+/// A client sending as the FC (source 3) is refused and logged; the FC still answers
+/// others, and the client's forged reply does not reach them.
+#[test]
+fn a_client_sending_as_the_fc_is_refused_and_the_fc_still_answers_others() {
+    let scenario = bare("impostor", 8);
+    let twin = Twin::start(
+        &[scenario.to_str().unwrap(), "--kiss-listen", "127.0.0.1:0"],
+        1,
+    );
+    let mut honest = Client::connect(twin.addrs[0]);
+    let mut impostor = Client::connect(twin.addrs[0]);
+    // The impostor speaks first: as the FC, a forged ping reply to 17.
+    impostor.send(&Packet::new(
+        Header::new(3, 17, 40, 1),
+        7u32.to_le_bytes().to_vec(),
+    ));
+    std::thread::sleep(Duration::from_millis(300));
+    for tag in 10..13 {
+        let rtt = honest.ping(17, 3, tag, Duration::from_secs(3));
+        assert!(rtt.is_some(), "ping {tag} to the FC not answered");
+    }
+    let forged = honest.drain(Duration::from_millis(300));
+    assert!(
+        forged.iter().all(|p| p.data != 7u32.to_le_bytes()),
+        "the forged reply reached a ground client: {forged:?}"
+    );
+    assert!(impostor.drain(Duration::from_millis(300)).is_empty());
+    let (ok, out, err) = twin.finish();
+    assert!(ok, "{out}{err}");
+    assert!(err.contains("address 3 is held by FC"), "{err}");
+}
+
+/// A payload link with `addrs = [14]` and a ground console on another link both work: the
+/// console (learning 17) pings the payload program and the FC; the payload, which never
+/// sends first, answers.
+#[test]
+fn a_payload_link_with_its_address_and_a_ground_console_on_another_link_both_work() {
+    let scenario = write_scenario(
+        "two-links",
+        r#"
+name = "two-links"
+duration = "10s"
+
+[[links]]
+kind = "kiss-listen"
+addr = "127.0.0.1:0"
+addrs = [14]
+
+[[links]]
+kind = "kiss-listen"
+addr = "127.0.0.1:0"
+"#,
+    );
+    let twin = Twin::start(&[scenario.to_str().unwrap()], 2);
+    let stop = Arc::new(AtomicBool::new(false));
+    // The payload program: answers pings to 14, never sends first.
+    let payload = {
+        let addr = twin.addrs[0];
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let mut c = Client::connect(addr);
+            let mut answered = 0;
+            while !stop.load(Ordering::Relaxed) {
+                if let Some(p) = c.wait(Duration::from_millis(200), |p| p.header.dport == 1) {
+                    let mut h = p.header.reply(14);
+                    h.flags = 0;
+                    c.send(&Packet::new(h, p.data.clone()));
+                    answered += 1;
+                }
+            }
+            answered
+        })
+    };
+    std::thread::sleep(Duration::from_millis(300));
+    let mut console = Client::connect(twin.addrs[1]);
+    for tag in 0..3 {
+        assert!(
+            console.ping(17, 3, tag, Duration::from_secs(3)).is_some(),
+            "console ping {tag} to the FC"
+        );
+        assert!(
+            console
+                .ping(17, 14, 100 + tag, Duration::from_secs(3))
+                .is_some(),
+            "console ping {tag} to the outside payload 14"
+        );
+    }
+    stop.store(true, Ordering::Relaxed);
+    assert_eq!(payload.join().unwrap(), 3);
+    let (ok, out, err) = twin.finish();
+    assert!(ok, "{out}{err}");
+    std::fs::remove_file(scenario).ok();
+}
+
+/// Flood `dst` from `src` as fast as TCP takes it for 5 s, reading the replies (or not),
+/// while another client pings the FC (one ping at a time, 300 ms apart); then the flood
+/// stops and the other client pings five more times. The twin's memory grows by less than 50 MiB and the other
+/// client is answered during and after the flood.
+fn flood(src: u8, dst: u8, read_replies: bool) {
+    let scenario = bare(&format!("flood-{src}-{read_replies}"), 30);
+    let twin = Twin::start(
+        &[scenario.to_str().unwrap(), "--kiss-listen", "127.0.0.1:0"],
+        1,
+    );
+    std::fs::remove_file(&scenario).ok();
+    let addr = twin.addrs[0];
+    let mut other = Client::connect(addr);
+    assert!(other.ping(17, 3, 0, Duration::from_secs(3)).is_some());
+    std::thread::sleep(Duration::from_millis(300));
+    let rss_before = twin.rss_kib();
+    let stop = Arc::new(AtomicBool::new(false));
+    let flooder = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let s = TcpStream::connect(addr).unwrap();
+            if read_replies {
+                let mut r = s.try_clone().unwrap();
+                std::thread::spawn(move || {
+                    let mut buf = [0u8; 65536];
+                    while matches!(r.read(&mut buf), Ok(n) if n > 0) {}
+                });
+            }
+            let mut w = s;
+            w.set_write_timeout(Some(Duration::from_millis(200)))
+                .unwrap();
+            let mut burst = Vec::new();
+            for k in 0..512u32 {
+                csp::kiss::encode(&ping(src, dst, k), &mut burst);
+            }
+            let mut sent = 0u64;
+            let t0 = Instant::now();
+            while !stop.load(Ordering::Relaxed) && t0.elapsed() < Duration::from_secs(5) {
+                match w.write(&burst) {
+                    Ok(n) => sent += n as u64,
+                    Err(_) => std::thread::sleep(Duration::from_millis(1)),
+                }
+            }
+            sent
+        })
+    };
+    let t0 = Instant::now();
+    let mut rss_max = rss_before;
+    let mut answered_during = 0;
+    let mut tag = 1;
+    while t0.elapsed() < Duration::from_secs(5) {
+        // Behind at most a sender's transmit buffer each way (4 KiB, 3.4 s at 9600 bit/s).
+        if other.ping(17, 3, tag, Duration::from_secs(8)).is_some() {
+            answered_during += 1;
+        }
+        tag += 1;
+        rss_max = rss_max.max(twin.rss_kib());
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    stop.store(true, Ordering::Relaxed);
+    let sent = flooder.join().unwrap();
+    rss_max = rss_max.max(twin.rss_kib());
+    let mut answered_after = 0;
+    for k in 0..5 {
+        if other
+            .ping(17, 3, 1000 + k, Duration::from_secs(8))
+            .is_some()
+        {
+            answered_after += 1;
+        }
+    }
+    let grew_mib = rss_max.saturating_sub(rss_before) as f64 / 1024.0;
+    println!(
+        "flood {src} -> {dst} (replies read: {read_replies}): {:.1} MiB written, RSS {} -> max {} KiB (+{grew_mib:.1} MiB), other client answered {answered_during} of {} during, {answered_after} of 5 after",
+        sent as f64 / 1048576.0,
+        rss_before,
+        rss_max,
+        tag - 1
+    );
+    drop(twin);
+    assert!(sent > 1 << 20, "the flood wrote only {sent} bytes");
+    assert!(grew_mib < 50.0, "RSS grew by {grew_mib:.1} MiB");
+    assert!(
+        answered_during >= 1,
+        "nobody else answered during the flood"
+    );
+    assert_eq!(answered_after, 5, "answered after the flood");
+}
+
+#[test]
+fn a_flood_on_the_ground_segment_is_bounded_and_others_are_answered() {
+    flood(18, 3, true);
+}
+
+#[test]
+fn a_flood_on_the_ground_segment_by_a_client_that_never_reads() {
+    flood(18, 3, false);
+}
+
+#[test]
+fn a_flood_on_the_main_bus_is_bounded_and_others_are_answered() {
+    flood(9, 3, false);
+}
+
+/// A ground client that sends bursts of pings to the FC and never reads its replies
+/// delays another ground client's pings by no more than the air time of what may be queued
+/// ahead of them: a sender's transmit buffer each way (4 KiB, 3.4 s at 9600 bit/s), not
+/// the 100 s of air its 6000 pings would take.
+#[test]
+fn a_client_that_never_reads_does_not_delay_others_beyond_the_bus_time() {
+    let scenario = bare("stuck", 20);
+    let twin = Twin::start(
+        &[scenario.to_str().unwrap(), "--kiss-listen", "127.0.0.1:0"],
+        1,
+    );
+    let addr = twin.addrs[0];
+    let mut other = Client::connect(addr);
+    let mut base = Vec::new();
+    for tag in 0..3 {
+        base.push(other.ping(17, 3, tag, Duration::from_secs(3)).unwrap());
+    }
+    let mut stuck = Client::connect(addr);
+    // 6000 pings, whose replies are never read.
+    for round in 0..20u32 {
+        let mut burst = Vec::new();
+        for k in 0..300u32 {
+            csp::kiss::encode(&ping(18, 3, round * 1000 + k), &mut burst);
+        }
+        stuck.s.write_all(&burst).unwrap();
+    }
+    // Its burst taken in (the twin reads it at its own pace).
+    std::thread::sleep(Duration::from_millis(1500));
+    let t_stuck = Instant::now();
+    let air = Duration::from_secs_f64(2.0 * 4096.0 * 8.0 / 9600.0);
+    let mut during = Vec::new();
+    for tag in 100..103 {
+        during.push(
+            other
+                .ping(17, 3, tag, air + Duration::from_secs(3))
+                .expect("answered while the stuck client is connected"),
+        );
+    }
+    base.sort();
+    during.sort();
+    let (b, d) = (base[base.len() / 2], during[during.len() - 1]);
+    println!(
+        "ping round trip: median {b:?} before, longest {d:?} with the stuck client connected ({during:?}, {:?} after its burst)",
+        t_stuck.elapsed()
+    );
+    assert!(
+        d <= b + air + Duration::from_secs(1),
+        "longest round trip {d:?} with the stuck client, median {b:?} before"
+    );
+    let (ok, out, err) = twin.finish();
+    println!("{out}");
+    assert!(ok, "{out}{err}");
+    assert!(out.contains("out dropped"), "{out}");
+}
