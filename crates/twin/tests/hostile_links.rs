@@ -18,6 +18,8 @@ use std::time::{Duration, Instant};
 use csp::kiss::{Decoder, DecoderConfig, KissEvent};
 use csp::{Header, Packet};
 
+mod common;
+
 fn twin_bin() -> PathBuf {
     std::env::var_os("M6P_TWIN_BIN")
         .map(PathBuf::from)
@@ -334,6 +336,71 @@ addr = "127.0.0.1:0"
     let (ok, out, err) = twin.finish();
     assert!(ok, "{out}{err}");
     std::fs::remove_file(scenario).ok();
+}
+
+/// A passive outside payload (`examples/outside_payload.py`: it only answers) serves a whole
+/// PC session of `examples/README.md`'s scenario on its link (`addrs = [12]`), while a ground
+/// console on a second link (no addresses: it is learned as 17) pings the FC throughout. The
+/// session runs to DONE with all 25 frames downlinked (the scenario's expectations), and
+/// every console ping is answered.
+#[test]
+fn a_passive_payload_serves_a_whole_session_beside_a_console_on_another_link() {
+    let text = common::readme_scenario()
+        .replace("127.0.0.1:52001", "127.0.0.1:0")
+        .replace(
+            "[pc]\n",
+            "[[links]]\nkind = \"kiss-listen\"\naddr = \"127.0.0.1:0\"\n\n[pc]\n",
+        );
+    assert_eq!(text.matches("[[links]]").count(), 2, "{text}");
+    let dir = std::env::temp_dir().join(format!("m6p-hostile-{}-passive", std::process::id()));
+    let text = text.replace("/tmp/outside_payload.downlink", dir.to_str().unwrap());
+    let scenario = write_scenario("passive", &text);
+    let twin = Twin::start(&[scenario.to_str().unwrap()], 2);
+    // The console connects first and pings the FC every 400 ms until the payload is done.
+    let stop = Arc::new(AtomicBool::new(false));
+    let console = {
+        let (addr, stop) = (twin.addrs[1], stop.clone());
+        std::thread::spawn(move || {
+            let mut c = Client::connect(addr);
+            let (mut sent, mut answered) = (0u32, 0u32);
+            while !stop.load(Ordering::Relaxed) {
+                sent += 1;
+                if c.ping(17, 3, sent, Duration::from_secs(3)).is_some() {
+                    answered += 1;
+                }
+                std::thread::sleep(Duration::from_millis(400));
+            }
+            (sent, answered)
+        })
+    };
+    std::thread::sleep(Duration::from_millis(200));
+    let payload = Command::new("python3")
+        .arg(common::repo_root().join("examples/outside_payload.py"))
+        .args(["--connect", &twin.addrs[0].to_string()])
+        .args(["--idle", "1.5", "--seconds", "12", "--wait", "5"])
+        .output()
+        .expect("python3 is needed for this test");
+    stop.store(true, Ordering::Relaxed);
+    let py = format!(
+        "{}{}",
+        String::from_utf8_lossy(&payload.stdout),
+        String::from_utf8_lossy(&payload.stderr)
+    );
+    let (sent, answered) = console.join().unwrap();
+    let (ok, out, err) = twin.finish();
+    std::fs::remove_file(scenario).ok();
+    std::fs::remove_dir_all(&dir).ok();
+    assert!(payload.status.success(), "the payload: {py}");
+    assert!(
+        py.contains("1 SYNC, 25 POLL, 3416 data bytes sent, 0 refused, 0 damaged frames"),
+        "{py}"
+    );
+    // The scenario's expectations: SETUP accepted, DONE after 25 packets, 3416 bytes down.
+    assert!(ok, "{out}{err}");
+    assert!(
+        sent >= 5 && answered == sent,
+        "console: {answered} of {sent} pings answered"
+    );
 }
 
 /// Flood `dst` from `src` as fast as TCP takes it for 5 s, reading the replies (or not),

@@ -8,7 +8,6 @@
 //! Real time: about 8 s of wall clock.
 #![allow(clippy::unwrap_used)]
 
-use std::path::PathBuf;
 use std::process::Command;
 
 use m6p_twin::expectations::check_all;
@@ -16,22 +15,9 @@ use m6p_twin::plan::compile;
 use m6p_twin::runtime::{RunReport, build_runtime, run};
 use m6p_twin::scenario::Scenario;
 
-fn repo_root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+mod common;
 
-/// The scenario of `examples/README.md`: the text of its `cat > ... <<'EOF'` block.
-fn readme_scenario() -> String {
-    let readme = std::fs::read_to_string(repo_root().join("examples/README.md")).unwrap();
-    let start = readme
-        .find("<<'EOF'\n")
-        .expect("a <<'EOF' block in examples/README.md")
-        + 8;
-    let len = readme[start..]
-        .find("\nEOF\n")
-        .expect("the block's closing EOF");
-    readme[start..start + len].to_owned()
-}
+use common::{readme_scenario, repo_root};
 
 /// The data stream of the script (`frame_data` in examples/outside_payload.py), written
 /// again here from its description: frame `seq` is `seq` u16 LE then a byte counter from

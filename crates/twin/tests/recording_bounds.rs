@@ -6,7 +6,6 @@
 // notes sizes; nothing else can see an allocation's size.
 #![allow(unsafe_code)]
 
-#[allow(dead_code)]
 mod common;
 
 use std::alloc::{GlobalAlloc, Layout, System};

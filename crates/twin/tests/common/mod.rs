@@ -1,6 +1,8 @@
 //! Helpers shared by the recording tests: temporary MCAP files, writing events to a
 //! recording and reading a channel back, and running `tests/decode_mcap.py` (the independent
-//! Python reader) on a recording.
+//! Python reader) on a recording; the outside-payload scenario of `examples/README.md`.
+// Each test binary uses a part of these.
+#![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -82,4 +84,22 @@ pub fn on(path: &Path, topic: &str) -> Vec<m6p_twin::recording::RecordedMessage>
         .map(Result::unwrap)
         .filter(|m| &*m.topic == topic)
         .collect()
+}
+
+/// The repository's root.
+pub fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The scenario of `examples/README.md`: the text of its `cat > ... <<'EOF'` block.
+pub fn readme_scenario() -> String {
+    let readme = std::fs::read_to_string(repo_root().join("examples/README.md")).unwrap();
+    let start = readme
+        .find("<<'EOF'\n")
+        .expect("a <<'EOF' block in examples/README.md")
+        + 8;
+    let len = readme[start..]
+        .find("\nEOF\n")
+        .expect("the block's closing EOF");
+    readme[start..start + len].to_owned()
 }
