@@ -187,7 +187,7 @@ pub async fn serve(
     stats: SharedStats,
     clock: Clock,
 ) {
-    let mut n = 0u16;
+    let mut n = 0u64;
     let active = Arc::new(std::sync::atomic::AtomicUsize::new(0));
     loop {
         match listener.accept().await {
@@ -221,6 +221,7 @@ pub async fn serve(
                         stats: &stats,
                         n,
                         clock,
+                        opened: clock.now(),
                     };
                     let why = run_connection(stream, k).await;
                     tracing::info!(%peer, "KISS/TCP: connection closed: {why}");
@@ -269,7 +270,7 @@ pub async fn connect(
     clock: Clock,
 ) {
     let mut backoff = Duration::from_millis(500);
-    let mut n = 0u16;
+    let mut n = 0u64;
     loop {
         match TcpStream::connect(addr).await {
             Ok(stream) => {
@@ -286,6 +287,7 @@ pub async fn connect(
                     stats: &stats,
                     n,
                     clock,
+                    opened: clock.now(),
                 };
                 let why = run_connection(stream, k).await;
                 tracing::info!(%addr, "KISS/TCP: connection closed: {why}");
@@ -327,7 +329,10 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
                         return "link closed".to_owned();
                     }
                 }
-                Err(e) => return format!("read error: {e}"),
+                Err(e) => {
+                    let _ = in_tx.send((clock.now(), Vec::new())).await;
+                    return format!("read error: {e}");
+                }
             }
         }
     };
@@ -372,10 +377,19 @@ pub async fn serve_link<W: AsyncWrite + Unpin>(
         "link closed".to_owned()
     };
     let core = link_core(input, out_tx, k);
+    tokio::pin!(core);
     tokio::select! {
         biased;
-        why = core => why,
-        why = writer => why,
+        why = &mut core => why,
+        why = writer => {
+            // A failed write ends the connection: recorded as its close (an empty chunk)
+            // before the core, and with it the connection's addresses, goes (on return).
+            if let Some(tap) = &cfg.tap {
+                tap.admit().await;
+                (tap.0)(k.clock.now(), name, true, &[]);
+            }
+            why
+        }
     }
 }
 
@@ -391,9 +405,11 @@ pub struct Connection<'a> {
     /// The link's counters.
     pub stats: &'a SharedStats,
     /// The connection's number (it seeds the connection's CFP idents).
-    pub n: u16,
+    pub n: u64,
     /// The run's clock.
     pub clock: Clock,
+    /// When the connection opened (a replay: when the recorded one did).
+    pub opened: SimTime,
 }
 
 /// What a connection learned or refused so far.
@@ -420,6 +436,12 @@ async fn link_core(
         clock,
         ..
     } = k;
+    // The open, recorded as an empty chunk (the first; the close is the second): a replay
+    // opens the connection, and claims its addresses, at that time.
+    if let Some(tap) = &cfg.tap {
+        tap.admit().await;
+        (tap.0)(k.opened, name, true, &[]);
+    }
     let (inbox_tx, mut inbox_rx) = inbox();
     let mut c = Conn {
         k,
@@ -461,8 +483,9 @@ async fn link_core(
             }
             r = input.recv() => {
                 // The input's end (an empty chunk, at the time the close was seen, or the
-                // channel's end) is recorded as an empty chunk: a replay closes the
-                // connection at that time, giving its addresses back as the original did.
+                // channel's end) is recorded as an empty chunk (the second, after the open's):
+                // a replay closes the connection at that time, giving its addresses back as
+                // the original did.
                 let (t, chunk) = match r {
                     Some((t, chunk)) if !chunk.is_empty() => (t, chunk),
                     r => {
@@ -620,7 +643,7 @@ impl Conn<'_> {
                     self.k.name,
                     addr,
                     self.inbox.clone(),
-                    self.k.n.wrapping_mul(97),
+                    (self.k.n as u16).wrapping_mul(97),
                 )?;
                 tracing::info!(
                     "{}: outside node {addr} joined the {:?} segment",
@@ -677,5 +700,102 @@ impl Drop for Claims {
         if let Some(ep) = &self.0 {
             ep.release();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use std::pin::Pin;
+    use std::task::{Context, Poll};
+
+    use super::*;
+    use crate::can::{CanBus, CanBusConfig};
+    use crate::clock::ClockMode;
+    use crate::net::{PacketNet, PacketNetConfig};
+    use csp::{Header, Packet};
+
+    /// A socket whose every write fails, as after a peer's reset.
+    struct Reset;
+
+    impl AsyncWrite for Reset {
+        fn poll_write(
+            self: Pin<&mut Self>,
+            _: &mut Context<'_>,
+            _: &[u8],
+        ) -> Poll<std::io::Result<usize>> {
+            Poll::Ready(Err(std::io::ErrorKind::ConnectionReset.into()))
+        }
+        fn poll_flush(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+            Poll::Ready(Ok(()))
+        }
+        fn poll_shutdown(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<std::io::Result<()>> {
+            Poll::Ready(Ok(()))
+        }
+    }
+
+    /// A connection that ends because a write failed records its close (an empty chunk
+    /// into the twin, after the open's) and gives its address back. It used to end with
+    /// nothing recorded, so its replay kept the address for the rest of the run.
+    #[tokio::test(start_paused = true)]
+    async fn a_failed_write_is_recorded_as_the_close_and_the_address_goes_back() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let ground = PacketNet::new(PacketNetConfig::ground(), 1);
+        let segs = Segments {
+            main: CanBus::new(CanBusConfig::new("main"), 1),
+            payload: CanBus::new(CanBusConfig::new("payload"), 1),
+            ground: ground.clone(),
+        };
+        let (tx_gs, _rx_gs) = inbox();
+        let gs = ground.attach("GS16", &[16], false, false, tx_gs, 0);
+        tokio::spawn(ground.clone().run(clock));
+        let taps: Arc<Mutex<Vec<(SimTime, bool, usize)>>> = Arc::default();
+        let seen = taps.clone();
+        let cfg = KissLinkConfig {
+            addrs: vec![17],
+            tap: Some(KissTap::new(move |t, _, input, bytes| {
+                seen.lock().unwrap().push((t, input, bytes.len()));
+            })),
+            ..Default::default()
+        };
+        let stats = SharedStats::default();
+        let (_in_tx, in_rx) = tokio::sync::mpsc::channel(4);
+        let k = Connection {
+            name: "test#1",
+            segs: &segs,
+            cfg: &cfg,
+            stats: &stats,
+            n: 1,
+            clock,
+            opened: SimTime(5),
+        };
+        let sent = async {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+            gs.send(
+                clock.now(),
+                Packet::new(Header::new(16, 17, 1, 40), vec![1, 2]),
+            );
+            std::future::pending::<()>().await;
+        };
+        let mut socket = Reset;
+        let why = tokio::select! {
+            why = serve_link(in_rx, &mut socket, k) => why,
+            () = sent => unreachable!(),
+        };
+        assert!(why.contains("reset"), "{why}");
+        let taps = taps.lock().unwrap().clone();
+        assert_eq!(
+            taps.first(),
+            Some(&(SimTime(5), true, 0)),
+            "the open: {taps:?}"
+        );
+        assert!(
+            matches!(taps.last(), Some(&(t, true, 0)) if t > SimTime(5)),
+            "the close: {taps:?}"
+        );
+        // 17 is free again: another endpoint may claim it.
+        let (tx, _rx) = inbox();
+        let other = ground.attach("other", &[], false, false, tx, 0);
+        assert_eq!(ground.claim(&other, 17), Ok(()));
     }
 }

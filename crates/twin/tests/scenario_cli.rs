@@ -6,6 +6,8 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+mod common;
+
 /// The standard output of a finished process, after asserting it succeeded.
 fn succeeded(out: &std::process::Output) -> String {
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
@@ -304,20 +306,17 @@ fn a_real_recording_decodes_with_the_python_mcap_package() {
     );
 }
 
-/// One real-time run with two outside connections, recorded, then replayed: the replay's
-/// verdict (`Ok` when identical) and the recording's summary.
-fn outside_run_and_replay(rec: &std::path::Path) -> (Result<(), String>, String) {
+/// `m6p-twin args --record rec` started in the repository; the child, the address its
+/// (first) KISS server announced, and the thread draining the rest of its stderr (so the
+/// child never blocks on a full pipe).
+fn recorded_run_with_kiss(
+    args: &[&str],
+    rec: &std::path::Path,
+) -> (std::process::Child, String, std::thread::JoinHandle<()>) {
     use std::io::{BufRead, BufReader};
     let mut child = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
-        .args([
-            "run",
-            "scenarios/node-faults.toml",
-            "--duration",
-            "6s",
-            "--kiss-listen",
-            "127.0.0.1:0",
-            "--record",
-        ])
+        .args(args)
+        .arg("--record")
         .arg(rec)
         .current_dir(repo())
         .stdout(std::process::Stdio::null())
@@ -335,8 +334,24 @@ fn outside_run_and_replay(rec: &std::path::Path) -> (Result<(), String>, String)
                 .map(str::to_owned)
         })
         .expect("the twin announces its KISS address");
-    // Drain the rest of stderr so the child never blocks on a full pipe.
     let drain = std::thread::spawn(move || lines.for_each(drop));
+    (child, addr, drain)
+}
+
+/// One real-time run with two outside connections, recorded, then replayed: the replay's
+/// verdict (`Ok` when identical) and the recording's summary.
+fn outside_run_and_replay(rec: &std::path::Path) -> (Result<(), String>, String) {
+    let (mut child, addr, drain) = recorded_run_with_kiss(
+        &[
+            "run",
+            "scenarios/node-faults.toml",
+            "--duration",
+            "6s",
+            "--kiss-listen",
+            "127.0.0.1:0",
+        ],
+        rec,
+    );
     // Two connections of an outside ground node (16). Over the UHF link its requests are
     // tens of milliseconds apart from any other traffic. (An outside node injecting frames
     // straight onto a CAN bus within about 1 ms of other frames can be arbitrated
@@ -565,4 +580,50 @@ fn the_scenario_docs_examples_check_and_the_fc_example_passes() {
     let (code, out, err) = twin(&["run", fc.to_str().unwrap()]);
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("4 passed, 0 failed"), "{out}");
+}
+
+/// A passive payload (`examples/outside_payload.py`, on the README's link with `addrs = [12]`)
+/// whose program first connects and drops the connection at once, then connects again and
+/// serves the session: the replay opens each recorded connection when the original opened
+/// (the open is recorded as the connection's first empty input chunk), so the second one
+/// holds 12 when the PC's SYNC comes, as it did in the original. Before, every replayed
+/// connection opened at time 0: the second's claim of 12 was refused (the first held it), the
+/// SYNC found no route, and the replay diverged.
+#[test]
+fn a_replayed_connection_opens_when_the_recorded_one_did() {
+    let dir = tmp("reconnect.downlink");
+    let text = common::readme_scenario()
+        .replace("127.0.0.1:52001", "127.0.0.1:0")
+        .replace("/tmp/outside_payload.downlink", dir.to_str().unwrap());
+    let scenario = tmp("reconnect.toml");
+    std::fs::write(&scenario, text).unwrap();
+    let mut failures = Vec::new();
+    for attempt in 0..3 {
+        let rec = tmp(&format!("reconnect-{attempt}.mcap"));
+        let (mut child, addr, drain) =
+            recorded_run_with_kiss(&["run", scenario.to_str().unwrap()], &rec);
+        drop(std::net::TcpStream::connect(&addr).unwrap());
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        let out = Command::new("python3")
+            .arg(repo().join("examples/outside_payload.py"))
+            .args(["--connect", &addr, "--idle", "1.5", "--seconds", "12"])
+            .output()
+            .unwrap();
+        let py = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(py.contains("1 SYNC, 25 POLL"), "{py}");
+        assert!(child.wait().unwrap().success());
+        drain.join().unwrap();
+        let (code, out, err) = twin(&["replay", rec.to_str().unwrap()]);
+        std::fs::remove_file(&rec).ok();
+        if code == 0 && out.starts_with("identical") {
+            std::fs::remove_file(&scenario).ok();
+            std::fs::remove_dir_all(&dir).ok();
+            return;
+        }
+        // Real-time originals can be stamped a fraction of a millisecond late (see the
+        // test above); anything else fails at once.
+        assert!(out.contains("first divergence"), "{out}{err}");
+        failures.push(format!("{out}{err}"));
+    }
+    panic!("three real-time originals diverged from their replays: {failures:#?}");
 }

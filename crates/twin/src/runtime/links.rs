@@ -11,6 +11,7 @@ use bus::Clock;
 use bus::gate::LinkGate;
 use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissLog, KissTap};
 use bus::outside::{BridgeStats, Segments};
+use csp::SimTime;
 use tokio::sync::mpsc;
 
 use super::{KissMode, RunOptions, mix};
@@ -153,13 +154,25 @@ pub(super) async fn kiss(
         let (in_tx, in_rx) = mpsc::channel(input.chunks.len().max(1));
         let cfg2 = wire(&input.cfg, &input.link);
         let (segs2, label) = (segs.clone(), input.link.clone());
+        // A recording's first empty chunk of a connection is its open (older recordings
+        // have none: the connection is open from the start); a later one is its close.
+        let mut chunks = input.chunks.clone();
+        let opened = match chunks.first() {
+            Some((t, b)) if b.is_empty() => {
+                let t = *t;
+                chunks.remove(0);
+                t
+            }
+            _ => SimTime::ZERO,
+        };
         background.push(tokio::spawn(async move {
+            clock.sleep_until(opened).await;
             let mut discard = tokio::io::sink();
             // The connection number seeds its CFP ident as in the recorded run.
             let conn = label
                 .rsplit_once('#')
                 .and_then(|(_, k)| k.parse().ok())
-                .unwrap_or(n as u16 + 1);
+                .unwrap_or(n as u64 + 1);
             let k = kiss_tcp::Connection {
                 name: &label,
                 segs: &segs2,
@@ -167,10 +180,10 @@ pub(super) async fn kiss(
                 stats: &stats,
                 n: conn,
                 clock,
+                opened,
             };
             kiss_tcp::serve_link(in_rx, &mut discard, k).await;
         }));
-        let chunks = input.chunks.clone();
         background.push(tokio::spawn(async move {
             for (t, bytes) in chunks {
                 clock.sleep_until(t).await;
