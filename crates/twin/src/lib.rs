@@ -5,9 +5,12 @@
 //! - [`ground`]: the twin's own ground stations.
 //! - [`gs`]: the outside ground-station client (`m6p-twin gs`).
 //! - [`record`] and [`recording`]: write a run to MCAP; read, summarize and compare recordings.
+//! - [`campaign`]: campaign files: a scenario run many times with drawn values.
 //! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
 pub mod adcs;
+pub mod campaign;
+pub mod campaign_run;
 pub mod can;
 pub mod comm;
 pub mod commands;

@@ -35,8 +35,15 @@ enum Command {
         #[arg(required = true)]
         files: Vec<PathBuf>,
     },
-    /// Print the JSON Schema of the scenario format (for editors).
-    Schema,
+    /// Print the JSON Schema of the scenario format, or of the campaign format (for editors).
+    Schema {
+        /// The campaign file's schema instead of the scenario's.
+        #[arg(long)]
+        campaign: bool,
+    },
+    /// Fault campaigns: a scenario run many times with drawn values, every run checked.
+    #[command(subcommand)]
+    Campaign(CampaignCmd),
     /// Summarise a recording (channels, counts per node and port, expectations), or export
     /// a channel to CSV.
     Inspect {
@@ -158,6 +165,28 @@ struct TestArgs {
     seed: Option<u64>,
 }
 
+#[derive(Debug, Subcommand)]
+enum CampaignCmd {
+    /// Run a campaign: results.csv, junit.xml and failures/run-<k>.toml in --out; exit 1
+    /// when a run failed.
+    Run(CampaignRunArgs),
+}
+
+#[derive(Debug, clap::Args)]
+struct CampaignRunArgs {
+    /// The campaign file.
+    file: PathBuf,
+    /// Runs 0..N instead of the campaign's `runs`.
+    #[arg(long)]
+    runs: Option<u64>,
+    /// Parallel runs [default: the machine's cores].
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Where the results go.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
 #[derive(Debug, clap::Args)]
 struct GsArgs {
     /// The twin's KISS/TCP server.
@@ -267,7 +296,7 @@ fn main() -> ExitCode {
     let cli =
         <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     // A benchmark runs the scenario many times: only warnings, unless RUST_LOG says more.
-    let default_filter = if matches!(cli.command, Command::Bench { .. }) {
+    let default_filter = if matches!(cli.command, Command::Bench { .. } | Command::Campaign(_)) {
         "warn"
     } else {
         "info,foxglove=warn"
@@ -288,7 +317,8 @@ fn main() -> ExitCode {
             .and_then(|links| cmd_run(a, links)),
         Command::Test(a) => cmd_test(a),
         Command::Check { files } => cmd_check(&files),
-        Command::Schema => cmd_schema(),
+        Command::Schema { campaign } => cmd_schema(campaign),
+        Command::Campaign(CampaignCmd::Run(a)) => cmd_campaign_run(a),
         Command::Inspect { file, csv } => cmd_inspect(&file, csv.as_deref()),
         Command::Diff { a, b } => cmd_diff(&a, &b),
         Command::Replay(a) => cmd_replay(a),
@@ -694,10 +724,76 @@ fn cmd_check(files: &[PathBuf]) -> anyhow::Result<bool> {
     Ok(ok)
 }
 
-fn cmd_schema() -> anyhow::Result<bool> {
-    let schema = schemars::schema_for!(m6p_twin::scenario::Scenario);
+fn cmd_schema(campaign: bool) -> anyhow::Result<bool> {
+    let schema = if campaign {
+        schemars::schema_for!(m6p_twin::campaign::CampaignSpec)
+    } else {
+        schemars::schema_for!(m6p_twin::scenario::Scenario)
+    };
     println!("{}", serde_json::to_string_pretty(&schema)?);
     Ok(true)
+}
+
+fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
+    use m6p_twin::campaign_run::{self, RunVerdict};
+    use std::io::IsTerminal as _;
+    let c = m6p_twin::campaign::Campaign::load(&a.file)?;
+    let runs = a.runs.unwrap_or(c.spec.runs);
+    // Every run's scenario is drawn and validated before anything runs.
+    c.check(runs)?;
+    let jobs = a
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
+        .max(1);
+    let indices: Vec<u64> = (0..runs).collect();
+    let bar = if std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() {
+        let b = indicatif::ProgressBar::new(runs);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} runs, {msg} [{elapsed}]")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let failed = std::sync::atomic::AtomicU64::new(0);
+    let started = std::time::Instant::now();
+    let rows = campaign_run::run_all(&c, &indices, jobs, &|row| {
+        if row.verdict != RunVerdict::Pass {
+            let n = failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            bar.set_message(format!("{n} failed"));
+        }
+        bar.inc(1);
+    });
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+    campaign_run::write_outputs(&c, &rows, &a.out)?;
+    let mut by_verdict = std::collections::BTreeMap::<&str, u64>::new();
+    for r in &rows {
+        *by_verdict.entry(r.verdict.word()).or_default() += 1;
+    }
+    println!(
+        "campaign {}: {runs} runs on {jobs} jobs in {wall:.1} s ({:.2} runs/s): {} pass, {} fail, {} error",
+        c.name(),
+        runs as f64 / wall.max(1e-9),
+        by_verdict.get("pass").unwrap_or(&0),
+        by_verdict.get("fail").unwrap_or(&0),
+        by_verdict.get("error").unwrap_or(&0),
+    );
+    for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
+        let why = match &r.verdict {
+            RunVerdict::Fail(f) => f
+                .iter()
+                .map(|(n, o)| format!("{n} ({o})"))
+                .collect::<Vec<_>>()
+                .join("; "),
+            RunVerdict::Error(e) => e.clone(),
+            RunVerdict::Pass => String::new(),
+        };
+        println!("  run {} {}: {why}", r.run, r.verdict.word());
+    }
+    println!("results in {}", a.out.display());
+    Ok(rows.iter().all(|r| r.verdict == RunVerdict::Pass))
 }
 
 fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {

@@ -370,7 +370,8 @@ impl fmt::Display for ScenarioErrors {
 
 impl std::error::Error for ScenarioErrors {}
 
-fn line_col(text: &str, offset: usize) -> (usize, usize) {
+/// The 1-based line and column of byte `offset` of `text`.
+pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = text.get(..offset.min(text.len())).unwrap_or(text);
     let line = before.matches('\n').count() + 1;
     let col = before
@@ -406,7 +407,7 @@ fn path_string(path: &[PathStep]) -> String {
 }
 
 /// The byte span of the value at `path` in `text`, or of its nearest existing parent.
-fn locate(text: &str, path: &[PathStep]) -> Option<std::ops::Range<usize>> {
+pub(crate) fn locate(text: &str, path: &[PathStep]) -> Option<std::ops::Range<usize>> {
     let root = toml::de::DeTable::parse(text).ok()?;
     let mut span = None;
     let mut node: Option<&toml::de::DeValue<'_>> = None;

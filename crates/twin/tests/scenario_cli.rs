@@ -627,3 +627,64 @@ fn a_replayed_connection_opens_when_the_recorded_one_did() {
     }
     panic!("three real-time originals diverged from their replays: {failures:#?}");
 }
+
+/// `campaign run`: a draw that makes a run's scenario invalid is an error naming the
+/// campaign file, line and field, before anything runs (no output directory); a good
+/// campaign writes its files, and a failure file reproduces under `m6p-twin test`.
+#[test]
+fn campaign_run_checks_every_draw_first_and_its_failures_reproduce() {
+    let dir = tmp("campaign");
+    std::fs::create_dir_all(&dir).unwrap();
+    // Runs pass or fail by a drawn ping time.
+    let good_text =
+        std::fs::read_to_string(repo().join("crates/twin/tests/data/campaign-ping.toml")).unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        good_text.replace(
+            "[dispersions]\n",
+            "[dispersions]\n\"fc.initial_rate_deg_s\" = { uniform = [300.0, 900.0] }\n",
+        ),
+    )
+    .unwrap();
+    let out = dir.join("out-bad");
+    let (code, _, err) = twin(&[
+        "campaign",
+        "run",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("bad.toml:7:") && err.contains("0-360"),
+        "{err}"
+    );
+    assert!(!out.exists());
+
+    let good = dir.join("good.toml");
+    std::fs::write(&good, &good_text).unwrap();
+    let out = dir.join("out-good");
+    let (code, stdout, err) = twin(&[
+        "campaign",
+        "run",
+        good.to_str().unwrap(),
+        "--jobs",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 7, "{csv}");
+    let failures: Vec<_> = std::fs::read_dir(out.join("failures"))
+        .map(|d| d.map(|e| e.unwrap().path()).collect())
+        .unwrap_or_default();
+    // Seed 3 draws `5s` (a ping after the end: never answered) for some of the 6 runs.
+    assert!(!failures.is_empty() && code == 1, "{stdout}{err}");
+    for f in &failures {
+        let (code, text, err) = twin(&["test", f.to_str().unwrap()]);
+        assert_eq!(code, 1, "{text}{err}");
+        assert!(text.contains("short run"), "{text}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,0 +1,828 @@
+//! Campaign files: one base scenario run many times with values drawn at random
+//! (`docs/campaigns.md`).
+//!
+//! A campaign names its base scenario (a file, or inline), how many runs, a seed,
+//! dispersions over scenario fields by path (`fc.initial_rate_deg_s`, `faults[0].at`) and a
+//! catalogue of faults from which each run draws some. Run `k`'s draws depend only on the
+//! campaign's seed, `k` and the entry drawn (each dispersion and each catalogue entry has its
+//! own random stream), so any subset of the runs, anywhere, draws the same values, and adding
+//! a dispersion leaves the others' values alone. A run resolves to a complete scenario text:
+//! the base with every draw written in and its own seed, which `m6p-twin run` reproduces.
+//!
+//! Parsing is strict like a scenario's: unknown fields, bad distributions, paths that the
+//! base scenario cannot have, and draws that make the scenario invalid are errors naming the
+//! campaign file, the line and the field, found before anything runs ([`Campaign::check`]
+//! resolves every run).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use rand_chacha::ChaCha8Rng;
+use rand_core::{Rng as _, SeedableRng as _};
+use schemars::JsonSchema;
+use serde::Deserialize;
+
+use crate::runtime::mix;
+use crate::scenario::{PathStep, Scenario, ScenarioError, ScenarioErrors};
+
+/// A campaign file.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignSpec {
+    /// Short name, used in reports (default: the file name).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// What the campaign explores.
+    #[serde(default)]
+    pub description: Option<String>,
+    /// The base scenario: a path (relative to the campaign file) or the scenario inline.
+    pub scenario: ScenarioSource,
+    /// How many runs (1-1000000); `campaign run --runs` may ask for fewer or more.
+    pub runs: u64,
+    /// The campaign's seed: every run's draws and its scenario seed derive from it.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Values drawn for scenario fields, by path (`fc.initial_rate_deg_s`,
+    /// `faults[0].at`): `{ uniform = [a, b] }`, `{ normal = [mean, sd], min, max }`,
+    /// `{ choice = [v, ...], weights = [w, ...] }`. Numbers, or durations (`"60s"`) for
+    /// uniform and normal.
+    #[serde(default)]
+    #[schemars(with = "BTreeMap<String, serde_json::Value>")]
+    pub dispersions: BTreeMap<String, toml::Value>,
+    /// Faults drawn into every run.
+    #[serde(default)]
+    pub faults: Option<FaultDraws>,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+/// Where the base scenario comes from.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(untagged)]
+pub enum ScenarioSource {
+    /// A scenario file, relative to the campaign file.
+    Path(String),
+    /// The scenario itself.
+    Inline(#[schemars(with = "serde_json::Value")] toml::Table),
+}
+
+/// The fault catalogue.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FaultDraws {
+    /// How many distinct catalogue entries each run draws (at most the catalogue's size).
+    pub draw: usize,
+    /// Faults as in a scenario's `[[faults]]`, any value of which may be a distribution.
+    #[schemars(with = "Vec<serde_json::Value>")]
+    pub catalogue: Vec<toml::Table>,
+}
+
+/// A distribution of values.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Dist {
+    /// Uniform between two numbers or durations (integers stay integers, inclusive).
+    Uniform(Scalar, Scalar),
+    /// Normal with a mean and a standard deviation, cut to `[min, max]` when given.
+    Normal {
+        /// The mean.
+        mean: Scalar,
+        /// The standard deviation (same unit as the mean).
+        sd: f64,
+        /// Lower bound.
+        min: Option<f64>,
+        /// Upper bound.
+        max: Option<f64>,
+    },
+    /// One of the values, with weights (equal when not given).
+    Choice(Vec<toml::Value>, Vec<f64>),
+}
+
+/// A number or a duration: what uniform and normal draw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scalar {
+    /// An integer.
+    Int(i64),
+    /// A real number.
+    Float(f64),
+    /// A duration, in ms.
+    Millis(f64),
+}
+
+impl Scalar {
+    fn of(v: &toml::Value) -> Result<Scalar, String> {
+        match v {
+            toml::Value::Integer(i) => Ok(Scalar::Int(*i)),
+            toml::Value::Float(f) if f.is_finite() => Ok(Scalar::Float(*f)),
+            toml::Value::String(s) => crate::duration::parse_duration(s)
+                .map(|d| Scalar::Millis(d.as_secs_f64() * 1e3))
+                .map_err(|e| format!("`{s}` is neither a number nor a duration: {e}")),
+            other => Err(format!("expected a number or a duration, found {other}")),
+        }
+    }
+    fn value(self) -> f64 {
+        match self {
+            Scalar::Int(i) => i as f64,
+            Scalar::Float(f) | Scalar::Millis(f) => f,
+        }
+    }
+    /// `x` in this scalar's kind, as a TOML value.
+    fn like(self, x: f64) -> toml::Value {
+        match self {
+            Scalar::Int(_) => toml::Value::Integer(x.round() as i64),
+            Scalar::Float(_) => toml::Value::Float(x),
+            Scalar::Millis(_) => toml::Value::String(format!("{}ms", x.max(0.0).round() as u64)),
+        }
+    }
+    fn same_kind(self, o: Scalar) -> bool {
+        matches!(
+            (self, o),
+            (Scalar::Millis(_), Scalar::Millis(_))
+                | (
+                    Scalar::Int(_) | Scalar::Float(_),
+                    Scalar::Int(_) | Scalar::Float(_)
+                )
+        )
+    }
+}
+
+/// The keys that make a table a distribution.
+const DIST_KEYS: [&str; 3] = ["uniform", "normal", "choice"];
+
+impl Dist {
+    /// Whether `v` is written as a distribution (a table with one of [`DIST_KEYS`]).
+    fn is_dist(v: &toml::Value) -> bool {
+        v.as_table()
+            .is_some_and(|t| DIST_KEYS.iter().any(|k| t.contains_key(*k)))
+    }
+
+    /// Parse a distribution table.
+    pub fn parse(v: &toml::Value) -> Result<Dist, String> {
+        let t = v
+            .as_table()
+            .ok_or_else(|| format!("expected a distribution table, found {v}"))?;
+        let allowed: &[&str] = if t.contains_key("uniform") {
+            &["uniform"]
+        } else if t.contains_key("normal") {
+            &["normal", "min", "max"]
+        } else if t.contains_key("choice") {
+            &["choice", "weights"]
+        } else {
+            return Err("expected one of `uniform`, `normal`, `choice`".into());
+        };
+        if let Some(k) = t.keys().find(|k| !allowed.contains(&k.as_str())) {
+            return Err(format!(
+                "unknown key `{k}` (this distribution takes {})",
+                allowed.join(", ")
+            ));
+        }
+        let pair = |k: &str| -> Result<(Scalar, Scalar), String> {
+            let a = t[k]
+                .as_array()
+                .filter(|a| a.len() == 2)
+                .ok_or_else(|| format!("`{k}` takes two values: [a, b]"))?;
+            let (x, y) = (Scalar::of(&a[0])?, Scalar::of(&a[1])?);
+            if !x.same_kind(y) {
+                return Err(format!(
+                    "`{k}`: both values must be numbers, or both durations"
+                ));
+            }
+            Ok((x, y))
+        };
+        let bound = |k: &str| -> Result<Option<f64>, String> {
+            t.get(k)
+                .map(|v| Scalar::of(v).map(Scalar::value))
+                .transpose()
+        };
+        if t.contains_key("uniform") {
+            let (a, b) = pair("uniform")?;
+            if a.value() > b.value() {
+                return Err(format!("uniform: {} is above {}", a.value(), b.value()));
+            }
+            Ok(Dist::Uniform(a, b))
+        } else if t.contains_key("normal") {
+            let (mean, sd) = pair("normal")?;
+            if sd.value() < 0.0 {
+                return Err("normal: the standard deviation must be >= 0".into());
+            }
+            let (min, max) = (bound("min")?, bound("max")?);
+            if let (Some(lo), Some(hi)) = (min, max)
+                && lo > hi
+            {
+                return Err(format!("normal: min {lo} is above max {hi}"));
+            }
+            Ok(Dist::Normal {
+                mean,
+                sd: sd.value(),
+                min,
+                max,
+            })
+        } else {
+            let values = t["choice"]
+                .as_array()
+                .filter(|a| !a.is_empty())
+                .ok_or("`choice` takes a non-empty list of values")?
+                .clone();
+            let weights = match t.get("weights") {
+                None => vec![1.0; values.len()],
+                Some(w) => {
+                    let w: Vec<f64> = w
+                        .as_array()
+                        .ok_or("`weights` takes a list of numbers")?
+                        .iter()
+                        .map(|x| Scalar::of(x).map(Scalar::value))
+                        .collect::<Result<_, _>>()?;
+                    if w.len() != values.len() {
+                        return Err(format!("{} weights for {} choices", w.len(), values.len()));
+                    }
+                    if w.iter().any(|x| *x < 0.0) || w.iter().sum::<f64>() <= 0.0 {
+                        return Err("weights must be >= 0 with a positive sum".into());
+                    }
+                    w
+                }
+            };
+            Ok(Dist::Choice(values, weights))
+        }
+    }
+
+    /// One draw.
+    pub fn sample(&self, rng: &mut ChaCha8Rng) -> toml::Value {
+        match self {
+            Dist::Uniform(a, b) => match (a, b) {
+                (Scalar::Int(x), Scalar::Int(y)) => {
+                    let span = (*y - *x) as u64 + 1;
+                    toml::Value::Integer(x + (rng.next_u64() % span) as i64)
+                }
+                _ => a.like(a.value() + unit(rng) * (b.value() - a.value())),
+            },
+            Dist::Normal { mean, sd, min, max } => {
+                // Box-Muller: two uniform draws, one normal.
+                let (u1, u2) = (1.0 - unit(rng), unit(rng));
+                let z = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+                let mut x = mean.value() + sd * z;
+                if let Some(lo) = min {
+                    x = x.max(*lo);
+                }
+                if let Some(hi) = max {
+                    x = x.min(*hi);
+                }
+                // An integer mean draws reals: a normal is continuous.
+                match mean {
+                    Scalar::Int(_) => toml::Value::Float(x),
+                    m => m.like(x),
+                }
+            }
+            Dist::Choice(values, weights) => {
+                let mut r = unit(rng) * weights.iter().sum::<f64>();
+                for (v, w) in values.iter().zip(weights) {
+                    if r < *w {
+                        return v.clone();
+                    }
+                    r -= w;
+                }
+                values[values.len() - 1].clone()
+            }
+        }
+    }
+}
+
+/// A uniform draw in [0, 1).
+fn unit(rng: &mut ChaCha8Rng) -> f64 {
+    (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// The random stream of one entry of run `k`: its own, whatever else the campaign draws.
+fn stream(seed: u64, k: u64, entry: &str) -> ChaCha8Rng {
+    // FNV-1a of the entry's name.
+    let h = entry.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    ChaCha8Rng::seed_from_u64(mix(mix(seed, k), h))
+}
+
+/// Parse a field path: `fc.initial_rate_deg_s`, `faults[0].at`, `payload[1].behaviour`.
+pub fn parse_path(s: &str) -> Result<Vec<PathStep>, String> {
+    let mut out = Vec::new();
+    for part in s.split('.') {
+        let (name, mut rest) = part.split_once('[').map_or((part, ""), |(n, r)| (n, r));
+        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(format!("`{s}` is not a field path (like `faults[0].at`)"));
+        }
+        out.push(PathStep::Key(name.to_owned()));
+        while !rest.is_empty() {
+            let (ix, after) = rest
+                .split_once(']')
+                .ok_or_else(|| format!("`{s}`: unclosed `[`"))?;
+            out.push(PathStep::Index(
+                ix.parse()
+                    .map_err(|_| format!("`{s}`: `{ix}` is not an index"))?,
+            ));
+            rest = after.strip_prefix('[').unwrap_or(after);
+            if !after.is_empty() && !after.starts_with('[') {
+                return Err(format!("`{s}` is not a field path (like `faults[0].at`)"));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Write `value` at `path` in `root`. Tables on the way are made when missing; an index
+/// must exist. (Recursion over the path's steps: a path has a handful.)
+fn set_path(root: &mut toml::Table, path: &[PathStep], value: toml::Value) -> Result<(), String> {
+    let mut whole = toml::Value::Table(std::mem::take(root));
+    let r = set_in(&mut whole, path, value);
+    if let toml::Value::Table(t) = whole {
+        *root = t;
+    }
+    r
+}
+
+fn set_in(node: &mut toml::Value, path: &[PathStep], value: toml::Value) -> Result<(), String> {
+    let Some((step, rest)) = path.split_first() else {
+        *node = value;
+        return Ok(());
+    };
+    let next = match step {
+        PathStep::Key(k) => node
+            .as_table_mut()
+            .ok_or_else(|| format!("`{k}`: its parent is not a table"))?
+            .entry(k.clone())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new())),
+        PathStep::Index(i) => {
+            let a = node
+                .as_array_mut()
+                .ok_or_else(|| format!("[{i}]: not a list in the base scenario"))?;
+            let n = a.len();
+            a.get_mut(*i)
+                .ok_or_else(|| format!("[{i}]: the base scenario's list has {n} entries"))?
+        }
+    };
+    set_in(next, rest, value)
+}
+
+/// Resolve every distribution inside `v` (a catalogue entry's fields), drawing from `rng`.
+fn draw_inside(v: &toml::Value, rng: &mut ChaCha8Rng) -> Result<toml::Value, String> {
+    if Dist::is_dist(v) {
+        return Ok(Dist::parse(v)?.sample(rng));
+    }
+    Ok(match v {
+        toml::Value::Table(t) => toml::Value::Table(
+            t.iter()
+                .map(|(k, x)| draw_inside(x, rng).map(|x| (k.clone(), x)))
+                .collect::<Result<_, String>>()?,
+        ),
+        toml::Value::Array(a) => toml::Value::Array(
+            a.iter()
+                .map(|x| draw_inside(x, rng))
+                .collect::<Result<_, String>>()?,
+        ),
+        other => other.clone(),
+    })
+}
+
+/// One run resolved: what was drawn and the complete scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Resolved {
+    /// The run's index.
+    pub run: u64,
+    /// The run's scenario seed.
+    pub seed: u64,
+    /// Each dispersion's drawn value (as TOML), by path; `faults` lists the drawn kinds.
+    pub draws: BTreeMap<String, String>,
+    /// The scenario text: the base with every draw written in.
+    pub text: String,
+}
+
+/// A campaign loaded: its spec, its file and its base scenario as a TOML table.
+#[derive(Debug, Clone)]
+pub struct Campaign {
+    /// The campaign file (as given).
+    pub file: String,
+    /// The campaign file's text.
+    pub text: String,
+    /// The parsed file.
+    pub spec: CampaignSpec,
+    /// The base scenario's table.
+    pub base: toml::Table,
+    /// Where the base scenario came from (for messages).
+    pub base_file: String,
+    dists: BTreeMap<String, (Vec<PathStep>, Dist)>,
+}
+
+/// An error at `field` of the campaign file, located in its text.
+fn err_at(file: &str, text: &str, field: &str, message: String) -> ScenarioError {
+    let path = parse_path(field).unwrap_or_default();
+    // A dispersion's key contains dots: locate the key itself under `dispersions`.
+    let steps: Vec<PathStep> = if let Some(k) = field.strip_prefix("dispersions.") {
+        vec![PathStep::Key("dispersions".into()), PathStep::Key(k.into())]
+    } else {
+        path
+    };
+    let (line, column) = crate::scenario::locate(text, &steps)
+        .map(|s| crate::scenario::line_col(text, s.start))
+        .map_or((None, None), |(l, c)| (Some(l), Some(c)));
+    ScenarioError {
+        file: file.to_owned(),
+        line,
+        column,
+        field: field.to_owned(),
+        message,
+    }
+}
+
+impl Campaign {
+    /// Parse a campaign; `file` names it in errors and anchors a relative scenario path.
+    pub fn parse(file: &str, text: &str) -> Result<Campaign, ScenarioErrors> {
+        let one =
+            |field: &str, message: String| ScenarioErrors(vec![err_at(file, text, field, message)]);
+        let spec: CampaignSpec = toml::from_str(text).map_err(|e| {
+            let (line, column) = e
+                .span()
+                .map(|s| crate::scenario::line_col(text, s.start))
+                .map_or((None, None), |(l, c)| (Some(l), Some(c)));
+            ScenarioErrors(vec![ScenarioError {
+                file: file.to_owned(),
+                line,
+                column,
+                field: String::new(),
+                message: e.message().trim().to_owned(),
+            }])
+        })?;
+        let mut errors = Vec::new();
+        if !(1..=1_000_000).contains(&spec.runs) {
+            errors.push(err_at(file, text, "runs", "must be 1-1000000".into()));
+        }
+        let (base, base_file) = match &spec.scenario {
+            ScenarioSource::Inline(t) => (t.clone(), format!("{file} (inline scenario)")),
+            ScenarioSource::Path(p) => {
+                let path = Path::new(file)
+                    .parent()
+                    .map_or_else(|| PathBuf::from(p), |d| d.join(p));
+                let shown = path.display().to_string();
+                let base_text = std::fs::read_to_string(&path)
+                    .map_err(|e| one("scenario", format!("cannot read {shown}: {e}")))?;
+                // The base must be a valid scenario on its own.
+                Scenario::parse(&shown, &base_text)?;
+                let t = base_text
+                    .parse::<toml::Table>()
+                    .map_err(|e| one("scenario", format!("{shown}: {e}")))?;
+                (t, shown)
+            }
+        };
+        let mut dists = BTreeMap::new();
+        for (k, v) in &spec.dispersions {
+            let field = format!("dispersions.{k}");
+            match (parse_path(k), Dist::parse(v)) {
+                (Ok(p), Ok(d)) => {
+                    dists.insert(k.clone(), (p, d));
+                }
+                (Err(e), _) | (_, Err(e)) => errors.push(err_at(file, text, &field, e)),
+            }
+        }
+        if let Some(f) = &spec.faults {
+            if f.draw > f.catalogue.len() {
+                errors.push(err_at(
+                    file,
+                    text,
+                    "faults.draw",
+                    format!("draws {} of a catalogue of {}", f.draw, f.catalogue.len()),
+                ));
+            }
+            for (i, entry) in f.catalogue.iter().enumerate() {
+                let mut rng = stream(0, 0, "check");
+                if let Err(e) = draw_inside(&toml::Value::Table(entry.clone()), &mut rng) {
+                    errors.push(err_at(file, text, &format!("faults.catalogue[{i}]"), e));
+                }
+            }
+        }
+        if !errors.is_empty() {
+            return Err(ScenarioErrors(errors));
+        }
+        Ok(Campaign {
+            file: file.to_owned(),
+            text: text.to_owned(),
+            spec,
+            base,
+            base_file,
+            dists,
+        })
+    }
+
+    /// Read and parse a campaign file.
+    pub fn load(path: &Path) -> anyhow::Result<Campaign> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("reading campaign {file}: {e}"))?;
+        Ok(Campaign::parse(&file, &text)?)
+    }
+
+    /// The campaign's name: its `name`, or the file stem.
+    pub fn name(&self) -> String {
+        self.spec.name.clone().unwrap_or_else(|| {
+            Path::new(&self.file)
+                .file_stem()
+                .map_or_else(|| self.file.clone(), |s| s.to_string_lossy().into_owned())
+        })
+    }
+
+    /// The scenario of run `k`: every dispersion and fault drawn, validated. An error names
+    /// the campaign field whose draw made the scenario invalid, when it can tell.
+    pub fn resolve(&self, k: u64) -> Result<Resolved, ScenarioErrors> {
+        let seed = self.spec.seed;
+        let mut table = self.base.clone();
+        let mut draws = BTreeMap::new();
+        // The run's own seed (the scenario's `seed`): from the campaign's seed and k too.
+        let run_seed = mix(mix(seed, k), 0x5eed);
+        table.insert("seed".into(), toml::Value::Integer((run_seed >> 1) as i64));
+        let name = format!(
+            "{} run {k}",
+            table
+                .get("name")
+                .and_then(toml::Value::as_str)
+                .unwrap_or("campaign")
+        );
+        table.insert("name".into(), toml::Value::String(name));
+        for (key, (path, dist)) in &self.dists {
+            let v = dist.sample(&mut stream(seed, k, key));
+            draws.insert(key.clone(), v.to_string());
+            set_path(&mut table, path, v).map_err(|e| {
+                ScenarioErrors(vec![err_at(
+                    &self.file,
+                    &self.text,
+                    &format!("dispersions.{key}"),
+                    format!("{e} (base scenario {})", self.base_file),
+                )])
+            })?;
+        }
+        if let Some(f) = &self.spec.faults {
+            let mut pick = stream(seed, k, "faults");
+            let mut left: Vec<usize> = (0..f.catalogue.len()).collect();
+            let mut chosen = Vec::new();
+            for _ in 0..f.draw {
+                let i = left.remove((pick.next_u64() % left.len() as u64) as usize);
+                chosen.push(i);
+            }
+            chosen.sort_unstable();
+            let mut kinds = Vec::new();
+            for i in chosen {
+                let mut rng = stream(seed, k, &format!("faults.catalogue[{i}]"));
+                let entry = draw_inside(&toml::Value::Table(f.catalogue[i].clone()), &mut rng)
+                    .map_err(|e| {
+                        ScenarioErrors(vec![err_at(
+                            &self.file,
+                            &self.text,
+                            &format!("faults.catalogue[{i}]"),
+                            e,
+                        )])
+                    })?;
+                kinds.push(format!(
+                    "{}#{i}",
+                    entry
+                        .get("kind")
+                        .and_then(toml::Value::as_str)
+                        .unwrap_or("?")
+                ));
+                let faults = table
+                    .entry("faults")
+                    .or_insert_with(|| toml::Value::Array(Vec::new()));
+                if let Some(a) = faults.as_array_mut() {
+                    a.push(entry);
+                }
+            }
+            draws.insert("faults".into(), kinds.join(" "));
+        }
+        let text = toml::to_string(&table).map_err(|e| {
+            ScenarioErrors(vec![err_at(
+                &self.file,
+                &self.text,
+                "scenario",
+                e.to_string(),
+            )])
+        })?;
+        let shown = format!("{} run {k}", self.file);
+        Scenario::parse(&shown, &text).map_err(|e| {
+            // Point at the dispersion whose path the scenario's error names, if any.
+            let errs =
+                e.0.into_iter()
+                    .map(|se| {
+                        let key = self.dists.keys().find(|key| {
+                            se.field == **key || se.field.starts_with(&format!("{key}."))
+                        });
+                        match key {
+                            Some(key) => err_at(
+                                &self.file,
+                                &self.text,
+                                &format!("dispersions.{key}"),
+                                format!("run {k} drew {}: {}", draws[key], se.message),
+                            ),
+                            None => ScenarioError {
+                                message: format!(
+                                    "run {k}: {} (draws: {})",
+                                    se.message,
+                                    draws
+                                        .iter()
+                                        .map(|(p, v)| format!("{p} = {v}"))
+                                        .collect::<Vec<_>>()
+                                        .join(", ")
+                                ),
+                                ..se
+                            },
+                        }
+                    })
+                    .collect();
+            ScenarioErrors(errs)
+        })?;
+        Ok(Resolved {
+            run: k,
+            seed: (run_seed >> 1),
+            draws,
+            text,
+        })
+    }
+
+    /// Resolve runs `0..runs` (every problem before anything runs); the first errors found.
+    pub fn check(&self, runs: u64) -> Result<(), ScenarioErrors> {
+        for k in 0..runs {
+            self.resolve(k)?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    const BASE: &str = r#"
+name = "base"
+duration = "60s"
+
+[fc]
+initial_rate_deg_s = 3.0
+
+[[faults]]
+at = "10s"
+until = "20s"
+kind = "clock"
+target = "FC"
+jump_s = 60
+"#;
+
+    fn campaign(extra: &str) -> Result<Campaign, ScenarioErrors> {
+        let text = format!(
+            "runs = 20\nseed = 7\n{extra}\n[scenario]\n{}",
+            BASE.replace("[fc]", "[scenario.fc]")
+                .replace("[[faults]]", "[[scenario.faults]]")
+        );
+        Campaign::parse("c.toml", &text)
+    }
+
+    #[test]
+    fn draws_depend_on_the_seed_the_run_and_the_entry_only() {
+        let a = campaign(
+            "[dispersions]\n\"fc.initial_rate_deg_s\" = { uniform = [1.0, 9.0] }\n\"faults[0].at\" = { uniform = [\"5s\", \"19s\"] }\n",
+        )
+        .unwrap();
+        let b = campaign("[dispersions]\n\"fc.initial_rate_deg_s\" = { uniform = [1.0, 9.0] }\n")
+            .unwrap();
+        let r5 = a.resolve(5).unwrap();
+        assert_eq!(r5, a.resolve(5).unwrap());
+        assert_ne!(r5.draws, a.resolve(6).unwrap().draws);
+        // Another dispersion does not change this one's values.
+        assert_eq!(
+            r5.draws["fc.initial_rate_deg_s"],
+            b.resolve(5).unwrap().draws["fc.initial_rate_deg_s"]
+        );
+        let s = Scenario::parse("r", &r5.text).unwrap();
+        let rate = s.fc.initial_rate_deg_s.unwrap();
+        assert!((1.0..=9.0).contains(&rate), "{rate}");
+        assert_eq!(r5.draws["fc.initial_rate_deg_s"], rate.to_string());
+        assert!(
+            r5.text
+                .contains(&format!("at = {}", r5.draws["faults[0].at"]))
+        );
+        assert_eq!(s.seed, r5.seed);
+    }
+
+    #[test]
+    fn distributions_stay_in_their_range_and_keep_their_kind() {
+        let mut rng = stream(1, 2, "x");
+        let u = Dist::parse(&toml::Value::from(toml::toml! { uniform = [3, 5] }.clone())).unwrap();
+        let n = Dist::parse(&toml::Value::Table(toml::toml! { normal = [0.5, 0.3]
+        min = 0.0
+        max = 1.0 }))
+        .unwrap();
+        let c = Dist::parse(&toml::Value::Table(toml::toml! { choice = ["a", "b"]
+        weights = [0, 1] }))
+        .unwrap();
+        let d = Dist::parse(&toml::Value::Table(toml::toml! { uniform = ["1s", "2s"] })).unwrap();
+        for _ in 0..500 {
+            let i = u.sample(&mut rng).as_integer().unwrap();
+            assert!((3..=5).contains(&i));
+            let x = n.sample(&mut rng).as_float().unwrap();
+            assert!((0.0..=1.0).contains(&x));
+            assert_eq!(c.sample(&mut rng).as_str(), Some("b"));
+            let ms = d.sample(&mut rng);
+            let ms = crate::duration::parse_duration(ms.as_str().unwrap()).unwrap();
+            assert!(ms.as_millis() >= 1000 && ms.as_millis() <= 2000);
+        }
+    }
+
+    #[test]
+    fn bad_campaigns_name_the_file_line_and_field() {
+        let e = campaign("[dispersions]\n\"fc.initial_rate_deg_s\" = { uniform = [9.0, 1.0] }\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("c.toml:4:"), "{e}");
+        assert!(
+            e.contains("dispersions.fc.initial_rate_deg_s") && e.contains("above"),
+            "{e}"
+        );
+        let e = campaign("[dispersions]\n\"faults[3].at\" = { uniform = [\"1s\", \"2s\"] }\n")
+            .unwrap()
+            .resolve(0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("c.toml:4:") && e.contains("1 entries"), "{e}");
+        // A draw that makes the scenario invalid (the FC's rate is 0-360 deg/s).
+        let e =
+            campaign("[dispersions]\n\"fc.initial_rate_deg_s\" = { uniform = [300.0, 900.0] }\n")
+                .unwrap()
+                .check(20)
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("c.toml:4:") && e.contains("0-360"), "{e}");
+        let e = campaign("bogus = 1\n").unwrap_err().to_string();
+        assert!(e.contains("c.toml:3:") && e.contains("bogus"), "{e}");
+        let e = campaign("[dispersions]\n\"fc.initial_rate_deg_s\" = { normal = [1.0, -1.0] }\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("standard deviation"), "{e}");
+    }
+
+    #[test]
+    fn the_fault_catalogue_draws_distinct_entries_with_their_values() {
+        let c = campaign(
+            r#"
+[faults]
+draw = 2
+
+[[faults.catalogue]]
+kind = "clock"
+target = "FC"
+at = { uniform = ["1s", "5s"] }
+until = "50s"
+jump_s = { choice = [10, 20] }
+
+[[faults.catalogue]]
+kind = "clock"
+target = "EPS"
+at = "2s"
+until = "3s"
+jump_s = 5
+
+[[faults.catalogue]]
+kind = "clock"
+target = "PC"
+at = "2s"
+until = "3s"
+jump_s = 5
+"#,
+        )
+        .unwrap();
+        for k in 0..20 {
+            let r = c.resolve(k).unwrap();
+            let s = Scenario::parse("r", &r.text).unwrap();
+            // The base's fault and two drawn ones.
+            assert_eq!(s.faults.len(), 3, "{}", r.text);
+            let kinds: Vec<&str> = r.draws["faults"].split(' ').collect();
+            assert_eq!(kinds.len(), 2);
+            assert_ne!(kinds[0], kinds[1]);
+        }
+        let e = campaign("[faults]\ndraw = 2\n[[faults.catalogue]]\nkind = \"clock\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("faults.draw") && e.contains("catalogue of 1"),
+            "{e}"
+        );
+    }
+
+    /// Every shipped campaign parses and every run of it resolves to a valid scenario.
+    #[test]
+    fn shipped_campaigns_check() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../campaigns");
+        let mut n = 0;
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().is_some_and(|x| x == "toml") {
+                let c = Campaign::load(&path).unwrap();
+                c.check(c.spec.runs).unwrap();
+                n += 1;
+            }
+        }
+        assert!(n >= 1);
+    }
+}

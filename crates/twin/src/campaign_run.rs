@@ -1,0 +1,329 @@
+//! Running a campaign ([`crate::campaign`]): its runs in parallel on J threads, each a
+//! virtual-time run of its resolved scenario, and the files a CI pipeline reads: a CSV row
+//! and a JUnit test case per run, and a scenario file per failure that `m6p-twin test`
+//! reproduces.
+//!
+//! What a row holds depends only on the campaign and the run's index (no wall-clock time,
+//! no thread), so the rows of any subset of the runs are those of the whole campaign.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use anyhow::Context as _;
+
+use crate::campaign::Campaign;
+use crate::exec;
+use crate::scenario::Scenario;
+
+/// How a run ended.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub enum RunVerdict {
+    /// Every expectation held.
+    Pass,
+    /// Expectations failed: their names and what was observed.
+    Fail(Vec<(String, String)>),
+    /// The run could not run or crashed: why.
+    Error(String),
+}
+
+impl RunVerdict {
+    /// `pass`, `fail` or `error`.
+    pub fn word(&self) -> &'static str {
+        match self {
+            RunVerdict::Pass => "pass",
+            RunVerdict::Fail(_) => "fail",
+            RunVerdict::Error(_) => "error",
+        }
+    }
+}
+
+/// One run's row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunRow {
+    /// The run's index.
+    pub run: u64,
+    /// The run's scenario seed.
+    pub seed: u64,
+    /// What was drawn, by path.
+    pub draws: BTreeMap<String, String>,
+    /// How it ended.
+    pub verdict: RunVerdict,
+    /// The resolved scenario (written out for failures).
+    pub scenario: String,
+}
+
+/// Run run `k` of `c`: resolve, compile, run in virtual time, check. A panic inside the
+/// run is caught and becomes the row's error.
+pub fn run_one(c: &Campaign, k: u64) -> RunRow {
+    let r = match c.resolve(k) {
+        Ok(r) => r,
+        Err(e) => {
+            return RunRow {
+                run: k,
+                seed: 0,
+                draws: BTreeMap::new(),
+                verdict: RunVerdict::Error(e.to_string()),
+                scenario: String::new(),
+            };
+        }
+    };
+    let file = format!("{} run {k}", c.file);
+    let outcome = std::panic::catch_unwind(|| -> anyhow::Result<exec::Outcome> {
+        let scenario = Scenario::parse(&file, &r.text)?;
+        let loaded = exec::Loaded {
+            file: file.clone(),
+            text: r.text.clone(),
+            scenario,
+        };
+        let compiled = exec::compile_seeded(&loaded, None);
+        let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
+        rt.block_on(exec::execute(compiled, &mut |_| {}))
+    });
+    let verdict = match outcome {
+        Ok(Ok(o)) if o.passed() => RunVerdict::Pass,
+        Ok(Ok(o)) => RunVerdict::Fail(
+            o.verdicts
+                .iter()
+                .filter(|v| !v.passed)
+                .map(|v| (v.name.clone(), format!("t = {}: {}", v.t, v.observed)))
+                .collect(),
+        ),
+        Ok(Err(e)) => RunVerdict::Error(format!("{e:#}")),
+        Err(p) => RunVerdict::Error(format!(
+            "panicked: {}",
+            p.downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| p.downcast_ref::<&str>().copied())
+                .unwrap_or("(no message)")
+        )),
+    };
+    RunRow {
+        run: k,
+        seed: r.seed,
+        draws: r.draws,
+        verdict,
+        scenario: r.text,
+    }
+}
+
+/// Run `runs` (indices) of `c` on `jobs` threads; `done` is called after each run. The rows
+/// come back in index order.
+pub fn run_all(
+    c: &Campaign,
+    runs: &[u64],
+    jobs: usize,
+    done: &(dyn Fn(&RunRow) + Sync),
+) -> Vec<RunRow> {
+    let next = AtomicUsize::new(0);
+    let rows = Mutex::new(Vec::with_capacity(runs.len()));
+    std::thread::scope(|s| {
+        for _ in 0..jobs.clamp(1, runs.len().max(1)) {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&k) = runs.get(i) else { break };
+                    let row = run_one(c, k);
+                    done(&row);
+                    rows.lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .push(row);
+                }
+            });
+        }
+    });
+    let mut rows = rows
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    rows.sort_by_key(|r| r.run);
+    rows
+}
+
+/// A CSV cell: quoted when it needs to be.
+fn cell(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_owned()
+    }
+}
+
+/// `results.csv`: run, seed, every drawn value (one column per path), verdict, the failed
+/// expectations (or the error).
+pub fn results_csv(rows: &[RunRow]) -> String {
+    let mut cols: Vec<&String> = rows.iter().flat_map(|r| r.draws.keys()).collect();
+    cols.sort();
+    cols.dedup();
+    let mut out = String::from("run,seed");
+    for c in &cols {
+        out.push(',');
+        out.push_str(&cell(c));
+    }
+    out.push_str(",verdict,failed\n");
+    for r in rows {
+        out.push_str(&format!("{},{}", r.run, r.seed));
+        for c in &cols {
+            out.push(',');
+            out.push_str(&cell(r.draws.get(*c).map_or("", String::as_str)));
+        }
+        let failed = match &r.verdict {
+            RunVerdict::Pass => String::new(),
+            RunVerdict::Fail(f) => f
+                .iter()
+                .map(|(n, _)| n.as_str())
+                .collect::<Vec<_>>()
+                .join("; "),
+            RunVerdict::Error(e) => e.clone(),
+        };
+        out.push_str(&format!(",{},{}\n", r.verdict.word(), cell(&failed)));
+    }
+    out
+}
+
+/// `junit.xml`: one test case per run.
+pub fn junit(name: &str, rows: &[RunRow]) -> anyhow::Result<String> {
+    use quick_junit::{NonSuccessKind, Report, TestCase, TestCaseStatus, TestSuite};
+    let mut suite = TestSuite::new(name);
+    for r in rows {
+        let status = match &r.verdict {
+            RunVerdict::Pass => TestCaseStatus::success(),
+            RunVerdict::Fail(f) => {
+                let mut st = TestCaseStatus::non_success(NonSuccessKind::Failure);
+                st.set_message(
+                    f.iter()
+                        .map(|(n, o)| format!("{n}: {o}"))
+                        .collect::<Vec<_>>()
+                        .join("\n"),
+                );
+                st
+            }
+            RunVerdict::Error(e) => {
+                let mut st = TestCaseStatus::non_success(NonSuccessKind::Error);
+                st.set_message(e.clone());
+                st
+            }
+        };
+        let mut case = TestCase::new(format!("run {}", r.run), status);
+        case.set_classname(name);
+        case.set_system_out(
+            r.draws
+                .iter()
+                .map(|(p, v)| format!("{p} = {v}"))
+                .collect::<Vec<_>>()
+                .join("\n"),
+        );
+        suite.add_test_case(case);
+    }
+    let mut report = Report::new(name);
+    report.add_test_suite(suite);
+    report.to_string().context("writing the JUnit report")
+}
+
+/// Write `results.csv`, `junit.xml` and `failures/run-<k>.toml` (one per failed or errored
+/// run: the complete scenario, with a header saying where it comes from) into `dir`.
+pub fn write_outputs(c: &Campaign, rows: &[RunRow], dir: &Path) -> anyhow::Result<()> {
+    let ctx = |what: &str| format!("writing {what} in {}", dir.display());
+    std::fs::create_dir_all(dir).with_context(|| ctx("the output directory"))?;
+    std::fs::write(dir.join("results.csv"), results_csv(rows))
+        .with_context(|| ctx("results.csv"))?;
+    std::fs::write(dir.join("junit.xml"), junit(&c.name(), rows)?)
+        .with_context(|| ctx("junit.xml"))?;
+    let failures = dir.join("failures");
+    for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
+        if r.scenario.is_empty() {
+            continue;
+        }
+        std::fs::create_dir_all(&failures).with_context(|| ctx("failures/"))?;
+        let head = format!(
+            "# Run {} of campaign {} (seed {}), {}: every draw resolved.\n# Reproduce: m6p-twin test failures/run-{}.toml\n",
+            r.run,
+            c.file,
+            c.spec.seed,
+            r.verdict.word(),
+            r.run
+        );
+        std::fs::write(
+            failures.join(format!("run-{}.toml", r.run)),
+            format!("{head}{}", r.scenario),
+        )
+        .with_context(|| ctx("a failure file"))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// `tests/data/campaign-ping.toml`: runs pass or fail by a drawn ping time.
+    fn campaign() -> Campaign {
+        Campaign::parse("c.toml", include_str!("../tests/data/campaign-ping.toml")).unwrap()
+    }
+
+    #[test]
+    fn rows_do_not_depend_on_the_threads_or_the_subset() {
+        let c = campaign();
+        let all: Vec<u64> = (0..6).collect();
+        let one = run_all(&c, &all, 1, &|_| {});
+        let two = run_all(&c, &all, 2, &|_| {});
+        assert_eq!(one, two);
+        let odd = run_all(&c, &[1, 3, 5], 2, &|_| {});
+        assert_eq!(
+            odd,
+            one.iter()
+                .filter(|r| r.run % 2 == 1)
+                .cloned()
+                .collect::<Vec<_>>()
+        );
+        // A ping at 5 s in a 2 s run is never answered: those runs fail, the others pass.
+        for r in &one {
+            let late = r.draws["commands[0].at"] == "\"5s\"";
+            assert_eq!(r.verdict != RunVerdict::Pass, late, "{r:?}");
+        }
+        assert!(one.iter().any(|r| r.verdict == RunVerdict::Pass));
+        assert!(one.iter().any(|r| r.verdict != RunVerdict::Pass));
+    }
+
+    #[test]
+    fn outputs_have_a_row_and_a_case_per_run_and_a_file_per_failure() {
+        let c = campaign();
+        let rows = run_all(&c, &(0..6).collect::<Vec<_>>(), 2, &|_| {});
+        let dir = std::env::temp_dir().join(format!("m6p-campaign-{}", std::process::id()));
+        write_outputs(&c, &rows, &dir).unwrap();
+        let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 7, "{csv}");
+        assert!(
+            csv.starts_with("run,seed,commands[0].at,verdict,failed\n"),
+            "{csv}"
+        );
+        let junit = std::fs::read_to_string(dir.join("junit.xml")).unwrap();
+        assert_eq!(junit.matches("<testcase").count(), 6);
+        let failed: Vec<_> = rows
+            .iter()
+            .filter(|r| r.verdict != RunVerdict::Pass)
+            .collect();
+        for r in &failed {
+            let f = dir.join(format!("failures/run-{}.toml", r.run));
+            let text = std::fs::read_to_string(&f).unwrap();
+            // The failure file is a scenario that fails the same way on its own.
+            let s = Scenario::parse("f", &text).unwrap();
+            assert_eq!(s.seed, r.seed);
+            let loaded = exec::Loaded {
+                file: "f".into(),
+                text: text.clone(),
+                scenario: s,
+            };
+            let compiled = exec::compile_seeded(&loaded, None);
+            let rt = crate::runtime::build_runtime(compiled.opts.clock).unwrap();
+            let o = rt.block_on(exec::execute(compiled, &mut |_| {})).unwrap();
+            assert!(!o.passed());
+        }
+        assert_eq!(
+            std::fs::read_dir(dir.join("failures")).unwrap().count(),
+            failed.len()
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
