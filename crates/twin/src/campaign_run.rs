@@ -1,5 +1,6 @@
 //! Running a campaign ([`crate::campaign`]): its runs in parallel on J threads, each a
-//! virtual-time run of its resolved scenario, and the files a CI pipeline reads: a CSV row
+//! virtual-time run of its resolved scenario checked against its expectations and the
+//! [`crate::invariants`], and the files a CI pipeline reads: a CSV row
 //! and a JUnit test case per run, and a scenario file per failure that `m6p-twin test`
 //! reproduces.
 //!
@@ -15,6 +16,7 @@ use anyhow::Context as _;
 
 use crate::campaign::Campaign;
 use crate::exec;
+use crate::invariants::{Invariants, Violation};
 use crate::scenario::Scenario;
 
 /// How a run ended.
@@ -70,24 +72,38 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
         }
     };
     let file = format!("{} run {k}", c.file);
-    let outcome = std::panic::catch_unwind(|| -> anyhow::Result<exec::Outcome> {
-        let scenario = Scenario::parse(&file, &r.text)?;
-        let loaded = exec::Loaded {
-            file: file.clone(),
-            text: r.text.clone(),
-            scenario,
-        };
-        let compiled = exec::compile_seeded(&loaded, None);
-        let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
-        rt.block_on(exec::execute(compiled, &mut |_| {}))
-    });
+    let outcome =
+        std::panic::catch_unwind(|| -> anyhow::Result<(exec::Outcome, Vec<Violation>)> {
+            let scenario = Scenario::parse(&file, &r.text)?;
+            let loaded = exec::Loaded {
+                file: file.clone(),
+                text: r.text.clone(),
+                scenario,
+            };
+            let compiled = exec::compile_seeded(&loaded, None);
+            let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
+            let mut inv = Invariants::default();
+            let o = rt.block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))?;
+            let broken = inv.finish(&o.report);
+            Ok((o, broken))
+        });
     let verdict = match outcome {
-        Ok(Ok(o)) if o.passed() => RunVerdict::Pass,
-        Ok(Ok(o)) => RunVerdict::Fail(
-            o.verdicts
+        Ok(Ok((o, broken))) if o.passed() && broken.is_empty() => RunVerdict::Pass,
+        Ok(Ok((o, broken))) => RunVerdict::Fail(
+            broken
                 .iter()
-                .filter(|v| !v.passed)
-                .map(|v| (v.name.clone(), format!("t = {}: {}", v.t, v.observed)))
+                .map(|v| {
+                    (
+                        format!("invariant {}", v.name),
+                        format!("t = {}: {}", v.t, v.detail),
+                    )
+                })
+                .chain(
+                    o.verdicts
+                        .iter()
+                        .filter(|v| !v.passed)
+                        .map(|v| (v.name.clone(), format!("t = {}: {}", v.t, v.observed))),
+                )
                 .collect(),
         ),
         Ok(Err(e)) => RunVerdict::Error(format!("{e:#}")),

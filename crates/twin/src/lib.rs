@@ -23,6 +23,7 @@ pub mod expectations;
 pub mod faults;
 pub mod ground;
 pub mod gs;
+pub mod invariants;
 #[cfg(feature = "live")]
 pub mod live;
 pub mod network;
