@@ -12,7 +12,8 @@ use std::path::Path;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use anyhow::Context as _;
+use anyhow::{Context as _, bail};
+use serde::{Deserialize, Serialize};
 
 use crate::campaign::Campaign;
 use crate::exec;
@@ -20,7 +21,8 @@ use crate::invariants::{Invariants, Violation};
 use crate::scenario::Scenario;
 
 /// How a run ended.
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum RunVerdict {
     /// Every expectation held.
     Pass,
@@ -42,7 +44,7 @@ impl RunVerdict {
 }
 
 /// One run's row.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunRow {
     /// The run's index.
     pub run: u64,
@@ -52,7 +54,8 @@ pub struct RunRow {
     pub draws: BTreeMap<String, String>,
     /// How it ended.
     pub verdict: RunVerdict,
-    /// The resolved scenario (written out for failures).
+    /// The resolved scenario (written out for failures; `rows.jsonl` keeps it for them only).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub scenario: String,
 }
 
@@ -236,14 +239,112 @@ pub fn junit(name: &str, rows: &[RunRow]) -> anyhow::Result<String> {
     report.to_string().context("writing the JUnit report")
 }
 
-/// Write `results.csv`, `junit.xml` and `failures/run-<k>.toml` (one per failed or errored
-/// run: the complete scenario, with a header saying where it comes from) into `dir`.
-pub fn write_outputs(c: &Campaign, rows: &[RunRow], dir: &Path) -> anyhow::Result<()> {
+/// What the output files say about their campaign (`campaign.json`): shards of one
+/// campaign agree on it, and `merge` checks that they do.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CampaignMeta {
+    /// The campaign's name.
+    pub name: String,
+    /// Its file, as given.
+    pub file: String,
+    /// Its seed.
+    pub seed: u64,
+    /// Runs 0..runs were asked for (over all shards).
+    pub runs: u64,
+}
+
+impl CampaignMeta {
+    /// The meta of `c` asked for `runs` runs.
+    pub fn of(c: &Campaign, runs: u64) -> CampaignMeta {
+        CampaignMeta {
+            name: c.name(),
+            file: c.file.clone(),
+            seed: c.spec.seed,
+            runs,
+        }
+    }
+}
+
+/// Which runs a shard takes: those whose index modulo `count` is `index`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    /// This shard, 0-based.
+    pub index: u64,
+    /// How many shards.
+    pub count: u64,
+}
+
+impl Shard {
+    /// `I/N`.
+    pub fn parse(s: &str) -> Result<Shard, String> {
+        let (i, n) = s
+            .split_once('/')
+            .ok_or_else(|| format!("`{s}`: expected I/N, for example 0/4"))?;
+        let index = i
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{s}`: `{i}` is not a number"))?;
+        let count = n
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{s}`: `{n}` is not a number"))?;
+        if count == 0 || index >= count {
+            return Err(format!(
+                "`{s}`: the index must be below the count (0/4 .. 3/4)"
+            ));
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// The shard a cluster engine gives this process through the environment (`get` reads
+    /// a variable): a Slurm job array (`SLURM_ARRAY_TASK_ID`, `SLURM_ARRAY_TASK_COUNT`), or a
+    /// Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`, and the count in `JOB_COMPLETIONS`,
+    /// which the Job's manifest sets from its `completions`). `None` when neither is set.
+    pub fn from_env(get: impl Fn(&str) -> Option<String>) -> Result<Option<Shard>, String> {
+        for (i, n) in [
+            ("SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT"),
+            ("JOB_COMPLETION_INDEX", "JOB_COMPLETIONS"),
+        ] {
+            if let Some(index) = get(i) {
+                let count = get(n).ok_or_else(|| format!("{i} is set but {n} is not"))?;
+                return Shard::parse(&format!("{index}/{count}"))
+                    .map(Some)
+                    .map_err(|e| format!("from {i} and {n}: {e}"));
+            }
+        }
+        Ok(None)
+    }
+
+    /// This shard's run indices among 0..runs.
+    pub fn runs(self, runs: u64) -> Vec<u64> {
+        (self.index..runs).step_by(self.count as usize).collect()
+    }
+}
+
+/// Write `campaign.json`, `rows.jsonl` (every row, for `merge`), `results.csv`, `junit.xml`
+/// and `failures/run-<k>.toml` (one per failed or errored run: the complete scenario, with a
+/// header saying where it comes from) into `dir`.
+pub fn write_outputs(meta: &CampaignMeta, rows: &[RunRow], dir: &Path) -> anyhow::Result<()> {
     let ctx = |what: &str| format!("writing {what} in {}", dir.display());
     std::fs::create_dir_all(dir).with_context(|| ctx("the output directory"))?;
+    std::fs::write(
+        dir.join("campaign.json"),
+        serde_json::to_string_pretty(meta)? + "\n",
+    )
+    .with_context(|| ctx("campaign.json"))?;
+    let mut jsonl = String::new();
+    for r in rows {
+        let mut r = r.clone();
+        if r.verdict == RunVerdict::Pass {
+            r.scenario.clear();
+        }
+        jsonl.push_str(&serde_json::to_string(&r)?);
+        jsonl.push('\n');
+    }
+    std::fs::write(dir.join("rows.jsonl"), jsonl).with_context(|| ctx("rows.jsonl"))?;
     std::fs::write(dir.join("results.csv"), results_csv(rows))
         .with_context(|| ctx("results.csv"))?;
-    std::fs::write(dir.join("junit.xml"), junit(&c.name(), rows)?)
+    std::fs::write(dir.join("junit.xml"), junit(&meta.name, rows)?)
         .with_context(|| ctx("junit.xml"))?;
     let failures = dir.join("failures");
     for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
@@ -254,8 +355,8 @@ pub fn write_outputs(c: &Campaign, rows: &[RunRow], dir: &Path) -> anyhow::Resul
         let head = format!(
             "# Run {} of campaign {} (seed {}), {}: every draw resolved.\n# Reproduce: m6p-twin test failures/run-{}.toml\n",
             r.run,
-            c.file,
-            c.spec.seed,
+            meta.file,
+            meta.seed,
             r.verdict.word(),
             r.run
         );
@@ -266,6 +367,54 @@ pub fn write_outputs(c: &Campaign, rows: &[RunRow], dir: &Path) -> anyhow::Resul
         .with_context(|| ctx("a failure file"))?;
     }
     Ok(())
+}
+
+/// Combine the outputs of shards (`dirs`) into `out`: the same files one unsharded run
+/// writes. The shards must be of one campaign and must not share a run; runs missing from
+/// all of them are named.
+pub fn merge(
+    dirs: &[std::path::PathBuf],
+    out: &Path,
+) -> anyhow::Result<(CampaignMeta, Vec<RunRow>)> {
+    let mut meta: Option<CampaignMeta> = None;
+    let mut rows: BTreeMap<u64, RunRow> = BTreeMap::new();
+    for d in dirs {
+        let m: CampaignMeta = serde_json::from_str(
+            &std::fs::read_to_string(d.join("campaign.json"))
+                .with_context(|| format!("reading {}/campaign.json", d.display()))?,
+        )
+        .with_context(|| format!("{}/campaign.json", d.display()))?;
+        match &meta {
+            Some(first) if *first != m => bail!(
+                "{} is from another campaign: {m:?}, not {first:?}",
+                d.display()
+            ),
+            _ => meta = Some(m),
+        }
+        let text = std::fs::read_to_string(d.join("rows.jsonl"))
+            .with_context(|| format!("reading {}/rows.jsonl", d.display()))?;
+        for (i, line) in text.lines().enumerate() {
+            let r: RunRow = serde_json::from_str(line)
+                .with_context(|| format!("{}/rows.jsonl:{}", d.display(), i + 1))?;
+            if rows.contains_key(&r.run) {
+                bail!("run {} is in two shards (again in {})", r.run, d.display());
+            }
+            rows.insert(r.run, r);
+        }
+    }
+    let meta = meta.context("nothing to merge")?;
+    let missing: Vec<u64> = (0..meta.runs).filter(|k| !rows.contains_key(k)).collect();
+    if !missing.is_empty() {
+        bail!(
+            "{} of {} runs are in no shard (first: {:?})",
+            missing.len(),
+            meta.runs,
+            &missing[..missing.len().min(10)]
+        );
+    }
+    let rows: Vec<RunRow> = rows.into_values().collect();
+    write_outputs(&meta, &rows, out)?;
+    Ok((meta, rows))
 }
 
 #[cfg(test)]
@@ -307,7 +456,7 @@ mod tests {
         let c = campaign();
         let rows = run_all(&c, &(0..6).collect::<Vec<_>>(), 2, &|_| {});
         let dir = std::env::temp_dir().join(format!("m6p-campaign-{}", std::process::id()));
-        write_outputs(&c, &rows, &dir).unwrap();
+        write_outputs(&CampaignMeta::of(&c, 6), &rows, &dir).unwrap();
         let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
         assert_eq!(csv.lines().count(), 7, "{csv}");
         assert!(
@@ -341,5 +490,81 @@ mod tests {
             failed.len()
         );
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn two_shards_merged_are_the_unsharded_run() {
+        let c = campaign();
+        let meta = CampaignMeta::of(&c, 6);
+        let base = std::env::temp_dir().join(format!("m6p-campaign-shards-{}", std::process::id()));
+        let whole = run_all(&c, &(0..6).collect::<Vec<_>>(), 2, &|_| {});
+        write_outputs(&meta, &whole, &base.join("whole")).unwrap();
+        let mut dirs = Vec::new();
+        for i in 0..2 {
+            let shard = Shard { index: i, count: 2 };
+            let rows = run_all(&c, &shard.runs(6), 1, &|_| {});
+            let d = base.join(format!("shard-{i}"));
+            write_outputs(&meta, &rows, &d).unwrap();
+            dirs.push(d);
+        }
+        let (_, merged) = merge(&dirs, &base.join("merged")).unwrap();
+        assert_eq!(
+            merged,
+            whole
+                .iter()
+                .map(|r| {
+                    let mut r = r.clone();
+                    if r.verdict == RunVerdict::Pass {
+                        r.scenario.clear();
+                    }
+                    r
+                })
+                .collect::<Vec<_>>()
+        );
+        for f in ["results.csv", "junit.xml", "campaign.json", "rows.jsonl"] {
+            assert_eq!(
+                std::fs::read(base.join("whole").join(f)).unwrap(),
+                std::fs::read(base.join("merged").join(f)).unwrap(),
+                "{f}"
+            );
+        }
+        // A shard missing, or given twice, is an error naming it.
+        let e = merge(&dirs[..1], &base.join("m2")).unwrap_err().to_string();
+        assert!(e.contains("3 of 6 runs are in no shard"), "{e}");
+        let e = merge(&[dirs[0].clone(), dirs[0].clone()], &base.join("m3"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("in two shards"), "{e}");
+        std::fs::remove_dir_all(&base).ok();
+    }
+
+    #[test]
+    fn shards_come_from_the_flag_or_the_cluster_engine() {
+        assert_eq!(Shard::parse("1/4"), Ok(Shard { index: 1, count: 4 }));
+        assert!(Shard::parse("4/4").is_err() && Shard::parse("1").is_err());
+        assert_eq!(Shard { index: 1, count: 4 }.runs(10), [1, 5, 9]);
+        let env = |vars: &'static [(&'static str, &'static str)]| {
+            move |k: &str| {
+                vars.iter()
+                    .find(|(n, _)| *n == k)
+                    .map(|(_, v)| (*v).to_owned())
+            }
+        };
+        assert_eq!(
+            Shard::from_env(env(&[
+                ("SLURM_ARRAY_TASK_ID", "2"),
+                ("SLURM_ARRAY_TASK_COUNT", "4")
+            ])),
+            Ok(Some(Shard { index: 2, count: 4 }))
+        );
+        assert_eq!(
+            Shard::from_env(env(&[
+                ("JOB_COMPLETION_INDEX", "0"),
+                ("JOB_COMPLETIONS", "3")
+            ])),
+            Ok(Some(Shard { index: 0, count: 3 }))
+        );
+        assert!(Shard::from_env(env(&[("JOB_COMPLETION_INDEX", "0")])).is_err());
+        assert_eq!(Shard::from_env(env(&[])), Ok(None));
     }
 }

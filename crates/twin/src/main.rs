@@ -170,6 +170,15 @@ enum CampaignCmd {
     /// Run a campaign: results.csv, junit.xml and failures/run-<k>.toml in --out; exit 1
     /// when a run failed.
     Run(CampaignRunArgs),
+    /// Combine shards' output directories into the files one unsharded run writes.
+    Merge {
+        /// The shards' output directories.
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Where the combined results go.
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Debug, clap::Args)]
@@ -182,6 +191,10 @@ struct CampaignRunArgs {
     /// Parallel runs [default: the machine's cores].
     #[arg(long)]
     jobs: Option<usize>,
+    /// Run only the runs whose index modulo N is I [default: from SLURM_ARRAY_TASK_ID and
+    /// SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX and JOB_COMPLETIONS, when set].
+    #[arg(long, value_name = "I/N")]
+    shard: Option<String>,
     /// Where the results go.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -319,6 +332,7 @@ fn main() -> ExitCode {
         Command::Check { files } => cmd_check(&files),
         Command::Schema { campaign } => cmd_schema(campaign),
         Command::Campaign(CampaignCmd::Run(a)) => cmd_campaign_run(a),
+        Command::Campaign(CampaignCmd::Merge { dirs, out }) => cmd_campaign_merge(&dirs, &out),
         Command::Inspect { file, csv } => cmd_inspect(&file, csv.as_deref()),
         Command::Diff { a, b } => cmd_diff(&a, &b),
         Command::Replay(a) => cmd_replay(a),
@@ -745,9 +759,15 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
         .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
         .max(1);
-    let indices: Vec<u64> = (0..runs).collect();
+    let shard = match &a.shard {
+        Some(s) => Some(campaign_run::Shard::parse(s).map_err(anyhow::Error::msg)?),
+        None => {
+            campaign_run::Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?
+        }
+    };
+    let indices: Vec<u64> = shard.map_or_else(|| (0..runs).collect(), |s| s.runs(runs));
     let bar = if std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() {
-        let b = indicatif::ProgressBar::new(runs);
+        let b = indicatif::ProgressBar::new(indices.len() as u64);
         b.set_style(
             indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} runs, {msg} [{elapsed}]")
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
@@ -767,15 +787,18 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     });
     bar.finish_and_clear();
     let wall = started.elapsed().as_secs_f64();
-    campaign_run::write_outputs(&c, &rows, &a.out)?;
+    campaign_run::write_outputs(&campaign_run::CampaignMeta::of(&c, runs), &rows, &a.out)?;
     let mut by_verdict = std::collections::BTreeMap::<&str, u64>::new();
     for r in &rows {
         *by_verdict.entry(r.verdict.word()).or_default() += 1;
     }
+    let shard_note =
+        shard.map_or_else(String::new, |s| format!(" (shard {}/{})", s.index, s.count));
     println!(
-        "campaign {}: {runs} runs on {jobs} jobs in {wall:.1} s ({:.2} runs/s): {} pass, {} fail, {} error",
+        "campaign {}{shard_note}: {} runs on {jobs} jobs in {wall:.1} s ({:.2} runs/s): {} pass, {} fail, {} error",
         c.name(),
-        runs as f64 / wall.max(1e-9),
+        rows.len(),
+        rows.len() as f64 / wall.max(1e-9),
         by_verdict.get("pass").unwrap_or(&0),
         by_verdict.get("fail").unwrap_or(&0),
         by_verdict.get("error").unwrap_or(&0),
@@ -794,6 +817,23 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     }
     println!("results in {}", a.out.display());
     Ok(rows.iter().all(|r| r.verdict == RunVerdict::Pass))
+}
+
+fn cmd_campaign_merge(dirs: &[PathBuf], out: &std::path::Path) -> anyhow::Result<bool> {
+    use m6p_twin::campaign_run::{self, RunVerdict};
+    let (meta, rows) = campaign_run::merge(dirs, out)?;
+    let failed = rows
+        .iter()
+        .filter(|r| r.verdict != RunVerdict::Pass)
+        .count();
+    println!(
+        "campaign {}: {} runs from {} shards, {failed} not passed; results in {}",
+        meta.name,
+        rows.len(),
+        dirs.len(),
+        out.display()
+    );
+    Ok(failed == 0)
 }
 
 fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
