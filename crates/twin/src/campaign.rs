@@ -470,6 +470,20 @@ impl Campaign {
                 (t, shown)
             }
         };
+        if base
+            .get("links")
+            .and_then(toml::Value::as_array)
+            .is_some_and(|l| !l.is_empty())
+        {
+            errors.push(err_at(
+                file,
+                text,
+                "scenario",
+                format!(
+                    "{base_file} has outside links: campaign runs are headless, in virtual time"
+                ),
+            ));
+        }
         let mut dists = BTreeMap::new();
         for (k, v) in &spec.dispersions {
             let field = format!("dispersions.{k}");

@@ -74,23 +74,37 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
             };
         }
     };
-    let file = format!("{} run {k}", c.file);
+    let verdict = run_text(&format!("{} run {k}", c.file), &r.text);
+    RunRow {
+        run: k,
+        seed: r.seed,
+        draws: r.draws,
+        verdict,
+        scenario: r.text,
+    }
+}
+
+/// Run one complete scenario (`file` names it in errors) in virtual time and judge it:
+/// its expectations and the invariants. A panic inside the run is caught and becomes the
+/// error.
+pub fn run_text(file: &str, text: &str) -> RunVerdict {
     let outcome =
         std::panic::catch_unwind(|| -> anyhow::Result<(exec::Outcome, Vec<Violation>)> {
-            let scenario = Scenario::parse(&file, &r.text)?;
+            let scenario = Scenario::parse(file, text)?;
             let loaded = exec::Loaded {
-                file: file.clone(),
-                text: r.text.clone(),
+                file: file.to_owned(),
+                text: text.to_owned(),
                 scenario,
             };
-            let compiled = exec::compile_seeded(&loaded, None);
+            let mut compiled = exec::compile_seeded(&loaded, None);
+            compiled.opts.clock = bus::ClockMode::Virtual;
             let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
             let mut inv = Invariants::default();
             let o = rt.block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))?;
             let broken = inv.finish(&o.report);
             Ok((o, broken))
         });
-    let verdict = match outcome {
+    match outcome {
         Ok(Ok((o, broken))) if o.passed() && broken.is_empty() => RunVerdict::Pass,
         Ok(Ok((o, broken))) => RunVerdict::Fail(
             broken
@@ -117,13 +131,6 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
                 .or_else(|| p.downcast_ref::<&str>().copied())
                 .unwrap_or("(no message)")
         )),
-    };
-    RunRow {
-        run: k,
-        seed: r.seed,
-        draws: r.draws,
-        verdict,
-        scenario: r.text,
     }
 }
 

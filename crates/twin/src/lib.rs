@@ -11,6 +11,7 @@
 pub mod adcs;
 pub mod campaign;
 pub mod campaign_run;
+pub mod campaign_shrink;
 pub mod can;
 pub mod comm;
 pub mod commands;

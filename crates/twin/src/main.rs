@@ -170,6 +170,18 @@ enum CampaignCmd {
     /// Run a campaign: results.csv, junit.xml and failures/run-<k>.toml in --out; exit 1
     /// when a run failed.
     Run(CampaignRunArgs),
+    /// Shrink a failing scenario (a campaign's failures/run-<k>.toml): remove faults, narrow
+    /// their windows and move drawn values back to the base while it still fails.
+    Shrink {
+        /// The failing scenario.
+        file: PathBuf,
+        /// The campaign it came from (its base scenario is where values move back to).
+        #[arg(long, value_name = "CAMPAIGN")]
+        campaign: Option<PathBuf>,
+        /// Where the smallest failing scenario goes.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+    },
     /// Combine shards' output directories into the files one unsharded run writes.
     Merge {
         /// The shards' output directories.
@@ -191,6 +203,9 @@ struct CampaignRunArgs {
     /// Parallel runs [default: the machine's cores].
     #[arg(long)]
     jobs: Option<usize>,
+    /// Also shrink every failure (failures/run-<k>.min.toml).
+    #[arg(long)]
+    shrink: bool,
     /// Run only the runs whose index modulo N is I [default: from SLURM_ARRAY_TASK_ID and
     /// SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX and JOB_COMPLETIONS, when set].
     #[arg(long, value_name = "I/N")]
@@ -333,6 +348,11 @@ fn main() -> ExitCode {
         Command::Schema { campaign } => cmd_schema(campaign),
         Command::Campaign(CampaignCmd::Run(a)) => cmd_campaign_run(a),
         Command::Campaign(CampaignCmd::Merge { dirs, out }) => cmd_campaign_merge(&dirs, &out),
+        Command::Campaign(CampaignCmd::Shrink {
+            file,
+            campaign,
+            out,
+        }) => cmd_campaign_shrink(&file, campaign.as_deref(), &out),
         Command::Inspect { file, csv } => cmd_inspect(&file, csv.as_deref()),
         Command::Diff { a, b } => cmd_diff(&a, &b),
         Command::Replay(a) => cmd_replay(a),
@@ -815,8 +835,67 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
         };
         println!("  run {} {}: {why}", r.run, r.verdict.word());
     }
+    if a.shrink {
+        for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
+            let out = a.out.join(format!("failures/run-{}.min.toml", r.run));
+            let file = format!("{} run {}", c.file, r.run);
+            match shrink_to(&file, &r.scenario, Some(&c.base), &out) {
+                Ok(line) => println!("  run {}: {line}", r.run),
+                Err(e) => println!("  run {}: not shrunk: {e:#}", r.run),
+            }
+        }
+    }
     println!("results in {}", a.out.display());
     Ok(rows.iter().all(|r| r.verdict == RunVerdict::Pass))
+}
+
+/// Shrink `text` and write the result to `out` with a header saying what was done; a line
+/// to print.
+fn shrink_to(
+    file: &str,
+    text: &str,
+    base: Option<&toml::Table>,
+    out: &std::path::Path,
+) -> anyhow::Result<String> {
+    let r = m6p_twin::campaign_shrink::shrink(file, text, base)?;
+    let mut head = format!("# Shrunk from {file} in {} runs; still fails:\n", r.runs);
+    for f in &r.failed {
+        head.push_str(&format!("#   {f}\n"));
+    }
+    for st in &r.steps {
+        head.push_str(&format!("# step: {st}\n"));
+    }
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(out, format!("{head}{}", r.text))
+        .with_context(|| format!("writing {}", out.display()))?;
+    Ok(format!(
+        "{} steps kept in {} runs -> {}",
+        r.steps.len(),
+        r.runs,
+        out.display()
+    ))
+}
+
+fn cmd_campaign_shrink(
+    file: &std::path::Path,
+    campaign: Option<&std::path::Path>,
+    out: &std::path::Path,
+) -> anyhow::Result<bool> {
+    let text =
+        std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+    let c = campaign
+        .map(m6p_twin::campaign::Campaign::load)
+        .transpose()?;
+    let line = shrink_to(
+        &file.display().to_string(),
+        &text,
+        c.as_ref().map(|c| &c.base),
+        out,
+    )?;
+    println!("{line}");
+    Ok(true)
 }
 
 fn cmd_campaign_merge(dirs: &[PathBuf], out: &std::path::Path) -> anyhow::Result<bool> {

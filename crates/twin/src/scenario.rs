@@ -390,7 +390,8 @@ pub enum PathStep {
     Index(usize),
 }
 
-fn path_string(path: &[PathStep]) -> String {
+/// `faults[0].at` of a path.
+pub(crate) fn path_string(path: &[PathStep]) -> String {
     let mut s = String::new();
     for step in path {
         match step {
