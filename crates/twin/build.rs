@@ -8,6 +8,10 @@
 //!   recording tests decode with). Under `CI` it is always set, so a missing package fails
 //!   those tests there (`.ci/run` installs it) instead of ignoring them. Set
 //!   `M6P_PYTHON_PROBE=off` to force "not available" outside CI.
+//! - `cfg(slurm_available)`: running as root with Debian's `slurm-wlm` and `munge` installed
+//!   (`tests/campaign_slurm.rs` starts a one-node cluster with `tools/slurm/cluster.sh`).
+//!   Under `CI` it is always set (`.ci/run` installs them); `M6P_SLURM_PROBE=off` forces
+//!   "not available" elsewhere.
 
 #[path = "../bus/build.rs"]
 mod uml_probe;
@@ -16,6 +20,36 @@ fn main() {
     println!("cargo::rerun-if-changed=../bus/build.rs");
     uml_probe::main();
     python_probe();
+    slurm_probe();
+}
+
+fn slurm_probe() {
+    println!("cargo::rustc-check-cfg=cfg(slurm_available)");
+    println!("cargo::rerun-if-env-changed=M6P_SLURM_PROBE");
+    if std::env::var_os("CI").is_some() {
+        println!("cargo::rustc-cfg=slurm_available");
+        return;
+    }
+    if std::env::var("M6P_SLURM_PROBE").is_ok_and(|v| v == "off") {
+        return;
+    }
+    let tools = ["sbatch", "slurmctld", "slurmd", "munged", "runuser"];
+    let dirs = ["/usr/bin", "/usr/sbin", "/bin", "/sbin"];
+    // Installing slurm-wlm adds /usr/bin/sbatch: probe again then.
+    println!("cargo::rerun-if-changed=/usr/bin");
+    let found = tools.iter().all(|t| {
+        dirs.iter()
+            .any(|d| std::path::Path::new(d).join(t).exists())
+    });
+    let root = std::fs::read_to_string("/proc/self/status").is_ok_and(|s| {
+        s.lines()
+            .find_map(|l| l.strip_prefix("Uid:"))
+            .and_then(|l| l.split_whitespace().nth(1))
+            == Some("0")
+    });
+    if found && root {
+        println!("cargo::rustc-cfg=slurm_available");
+    }
 }
 
 fn python_probe() {
