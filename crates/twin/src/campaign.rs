@@ -75,6 +75,8 @@ pub struct FaultDraws {
     /// How many distinct catalogue entries each run draws (at most the catalogue's size).
     pub draw: usize,
     /// Faults as in a scenario's `[[faults]]`, any value of which may be a distribution.
+    /// An entry with `into = "fc.faults"` goes into that list instead (the FC's sensor and
+    /// wheel faults).
     #[schemars(with = "Vec<serde_json::Value>")]
     pub catalogue: Vec<toml::Table>,
 }
@@ -361,6 +363,16 @@ fn set_in(node: &mut toml::Value, path: &[PathStep], value: toml::Value) -> Resu
     set_in(next, rest, value)
 }
 
+/// The value at `path` in `root`, if there is one.
+fn get_path<'a>(root: &'a toml::Table, path: &[PathStep]) -> Option<&'a toml::Value> {
+    let (first, rest) = path.split_first()?;
+    let PathStep::Key(k) = first else { return None };
+    rest.iter().try_fold(root.get(k)?, |v, step| match step {
+        PathStep::Key(k) => v.get(k.as_str()),
+        PathStep::Index(i) => v.get(*i),
+    })
+}
+
 /// Resolve every distribution inside `v` (a catalogue entry's fields), drawing from `rng`.
 fn draw_inside(v: &toml::Value, rng: &mut ChaCha8Rng) -> Result<toml::Value, String> {
     if Dist::is_dist(v) {
@@ -580,29 +592,40 @@ impl Campaign {
             chosen.sort_unstable();
             let mut kinds = Vec::new();
             for i in chosen {
+                let at = |e: String| {
+                    ScenarioErrors(vec![err_at(
+                        &self.file,
+                        &self.text,
+                        &format!("faults.catalogue[{i}]"),
+                        e,
+                    )])
+                };
                 let mut rng = stream(seed, k, &format!("faults.catalogue[{i}]"));
-                let entry = draw_inside(&toml::Value::Table(f.catalogue[i].clone()), &mut rng)
-                    .map_err(|e| {
-                        ScenarioErrors(vec![err_at(
-                            &self.file,
-                            &self.text,
-                            &format!("faults.catalogue[{i}]"),
-                            e,
-                        )])
-                    })?;
-                kinds.push(format!(
-                    "{}#{i}",
-                    entry
-                        .get("kind")
-                        .and_then(toml::Value::as_str)
-                        .unwrap_or("?")
-                ));
-                let faults = table
-                    .entry("faults")
-                    .or_insert_with(|| toml::Value::Array(Vec::new()));
-                if let Some(a) = faults.as_array_mut() {
-                    a.push(entry);
-                }
+                let mut entry = draw_inside(&toml::Value::Table(f.catalogue[i].clone()), &mut rng)
+                    .map_err(at)?;
+                let into = match entry.as_table_mut().and_then(|t| t.remove("into")) {
+                    None => "faults".to_owned(),
+                    Some(toml::Value::String(p)) => p,
+                    Some(other) => {
+                        return Err(at(format!("`into` takes a list's path, found {other}")));
+                    }
+                };
+                let what = entry
+                    .get("kind")
+                    .or_else(|| entry.get("fault"))
+                    .and_then(toml::Value::as_str)
+                    .unwrap_or("?");
+                kinds.push(format!("{what}#{i}"));
+                let path = parse_path(&into).map_err(at)?;
+                let mut list = match get_path(&table, &path) {
+                    Some(toml::Value::Array(a)) => a.clone(),
+                    None => Vec::new(),
+                    Some(_) => {
+                        return Err(at(format!("`{into}` is not a list in the base scenario")));
+                    }
+                };
+                list.push(entry);
+                set_path(&mut table, &path, toml::Value::Array(list)).map_err(at)?;
             }
             draws.insert("faults".into(), kinds.join(" "));
         }

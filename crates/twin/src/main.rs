@@ -182,6 +182,13 @@ enum CampaignCmd {
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
     },
+    /// Print run K's complete scenario (every draw resolved), as `m6p-twin run` takes it.
+    Resolve {
+        /// The campaign file.
+        file: PathBuf,
+        /// The run's index.
+        run: u64,
+    },
     /// Combine shards' output directories into the files one unsharded run writes.
     Merge {
         /// The shards' output directories.
@@ -348,6 +355,14 @@ fn main() -> ExitCode {
         Command::Schema { campaign } => cmd_schema(campaign),
         Command::Campaign(CampaignCmd::Run(a)) => cmd_campaign_run(a),
         Command::Campaign(CampaignCmd::Merge { dirs, out }) => cmd_campaign_merge(&dirs, &out),
+        Command::Campaign(CampaignCmd::Resolve { file, run }) => {
+            let c = m6p_twin::campaign::Campaign::load(&file)
+                .and_then(|c| c.resolve(run).map_err(anyhow::Error::from));
+            c.map(|r| {
+                print!("# Run {run} of campaign {}\n{}", file.display(), r.text);
+                true
+            })
+        }
         Command::Campaign(CampaignCmd::Shrink {
             file,
             campaign,
