@@ -400,7 +400,8 @@ pub struct Resolved {
     pub run: u64,
     /// The run's scenario seed.
     pub seed: u64,
-    /// Each dispersion's drawn value (as TOML), by path; `faults` lists the drawn kinds.
+    /// Each dispersion's drawn value (a string as itself, anything else as TOML), by path;
+    /// `faults` lists the drawn catalogue entries (`kind#index`).
     pub draws: BTreeMap<String, String>,
     /// The scenario text: the base with every draw written in.
     pub text: String,
@@ -571,7 +572,11 @@ impl Campaign {
         table.insert("name".into(), toml::Value::String(name));
         for (key, (path, dist)) in &self.dists {
             let v = dist.sample(&mut stream(seed, k, key));
-            draws.insert(key.clone(), v.to_string());
+            // A string as itself (`normal`, `60000ms`), anything else as TOML.
+            draws.insert(
+                key.clone(),
+                v.as_str().map_or_else(|| v.to_string(), str::to_owned),
+            );
             set_path(&mut table, path, v).map_err(|e| {
                 ScenarioErrors(vec![err_at(
                     &self.file,
@@ -738,7 +743,7 @@ jump_s = 60
         assert_eq!(r5.draws["fc.initial_rate_deg_s"], rate.to_string());
         assert!(
             r5.text
-                .contains(&format!("at = {}", r5.draws["faults[0].at"]))
+                .contains(&format!("at = \"{}\"", r5.draws["faults[0].at"]))
         );
         assert_eq!(s.seed, r5.seed);
     }
