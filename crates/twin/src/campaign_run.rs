@@ -54,6 +54,9 @@ pub struct RunRow {
     pub draws: BTreeMap<String, String>,
     /// How it ended.
     pub verdict: RunVerdict,
+    /// Key figures of the run ([`metrics`]), by name; absent where they do not apply.
+    #[serde(default)]
+    pub metrics: BTreeMap<String, f64>,
     /// The resolved scenario (written out for failures; `rows.jsonl` keeps it for them only).
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub scenario: String,
@@ -70,16 +73,18 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
                 seed: 0,
                 draws: BTreeMap::new(),
                 verdict: RunVerdict::Error(e.to_string()),
+                metrics: BTreeMap::new(),
                 scenario: String::new(),
             };
         }
     };
-    let verdict = run_text(&format!("{} run {k}", c.file), &r.text);
+    let (verdict, metrics) = run_judged(&format!("{} run {k}", c.file), &r.text);
     RunRow {
         run: k,
         seed: r.seed,
         draws: r.draws,
         verdict,
+        metrics,
         scenario: r.text,
     }
 }
@@ -88,6 +93,42 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
 /// its expectations and the invariants. A panic inside the run is caught and becomes the
 /// error.
 pub fn run_text(file: &str, text: &str) -> RunVerdict {
+    run_judged(file, text).0
+}
+
+/// The key figures of a run, for `results.csv` and the report: `min_soc` (the battery's
+/// lowest state of charge), `downlinked_bytes` (every session's bytes at the ground),
+/// `detumble_s` (when the body rate first fell below 0.5 deg/s, in a run that started
+/// tumbling),
+/// `max_rate_deg_s` (the highest body rate published).
+pub fn metrics(report: &crate::runtime::RunReport) -> BTreeMap<String, f64> {
+    let mut m = BTreeMap::new();
+    if let Some(min) = report.power.iter().map(|p| p.soc).reduce(f64::min) {
+        m.insert("min_soc".to_owned(), min);
+    }
+    if report.sessions.held.is_some() || !report.sessions.downlinked.is_empty() {
+        let bytes: u64 = report.sessions.downlinked.values().sum();
+        m.insert("downlinked_bytes".to_owned(), bytes as f64);
+    }
+    if let Some(max) = report
+        .attitude
+        .iter()
+        .map(|a| a.rate_deg_s)
+        .reduce(f64::max)
+    {
+        m.insert("max_rate_deg_s".to_owned(), max);
+        // A run that starts tumbling (0.5 deg/s or more): when it first fell below.
+        if report.attitude.first().is_some_and(|a| a.rate_deg_s >= 0.5)
+            && let Some(a) = report.attitude.iter().find(|a| a.rate_deg_s < 0.5)
+        {
+            m.insert("detumble_s".to_owned(), a.t.as_secs_f64());
+        }
+    }
+    m
+}
+
+/// [`run_text`] with the run's [`metrics`] (none when it did not run to its end).
+pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>) {
     let outcome =
         std::panic::catch_unwind(|| -> anyhow::Result<(exec::Outcome, Vec<Violation>)> {
             let scenario = Scenario::parse(file, text)?;
@@ -104,7 +145,11 @@ pub fn run_text(file: &str, text: &str) -> RunVerdict {
             let broken = inv.finish(&o.report);
             Ok((o, broken))
         });
-    match outcome {
+    let figures = match &outcome {
+        Ok(Ok((o, _))) => metrics(&o.report),
+        _ => BTreeMap::new(),
+    };
+    let verdict = match outcome {
         Ok(Ok((o, broken))) if o.passed() && broken.is_empty() => RunVerdict::Pass,
         Ok(Ok((o, broken))) => RunVerdict::Fail(
             broken
@@ -131,7 +176,8 @@ pub fn run_text(file: &str, text: &str) -> RunVerdict {
                 .or_else(|| p.downcast_ref::<&str>().copied())
                 .unwrap_or("(no message)")
         )),
-    }
+    };
+    (verdict, figures)
 }
 
 /// Run `runs` (indices) of `c` on `jobs` threads; `done` is called after each run. The rows
@@ -175,8 +221,8 @@ fn cell(s: &str) -> String {
     }
 }
 
-/// `results.csv`: run, seed, every drawn value (one column per path), verdict, the failed
-/// expectations (or the error).
+/// `results.csv`: run, seed, every drawn value (one column per path), the run's
+/// [`metrics`], verdict, the failed expectations (or the error).
 pub fn results_csv(rows: &[RunRow]) -> String {
     let mut cols: Vec<&String> = rows.iter().flat_map(|r| r.draws.keys()).collect();
     cols.sort();
@@ -186,12 +232,25 @@ pub fn results_csv(rows: &[RunRow]) -> String {
         out.push(',');
         out.push_str(&cell(c));
     }
+    let mut mcols: Vec<&String> = rows.iter().flat_map(|r| r.metrics.keys()).collect();
+    mcols.sort();
+    mcols.dedup();
+    for c in &mcols {
+        out.push(',');
+        out.push_str(&cell(c));
+    }
     out.push_str(",verdict,failed\n");
     for r in rows {
         out.push_str(&format!("{},{}", r.run, r.seed));
         for c in &cols {
             out.push(',');
             out.push_str(&cell(r.draws.get(*c).map_or("", String::as_str)));
+        }
+        for c in &mcols {
+            out.push(',');
+            if let Some(v) = r.metrics.get(*c) {
+                out.push_str(&v.to_string());
+            }
         }
         let failed = match &r.verdict {
             RunVerdict::Pass => String::new(),
@@ -328,8 +387,8 @@ impl Shard {
     }
 }
 
-/// Write `campaign.json`, `rows.jsonl` (every row, for `merge`), `results.csv`, `junit.xml`
-/// and `failures/run-<k>.toml` (one per failed or errored run: the complete scenario, with a
+/// Write `campaign.json`, `rows.jsonl` (every row, for `merge`), `results.csv`, `junit.xml`,
+/// `report.html` ([`crate::campaign_report`]) and `failures/run-<k>.toml` (one per failed or errored run: the complete scenario, with a
 /// header saying where it comes from) into `dir`.
 pub fn write_outputs(meta: &CampaignMeta, rows: &[RunRow], dir: &Path) -> anyhow::Result<()> {
     let ctx = |what: &str| format!("writing {what} in {}", dir.display());
@@ -353,6 +412,11 @@ pub fn write_outputs(meta: &CampaignMeta, rows: &[RunRow], dir: &Path) -> anyhow
         .with_context(|| ctx("results.csv"))?;
     std::fs::write(dir.join("junit.xml"), junit(&meta.name, rows)?)
         .with_context(|| ctx("junit.xml"))?;
+    std::fs::write(
+        dir.join("report.html"),
+        crate::campaign_report::report_html(meta, rows),
+    )
+    .with_context(|| ctx("report.html"))?;
     let failures = dir.join("failures");
     for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
         if r.scenario.is_empty() {
@@ -467,7 +531,9 @@ mod tests {
         let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
         assert_eq!(csv.lines().count(), 7, "{csv}");
         assert!(
-            csv.starts_with("run,seed,commands[0].at,verdict,failed\n"),
+            csv.starts_with(
+                "run,seed,commands[0].at,downlinked_bytes,max_rate_deg_s,min_soc,verdict,failed\n"
+            ),
             "{csv}"
         );
         let junit = std::fs::read_to_string(dir.join("junit.xml")).unwrap();
@@ -528,7 +594,13 @@ mod tests {
                 })
                 .collect::<Vec<_>>()
         );
-        for f in ["results.csv", "junit.xml", "campaign.json", "rows.jsonl"] {
+        for f in [
+            "results.csv",
+            "junit.xml",
+            "campaign.json",
+            "rows.jsonl",
+            "report.html",
+        ] {
             assert_eq!(
                 std::fs::read(base.join("whole").join(f)).unwrap(),
                 std::fs::read(base.join("merged").join(f)).unwrap(),

@@ -10,6 +10,7 @@
 
 pub mod adcs;
 pub mod campaign;
+pub mod campaign_report;
 pub mod campaign_run;
 pub mod campaign_shrink;
 pub mod can;

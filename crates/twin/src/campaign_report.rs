@@ -1,0 +1,374 @@
+//! `report.html`: a campaign's results for a person: one self-contained page (inline SVG, no
+//! script, nothing fetched) with the pass rate per fault kind, the failures plotted against
+//! every drawn value, histograms of the runs' metrics, and the failures with what they drew.
+//! Built from the rows alone, so a merged campaign's page is the unsharded one's.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use crate::campaign_run::{CampaignMeta, RunRow, RunVerdict};
+
+const PASS: &str = "#2e8b57";
+const FAIL: &str = "#d0453a";
+const ERROR: &str = "#8a2be2";
+const WIDTH: f64 = 640.0;
+
+/// Text for HTML.
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// A number for an axis: at most 4 decimals, no trailing zeros.
+fn num(x: f64) -> String {
+    let s = format!("{x:.4}");
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.')
+    } else {
+        &s
+    };
+    s.to_owned()
+}
+
+fn colour(v: &RunVerdict) -> &'static str {
+    match v {
+        RunVerdict::Pass => PASS,
+        RunVerdict::Fail(_) => FAIL,
+        RunVerdict::Error(_) => ERROR,
+    }
+}
+
+/// A drawn value as a number: a number, or a duration (in seconds).
+fn number(v: &str) -> Option<f64> {
+    v.parse::<f64>().ok().or_else(|| {
+        crate::duration::parse_duration(v)
+            .ok()
+            .map(|d| d.as_secs_f64())
+    })
+}
+
+/// Horizontal bars: (label, passed, total) each, the pass rate drawn and written.
+fn rate_bars(out: &mut String, rows: &[(String, u64, u64)]) {
+    let h = 22.0;
+    let label_w = 220.0;
+    let bar_w = WIDTH - label_w - 120.0;
+    let height = h * rows.len() as f64 + 8.0;
+    let _ = writeln!(
+        out,
+        r#"<svg width="{WIDTH}" height="{height}" role="img" aria-label="pass rate">"#
+    );
+    for (i, (label, pass, total)) in rows.iter().enumerate() {
+        let y = 4.0 + h * i as f64;
+        let rate = if *total == 0 {
+            0.0
+        } else {
+            *pass as f64 / *total as f64
+        };
+        let _ = writeln!(
+            out,
+            r#"<text x="{x}" y="{ty}" text-anchor="end">{l}</text><rect x="{bx}" y="{y}" width="{bw}" height="{bh}" fill="{FAIL}" opacity="0.35"/><rect x="{bx}" y="{y}" width="{pw:.1}" height="{bh}" fill="{PASS}"><title>{l}: {pass} of {total} passed</title></rect><text x="{tx}" y="{ty}">{pct:.0} % of {total}</text>"#,
+            x = label_w - 6.0,
+            ty = y + 14.0,
+            l = esc(label),
+            bx = label_w,
+            bw = bar_w,
+            bh = h - 6.0,
+            pw = bar_w * rate,
+            tx = label_w + bar_w + 6.0,
+            pct = rate * 100.0,
+        );
+    }
+    out.push_str("</svg>\n");
+}
+
+/// A strip plot of one drawn number: every run a dot at its value, passes above, failures
+/// below.
+fn strip(out: &mut String, name: &str, points: &[(f64, &RunRow)]) {
+    let (lo, hi) = points
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (x, _)| {
+            (lo.min(*x), hi.max(*x))
+        });
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let (left, right) = (60.0, WIDTH - 20.0);
+    let x_of = |x: f64| left + (x - lo) / span * (right - left);
+    let _ = writeln!(
+        out,
+        r#"<svg width="{WIDTH}" height="110" role="img" aria-label="{n}"><text x="4" y="34">pass</text><text x="4" y="74">fail</text><line x1="{left}" y1="90" x2="{right}" y2="90" stroke="gray"/><text x="{left}" y="105">{lo}</text><text x="{right}" y="105" text-anchor="end">{hi}</text>"#,
+        n = esc(name),
+        lo = num(lo),
+        hi = num(hi),
+    );
+    for (x, r) in points {
+        let lane = if r.verdict == RunVerdict::Pass {
+            30.0
+        } else {
+            70.0
+        };
+        // A deterministic jitter from the run's index, so that equal values stay visible.
+        let jitter = ((r.run.wrapping_mul(2_654_435_761) % 17) as f64) - 8.0;
+        let _ = writeln!(
+            out,
+            r#"<circle cx="{cx:.1}" cy="{cy:.1}" r="3" fill="{c}" opacity="0.6"><title>run {k}: {n} = {x}</title></circle>"#,
+            cx = x_of(*x),
+            cy = lane + jitter,
+            c = colour(&r.verdict),
+            k = r.run,
+            n = esc(name),
+        );
+    }
+    out.push_str("</svg>\n");
+}
+
+/// A histogram of one metric, 20 bins, passes and failures stacked.
+fn histogram(out: &mut String, name: &str, values: &[(f64, &RunRow)]) {
+    const BINS: usize = 20;
+    let (lo, hi) = values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (x, _)| {
+            (lo.min(*x), hi.max(*x))
+        });
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let mut bins = [(0u64, 0u64); BINS];
+    for (x, r) in values {
+        let i = (((x - lo) / span) * BINS as f64).floor() as usize;
+        let b = &mut bins[i.min(BINS - 1)];
+        if r.verdict == RunVerdict::Pass {
+            b.0 += 1;
+        } else {
+            b.1 += 1;
+        }
+    }
+    let top = bins.iter().map(|(p, f)| p + f).max().unwrap_or(1).max(1) as f64;
+    let (left, plot_h) = (60.0, 120.0);
+    let bw = (WIDTH - left - 20.0) / BINS as f64;
+    let _ = writeln!(
+        out,
+        r#"<svg width="{WIDTH}" height="{h}" role="img" aria-label="{n}"><text x="4" y="14">{top}</text><text x="4" y="{b}">0</text><text x="{left}" y="{lb}">{lo}</text><text x="{r}" y="{lb}" text-anchor="end">{hi}</text>"#,
+        lo = num(lo),
+        hi = num(hi),
+        h = plot_h + 30.0,
+        n = esc(name),
+        b = plot_h,
+        lb = plot_h + 20.0,
+        r = WIDTH - 20.0,
+    );
+    for (i, (p, f)) in bins.iter().enumerate() {
+        let x = left + bw * i as f64;
+        let ph = plot_h * *p as f64 / top;
+        let fh = plot_h * *f as f64 / top;
+        let _ = writeln!(
+            out,
+            r#"<rect x="{x:.1}" y="{py:.1}" width="{w:.1}" height="{ph:.1}" fill="{PASS}"><title>{p} passed</title></rect><rect x="{x:.1}" y="{fy:.1}" width="{w:.1}" height="{fh:.1}" fill="{FAIL}"><title>{f} failed</title></rect>"#,
+            py = plot_h - ph,
+            fy = plot_h - ph - fh,
+            w = bw - 1.0,
+        );
+    }
+    out.push_str("</svg>\n");
+}
+
+/// The page.
+pub fn report_html(meta: &CampaignMeta, rows: &[RunRow]) -> String {
+    let count = |w: &str| rows.iter().filter(|r| r.verdict.word() == w).count();
+    let (pass, fail, error) = (count("pass"), count("fail"), count("error"));
+    let mut out = String::new();
+    let _ = write!(
+        out,
+        r#"<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>campaign {name}</title>
+<style>
+body {{ font-family: system-ui, sans-serif; margin: 2em; max-width: 60em; color: #222; }}
+svg {{ display: block; margin: 0.5em 0 1.5em; font-size: 12px; }}
+table {{ border-collapse: collapse; font-size: 13px; }}
+td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-align: top; }}
+.pass {{ color: {PASS}; }} .fail {{ color: {FAIL}; }} .error {{ color: {ERROR}; }}
+</style></head><body>
+<h1>Campaign {name}</h1>
+<p>{file}, seed {seed}: {n} runs, <b class="pass">{pass} passed</b>, <b class="fail">{fail} failed</b>, <b class="error">{error} errors</b>.</p>
+"#,
+        name = esc(&meta.name),
+        file = esc(&meta.file),
+        seed = meta.seed,
+        n = rows.len(),
+    );
+    // Pass rate per fault kind.
+    let mut kinds: BTreeMap<String, (u64, u64)> = BTreeMap::new();
+    for r in rows {
+        if let Some(f) = r.draws.get("faults") {
+            let mut seen: Vec<&str> = f
+                .split_whitespace()
+                .map(|k| k.split('#').next().unwrap_or(k))
+                .collect();
+            seen.sort_unstable();
+            seen.dedup();
+            for k in seen {
+                let e = kinds.entry(k.to_owned()).or_default();
+                e.1 += 1;
+                if r.verdict == RunVerdict::Pass {
+                    e.0 += 1;
+                }
+            }
+        }
+    }
+    if !kinds.is_empty() {
+        out.push_str("<h2>Pass rate per fault kind</h2>\n<p>Runs that drew the kind (among others), and how many of them passed.</p>\n");
+        let bars: Vec<_> = kinds.into_iter().map(|(k, (p, t))| (k, p, t)).collect();
+        rate_bars(&mut out, &bars);
+    }
+    // The drawn values against the verdicts.
+    let mut columns: Vec<&String> = rows
+        .iter()
+        .flat_map(|r| r.draws.keys())
+        .filter(|k| *k != "faults")
+        .collect();
+    columns.sort();
+    columns.dedup();
+    if !columns.is_empty() {
+        out.push_str("<h2>Failures against the drawn values</h2>\n");
+    }
+    for col in columns {
+        let values: Vec<(&str, &RunRow)> = rows
+            .iter()
+            .filter_map(|r| r.draws.get(col).map(|v| (v.as_str(), r)))
+            .collect();
+        let _ = writeln!(out, "<h3>{}</h3>", esc(col));
+        let numbers: Option<Vec<(f64, &RunRow)>> = values
+            .iter()
+            .map(|(v, r)| number(v).map(|x| (x, *r)))
+            .collect();
+        match numbers {
+            Some(points) => strip(&mut out, col, &points),
+            None => {
+                let mut by: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
+                for (v, r) in &values {
+                    let e = by.entry(v).or_default();
+                    e.1 += 1;
+                    if r.verdict == RunVerdict::Pass {
+                        e.0 += 1;
+                    }
+                }
+                let bars: Vec<_> = by
+                    .into_iter()
+                    .map(|(v, (p, t))| (v.to_owned(), p, t))
+                    .collect();
+                rate_bars(&mut out, &bars);
+            }
+        }
+    }
+    // Metrics.
+    let mut metrics: Vec<&String> = rows.iter().flat_map(|r| r.metrics.keys()).collect();
+    metrics.sort();
+    metrics.dedup();
+    if !metrics.is_empty() {
+        out.push_str("<h2>Metrics</h2>\n<p>Green: runs that passed; red: the others.</p>\n");
+    }
+    for m in metrics {
+        let values: Vec<(f64, &RunRow)> = rows
+            .iter()
+            .filter_map(|r| r.metrics.get(m).map(|v| (*v, r)))
+            .collect();
+        let _ = writeln!(out, "<h3>{} ({} runs)</h3>", esc(m), values.len());
+        histogram(&mut out, m, &values);
+    }
+    // The failures.
+    let failed: Vec<&RunRow> = rows
+        .iter()
+        .filter(|r| r.verdict != RunVerdict::Pass)
+        .collect();
+    if !failed.is_empty() {
+        out.push_str(
+            "<h2>Failures</h2>\n<table><tr><th>run</th><th>drew</th><th>failed</th></tr>\n",
+        );
+        for r in failed {
+            let drew = r
+                .draws
+                .iter()
+                .map(|(k, v)| format!("{} = {}", esc(k), esc(v)))
+                .collect::<Vec<_>>()
+                .join("<br>");
+            let why = match &r.verdict {
+                RunVerdict::Fail(f) => f
+                    .iter()
+                    .map(|(n, o)| format!("<b>{}</b>: {}", esc(n), esc(o)))
+                    .collect::<Vec<_>>()
+                    .join("<br>"),
+                RunVerdict::Error(e) => format!("<b>error</b>: {}", esc(e)),
+                RunVerdict::Pass => String::new(),
+            };
+            let _ = writeln!(
+                out,
+                r#"<tr><td><a href="failures/run-{k}.toml">{k}</a></td><td>{drew}</td><td class="{w}">{why}</td></tr>"#,
+                k = r.run,
+                w = r.verdict.word(),
+            );
+        }
+        out.push_str("</table>\n");
+    }
+    out.push_str("</body></html>\n");
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn row(run: u64, draws: &[(&str, &str)], verdict: RunVerdict, soc: f64) -> RunRow {
+        RunRow {
+            run,
+            seed: run,
+            draws: draws
+                .iter()
+                .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
+                .collect(),
+            verdict,
+            metrics: BTreeMap::from([("min_soc".to_owned(), soc)]),
+            scenario: String::new(),
+        }
+    }
+
+    #[test]
+    fn the_page_has_each_section_and_escapes_what_it_quotes() {
+        let fail = || RunVerdict::Fail(vec![("fc-answers".into(), "t = 1 s: <no reply>".into())]);
+        let rows = vec![
+            row(
+                0,
+                &[("faults", "hang#1 clock#3"), ("x", "1.5"), ("b", "normal")],
+                RunVerdict::Pass,
+                0.8,
+            ),
+            row(
+                1,
+                &[("faults", "hang#1"), ("x", "2.5"), ("b", "no-ack")],
+                fail(),
+                0.4,
+            ),
+            row(
+                2,
+                &[("faults", "clock#3"), ("x", "30s"), ("b", "normal")],
+                RunVerdict::Pass,
+                0.6,
+            ),
+        ];
+        let meta = CampaignMeta {
+            name: "t<1>".into(),
+            file: "c.toml".into(),
+            seed: 1,
+            runs: 3,
+        };
+        let html = report_html(&meta, &rows);
+        assert!(html.contains("Campaign t&lt;1&gt;"));
+        assert!(html.contains("2 passed") && html.contains("1 failed"));
+        // hang: 1 of 2 passed; clock: 2 of 2.
+        assert!(html.contains("hang: 1 of 2 passed") && html.contains("clock: 2 of 2 passed"));
+        assert!(html.contains("<h3>x</h3>") && html.contains("run 2: x = 30"));
+        assert!(html.contains("normal: 2 of 2 passed"));
+        assert!(html.contains("<h3>min_soc (3 runs)</h3>"));
+        assert!(html.contains(r#"<a href="failures/run-1.toml">1</a>"#));
+        assert!(html.contains("&lt;no reply&gt;") && !html.contains("<no reply>"));
+        assert_eq!(html, report_html(&meta, &rows));
+    }
+}
