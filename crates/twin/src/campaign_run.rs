@@ -180,6 +180,50 @@ pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>)
     (verdict, figures)
 }
 
+/// Run a failed row's scenario again, recording it to `path` (MCAP), and read the file back:
+/// the recording must be complete and decodable, and the run must fail again the same way
+/// (a campaign's runs are deterministic). What the recorded run said, or why not.
+pub fn record_failure(file: &str, row: &RunRow, path: &Path) -> anyhow::Result<()> {
+    let scenario = Scenario::parse(file, &row.scenario)?;
+    let loaded = exec::Loaded {
+        file: file.to_owned(),
+        text: row.scenario.clone(),
+        scenario,
+    };
+    let mut compiled = exec::compile_seeded(&loaded, None);
+    compiled.opts.clock = bus::ClockMode::Virtual;
+    let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
+    let (outcome, _) = rt.block_on(exec::execute_recorded_without_files(
+        &loaded,
+        compiled,
+        Some(path),
+    ))?;
+    let summary = crate::recording::read_summary(path)?;
+    if let Some(why) = summary.incomplete {
+        bail!("{}: the recording is incomplete: {why}", path.display());
+    }
+    let again: Vec<&str> = outcome
+        .verdicts
+        .iter()
+        .filter(|v| !v.passed)
+        .map(|v| v.name.as_str())
+        .collect();
+    if let RunVerdict::Fail(f) = &row.verdict {
+        let before: Vec<&str> = f
+            .iter()
+            .map(|(n, _)| n.as_str())
+            .filter(|n| !n.starts_with("invariant "))
+            .collect();
+        if before != again {
+            bail!(
+                "run {} failed {before:?} in the campaign but {again:?} when recorded (not deterministic?)",
+                row.run
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Run `runs` (indices) of `c` on `jobs` threads; `done` is called after each run. The rows
 /// come back in index order.
 pub fn run_all(
@@ -645,5 +689,24 @@ mod tests {
         );
         assert!(Shard::from_env(env(&[("JOB_COMPLETION_INDEX", "0")])).is_err());
         assert_eq!(Shard::from_env(env(&[])), Ok(None));
+    }
+
+    /// A failure recorded again: a complete recording, failing the same way; a row that
+    /// claims another failure is caught.
+    #[test]
+    fn a_recorded_failure_is_complete_and_fails_the_same_way() {
+        let c = campaign();
+        let rows = run_all(&c, &(0..6).collect::<Vec<_>>(), 1, &|_| {});
+        let failed = rows.iter().find(|r| r.verdict != RunVerdict::Pass).unwrap();
+        let dir = std::env::temp_dir().join(format!("m6p-campaign-rec-{}", std::process::id()));
+        let path = dir.join("run.mcap");
+        record_failure("f", failed, &path).unwrap();
+        let summary = crate::recording::read_summary(&path).unwrap();
+        assert!(summary.messages > 0 && summary.incomplete.is_none());
+        let mut other = failed.clone();
+        other.verdict = RunVerdict::Fail(vec![("something-else".into(), String::new())]);
+        let e = record_failure("f", &other, &path).unwrap_err().to_string();
+        assert!(e.contains("not deterministic"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

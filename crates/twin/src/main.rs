@@ -213,6 +213,10 @@ struct CampaignRunArgs {
     /// Also shrink every failure (failures/run-<k>.min.toml).
     #[arg(long)]
     shrink: bool,
+    /// Also record every failure again to failures/run-<k>.mcap (checked complete, and
+    /// failing the same way).
+    #[arg(long)]
+    record_failures: bool,
     /// Run only the runs whose index modulo N is I [default: from SLURM_ARRAY_TASK_ID and
     /// SLURM_ARRAY_TASK_COUNT, or JOB_COMPLETION_INDEX and JOB_COMPLETIONS, when set].
     #[arg(long, value_name = "I/N")]
@@ -850,6 +854,23 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
         };
         println!("  run {} {}: {why}", r.run, r.verdict.word());
     }
+    let mut recording_ok = true;
+    if a.record_failures {
+        for r in rows
+            .iter()
+            .filter(|r| r.verdict != RunVerdict::Pass && !r.scenario.is_empty())
+        {
+            let path = a.out.join(format!("failures/run-{}.mcap", r.run));
+            let file = format!("{} run {}", c.file, r.run);
+            match campaign_run::record_failure(&file, r, &path) {
+                Ok(()) => println!("  run {}: recorded to {}", r.run, path.display()),
+                Err(e) => {
+                    recording_ok = false;
+                    println!("  run {}: recording failed: {e:#}", r.run);
+                }
+            }
+        }
+    }
     if a.shrink {
         for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
             let out = a.out.join(format!("failures/run-{}.min.toml", r.run));
@@ -861,7 +882,7 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
         }
     }
     println!("results in {}", a.out.display());
-    Ok(rows.iter().all(|r| r.verdict == RunVerdict::Pass))
+    Ok(recording_ok && rows.iter().all(|r| r.verdict == RunVerdict::Pass))
 }
 
 /// Shrink `text` and write the result to `out` with a header saying what was done; a line
