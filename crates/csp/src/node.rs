@@ -26,7 +26,7 @@ use crate::cfp::{CanFrame, Fragmenter, Reassembler, ReassemblerConfig};
 use crate::header::{BROADCAST, EPHEMERAL_PORT_MIN, MAX_PORT};
 use crate::router::{IfaceId, Route, RoutingTable};
 use crate::service::{self, ServiceAction, ServiceConfig};
-use crate::{Packet, SimTime, crc32};
+use crate::{Header, Packet, SimTime, crc32};
 
 /// The kind of link an interface sits on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -190,6 +190,15 @@ pub enum Severity {
     Warning,
 }
 
+/// A CSP packet a node dropped: its header and the length of its data.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DroppedPacket {
+    /// The packet's header.
+    pub header: Header,
+    /// Bytes of data (after any CRC was stripped).
+    pub data_len: usize,
+}
+
 /// A drop or a log line of a node, pulled with [`Node::poll_event`].
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum NodeEvent {
@@ -202,6 +211,8 @@ pub enum NodeEvent {
         reason: std::borrow::Cow<'static, str>,
         /// What was dropped.
         detail: String,
+        /// The packet, when a whole CSP packet was dropped by the node (for accounting).
+        packet: Option<DroppedPacket>,
     },
     /// A line from the node or its application.
     Log {
@@ -241,6 +252,7 @@ impl NodeEvent {
             t,
             reason: reason.into(),
             detail,
+            packet: None,
         }
     }
     /// When it happened.
@@ -577,7 +589,16 @@ impl Node {
             self.counters.delivered += 1;
             self.rx.push_back(packet);
         } else {
-            self.note_drop(now, "unbound port", packet.header.to_string());
+            self.counters.drop("unbound port");
+            self.push_event(NodeEvent::Drop {
+                t: now,
+                reason: "unbound port".into(),
+                detail: packet.header.to_string(),
+                packet: Some(DroppedPacket {
+                    header: packet.header,
+                    data_len: packet.data.len(),
+                }),
+            });
         }
     }
 

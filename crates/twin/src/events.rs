@@ -53,6 +53,18 @@ pub enum RunEvent {
         /// Text.
         message: String,
     },
+    /// A whole CSP packet a node dropped (recorded as the debug log line it also is; the
+    /// sessions' accounting counts a payload's replies lost this way).
+    PacketDropped {
+        /// The log line.
+        log: Box<RunEvent>,
+        /// The dropping node's name.
+        node: String,
+        /// Why.
+        reason: String,
+        /// The packet.
+        packet: csp::node::DroppedPacket,
+    },
     /// A scenario fault applied or lifted.
     Fault {
         /// When.
@@ -132,6 +144,7 @@ impl RunEvent {
     pub fn t(&self) -> SimTime {
         match self {
             RunEvent::Medium(e) => e.t,
+            RunEvent::PacketDropped { log, .. } => log.t(),
             RunEvent::Kiss { t, .. }
             | RunEvent::Log { t, .. }
             | RunEvent::Fault { t, .. }
@@ -171,11 +184,24 @@ impl From<bus::driver::NodeLog> for RunEvent {
             } => Level::Info,
             NodeEvent::Log { .. } => Level::Warning,
         };
-        RunEvent::Log {
+        let log = RunEvent::Log {
             t: l.event.t(),
             source: l.node.to_string(),
             level,
             message: l.event.to_string(),
+        };
+        match l.event {
+            NodeEvent::Drop {
+                reason,
+                packet: Some(packet),
+                ..
+            } => RunEvent::PacketDropped {
+                log: Box::new(log),
+                node: l.node.to_string(),
+                reason: reason.into_owned(),
+                packet,
+            },
+            _ => log,
         }
     }
 }

@@ -1535,6 +1535,8 @@ impl EventEncoder {
         let buf = &mut self.buf;
         match ev {
             RunEvent::Medium(m) => self.encode_medium(m, emit),
+            // Recorded as the log line it is.
+            RunEvent::PacketDropped { log, .. } => self.encode(log, emit),
             RunEvent::Kiss {
                 t,
                 link,

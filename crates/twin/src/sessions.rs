@@ -648,6 +648,25 @@ impl SessionsReport {
                     *self.syncs.entry(*addr).or_default() += 1;
                 }
             },
+            // A payload's POLL reply that reached the PC after the PC stopped listening for
+            // it (its request's ephemeral port was no longer bound): CSP dropped it. Its
+            // data (after the reply's command and result bytes) was produced: dropped here.
+            RunEvent::PacketDropped {
+                node,
+                reason,
+                packet,
+                ..
+            } if node == "PC"
+                && reason == "unbound port"
+                && packet.header.sport == nodes_payload::wire::PORT
+                && self.produced.contains_key(&packet.header.src) =>
+            {
+                let data = packet.data_len.saturating_sub(REPLY_HEAD_BYTES) as u64;
+                *self
+                    .dropped
+                    .entry((packet.header.src, LATE_AT_CSP.to_owned()))
+                    .or_default() += data;
+            }
             _ => {}
         }
     }
@@ -694,6 +713,13 @@ impl SessionsReport {
         Ok(out)
     }
 }
+
+/// A payload reply's bytes before its data: the command and the result (`02 01 | data`).
+const REPLY_HEAD_BYTES: usize = 2;
+
+/// The drop reason of a payload's reply that reached the PC after the PC's own memory of
+/// its request (its retired ephemeral ports) and was dropped by CSP as `unbound port`.
+pub const LATE_AT_CSP: &str = "late, after the PC forgot the request (unbound port)";
 
 /// `session`: every (or any) run of a PC session ended with `session_result`, counting
 /// `min`..=`max` packets.
@@ -1159,6 +1185,53 @@ mod tests {
                 unattributed: Default::default(),
             },
         })
+    }
+
+    /// A POLL reply that reached the PC after the PC forgot its request is dropped by CSP
+    /// (`unbound port`): its data counts as dropped with that reason, and the books
+    /// balance. Found by the pc-sessions campaign (a 1.5 s delay on the payload bus left
+    /// 34,100 bytes unaccounted for); before, such bytes were in no ledger.
+    #[test]
+    fn a_reply_the_pc_forgot_is_dropped_with_its_reason() {
+        let t = SimTime::from_secs(2);
+        let stream = nodes_payload::counter_stream(12, 0, 500);
+        let late = |src: u8, sport: u8| RunEvent::PacketDropped {
+            log: Box::new(RunEvent::Log {
+                t,
+                source: "PC".into(),
+                level: crate::events::Level::Debug,
+                message: "drop (unbound port)".into(),
+            }),
+            node: "PC".into(),
+            reason: "unbound port".into(),
+            packet: csp::node::DroppedPacket {
+                header: csp::Header::new(src, 6, 40, sport),
+                data_len: 2 + 100,
+            },
+        };
+        let events = vec![
+            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            produced(12, 600),
+            pc(nodes_pc::PcOutput::Downlinked {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+                bytes: stream,
+            }),
+            late(12, nodes_payload::wire::PORT),
+            // Another port's packet, or another node's, is not a payload reply.
+            late(12, 11),
+            late(3, nodes_payload::wire::PORT),
+            final_held(12, 0),
+        ];
+        let report = report_of(events);
+        let acc = AccountingExpect {
+            payload: Some(12),
+            max: None,
+        };
+        let (ok, _, seen) = check(&acc, &report);
+        assert!(ok, "{seen}");
+        assert!(seen.contains(&format!("{LATE_AT_CSP} 100")), "{seen}");
     }
 
     #[test]
