@@ -23,7 +23,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use crate::runtime::mix;
-use crate::scenario::{PathStep, Scenario, ScenarioError, ScenarioErrors};
+use crate::scenario::{PathStep, Scenario, ScenarioError, ScenarioErrors, path_string};
 
 /// A campaign file.
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
@@ -559,6 +559,8 @@ impl Campaign {
         let seed = self.spec.seed;
         let mut table = self.base.clone();
         let mut draws = BTreeMap::new();
+        // Drawn catalogue entries: where each landed in the scenario, and its index.
+        let mut appended: Vec<(String, usize)> = Vec::new();
         // The run's own seed (the scenario's `seed`): from the campaign's seed and k too.
         let run_seed = mix(mix(seed, k), 0x5eed);
         table.insert("seed".into(), toml::Value::Integer((run_seed >> 1) as i64));
@@ -629,6 +631,8 @@ impl Campaign {
                         return Err(at(format!("`{into}` is not a list in the base scenario")));
                     }
                 };
+                // Where the entry lands (`faults[3]`), to name it if the scenario refuses it.
+                appended.push((format!("{}[{}]", path_string(&path), list.len()), i));
                 list.push(entry);
                 set_path(&mut table, &path, toml::Value::Array(list)).map_err(at)?;
             }
@@ -651,6 +655,27 @@ impl Campaign {
                         let key = self.dists.keys().find(|key| {
                             se.field == **key || se.field.starts_with(&format!("{key}."))
                         });
+                        let entry = appended.iter().find(|(at, _)| {
+                            se.field == *at || se.field.starts_with(&format!("{at}."))
+                        });
+                        if let (None, Some((at, i))) = (key, entry) {
+                            let field = se.field.strip_prefix(at.as_str()).unwrap_or("");
+                            return err_at(
+                                &self.file,
+                                &self.text,
+                                &format!("faults.catalogue[{i}]"),
+                                format!(
+                                    "run {k} drew this entry (as {}){}: {}",
+                                    at,
+                                    if field.is_empty() {
+                                        String::new()
+                                    } else {
+                                        format!(", its `{}`", field.trim_start_matches('.'))
+                                    },
+                                    se.message
+                                ),
+                            );
+                        }
                         match key {
                             Some(key) => err_at(
                                 &self.file,
@@ -843,6 +868,21 @@ jump_s = 5
             assert_eq!(kinds.len(), 2);
             assert_ne!(kinds[0], kinds[1]);
         }
+        // A drawn entry the scenario refuses is named in the campaign file.
+        let e = campaign(
+            "[faults]\ndraw = 1\n[[faults.catalogue]]\nkind = \"babble\"\ntarget = \"payload\"\nnode = \"ECU\"\nat = \"1s\"\n",
+        )
+        .unwrap()
+        .check(1)
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("c.toml:5:")
+                && e.contains("faults.catalogue[0]")
+                && e.contains("faults[1]"),
+            "{e}"
+        );
+        assert!(e.contains("its `node`") && e.contains("payload"), "{e}");
         let e = campaign("[faults]\ndraw = 2\n[[faults.catalogue]]\nkind = \"clock\"\n")
             .unwrap_err()
             .to_string();
