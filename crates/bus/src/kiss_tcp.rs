@@ -213,17 +213,7 @@ pub async fn serve(
                 let guard = ActiveGuard::new(active.clone());
                 tokio::spawn(async move {
                     let _guard = guard;
-                    let conn = format!("{label}#{n}");
-                    let k = Connection {
-                        name: &conn,
-                        segs: &segs,
-                        cfg: &cfg,
-                        stats: &stats,
-                        n,
-                        clock,
-                        opened: clock.now(),
-                    };
-                    let why = run_connection(stream, k).await;
+                    let why = run_numbered(stream, &label, n, &segs, &cfg, &stats, clock).await;
                     tracing::info!(%peer, "KISS/TCP: connection closed: {why}");
                     bump(&stats, |s| s.disconnects += 1);
                 });
@@ -279,17 +269,7 @@ pub async fn connect(
                 tracing::info!(%addr, "KISS/TCP: connected to outside server");
                 bump(&stats, |s| s.connections += 1);
                 let _ = stream.set_nodelay(true);
-                let conn = format!("{label}#{n}");
-                let k = Connection {
-                    name: &conn,
-                    segs: &segs,
-                    cfg: &cfg,
-                    stats: &stats,
-                    n,
-                    clock,
-                    opened: clock.now(),
-                };
-                let why = run_connection(stream, k).await;
+                let why = run_numbered(stream, &label, n, &segs, &cfg, &stats, clock).await;
                 tracing::info!(%addr, "KISS/TCP: connection closed: {why}");
                 bump(&stats, |s| s.disconnects += 1);
             }
@@ -298,6 +278,29 @@ pub async fn connect(
         tokio::time::sleep(backoff).await;
         backoff = (backoff * 2).min(Duration::from_secs(10));
     }
+}
+
+/// Serve connection `n` of link `label` (named `label#n`), opened now, until it closes.
+async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
+    stream: S,
+    label: &str,
+    n: u64,
+    segs: &Segments,
+    cfg: &KissLinkConfig,
+    stats: &SharedStats,
+    clock: Clock,
+) -> String {
+    let name = format!("{label}#{n}");
+    let k = Connection {
+        name: &name,
+        segs,
+        cfg,
+        stats,
+        n,
+        clock,
+        opened: clock.now(),
+    };
+    run_connection(stream, k).await
 }
 
 /// Serve one connection of link `name` until it closes; returns why it closed. Generic over

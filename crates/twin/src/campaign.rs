@@ -364,7 +364,7 @@ fn set_in(node: &mut toml::Value, path: &[PathStep], value: toml::Value) -> Resu
 }
 
 /// The value at `path` in `root`, if there is one.
-fn get_path<'a>(root: &'a toml::Table, path: &[PathStep]) -> Option<&'a toml::Value> {
+pub(crate) fn get_path<'a>(root: &'a toml::Table, path: &[PathStep]) -> Option<&'a toml::Value> {
     let (first, rest) = path.split_first()?;
     let PathStep::Key(k) = first else { return None };
     rest.iter().try_fold(root.get(k)?, |v, step| match step {

@@ -16,6 +16,7 @@ use std::collections::BTreeSet;
 
 use anyhow::bail;
 
+use crate::campaign::get_path;
 use crate::campaign_run::{RunVerdict, run_text};
 use crate::scenario::{PathStep, path_string};
 
@@ -109,20 +110,6 @@ fn differences(run: &toml::Table, base: &toml::Table, skip: &[&str]) -> Vec<Vec<
         walk(v, base.get(k), &mut path, &mut out);
     }
     out
-}
-
-/// The value at `path` in `t`.
-fn get<'a>(t: &'a toml::Table, path: &[PathStep]) -> Option<&'a toml::Value> {
-    let (first, rest) = path.split_first()?;
-    let PathStep::Key(k) = first else { return None };
-    let mut v = t.get(k)?;
-    for step in rest {
-        v = match step {
-            PathStep::Key(k) => v.get(k.as_str())?,
-            PathStep::Index(i) => v.get(*i)?,
-        };
-    }
-    Some(v)
 }
 
 /// `t` with the value at `path` replaced by `value` (`None`: removed).
@@ -223,8 +210,8 @@ pub fn shrink(file: &str, text: &str, base: Option<&toml::Table>) -> anyhow::Res
         };
         for (moved, towards) in [("until", "at"), ("at", "until")] {
             let (Some(mut from), Some(other)) = (
-                get(&table, &field(moved)).and_then(millis),
-                get(&table, &field(towards)).and_then(millis),
+                get_path(&table, &field(moved)).and_then(millis),
+                get_path(&table, &field(towards)).and_then(millis),
             ) else {
                 break;
             };
@@ -260,7 +247,7 @@ pub fn shrink(file: &str, text: &str, base: Option<&toml::Table>) -> anyhow::Res
     // 3. Towards the base.
     if let Some(base) = base {
         for path in differences(&table, base, &["seed", "name", "faults"]) {
-            let to = get(base, &path).cloned();
+            let to = get_path(base, &path).cloned();
             let candidate = with(&table, &path, to.clone());
             if s.fails(&candidate) {
                 steps.push(match &to {
