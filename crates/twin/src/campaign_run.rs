@@ -462,6 +462,7 @@ pub fn write_outputs(meta: &CampaignMeta, rows: &[RunRow], dir: &Path) -> anyhow
     )
     .with_context(|| ctx("report.html"))?;
     let failures = dir.join("failures");
+    remove_stale_failures(&failures).with_context(|| ctx("failures/"))?;
     for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
         if r.scenario.is_empty() {
             continue;
@@ -480,6 +481,26 @@ pub fn write_outputs(meta: &CampaignMeta, rows: &[RunRow], dir: &Path) -> anyhow
             format!("{head}{}", r.scenario),
         )
         .with_context(|| ctx("a failure file"))?;
+    }
+    Ok(())
+}
+
+/// Remove what an earlier campaign left in `failures` (`run-<k>.toml`, `.min.toml`,
+/// `.mcap`): a failure file must be of this run. Other files stay.
+fn remove_stale_failures(failures: &Path) -> std::io::Result<()> {
+    let Ok(entries) = std::fs::read_dir(failures) else {
+        return Ok(());
+    };
+    for e in entries {
+        let e = e?;
+        let name = e.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix("run-")) else {
+            continue;
+        };
+        let digits = rest.chars().take_while(char::is_ascii_digit).count();
+        if digits > 0 && matches!(&rest[digits..], ".toml" | ".min.toml" | ".mcap") {
+            std::fs::remove_file(e.path())?;
+        }
     }
     Ok(())
 }
@@ -571,7 +592,19 @@ mod tests {
         let c = campaign();
         let rows = run_all(&c, &(0..6).collect::<Vec<_>>(), 2, &|_| {});
         let dir = std::env::temp_dir().join(format!("m6p-campaign-{}", std::process::id()));
+        // An earlier campaign's failure files go; other files stay.
+        std::fs::create_dir_all(dir.join("failures")).unwrap();
+        for f in [
+            "run-999.toml",
+            "run-999.min.toml",
+            "run-999.mcap",
+            "notes.txt",
+        ] {
+            std::fs::write(dir.join("failures").join(f), "old").unwrap();
+        }
         write_outputs(&CampaignMeta::of(&c, 6), &rows, &dir).unwrap();
+        assert!(dir.join("failures/notes.txt").exists());
+        std::fs::remove_file(dir.join("failures/notes.txt")).unwrap();
         let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
         assert_eq!(csv.lines().count(), 7, "{csv}");
         assert!(
