@@ -126,6 +126,40 @@ struct Candidate {
     babble: Option<u32>,
 }
 
+/// Why a frame was lost by its sender ([`TraceFrame::CanLost`]: it never went on the wire)
+/// or by every endpoint it was addressed to ([`TraceFrame::CanUnreceived`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum FrameLoss {
+    /// The sender's transmit queue was full ([`PortStats::tx_overflow`]).
+    QueueFull = 0,
+    /// The controller was, or went, bus-off ([`PortStats::bus_off_drops`] for a sender).
+    BusOff = 1,
+    /// The endpoint was off the bus: unpowered, or an outside link gone
+    /// ([`PortStats::off_drops`] for a sender).
+    Off = 2,
+}
+
+impl FrameLoss {
+    /// Why a sender lost it, in words (`sender's transmit queue full`, `sender bus-off`,
+    /// `sender off the bus`).
+    pub fn sender(self) -> &'static str {
+        match self {
+            FrameLoss::QueueFull => "sender's transmit queue full",
+            FrameLoss::BusOff => "sender bus-off",
+            FrameLoss::Off => "sender off the bus",
+        }
+    }
+    /// Why its receiver did not take it, in words (`receiver bus-off`, `receiver off the
+    /// bus`).
+    pub fn receiver(self) -> &'static str {
+        match self {
+            FrameLoss::QueueFull => "receiver's inbox full",
+            FrameLoss::BusOff => "receiver bus-off",
+            FrameLoss::Off => "receiver off the bus",
+        }
+    }
+}
+
 /// A CAN controller's fault confinement state (ISO 11898-1).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, PartialOrd, Ord)]
 pub enum ErrorState {
@@ -208,6 +242,9 @@ pub struct PortStats {
     pub bus_off_drops: u64,
     /// Frames lost because its transmit queue was full.
     pub tx_overflow: u64,
+    /// Frames lost because it was off the bus (queued when it lost power, or sent while
+    /// off).
+    pub off_drops: u64,
     /// Frames lost because its inbox was full (it did not take them in time).
     pub rx_overflow: u64,
     /// The most frames its transmit queue held.
@@ -320,6 +357,8 @@ struct State {
     babble_next: BTreeMap<u32, SimTime>,
     rng: ImpairRng,
     trace: Option<TraceTx>,
+    /// The last frame whose bits were counted, and its count.
+    last_bits: Option<(CanFrame, u32)>,
 }
 
 /// A CAN segment; clone it freely (all clones are the same bus).
@@ -342,10 +381,20 @@ impl CanPort {
         {
             let mut st = self.bus.lock();
             let limit = st.cfg.tx_queue_frames;
+            let st = &mut *st;
             let Some(port) = st.ports.get_mut(self.idx) else {
                 return;
             };
             if !port.enabled {
+                port.stats.off_drops += 1;
+                lost(
+                    &st.trace,
+                    &st.name,
+                    &port.stats.name,
+                    t,
+                    frame,
+                    FrameLoss::Off,
+                );
                 return;
             }
             if port.queue.len() >= limit {
@@ -353,6 +402,7 @@ impl CanPort {
                 crate::count_loss(&mut port.stats.tx_overflow, |n| {
                     format!("{name}: transmit queue full ({limit} frames): frame lost ({n} so far)")
                 });
+                lost(&st.trace, &st.name, name, t, frame, FrameLoss::QueueFull);
                 return;
             }
             port.queue.push_back((t, frame));
@@ -407,6 +457,7 @@ impl CanBus {
                 babble_next: BTreeMap::new(),
                 rng,
                 trace: None,
+                last_bits: None,
             })),
             wake: Arc::new(Notify::new()),
         }
@@ -460,9 +511,9 @@ impl CanBus {
         let mut st = self.lock();
         if let Some(p) = st.ports.get_mut(port.idx) {
             p.enabled = enabled;
-            if !enabled {
-                p.queue.clear();
-            }
+        }
+        if !enabled {
+            st.lose_queue(port.idx, None, FrameLoss::Off);
         }
     }
 
@@ -502,8 +553,8 @@ impl CanBus {
         if let Some(p) = st.ports.get_mut(port.idx) {
             p.addrs.clear();
             p.enabled = false;
-            p.queue.clear();
         }
+        st.lose_queue(port.idx, None, FrameLoss::Off);
     }
 
     /// Fault `id` impairs the medium with `imp` (`Some`) or is lifted (`None`); the
@@ -564,13 +615,70 @@ impl CanBus {
     }
 }
 
+/// Trace a frame that never went on the wire.
+fn lost(
+    trace: &Option<TraceTx>,
+    medium: &Arc<str>,
+    from: &str,
+    t: SimTime,
+    f: CanFrame,
+    why: FrameLoss,
+) {
+    if let Some(tr) = trace {
+        tr.emit(TraceEvent {
+            t,
+            medium: medium.clone(),
+            from: from.into(),
+            frame: TraceFrame::CanLost(f, why),
+            dropped: true,
+        });
+    }
+}
+
 impl State {
+    /// Port `i` loses its whole transmit queue (at `t`, or each frame at its own instant),
+    /// counted and traced.
+    fn lose_queue(&mut self, i: usize, t: Option<SimTime>, why: FrameLoss) {
+        let Some(p) = self.ports.get_mut(i) else {
+            return;
+        };
+        let n = p.queue.len() as u64;
+        match why {
+            FrameLoss::BusOff => p.stats.bus_off_drops += n,
+            FrameLoss::Off => p.stats.off_drops += n,
+            FrameLoss::QueueFull => p.stats.tx_overflow += n,
+        }
+        for (r, f) in p.queue.drain(..) {
+            lost(
+                &self.trace,
+                &self.name,
+                &p.stats.name,
+                t.unwrap_or(r),
+                f,
+                why,
+            );
+        }
+    }
+
     /// The endpoint holding `addr`: its claimant, or a node attached with it.
     fn holder(&self, addr: u8) -> Option<usize> {
         self.claims
             .get(&addr)
             .copied()
             .or_else(|| self.ports.iter().position(|p| p.own.contains(&addr)))
+    }
+
+    /// [`frame_bits`], remembered for the last frame (a babbler sends one frame over and
+    /// over, and it was a third of such a run's time).
+    fn frame_bits(&mut self, frame: &CanFrame) -> u32 {
+        match self.last_bits {
+            Some((f, n)) if f == *frame => n,
+            _ => {
+                let n = frame_bits(frame);
+                self.last_bits = Some((*frame, n));
+                n
+            }
+        }
     }
 
     fn ns_per_bit(&self) -> u64 {
@@ -612,8 +720,7 @@ impl State {
             ErrorState::Passive => p.stats.passive_count += 1,
             ErrorState::BusOff => {
                 p.stats.bus_off_count += 1;
-                p.stats.bus_off_drops += p.queue.len() as u64;
-                p.queue.clear();
+                self.lose_queue(i, Some(t), FrameLoss::BusOff);
                 self.stats.bus_off += 1;
                 self.bus_off_since.insert(i, self.recessive_seqs);
             }
@@ -689,9 +796,17 @@ impl State {
             .iter_mut()
             .filter(|p| p.stats.state == ErrorState::BusOff)
         {
-            while p.queue.front().is_some_and(|(r, _)| *r <= t) {
+            while let Some(&(r, f)) = p.queue.front().filter(|(r, _)| *r <= t) {
                 p.queue.pop_front();
                 p.stats.bus_off_drops += 1;
+                lost(
+                    &self.trace,
+                    &self.name,
+                    &p.stats.name,
+                    r,
+                    f,
+                    FrameLoss::BusOff,
+                );
             }
         }
     }
@@ -791,14 +906,17 @@ impl State {
                     let next = match period {
                         Some(p) => start + p,
                         // Back to back: ready again as the bus frees.
-                        None => start + self.bits(u64::from(frame_bits(&frame))),
+                        None => {
+                            let n = self.frame_bits(&frame);
+                            start + self.bits(u64::from(n))
+                        }
                     };
                     self.babble_next.insert(fid, next);
                     (start, frame)
                 }
             };
             let requeue = w.babble.is_none();
-            let bits = frame_bits(&frame);
+            let bits = self.frame_bits(&frame);
             let fate = self.rng.fate(&self.impair);
             if let Fate::Corrupt { bit } = fate {
                 self.stats.corrupted += 1;
@@ -951,25 +1069,44 @@ impl State {
             if dropped {
                 self.stats.dropped += 1;
             }
+            let dst = CfpId::from_can_id(frame.id).dst;
+            let claimed_by = self.claims.get(&dst).copied();
             if let Some(tr) = &self.trace {
-                let from = self
+                let sender = self
                     .ports
                     .get(from)
                     .map_or("?", |p| p.stats.name.as_str())
                     .into();
+                // Addressed to endpoints of which none can take it: lost at the receiver.
+                let addressed = self.ports.iter().enumerate().filter(|&(i, p)| {
+                    i != from && p.addrs.contains(&dst) && claimed_by.is_none_or(|c| c == i)
+                });
+                let unreceived = addressed
+                    .map(|(_, p)| {
+                        if !p.enabled {
+                            Some(FrameLoss::Off)
+                        } else if p.stats.state == ErrorState::BusOff {
+                            Some(FrameLoss::BusOff)
+                        } else {
+                            None
+                        }
+                    })
+                    .reduce(|a, b| a.and(b))
+                    .flatten();
                 tr.emit(TraceEvent {
                     t,
                     medium: self.name.clone(),
-                    from,
-                    frame: TraceFrame::Can(frame),
+                    from: sender,
+                    frame: match unreceived {
+                        Some(why) if !dropped => TraceFrame::CanUnreceived(frame, why),
+                        _ => TraceFrame::Can(frame),
+                    },
                     dropped,
                 });
             }
             if dropped {
                 continue;
             }
-            let dst = CfpId::from_can_id(frame.id).dst;
-            let claimed_by = self.claims.get(&dst).copied();
             for (i, p) in self.ports.iter_mut().enumerate() {
                 if i == from || !p.enabled || p.stats.state == ErrorState::BusOff {
                     continue;
@@ -1131,6 +1268,66 @@ mod tests {
         assert_eq!(s.frames, 3);
         assert_eq!(s.ports[0].frames_tx, 2);
         assert_eq!(s.ports[2].frames_rx, 2);
+    }
+
+    /// Every frame queued ends in the trace once: crossed, crossed but not taken (its
+    /// receiver off), or lost before the wire (queue full, sender off), with the reason.
+    #[tokio::test(start_paused = true)]
+    async fn every_queued_frame_is_traced_once_with_its_fate() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let mut cfg = CanBusConfig::new("payload");
+        cfg.tx_queue_frames = 2;
+        let bus = CanBus::new(cfg, 1);
+        let trace = Arc::new(Mutex::new(Vec::new()));
+        let sink = trace.clone();
+        bus.set_trace(TraceTx::new(move |e| {
+            sink.lock().unwrap().push((e.frame, e.dropped))
+        }));
+        let (tx_a, _ra) = inbox();
+        let (tx_b, _rb) = inbox();
+        let a = bus.attach("PL12", &[12], false, tx_a, 0);
+        let b = bus.attach("PC", &[6], false, tx_b, 0);
+        tokio::spawn(bus.clone().run(clock));
+        for i in 0..3 {
+            a.send(SimTime::ZERO, cfp_frame(12, 6, i));
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+        // The receiver off: its frame crosses, untaken.
+        bus.set_enabled(&b, false);
+        a.send(clock.now(), cfp_frame(12, 6, 3));
+        tokio::time::sleep(Duration::from_millis(2)).await;
+        bus.set_enabled(&b, true);
+        // The sender off: queued frames and frames sent meanwhile never go out.
+        a.send(clock.now(), cfp_frame(12, 6, 4));
+        bus.set_enabled(&a, false);
+        a.send(clock.now(), cfp_frame(12, 6, 5));
+        tokio::time::sleep(Duration::from_millis(2)).await;
+        let got: Vec<_> = trace.lock().unwrap().clone();
+        assert_eq!(
+            got,
+            [
+                (
+                    TraceFrame::CanLost(cfp_frame(12, 6, 2), FrameLoss::QueueFull),
+                    true
+                ),
+                (TraceFrame::Can(cfp_frame(12, 6, 0)), false),
+                (TraceFrame::Can(cfp_frame(12, 6, 1)), false),
+                (
+                    TraceFrame::CanUnreceived(cfp_frame(12, 6, 3), FrameLoss::Off),
+                    false
+                ),
+                (
+                    TraceFrame::CanLost(cfp_frame(12, 6, 4), FrameLoss::Off),
+                    true
+                ),
+                (
+                    TraceFrame::CanLost(cfp_frame(12, 6, 5), FrameLoss::Off),
+                    true
+                ),
+            ]
+        );
+        let s = bus.stats();
+        assert_eq!((s.ports[0].tx_overflow, s.ports[0].off_drops), (1, 2));
     }
 
     #[tokio::test(start_paused = true)]

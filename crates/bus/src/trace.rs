@@ -16,6 +16,22 @@ pub enum TraceFrame {
     Packet(Vec<u8>),
     /// An error frame or a change of a CAN controller's error state.
     CanError(crate::can::CanErrorEvent),
+    /// A CAN frame its sender queued that never went on the wire, and why (not recorded as
+    /// a frame on the bus; the accounting of what was lost in transit uses it).
+    CanLost(CanFrame, crate::can::FrameLoss),
+    /// A CAN frame that crossed the bus (as [`TraceFrame::Can`]) but that none of the
+    /// endpoints it was addressed to could take, and why (they were bus-off or off).
+    CanUnreceived(CanFrame, crate::can::FrameLoss),
+}
+
+impl TraceFrame {
+    /// The CAN frame that went on the wire, if this is one (taken or not).
+    pub fn can_on_wire(&self) -> Option<&CanFrame> {
+        match self {
+            TraceFrame::Can(f) | TraceFrame::CanUnreceived(f, _) => Some(f),
+            _ => None,
+        }
+    }
 }
 
 /// One frame or packet on a medium.
@@ -37,12 +53,18 @@ impl TraceEvent {
     /// The frame's bytes for comparisons: CAN id (4 bytes big-endian) and data, or the packet.
     pub fn bytes(&self) -> Vec<u8> {
         match &self.frame {
-            TraceFrame::Can(f) => {
+            TraceFrame::Can(f) | TraceFrame::CanUnreceived(f, _) => {
                 let mut v = f.id.to_be_bytes().to_vec();
                 v.extend_from_slice(f.data());
                 v
             }
             TraceFrame::Packet(p) => p.clone(),
+            TraceFrame::CanLost(f, why) => {
+                let mut v = vec![0xFF, *why as u8];
+                v.extend_from_slice(&f.id.to_be_bytes());
+                v.extend_from_slice(f.data());
+                v
+            }
             TraceFrame::CanError(e) => {
                 let (what, id) = match &e.kind {
                     crate::can::CanErrorKind::ErrorFrame { can_id } => (0u8, *can_id),

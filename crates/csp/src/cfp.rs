@@ -130,6 +130,19 @@ impl CfpId {
     }
 }
 
+/// The CSP header and data length a BEGIN frame carries; `None` for a MORE frame or a
+/// BEGIN too short to hold them.
+pub fn begin_fields(frame: &CanFrame) -> Option<(Header, usize)> {
+    if CfpId::from_can_id(frame.id).kind != FrameType::Begin {
+        return None;
+    }
+    let &[h0, h1, h2, h3, l0, l1] = frame.data().get(..BEGIN_OVERHEAD)? else {
+        return None;
+    };
+    let header = Header::from_word(u32::from_be_bytes([h0, h1, h2, h3]));
+    Some((header, usize::from(u16::from_be_bytes([l0, l1]))))
+}
+
 /// Fragment `packet` into CAN frames with the given ident, appending them to `out` in
 /// transmit order, as `csp_can_tx` does.
 ///
@@ -481,11 +494,23 @@ impl Reassembler {
 
     /// Purge partial packets idle for at least the timeout at `now`; returns how many.
     pub fn handle_timeout(&mut self, now: SimTime) -> usize {
+        self.purge_stale(now, |_, _, _| {})
+    }
+
+    /// As [`Reassembler::handle_timeout`], telling `on_purge` each purged packet: its CFP
+    /// key (the can id bits of [`CFP_ID_CONN_MASK`]), CSP header and data length.
+    pub fn purge_stale(
+        &mut self,
+        now: SimTime,
+        mut on_purge: impl FnMut(u32, Header, usize),
+    ) -> usize {
         let timeout = self.config.timeout;
         let mut purged = 0;
         for slot in &mut self.slots {
             if slot.as_ref().is_some_and(|s| now >= s.last_used + timeout) {
-                *slot = None;
+                if let Some(s) = slot.take() {
+                    on_purge(s.key, s.header, s.length);
+                }
                 purged += 1;
             }
         }

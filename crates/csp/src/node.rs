@@ -22,7 +22,7 @@ use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::time::Duration;
 
-use crate::cfp::{CanFrame, Fragmenter, Reassembler, ReassemblerConfig};
+use crate::cfp::{self as cfp, CanFrame, CfpDrop, Fragmenter, Reassembler, ReassemblerConfig};
 use crate::header::{BROADCAST, EPHEMERAL_PORT_MIN, MAX_PORT};
 use crate::router::{IfaceId, Route, RoutingTable};
 use crate::service::{self, ServiceAction, ServiceConfig};
@@ -197,6 +197,10 @@ pub struct DroppedPacket {
     pub header: Header,
     /// Bytes of data (after any CRC was stripped).
     pub data_len: usize,
+    /// When CFP reassembly dropped the packet (its BEGIN refused: no free buffer, too long;
+    /// or the partial packet timed out): a CAN id of it (the BEGIN's, or the id bits that
+    /// name the packet on its bus, [`cfp::CFP_ID_CONN_MASK`]), and why.
+    pub cfp: Option<(u32, CfpDrop)>,
 }
 
 /// A drop or a log line of a node, pulled with [`Node::poll_event`].
@@ -543,7 +547,25 @@ impl Node {
         match reasm.handle(frame, now) {
             Some(Ok(packet)) => self.route_in(iface, packet, now),
             Some(Err(reason)) => {
-                self.note_drop(now, "cfp", format!("{reason} (can id {:#010x})", frame.id))
+                let detail = format!("{reason} (can id {:#010x})", frame.id);
+                // A BEGIN refused whole: the packet it starts is lost here, and known.
+                let refused = matches!(reason, CfpDrop::NoBufferFree | CfpDrop::LengthExceedsMtu);
+                match (refused, cfp::begin_fields(frame)) {
+                    (true, Some((header, data_len))) => {
+                        self.counters.drop("cfp");
+                        self.push_event(NodeEvent::Drop {
+                            t: now,
+                            reason: "cfp".into(),
+                            detail,
+                            packet: Some(DroppedPacket {
+                                header,
+                                data_len,
+                                cfp: Some((frame.id, reason)),
+                            }),
+                        });
+                    }
+                    _ => self.note_drop(now, "cfp", detail),
+                }
             }
             None => {}
         }
@@ -597,6 +619,7 @@ impl Node {
                 packet: Some(DroppedPacket {
                     header: packet.header,
                     data_len: packet.data.len(),
+                    cfp: None,
                 }),
             });
         }
@@ -737,12 +760,24 @@ impl Node {
     }
     /// Purge stale partial CFP packets.
     pub fn handle_timeout(&mut self, now: SimTime) {
-        let mut purged = 0;
+        let mut purged = Vec::new();
         for r in self.reasm.iter_mut().flatten() {
-            purged += r.handle_timeout(now);
+            r.purge_stale(now, |key, header, data_len| {
+                purged.push(DroppedPacket {
+                    header,
+                    data_len,
+                    cfp: Some((key, CfpDrop::Timeout)),
+                })
+            });
         }
-        for _ in 0..purged {
-            self.note_drop(now, "cfp", "partial packet timed out".to_owned());
+        for packet in purged {
+            self.counters.drop("cfp");
+            self.push_event(NodeEvent::Drop {
+                t: now,
+                reason: "cfp".into(),
+                detail: "partial packet timed out".to_owned(),
+                packet: Some(packet),
+            });
         }
     }
 

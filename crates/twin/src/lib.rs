@@ -38,6 +38,7 @@ pub mod scenario;
 pub mod sessions;
 pub mod tagged;
 pub mod timefmt;
+pub mod transit;
 
 use std::time::Duration;
 

@@ -1846,7 +1846,7 @@ impl EventEncoder {
     fn encode_medium(&mut self, m: &TraceEvent, emit: &mut Emit<'_>) -> anyhow::Result<()> {
         let t_ns = m.t.as_ns();
         match &m.frame {
-            TraceFrame::Can(f) => {
+            TraceFrame::Can(f) | TraceFrame::CanUnreceived(f, _) => {
                 let msg = CanFrameMsg {
                     t_ns,
                     from: m.from.to_string(),
@@ -1873,6 +1873,9 @@ impl EventEncoder {
                     None => Ok(()),
                 }
             }
+            // Never on the wire: counted by the bus (`tx_overflow`, `bus_off_drops`,
+            // `off_drops`), not a frame of `/can/<bus>/frames`.
+            TraceFrame::CanLost(..) => Ok(()),
             TraceFrame::CanError(e) => {
                 let (event, can_id) = match &e.kind {
                     bus::can::CanErrorKind::ErrorFrame { can_id } => ("error-frame", Some(*can_id)),

@@ -572,6 +572,9 @@ pub struct SessionsReport {
     pub held: Option<BTreeMap<u8, u64>>,
     /// Whether the PC's own ledgers balanced at the end.
     pub pc_balanced: Option<bool>,
+    /// Packets in transit on the CAN buses (a payload's packets lost there count as
+    /// dropped, with the bus's reason).
+    pub transit: crate::transit::Transit,
 }
 
 impl SessionsReport {
@@ -648,6 +651,33 @@ impl SessionsReport {
                     *self.syncs.entry(*addr).or_default() += 1;
                 }
             },
+            // A payload's packet that lost a frame between the payload and the PC (dropped
+            // on the bus, or never sent: its transmit queue full, bus-off, powered off).
+            RunEvent::Medium(m) => {
+                if let Some(lost) = self.transit.observe(m) {
+                    self.lost_in_transit(&lost);
+                }
+            }
+            // A packet a node's CAN reassembly dropped (its BEGIN refused for want of a
+            // free buffer, or the partial packet timed out): lost there, unless it lost a
+            // frame on the bus before.
+            RunEvent::PacketDropped {
+                log,
+                packet:
+                    csp::node::DroppedPacket {
+                        cfp: Some((can_id, drop)),
+                        ..
+                    },
+                ..
+            } => {
+                let why = match drop {
+                    csp::cfp::CfpDrop::Timeout => "the receiver's CAN reassembly timed out",
+                    _ => "the receiver's CAN reassembly refused it",
+                };
+                if let Some(lost) = self.transit.receiver_dropped(*can_id, log.t(), why) {
+                    self.lost_in_transit(&lost);
+                }
+            }
             // A payload's POLL reply that reached the PC after the PC stopped listening for
             // it (its request's ephemeral port was no longer bound): CSP dropped it. Its
             // data (after the reply's command and result bytes) was produced: dropped here.
@@ -669,6 +699,24 @@ impl SessionsReport {
             }
             _ => {}
         }
+    }
+
+    /// A packet lost between its sender and its receiver: a payload's data in it counts
+    /// as dropped, with where and why.
+    fn lost_in_transit(&mut self, lost: &crate::transit::LostPacket) {
+        let h = &lost.header;
+        if h.sport != nodes_payload::wire::PORT || !self.produced.contains_key(&h.src) {
+            return;
+        }
+        // A reply to the PC's request (an ephemeral port) carries the command and result
+        // before its stream bytes; a push is all stream bytes.
+        let data = if h.dport >= csp::header::EPHEMERAL_PORT_MIN {
+            lost.data_len.saturating_sub(REPLY_HEAD_BYTES)
+        } else {
+            lost.data_len
+        };
+        let reason = format!("lost on the {} bus ({})", lost.bus, lost.reason);
+        *self.dropped.entry((h.src, reason)).or_default() += data as u64;
     }
 
     fn latest_open(&mut self, session: u8) -> Option<&mut SessionRun> {
@@ -1205,6 +1253,7 @@ mod tests {
             node: "PC".into(),
             reason: "unbound port".into(),
             packet: csp::node::DroppedPacket {
+                cfp: None,
                 header: csp::Header::new(src, 6, 40, sport),
                 data_len: 2 + 100,
             },

@@ -499,7 +499,6 @@ max = 0
 /// frame of station 18's waits at its head, station 16's wait behind it.
 #[test]
 fn a_babbling_node_starves_exactly_the_frames_with_higher_ids() {
-    use bus::trace::TraceFrame;
     let scenario = |stations: &[u8]| {
         let mut text = String::from(
             "name = \"babble\"\nduration = \"30s\"\n\n[network]\nground_stations = [16, 18]\n",
@@ -526,7 +525,7 @@ fn a_babbling_node_starves_exactly_the_frames_with_higher_ids() {
     let (mut n, mut busy_ns, mut first, mut last) = (0u64, 0u64, f64::MAX, 0f64);
     for e in &events {
         if let RunEvent::Medium(m) = e
-            && let TraceFrame::Can(f) = &m.frame
+            && let Some(f) = m.frame.can_on_wire()
             && &*m.medium == "main"
         {
             let t = m.t.as_secs_f64();
