@@ -245,6 +245,18 @@ pub struct PortStats {
     /// Frames lost because it was off the bus (queued when it lost power, or sent while
     /// off).
     pub off_drops: u64,
+    /// Frames its node handed to it to send: each is sent, lost with one of the counted
+    /// reasons above, or still queued ([`PortStats::unaccounted`]).
+    pub offered: u64,
+    /// Frames a babble fault sent from it (not its node's).
+    pub babbled: u64,
+    /// Frames its node handed to it while it was off (part of `off_drops`): a node that
+    /// acts while unpowered.
+    pub sent_while_off: u64,
+    /// When the first of those came.
+    pub first_sent_while_off: Option<SimTime>,
+    /// Frames in its transmit queue when the counters were read.
+    pub queued: u64,
     /// Frames lost because its inbox was full (it did not take them in time).
     pub rx_overflow: u64,
     /// The most frames its transmit queue held.
@@ -252,6 +264,17 @@ pub struct PortStats {
 }
 
 impl PortStats {
+    /// Frames offered that are neither sent, nor lost for a counted reason, nor queued
+    /// (0 unless a frame went missing; negative if one was counted twice).
+    pub fn unaccounted(&self) -> i128 {
+        let ended = self.frames_tx.saturating_sub(self.babbled)
+            + self.tx_overflow
+            + self.bus_off_drops
+            + self.off_drops
+            + self.queued;
+        i128::from(self.offered) - i128::from(ended)
+    }
+
     fn state_after_counters(&self) -> ErrorState {
         if self.tec > 255 {
             ErrorState::BusOff
@@ -385,8 +408,11 @@ impl CanPort {
             let Some(port) = st.ports.get_mut(self.idx) else {
                 return;
             };
+            port.stats.offered += 1;
             if !port.enabled {
                 port.stats.off_drops += 1;
+                port.stats.sent_while_off += 1;
+                port.stats.first_sent_while_off.get_or_insert(t);
                 lost(
                     &st.trace,
                     &st.name,
@@ -591,7 +617,14 @@ impl CanBus {
     pub fn stats(&self) -> BusStats {
         let st = self.lock();
         let mut s = st.stats.clone();
-        s.ports = st.ports.iter().map(|p| p.stats.clone()).collect();
+        s.ports = st
+            .ports
+            .iter()
+            .map(|p| PortStats {
+                queued: p.queue.len() as u64,
+                ..p.stats.clone()
+            })
+            .collect();
         s
     }
 
@@ -960,6 +993,7 @@ impl State {
             self.stats.busy += end - start;
             let port = &mut self.ports[winner].stats;
             port.frames_tx += 1;
+            port.babbled += u64::from(!requeue);
             port.bytes_tx += u64::from(frame.dlc);
             if self.errors_seen {
                 // A good frame: one off the transmitter's TEC and every receiver's REC.
@@ -1328,6 +1362,9 @@ mod tests {
         );
         let s = bus.stats();
         assert_eq!((s.ports[0].tx_overflow, s.ports[0].off_drops), (1, 2));
+        // Every frame offered is accounted for; one was handed over while off.
+        assert_eq!((s.ports[0].offered, s.ports[0].unaccounted()), (6, 0));
+        assert_eq!(s.ports[0].sent_while_off, 1);
     }
 
     #[tokio::test(start_paused = true)]

@@ -140,7 +140,7 @@ pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>)
             let mut compiled = exec::compile_seeded(&loaded, None);
             compiled.opts.clock = bus::ClockMode::Virtual;
             let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
-            let mut inv = Invariants::default();
+            let mut inv = Invariants::for_run(&compiled.opts);
             let o = rt.block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))?;
             let broken = inv.finish(&o.report);
             Ok((o, broken))

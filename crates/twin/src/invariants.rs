@@ -10,7 +10,13 @@
 //! - `soc-range`: the battery's state of charge stays within [0, 1];
 //! - `one-active-session`: at most one PC session is ACTIVE at any time;
 //! - `pc-balanced`: the PC's byte accounting balances (produced = downlinked + dropped by
-//!   reason + held) when it reports it.
+//!   reason + held) when it reports it;
+//! - `frames-accounted`: every CAN frame a node handed to its controller was sent, lost for
+//!   a counted reason (transmit queue full, bus-off, off the bus), or is still queued;
+//! - `silent-while-off`: no node hands its controller a frame while it is off the bus
+//!   (unpowered);
+//! - `icd-reply-length`: every reply of a platform node has the length the ICD's table
+//!   gives its command ([`crate::icd_lengths`]; with [`Invariants::for_run`]).
 
 use std::collections::BTreeMap;
 
@@ -34,12 +40,60 @@ pub struct Violation {
 #[derive(Debug, Default)]
 pub struct Invariants {
     first: BTreeMap<&'static str, Violation>,
+    icd: Option<crate::icd_lengths::IcdTable>,
+    /// Platform replies checked against the ICD's table so far.
+    pub replies_checked: u64,
 }
 
 /// How far from 1 a unit quaternion's norm may be.
 const UNIT_TOLERANCE: f64 = 1e-6;
 
 impl Invariants {
+    /// Every invariant, the ICD's reply lengths with the ports of `opts`.
+    pub fn for_run(opts: &crate::runtime::RunOptions) -> Self {
+        Invariants {
+            icd: Some(crate::icd_lengths::IcdTable::for_run(opts)),
+            ..Invariants::default()
+        }
+    }
+
+    /// A packet on a medium (a CAN BEGIN frame carries the header, the length and the
+    /// command and result): a platform node's reply against the ICD's table.
+    fn reply_length(&mut self, m: &bus::trace::TraceEvent) {
+        use bus::trace::TraceFrame;
+        let Some(icd) = &self.icd else {
+            return;
+        };
+        if m.dropped {
+            return;
+        }
+        let checked = match &m.frame {
+            TraceFrame::Packet(bytes) => match csp::Packet::parse(bytes) {
+                Ok(p) => icd.check(&p.header, p.data.len(), &p.data),
+                Err(_) => Ok(false),
+            },
+            frame => match frame.can_on_wire().and_then(|f| {
+                let (h, len) = csp::cfp::begin_fields(f)?;
+                Some((
+                    h,
+                    len,
+                    f.data().get(csp::cfp::BEGIN_OVERHEAD..).unwrap_or_default(),
+                ))
+            }) {
+                Some((h, len, head)) => icd.check(&h, len, head),
+                None => Ok(false),
+            },
+        };
+        match checked {
+            Ok(true) => self.replies_checked += 1,
+            Ok(false) => {}
+            Err(_) => self.replies_checked += 1,
+        }
+        if let Err(e) = checked {
+            self.broken("icd-reply-length", m.t, || format!("{} bus: {e}", m.medium));
+        }
+    }
+
     fn broken(&mut self, name: &'static str, t: SimTime, detail: impl FnOnce() -> String) {
         self.first.entry(name).or_insert_with(|| Violation {
             name,
@@ -50,6 +104,9 @@ impl Invariants {
 
     /// Look at one event of the run.
     pub fn observe(&mut self, ev: &RunEvent) {
+        if let RunEvent::Medium(m) = ev {
+            self.reply_length(m);
+        }
         if let RunEvent::Truth { t, truth, adcs } = ev {
             let norm = truth.q_eci_from_body.quaternion().norm();
             if (norm - 1.0).abs() > UNIT_TOLERANCE || !norm.is_finite() {
@@ -104,6 +161,35 @@ impl Invariants {
                 });
             }
         }
+        for bus in &report.buses {
+            for p in &bus.ports {
+                let n = p.unaccounted();
+                if n != 0 {
+                    self.broken("frames-accounted", report.sim_time, || {
+                        format!(
+                            "{} bus, {}: {n} of {} frames offered neither sent ({} of {} by a babble), lost for a reason ({} queue full, {} bus-off, {} off) nor queued ({})",
+                            bus.name,
+                            p.name,
+                            p.offered,
+                            p.frames_tx,
+                            p.babbled,
+                            p.tx_overflow,
+                            p.bus_off_drops,
+                            p.off_drops,
+                            p.queued
+                        )
+                    });
+                }
+                if let Some(t) = p.first_sent_while_off {
+                    self.broken("silent-while-off", t, || {
+                        format!(
+                            "{} handed its {} bus controller {} frames while off",
+                            p.name, bus.name, p.sent_while_off
+                        )
+                    });
+                }
+            }
+        }
         if report.sessions.pc_balanced == Some(false) {
             self.broken("pc-balanced", report.sim_time, || {
                 format!(
@@ -146,9 +232,42 @@ mod tests {
         };
         report.sessions.runs = vec![run(1, 10, Some(20)), run(2, 20, Some(30)), run(3, 25, None)];
         report.sessions.pc_balanced = Some(false);
+        let port = |name: &str, offered, tx, off_at: Option<u64>| bus::can::PortStats {
+            name: name.into(),
+            offered,
+            frames_tx: tx,
+            sent_while_off: u64::from(off_at.is_some()),
+            off_drops: u64::from(off_at.is_some()),
+            first_sent_while_off: off_at.map(SimTime),
+            ..Default::default()
+        };
+        report.buses = vec![bus::can::BusStats {
+            name: "payload".into(),
+            ports: vec![port("PC", 5, 5, None), port("PL12", 9, 7, Some(40))],
+            ..Default::default()
+        }];
         let v = Invariants::default().finish(&report);
         let names: Vec<_> = v.iter().map(|v| v.name).collect();
-        assert_eq!(names, ["one-active-session", "pc-balanced", "soc-range"]);
+        assert_eq!(
+            names,
+            [
+                "frames-accounted",
+                "one-active-session",
+                "pc-balanced",
+                "silent-while-off",
+                "soc-range"
+            ]
+        );
+        assert!(
+            v[0].detail.starts_with("payload bus, PL12: 1 of 9 frames"),
+            "{}",
+            v[0].detail
+        );
+        assert_eq!(v[3].t, SimTime(40));
+        let v: Vec<_> = v
+            .into_iter()
+            .filter(|v| !matches!(v.name, "frames-accounted" | "silent-while-off"))
+            .collect();
         assert_eq!(v[0].t, SimTime(25));
         assert!(
             v[0].detail.contains("session 3 ACTIVE while session 2"),
@@ -160,6 +279,7 @@ mod tests {
         report.power.truncate(1);
         report.sessions.runs.pop();
         report.sessions.pc_balanced = Some(true);
+        report.buses[0].ports[1] = port("PL12", 9, 9, None);
         assert_eq!(Invariants::default().finish(&report), vec![]);
     }
 }

@@ -87,3 +87,28 @@ fn replies_to_a_burst_of_polls_after_a_hang() {
         &["lost on the payload bus (sender's transmit queue full)"],
     );
 }
+
+/// The invariants hold on shipped scenarios that send every kind of platform request
+/// (telemetry, clock, attitude, EPS, ECU, COMM, PC sessions), and the ICD's reply lengths
+/// are really checked there.
+#[test]
+fn shipped_scenarios_keep_the_invariants_and_their_replies_are_checked() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios");
+    for name in ["fc-ports", "ecu-burn", "pc-polling", "platform-faults"] {
+        let loaded =
+            exec::load(&root.join(format!("{name}.toml"))).unwrap_or_else(|e| panic!("{e:#}"));
+        let compiled = exec::compile_loaded(&loaded);
+        let mut inv = m6p_twin::invariants::Invariants::for_run(&compiled.opts);
+        let rt = m6p_twin::runtime::build_runtime(compiled.opts.clock)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        let o = rt
+            .block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        let checked = inv.replies_checked;
+        let broken = inv.finish(&o.report);
+        assert!(broken.is_empty(), "{name}: {broken:?}");
+        let least = if name == "fc-ports" { 50 } else { 4 };
+        assert!(checked >= least, "{name}: {checked} replies checked");
+        eprintln!("{name}: {checked} replies checked");
+    }
+}

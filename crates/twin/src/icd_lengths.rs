@@ -1,0 +1,237 @@
+//! The reply lengths the ICD allows, for the `icd-reply-length` invariant: every reply of a
+//! platform node (COMM 1/2, FC 3, EPS 4, ECU 5, PC 6) to a request (a packet from a
+//! request-reply port to a client's ephemeral port) has the length its command's table
+//! gives: `command | result | data`, so 2 + the ICD's size on success (result 1) and exactly
+//! 2 on failure, unknown commands included (ICD 1.8, docs/INTERPRETATION.md 2). Sizes come
+//! from the node crates' own wire types (`Repr::LEN`), the ports from the run's
+//! configuration.
+//!
+//! Where the ICD's size column and its types disagree (ATCATGET, ATCPTGET: 16 in the
+//! column, 32 and 24 by the types), the types win, as INTERPRETATION 5 decides. Not
+//! checked: payloads 12-15 (their behaviours break the ICD on purpose: oversize, wrong echo,
+//! garbage), the CSP service ports (ping echoes its request), unsolicited packets (beacons,
+//! pushes).
+
+use std::collections::BTreeMap;
+
+use csp::header::{EPHEMERAL_PORT_MIN, Header};
+use csp::reqrep::RESULT_SUCCESS;
+use csp::reqrep::le::Repr;
+
+use crate::runtime::RunOptions;
+
+/// A reply's whole data length (`command | result | data`) allowed on success.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Len {
+    Exact(usize),
+    /// Inclusive.
+    Range(usize, usize),
+}
+
+impl Len {
+    fn holds(self, n: usize) -> bool {
+        match self {
+            Len::Exact(e) => n == e,
+            Len::Range(a, b) => (a..=b).contains(&n),
+        }
+    }
+}
+
+impl std::fmt::Display for Len {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Len::Exact(e) => write!(f, "{e}"),
+            Len::Range(a, b) => write!(f, "{a}..={b}"),
+        }
+    }
+}
+
+/// `command | result` before a reply's data.
+const HEAD: usize = 2;
+
+const fn ok<T: Repr>() -> Len {
+    Len::Exact(HEAD + T::LEN)
+}
+
+const NONE: Len = Len::Exact(HEAD);
+
+/// What one request-reply port answers: by command, or the same for any (FC scripts).
+#[derive(Debug, Clone)]
+enum PortRule {
+    Commands(BTreeMap<u8, Len>),
+    Any(Len),
+}
+
+/// The ICD's reply lengths of one run's platform nodes, by node address and port.
+#[derive(Debug, Clone, Default)]
+pub struct IcdTable {
+    ports: BTreeMap<(u8, u8), PortRule>,
+}
+
+impl IcdTable {
+    /// The table for the nodes and ports of `opts`.
+    pub fn for_run(opts: &RunOptions) -> Self {
+        use nodes_comm::wire as comm;
+        use nodes_ecu::wire as ecu;
+        use nodes_eps::wire as eps;
+        use nodes_fc::wire as fc;
+        use nodes_pc::wire as pc;
+        let cmds = |rows: &[(u8, Len)]| PortRule::Commands(rows.iter().copied().collect());
+        let mut ports = BTreeMap::new();
+        let p = &opts.fc.ports;
+        ports.insert(
+            (platform::addr::FC, p.telemetry),
+            cmds(&[
+                (fc::cmd::TMGEN, ok::<fc::TmGen>()),
+                (fc::cmd::TMATP, ok::<fc::TmAtp>()),
+                (fc::cmd::TMACD, ok::<fc::TmAcd>()),
+                (fc::cmd::TMSENS, ok::<fc::TmSens>()),
+                (fc::cmd::TMRAWSENS, ok::<fc::TmRawSens>()),
+                (fc::cmd::TMALL, ok::<fc::TmAll>()),
+            ]),
+        );
+        ports.insert(
+            (platform::addr::FC, p.rtc),
+            cmds(&[
+                (fc::cmd::RTCSTMSET, NONE),
+                (fc::cmd::RTCSTMGET, ok::<fc::RtcTimestamp>()),
+            ]),
+        );
+        ports.insert(
+            (platform::addr::FC, p.attitude),
+            cmds(&[
+                (fc::cmd::ATCATGET, ok::<fc::TargetAttitude>()),
+                (fc::cmd::ATCATSET, NONE),
+                (fc::cmd::ATCPTGET, ok::<fc::TargetPoint>()),
+                (fc::cmd::ATCPTSET, NONE),
+                (fc::cmd::ATCMDGET, ok::<fc::TargetModeRepr>()),
+                (fc::cmd::ATCMDSET, NONE),
+                (fc::cmd::ATCTLESET, NONE),
+                (fc::cmd::ATCTLEGET, Len::Exact(HEAD + fc::TleLines::LEN)),
+            ]),
+        );
+        ports.insert((platform::addr::FC, p.scripts), PortRule::Any(NONE));
+        ports.insert(
+            (platform::addr::PC, opts.pc.control_port),
+            cmds(&[
+                (pc::cmd::SETUP, NONE),
+                (
+                    pc::cmd::STATUS,
+                    Len::Range(
+                        HEAD + pc::STATUS_FIXED_LEN,
+                        HEAD + pc::STATUS_FIXED_LEN + pc::SYNC_MAX_LEN,
+                    ),
+                ),
+                (pc::cmd::ABORT, NONE),
+            ]),
+        );
+        ports.insert(
+            (platform::addr::PC, opts.pc.telemetry_port),
+            cmds(&[(pc::cmd::TMPC, Len::Exact(HEAD + pc::Tmpc::LEN))]),
+        );
+        ports.insert(
+            (platform::addr::EPS, opts.eps.port),
+            cmds(&[
+                (eps::cmd::TMEPS, ok::<eps::TmEps>()),
+                (eps::cmd::CHGET, ok::<eps::ChannelStates>()),
+                (eps::cmd::CHSET, ok::<eps::ChannelStates>()),
+                (eps::cmd::THRGET, ok::<eps::Thresholds>()),
+                (eps::cmd::THRSET, NONE),
+            ]),
+        );
+        ports.insert(
+            (platform::addr::ECU, opts.ecu.port),
+            cmds(&[
+                (ecu::cmd::TMECU, ok::<ecu::TmEcu>()),
+                (ecu::cmd::ARM, ok::<ecu::ArmReply>()),
+                (ecu::cmd::FIRE, ok::<ecu::FireReply>()),
+                (ecu::cmd::SAFE, NONE),
+            ]),
+        );
+        for addr in [platform::addr::COMM1, platform::addr::COMM2] {
+            ports.insert(
+                (addr, opts.comm.port),
+                cmds(&[
+                    (comm::cmd::TMCOMM, ok::<comm::TmComm>()),
+                    (comm::cmd::BEACONSET, NONE),
+                    (comm::cmd::BEACONGET, ok::<comm::BeaconPeriod>()),
+                    (comm::cmd::BEACON, Len::Exact(comm::Beacon::PACKET_LEN)),
+                ]),
+            );
+        }
+        IcdTable { ports }
+    }
+
+    /// Check a packet with `header`, `data_len` data bytes (a CRC's 4 included when its
+    /// flag is set) starting with `head`: `Ok(true)` for a platform node's reply of the
+    /// table's length, `Ok(false)` for what is not such a reply, `Err` says how a reply
+    /// contradicts the table.
+    pub fn check(&self, header: &Header, data_len: usize, head: &[u8]) -> Result<bool, String> {
+        if header.dport < EPHEMERAL_PORT_MIN {
+            return Ok(false);
+        }
+        let Some(rule) = self.ports.get(&(header.src, header.sport)) else {
+            return Ok(false);
+        };
+        let n = data_len.saturating_sub(if header.has_crc() { 4 } else { 0 });
+        let (Some(&cmd), result) = (head.first(), head.get(1).copied()) else {
+            return Err(format!("{header}: an empty reply"));
+        };
+        let want = match (rule, result) {
+            (_, Some(r)) if r != RESULT_SUCCESS => NONE,
+            (PortRule::Any(l), _) => *l,
+            (PortRule::Commands(c), _) => c.get(&cmd).copied().unwrap_or(NONE),
+        };
+        if want.holds(n) {
+            Ok(true)
+        } else {
+            Err(format!(
+                "{header}: reply to command {cmd} (result {}) is {n} bytes; the ICD's table gives {want}",
+                result.map_or("none".to_owned(), |r| r.to_string())
+            ))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn replies_are_checked_against_the_icd_and_the_configured_ports() {
+        let mut opts = RunOptions::new(
+            crate::network::NetworkSpec::m6p(&[12], &[16]),
+            std::time::Duration::from_secs(1),
+        );
+        opts.fc.ports.telemetry = 20;
+        let t = IcdTable::for_run(&opts);
+        let reply = |src, sport| Header::new(src, 16, 40, sport);
+        // TMGEN: 2 + 16 bytes; a failure is 2; a refused unknown command is 2.
+        assert_eq!(t.check(&reply(3, 20), 18, &[1, 1]), Ok(true));
+        assert_eq!(t.check(&reply(3, 20), 2, &[1, 0]), Ok(true));
+        assert_eq!(t.check(&reply(3, 20), 2, &[99, 0]), Ok(true));
+        let e = t.check(&reply(3, 20), 17, &[1, 1]).unwrap_err();
+        assert!(e.contains("is 17 bytes; the ICD's table gives 18"), "{e}");
+        assert!(t.check(&reply(3, 20), 5, &[1, 0]).is_err());
+        // ATCATGET by the ICD's types (32 data bytes), not its size column (16).
+        assert_eq!(t.check(&reply(3, 12), 34, &[1, 1]), Ok(true));
+        assert!(t.check(&reply(3, 12), 18, &[1, 1]).is_err());
+        // PC STATUS: 11 + a sync message of up to 128 bytes.
+        assert_eq!(t.check(&reply(6, 10), 13 + 128, &[2, 1]), Ok(true));
+        assert!(t.check(&reply(6, 10), 14 + 128, &[2, 1]).is_err());
+        // With a CRC, 4 more bytes.
+        let mut h = reply(4, 10);
+        h.flags |= csp::header::flags::CRC32;
+        assert_eq!(t.check(&h, 2 + 4, &[5, 1]), Ok(true));
+        // Not replies, or not the platform's: a push to the PC's ingest port, a payload's
+        // reply, a ping echo, the FC's old telemetry port.
+        assert_eq!(
+            t.check(&Header::new(12, 6, 11, 10), 200, &[0, 0]),
+            Ok(false)
+        );
+        assert_eq!(t.check(&reply(12, 10), 200, &[2, 1]), Ok(false));
+        assert_eq!(t.check(&reply(3, 1), 100, &[0, 0]), Ok(false));
+        assert_eq!(t.check(&reply(3, 10), 100, &[1, 1]), Ok(false));
+    }
+}
