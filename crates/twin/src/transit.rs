@@ -81,14 +81,12 @@ impl Transit {
         let key = (frame.id & CFP_ID_CONN_MASK, ev.medium.clone());
         let begin = match cfp.kind {
             FrameType::Begin => {
-                let d = frame.data();
-                let (Some(h), Some(len)) = (d.get(..4), d.get(4..BEGIN_OVERHEAD)) else {
-                    return None;
-                };
-                let header = Header::from_word(u32::from_be_bytes([h[0], h[1], h[2], h[3]]));
-                let len = usize::from(u16::from_be_bytes([len[0], len[1]]));
+                let (header, len) = csp::cfp::begin_fields(frame)?;
                 let mut head = [0; 2];
-                for (h, b) in head.iter_mut().zip(d.iter().skip(BEGIN_OVERHEAD)) {
+                for (h, b) in head
+                    .iter_mut()
+                    .zip(frame.data().iter().skip(BEGIN_OVERHEAD))
+                {
                     *h = *b;
                 }
                 Some((header, len, head, usize::from(cfp.remain) + 1))
