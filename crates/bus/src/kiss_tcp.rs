@@ -28,7 +28,8 @@ use tokio::net::{TcpListener, TcpStream};
 use crate::clock::Clock;
 use crate::gate::{DelayLine, LinkGate, Passage};
 use crate::inbox::inbox;
-use crate::outside::{OutsideEndpoint, OutsideError, Segments};
+use crate::outside::{OutsideEndpoint, OutsideError, SegmentKind, Segments};
+use csp::zmqhub::HubDrop;
 
 /// The bounds of a KISS/TCP link, each with the real-world thing it models.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -89,6 +90,37 @@ pub struct KissLinkConfig {
     pub tap: Option<KissTap>,
     /// The link's faults and power ([`crate::gate`]); `None`: everything crosses.
     pub gate: Option<LinkGate>,
+    /// How packets are framed on it: KISS, or libcsp 1.4's ZMQ hub messages.
+    pub framing: Framing,
+}
+
+/// How a link frames packets.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Framing {
+    /// libcsp 1.4's KISS on a byte stream (TCP, a pty); one segment per connection.
+    #[default]
+    Kiss,
+    /// libcsp 1.4's ZMQ hub: one message per packet (`csp::zmqhub`). Its programs may sit
+    /// on several segments (an address's range decides), and a packet between two of them
+    /// goes straight across the hub, as libcsp's own hub forwards it.
+    ZmqHub,
+}
+
+/// Where a link's frames towards the outside go: a byte stream ([`Stream`]) or a message
+/// socket (the ZMQ hub).
+pub trait FrameSink {
+    /// Send one whole frame (a KISS frame, a hub message).
+    fn send_frame(&mut self, frame: &[u8]) -> impl Future<Output = std::io::Result<()>>;
+}
+
+/// A byte stream as a [`FrameSink`].
+#[derive(Debug)]
+pub struct Stream<W>(pub W);
+
+impl<W: AsyncWrite + Unpin> FrameSink for Stream<W> {
+    async fn send_frame(&mut self, frame: &[u8]) -> std::io::Result<()> {
+        self.0.write_all(frame).await
+    }
 }
 
 /// Receives every chunk read from and every frame written to a link's socket:
@@ -171,7 +203,7 @@ pub struct KissLinkStats {
 /// Shared counters of a link.
 pub type SharedStats = Arc<Mutex<KissLinkStats>>;
 
-fn bump(stats: &SharedStats, f: impl FnOnce(&mut KissLinkStats)) {
+pub(crate) fn bump(stats: &SharedStats, f: impl FnOnce(&mut KissLinkStats)) {
     f(&mut stats
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner));
@@ -281,7 +313,7 @@ pub async fn connect(
 }
 
 /// Serve connection `n` of link `label` (named `label#n`), opened now, until it closes.
-async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
+pub(crate) async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
     stream: S,
     label: &str,
     n: u64,
@@ -310,7 +342,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
     k: Connection<'_>,
 ) -> String {
     let (cfg, clock) = (k.cfg, k.clock);
-    let (mut rd, mut wr) = tokio::io::split(stream);
+    let (mut rd, wr) = tokio::io::split(stream);
     // Bounded: when the twin has not taken `input_chunks` chunks yet, the reader waits and
     // TCP holds the sender back.
     let (in_tx, in_rx) = tokio::sync::mpsc::channel(cfg.limits.input_chunks.max(1));
@@ -339,6 +371,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
             }
         }
     };
+    let mut wr = Stream(wr);
     let link = serve_link(in_rx, &mut wr, k);
     tokio::pin!(link);
     tokio::select! {
@@ -363,7 +396,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
 /// recorded) when it crosses. Frames towards the outside wait in a queue of
 /// `cfg.limits.output_frames` for the socket: when the program does not read, they are
 /// dropped and counted, and the twin goes on.
-pub async fn serve_link<W: AsyncWrite + Unpin>(
+pub async fn serve_link<W: FrameSink>(
     input: tokio::sync::mpsc::Receiver<(SimTime, Vec<u8>)>,
     stream: &mut W,
     k: Connection<'_>,
@@ -449,7 +482,7 @@ async fn link_core(
     let mut c = Conn {
         k,
         inbox: inbox_tx,
-        claims: Claims(None),
+        claims: Claims(Vec::new()),
         warned: std::collections::BTreeSet::new(),
         out_full: false,
     };
@@ -478,7 +511,7 @@ async fn link_core(
             () = clock.sleep_until(next_due.unwrap_or(SimTime::MAX)), if next_due.is_some() => {
                 let now = next_due.unwrap_or(SimTime::MAX);
                 while let Some((t, p)) = delayed_in.pop_due(now) {
-                    c.take_in(t, &p);
+                    c.take_in(&out, t, &p);
                 }
                 while let Some((t, bytes)) = delayed_out.pop_due(now) {
                     c.put_out(&out, t, bytes);
@@ -505,17 +538,34 @@ async fn link_core(
                     tap.admit().await;
                     (tap.0)(t, name, true, chunk);
                 }
-                let before = decoder.stats();
-                decoder.push(chunk, &mut events);
-                let after = decoder.stats();
-                bump(stats, |s| {
-                    s.bytes_in += chunk.len() as u64;
-                    s.garbage_bytes += after.discarded_bytes - before.discarded_bytes;
-                });
+                match cfg.framing {
+                    Framing::Kiss => {
+                        let before = decoder.stats();
+                        decoder.push(chunk, &mut events);
+                        let after = decoder.stats();
+                        bump(stats, |s| {
+                            s.bytes_in += chunk.len() as u64;
+                            s.garbage_bytes += after.discarded_bytes - before.discarded_bytes;
+                        });
+                    }
+                    Framing::ZmqHub => {
+                        bump(stats, |s| s.bytes_in += chunk.len() as u64);
+                        match csp::zmqhub::decode(chunk) {
+                            Ok((_via, p)) => events.push(KissEvent::Packet(p)),
+                            Err(d) => {
+                                tracing::debug!("{name}: dropped hub message: {d}");
+                                bump(stats, |s| match d {
+                                    HubDrop::Short => s.short += 1,
+                                    HubDrop::Oversize => s.oversize += 1,
+                                });
+                            }
+                        }
+                    }
+                }
                 for ev in events.drain(..) {
                     match ev {
                         KissEvent::Packet(p) => match gate(cfg) {
-                            Passage::Now => c.take_in(t, &p),
+                            Passage::Now => c.take_in(&out, t, &p),
                             Passage::After(d) => {
                                 if delayed_in.push(t + d, p).is_err() {
                                     overflow(cfg, name);
@@ -539,11 +589,17 @@ async fn link_core(
             a = inbox_rx.recv() => {
                 let Some(a) = a else { break "inbox closed".to_owned() };
                 let a_t = a.t;
-                let Some(ep) = c.claims.0.as_mut() else { continue };
+                let Some(ep) = c.claims.0.iter_mut().find(|e| e.iface() == a.iface) else {
+                    continue;
+                };
                 match ep.receive(a) {
                     Some(Ok(p)) => {
                         frame.clear();
-                        kiss::encode(&p, &mut frame);
+                        if !encode(cfg.framing, &p, &mut frame) {
+                            bump(stats, |s| s.out_dropped += 1);
+                            tracing::debug!("{name}: packet {} too long for the hub", p.header);
+                            continue;
+                        }
                         match gate(cfg) {
                             Passage::Now => c.put_out(&out, a_t, frame.clone()),
                             Passage::After(d) => {
@@ -567,12 +623,29 @@ async fn link_core(
 impl Conn<'_> {
     /// Take a packet from the outside into the twin at `t`: its source must be one of the
     /// link's configured addresses, or, on a link without any, an address it can claim.
-    fn take_in(&mut self, t: SimTime, p: &csp::Packet) {
+    fn take_in(
+        &mut self,
+        out: &tokio::sync::mpsc::Sender<(SimTime, Vec<u8>)>,
+        t: SimTime,
+        p: &csp::Packet,
+    ) {
         let src = p.header.src;
         let res = if !self.k.cfg.addrs.is_empty() && !self.k.cfg.addrs.contains(&src) {
             Err(OutsideError::NotConfigured(src))
         } else {
-            self.claim(src).and_then(|ep| ep.send(t, p))
+            // Between two programs on the hub: straight across, as libcsp's hub does.
+            let across = self.k.cfg.framing == Framing::ZmqHub && self.holds(p.header.dst);
+            match self.claim(src) {
+                Ok(_) if across => {
+                    let mut msg = Vec::new();
+                    if encode(Framing::ZmqHub, p, &mut msg) {
+                        self.put_out(out, t, msg);
+                    }
+                    Ok(())
+                }
+                Ok(ep) => ep.send(t, p),
+                Err(e) => Err(e),
+            }
         };
         match res {
             Ok(()) => bump(self.k.stats, |s| s.packets_in += 1),
@@ -636,11 +709,29 @@ impl Conn<'_> {
         }
     }
 
-    /// The connection's endpoint with `addr` claimed (attaching it on the first claim).
+    /// Whether one of the connection's endpoints holds `addr`.
+    fn holds(&self, addr: u8) -> bool {
+        self.claims.0.iter().any(|e| e.addrs().contains(&addr))
+    }
+
+    /// The connection's endpoint with `addr` claimed (attaching it on the first claim on
+    /// its segment). A KISS connection joins one segment; the hub joins each its programs'
+    /// addresses are on.
     fn claim(&mut self, addr: u8) -> Result<&mut OutsideEndpoint, OutsideError> {
-        match &mut self.claims.0 {
-            Some(ep) => ep.claim(addr)?,
-            slot @ None => {
+        let at = if self.k.cfg.framing == Framing::ZmqHub {
+            let kind = SegmentKind::of(addr);
+            self.claims.0.iter().position(|e| e.kind() == kind)
+        } else {
+            (!self.claims.0.is_empty()).then_some(0)
+        };
+        let at = match at {
+            Some(i) => {
+                if let Some(ep) = self.claims.0.get_mut(i) {
+                    ep.claim(addr)?;
+                }
+                i
+            }
+            None => {
                 let ep = OutsideEndpoint::attach(
                     self.k.segs,
                     self.k.name,
@@ -653,11 +744,30 @@ impl Conn<'_> {
                     self.k.name,
                     ep.kind()
                 );
-                *slot = Some(ep);
+                self.claims.0.push(ep);
+                self.claims.0.len() - 1
             }
-        }
-        self.claims.0.as_mut().ok_or(OutsideError::BadSource(addr))
+        };
+        self.claims
+            .0
+            .get_mut(at)
+            .ok_or(OutsideError::BadSource(addr))
     }
+}
+
+/// Frame `p` for the outside in `out`; false when it does not fit the framing (more than
+/// the hub's 256 bytes).
+fn encode(framing: Framing, p: &csp::Packet, out: &mut Vec<u8>) -> bool {
+    match framing {
+        Framing::Kiss => kiss::encode(p, out),
+        Framing::ZmqHub => {
+            if p.data.len() > csp::zmqhub::HUB_MTU {
+                return false;
+            }
+            csp::zmqhub::encode(p, p.header.dst, out);
+        }
+    }
+    true
 }
 
 /// The passage of one packet through the link's gate (everything crosses without one).
@@ -673,7 +783,7 @@ fn overflow(cfg: &KissLinkConfig, name: &str) {
 }
 
 /// Write one KISS frame to the outside program at `t`; the error ends the link.
-async fn write_out<W: AsyncWrite + Unpin>(
+async fn write_out<W: FrameSink>(
     stream: &mut W,
     name: &str,
     cfg: &KissLinkConfig,
@@ -685,7 +795,7 @@ async fn write_out<W: AsyncWrite + Unpin>(
         (tap.0)(t, name, false, frame);
     }
     stream
-        .write_all(frame)
+        .send_frame(frame)
         .await
         .map_err(|e| format!("write error: {e}"))?;
     bump(stats, |s| {
@@ -695,12 +805,12 @@ async fn write_out<W: AsyncWrite + Unpin>(
     Ok(())
 }
 
-/// An outside link's endpoint, released when dropped.
-struct Claims(Option<OutsideEndpoint>);
+/// An outside link's endpoints (one per segment), released when dropped.
+struct Claims(Vec<OutsideEndpoint>);
 
 impl Drop for Claims {
     fn drop(&mut self) {
-        if let Some(ep) = &self.0 {
+        for ep in &self.0 {
             ep.release();
         }
     }
@@ -780,7 +890,7 @@ mod tests {
             );
             std::future::pending::<()>().await;
         };
-        let mut socket = Reset;
+        let mut socket = Stream(Reset);
         let why = tokio::select! {
             why = serve_link(in_rx, &mut socket, k) => why,
             () = sent => unreachable!(),

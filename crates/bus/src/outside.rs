@@ -108,6 +108,15 @@ pub enum OutsideError {
     },
 }
 
+/// The interface index of an endpoint on `kind`.
+fn iface_of(kind: SegmentKind) -> usize {
+    match kind {
+        SegmentKind::Main => 0,
+        SegmentKind::Payload => 1,
+        SegmentKind::Ground => 2,
+    }
+}
+
 impl OutsideEndpoint {
     /// Attach a link named `name` for `addr` on its segment, delivering to `inbox`.
     pub fn attach(
@@ -128,7 +137,7 @@ impl OutsideEndpoint {
                 } else {
                     &segs.payload
                 };
-                let port = bus.attach(name, &[], false, inbox, 0);
+                let port = bus.attach(name, &[], false, inbox, iface_of(kind));
                 if let Err(holder) = bus.claim(&port, addr) {
                     bus.release(&port);
                     return Err(OutsideError::Held { addr, holder });
@@ -140,7 +149,9 @@ impl OutsideEndpoint {
                 }
             }
             SegmentKind::Ground => {
-                let port = segs.ground.attach(name, &[], false, false, inbox, 0);
+                let port = segs
+                    .ground
+                    .attach(name, &[], false, false, inbox, iface_of(kind));
                 if let Err(holder) = segs.ground.claim(&port, addr) {
                     segs.ground.release(&port);
                     return Err(OutsideError::Held { addr, holder });
@@ -158,6 +169,11 @@ impl OutsideEndpoint {
     /// The segment the link sits on.
     pub fn kind(&self) -> SegmentKind {
         self.kind
+    }
+    /// The interface index its arrivals carry (`Inbound::iface`): one per segment, so that
+    /// endpoints of one program on several segments can share an inbox.
+    pub fn iface(&self) -> usize {
+        iface_of(self.kind)
     }
     /// Addresses claimed by the link.
     pub fn addrs(&self) -> &[u8] {

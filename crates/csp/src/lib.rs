@@ -23,6 +23,7 @@ pub mod reqrep;
 pub mod router;
 pub mod service;
 pub mod time;
+pub mod zmqhub;
 
 pub use header::{Header, Priority};
 pub use packet::Packet;

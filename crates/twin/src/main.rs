@@ -106,7 +106,16 @@ struct RunArgs {
     /// Connect to an outside KISS/TCP server, as the platform does in ICD 2.3.
     #[arg(long = "kiss-connect", value_name = "ADDR")]
     kiss_connect: Vec<SocketAddr>,
-    /// A CSP address behind the --kiss-listen or --kiss-connect before it (repeat for more);
+    /// KISS on a pseudo-terminal linked at PATH, for a program using libcsp's usart driver
+    /// (`usart_init(PATH)`): no socat needed. The program may close and reopen it.
+    #[arg(long = "kiss-pty", value_name = "PATH")]
+    kiss_pty: Vec<PathBuf>,
+    /// Play libcsp 1.4's ZMQ hub on HOST (programs call csp_zmqhub_init(addr, "HOST")):
+    /// HOST or HOST:PUB_PORT:SUB_PORT [default ports: 6000 7000]. Any 127.0.0.x works.
+    #[arg(long = "zmq-hub", value_name = "HOST")]
+    zmq_hub: Vec<bus::zmq_hub::HubAddr>,
+    /// A CSP address behind the --kiss-listen, --kiss-connect, --kiss-pty or --zmq-hub
+    /// before it (repeat for more);
     /// claimed when a program connects, and the only sources that link accepts. A link
     /// without any learns them from the packets it receives.
     #[arg(long = "kiss-addr", value_name = "ID")]
@@ -397,7 +406,7 @@ fn cli_kiss_links(
     m: &clap::ArgMatches,
     a: &RunArgs,
 ) -> anyhow::Result<Vec<m6p_twin::runtime::KissLink>> {
-    use m6p_twin::runtime::KissLink;
+    use m6p_twin::runtime::{KissLink, KissMode};
     let at =
         |id: &str| -> Vec<usize> { m.indices_of(id).map(Iterator::collect).unwrap_or_default() };
     let mut links: Vec<(usize, KissLink)> = at("kiss_listen")
@@ -410,6 +419,18 @@ fn cli_kiss_links(
                 .zip(&a.kiss_connect)
                 .map(|(i, &addr)| (i, KissLink::connect(addr))),
         )
+        .chain(
+            at("kiss_pty")
+                .into_iter()
+                .zip(&a.kiss_pty)
+                .map(|(i, p)| (i, KissLink::new(KissMode::Pty(p.clone())))),
+        )
+        .chain(
+            at("zmq_hub")
+                .into_iter()
+                .zip(&a.zmq_hub)
+                .map(|(i, &h)| (i, KissLink::new(KissMode::ZmqHub(h)))),
+        )
         .collect();
     links.sort_by_key(|(i, _)| *i);
     for (i, &id) in at("kiss_addr").into_iter().zip(&a.kiss_addr) {
@@ -418,12 +439,14 @@ fn cli_kiss_links(
         }
         let Some((_, link)) = links.iter_mut().rev().find(|(j, _)| *j < i) else {
             anyhow::bail!(
-                "--kiss-addr {id} comes before any --kiss-listen or --kiss-connect: it names an \
-                 address of the link before it"
+                "--kiss-addr {id} comes before any --kiss-listen, --kiss-connect, --kiss-pty or \
+                 --zmq-hub: it names an address of the link before it"
             );
         };
         let first = link.cfg.addrs.first().copied();
-        if let Some(f) = first
+        // The hub's programs may sit on several segments.
+        if !matches!(link.mode, KissMode::ZmqHub(_))
+            && let Some(f) = first
             && platform::addr::Segment::of(f) != platform::addr::Segment::of(id)
         {
             anyhow::bail!(
@@ -713,6 +736,10 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         // Each recorded connection with its link's settings (its addresses above all).
         for r in &mut input {
             let link = r.link.split_once('#').map_or(r.link.as_str(), |(l, _)| l);
+            // A hub's messages, even when the hub came from the command line.
+            if link.starts_with("zmq-hub ") {
+                r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
+            }
             if let Some(k) = compiled.opts.kiss_links.iter().find(|k| k.label() == link) {
                 r.cfg = k.cfg.clone();
             }

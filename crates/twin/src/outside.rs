@@ -11,11 +11,11 @@
 //! - a node sitting on two media (the PC on both buses, a COMM with its radio) cannot be
 //!   replaced over KISS; the PC can be over two `socketcan` links, one per bus.
 
-use bus::kiss_tcp::{KissLimits, KissLinkConfig};
+use bus::kiss_tcp::KissLimits;
 use platform::addr::Segment;
 
 use crate::network::{NetworkSpec, Role};
-use crate::runtime::{KissLink, OutsideLink, RunOptions, SocketCanBus};
+use crate::runtime::{KissLink, KissMode, OutsideLink, RunOptions, SocketCanBus};
 use crate::scenario::{LinkKind, LinkSpec, PathStep, Scenario};
 
 fn key(k: &str) -> PathStep {
@@ -37,7 +37,7 @@ pub fn validate(
 ) {
     let Some(l) = s.links.get(i) else { return };
     let p = |f: &str| vec![key("links"), PathStep::Index(i), key(f)];
-    let kiss = matches!(l.kind, LinkKind::KissListen | LinkKind::KissConnect);
+    let kiss = l.kind != LinkKind::Socketcan;
     let mut replaced_addrs = Vec::new();
     for (j, name) in l.replaces.iter().enumerate() {
         let at = || {
@@ -119,7 +119,9 @@ pub fn validate(
     }
     if kiss {
         let addrs: Vec<u8> = l.addrs.iter().chain(&replaced_addrs).copied().collect();
-        if let Some(&first) = addrs.first()
+        // The hub's programs may sit on several segments; a KISS link joins one.
+        if l.kind != LinkKind::ZmqHub
+            && let Some(&first) = addrs.first()
             && let Some(&other) = addrs
                 .iter()
                 .find(|&&a| Segment::of(a) != Segment::of(first))
@@ -198,35 +200,34 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
         opts.replaced.extend(&replaced);
         // Every link gets its place in `opts.outside` (faults name it by its index).
         let label = match l.kind {
-            LinkKind::KissListen | LinkKind::KissConnect => {
+            LinkKind::KissListen | LinkKind::KissConnect | LinkKind::KissPty | LinkKind::ZmqHub => {
                 let mut addrs = l.addrs.clone();
                 addrs.extend(replaced.iter().filter(|a| !l.addrs.contains(a)));
                 let defaults = KissLimits::default();
-                let cfg = KissLinkConfig {
-                    addrs,
-                    limits: KissLimits {
-                        max_connections: l.max_connections.unwrap_or(defaults.max_connections),
-                        input_chunks: l.input_chunks.unwrap_or(defaults.input_chunks),
-                        output_frames: l.output_frames.unwrap_or(defaults.output_frames),
-                    },
-                    decoder: csp::kiss::DecoderConfig {
-                        libcsp14_rx_limit: l.libcsp14_rx_limit,
-                    },
-                    ..Default::default()
+                let limits = KissLimits {
+                    max_connections: l.max_connections.unwrap_or(defaults.max_connections),
+                    input_chunks: l.input_chunks.unwrap_or(defaults.input_chunks),
+                    output_frames: l.output_frames.unwrap_or(defaults.output_frames),
                 };
-                match l.addr.parse::<std::net::SocketAddr>() {
-                    Ok(addr) => {
-                        let link = if l.kind == LinkKind::KissListen {
-                            KissLink::listen(addr)
-                        } else {
-                            KissLink::connect(addr)
+                let mode = match l.kind {
+                    LinkKind::KissListen => l.addr.parse().ok().map(KissMode::Listen),
+                    LinkKind::KissConnect => l.addr.parse().ok().map(KissMode::Connect),
+                    LinkKind::KissPty => Some(KissMode::Pty(l.addr.clone().into())),
+                    _ => l.addr.parse().ok().map(KissMode::ZmqHub),
+                };
+                match mode {
+                    Some(mode) => {
+                        let mut link = KissLink::new(mode);
+                        link.cfg.addrs = addrs;
+                        link.cfg.limits = limits;
+                        link.cfg.decoder = csp::kiss::DecoderConfig {
+                            libcsp14_rx_limit: l.libcsp14_rx_limit,
                         };
-                        let link = KissLink { cfg, ..link };
                         let label = link.label();
                         opts.kiss_links.push(link);
                         label
                     }
-                    Err(_) => l.addr.clone(),
+                    None => l.addr.clone(),
                 }
             }
             LinkKind::Socketcan => match SocketCanBus::parse_arg(&l.addr) {

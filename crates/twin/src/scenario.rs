@@ -262,9 +262,12 @@ pub enum UptimeKind {
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LinkSpec {
-    /// `kiss-listen`, `kiss-connect` or `socketcan`.
+    /// `kiss-listen`, `kiss-connect`, `kiss-pty`, `zmq-hub` or `socketcan`.
     pub kind: LinkKind,
-    /// TCP address (KISS) or interface name with an optional `:main`/`:payload` (SocketCAN).
+    /// TCP address (KISS/TCP), path (`kiss-pty`: where the pty is linked), host
+    /// (`zmq-hub`: `127.0.0.2`, or `127.0.0.2:6000:7000` with the ports the programs
+    /// publish to and subscribe at) or interface name with an optional `:main`/`:payload`
+    /// (SocketCAN).
     pub addr: String,
     /// CSP addresses behind the link (default: learned from its packets).
     #[serde(default)]
@@ -305,6 +308,10 @@ pub enum LinkKind {
     KissListen,
     /// Connect to an outside KISS/TCP server.
     KissConnect,
+    /// KISS on a pseudo-terminal linked at `addr` (a path), for libcsp's usart driver.
+    KissPty,
+    /// libcsp 1.4's ZMQ hub bound on `addr` (`HOST` or `HOST:PUB:SUB`).
+    ZmqHub,
     /// Bridge to a SocketCAN interface.
     Socketcan,
 }
@@ -596,6 +603,16 @@ impl Scenario {
                             p("addr"),
                             format!("`{}` is not an address like 127.0.0.1:52001", l.addr),
                         );
+                    }
+                }
+                LinkKind::KissPty => {
+                    if l.addr.is_empty() {
+                        err(p("addr"), "the path to link the pty at is empty".to_owned());
+                    }
+                }
+                LinkKind::ZmqHub => {
+                    if let Err(e) = l.addr.parse::<bus::zmq_hub::HubAddr>() {
+                        err(p("addr"), e);
                     }
                 }
                 LinkKind::Socketcan => {

@@ -53,7 +53,7 @@ fn python_payload_over_kiss_serves_a_polling_session_and_its_bytes_reach_the_gro
     // on an ephemeral port instead of 52001.
     assert_eq!(opts.kiss_links.len(), 1);
     assert_eq!(opts.kiss_links[0].cfg.addrs, vec![12]);
-    opts.kiss_links[0].addr = "127.0.0.1:0".parse().unwrap();
+    opts.kiss_links[0].mode = m6p_twin::runtime::KissMode::Listen("127.0.0.1:0".parse().unwrap());
     assert!(matches!(opts.clock, bus::ClockMode::Realtime { .. }));
 
     let dir = std::env::temp_dir().join(format!("m6p-outside-payload-{}", std::process::id()));

@@ -101,25 +101,15 @@ pub(super) async fn kiss(
         let label = link.label();
         let cfg = wire(&link.cfg, &label);
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
-        match link.mode {
-            KissMode::Listen => {
-                let addr = link.addr;
+        match &link.mode {
+            KissMode::Listen(addr) => {
+                let addr = *addr;
                 let listener = tokio::net::TcpListener::bind(addr)
                     .await
                     .with_context(|| format!("listening for KISS/TCP on {addr}"))?;
                 let local = listener.local_addr().context("reading the bound address")?;
                 if !local.ip().is_loopback() {
-                    let text = format!(
-                        "KISS/TCP server on {local}: not a loopback address, so programs on \
-                         other machines can connect and claim addresses of the twin"
-                    );
-                    tracing::warn!("{text}");
-                    let _ = events.send(RunEvent::Log {
-                        t: clock.now(),
-                        source: label.clone(),
-                        level: Level::Warning,
-                        message: text,
-                    });
+                    not_loopback(events, clock, &label, format!("KISS/TCP server on {local}"));
                 }
                 bound.push(local);
                 kiss_stats.push((format!("listen {local}"), stats.clone()));
@@ -132,10 +122,42 @@ pub(super) async fn kiss(
                     clock,
                 )));
             }
-            KissMode::Connect => {
+            KissMode::Connect(addr) => {
                 kiss_stats.push((label.clone(), stats.clone()));
                 background.push(tokio::spawn(kiss_tcp::connect(
-                    link.addr,
+                    *addr,
+                    label,
+                    segs.clone(),
+                    cfg,
+                    stats,
+                    clock,
+                )));
+            }
+            KissMode::Pty(path) => {
+                let pty = open_pty(path)?;
+                tracing::info!(
+                    "KISS on {} (pseudo-terminal {})",
+                    path.display(),
+                    pty.device().display()
+                );
+                kiss_stats.push((label.clone(), stats.clone()));
+                background.push(tokio::spawn(bus::kiss_pty::serve(
+                    pty,
+                    label,
+                    segs.clone(),
+                    cfg,
+                    stats,
+                    clock,
+                )));
+            }
+            KissMode::ZmqHub(addr) => {
+                let hub = bus::zmq_hub::Hub::bind(*addr).await?;
+                if !addr.host.is_loopback() {
+                    not_loopback(events, clock, &label, format!("ZMQ hub on {addr}"));
+                }
+                kiss_stats.push((label.clone(), stats.clone()));
+                background.push(tokio::spawn(bus::zmq_hub::serve(
+                    hub,
                     label,
                     segs.clone(),
                     cfg,
@@ -167,7 +189,7 @@ pub(super) async fn kiss(
         };
         background.push(tokio::spawn(async move {
             clock.sleep_until(opened).await;
-            let mut discard = tokio::io::sink();
+            let mut discard = kiss_tcp::Stream(tokio::io::sink());
             // The connection number seeds its CFP ident as in the recorded run.
             let conn = label
                 .rsplit_once('#')
@@ -202,6 +224,27 @@ pub(super) async fn kiss(
         bound,
         budget,
     })
+}
+
+/// Warn that a link's server listens beyond this machine.
+fn not_loopback(events: &mpsc::UnboundedSender<RunEvent>, clock: Clock, label: &str, what: String) {
+    let text = format!(
+        "{what}: not a loopback address, so programs on other machines can connect and \
+         claim addresses of the twin"
+    );
+    tracing::warn!("{text}");
+    let _ = events.send(RunEvent::Log {
+        t: clock.now(),
+        source: label.to_owned(),
+        level: Level::Warning,
+        message: text,
+    });
+}
+
+/// The pseudo-terminal of a `kiss-pty` link.
+#[cfg(unix)]
+fn open_pty(path: &std::path::Path) -> anyhow::Result<bus::kiss_pty::Pty> {
+    Ok(bus::kiss_pty::Pty::open(path)?)
 }
 
 /// Shared counters of the SocketCAN bridges, by name.

@@ -121,22 +121,26 @@ pub struct KissReplay {
     pub cfg: KissLinkConfig,
 }
 
-/// Whether a KISS link listens for outside programs or connects to one.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Where a link to outside programs meets them.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum KissMode {
-    /// A server for outside programs (`--kiss-listen`, `kind = "kiss-listen"`).
-    Listen,
-    /// A client of an outside server, as the platform in ICD 2.3 (`--kiss-connect`).
-    Connect,
+    /// A KISS/TCP server for outside programs (`--kiss-listen`, `kind = "kiss-listen"`).
+    Listen(SocketAddr),
+    /// A KISS/TCP client of an outside server, as the platform in ICD 2.3 (`--kiss-connect`).
+    Connect(SocketAddr),
+    /// KISS on a pseudo-terminal linked at this path (`--kiss-pty`, `kind = "kiss-pty"`):
+    /// libcsp's `usart_init(PATH)` opens it.
+    Pty(std::path::PathBuf),
+    /// libcsp 1.4's ZMQ hub (`--zmq-hub`, `kind = "zmq-hub"`): the twin binds its two
+    /// sockets on this host, the nodes' PUB side and SUB side (`bus::zmq_hub`).
+    ZmqHub(bus::zmq_hub::HubAddr),
 }
 
-/// A KISS/TCP link of the run.
+/// A link of the run to outside programs: KISS (TCP or a pty) or the ZMQ hub.
 #[derive(Debug, Clone)]
 pub struct KissLink {
-    /// Listen or connect.
+    /// Where it meets the programs.
     pub mode: KissMode,
-    /// The address to listen on or connect to.
-    pub addr: SocketAddr,
     /// Its addresses, receiver and limits (the tap, log and gate are the run's).
     pub cfg: KissLinkConfig,
 }
@@ -144,31 +148,37 @@ pub struct KissLink {
 impl KissLink {
     /// A server on `addr`, learning its addresses.
     pub fn listen(addr: SocketAddr) -> Self {
-        KissLink {
-            mode: KissMode::Listen,
-            addr,
-            cfg: KissLinkConfig::default(),
-        }
+        KissLink::new(KissMode::Listen(addr))
     }
     /// A client of `addr`, learning its addresses.
     pub fn connect(addr: SocketAddr) -> Self {
-        KissLink {
-            mode: KissMode::Connect,
-            ..KissLink::listen(addr)
-        }
+        KissLink::new(KissMode::Connect(addr))
+    }
+    /// A link meeting its programs at `mode`, learning its addresses.
+    pub fn new(mode: KissMode) -> Self {
+        let cfg = match mode {
+            KissMode::ZmqHub(_) => KissLinkConfig {
+                framing: bus::kiss_tcp::Framing::ZmqHub,
+                ..KissLinkConfig::default()
+            },
+            _ => KissLinkConfig::default(),
+        };
+        KissLink { mode, cfg }
     }
     /// With these CSP addresses behind it.
     pub fn with_addrs(mut self, addrs: &[u8]) -> Self {
         self.cfg.addrs = addrs.to_vec();
         self
     }
-    /// The runtime's name of the link: `listen 127.0.0.1:52001` or `connect ...`.
+    /// The runtime's name of the link: `listen 127.0.0.1:52001`, `connect ...`, `pty
+    /// /tmp/m6p-tty` or `zmq-hub 127.0.0.2`.
     pub fn label(&self) -> String {
-        let verb = match self.mode {
-            KissMode::Listen => "listen",
-            KissMode::Connect => "connect",
-        };
-        format!("{verb} {}", self.addr)
+        match &self.mode {
+            KissMode::Listen(a) => format!("listen {a}"),
+            KissMode::Connect(a) => format!("connect {a}"),
+            KissMode::Pty(p) => format!("pty {}", p.display()),
+            KissMode::ZmqHub(h) => format!("zmq-hub {h}"),
+        }
     }
 }
 

@@ -239,7 +239,7 @@ impl RunReport {
         for (name, k) in &self.kiss {
             let _ = writeln!(
                 s,
-                "\nKISS/TCP {name}: {} connections ({} refused), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
+                "\nlink {name}: {} connections ({} refused), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
                 k.connections,
                 k.connections_refused,
                 k.packets_in,
