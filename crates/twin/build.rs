@@ -12,6 +12,10 @@
 //!   (`tests/campaign_slurm.rs` starts a one-node cluster with `tools/slurm/cluster.sh`).
 //!   Under `CI` it is always set (`.ci/run` installs them); `M6P_SLURM_PROBE=off` forces
 //!   "not available" elsewhere.
+//! - `cfg(libcsp_peer)`: a C compiler (`cc`) and libzmq's headers (`zmq.h`, Debian
+//!   `libzmq3-dev`), to build the vendored libcsp 1.4 and `tests/libcsp/` for
+//!   `tests/libcsp.rs`. Under `CI` it is always set (`.ci/run` installs them);
+//!   `M6P_LIBCSP_PROBE=off` forces "not available" elsewhere.
 
 #[path = "../bus/build.rs"]
 mod uml_probe;
@@ -21,6 +25,30 @@ fn main() {
     uml_probe::main();
     python_probe();
     slurm_probe();
+    libcsp_probe();
+}
+
+fn libcsp_probe() {
+    println!("cargo::rustc-check-cfg=cfg(libcsp_peer)");
+    println!("cargo::rerun-if-env-changed=M6P_LIBCSP_PROBE");
+    if std::env::var_os("CI").is_some() {
+        println!("cargo::rustc-cfg=libcsp_peer");
+        return;
+    }
+    if std::env::var("M6P_LIBCSP_PROBE").is_ok_and(|v| v == "off") {
+        return;
+    }
+    // Installing libzmq3-dev adds /usr/include/zmq.h: probe again then.
+    println!("cargo::rerun-if-changed=/usr/include");
+    let cc = ["/usr/bin", "/bin", "/usr/local/bin"]
+        .iter()
+        .any(|d| std::path::Path::new(d).join("cc").exists());
+    let zmq = ["/usr/include/zmq.h", "/usr/local/include/zmq.h"]
+        .iter()
+        .any(|f| std::path::Path::new(f).exists());
+    if cc && zmq {
+        println!("cargo::rustc-cfg=libcsp_peer");
+    }
 }
 
 fn slurm_probe() {

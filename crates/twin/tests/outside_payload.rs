@@ -17,32 +17,7 @@ use m6p_twin::scenario::Scenario;
 
 mod common;
 
-use common::{readme_scenario, repo_root};
-
-/// The data stream of the script (`frame_data` in examples/outside_payload.py), written
-/// again here from its description: frame `seq` is `seq` u16 LE then a byte counter from
-/// `seq`, `frame_size - (seq % 3) * (frame_size / 3)` bytes long (at least 1).
-fn expected_stream(frames: u32, frame_size: usize) -> Vec<u8> {
-    let mut out = Vec::new();
-    for seq in 0..frames {
-        let len = frame_size
-            .saturating_sub((seq as usize % 3) * (frame_size / 3))
-            .max(1);
-        let mut frame = (seq as u16).to_le_bytes().to_vec();
-        frame.extend((0..len).map(|i| (seq as usize + i) as u8));
-        frame.truncate(len);
-        out.extend(frame);
-    }
-    out
-}
-
-/// Assert `a == b`, naming the first differing byte rather than printing kilobytes.
-fn same_bytes(what_a: &str, a: &[u8], what_b: &str, b: &[u8]) {
-    if let Some(i) = a.iter().zip(b).position(|(x, y)| x != y) {
-        panic!("byte {i}: {what_a} {:#04x}, {what_b} {:#04x}", a[i], b[i]);
-    }
-    assert_eq!(a.len(), b.len(), "{what_a} vs {what_b}: lengths differ");
-}
+use common::{expected_stream, readme_scenario, repo_root, same_bytes};
 
 #[test]
 fn python_payload_over_kiss_serves_a_polling_session_and_its_bytes_reach_the_ground() {
@@ -110,16 +85,7 @@ fn python_payload_over_kiss_serves_a_polling_session_and_its_bytes_reach_the_gro
     );
 
     // The PC ran the session to DONE after 25 packets (maxNumOfPackets).
-    let runs: Vec<_> = report
-        .sessions
-        .runs
-        .iter()
-        .filter(|r| r.session == 1)
-        .collect();
-    assert_eq!(runs.len(), 1, "{:?}", report.sessions.runs);
-    assert!(runs[0].started.is_some());
-    let (_, result, packets) = runs[0].ended.expect("session 1 ended within the run");
-    assert_eq!((result, packets), (0, 25), "expected DONE after 25 packets");
+    common::assert_one_session_done(&report, 1, 25);
 
     // What reached the ground is exactly what the payload sent: nothing dropped, nothing
     // still held by the PC, nothing else mixed in.

@@ -99,7 +99,12 @@ pub(super) async fn kiss(
     let mut bound = Vec::new();
     for link in &opts.kiss_links {
         let label = link.label();
-        let cfg = wire(&link.cfg, &label);
+        let mut cfg = wire(&link.cfg, &label);
+        // The hub's messages; KISS on every other link.
+        cfg.framing = match link.mode {
+            KissMode::ZmqHub(_) => bus::kiss_tcp::Framing::ZmqHub,
+            _ => bus::kiss_tcp::Framing::Kiss,
+        };
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         match &link.mode {
             KissMode::Listen(addr) => {

@@ -156,14 +156,10 @@ impl KissLink {
     }
     /// A link meeting its programs at `mode`, learning its addresses.
     pub fn new(mode: KissMode) -> Self {
-        let cfg = match mode {
-            KissMode::ZmqHub(_) => KissLinkConfig {
-                framing: bus::kiss_tcp::Framing::ZmqHub,
-                ..KissLinkConfig::default()
-            },
-            _ => KissLinkConfig::default(),
-        };
-        KissLink { mode, cfg }
+        KissLink {
+            mode,
+            cfg: KissLinkConfig::default(),
+        }
     }
     /// With these CSP addresses behind it.
     pub fn with_addrs(mut self, addrs: &[u8]) -> Self {

@@ -103,3 +103,48 @@ pub fn readme_scenario() -> String {
         .expect("the block's closing EOF");
     readme[start..start + len].to_owned()
 }
+
+/// The data stream of the script (`frame_data` in examples/outside_payload.py), written
+/// again here from its description: frame `seq` is `seq` u16 LE then a byte counter from
+/// `seq`, `frame_size - (seq % 3) * (frame_size / 3)` bytes long (at least 1).
+pub fn expected_stream(frames: u32, frame_size: usize) -> Vec<u8> {
+    let mut out = Vec::new();
+    for seq in 0..frames {
+        let len = frame_size
+            .saturating_sub((seq as usize % 3) * (frame_size / 3))
+            .max(1);
+        let mut frame = (seq as u16).to_le_bytes().to_vec();
+        frame.extend((0..len).map(|i| (seq as usize + i) as u8));
+        frame.truncate(len);
+        out.extend(frame);
+    }
+    out
+}
+
+/// Assert `a == b`, naming the first differing byte rather than printing kilobytes.
+pub fn same_bytes(what_a: &str, a: &[u8], what_b: &str, b: &[u8]) {
+    if let Some(i) = a.iter().zip(b).position(|(x, y)| x != y) {
+        panic!("byte {i}: {what_a} {:#04x}, {what_b} {:#04x}", a[i], b[i]);
+    }
+    assert_eq!(a.len(), b.len(), "{what_a} vs {what_b}: lengths differ");
+}
+
+/// Session `session` ran once in `report` and ended DONE after `packets` packets.
+pub fn assert_one_session_done(report: &m6p_twin::runtime::RunReport, session: u8, packets: u32) {
+    let runs: Vec<_> = report
+        .sessions
+        .runs
+        .iter()
+        .filter(|r| r.session == session)
+        .collect();
+    assert_eq!(runs.len(), 1, "{:?}", report.sessions.runs);
+    assert!(runs[0].started.is_some());
+    let (_, result, n) = runs[0]
+        .ended
+        .unwrap_or_else(|| panic!("session {session} ended within the run"));
+    assert_eq!(
+        (result, n),
+        (0, packets),
+        "expected DONE after {packets} packets"
+    );
+}

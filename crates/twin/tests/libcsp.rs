@@ -1,0 +1,205 @@
+//! The twin against the real libcsp 1.4: the vendored, unmodified library
+//! (`third_party/libcsp-1.4`) built with `cc` into the small C programs of `tests/libcsp/`
+//! (`build.sh`), which join a real-time run the ways libcsp connects:
+//!
+//! - over KISS on the twin's pseudo-terminal (`KissMode::Pty`, libcsp's `usart_init`);
+//! - over the twin's ZMQ hub (`KissMode::ZmqHub`, libcsp's `csp_zmqhub_init`), each test
+//!   on a loopback address of its own (127.0.0.x) so that they run side by side;
+//! - over SocketCAN, in the User-Mode Linux guest of `socketcan_uml.rs` (`libcsp_can.rs`).
+//!
+//! `csp_client` pings every node of the default network (1, 64 and 200 bytes, with and
+//! without CRC32), asks CMP ident, uptime, ps, memfree and buf_free of the FC and the PC,
+//! runs a transaction with every ICD telemetry command of the FC (reply lengths of
+//! `icd_lengths.rs`) and checks that a reserved address times out. `csp_payload` takes the
+//! place of payload 12 and serves a whole polling session of the PC (the scenario of
+//! `examples/README.md`), with libcsp's connection API and connection-less; what reached
+//! the ground is byte for byte what it logged as sent.
+//!
+//! Needs a C compiler and libzmq's headers (Debian `gcc`, `libzmq3-dev`): without them the
+//! tests are compiled as ignored with the reason (`build.rs`, `cfg(libcsp_peer)`); in CI
+//! they are always compiled, so a missing prerequisite fails.
+#![cfg(unix)]
+#![allow(clippy::unwrap_used)]
+
+mod common;
+mod libcsp_peer;
+
+use libcsp_peer::{
+    Iface, client, client_checks, expected_stream, programs, readme_options, run_payload_session,
+    same_bytes, with_twin,
+};
+use m6p_twin::runtime::{KissLink, KissMode};
+
+/// A test that needs libcsp 1.4 built: ignored with the reason where it cannot be.
+macro_rules! libcsp_test {
+    ($(#[$m:meta])* fn $name:ident() $body:block) => {
+        $(#[$m])*
+        #[test]
+        #[cfg_attr(
+            not(libcsp_peer),
+            ignore = "needs a C compiler and libzmq3-dev to build libcsp 1.4 (apt-get install gcc libzmq3-dev)"
+        )]
+        fn $name() $body
+    };
+}
+
+/// The default scenario in real time with one link for address 10 at `mode`.
+fn client_twin(mode: KissMode) -> m6p_twin::runtime::RunOptions {
+    let mut opts = libcsp_peer::default_options();
+    opts.kiss_links = vec![KissLink::new(mode).with_addrs(&[10])];
+    opts
+}
+
+fn run_client_checks(mode: KissMode, iface: Iface) {
+    let progs = programs();
+    let (_, out) = with_twin(client_twin(mode), move || {
+        client(progs, &iface, 10, &client_checks(), &["--all-icd-fc"])
+    });
+    let (ok, text) = out;
+    println!("{text}");
+    assert!(ok, "csp_client failed:\n{text}");
+    // 9 nodes x 3 sizes x 2, 5 services x 2 nodes, 1 reserved, 6 ICD commands.
+    assert!(
+        text.contains("summary checks=71 ok=71 fail=0"),
+        "not every check ran and passed:\n{text}"
+    );
+}
+
+libcsp_test! {
+    fn libcsp_client_over_the_kiss_pty() {
+        let path = libcsp_peer::temp_path("client-tty");
+        run_client_checks(KissMode::Pty(path.clone()), Iface::Kiss(path));
+    }
+}
+
+libcsp_test! {
+    fn libcsp_client_over_the_zmq_hub() {
+        let host = "127.0.0.61";
+        run_client_checks(
+            KissMode::ZmqHub(host.parse().unwrap()),
+            Iface::Zmq(host.to_owned()),
+        );
+    }
+}
+
+/// The libcsp payload serves session 1 as payload 12 at `mode`/`iface` with `api`; with
+/// `also` a libcsp client at 10 on the same link runs its checks during the session.
+fn payload_session(mode: KissMode, iface: Iface, api: &str, also: Option<&[&str]>) {
+    let progs = programs();
+    let mut opts = readme_options();
+    opts.kiss_links[0].mode = mode.clone();
+    if also.is_some() {
+        // The client's address on the same link.
+        opts.kiss_links[0].cfg.addrs.push(10);
+    }
+    let link: String = opts.kiss_links[0]
+        .label()
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
+        .collect();
+    let dir = libcsp_peer::temp_path(&format!("payload-{api}-{link}"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let sent_path = dir.join("sent.bin");
+    let (report, payload, client_out) =
+        run_payload_session(progs, opts, &iface, api, &sent_path, also);
+    println!("{payload}");
+    if let Some((ok, text)) = &client_out {
+        println!("{text}");
+        assert!(ok, "csp_client failed:\n{text}");
+    }
+    assert!(
+        payload.contains("served syncs=1 polls=25 bytes=3416 refused=0"),
+        "{payload}"
+    );
+    let sent = std::fs::read(&sent_path).unwrap();
+    same_bytes("sent", &sent, "frame_data", &expected_stream(25, 200));
+    common::assert_one_session_done(&report, 1, 25);
+    let down = report.sessions.session_bytes(1);
+    same_bytes("downlinked", &down, "sent by the libcsp payload", &sent);
+    assert_eq!(report.sessions.dropped_total(12), 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+libcsp_test! {
+    fn libcsp_payload_with_connections_serves_a_session_over_the_zmq_hub_with_a_client_beside_it() {
+        let host = "127.0.0.62";
+        // Beside the payload, a client on the hub pings the FC, the PC, the libcsp payload
+        // (straight across the hub) and the simulated payload 13 (through the PC).
+        let checks: &[&str] = &[
+            "ping", "3", "64", "ping", "6", "64", "ping", "12", "64", "ping", "13", "64", "ping", "12",
+            "200", "crc",
+        ];
+        payload_session(
+            KissMode::ZmqHub(host.parse().unwrap()),
+            Iface::Zmq(host.to_owned()),
+            "conn",
+            Some(checks),
+        );
+    }
+}
+
+libcsp_test! {
+    fn libcsp_payload_connectionless_serves_a_session_over_the_zmq_hub() {
+        let host = "127.0.0.63";
+        payload_session(
+            KissMode::ZmqHub(host.parse().unwrap()),
+            Iface::Zmq(host.to_owned()),
+            "connless",
+            None,
+        );
+    }
+}
+
+libcsp_test! {
+    fn libcsp_payload_with_connections_serves_a_session_over_the_kiss_pty() {
+        let path = libcsp_peer::temp_path("payload-conn-tty");
+        payload_session(KissMode::Pty(path.clone()), Iface::Kiss(path), "conn", None);
+    }
+}
+
+libcsp_test! {
+    fn libcsp_payload_connectionless_serves_a_session_over_the_kiss_pty() {
+        let path = libcsp_peer::temp_path("payload-connless-tty");
+        payload_session(
+            KissMode::Pty(path.clone()),
+            Iface::Kiss(path),
+            "connless",
+            None,
+        );
+    }
+}
+
+libcsp_test! {
+    /// A reserved address times out, and a program on another 127.0.0.x reaches nobody:
+    /// hubs side by side stay apart.
+    fn a_reserved_address_times_out_and_hubs_side_by_side_stay_apart() {
+        let progs = programs();
+        let opts = client_twin(KissMode::ZmqHub("127.0.0.64".parse().unwrap()));
+        let (_, (ok, text)) = with_twin(opts, move || {
+            // A client on another hub address reaches nobody.
+            let (other_ok, other) = client(
+                progs,
+                &Iface::Zmq("127.0.0.65".to_owned()),
+                10,
+                &["reserved".into(), "3".into()],
+                &["--timeout", "300"],
+            );
+            let (ok, text) = client(
+                progs,
+                &Iface::Zmq("127.0.0.64".to_owned()),
+                10,
+                &[
+                    "reserved".into(),
+                    "9".into(),
+                    "ping".into(),
+                    "3".into(),
+                    "1".into(),
+                ],
+                &[],
+            );
+            (ok && other_ok, format!("{other}{text}"))
+        });
+        println!("{text}");
+        assert!(ok, "{text}");
+    }
+}
