@@ -1,5 +1,7 @@
-//! The run's clock: virtual time (tokio's paused clock, jumping to the next timer) or real
-//! time (the wall clock, optionally sped up or slowed down).
+//! The run's clock: virtual time (tokio's paused clock, jumping to the next timer), real
+//! time (the wall clock, optionally sped up or slowed down), or virtual time until a
+//! moment and real time after it (outside programs needed only from then on: a CI run does
+//! not wait hours of simulated time for a pass).
 //!
 //! Events carry exact [`SimTime`] stamps in nanoseconds; the tokio timer wheel that wakes
 //! tasks has a 1 ms granularity, so a task may run up to 1 ms (of its clock) after the stamp
@@ -21,6 +23,24 @@ pub enum ClockMode {
         /// Simulated seconds per wall second.
         speed: f64,
     },
+    /// Virtual until `from`, then wall-clock pacing at `speed`: the runtime starts paused
+    /// and [`Clock::go_realtime`] resumes tokio's clock at `from`.
+    VirtualThenRealtime {
+        /// The simulated time at which the wall clock takes over.
+        from: SimTime,
+        /// Simulated seconds per wall second after `from`.
+        speed: f64,
+    },
+}
+
+impl ClockMode {
+    /// Whether the run starts on tokio's paused clock.
+    pub fn starts_paused(&self) -> bool {
+        matches!(
+            self,
+            ClockMode::Virtual | ClockMode::VirtualThenRealtime { .. }
+        )
+    }
 }
 
 /// The run's clock, cheap to clone and share between tasks.
@@ -34,9 +54,11 @@ impl Clock {
     /// A clock whose zero is now. In virtual mode the runtime must be built with
     /// `start_paused(true)`.
     pub fn new(mode: ClockMode) -> Self {
+        let ok = |speed: f64| speed.is_finite() && speed > 0.0;
         let mode = match mode {
-            ClockMode::Realtime { speed } if !(speed.is_finite() && speed > 0.0) => {
-                ClockMode::Realtime { speed: 1.0 }
+            ClockMode::Realtime { speed } if !ok(speed) => ClockMode::Realtime { speed: 1.0 },
+            ClockMode::VirtualThenRealtime { from, speed } if !ok(speed) => {
+                ClockMode::VirtualThenRealtime { from, speed: 1.0 }
             }
             m => m,
         };
@@ -59,9 +81,16 @@ impl Clock {
     /// Simulated time now.
     pub fn now(&self) -> SimTime {
         let wall = self.start.elapsed();
+        let ns = u64::try_from(wall.as_nanos()).unwrap_or(u64::MAX);
         match self.mode {
-            ClockMode::Virtual => SimTime(u64::try_from(wall.as_nanos()).unwrap_or(u64::MAX)),
-            ClockMode::Realtime { speed } => SimTime((wall.as_nanos() as f64 * speed) as u64),
+            ClockMode::Virtual => SimTime(ns),
+            ClockMode::Realtime { speed } => SimTime((ns as f64 * speed) as u64),
+            // Until `from` the paused clock's elapsed time is simulated time; after it
+            // the wall clock's, scaled.
+            ClockMode::VirtualThenRealtime { from, speed } => match ns.checked_sub(from.as_ns()) {
+                None | Some(0) => SimTime(ns),
+                Some(after) => SimTime(from.as_ns().saturating_add((after as f64 * speed) as u64)),
+            },
         }
     }
 
@@ -72,10 +101,30 @@ impl Clock {
             ClockMode::Realtime { speed } => {
                 Duration::from_nanos((t.as_ns() as f64 / speed) as u64)
             }
+            ClockMode::VirtualThenRealtime { from, speed } => {
+                match t.as_ns().checked_sub(from.as_ns()) {
+                    None | Some(0) => Duration::from_nanos(t.as_ns()),
+                    Some(after) => Duration::from_nanos(
+                        from.as_ns().saturating_add((after as f64 / speed) as u64),
+                    ),
+                }
+            }
         };
         self.start
             .checked_add(wall)
             .unwrap_or_else(|| self.start + Duration::from_secs(1 << 40))
+    }
+
+    /// In [`ClockMode::VirtualThenRealtime`], wait for its `from` and let the wall clock
+    /// take over there (tokio's clock resumes); returns at once in any other mode. Call it
+    /// once, from a task of the run's (current-thread) runtime.
+    pub async fn go_realtime(&self) -> Option<SimTime> {
+        let ClockMode::VirtualThenRealtime { from, .. } = self.mode else {
+            return None;
+        };
+        self.sleep_until(from).await;
+        tokio::time::resume();
+        Some(from)
     }
 
     /// Sleep until simulated time `t` (returns at once if it has passed).
@@ -84,5 +133,44 @@ impl Clock {
             std::future::pending::<()>().await;
         }
         tokio::time::sleep_until(self.instant_of(t)).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// Virtual until `from` (10 s pass at once), then the wall clock at twice real time.
+    #[test]
+    fn virtual_then_realtime_jumps_to_from_then_follows_the_wall_clock() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .start_paused(true)
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            let from = SimTime::from_ns(10_000_000_000);
+            let clock = Clock::new(ClockMode::VirtualThenRealtime { from, speed: 2.0 });
+            let wall = std::time::Instant::now();
+            clock.sleep_until(SimTime::from_ns(4_000_000_000)).await;
+            assert_eq!(clock.now(), SimTime::from_ns(4_000_000_000));
+            assert_eq!(clock.go_realtime().await, Some(from));
+            assert!(wall.elapsed() < Duration::from_millis(500), "virtual part");
+            assert!(clock.now() >= from);
+            // 12 s is 1 s of wall clock after `from` at speed 2.
+            assert_eq!(
+                clock.instant_of(SimTime::from_ns(12_000_000_000)) - clock.instant_of(from),
+                Duration::from_secs(1)
+            );
+            let w = std::time::Instant::now();
+            clock.sleep_until(from + Duration::from_millis(200)).await;
+            let took = w.elapsed();
+            assert!(
+                took >= Duration::from_millis(90) && took < Duration::from_secs(2),
+                "200 ms simulated at speed 2 took {took:?} of wall clock"
+            );
+            assert!(clock.now() >= from + Duration::from_millis(200));
+        });
     }
 }

@@ -146,25 +146,57 @@ pub fn compile(s: &Scenario) -> nodes_comm::CommConfig {
     cfg
 }
 
-/// The UHF contact timeline of `[comm] passes = true`: passes over every station above the
-/// mask, from the scenario's TLE through `orbit`'s SGP4 and pass prediction, merged; the
-/// link is down outside them. Computed before the run from the TLE: a burn during the run
-/// (which changes the true orbit slightly) does not move them.
-pub fn compile_passes(s: &Scenario, epoch_unix_s: u64) -> Vec<TimedFault> {
+/// `Ok` when `[comm] stations` has one named `name` (any case), else the error naming them.
+pub fn check_station(s: &Scenario, name: &str) -> Result<(), String> {
+    let c = &s.comm;
+    if c.stations
+        .iter()
+        .any(|st| st.name.eq_ignore_ascii_case(name))
+    {
+        return Ok(());
+    }
+    let names: Vec<&str> = c.stations.iter().map(|st| st.name.as_str()).collect();
+    Err(format!(
+        "no station `{name}` in [comm] stations ({})",
+        names.join(", ")
+    ))
+}
+
+/// One pass of the scenario's orbit over one of its stations, in simulated time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StationPass {
+    /// The station's name.
+    pub station: String,
+    /// Rise above the elevation mask, ns of simulated time (0 when the run starts in it).
+    pub rise_ns: i64,
+    /// Maximum elevation, ns.
+    pub culmination_ns: i64,
+    /// Set below the mask, ns (the end of the window when the run ends in it).
+    pub set_ns: i64,
+    /// Elevation at culmination, deg.
+    pub max_elevation_deg: f64,
+}
+
+/// The passes over the scenario's stations (`[comm] stations`, above its elevation mask)
+/// from simulated time 0 for `span`, from its TLE through `orbit`'s SGP4 and pass
+/// prediction, in time order; only `station`'s when given (by name, any case). Empty
+/// without a TLE.
+pub fn station_passes(
+    s: &Scenario,
+    epoch_unix_s: u64,
+    span: Duration,
+    station: Option<&str>,
+) -> Vec<StationPass> {
     use orbit::passes::{GroundSite, PassOptions, predict_passes_propagator};
     use orbit::propagate::Sgp4Propagator;
     use orbit::time::UtcTime;
     let c = &s.comm;
-    if !c.passes {
-        return Vec::new();
-    }
-    let ns = |t: UtcTime| t.unix_ns() - epoch_unix_s as i64 * 1_000_000_000;
-    let start = UtcTime::from_unix_ns(epoch_unix_s as i64 * 1_000_000_000);
-    let end = UtcTime::from_unix_ns(
-        epoch_unix_s as i64 * 1_000_000_000
-            + i64::try_from(s.duration.0.as_nanos()).unwrap_or(i64::MAX / 2),
-    );
-    let mut windows: Vec<(i64, i64, String)> = Vec::new();
+    let epoch_ns = epoch_unix_s as i64 * 1_000_000_000;
+    let ns = |t: UtcTime| t.unix_ns() - epoch_ns;
+    let start = UtcTime::from_unix_ns(epoch_ns);
+    let end =
+        UtcTime::from_unix_ns(epoch_ns + i64::try_from(span.as_nanos()).unwrap_or(i64::MAX / 2));
+    let mut out = Vec::new();
     if let [.., l1, l2] = s.satellite.tle.as_slice()
         && let Ok(tle) = orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
         && let Ok(mut prop) = Sgp4Propagator::new(&tle)
@@ -173,24 +205,46 @@ pub fn compile_passes(s: &Scenario, epoch_unix_s: u64) -> Vec<TimedFault> {
             mask_rad: c.elevation_mask_deg.to_radians(),
             ..PassOptions::default()
         };
-        for st in &c.stations {
+        let wanted = c
+            .stations
+            .iter()
+            .filter(|st| station.is_none_or(|n| st.name.eq_ignore_ascii_case(n)));
+        for st in wanted {
             let site = GroundSite::from_deg(st.lat_deg, st.lon_deg, st.alt_m);
             if let Ok(passes) = predict_passes_propagator(&site, start, end, &opts, &mut prop, None)
             {
-                for p in passes {
-                    windows.push((
-                        ns(p.rise),
-                        ns(p.set),
-                        format!(
-                            "{} (max {:.1} deg)",
-                            st.name,
-                            p.max_elevation_rad.to_degrees()
-                        ),
-                    ));
-                }
+                out.extend(passes.into_iter().map(|p| StationPass {
+                    station: st.name.clone(),
+                    rise_ns: ns(p.rise),
+                    culmination_ns: ns(p.culmination),
+                    set_ns: ns(p.set),
+                    max_elevation_deg: p.max_elevation_rad.to_degrees(),
+                }));
             }
         }
     }
+    out.sort_by_key(|p| (p.rise_ns, p.station.clone()));
+    out
+}
+
+/// The UHF contact timeline of `[comm] passes = true`: passes over every station above the
+/// mask ([`station_passes`]), merged; the link is down outside them. Computed before the
+/// run from the TLE: a burn during the run (which changes the true orbit slightly) does
+/// not move them.
+pub fn compile_passes(s: &Scenario, epoch_unix_s: u64) -> Vec<TimedFault> {
+    if !s.comm.passes {
+        return Vec::new();
+    }
+    let mut windows: Vec<(i64, i64, String)> = station_passes(s, epoch_unix_s, s.duration.0, None)
+        .into_iter()
+        .map(|p| {
+            (
+                p.rise_ns,
+                p.set_ns,
+                format!("{} (max {:.1} deg)", p.station, p.max_elevation_deg),
+            )
+        })
+        .collect();
     windows.sort_by_key(|w| w.0);
     // Merge overlapping windows (two stations in view at once).
     let mut merged: Vec<(i64, i64, String)> = Vec::new();

@@ -156,7 +156,7 @@ pub async fn execute_recorded_without_files(
     compiled: Compiled,
     record: Option<&Path>,
 ) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
-    execute_inner(loaded, compiled, record, false, &mut |_| {}).await
+    execute_inner(loaded, compiled, record, None, &mut |_| {}).await
 }
 
 /// [`execute_recorded`], also handing every event to `live` after the recorder (the live
@@ -167,20 +167,40 @@ pub async fn execute_with(
     record: Option<&Path>,
     live: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
-    execute_inner(loaded, compiled, record, true, live).await
+    let dir = downlink_dir(loaded, record);
+    execute_inner(loaded, compiled, record, dir.as_deref(), live).await
+}
+
+/// [`execute_recorded`] of a replay: its downlink goes beside its own recording `record`
+/// (`x.mcap` -> `x.downlink/`), never into the scenario's `[pc] downlink_dir`, which holds
+/// the original run's.
+pub async fn execute_replay(
+    loaded: &Loaded,
+    compiled: Compiled,
+    record: &Path,
+) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    let dir = record.with_extension("downlink");
+    execute_inner(loaded, compiled, Some(record), Some(&dir), &mut |_| {}).await
 }
 
 async fn execute_inner(
     loaded: &Loaded,
     compiled: Compiled,
     record: Option<&Path>,
-    files: bool,
+    downlink: Option<&Path>,
     live: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
-    let downlink_dir = downlink_dir(loaded, record).filter(|_| files);
+    // The ground sink's files grow as the bytes arrive.
+    let mut files = downlink.map(crate::sessions::DownlinkFiles::new);
+    let mut live = |ev: &RunEvent| {
+        if let Some(f) = files.as_mut() {
+            f.observe(ev);
+        }
+        live(ev);
+    };
     let Some(path) = record else {
-        let outcome = execute(compiled, live).await?;
-        write_downlink(&outcome, downlink_dir.as_deref())?;
+        let outcome = execute(compiled, &mut live).await?;
+        downlink_written(files)?;
         return Ok((outcome, None));
     };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -221,7 +241,7 @@ async fn execute_inner(
         ),
         None => None,
     };
-    write_downlink(&outcome, downlink_dir.as_deref())?;
+    downlink_written(files)?;
     Ok((outcome, stats))
 }
 
@@ -235,22 +255,23 @@ pub fn downlink_dir(loaded: &Loaded, record: Option<&Path>) -> Option<std::path:
     }
 }
 
-/// Write each session run's downlinked bytes under `dir` (nothing when no session ran).
-fn write_downlink(outcome: &Outcome, dir: Option<&Path>) -> anyhow::Result<()> {
-    let Some(dir) = dir else { return Ok(()) };
-    if outcome.report.sessions.runs.is_empty() {
-        return Ok(());
+/// Say where the downlinked data went (nothing when no session ran); a write that failed
+/// fails the command, after the run and its recording are complete.
+fn downlink_written(files: Option<crate::sessions::DownlinkFiles>) -> anyhow::Result<()> {
+    let Some(f) = files else { return Ok(()) };
+    if let Some(e) = f.first_error {
+        anyhow::bail!(
+            "writing the downlinked data: {e} ({} write(s) failed)",
+            f.errors
+        );
     }
-    let files = outcome
-        .report
-        .sessions
-        .write_files(dir)
-        .with_context(|| format!("writing the downlinked data to {}", dir.display()))?;
-    eprintln!(
-        "downlink: {} session file(s) in {}",
-        files.len(),
-        dir.display()
-    );
+    if !f.files.is_empty() {
+        eprintln!(
+            "downlink: {} session file(s) in {}",
+            f.files.len(),
+            f.dir_display()
+        );
+    }
     Ok(())
 }
 

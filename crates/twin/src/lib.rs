@@ -14,6 +14,7 @@ pub mod campaign_report;
 pub mod campaign_run;
 pub mod campaign_shrink;
 pub mod can;
+pub mod clock;
 pub mod comm;
 pub mod commands;
 pub mod counters;

@@ -76,6 +76,19 @@ enum Command {
     },
     /// Join a running twin over KISS/TCP as a ground node and send requests.
     Gs(GsArgs),
+    /// List the passes of a scenario's orbit over its ground stations (`[comm] stations`,
+    /// above `[comm] elevation_mask_deg`): rise, culmination, set (simulated seconds and
+    /// UTC) and maximum elevation.
+    Passes {
+        /// Scenario file [default: the embedded default scenario].
+        scenario: Option<PathBuf>,
+        /// Only the passes over this station (by name).
+        #[arg(long, value_name = "NAME")]
+        station: Option<String>,
+        /// How far to look [default: the scenario's duration].
+        #[arg(long, value_parser = parse_duration)]
+        duration: Option<Duration>,
+    },
 }
 
 #[derive(Debug, clap::Args)]
@@ -97,6 +110,11 @@ struct RunArgs {
     /// With --realtime: simulated seconds per wall second.
     #[arg(long, default_value_t = 1.0)]
     speed: f64,
+    /// Virtual time until WHEN, real time (at --speed) after it: a simulated time
+    /// ("13000s"), "first pass" or "first pass over STATION" (see `m6p-twin passes`).
+    /// Outside links are open from the start.
+    #[arg(long, value_name = "WHEN")]
+    realtime_from: Option<m6p_twin::clock::RealtimeFrom>,
     /// With --realtime and no --duration: run until Ctrl-C instead of the scenario's duration.
     #[arg(long)]
     forever: bool,
@@ -390,6 +408,11 @@ fn main() -> ExitCode {
             runs,
         } => cmd_bench(scenario.as_deref(), duration, runs),
         Command::Gs(a) => cmd_gs(a),
+        Command::Passes {
+            scenario,
+            station,
+            duration,
+        } => cmd_passes(scenario.as_deref(), station.as_deref(), duration),
     };
     match res {
         Ok(true) => ExitCode::SUCCESS,
@@ -485,14 +508,34 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
              rebuild with --features live (cargo build -p m6p-twin --features live)"
         );
     }
-    if opts.has_outside_links() && !a.realtime && opts.clock == ClockMode::Virtual {
+    if let Some(from) = &a.realtime_from {
+        let at = m6p_twin::clock::resolve(&loaded.scenario, opts.epoch_unix_s, from)
+            .map_err(|e| anyhow::anyhow!("--realtime-from: {e}"))?;
+        let speed = match opts.clock {
+            ClockMode::Realtime { speed } | ClockMode::VirtualThenRealtime { speed, .. } => speed,
+            ClockMode::Virtual => a.speed,
+        };
+        opts.clock = ClockMode::VirtualThenRealtime { from: at, speed };
+    }
+    if let ClockMode::VirtualThenRealtime { from, speed } = &mut opts.clock {
+        if a.speed != 1.0 {
+            *speed = a.speed;
+        }
+        eprintln!(
+            "note: virtual time until {from}, then real time at {speed}x simulated per wall second"
+        );
+    } else if opts.has_outside_links() && !a.realtime && opts.clock == ClockMode::Virtual {
         eprintln!("note: outside links need the wall clock: running in real time");
     } else if a.live.is_some() && !a.realtime && opts.clock == ClockMode::Virtual {
         eprintln!(
             "note: the live view follows the wall clock: running in real time (--speed sets the pace)"
         );
     }
-    if a.realtime || opts.has_outside_links() || a.live.is_some() {
+    if matches!(opts.clock, ClockMode::VirtualThenRealtime { .. }) {
+        if a.forever && a.duration.is_none() {
+            opts.duration = None;
+        }
+    } else if a.realtime || opts.has_outside_links() || a.live.is_some() {
         let speed = match opts.clock {
             ClockMode::Realtime { speed } if !a.realtime => speed,
             _ => a.speed,
@@ -618,6 +661,61 @@ fn peak_rss_kib() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
+fn cmd_passes(
+    scenario: Option<&std::path::Path>,
+    station: Option<&str>,
+    duration: Option<Duration>,
+) -> anyhow::Result<bool> {
+    let loaded = match scenario {
+        Some(p) => exec::load(p)?,
+        None => exec::load_default()?,
+    };
+    let s = &loaded.scenario;
+    if let Some(name) = station {
+        m6p_twin::comm::check_station(s, name)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", loaded.file))?;
+    }
+    if s.satellite.tle.is_empty() {
+        anyhow::bail!(
+            "{} has no [satellite] tle: no orbit, no passes",
+            loaded.file
+        );
+    }
+    let epoch = exec::compile_loaded(&loaded).opts.epoch_unix_s;
+    let span = duration.unwrap_or(s.duration.0);
+    let passes = m6p_twin::comm::station_passes(s, epoch, span, station);
+    println!(
+        "passes of `{}` over {} above {} deg, from {} for {}",
+        loaded.name(),
+        station.unwrap_or("every station"),
+        s.comm.elevation_mask_deg,
+        m6p_twin::timefmt::format_utc(epoch as i64 * 1_000_000_000),
+        m6p_twin::duration::format_duration(span)
+    );
+    println!(
+        "{:<12} {:>10} {:>13} {:>10} {:>9} {:>8}  rise (UTC)",
+        "station", "rise (s)", "culmin. (s)", "set (s)", "max (deg)", "length"
+    );
+    let utc = |ns: i64| m6p_twin::timefmt::format_utc(epoch as i64 * 1_000_000_000 + ns);
+    for p in &passes {
+        let secs = |ns: i64| ns as f64 / 1e9;
+        println!(
+            "{:<12} {:>10.1} {:>13.1} {:>10.1} {:>9.1} {:>7.0}s  {}",
+            p.station,
+            secs(p.rise_ns),
+            secs(p.culmination_ns),
+            secs(p.set_ns),
+            p.max_elevation_deg,
+            secs(p.set_ns - p.rise_ns),
+            utc(p.rise_ns)
+        );
+    }
+    if passes.is_empty() {
+        println!("(no pass in this window)");
+    }
+    Ok(true)
+}
+
 fn cmd_bench(
     scenario: Option<&std::path::Path>,
     duration: Duration,
@@ -737,11 +835,11 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         for r in &mut input {
             let link = r.link.split_once('#').map_or(r.link.as_str(), |(l, _)| l);
             // A hub's messages, even when the hub came from the command line.
-            if link.starts_with("zmq-hub ") {
-                r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
-            }
             if let Some(k) = compiled.opts.kiss_links.iter().find(|k| k.label() == link) {
                 r.cfg = k.cfg.clone();
+            }
+            if link.starts_with("zmq-hub ") {
+                r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
             }
         }
         compiled.opts.kiss_links.clear();
@@ -774,10 +872,11 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         ),
     };
     let rt = build_runtime(compiled.opts.clock)?;
-    let result = rt.block_on(exec::execute_recorded(&loaded, compiled, Some(&path)));
+    let result = rt.block_on(exec::execute_replay(&loaded, compiled, &path));
     let d = result.and_then(|_| m6p_twin::recording::diff(&a.file, &path));
     if temporary {
         let _ = std::fs::remove_file(&path);
+        let _ = std::fs::remove_dir_all(path.with_extension("downlink"));
     }
     let d = d?;
     println!("{d}");

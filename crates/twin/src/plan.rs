@@ -38,7 +38,9 @@ pub fn compile(s: &Scenario) -> Compiled {
         opts.tle = Some((l1.clone(), l2.clone()));
     }
     crate::outside::compile(s, &net, &mut opts);
-    if opts.has_outside_links() && opts.clock == ClockMode::Virtual {
+    if let Some(mode) = crate::clock::compile(s, opts.epoch_unix_s) {
+        opts.clock = mode;
+    } else if opts.has_outside_links() && opts.clock == ClockMode::Virtual {
         opts.clock = ClockMode::Realtime { speed: 1.0 };
     }
     opts.ground_plan = crate::commands::compile(s, &net);

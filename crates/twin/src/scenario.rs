@@ -141,6 +141,11 @@ pub struct ClockSpec {
     /// Simulated seconds per wall second in real time.
     #[serde(default = "one")]
     pub speed: f64,
+    /// Run in virtual time until this moment and in real time (at `speed`) after it: a
+    /// simulated time (`"13000s"`), `"first pass"` or `"first pass over STATION"`
+    /// (crate::clock). Outside links are open from the start.
+    #[serde(default)]
+    pub realtime_from: Option<String>,
 }
 
 fn one() -> f64 {
@@ -152,6 +157,7 @@ impl Default for ClockSpec {
         ClockSpec {
             mode: ClockKind::Virtual,
             speed: 1.0,
+            realtime_from: None,
         }
     }
 }
@@ -668,6 +674,7 @@ impl Scenario {
         crate::sessions::validate(self, &mut err);
         crate::eps::validate(self, &mut err);
         crate::comm::validate(self, &mut err);
+        crate::clock::validate(self, &mut err);
         crate::expectations::validate(self, &net, &mut err);
         if errs.is_empty() {
             Ok(())

@@ -744,21 +744,103 @@ impl SessionsReport {
             .map(|(_, n)| n)
             .sum()
     }
+}
 
-    /// Write each run's downlinked bytes to `dir/session-<id>-run<k>.bin` (k from 1 per
-    /// session); returns the files written.
-    pub fn write_files(&self, dir: &std::path::Path) -> std::io::Result<Vec<std::path::PathBuf>> {
-        std::fs::create_dir_all(dir)?;
-        let mut count: BTreeMap<u8, u32> = BTreeMap::new();
-        let mut out = Vec::new();
-        for r in &self.runs {
-            let k = count.entry(r.session).or_default();
-            *k += 1;
-            let f = dir.join(format!("session-{}-run{}.bin", r.session, k));
-            std::fs::write(&f, &r.bytes)?;
-            out.push(f);
+/// The S-band ground sink's files, written as the bytes arrive: each session run's file
+/// (`dir/session-<id>-run<k>.bin`, k from 1 per session, as [`SessionsReport::runs`]) is
+/// created when the run starts and each downlinked
+/// frame's bytes are appended to it when the ground receives them, so that a payload
+/// engineer can watch a real-time session's data arrive (`tail -c +1 -f`). A write that
+/// fails is logged once and counted; the run goes on.
+#[derive(Debug)]
+pub struct DownlinkFiles {
+    dir: std::path::PathBuf,
+    runs: BTreeMap<u8, u32>,
+    /// The latest run's file of each session, and whether that run has ended.
+    open: BTreeMap<u8, (std::path::PathBuf, Option<std::fs::File>, bool)>,
+    /// The files written, in the order their runs started.
+    pub files: Vec<std::path::PathBuf>,
+    /// Writes that failed (the first is logged).
+    pub errors: u64,
+    /// The first failure.
+    pub first_error: Option<String>,
+}
+
+impl DownlinkFiles {
+    /// Files under `dir` (created with the first run).
+    pub fn new(dir: &std::path::Path) -> Self {
+        DownlinkFiles {
+            dir: dir.to_owned(),
+            runs: BTreeMap::new(),
+            open: BTreeMap::new(),
+            files: Vec::new(),
+            errors: 0,
+            first_error: None,
         }
-        Ok(out)
+    }
+
+    fn failed(&mut self, what: String) {
+        self.errors += 1;
+        if self.first_error.is_none() {
+            tracing::warn!("downlink files: {what}");
+            self.first_error = Some(what);
+        }
+    }
+
+    fn start(&mut self, session: u8) {
+        let k = self.runs.entry(session).or_default();
+        *k += 1;
+        let path = self.dir.join(format!("session-{session}-run{k}.bin"));
+        let file = std::fs::create_dir_all(&self.dir)
+            .and_then(|()| std::fs::File::create(&path))
+            .map_err(|e| format!("creating {}: {e}", path.display()));
+        let file = match file {
+            Ok(f) => Some(f),
+            Err(e) => {
+                self.failed(e);
+                None
+            }
+        };
+        self.files.push(path.clone());
+        self.open.insert(session, (path, file, false));
+    }
+
+    /// The directory, for messages.
+    pub fn dir_display(&self) -> std::path::Display<'_> {
+        self.dir.display()
+    }
+
+    /// Take in one event of the run: a session's start opens its file, a downlink appends.
+    pub fn observe(&mut self, ev: &crate::events::RunEvent) {
+        use nodes_pc::PcOutput as O;
+        let crate::events::RunEvent::Pc(o) = ev else {
+            return;
+        };
+        match &**o {
+            O::SessionStarted { session_id, .. } => self.start(*session_id),
+            // As the report: an end without an open run is a run of its own.
+            O::SessionEnded { session_id, .. } => {
+                if !matches!(self.open.get(session_id), Some((_, _, false))) {
+                    self.start(*session_id);
+                }
+                if let Some(run) = self.open.get_mut(session_id) {
+                    run.2 = true;
+                }
+            }
+            O::Downlinked {
+                session_id, bytes, ..
+            } => {
+                let res = match self.open.get_mut(session_id) {
+                    Some((path, Some(f), _)) => std::io::Write::write_all(f, bytes)
+                        .map_err(|e| format!("appending to {}: {e}", path.display())),
+                    _ => Ok(()),
+                };
+                if let Err(e) = res {
+                    self.failed(e);
+                }
+            }
+            _ => {}
+        }
     }
 }
 
@@ -1214,6 +1296,65 @@ mod tests {
 
     fn pc(o: nodes_pc::PcOutput) -> RunEvent {
         RunEvent::Pc(Box::new(o))
+    }
+
+    /// The ground sink's files grow with each downlink, hold exactly the report's bytes per
+    /// run, and exist before the run ends (they used to be written only at its end).
+    #[test]
+    fn downlink_files_grow_as_the_bytes_arrive_and_match_the_report() {
+        let dir = std::env::temp_dir().join(format!("m6p-dl-files-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let t = SimTime::from_secs(1);
+        let down = |s: u8, b: &[u8]| {
+            pc(nodes_pc::PcOutput::Downlinked {
+                t,
+                session_id: s,
+                payload_addr: 12,
+                bytes: b.to_vec(),
+            })
+        };
+        let end = |s: u8| {
+            pc(nodes_pc::PcOutput::SessionEnded {
+                t,
+                session_id: s,
+                result: nodes_pc::SessionResult::Done,
+                packets: 1,
+            })
+        };
+        let events = vec![
+            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            down(1, b"abc"),
+            down(1, b"de"),
+            end(1),
+            // Bytes still queued for S-band after the end belong to that run.
+            down(1, b"f"),
+            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            down(1, b"xyz"),
+            // An end without a start is a run of its own, as in the report.
+            end(2),
+        ];
+        let mut files = DownlinkFiles::new(&dir);
+        let run1 = dir.join("session-1-run1.bin");
+        for (i, e) in events.iter().enumerate() {
+            files.observe(e);
+            if i == 2 {
+                assert_eq!(std::fs::read(&run1).unwrap(), b"abcde", "before the end");
+            }
+        }
+        let report = report_of(events);
+        assert_eq!(files.files.len(), report.sessions.runs.len());
+        let mut runs = report.sessions.runs.clone();
+        runs.sort_by_key(|r| r.session);
+        let names = [
+            "session-1-run1.bin",
+            "session-1-run2.bin",
+            "session-2-run1.bin",
+        ];
+        for (r, name) in runs.iter().zip(names) {
+            assert_eq!(std::fs::read(dir.join(name)).unwrap(), r.bytes, "{name}");
+        }
+        assert_eq!(files.errors, 0);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     fn final_held(addr: u8, held: u64) -> RunEvent {

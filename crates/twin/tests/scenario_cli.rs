@@ -688,3 +688,74 @@ fn campaign_run_checks_every_draw_first_and_its_failures_reproduce() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A replay writes its downlink beside its own recording: the files of the original run,
+/// in the scenario's `[pc] downlink_dir`, are left as they are. (It used to write into the
+/// scenario's directory, over the original's files.)
+#[test]
+fn a_replay_writes_its_downlink_beside_its_recording_never_over_the_originals() {
+    let orig = tmp("replay-downlink-orig");
+    let _ = std::fs::remove_dir_all(&orig);
+    let scenario = tmp("replay-downlink.toml");
+    std::fs::write(
+        &scenario,
+        format!(
+            "name = \"replay-downlink\"\nduration = \"5s\"\n[pc]\ndownlink_dir = \"{}\"\n\
+             [[commands]]\nname = \"setup\"\nat = \"1s\"\nto = \"PC\"\nrequest = \"raw\"\nport = 10\n\
+             data = \"01 01 00000000 0500 0300 40 53656e642074656c656d65747279\"\n",
+            orig.display()
+        ),
+    )
+    .unwrap();
+    let rec = tmp("replay-downlink.mcap");
+    let (code, _, err) = twin(&[
+        "run",
+        scenario.to_str().unwrap(),
+        "--record",
+        rec.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let file = orig.join("session-1-run1.bin");
+    let original = std::fs::read(&file).unwrap();
+    assert_eq!(original.len(), 3 * 64, "3 packets of 64 bytes");
+    // Mark the original's file: a replay writing there would replace it.
+    std::fs::write(&file, b"the original run's file").unwrap();
+    let again = tmp("replay-downlink-again.mcap");
+    let (code, out, err) = twin(&[
+        "replay",
+        rec.to_str().unwrap(),
+        "--record",
+        again.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert_eq!(std::fs::read(&file).unwrap(), b"the original run's file");
+    let replayed =
+        std::fs::read(again.with_extension("downlink").join("session-1-run1.bin")).unwrap();
+    assert_eq!(replayed, original);
+}
+
+/// `passes` lists the default orbit's passes over Vilnius, the one at 13,150 s among them,
+/// and names the stations when asked for one that is not there.
+#[test]
+fn passes_lists_rise_culmination_set_and_elevation() {
+    let (code, out, err) = twin(&["passes", "--duration", "4h"]);
+    assert_eq!(code, 0, "{err}");
+    let rows: Vec<&str> = out.lines().filter(|l| l.starts_with("Vilnius")).collect();
+    assert_eq!(rows.len(), 2, "{out}");
+    let cols: Vec<&str> = rows[1].split_whitespace().collect();
+    // station, rise, culmination, set, max elevation, length, rise in UTC
+    assert_eq!(cols[1], "13149.9", "{out}");
+    let (rise, culm, set): (f64, f64, f64) = (
+        cols[1].parse().unwrap(),
+        cols[2].parse().unwrap(),
+        cols[3].parse().unwrap(),
+    );
+    assert!(rise < culm && culm < set, "{out}");
+    assert!(cols[6].starts_with("2026-04-30T21:39:09"), "{out}");
+    let (code, _, err) = twin(&["passes", "--station", "Kaunas"]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("no station `Kaunas`") && err.contains("Vilnius"),
+        "{err}"
+    );
+}

@@ -253,7 +253,7 @@ impl SocketCanBus {
 pub fn build_runtime(mode: ClockMode) -> anyhow::Result<tokio::runtime::Runtime> {
     let mut b = tokio::runtime::Builder::new_current_thread();
     b.enable_all();
-    if mode == ClockMode::Virtual {
+    if mode.starts_paused() {
         b.start_paused(true);
     }
     b.build().context("building the tokio runtime")
@@ -293,6 +293,21 @@ pub async fn run_with(
     let boards = Boards::default();
     let nodes = build::nodes(&mut opts, &segs, clock, &boards, &results, &ev_tx);
     let kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
+    if let ClockMode::VirtualThenRealtime { .. } = opts.clock {
+        // Virtual time until the scenario's `realtime_from`, the wall clock after it.
+        let tx = ev_tx.clone();
+        background.push(tokio::spawn(async move {
+            if let Some(t) = clock.go_realtime().await {
+                tracing::info!("real time from {t} on");
+                let _ = tx.send(RunEvent::Log {
+                    t,
+                    source: "clock".to_owned(),
+                    level: crate::events::Level::Info,
+                    message: "virtual time ends: the wall clock paces the run from here".to_owned(),
+                });
+            }
+        }));
+    }
     if let Some(r) = ready {
         let _ = r.send(kiss.bound.clone());
     }
