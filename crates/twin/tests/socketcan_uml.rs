@@ -14,6 +14,9 @@
 //! (`build.rs`), `twin_over_vcan_in_uml` is compiled as ignored with the reason.
 #![cfg(all(feature = "socketcan", target_os = "linux"))]
 
+#[path = "../../../tools/uml/guest_test.rs"]
+mod uml;
+
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Arc, Mutex};
@@ -58,41 +61,11 @@ fn run_in_uml_script() -> PathBuf {
 fn twin_over_vcan_in_uml() {
     let script = run_in_uml_script();
     assert!(script.is_file(), "{} missing", script.display());
-    let exe = std::env::current_exe().expect("path of the test binary");
-    let started = Instant::now();
-    let output = Command::new("bash")
-        .arg(&script)
-        .arg(&exe)
-        .args([
-            "--ignored",
-            "--exact",
-            GUEST_TEST,
-            "--nocapture",
-            "--test-threads=1",
-        ])
-        .env(GUEST_ENV, "vcan0")
-        .output()
-        .expect("spawn tools/uml/run-in-uml.sh");
-    let elapsed = started.elapsed();
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    println!("{stdout}");
-    eprintln!("{stderr}");
-    eprintln!("twin_over_vcan_in_uml: guest boot + test took {elapsed:?}");
-    assert!(
-        output.status.success(),
-        "the twin-over-vcan test inside User-Mode Linux failed ({}); guest output above",
-        output.status
-    );
-    // Guard against a filter that matched nothing: exactly the guest test must have run.
-    assert!(
-        stdout.contains(&format!("test {GUEST_TEST} ... "))
-            && stdout.contains("test result: ok. 1 passed"),
-        "the guest did not run `{GUEST_TEST}`; output above"
-    );
-    assert!(
-        stdout.contains("twin_over_vcan: OK"),
-        "no success line from the guest; output above"
+    uml::run_guest_test(
+        &script,
+        GUEST_TEST,
+        &[(GUEST_ENV, "vcan0")],
+        "twin_over_vcan: OK",
     );
 }
 
