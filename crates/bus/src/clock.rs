@@ -43,6 +43,9 @@ impl ClockMode {
     }
 }
 
+/// The granularity of tokio's timer wheel.
+const TIMER_TICK: Duration = Duration::from_millis(1);
+
 /// The run's clock, cheap to clone and share between tasks.
 #[derive(Debug, Clone, Copy)]
 pub struct Clock {
@@ -128,11 +131,36 @@ impl Clock {
     }
 
     /// Sleep until simulated time `t` (returns at once if it has passed).
+    ///
+    /// On the wall clock, tokio's timer wheel would wake the task at the first millisecond
+    /// tick after `t`: up to 1 ms late at every step of an exchange with an outside program
+    /// (a CAN frame's end, a node's reply). So the wheel wakes it up to 1 ms early and a
+    /// blocking thread's precise sleep waits the rest (microseconds on Linux).
     pub async fn sleep_until(&self, t: SimTime) {
         if t == SimTime::MAX {
             std::future::pending::<()>().await;
         }
-        tokio::time::sleep_until(self.instant_of(t)).await;
+        let at = self.instant_of(t);
+        if !self.wall_clock_at(t) {
+            tokio::time::sleep_until(at).await;
+            return;
+        }
+        if let Some(early) = at.checked_sub(TIMER_TICK) {
+            tokio::time::sleep_until(early).await;
+        }
+        let rest = at.saturating_duration_since(Instant::now());
+        if !rest.is_zero() {
+            let _ = tokio::task::spawn_blocking(move || std::thread::sleep(rest)).await;
+        }
+    }
+
+    /// Whether simulated time `t` is paced by the wall clock.
+    fn wall_clock_at(&self, t: SimTime) -> bool {
+        match self.mode {
+            ClockMode::Virtual => false,
+            ClockMode::Realtime { .. } => true,
+            ClockMode::VirtualThenRealtime { from, .. } => t > from,
+        }
     }
 }
 
