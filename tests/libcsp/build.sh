@@ -5,6 +5,7 @@
 #   OUTDIR/bin/csp_client     checks against CSP nodes (ping, ident, ICD transactions ...)
 #   OUTDIR/bin/csp_payload    a payload serving the PC's polling session
 #   OUTDIR/bin/zmq_hub        a ZMQ hub (XSUB 6000 / XPUB 7000), when libzmq is installed
+#   OUTDIR/bin/libcsp_payload examples/libcsp_payload.c, the example payload for users
 #
 # libcsp is the unmodified libcsp at its tag v1.4 (third_party/libcsp-1.4/libcsp-1.4.tar.gz,
 # https://github.com/libcsp/libcsp), licensed under the LGPL-2.1 (its COPYING is in the
@@ -40,6 +41,11 @@ fi
 for prog in csp_client csp_payload; do
   "$cc" "${cflags[@]}" -o "$out/bin/$prog" "$here/$prog.c" "$here/common.c" "${libs[@]}"
 done
+# The example of examples/, built as its comment tells users to (without -DNO_ZMQ when
+# libzmq is there).
+example_flags=(-O2 -Wall -Wextra -Werror -I"$out/libcsp/include")
+[ "$zmq" = yes ] || example_flags+=(-DNO_ZMQ)
+"$cc" "${example_flags[@]}" -o "$out/bin/libcsp_payload" "$here/../../examples/libcsp_payload.c" "${libs[@]}"
 if [ "$zmq" = yes ]; then
   "$cc" "${cflags[@]}" -o "$out/bin/zmq_hub" "$here/zmq_hub.c" -lzmq
 else

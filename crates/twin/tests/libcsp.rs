@@ -203,3 +203,73 @@ libcsp_test! {
         assert!(ok, "{text}");
     }
 }
+
+libcsp_test! {
+    /// `examples/sil-pass.toml` with `examples/libcsp_payload.c` as payload 12: the session
+    /// needs the pass at 13,150 s (the SETUP crosses the UHF link only then), the run is in
+    /// virtual time until 13,190 s and in real time after it, and the payload's bytes reach
+    /// the ground intact. The wall time is printed (docs/payload-guide.md quotes it).
+    fn the_example_payload_serves_a_session_during_the_pass_at_13150s_in_seconds_of_wall_clock() {
+        let progs = programs();
+        let file = common::repo_root().join("examples/sil-pass.toml");
+        let text = std::fs::read_to_string(&file).unwrap();
+        let scenario = m6p_twin::scenario::Scenario::parse("examples/sil-pass.toml", &text).unwrap();
+        let compiled = m6p_twin::plan::compile(&scenario);
+        let mut opts = compiled.opts;
+        let host = "127.0.0.67";
+        opts.kiss_links[0].mode = KissMode::ZmqHub(host.parse().unwrap());
+        assert_eq!(
+            opts.clock,
+            bus::ClockMode::VirtualThenRealtime {
+                from: csp::SimTime::from_secs(13_190),
+                speed: 1.0
+            }
+        );
+        let dir = libcsp_peer::temp_path("sil-pass");
+        std::fs::create_dir_all(&dir).unwrap();
+        let sent = dir.join("sent.bin");
+        let sent_arg = sent.clone();
+        let started = std::time::Instant::now();
+        let (report, payload) = with_twin(opts, move || {
+            let out = std::process::Command::new(&progs.example)
+                .args(["--zmq", host, "--sent"])
+                .arg(&sent_arg)
+                .args(["--idle", "1.5", "--seconds", "120"])
+                .output()
+                .unwrap();
+            String::from_utf8_lossy(&out.stdout).into_owned()
+        });
+        let wall = started.elapsed();
+        let report = report.unwrap();
+        println!("{payload}");
+        println!(
+            "sil-pass: {:.0} s simulated in {wall:.1?} of wall clock",
+            report.sim_time.as_secs_f64()
+        );
+        assert!(payload.contains("served syncs=1 polls=25 bytes=3416"), "{payload}");
+        let verdicts = m6p_twin::expectations::check_all(
+            &compiled.expectations,
+            &report,
+            &opts_network(),
+        );
+        for v in &verdicts {
+            assert!(v.passed, "{}: {}", v.name, v.observed);
+        }
+        let sent = std::fs::read(&sent).unwrap();
+        same_bytes("sent", &sent, "frame_data", &expected_stream(25, 200));
+        same_bytes(
+            "downlinked",
+            &report.sessions.session_bytes(1),
+            "sent by the example payload",
+            &sent,
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// The network of `examples/sil-pass.toml` (payload 13 only).
+fn opts_network() -> m6p_twin::network::NetworkSpec {
+    let text = std::fs::read_to_string(common::repo_root().join("examples/sil-pass.toml")).unwrap();
+    let scenario = m6p_twin::scenario::Scenario::parse("examples/sil-pass.toml", &text).unwrap();
+    m6p_twin::plan::compile(&scenario).opts.network
+}

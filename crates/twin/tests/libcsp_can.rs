@@ -63,6 +63,7 @@ fn guest_libcsp_over_vcan() {
     let progs: &'static Programs = Box::leak(Box::new(Programs {
         client: bin.join("csp_client"),
         payload: bin.join("csp_payload"),
+        example: bin.join("libcsp_payload"),
     }));
     // The guest has vcan0; the payload bus gets vcan1.
     for args in [

@@ -22,6 +22,8 @@ pub struct Programs {
     pub client: PathBuf,
     /// `csp_payload`.
     pub payload: PathBuf,
+    /// `examples/libcsp_payload.c`, the example for users.
+    pub example: PathBuf,
 }
 
 /// Build libcsp 1.4 and the programs once per test binary (about 3 s), in a directory of
@@ -48,6 +50,7 @@ pub fn programs() -> &'static Programs {
         Programs {
             client: bin.join("csp_client"),
             payload: bin.join("csp_payload"),
+            example: bin.join("libcsp_payload"),
         }
     })
 }
@@ -151,7 +154,7 @@ pub fn readme_options() -> RunOptions {
     opts
 }
 
-/// Run the twin with `opts` and `f` on a blocking thread once its links are open; the
+/// Run the twin with `opts` and `f` on a thread of its own once its links are open; the
 /// report when the run has a duration (else it is stopped when `f` returns).
 pub fn with_twin<T: Send + 'static>(
     opts: RunOptions,
@@ -163,7 +166,13 @@ pub fn with_twin<T: Send + 'static>(
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
         rx.await.unwrap();
-        let out = tokio::task::spawn_blocking(f).await.unwrap();
+        // A thread of its own, not `spawn_blocking`: a blocking task of the runtime would
+        // keep tokio's paused clock from advancing in a run's virtual part.
+        let (done_tx, done_rx) = tokio::sync::oneshot::channel();
+        std::thread::spawn(move || {
+            let _ = done_tx.send(f());
+        });
+        let out = done_rx.await.unwrap();
         if bounded {
             (Some(twin.await.unwrap().unwrap()), out)
         } else {
