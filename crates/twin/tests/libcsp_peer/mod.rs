@@ -112,7 +112,36 @@ pub fn client(
 pub const NODES: [u8; 9] = [1, 2, 3, 4, 5, 6, 12, 13, 16];
 
 /// Every node pinged with 1, 64 and 200 bytes, with and without CRC32; CMP ident, uptime,
-/// ps, memfree and buf_free of the FC and the PC; a reserved address.
+/// ps, memfree and buf_free of the FC and the PC; a reserved address; the CMP clock of the
+/// nodes on the buses and the FC's RTC. With `--all-icd-fc`, [`CLIENT_CHECKS`] checks.
+pub const CLIENT_CHECKS: usize = 9 * 3 * 2 + 5 * 2 + 1 + 8 + 1 + 6;
+
+/// Assert that `csp_client`'s output `text` ran [`CLIENT_CHECKS`] checks, all passed, and
+/// that every CMP clock it read of a node of the twin is the simulated time of a run
+/// starting at `epoch_unix_s` (within its first ten minutes), not the host's; `outside`
+/// are libcsp programs (their clock is the host's, `clock_posix.c`).
+pub fn assert_client_checks(ok: bool, text: &str, epoch_unix_s: u64, outside: &[u8]) {
+    assert!(ok, "csp_client failed:\n{text}");
+    let n = CLIENT_CHECKS;
+    assert!(
+        text.contains(&format!("summary checks={n} ok={n} fail=0")),
+        "not every check ran and passed:\n{text}"
+    );
+    let secs: Vec<u64> = text
+        .lines()
+        .filter(|l| l.starts_with("ok clock "))
+        .filter(|l| !outside.iter().any(|n| l.contains(&format!(" node={n} "))))
+        .filter_map(|l| l.split_whitespace().find_map(|w| w.strip_prefix("sec=")))
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(secs.len(), 8 - outside.len(), "{text}");
+    for s in secs {
+        assert!(
+            (epoch_unix_s..epoch_unix_s + 600).contains(&s),
+            "a CMP clock read {s}, not the simulated time from {epoch_unix_s}:\n{text}"
+        );
+    }
+}
 pub fn client_checks() -> Vec<String> {
     let mut c = Vec::new();
     for node in NODES {
@@ -127,6 +156,12 @@ pub fn client_checks() -> Vec<String> {
         }
     }
     c.push("reserved 9".into());
+    // The twin's time, simulated: CMP clock of every node on the buses, the FC's RTC
+    // (RTCSTMGET, port 11: `02 01` + u32 seconds).
+    for node in NODES.iter().filter(|&&n| n < 16) {
+        c.push(format!("clock {node}"));
+    }
+    c.push("icd 3 11 02 6".into());
     c.iter()
         .flat_map(|s| s.split(' ').map(str::to_owned).collect::<Vec<_>>())
         .collect()
