@@ -18,8 +18,18 @@ use m6p_twin::runtime::{KissLink, KissMode, RunOptions, RunReport, build_runtime
 /// Run the twin in real time for `secs` with a KISS pty for address 10 at `path`, and call
 /// `client` on a thread while it runs.
 fn with_twin(secs: u64, path: &Path, client: impl FnOnce() + Send + 'static) -> RunReport {
+    with_twin_at(1.0, secs, path, client)
+}
+
+/// [`with_twin`] at `speed` simulated seconds per wall second, for `secs` simulated.
+fn with_twin_at(
+    speed: f64,
+    secs: u64,
+    path: &Path,
+    client: impl FnOnce() + Send + 'static,
+) -> RunReport {
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(secs));
-    opts.clock = ClockMode::Realtime { speed: 1.0 };
+    opts.clock = ClockMode::Realtime { speed };
     opts.kiss_links = vec![KissLink::new(KissMode::Pty(path.to_owned())).with_addrs(&[10])];
     let rt = build_runtime(opts.clock).unwrap();
     rt.block_on(async move {
@@ -104,6 +114,28 @@ fn a_program_opens_the_pty_pings_closes_and_reopens_it() {
     assert!(
         std::fs::symlink_metadata(&path).is_err(),
         "the link is removed at the end of the run"
+    );
+}
+
+/// At four times real time an outside program is still answered: its pings cross in a
+/// quarter of the wall time of their simulated exchange, and 8 s simulated pass in 2 s.
+#[test]
+fn a_sped_up_run_answers_an_outside_program() {
+    let path = temp_path("tty-speed");
+    let p = path.clone();
+    let wall = Instant::now();
+    let report = with_twin_at(4.0, 8, &path, move || {
+        for (i, node) in [3u8, 6, 12].into_iter().enumerate() {
+            let rtt = ping_over(&p, node, 42 + i as u8);
+            println!("ping {node} at speed 4: {rtt:?}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    });
+    let wall = wall.elapsed();
+    assert_eq!(report.kiss[0].1.packets_out, 3, "{:?}", report.kiss[0].1);
+    assert!(
+        wall < Duration::from_secs(6),
+        "8 s simulated at speed 4 took {wall:?} of wall clock"
     );
 }
 
