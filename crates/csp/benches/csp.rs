@@ -1,4 +1,4 @@
-//! Throughput of the wire codecs: KISS encode + decode, CFP fragment + reassemble.
+//! Throughput of the wire codecs: KISS encode + decode, CFP fragment + reassemble, CRC-32C.
 #![allow(clippy::unwrap_used)]
 
 use std::hint::black_box;
@@ -58,11 +58,23 @@ fn cfp_fragment_reassemble(c: &mut Criterion) {
     g.finish();
 }
 
+fn crc32c(c: &mut Criterion) {
+    let mut g = c.benchmark_group("crc32c");
+    for len in [64usize, 256] {
+        let data = ramp(len);
+        g.throughput(Throughput::Bytes(len as u64));
+        g.bench_function(format!("{len}B"), |b| {
+            b.iter(|| m6p_csp::crc32::crc32c(black_box(&data)))
+        });
+    }
+    g.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default()
         .warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(2));
-    targets = kiss_encode_decode, cfp_fragment_reassemble
+    targets = kiss_encode_decode, cfp_fragment_reassemble, crc32c
 }
 criterion_main!(benches);
