@@ -1188,54 +1188,82 @@ impl State {
 
 /// Bits an extended CAN data frame occupies on the bus, stuff bits and the 3-bit
 /// intermission included (ISO 11898-1).
+///
+/// One pass over the frame's bits, with no allocation: each bit goes through the CRC-15
+/// (over SOF..data) and the stuffing count (over SOF..CRC) as it is produced.
 pub fn frame_bits(frame: &CanFrame) -> u32 {
-    let mut bits: Vec<bool> = Vec::with_capacity(160);
-    let push = |v: u64, n: u32, bits: &mut Vec<bool>| {
-        for i in (0..n).rev() {
-            bits.push((v >> i) & 1 == 1);
-        }
-    };
     let id = u64::from(frame.id & csp::cfp::CAN_EFF_MASK);
-    push(0, 1, &mut bits); // SOF
-    push(id >> 18, 11, &mut bits); // base id
-    push(1, 1, &mut bits); // SRR
-    push(1, 1, &mut bits); // IDE
-    push(id & 0x3FFFF, 18, &mut bits); // extended id
-    push(0, 1, &mut bits); // RTR
-    push(0, 2, &mut bits); // r1, r0
-    push(u64::from(frame.dlc.min(8)), 4, &mut bits);
+    let mut w = BitWriter::default();
+    w.push(0, 1); // SOF
+    w.push(id >> 18, 11); // base id
+    w.push(1, 1); // SRR
+    w.push(1, 1); // IDE
+    w.push(id & 0x3FFFF, 18); // extended id
+    w.push(0, 1); // RTR
+    w.push(0, 2); // r1, r0
+    w.push(u64::from(frame.dlc.min(8)), 4);
     for &b in frame.data() {
-        push(u64::from(b), 8, &mut bits);
+        w.push(u64::from(b), 8);
     }
-    // CRC-15, polynomial 0x4599, over SOF..data.
-    let mut crc: u16 = 0;
-    for &b in &bits {
-        let next = b ^ ((crc >> 14) & 1 == 1);
-        crc = (crc << 1) & 0x7FFF;
-        if next {
-            crc ^= 0x4599;
-        }
-    }
-    push(u64::from(crc), 15, &mut bits);
-    // Stuffing: after five equal bits a complementary bit is inserted (and counts itself).
-    let mut stuffed = 0u32;
-    let mut run = 0u32;
-    let mut last: Option<bool> = None;
-    for &b in &bits {
-        if Some(b) == last {
-            run += 1;
-        } else {
-            run = 1;
-            last = Some(b);
-        }
-        if run == 5 {
-            stuffed += 1;
-            last = Some(!b);
-            run = 1;
-        }
-    }
+    // CRC-15, polynomial 0x4599, over SOF..data; stuffed like the rest.
+    let crc = w.crc;
+    w.crc_on = false;
+    w.push(u64::from(crc), 15);
     // CRC delimiter, ACK slot, ACK delimiter, EOF (7), intermission (3).
-    bits.len() as u32 + stuffed + 1 + 1 + 1 + 7 + 3
+    w.count + w.stuffed + 1 + 1 + 1 + 7 + 3
+}
+
+/// The stuffed part of a frame, bit by bit: its CRC-15 and stuff bits.
+#[derive(Debug)]
+struct BitWriter {
+    count: u32,
+    stuffed: u32,
+    crc: u16,
+    crc_on: bool,
+    run: u32,
+    last: Option<bool>,
+}
+
+impl Default for BitWriter {
+    fn default() -> Self {
+        BitWriter {
+            count: 0,
+            stuffed: 0,
+            crc: 0,
+            crc_on: true,
+            run: 0,
+            last: None,
+        }
+    }
+}
+
+impl BitWriter {
+    /// The `n` low bits of `v`, most significant first.
+    fn push(&mut self, v: u64, n: u32) {
+        for i in (0..n).rev() {
+            let b = (v >> i) & 1 == 1;
+            self.count += 1;
+            if self.crc_on {
+                let next = b ^ ((self.crc >> 14) & 1 == 1);
+                self.crc = (self.crc << 1) & 0x7FFF;
+                if next {
+                    self.crc ^= 0x4599;
+                }
+            }
+            // After five equal bits a complementary bit is inserted (and counts itself).
+            if Some(b) == self.last {
+                self.run += 1;
+            } else {
+                self.run = 1;
+                self.last = Some(b);
+            }
+            if self.run == 5 {
+                self.stuffed += 1;
+                self.last = Some(!b);
+                self.run = 1;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -1244,6 +1272,68 @@ mod tests {
     use super::*;
     use crate::clock::ClockMode;
     use crate::inbox::inbox;
+
+    /// The first implementation, bit vector and all: the reference [`frame_bits`] must match.
+    fn frame_bits_reference(frame: &CanFrame) -> u32 {
+        let mut bits: Vec<bool> = Vec::with_capacity(160);
+        let push = |v: u64, n: u32, bits: &mut Vec<bool>| {
+            for i in (0..n).rev() {
+                bits.push((v >> i) & 1 == 1);
+            }
+        };
+        let id = u64::from(frame.id & csp::cfp::CAN_EFF_MASK);
+        push(0, 1, &mut bits); // SOF
+        push(id >> 18, 11, &mut bits); // base id
+        push(1, 1, &mut bits); // SRR
+        push(1, 1, &mut bits); // IDE
+        push(id & 0x3FFFF, 18, &mut bits); // extended id
+        push(0, 1, &mut bits); // RTR
+        push(0, 2, &mut bits); // r1, r0
+        push(u64::from(frame.dlc.min(8)), 4, &mut bits);
+        for &b in frame.data() {
+            push(u64::from(b), 8, &mut bits);
+        }
+        // CRC-15, polynomial 0x4599, over SOF..data.
+        let mut crc: u16 = 0;
+        for &b in &bits {
+            let next = b ^ ((crc >> 14) & 1 == 1);
+            crc = (crc << 1) & 0x7FFF;
+            if next {
+                crc ^= 0x4599;
+            }
+        }
+        push(u64::from(crc), 15, &mut bits);
+        // Stuffing: after five equal bits a complementary bit is inserted (and counts itself).
+        let mut stuffed = 0u32;
+        let mut run = 0u32;
+        let mut last: Option<bool> = None;
+        for &b in &bits {
+            if Some(b) == last {
+                run += 1;
+            } else {
+                run = 1;
+                last = Some(b);
+            }
+            if run == 5 {
+                stuffed += 1;
+                last = Some(!b);
+                run = 1;
+            }
+        }
+        // CRC delimiter, ACK slot, ACK delimiter, EOF (7), intermission (3).
+        bits.len() as u32 + stuffed + 1 + 1 + 1 + 7 + 3
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn frame_bits_equals_the_bit_vector_reference(
+            id in 0u32..=csp::cfp::CAN_EFF_MASK,
+            data in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..=8),
+        ) {
+            let f = CanFrame::new(id, &data).unwrap();
+            proptest::prop_assert_eq!(frame_bits(&f), frame_bits_reference(&f));
+        }
+    }
 
     #[test]
     fn frame_bits_within_physical_bounds() {
