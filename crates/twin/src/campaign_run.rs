@@ -139,7 +139,7 @@ pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>)
             };
             let mut compiled = exec::compile_seeded(&loaded, None);
             compiled.opts.clock = bus::ClockMode::Virtual;
-            let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
+            let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
             let mut inv = Invariants::for_run(&compiled.opts);
             let o = rt.block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))?;
             let broken = inv.finish(&o.report);
@@ -192,7 +192,7 @@ pub fn record_failure(file: &str, row: &RunRow, path: &Path) -> anyhow::Result<(
     };
     let mut compiled = exec::compile_seeded(&loaded, None);
     compiled.opts.clock = bus::ClockMode::Virtual;
-    let rt = crate::runtime::build_runtime(compiled.opts.clock)?;
+    let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
     let (outcome, _) = rt.block_on(exec::execute_recorded_without_files(
         &loaded,
         compiled,
@@ -631,7 +631,7 @@ mod tests {
                 scenario: s,
             };
             let compiled = exec::compile_seeded(&loaded, None);
-            let rt = crate::runtime::build_runtime(compiled.opts.clock).unwrap();
+            let rt = crate::runtime::build_runtime_for(&compiled.opts).unwrap();
             let o = rt.block_on(exec::execute(compiled, &mut |_| {})).unwrap();
             assert!(!o.passed());
         }

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 
 use m6p_twin::exec;
 use m6p_twin::gs;
-use m6p_twin::runtime::{SocketCanBus, build_runtime};
+use m6p_twin::runtime::{SocketCanBus, build_runtime_for};
 
 /// A digital twin of the NanoAvionics M6P smallsat network: every node speaks CSP 1.4 on
 /// simulated CAN buses, and outside programs join over KISS/TCP.
@@ -563,7 +563,7 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
         .record
         .clone()
         .or_else(|| loaded.scenario.record.file.as_ref().map(PathBuf::from));
-    let rt = build_runtime(opts.clock)?;
+    let rt = build_runtime_for(opts)?;
     #[cfg(feature = "live")]
     let mut live = match a.live {
         Some(addr) => Some(start_live(addr, compiled.opts.epoch_unix_s)?),
@@ -736,7 +736,7 @@ fn cmd_bench(
             let mut compiled = exec::compile_loaded(&loaded);
             compiled.opts.duration = Some(duration);
             compiled.opts.clock = bus::ClockMode::Virtual;
-            let rt = build_runtime(compiled.opts.clock)?;
+            let rt = build_runtime_for(&compiled.opts)?;
             let started = std::time::Instant::now();
             let (_, stats) = rt.block_on(exec::execute_recorded_without_files(
                 &loaded,
@@ -871,7 +871,7 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
             true,
         ),
     };
-    let rt = build_runtime(compiled.opts.clock)?;
+    let rt = build_runtime_for(&compiled.opts)?;
     let result = rt.block_on(exec::execute_replay(&loaded, compiled, &path));
     let d = result.and_then(|_| m6p_twin::recording::diff(&a.file, &path));
     if temporary {
@@ -1119,7 +1119,7 @@ fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
             Ok(loaded) => {
                 let name = loaded.name();
                 let compiled = exec::compile_seeded(&loaded, a.seed);
-                let rt = build_runtime(compiled.opts.clock)?;
+                let rt = build_runtime_for(&compiled.opts)?;
                 match rt.block_on(exec::execute(compiled, &mut |_| {})) {
                     Err(e) => {
                         all_ok = false;

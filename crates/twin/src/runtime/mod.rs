@@ -259,6 +259,76 @@ pub fn build_runtime(mode: ClockMode) -> anyhow::Result<tokio::runtime::Runtime>
     b.build().context("building the tokio runtime")
 }
 
+/// The runtime for the run `opts`: [`build_runtime`], without the IO driver when the run is
+/// in virtual time with no link to the outside (every wake-up then costs no `epoll_wait`
+/// and no eventfd write: the paused clock only needs the timer).
+pub fn build_runtime_for(opts: &RunOptions) -> anyhow::Result<tokio::runtime::Runtime> {
+    if opts.clock != ClockMode::Virtual || opts.has_outside_links() {
+        return build_runtime(opts.clock);
+    }
+    tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .start_paused(true)
+        .build()
+        .context("building the tokio runtime")
+}
+
+/// Whether Ctrl-C was pressed: one watcher thread for the process (its own small runtime
+/// with the signal driver), so that a run in virtual time needs no IO driver of its own.
+/// Once pressed it stays pressed: every run still going stops, and so does any later one
+/// (a campaign ends).
+fn ctrl_c() -> tokio::sync::watch::Receiver<bool> {
+    static SEEN: std::sync::OnceLock<tokio::sync::watch::Receiver<bool>> =
+        std::sync::OnceLock::new();
+    SEEN.get_or_init(|| {
+        let (tx, rx) = tokio::sync::watch::channel(false);
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let spawned = std::thread::Builder::new()
+            .name("ctrl-c".into())
+            .spawn(move || {
+                let rt = tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .build();
+                if let Ok(rt) = rt {
+                    rt.block_on(async {
+                        // The handler is in place before the first run starts.
+                        let sig = watch_interrupt();
+                        let _ = ready_tx.send(());
+                        if let Some(sig) = sig
+                            && sig.await
+                        {
+                            let _ = tx.send(true);
+                        }
+                    });
+                }
+                // Keep the sender: without a handler the runs just never see Ctrl-C.
+                std::mem::forget(tx);
+            });
+        match spawned {
+            Ok(_) => {
+                let _ = ready_rx.recv_timeout(Duration::from_secs(1));
+            }
+            Err(e) => tracing::warn!("no Ctrl-C watcher: {e}"),
+        }
+        rx
+    })
+    .clone()
+}
+
+/// SIGINT's handler, installed now; its future says whether it was raised.
+fn watch_interrupt() -> Option<impl std::future::Future<Output = bool>> {
+    #[cfg(unix)]
+    {
+        let mut sig =
+            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt()).ok()?;
+        Some(async move { sig.recv().await.is_some() })
+    }
+    #[cfg(not(unix))]
+    {
+        Some(async { tokio::signal::ctrl_c().await.is_ok() })
+    }
+}
+
 /// A well-mixed 64-bit value from the run seed and a salt (splitmix64).
 pub fn mix(seed: u64, salt: u64) -> u64 {
     let mut z = seed ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15);
@@ -344,7 +414,12 @@ pub async fn run_with(
             kiss_budget.add_permits(1);
         }
     };
-    let ctrl_c = tokio::signal::ctrl_c();
+    let mut ctrl_c_seen = ctrl_c();
+    let ctrl_c = async move {
+        if ctrl_c_seen.wait_for(|seen| *seen).await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
     tokio::pin!(ctrl_c);
     loop {
         let next_fault = faults.peek().map_or(SimTime::MAX, |f| f.at).min(end);
