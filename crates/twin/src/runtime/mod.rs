@@ -421,12 +421,14 @@ pub async fn run_with(
         }
     };
     tokio::pin!(ctrl_c);
+    let mut interrupted = false;
     loop {
         let next_fault = faults.peek().map_or(SimTime::MAX, |f| f.at).min(end);
         tokio::select! {
             biased;
             _ = &mut ctrl_c => {
                 tracing::info!("Ctrl-C: stopping");
+                interrupted = true;
                 break;
             }
             ev = ev_rx.recv() => {
@@ -468,8 +470,9 @@ pub async fn run_with(
             }
         }
     }
+    // A virtual run ends exactly at its duration, unless Ctrl-C stopped it before.
     let sim_time = match opts.duration {
-        Some(d) if clock.is_virtual() => SimTime::ZERO + d,
+        Some(d) if clock.is_virtual() && !interrupted => SimTime::ZERO + d,
         _ => clock.now(),
     };
 
