@@ -227,6 +227,20 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
 
+    /// A second hub on the same host and ports is refused with a message naming the
+    /// endpoint, not a panic.
+    #[tokio::test]
+    async fn a_taken_port_is_a_clear_error() {
+        let addr: HubAddr = "127.0.0.68:6468:7468".parse().unwrap();
+        let first = Hub::bind(addr).await.unwrap();
+        assert_eq!(first.addr(), addr);
+        let e = Hub::bind(addr).await.unwrap_err().to_string();
+        assert!(
+            e.contains("cannot bind the ZMQ hub on tcp://127.0.0.68:6468"),
+            "{e}"
+        );
+    }
+
     #[test]
     fn hub_addresses_parse_and_print() {
         let a: HubAddr = "127.0.0.2".parse().unwrap();
