@@ -9,6 +9,7 @@
 //! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
 pub mod adcs;
+pub mod bench;
 pub mod campaign;
 pub mod campaign_report;
 pub mod campaign_run;

@@ -73,6 +73,11 @@ enum Command {
         /// Runs per variant.
         #[arg(long, default_value_t = 5)]
         runs: usize,
+        /// Print the figures as one JSON object (`cpu_s_plain`, `cpu_s_recorded`,
+        /// `cpu_s_adcs_floor`, `rtf_plain`, `rtf_recorded`, `mcap_bytes_per_hour`,
+        /// `messages_per_hour`, `peak_rss_mib`, the ratios and per-variant spreads).
+        #[arg(long)]
+        json: bool,
     },
     /// Join a running twin over KISS/TCP as a ground node and send requests.
     Gs(GsArgs),
@@ -406,7 +411,8 @@ fn main() -> ExitCode {
             scenario,
             duration,
             runs,
-        } => cmd_bench(scenario.as_deref(), duration, runs),
+            json,
+        } => cmd_bench(scenario.as_deref(), duration, runs, json),
         Command::Gs(a) => cmd_gs(a),
         Command::Passes {
             scenario,
@@ -654,13 +660,6 @@ fn recorded_kiss_input(
         .collect())
 }
 
-/// Peak resident memory of this process (Linux `VmHWM`), in KiB.
-fn peak_rss_kib() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    line.split_whitespace().nth(1)?.parse().ok()
-}
-
 fn cmd_passes(
     scenario: Option<&std::path::Path>,
     station: Option<&str>,
@@ -720,68 +719,18 @@ fn cmd_bench(
     scenario: Option<&std::path::Path>,
     duration: Duration,
     runs: usize,
+    json: bool,
 ) -> anyhow::Result<bool> {
     let loaded = match scenario {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
     };
-    let runs = runs.max(1);
-    let sim_h = duration.as_secs_f64() / 3600.0;
-    let file = std::env::temp_dir().join(format!("m6p-twin-bench-{}.mcap", std::process::id()));
-    let measure = |record: bool| -> anyhow::Result<(f64, u64, u64)> {
-        let mut rtf = Vec::new();
-        let mut bytes = 0;
-        let mut messages = 0;
-        for _ in 0..runs {
-            let mut compiled = exec::compile_loaded(&loaded);
-            compiled.opts.duration = Some(duration);
-            compiled.opts.clock = bus::ClockMode::Virtual;
-            let rt = build_runtime_for(&compiled.opts)?;
-            let started = std::time::Instant::now();
-            let (_, stats) = rt.block_on(exec::execute_recorded_without_files(
-                &loaded,
-                compiled,
-                record.then_some(file.as_path()),
-            ))?;
-            rtf.push(duration.as_secs_f64() / started.elapsed().as_secs_f64());
-            if let Some(s) = stats {
-                bytes = s.bytes;
-                messages = s.messages;
-            }
-        }
-        rtf.sort_by(f64::total_cmp);
-        Ok((rtf[rtf.len() / 2], bytes, messages))
-    };
-    let (rtf_plain, _, _) = measure(false)?;
-    let peak_plain = peak_rss_kib();
-    let (rtf_rec, bytes, messages) = measure(true)?;
-    let peak_all = peak_rss_kib();
-    let _ = std::fs::remove_file(&file);
-    let kib = |k: Option<u64>| {
-        k.map_or("n/a".to_owned(), |k| {
-            format!("{:.1} MiB", k as f64 / 1024.0)
-        })
-    };
-    println!(
-        "scenario `{}`, {} simulated per run, {runs} runs per variant (medians)",
-        loaded.name(),
-        m6p_twin::duration::format_duration(duration)
-    );
-    println!("  real-time factor without recording: {rtf_plain:.0}x");
-    println!(
-        "  real-time factor with recording:    {rtf_rec:.0}x ({:.1} % slower)",
-        100.0 * (1.0 - rtf_rec / rtf_plain)
-    );
-    println!(
-        "  peak memory (VmHWM): {} after the plain runs, {} after all",
-        kib(peak_plain),
-        kib(peak_all)
-    );
-    println!(
-        "  MCAP: {} bytes, {messages} messages per run = {:.0} bytes per simulated hour",
-        bytes,
-        bytes as f64 / sim_h
-    );
+    let report = m6p_twin::bench::run(&loaded, duration, runs)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.text());
+    }
     Ok(true)
 }
 

@@ -91,6 +91,17 @@ impl Nodes {
     }
 }
 
+/// The FC's configuration in the run `opts`: the scenario's, with the run's epoch, TLE and
+/// the FC's seed.
+pub(crate) fn fc_config(opts: &RunOptions) -> nodes_fc::FcConfig {
+    nodes_fc::FcConfig {
+        epoch_unix_s: opts.epoch_unix_s,
+        tle: opts.tle.clone(),
+        seed: mix(opts.seed, 0x300),
+        ..opts.fc.clone()
+    }
+}
+
 /// Boot every node of `opts.network` on `segs` and start its task; the ground stations
 /// record their requests' outcomes in `results`.
 pub(super) fn nodes(
@@ -103,12 +114,7 @@ pub(super) fn nodes(
 ) -> Nodes {
     let ev_tx = events;
 
-    opts.fc = nodes_fc::FcConfig {
-        epoch_unix_s: opts.epoch_unix_s,
-        tle: opts.tle.clone(),
-        seed: mix(opts.seed, 0x300),
-        ..opts.fc.clone()
-    };
+    opts.fc = fc_config(opts);
     let mut comm_ports = Vec::new();
     {
         // Every radio transmission is charged to its COMM's transmitter, at its place on the

@@ -38,6 +38,7 @@ use crate::events::RunEvent;
 use crate::faults::{FaultAction, TimedFault};
 use crate::ground::{PlannedRequest, Results};
 use crate::network::NetworkSpec;
+pub(crate) use build::fc_config;
 pub use report::{NodeReport, Observed, Observer, RunReport};
 
 /// Everything a run needs.
