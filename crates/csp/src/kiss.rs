@@ -69,24 +69,45 @@ const MIN_BODY: usize = HEADER_LEN + CRC_LEN;
 /// Append the KISS frame of `packet` to `out`: `C0 00 esc(header | data | CRC32C) C0`.
 pub fn encode(packet: &Packet, out: &mut Vec<u8>) {
     let crc = crc32::crc32c(&packet.data).to_be_bytes();
-    // Worst case every byte is escaped; reserving avoids repeated growth on the hot path.
+    // Worst case every byte is escaped; reserving once avoids growth on the hot path.
     out.reserve(2 * (HEADER_LEN + packet.data.len() + CRC_LEN) + 3);
+    out.extend_from_slice(&[FEND, TNC_DATA]);
+    escape_bytes(&packet.header.to_bytes(), out);
+    escape_into(&packet.data, out);
+    escape_bytes(&crc, out);
     out.push(FEND);
-    out.push(TNC_DATA);
-    for &b in packet
-        .header
-        .to_bytes()
-        .iter()
-        .chain(&packet.data)
-        .chain(&crc)
-    {
+}
+
+/// Bytes [`escape_into`] checks at a time.
+const SCAN_CHUNK: usize = 16;
+
+/// Append `bytes` escaped: each [`SCAN_CHUNK`] bytes holding neither FEND nor FESC (the
+/// common case) are copied whole, the others byte by byte. The check has no early exit,
+/// so the compiler turns it into a few vector compares.
+fn escape_into(bytes: &[u8], out: &mut Vec<u8>) {
+    let mut chunks = bytes.chunks_exact(SCAN_CHUNK);
+    for chunk in &mut chunks {
+        if chunk
+            .iter()
+            .fold(false, |any, &b| any | (b == FEND) | (b == FESC))
+        {
+            escape_bytes(chunk, out);
+        } else {
+            out.extend_from_slice(chunk);
+        }
+    }
+    escape_bytes(chunks.remainder(), out);
+}
+
+/// Append `bytes` escaped, one at a time.
+fn escape_bytes(bytes: &[u8], out: &mut Vec<u8>) {
+    for &b in bytes {
         match b {
             FEND => out.extend_from_slice(&[FESC, TFEND]),
             FESC => out.extend_from_slice(&[FESC, TFESC]),
             _ => out.push(b),
         }
     }
-    out.push(FEND);
 }
 
 /// Receiver options.
@@ -308,6 +329,51 @@ mod tests {
         let mut out = Vec::new();
         d.push(bytes, &mut out);
         (out, d.stats())
+    }
+
+    /// The byte-at-a-time encoder [`encode`] replaced, kept as the reference.
+    fn encode_reference(packet: &Packet) -> Vec<u8> {
+        let crc = crc32::crc32c(&packet.data).to_be_bytes();
+        let mut out = vec![FEND, TNC_DATA];
+        for &b in packet
+            .header
+            .to_bytes()
+            .iter()
+            .chain(&packet.data)
+            .chain(&crc)
+        {
+            match b {
+                FEND => out.extend_from_slice(&[FESC, TFEND]),
+                FESC => out.extend_from_slice(&[FESC, TFESC]),
+                _ => out.push(b),
+            }
+        }
+        out.push(FEND);
+        out
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn encode_matches_the_byte_at_a_time_reference(
+            word in proptest::prelude::any::<u32>(),
+            // Half the bytes FEND, FESC or their transposed forms, at every offset.
+            data in proptest::collection::vec(
+                proptest::prop_oneof![
+                    proptest::prelude::any::<u8>(),
+                    proptest::sample::select(vec![FEND, FESC, TFEND, TFESC]),
+                ],
+                0..=300,
+            ),
+            prefix in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..4),
+        ) {
+            let p = Packet::new(Header::from_word(word), data);
+            // Appends after what `out` already holds.
+            let mut out = prefix.clone();
+            encode(&p, &mut out);
+            let mut want = prefix;
+            want.extend(encode_reference(&p));
+            proptest::prop_assert_eq!(out, want);
+        }
     }
 
     #[test]
