@@ -515,9 +515,11 @@ fn bench_reports_its_figures_and_leaves_no_files() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains(" INFO "), "{err}");
     for figure in [
-        "without recording",
-        "with recording",
-        "peak memory",
+        "plain ",
+        "recorded ",
+        "adcs_floor ",
+        "recorded / plain CPU",
+        "peak RSS",
         "MCAP:",
     ] {
         assert!(text.contains(figure), "{figure} missing from\n{text}");
@@ -527,6 +529,49 @@ fn bench_reports_its_figures_and_leaves_no_files() {
         .map(|e| e.unwrap().path())
         .collect();
     assert!(left.is_empty(), "{left:?}");
+}
+
+/// `bench --json` prints one object with the figures dashboards read, consistent with each
+/// other: the recorded run costs more than the plain one, which costs more than the FC's
+/// physics alone, and the ratios are the ratios of the medians.
+#[test]
+fn bench_json_has_the_dashboard_keys() {
+    let (code, out, err) = twin(&[
+        "bench",
+        "scenarios/adcs-nadir.toml",
+        "--duration",
+        "300s",
+        "--runs",
+        "3",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let num = |k: &str| {
+        v[k].as_f64()
+            .unwrap_or_else(|| panic!("{k} missing or not a number in {out}"))
+    };
+    for k in [
+        "cpu_s_plain",
+        "cpu_s_recorded",
+        "cpu_s_adcs_floor",
+        "rtf_plain",
+        "rtf_recorded",
+        "mcap_bytes_per_hour",
+        "messages_per_hour",
+        "peak_rss_mib",
+    ] {
+        assert!(num(k) > 0.0, "{k} = {} in {out}", num(k));
+    }
+    assert!(num("cpu_s_recorded") > num("cpu_s_adcs_floor"), "{out}");
+    let ratio = num("cpu_s_recorded") / num("cpu_s_plain");
+    assert!((num("ratio_recorded_plain") - ratio).abs() < 1e-9, "{out}");
+    for variant in ["plain", "recorded", "adcs_floor"] {
+        let s = &v["variants"][variant]["cpu_s"];
+        let (min, med, max) = (s["min"].as_f64(), s["median"].as_f64(), s["max"].as_f64());
+        assert!(min <= med && med <= max, "{variant}: {s}");
+    }
+    assert_eq!(v["runs"], 3);
 }
 
 /// A beacon verdict reads like the others: bounds as `>= 2`, and no contact as `0 s` (it
