@@ -1189,81 +1189,120 @@ impl State {
 /// Bits an extended CAN data frame occupies on the bus, stuff bits and the 3-bit
 /// intermission included (ISO 11898-1).
 ///
-/// One pass over the frame's bits, with no allocation: each bit goes through the CRC-15
-/// (over SOF..data) and the stuffing count (over SOF..CRC) as it is produced.
+/// A byte at a time, with no allocation: the stuffed part (SOF .. CRC, at most 118 bits)
+/// is one `u128`; its CRC-15 (over SOF .. data) and its stuff bits come from two tables
+/// indexed by byte ([`CRC15_TABLE`], [`STUFF_TABLE`]), the few bits before the first whole
+/// byte one at a time.
 pub fn frame_bits(frame: &CanFrame) -> u32 {
     let id = u64::from(frame.id & csp::cfp::CAN_EFF_MASK);
-    let mut w = BitWriter::default();
-    w.push(0, 1); // SOF
-    w.push(id >> 18, 11); // base id
-    w.push(1, 1); // SRR
-    w.push(1, 1); // IDE
-    w.push(id & 0x3FFFF, 18); // extended id
-    w.push(0, 1); // RTR
-    w.push(0, 2); // r1, r0
-    w.push(u64::from(frame.dlc.min(8)), 4);
+    let dlc = frame.dlc.min(8);
+    // SOF 0 | base id (11) | SRR 1 | IDE 1 | extended id (18) | RTR 0 | r1 r0 00 | DLC (4).
+    let header = (id >> 18) << 27 | 1 << 26 | 1 << 25 | (id & 0x3FFFF) << 7 | u64::from(dlc);
+    // The 7 bits before the header's last four bytes, then bytes.
+    let mut crc = 0u16;
+    for i in (32..HEADER_BITS).rev() {
+        let next = ((header >> i) as u16 ^ (crc >> 14)) & 1;
+        crc = ((crc << 1) & 0x7FFF) ^ (0x4599 * next);
+    }
+    let mut bits = u128::from(header);
+    for b in (header as u32).to_be_bytes().iter().chain(frame.data()) {
+        crc = ((crc << 8) & 0x7FFF) ^ CRC15_TABLE[usize::from(((crc >> 7) as u8) ^ b)];
+    }
     for &b in frame.data() {
-        w.push(u64::from(b), 8);
+        bits = bits << 8 | u128::from(b);
     }
-    // CRC-15, polynomial 0x4599, over SOF..data; stuffed like the rest.
-    let crc = w.crc;
-    w.crc_on = false;
-    w.push(u64::from(crc), 15);
+    let n = HEADER_BITS + 8 * frame.data().len() as u32 + 15;
+    bits = bits << 15 | u128::from(crc);
     // CRC delimiter, ACK slot, ACK delimiter, EOF (7), intermission (3).
-    w.count + w.stuffed + 1 + 1 + 1 + 7 + 3
+    n + stuff_bits(bits, n) + 1 + 1 + 1 + 7 + 3
 }
 
-/// The stuffed part of a frame, bit by bit: its CRC-15 and stuff bits.
-#[derive(Debug)]
-struct BitWriter {
-    count: u32,
-    stuffed: u32,
-    crc: u16,
-    crc_on: bool,
-    run: u32,
-    last: Option<bool>,
-}
+/// Bits of an extended frame's header, SOF to DLC.
+const HEADER_BITS: u32 = 39;
 
-impl Default for BitWriter {
-    fn default() -> Self {
-        BitWriter {
-            count: 0,
-            stuffed: 0,
-            crc: 0,
-            crc_on: true,
-            run: 0,
-            last: None,
-        }
-    }
-}
-
-impl BitWriter {
-    /// The `n` low bits of `v`, most significant first.
-    fn push(&mut self, v: u64, n: u32) {
-        for i in (0..n).rev() {
-            let b = (v >> i) & 1 == 1;
-            self.count += 1;
-            if self.crc_on {
-                let next = b ^ ((self.crc >> 14) & 1 == 1);
-                self.crc = (self.crc << 1) & 0x7FFF;
-                if next {
-                    self.crc ^= 0x4599;
-                }
-            }
-            // After five equal bits a complementary bit is inserted (and counts itself).
-            if Some(b) == self.last {
-                self.run += 1;
+/// The CRC-15 register's change for each input byte, from a zero register.
+const CRC15_TABLE: [u16; 256] = {
+    let mut t = [0u16; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut r = (i as u16) << 7;
+        let mut k = 0;
+        while k < 8 {
+            r = if r & 0x4000 != 0 {
+                ((r << 1) ^ 0x4599) & 0x7FFF
             } else {
-                self.run = 1;
-                self.last = Some(b);
-            }
-            if self.run == 5 {
-                self.stuffed += 1;
-                self.last = Some(!b);
-                self.run = 1;
-            }
+                (r << 1) & 0x7FFF
+            };
+            k += 1;
         }
+        t[i] = r;
+        i += 1;
     }
+    t
+};
+
+/// The stuffing state after one more bit: the state is the last bit's value (bit 3) and
+/// how many equal bits end the stream (0 at the start, else 1..=4); returns the new state
+/// and whether a stuff bit followed (after five equal bits a complementary bit is
+/// inserted, and it starts the next run).
+const fn stuff_step(state: u8, bit: u8) -> (u8, u8) {
+    let (last, run) = (state >> 3, state & 7);
+    let (mut last, mut run) = if run > 0 && bit == last {
+        (last, run + 1)
+    } else {
+        (bit, 1)
+    };
+    let mut stuffed = 0;
+    if run == 5 {
+        stuffed = 1;
+        last ^= 1;
+        run = 1;
+    }
+    (last << 3 | run, stuffed)
+}
+
+/// For each stuffing state and next byte (most significant bit first): the state after it
+/// (low 4 bits) and the stuff bits it caused (high 4 bits).
+const STUFF_TABLE: [[u8; 256]; 16] = {
+    let mut t = [[0u8; 256]; 16];
+    let mut state = 0;
+    while state < 16 {
+        let mut byte = 0;
+        while byte < 256 {
+            let (mut s, mut stuffed) = (state as u8, 0);
+            let mut k = 0;
+            while k < 8 {
+                let (next, n) = stuff_step(s, ((byte >> (7 - k)) & 1) as u8);
+                s = next;
+                stuffed += n;
+                k += 1;
+            }
+            t[state][byte] = stuffed << 4 | s;
+            byte += 1;
+        }
+        state += 1;
+    }
+    t
+};
+
+/// Stuff bits in the `n` low bits of `bits` (most significant first).
+fn stuff_bits(bits: u128, n: u32) -> u32 {
+    let mut x = bits << (128 - n);
+    let mut state = 0;
+    let mut stuffed = 0;
+    for _ in 0..n % 8 {
+        let (next, k) = stuff_step(state, (x >> 127) as u8);
+        state = next;
+        stuffed += u32::from(k);
+        x <<= 1;
+    }
+    for _ in 0..n / 8 {
+        let e = STUFF_TABLE[usize::from(state)][(x >> 120) as usize];
+        state = e & 0xF;
+        stuffed += u32::from(e >> 4);
+        x <<= 8;
+    }
+    stuffed
 }
 
 #[cfg(test)]
@@ -1329,6 +1368,19 @@ mod tests {
         fn frame_bits_equals_the_bit_vector_reference(
             id in 0u32..=csp::cfp::CAN_EFF_MASK,
             data in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..=8),
+        ) {
+            let f = CanFrame::new(id, &data).unwrap();
+            proptest::prop_assert_eq!(frame_bits(&f), frame_bits_reference(&f));
+        }
+
+        /// Long runs of equal bits, where stuff bits chain from one run into the next.
+        #[test]
+        fn frame_bits_equals_the_reference_on_long_runs(
+            id in proptest::sample::select(vec![0, csp::cfp::CAN_EFF_MASK, 0x1F, 0x1FFF_FFE0, 0x0F0F_0F0F, 0x1E1E_1E1E]),
+            data in proptest::collection::vec(
+                proptest::sample::select(vec![0x00u8, 0xFF, 0x0F, 0xF0, 0x1F, 0xF8, 0x07, 0xE0, 0x83, 0x7C]),
+                0..=8,
+            ),
         ) {
             let f = CanFrame::new(id, &data).unwrap();
             proptest::prop_assert_eq!(frame_bits(&f), frame_bits_reference(&f));
