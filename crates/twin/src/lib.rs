@@ -34,6 +34,7 @@ pub mod live;
 pub mod network;
 pub mod outside;
 pub mod plan;
+pub mod protobuf;
 pub mod record;
 pub mod recording;
 pub mod runtime;

@@ -1,0 +1,511 @@
+//! The recording's message encoding: Protocol Buffers, with the schemas in the file.
+//!
+//! Encoding: each message type derives [`foxglove::Encode`] (the foxglove crate's own
+//! protobuf encoder and schema generator; Foxglove's well-known types come from
+//! `foxglove::messages`). [`schema`] turns a type's generated `FileDescriptorSet` into the
+//! recording's schema under the project's name (`m6p.CanFrames`).
+//!
+//! Decoding: [`decode`] reads any message with nothing but its schema, into the JSON the
+//! project's tools work with (`inspect --csv`, `diff`, `replay`, the tests): field names
+//! as in the schema; a repeated field is an array; `bytes` are lowercase hex strings; a
+//! non-finite float is null; an absent field with presence (`optional`, a message) is null
+//! and an absent plain field its default (0, false, ""), as protobuf defines. The twin
+//! writes every field it has, so null means the value was absent (`None`). A `jsonschema`
+//! channel (a recording of format 2) is read as the JSON it holds.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use anyhow::{Context, anyhow, bail};
+use prost::Message;
+use prost_types::field_descriptor_proto::{Label, Type};
+use prost_types::{DescriptorProto, FileDescriptorSet};
+use serde_json::{Map, Number, Value};
+
+/// The message encoding of every channel.
+pub const MESSAGE_ENCODING: &str = "protobuf";
+/// The schema encoding of every channel: a binary `FileDescriptorSet`.
+pub const SCHEMA_ENCODING: &str = "protobuf";
+/// The package of the project's own message types.
+pub const PACKAGE: &str = "m6p";
+
+/// The schema of `T` (derived [`foxglove::Encode`]) as the recording names it:
+/// `m6p.<name>`, its `FileDescriptorSet` with the package and the top message renamed.
+pub fn schema<T: foxglove::Encode>(name: &str) -> anyhow::Result<Vec<u8>> {
+    let s = T::get_schema().ok_or_else(|| anyhow!("{name}: no schema"))?;
+    let mut fds = FileDescriptorSet::decode(&*s.data).context("the generated schema")?;
+    let (_, message) = s
+        .name
+        .rsplit_once('.')
+        .ok_or_else(|| anyhow!("{name}: schema name {}", s.name))?;
+    let file = fds
+        .file
+        .iter_mut()
+        .find(|f| f.message_type.iter().any(|m| m.name() == message))
+        .ok_or_else(|| anyhow!("{name}: {message} not in its schema"))?;
+    file.package = Some(PACKAGE.to_owned());
+    file.name = Some(format!("{PACKAGE}/{name}.proto"));
+    for m in &mut file.message_type {
+        if m.name() == message {
+            m.name = Some(name.to_owned());
+        }
+    }
+    Ok(fds.encode_to_vec())
+}
+
+/// The messages of one schema, by full name (`m6p.CanFrames`, `foxglove.Time`).
+#[derive(Debug)]
+struct Types {
+    messages: BTreeMap<String, DescriptorProto>,
+    root: String,
+}
+
+impl Types {
+    fn parse(schema_name: &str, data: &[u8]) -> anyhow::Result<Types> {
+        let fds = FileDescriptorSet::decode(data).context("a FileDescriptorSet")?;
+        let mut messages = BTreeMap::new();
+        fn walk(prefix: &str, m: &DescriptorProto, out: &mut BTreeMap<String, DescriptorProto>) {
+            let full = format!("{prefix}.{}", m.name());
+            for n in &m.nested_type {
+                walk(&full, n, out);
+            }
+            out.insert(full, m.clone());
+        }
+        for f in &fds.file {
+            for m in &f.message_type {
+                walk(f.package(), m, &mut messages);
+            }
+        }
+        if !messages.contains_key(schema_name) {
+            bail!("message {schema_name} is not in its schema");
+        }
+        Ok(Types {
+            messages,
+            root: schema_name.to_owned(),
+        })
+    }
+
+    /// The message a field's `type_name` names, seen from message `scope` (protobuf's
+    /// scoping: innermost first; a leading dot is fully qualified).
+    fn resolve(&self, scope: &str, type_name: &str) -> Option<(&str, &DescriptorProto)> {
+        if let Some(full) = type_name.strip_prefix('.') {
+            return self
+                .messages
+                .get_key_value(full)
+                .map(|(k, v)| (k.as_str(), v));
+        }
+        let mut scope = scope;
+        loop {
+            let candidate = format!("{scope}.{type_name}");
+            if let Some((k, v)) = self.messages.get_key_value(&candidate) {
+                return Some((k.as_str(), v));
+            }
+            match scope.rsplit_once('.') {
+                Some((outer, _)) => scope = outer,
+                None => {
+                    return self
+                        .messages
+                        .get_key_value(type_name)
+                        .map(|(k, v)| (k.as_str(), v));
+                }
+            }
+        }
+    }
+}
+
+/// A parsed schema: its bytes, its name and its types.
+type Cached = (Arc<[u8]>, String, Arc<Types>);
+
+thread_local! {
+    /// Parsed schemas, by their bytes (a recording has a few dozen).
+    static CACHE: std::cell::RefCell<Vec<Cached>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Schemas kept parsed per thread; more are parsed again each time.
+const CACHE_LIMIT: usize = 256;
+
+fn types(schema_name: &str, data: &Arc<[u8]>) -> anyhow::Result<Arc<Types>> {
+    let hit = CACHE.with(|c| {
+        c.borrow()
+            .iter()
+            .find(|(d, n, _)| n == schema_name && (Arc::ptr_eq(d, data) || **d == **data))
+            .map(|(_, _, t)| t.clone())
+    });
+    if let Some(t) = hit {
+        return Ok(t);
+    }
+    let t = Arc::new(Types::parse(schema_name, data)?);
+    CACHE.with(|c| {
+        let mut c = c.borrow_mut();
+        if c.len() < CACHE_LIMIT {
+            c.push((data.clone(), schema_name.to_owned(), t.clone()));
+        }
+    });
+    Ok(t)
+}
+
+/// The JSON of message `data` on a channel whose schema is `schema_name`, encoded
+/// `schema_encoding`, with schema bytes `schema_data` (see the module docs).
+pub fn decode(
+    schema_name: &str,
+    schema_encoding: &str,
+    schema_data: &Arc<[u8]>,
+    data: &[u8],
+) -> anyhow::Result<Value> {
+    match schema_encoding {
+        SCHEMA_ENCODING => {
+            let t = types(schema_name, schema_data)?;
+            let root = t
+                .messages
+                .get(&t.root)
+                .ok_or_else(|| anyhow!("no message {}", t.root))?;
+            decode_message(&t, &t.root, root, data, 0)
+        }
+        "jsonschema" | "" => serde_json::from_slice(data).context("a JSON message"),
+        other => bail!("schema encoding {other:?} is not read here"),
+    }
+}
+
+/// Nested messages deeper than this are refused (a schema could recurse).
+const MAX_DEPTH: usize = 32;
+
+/// One wire value.
+enum Wire<'a> {
+    Varint(u64),
+    Fixed64(u64),
+    Bytes(&'a [u8]),
+    Fixed32(u32),
+}
+
+fn varint(data: &[u8], pos: &mut usize) -> anyhow::Result<u64> {
+    let mut v = 0u64;
+    for shift in (0..70).step_by(7) {
+        let b = *data.get(*pos).ok_or_else(|| anyhow!("truncated varint"))?;
+        *pos += 1;
+        v |= u64::from(b & 0x7F).checked_shl(shift).unwrap_or(0);
+        if b & 0x80 == 0 {
+            return Ok(v);
+        }
+    }
+    bail!("varint longer than 10 bytes")
+}
+
+fn take<'a>(data: &'a [u8], pos: &mut usize, n: usize) -> anyhow::Result<&'a [u8]> {
+    let end = pos
+        .checked_add(n)
+        .filter(|&e| e <= data.len())
+        .ok_or_else(|| anyhow!("field of {n} bytes beyond the message"))?;
+    let s = &data[*pos..end];
+    *pos = end;
+    Ok(s)
+}
+
+fn next_field<'a>(data: &'a [u8], pos: &mut usize) -> anyhow::Result<(u32, Wire<'a>)> {
+    let key = varint(data, pos)?;
+    let number = u32::try_from(key >> 3).map_err(|_| anyhow!("field number {}", key >> 3))?;
+    let wire = match key & 7 {
+        0 => Wire::Varint(varint(data, pos)?),
+        1 => Wire::Fixed64(u64::from_le_bytes(
+            take(data, pos, 8)?.try_into().unwrap_or_default(),
+        )),
+        2 => {
+            let n = usize::try_from(varint(data, pos)?).unwrap_or(usize::MAX);
+            Wire::Bytes(take(data, pos, n)?)
+        }
+        5 => Wire::Fixed32(u32::from_le_bytes(
+            take(data, pos, 4)?.try_into().unwrap_or_default(),
+        )),
+        w => bail!("wire type {w} of field {number}"),
+    };
+    Ok((number, wire))
+}
+
+fn float(x: f64) -> Value {
+    Number::from_f64(x).map_or(Value::Null, Value::Number)
+}
+
+/// A scalar of type `ty` from one wire value.
+fn scalar(ty: Type, w: &Wire<'_>) -> anyhow::Result<Value> {
+    Ok(match (ty, w) {
+        (Type::Double, Wire::Fixed64(v)) => float(f64::from_bits(*v)),
+        (Type::Float, Wire::Fixed32(v)) => float(f64::from(f32::from_bits(*v))),
+        (Type::Uint64 | Type::Fixed64, Wire::Varint(v) | Wire::Fixed64(v)) => Value::from(*v),
+        (Type::Int64 | Type::Sfixed64, Wire::Varint(v) | Wire::Fixed64(v)) => {
+            Value::from(*v as i64)
+        }
+        (Type::Uint32 | Type::Fixed32, Wire::Varint(v)) => Value::from(*v as u32),
+        (Type::Uint32 | Type::Fixed32, Wire::Fixed32(v)) => Value::from(*v),
+        (Type::Int32 | Type::Enum, Wire::Varint(v)) => Value::from(*v as i32),
+        (Type::Sfixed32, Wire::Fixed32(v)) => Value::from(*v as i32),
+        (Type::Sint32, Wire::Varint(v)) => Value::from(((*v >> 1) as i32) ^ -((*v & 1) as i32)),
+        (Type::Sint64, Wire::Varint(v)) => Value::from(((*v >> 1) as i64) ^ -((*v & 1) as i64)),
+        (Type::Bool, Wire::Varint(v)) => Value::Bool(*v != 0),
+        (Type::String, Wire::Bytes(b)) => Value::String(String::from_utf8_lossy(b).into_owned()),
+        (Type::Bytes, Wire::Bytes(b)) => Value::String(hex::encode(b)),
+        (ty, _) => bail!("a {ty:?} field with the wrong wire type"),
+    })
+}
+
+/// The elements of a packed repeated scalar field.
+fn packed(ty: Type, b: &[u8], out: &mut Vec<Value>) -> anyhow::Result<()> {
+    let mut pos = 0;
+    while pos < b.len() {
+        let w = match ty {
+            Type::Double | Type::Fixed64 | Type::Sfixed64 => Wire::Fixed64(u64::from_le_bytes(
+                take(b, &mut pos, 8)?.try_into().unwrap_or_default(),
+            )),
+            Type::Float | Type::Fixed32 | Type::Sfixed32 => Wire::Fixed32(u32::from_le_bytes(
+                take(b, &mut pos, 4)?.try_into().unwrap_or_default(),
+            )),
+            _ => Wire::Varint(varint(b, &mut pos)?),
+        };
+        out.push(scalar(ty, &w)?);
+    }
+    Ok(())
+}
+
+/// The default of an absent field without presence.
+fn default_of(ty: Type) -> Value {
+    match ty {
+        Type::Double | Type::Float => float(0.0),
+        Type::Bool => Value::Bool(false),
+        Type::String | Type::Bytes => Value::String(String::new()),
+        Type::Message | Type::Group => Value::Null,
+        _ => Value::from(0),
+    }
+}
+
+fn decode_message(
+    t: &Types,
+    scope: &str,
+    desc: &DescriptorProto,
+    data: &[u8],
+    depth: usize,
+) -> anyhow::Result<Value> {
+    if depth > MAX_DEPTH {
+        bail!("messages nested deeper than {MAX_DEPTH}");
+    }
+    let mut found: Vec<Option<Value>> = vec![None; desc.field.len()];
+    let mut pos = 0;
+    while pos < data.len() {
+        let (number, wire) = next_field(data, &mut pos)?;
+        let Some(i) = desc
+            .field
+            .iter()
+            .position(|f| u32::try_from(f.number()) == Ok(number))
+        else {
+            continue; // unknown fields are skipped, as protobuf does
+        };
+        let f = &desc.field[i];
+        let ty = f.r#type();
+        let value = match (ty, &wire) {
+            (Type::Message, Wire::Bytes(b)) => {
+                let (full, sub) = t
+                    .resolve(scope, f.type_name())
+                    .ok_or_else(|| anyhow!("unknown type {}", f.type_name()))?;
+                decode_message(t, full, sub, b, depth + 1)?
+            }
+            _ => Value::Null,
+        };
+        if f.label() == Label::Repeated {
+            let slot = found[i].get_or_insert_with(|| Value::Array(Vec::new()));
+            let Value::Array(items) = slot else {
+                continue;
+            };
+            match (ty, &wire) {
+                (Type::Message, _) => items.push(value),
+                (Type::String | Type::Bytes, w) => items.push(scalar(ty, w)?),
+                (_, Wire::Bytes(b)) => packed(ty, b, items)?,
+                (_, w) => items.push(scalar(ty, w)?),
+            }
+        } else if ty == Type::Message {
+            found[i] = Some(value);
+        } else {
+            found[i] = Some(scalar(ty, &wire).with_context(|| f.name().to_owned())?);
+        }
+    }
+    let mut out = Map::new();
+    for (f, v) in desc.field.iter().zip(found) {
+        let v = v.unwrap_or_else(|| {
+            if f.label() == Label::Repeated {
+                Value::Array(Vec::new())
+            } else if f.proto3_optional() {
+                Value::Null
+            } else {
+                default_of(f.r#type())
+            }
+        });
+        out.insert(f.name().to_owned(), v);
+    }
+    Ok(Value::Object(out))
+}
+
+/// Serde for `bytes::Bytes` as lowercase hex (the decoded JSON's form of `bytes`).
+pub mod hex_bytes {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Hex of the bytes.
+    pub fn serialize<S: Serializer>(b: &bytes::Bytes, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&hex::encode(b))
+    }
+
+    /// The bytes of a hex string.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<bytes::Bytes, D::Error> {
+        let s = String::deserialize(d)?;
+        hex::decode(s)
+            .map(bytes::Bytes::from)
+            .map_err(serde::de::Error::custom)
+    }
+}
+
+/// Serde for `Option<bytes::Bytes>` as lowercase hex or null.
+pub mod hex_bytes_opt {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Hex of the bytes, or null.
+    pub fn serialize<S: Serializer>(b: &Option<bytes::Bytes>, s: S) -> Result<S::Ok, S::Error> {
+        match b {
+            Some(b) => s.serialize_str(&hex::encode(b)),
+            None => s.serialize_none(),
+        }
+    }
+
+    /// The bytes of a hex string, or none.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<bytes::Bytes>, D::Error> {
+        let s = Option::<String>::deserialize(d)?;
+        s.map(|s| hex::decode(s).map(bytes::Bytes::from))
+            .transpose()
+            .map_err(serde::de::Error::custom)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use foxglove::Encode;
+
+    #[derive(Debug, foxglove::Encode)]
+    struct Inner {
+        a: u8,
+        b: f32,
+    }
+
+    #[derive(Debug, foxglove::Encode)]
+    struct Outer {
+        t_ns: u64,
+        name: String,
+        data: bytes::Bytes,
+        opt: Option<u32>,
+        none: Option<u32>,
+        arr: [f32; 3],
+        ids: Vec<u32>,
+        inner: Inner,
+        maybe: Option<Inner>,
+        flag: bool,
+        neg: i32,
+        big: f64,
+    }
+
+    fn decode_outer(o: &Outer) -> Value {
+        let schema: Arc<[u8]> = schema::<Outer>("Outer").unwrap().into();
+        let mut buf = Vec::new();
+        o.encode(&mut buf).unwrap();
+        decode("m6p.Outer", SCHEMA_ENCODING, &schema, &buf).unwrap()
+    }
+
+    #[test]
+    fn a_derived_message_decodes_to_its_fields() {
+        let v = decode_outer(&Outer {
+            t_ns: 1_777_572_000_000_000_001,
+            name: "FC".into(),
+            data: bytes::Bytes::from_static(&[0xc0, 0x00, 0xdb]),
+            opt: Some(0),
+            none: None,
+            arr: [1.5, f32::NAN, -2.0],
+            ids: vec![0x1FFF_FFFF, 0, 7],
+            inner: Inner { a: 0, b: 0.0 },
+            maybe: None,
+            flag: false,
+            neg: -5,
+            big: 6_792_531.470_923_343,
+        });
+        assert_eq!(
+            v,
+            serde_json::json!({
+                "t_ns": 1_777_572_000_000_000_001u64, "name": "FC", "data": "c000db",
+                "opt": 0, "none": null, "arr": [1.5, null, -2.0], "ids": [536870911, 0, 7],
+                "inner": {"a": 0, "b": 0.0}, "maybe": null, "flag": false, "neg": -5,
+                "big": 6_792_531.470_923_343,
+            })
+        );
+    }
+
+    #[test]
+    fn the_schema_is_named_in_the_project_package() {
+        let data = schema::<Outer>("Outer").unwrap();
+        let fds = FileDescriptorSet::decode(&*data).unwrap();
+        let f = &fds.file[0];
+        assert_eq!(f.package(), PACKAGE);
+        assert_eq!(f.message_type[0].name(), "Outer");
+        assert_eq!(f.message_type[0].nested_type[0].name(), "Inner");
+    }
+
+    #[test]
+    fn damaged_messages_are_errors_not_panics() {
+        let schema: Arc<[u8]> = schema::<Outer>("Outer").unwrap().into();
+        let mut buf = Vec::new();
+        Outer {
+            t_ns: 1,
+            name: "x".into(),
+            data: bytes::Bytes::from_static(b"abc"),
+            opt: None,
+            none: None,
+            arr: [0.0; 3],
+            ids: vec![1],
+            inner: Inner { a: 1, b: 1.0 },
+            maybe: Some(Inner { a: 2, b: 2.0 }),
+            flag: true,
+            neg: 1,
+            big: 1.0,
+        }
+        .encode(&mut buf)
+        .unwrap();
+        for n in 0..buf.len() {
+            // Every prefix and every one-byte change is decoded or refused, never a panic.
+            let _ = decode("m6p.Outer", SCHEMA_ENCODING, &schema, &buf[..n]);
+            let mut b = buf.clone();
+            b[n] ^= 0xFF;
+            let _ = decode("m6p.Outer", SCHEMA_ENCODING, &schema, &b);
+        }
+        assert!(decode("m6p.Outer", SCHEMA_ENCODING, &schema, &[0x0a, 0x7f]).is_err());
+        assert!(decode("m6p.Nope", SCHEMA_ENCODING, &schema, &buf).is_err());
+    }
+
+    #[test]
+    fn foxglove_well_known_messages_decode_with_defaults() {
+        let s = foxglove::messages::FrameTransform::get_schema().unwrap();
+        let data: Arc<[u8]> = s.data.to_vec().into();
+        let m = foxglove::messages::FrameTransform {
+            timestamp: Some(foxglove::messages::Timestamp::new(5, 0)),
+            parent_frame_id: "eci".into(),
+            child_frame_id: "body".into(),
+            translation: None,
+            rotation: Some(foxglove::messages::Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            }),
+        };
+        let mut buf = Vec::new();
+        Encode::encode(&m, &mut buf).unwrap();
+        let v = decode(&s.name, &s.encoding, &data, &buf).unwrap();
+        assert_eq!(v["timestamp"]["seconds"], 5, "{v}");
+        assert_eq!(v["timestamp"]["nanos"], 0);
+        assert_eq!(v["rotation"]["w"], 1.0);
+        assert_eq!(v["rotation"]["x"], 0.0);
+        assert_eq!(v["translation"], Value::Null);
+        assert_eq!(v["child_frame_id"], "body");
+    }
+}
