@@ -2,7 +2,7 @@
 //! (`m6p-twin run --live [ADDR]`, cargo feature `live`).
 //!
 //! The server offers the same channels as the MCAP recording ([`crate::record`]): same
-//! topics, same `jsonschema` schemas, same JSON messages (one encoder,
+//! topics, same protobuf schemas, same messages (one encoder,
 //! [`EventEncoder`], feeds both). Every message's log time is simulated time (the
 //! scenario's start epoch plus the event's simulated time), and the server advertises the
 //! `time` capability and broadcasts the simulated time as events arrive, so Foxglove's clock
@@ -147,7 +147,7 @@ impl LiveServer {
         } = self;
         enc.encode(ev, &mut |m: Encoded<'_>| {
             let chan = channel(chans, ctx, m.kind, m.key)?;
-            chan.log_with_meta(m.json, PartialMetadata::with_log_time(m.log_time));
+            chan.log_with_meta(m.data, PartialMetadata::with_log_time(m.log_time));
             *latest = (*latest).max(m.log_time);
             *messages += 1;
             Ok(())
@@ -203,7 +203,7 @@ fn channel<'c>(
     let i = match chans.iter().position(|(k, c, _)| *k == kind && c == key) {
         Some(i) => i,
         None => {
-            let schema = Schema::new(kind.schema_name(), SCHEMA_ENCODING, kind.schema_json()?);
+            let schema = Schema::new(kind.schema_name(), SCHEMA_ENCODING, kind.schema_data()?);
             let topic = kind.topic(key);
             let chan = ChannelBuilder::new(topic.as_str())
                 .context(ctx)

@@ -639,15 +639,14 @@ fn recorded_kiss_input(
         if !m.topic.starts_with("/kiss/") {
             continue;
         }
-        let k: m6p_twin::record::KissFrameMsg = serde_json::from_slice(&m.data)
+        let k: m6p_twin::record::KissFrameMsg = m
+            .decode()
             .with_context(|| format!("decoding a {} message", m.topic))?;
         if k.dir == "in" {
-            let bytes =
-                hex::decode(&k.bytes_hex).with_context(|| format!("bad hex in {}", m.topic))?;
             links
                 .entry(k.link)
                 .or_default()
-                .push((csp::SimTime(k.t_ns), bytes));
+                .push((csp::SimTime(k.t_ns), k.bytes.to_vec()));
         }
     }
     Ok(links

@@ -8,7 +8,8 @@
 //! Decoding: [`decode`] reads any message with nothing but its schema, into the JSON the
 //! project's tools work with (`inspect --csv`, `diff`, `replay`, the tests): field names
 //! as in the schema; a repeated field is an array; `bytes` are lowercase hex strings; a
-//! non-finite float is null; an absent field with presence (`optional`, a message) is null
+//! non-finite float is null; a `google.protobuf.Timestamp` or `Duration` is `{sec, nsec}`
+//! as in Foxglove's JSON schemas; an absent field with presence (`optional`, a message) is null
 //! and an absent plain field its default (0, false, ""), as protobuf defines. The twin
 //! writes every field it has, so null means the value was absent (`None`). A `jsonschema`
 //! channel (a recording of format 2) is read as the JSON it holds.
@@ -20,7 +21,7 @@ use anyhow::{Context, anyhow, bail};
 use prost::Message;
 use prost_types::field_descriptor_proto::{Label, Type};
 use prost_types::{DescriptorProto, FileDescriptorSet};
-use serde_json::{Map, Number, Value};
+use serde_json::{Number, Value};
 
 /// The message encoding of every channel.
 pub const MESSAGE_ENCODING: &str = "protobuf";
@@ -144,6 +145,52 @@ fn types(schema_name: &str, data: &Arc<[u8]>) -> anyhow::Result<Arc<Types>> {
     Ok(t)
 }
 
+/// A decoded message with its fields in schema order (a [`Value`] object sorts them).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Node {
+    /// A message: its fields in order.
+    Object(Vec<(String, Node)>),
+    /// A repeated field.
+    Array(Vec<Node>),
+    /// A scalar (or null).
+    Leaf(Value),
+}
+
+impl serde::Serialize for Node {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{SerializeMap, SerializeSeq};
+        match self {
+            Node::Object(fields) => {
+                let mut m = s.serialize_map(Some(fields.len()))?;
+                for (k, v) in fields {
+                    m.serialize_entry(k, v)?;
+                }
+                m.end()
+            }
+            Node::Array(items) => {
+                let mut q = s.serialize_seq(Some(items.len()))?;
+                for v in items {
+                    q.serialize_element(v)?;
+                }
+                q.end()
+            }
+            Node::Leaf(v) => v.serialize(s),
+        }
+    }
+}
+
+impl From<Node> for Value {
+    fn from(n: Node) -> Value {
+        match n {
+            Node::Object(fields) => {
+                Value::Object(fields.into_iter().map(|(k, v)| (k, v.into())).collect())
+            }
+            Node::Array(items) => Value::Array(items.into_iter().map(Value::from).collect()),
+            Node::Leaf(v) => v,
+        }
+    }
+}
+
 /// The JSON of message `data` on a channel whose schema is `schema_name`, encoded
 /// `schema_encoding`, with schema bytes `schema_data` (see the module docs).
 pub fn decode(
@@ -153,17 +200,45 @@ pub fn decode(
     data: &[u8],
 ) -> anyhow::Result<Value> {
     match schema_encoding {
-        SCHEMA_ENCODING => {
-            let t = types(schema_name, schema_data)?;
-            let root = t
-                .messages
-                .get(&t.root)
-                .ok_or_else(|| anyhow!("no message {}", t.root))?;
-            decode_message(&t, &t.root, root, data, 0)
-        }
         "jsonschema" | "" => serde_json::from_slice(data).context("a JSON message"),
-        other => bail!("schema encoding {other:?} is not read here"),
+        _ => Ok(decode_ordered(schema_name, schema_encoding, schema_data, data)?.into()),
     }
+}
+
+/// [`decode`] as JSON text, the fields in schema order.
+pub fn decode_text(
+    schema_name: &str,
+    schema_encoding: &str,
+    schema_data: &Arc<[u8]>,
+    data: &[u8],
+) -> anyhow::Result<Vec<u8>> {
+    match schema_encoding {
+        "jsonschema" | "" => Ok(data.to_vec()),
+        _ => Ok(serde_json::to_vec(&decode_ordered(
+            schema_name,
+            schema_encoding,
+            schema_data,
+            data,
+        )?)?),
+    }
+}
+
+/// [`decode`], the fields in schema order.
+pub fn decode_ordered(
+    schema_name: &str,
+    schema_encoding: &str,
+    schema_data: &Arc<[u8]>,
+    data: &[u8],
+) -> anyhow::Result<Node> {
+    if schema_encoding != SCHEMA_ENCODING {
+        bail!("schema encoding {schema_encoding:?} is not read here");
+    }
+    let t = types(schema_name, schema_data)?;
+    let root = t
+        .messages
+        .get(&t.root)
+        .ok_or_else(|| anyhow!("no message {}", t.root))?;
+    decode_message(&t, &t.root, root, data, 0)
 }
 
 /// Nested messages deeper than this are refused (a schema could recurse).
@@ -281,11 +356,11 @@ fn decode_message(
     desc: &DescriptorProto,
     data: &[u8],
     depth: usize,
-) -> anyhow::Result<Value> {
+) -> anyhow::Result<Node> {
     if depth > MAX_DEPTH {
         bail!("messages nested deeper than {MAX_DEPTH}");
     }
-    let mut found: Vec<Option<Value>> = vec![None; desc.field.len()];
+    let mut found: Vec<Option<Node>> = vec![None; desc.field.len()];
     let mut pos = 0;
     while pos < data.len() {
         let (number, wire) = next_field(data, &mut pos)?;
@@ -305,39 +380,59 @@ fn decode_message(
                     .ok_or_else(|| anyhow!("unknown type {}", f.type_name()))?;
                 decode_message(t, full, sub, b, depth + 1)?
             }
-            _ => Value::Null,
+            _ => Node::Leaf(Value::Null),
         };
         if f.label() == Label::Repeated {
-            let slot = found[i].get_or_insert_with(|| Value::Array(Vec::new()));
-            let Value::Array(items) = slot else {
+            let slot = found[i].get_or_insert_with(|| Node::Array(Vec::new()));
+            let Node::Array(items) = slot else {
                 continue;
             };
             match (ty, &wire) {
                 (Type::Message, _) => items.push(value),
-                (Type::String | Type::Bytes, w) => items.push(scalar(ty, w)?),
-                (_, Wire::Bytes(b)) => packed(ty, b, items)?,
-                (_, w) => items.push(scalar(ty, w)?),
+                (Type::String | Type::Bytes, w) => items.push(Node::Leaf(scalar(ty, w)?)),
+                (_, Wire::Bytes(b)) => {
+                    let mut v = Vec::new();
+                    packed(ty, b, &mut v)?;
+                    items.extend(v.into_iter().map(Node::Leaf));
+                }
+                (_, w) => items.push(Node::Leaf(scalar(ty, w)?)),
             }
         } else if ty == Type::Message {
             found[i] = Some(value);
         } else {
-            found[i] = Some(scalar(ty, &wire).with_context(|| f.name().to_owned())?);
+            let v = scalar(ty, &wire).with_context(|| f.name().to_owned())?;
+            found[i] = Some(Node::Leaf(v));
         }
     }
-    let mut out = Map::new();
-    for (f, v) in desc.field.iter().zip(found) {
-        let v = v.unwrap_or_else(|| {
-            if f.label() == Label::Repeated {
-                Value::Array(Vec::new())
-            } else if f.proto3_optional() {
-                Value::Null
-            } else {
-                default_of(f.r#type())
-            }
-        });
-        out.insert(f.name().to_owned(), v);
-    }
-    Ok(Value::Object(out))
+    // Foxglove's times (`google.protobuf.Timestamp`, `Duration`) read as Foxglove's own
+    // JSON writes them: `{sec, nsec}`.
+    let is_time = matches!(
+        scope,
+        "google.protobuf.Timestamp" | "google.protobuf.Duration"
+    );
+    let fields = desc
+        .field
+        .iter()
+        .zip(found)
+        .map(|(f, v)| {
+            let v = v.unwrap_or_else(|| {
+                if f.label() == Label::Repeated {
+                    Node::Array(Vec::new())
+                } else if f.proto3_optional() {
+                    Node::Leaf(Value::Null)
+                } else {
+                    Node::Leaf(default_of(f.r#type()))
+                }
+            });
+            let name = match (is_time, f.name()) {
+                (true, "seconds") => "sec",
+                (true, "nanos") => "nsec",
+                (_, name) => name,
+            };
+            (name.to_owned(), v)
+        })
+        .collect();
+    Ok(Node::Object(fields))
 }
 
 /// Serde for `bytes::Bytes` as lowercase hex (the decoded JSON's form of `bytes`).
@@ -376,6 +471,28 @@ pub mod hex_bytes_opt {
         s.map(|s| hex::decode(s).map(bytes::Bytes::from))
             .transpose()
             .map_err(serde::de::Error::custom)
+    }
+}
+
+/// Serde for `[f64; N]` whose non-finite elements are null (the decoded JSON's form of a
+/// NaN in a repeated `double`).
+pub mod nan_null {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    /// Each element, null when not finite.
+    pub fn serialize<S: Serializer, const N: usize>(v: &[f64; N], s: S) -> Result<S::Ok, S::Error> {
+        v.map(|x| x.is_finite().then_some(x)).serialize(s)
+    }
+
+    /// Each element, NaN for null.
+    pub fn deserialize<'de, D: Deserializer<'de>, const N: usize>(
+        d: D,
+    ) -> Result<[f64; N], D::Error> {
+        let v = Vec::<Option<f64>>::deserialize(d)?;
+        let n = v.len();
+        <[Option<f64>; N]>::try_from(v)
+            .map(|a| a.map(|x| x.unwrap_or(f64::NAN)))
+            .map_err(|_| serde::de::Error::invalid_length(n, &"the array's length"))
     }
 }
 
@@ -501,8 +618,8 @@ mod tests {
         let mut buf = Vec::new();
         Encode::encode(&m, &mut buf).unwrap();
         let v = decode(&s.name, &s.encoding, &data, &buf).unwrap();
-        assert_eq!(v["timestamp"]["seconds"], 5, "{v}");
-        assert_eq!(v["timestamp"]["nanos"], 0);
+        assert_eq!(v["timestamp"]["sec"], 5, "{v}");
+        assert_eq!(v["timestamp"]["nsec"], 0);
         assert_eq!(v["rotation"]["w"], 1.0);
         assert_eq!(v["rotation"]["x"], 0.0);
         assert_eq!(v["translation"], Value::Null);

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{Context as _, anyhow, bail};
+use csp::cfp::CanFrame;
 use mcap::McapError;
 use mcap::records::{Metadata, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -22,7 +23,7 @@ use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde_json::Value;
 
 use crate::record::{
-    AdcsMsg, BeginFields, CanFrameMsg, CommandMsg, CspPacketMsg, ExpectationMsg, KissFrameMsg,
+    AdcsMsg, BeginFields, CanFramesMsg, CommandMsg, CspPacketMsg, ExpectationMsg, KissFrameMsg,
     METADATA_NAME, NetPacketMsg, RecordingMeta, SCENARIO_ATTACHMENT, TOPIC_ADCS, TOPIC_COMMANDS,
     TOPIC_CSP, TOPIC_EXPECTATIONS, TOPIC_TRUTH_STATE, TruthStateMsg, service_name,
 };
@@ -43,10 +44,61 @@ pub struct RecordedMessage {
     pub topic: Arc<str>,
     /// Schema name of the channel (empty when it has none).
     pub schema: Arc<str>,
+    /// The schema's encoding (`protobuf`; `jsonschema` in recordings of format 2).
+    pub schema_encoding: Arc<str>,
+    /// The schema's bytes (a `FileDescriptorSet` for `protobuf`).
+    pub schema_data: Arc<[u8]>,
     /// Log time, ns since the Unix epoch (simulated).
     pub log_time: u64,
-    /// The message bytes (JSON).
+    /// The message bytes (protobuf; JSON in recordings of format 2).
     pub data: Vec<u8>,
+}
+
+impl RecordedMessage {
+    /// The message decoded with its schema, as JSON ([`crate::protobuf::decode`]).
+    pub fn json(&self) -> anyhow::Result<Value> {
+        crate::protobuf::decode(
+            &self.schema,
+            &self.schema_encoding,
+            &self.schema_data,
+            &self.data,
+        )
+        .with_context(|| format!("a message on {}", self.topic))
+    }
+
+    /// [`RecordedMessage::json`] as JSON text, the fields in schema order.
+    pub fn json_text(&self) -> anyhow::Result<Vec<u8>> {
+        crate::protobuf::decode_text(
+            &self.schema,
+            &self.schema_encoding,
+            &self.schema_data,
+            &self.data,
+        )
+        .with_context(|| format!("a message on {}", self.topic))
+    }
+
+    /// The message decoded into `T` (through [`RecordedMessage::json`]).
+    pub fn decode<T: serde::de::DeserializeOwned>(&self) -> anyhow::Result<T> {
+        Ok(serde_json::from_value(self.json()?)?)
+    }
+}
+
+/// A schema as the reader keeps it.
+#[derive(Debug, Clone)]
+struct SchemaInfo {
+    name: Arc<str>,
+    encoding: Arc<str>,
+    data: Arc<[u8]>,
+}
+
+impl Default for SchemaInfo {
+    fn default() -> Self {
+        SchemaInfo {
+            name: Arc::from(""),
+            encoding: Arc::from(""),
+            data: Arc::from(&[][..]),
+        }
+    }
 }
 
 /// A top-level item of the file, in file order.
@@ -262,8 +314,8 @@ struct Reader {
     path: PathBuf,
     file: File,
     reader: LinearReader,
-    schemas: BTreeMap<u16, Arc<str>>,
-    channels: BTreeMap<u16, (Arc<str>, Arc<str>)>,
+    schemas: BTreeMap<u16, SchemaInfo>,
+    channels: BTreeMap<u16, (Arc<str>, SchemaInfo)>,
     records: u64,
     messages: u64,
     past_data_end: bool,
@@ -471,16 +523,17 @@ impl Reader {
                 self.past_data_end = true;
                 return None;
             }
-            Record::Schema { header, .. } => {
-                self.schemas.insert(header.id, header.name.into());
+            Record::Schema { header, data } => {
+                let info = SchemaInfo {
+                    name: header.name.into(),
+                    encoding: header.encoding.into(),
+                    data: Arc::from(&*data),
+                };
+                self.schemas.insert(header.id, info);
                 return None;
             }
             Record::Channel(c) => {
-                let schema = self
-                    .schemas
-                    .get(&c.schema_id)
-                    .cloned()
-                    .unwrap_or_else(|| Arc::from(""));
+                let schema = self.schemas.get(&c.schema_id).cloned().unwrap_or_default();
                 self.channels.insert(c.id, (c.topic.into(), schema));
                 return None;
             }
@@ -496,7 +549,9 @@ impl Reader {
                 self.messages += 1;
                 Item::Message(RecordedMessage {
                     topic: topic.clone(),
-                    schema: schema.clone(),
+                    schema: schema.name.clone(),
+                    schema_encoding: schema.encoding.clone(),
+                    schema_data: schema.data.clone(),
                     log_time: header.log_time,
                     data: data.into_owned(),
                 })
@@ -739,7 +794,7 @@ pub fn read_summary(path: &Path) -> anyhow::Result<Summary> {
         .values()
         .map(|(topic, schema)| ChannelSummary {
             topic: topic.to_string(),
-            schema: schema.to_string(),
+            schema: schema.name.to_string(),
             messages: counts.get(topic).copied().unwrap_or(0),
         })
         .collect();
@@ -751,13 +806,13 @@ pub fn read_summary(path: &Path) -> anyhow::Result<Summary> {
 fn summarize_message(s: &mut Summary, m: &RecordedMessage) {
     match &*m.topic {
         TOPIC_CSP => {
-            if let Ok(p) = serde_json::from_slice::<CspPacketMsg>(&m.data) {
+            if let Ok(p) = m.decode::<CspPacketMsg>() {
                 *s.packets_per_node.entry(p.src).or_default() += 1;
                 *s.packets_per_port.entry(p.dport).or_default() += 1;
             }
         }
         TOPIC_COMMANDS => {
-            if let Ok(c) = serde_json::from_slice::<CommandMsg>(&m.data) {
+            if let Ok(c) = m.decode::<CommandMsg>() {
                 let e = s.commands.entry(c.name).or_default();
                 match c.answered {
                     None => e.sent += 1,
@@ -767,17 +822,17 @@ fn summarize_message(s: &mut Summary, m: &RecordedMessage) {
             }
         }
         TOPIC_EXPECTATIONS => {
-            if let Ok(x) = serde_json::from_slice::<ExpectationMsg>(&m.data) {
+            if let Ok(x) = m.decode::<ExpectationMsg>() {
                 s.expectations.push(x);
             }
         }
         TOPIC_TRUTH_STATE => {
-            if let Ok(x) = serde_json::from_slice::<TruthStateMsg>(&m.data) {
+            if let Ok(x) = m.decode::<TruthStateMsg>() {
                 s.truth_last = Some(x);
             }
         }
         TOPIC_ADCS => {
-            if let Ok(x) = serde_json::from_slice::<AdcsMsg>(&m.data) {
+            if let Ok(x) = m.decode::<AdcsMsg>() {
                 s.adcs_last = Some(x);
             }
         }
@@ -1040,7 +1095,27 @@ fn csv_row<'a>(out: &mut impl Write, cells: impl Iterator<Item = &'a str>) -> st
 /// rows), streaming both times. Returns the number of rows. A truncated file is an error
 /// before anything is written.
 pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::Result<u64> {
-    let not_json = |i: u64| format!("{}: message {i} on {channel} is not JSON", path.display());
+    let schema = {
+        let mut r = Reader::open(path)?;
+        let mut schema = None;
+        while let Some(m) = r.next_message() {
+            let m = m?;
+            if &*m.topic == channel {
+                schema = Some(m.schema.clone());
+                break;
+            }
+        }
+        schema
+    };
+    if schema.as_deref() == Some(crate::record::ChannelKind::Can.schema_name()) {
+        return export_can_csv(path, channel, out);
+    }
+    let not_json = |i: u64| {
+        format!(
+            "{}: message {i} on {channel} is not decodable",
+            path.display()
+        )
+    };
     // Pass 1: the columns.
     let mut r = Reader::open(path)?;
     let mut cols: Vec<String> = Vec::new();
@@ -1051,7 +1126,7 @@ pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::R
         if &*m.topic != channel {
             continue;
         }
-        flatten(&m.data, &mut cells).with_context(|| not_json(n))?;
+        flatten(&m.json_text()?, &mut cells).with_context(|| not_json(n))?;
         merge_columns(&mut cols, cells.drain(..).map(|(k, _)| k));
         n += 1;
     }
@@ -1077,7 +1152,7 @@ pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::R
         if &*m.topic != channel {
             continue;
         }
-        flatten(&m.data, &mut cells).with_context(|| not_json(rows))?;
+        flatten(&m.json_text()?, &mut cells).with_context(|| not_json(rows))?;
         let time = m.log_time.to_string();
         let row = cols.iter().map(|col| {
             cells
@@ -1087,6 +1162,80 @@ pub fn export_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::R
         });
         csv_row(out, std::iter::once(time.as_str()).chain(row))?;
         rows += 1;
+    }
+    Ok(rows)
+}
+
+/// The columns of a CAN channel's CSV, after `log_time_ns`.
+const CAN_CSV_COLUMNS: [&str; 18] = [
+    "t_ns",
+    "from",
+    "can_id",
+    "dlc",
+    "data",
+    "cfp.src",
+    "cfp.dst",
+    "cfp.type",
+    "cfp.remain",
+    "cfp.ident",
+    "dropped",
+    "csp.prio",
+    "csp.src",
+    "csp.dst",
+    "csp.dport",
+    "csp.sport",
+    "csp.flags",
+    "csp.len",
+];
+
+/// [`export_csv`] of a `/can/<bus>/frames` channel: one row per frame (not per train),
+/// `log_time_ns` and `t_ns` its end, its CFP fields and, for a BEGIN frame, the CSP header
+/// it carries.
+fn export_can_csv(path: &Path, channel: &str, out: &mut impl Write) -> anyhow::Result<u64> {
+    csv_row(out, std::iter::once("log_time_ns").chain(CAN_CSV_COLUMNS))?;
+    let mut r = Reader::open(path)?;
+    let mut base = None;
+    let mut rows = 0u64;
+    while let Some(m) = r.next_message() {
+        let m = m?;
+        if &*m.topic != channel {
+            continue;
+        }
+        let train: CanFramesMsg = m
+            .decode()
+            .with_context(|| format!("{}: a message on {channel}", path.display()))?;
+        // Log time = the run's start + t_ns, as for every message.
+        let start = *base.get_or_insert(m.log_time.saturating_sub(train.t_ns));
+        for (t_ns, can_id, data, dropped) in train.frames() {
+            let cfp = crate::record::cfp_fields(can_id);
+            let csp = CanFrame::new(can_id, data)
+                .as_ref()
+                .and_then(crate::record::begin_fields);
+            let opt = |x: Option<String>| x.unwrap_or_default();
+            let cells = [
+                (start + t_ns).to_string(),
+                t_ns.to_string(),
+                train.from.clone(),
+                can_id.to_string(),
+                data.len().to_string(),
+                hex::encode(data),
+                cfp.src.to_string(),
+                cfp.dst.to_string(),
+                cfp.kind.clone(),
+                cfp.remain.to_string(),
+                cfp.ident.to_string(),
+                dropped.to_string(),
+                opt(csp.as_ref().map(|b| b.prio.to_string())),
+                opt(csp.as_ref().map(|b| b.src.to_string())),
+                opt(csp.as_ref().map(|b| b.dst.to_string())),
+                opt(csp.as_ref().map(|b| b.dport.to_string())),
+                opt(csp.as_ref().map(|b| b.sport.to_string())),
+                opt(csp.as_ref().map(|b| b.flags.to_string())),
+                opt(csp.as_ref().map(|b| b.len.to_string())),
+            ];
+            csv_row(out, cells.iter().map(String::as_str))?;
+            rows += 1;
+        }
     }
     Ok(rows)
 }
@@ -1159,7 +1308,7 @@ fn next_medium(r: &mut Reader, role: &str) -> anyhow::Result<Option<RecordedMess
 
 /// The `t_ns` field of a message, else its log time.
 fn t_ns_of(m: &RecordedMessage) -> u64 {
-    serde_json::from_slice::<Value>(&m.data)
+    m.json()
         .ok()
         .and_then(|v| v.get("t_ns").and_then(Value::as_u64))
         .unwrap_or(m.log_time)
@@ -1172,39 +1321,50 @@ fn describe_header(b: &BeginFields) -> String {
     )
 }
 
-/// A message as bytes and decoded fields, for a divergence report.
+/// One CAN frame of a train as bytes and decoded fields, for a divergence report.
+fn describe_frame(from: &str, (end_ns, can_id, data, dropped): (u64, u32, &[u8], bool)) -> String {
+    let f = CanFrame::new(can_id, data);
+    let cfp = crate::record::cfp_fields(can_id);
+    let csp = f
+        .as_ref()
+        .and_then(crate::record::begin_fields)
+        .map(|b| format!("; {}", describe_header(&b)))
+        .unwrap_or_default();
+    format!(
+        "t={}s from {from}: can_id 0x{can_id:08x} dlc {} data {}{} (CFP {} src {} dst {} remain {} ident {}{csp})",
+        secs(end_ns),
+        data.len(),
+        if data.is_empty() {
+            "-".to_owned()
+        } else {
+            hex::encode(data)
+        },
+        if dropped { " DROPPED" } else { "" },
+        cfp.kind,
+        cfp.src,
+        cfp.dst,
+        cfp.remain,
+        cfp.ident
+    )
+}
+
+/// A message as bytes and decoded fields, for a divergence report (a CAN train: its
+/// first frame).
 pub fn describe(m: &RecordedMessage) -> String {
     let t = |t_ns: u64| format!("t={}s", secs(t_ns));
     let dropped = |d: bool| if d { " DROPPED" } else { "" };
     if m.topic.starts_with("/can/")
-        && let Ok(c) = serde_json::from_slice::<CanFrameMsg>(&m.data)
+        && let Ok(c) = m.decode::<CanFramesMsg>()
+        && let Some(first) = c.frames().next()
     {
-        let csp = c
-            .csp
-            .as_ref()
-            .map(|b| format!("; {}", describe_header(b)))
-            .unwrap_or_default();
         return format!(
-            "{} from {}: can_id 0x{:08x} dlc {} data {}{} (CFP {} src {} dst {} remain {} ident {}{csp})",
-            t(c.t_ns),
-            c.from,
-            c.can_id,
-            c.dlc,
-            if c.data_hex.is_empty() {
-                "-"
-            } else {
-                &c.data_hex
-            },
-            dropped(c.dropped),
-            c.cfp.kind,
-            c.cfp.src,
-            c.cfp.dst,
-            c.cfp.remain,
-            c.cfp.ident
+            "{} (frame 1 of {})",
+            describe_frame(&c.from, first),
+            c.can_id.len()
         );
     }
     if m.topic.starts_with("/kiss/")
-        && let Ok(k) = serde_json::from_slice::<KissFrameMsg>(&m.data)
+        && let Ok(k) = m.decode::<KissFrameMsg>()
     {
         return format!(
             "{} {} {}: {} bytes {}",
@@ -1212,10 +1372,12 @@ pub fn describe(m: &RecordedMessage) -> String {
             k.link,
             k.dir,
             k.len,
-            k.bytes_hex
+            hex::encode(&k.bytes)
         );
     }
-    if let Ok(p) = serde_json::from_slice::<NetPacketMsg>(&m.data) {
+    if m.schema.as_ref() == crate::record::ChannelKind::Net.schema_name()
+        && let Ok(p) = m.decode::<NetPacketMsg>()
+    {
         let csp = match (p.prio, p.src, p.dst, p.dport, p.sport, p.flags) {
             (Some(prio), Some(src), Some(dst), Some(dport), Some(sport), Some(flags)) => {
                 format!(
@@ -1237,15 +1399,14 @@ pub fn describe(m: &RecordedMessage) -> String {
             "{} from {}: bytes {}{}{csp}",
             t(p.t_ns),
             p.from,
-            p.bytes_hex,
+            hex::encode(&p.bytes),
             dropped(p.dropped)
         );
     }
-    format!(
-        "{} {}",
-        t(t_ns_of(m)),
-        String::from_utf8_lossy(&m.data).into_owned()
-    )
+    let text = m
+        .json_text()
+        .unwrap_or_else(|e| format!("{e:#}").into_bytes());
+    format!("{} {}", t(t_ns_of(m)), String::from_utf8_lossy(&text))
 }
 
 /// Compare the medium channels (`/can/*/frames`, `/ground/packets`, `/kiss/*`) of two
@@ -1291,7 +1452,10 @@ pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
                 same += 1;
                 continue;
             }
-            let t = x.or(y).map_or(u64::MAX, t_ns_of);
+            let t = match (x, y) {
+                (Some(x), Some(y)) => first_frame_difference(x, y).map_or(t_ns_of(x), |d| d.0),
+                _ => x.or(y).map_or(u64::MAX, t_ns_of),
+            };
             if first.as_ref().is_none_or(|f| t < f.0) {
                 first = Some((t, i as u64, topic, x, y));
             }
@@ -1302,6 +1466,17 @@ pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
         return Ok(DiffResult::Identical { messages: same });
     };
     let end = "(end of recording)".to_owned();
+    if let (Some(x), Some(y)) = (x, y)
+        && let Some((_, expected, actual)) = first_frame_difference(x, y)
+    {
+        return Ok(DiffResult::Diverged {
+            index,
+            t_ns,
+            channel: topic.to_string(),
+            expected,
+            actual,
+        });
+    }
     Ok(DiffResult::Diverged {
         index,
         t_ns,
@@ -1309,4 +1484,47 @@ pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
         expected: x.map_or_else(|| end.clone(), describe),
         actual: y.map_or_else(|| end.clone(), describe),
     })
+}
+
+/// Where two CAN trains first differ: the time and the frame as each has it (the first
+/// frame that is not the same, or the end of the shorter train); `None` when they are not
+/// both CAN trains or when they are the same frame for frame.
+fn first_frame_difference(
+    x: &RecordedMessage,
+    y: &RecordedMessage,
+) -> Option<(u64, String, String)> {
+    if !x.topic.starts_with("/can/") || !x.topic.ends_with("/frames") {
+        return None;
+    }
+    let (a, b) = (
+        x.decode::<CanFramesMsg>().ok()?,
+        y.decode::<CanFramesMsg>().ok()?,
+    );
+    let (mut fa, mut fb) = (a.frames(), b.frames());
+    for k in 1.. {
+        let (p, q) = (fa.next(), fb.next());
+        if p.is_none() && q.is_none() {
+            return None;
+        }
+        let same = match (p, q) {
+            (Some(p), Some(q)) => a.from == b.from && p == q,
+            _ => false,
+        };
+        if same {
+            continue;
+        }
+        let describe = |from: &str, f: Option<(u64, u32, &[u8], bool)>, n: usize| {
+            f.map_or_else(
+                || format!("(end of its train of {n} frames)"),
+                |f| format!("{} (frame {k} of {n})", describe_frame(from, f)),
+            )
+        };
+        let t = p.or(q).map_or(a.t_ns, |f| f.0);
+        return Some((
+            t,
+            describe(&a.from, p, a.can_id.len()),
+            describe(&b.from, q, b.can_id.len()),
+        ));
+    }
+    None
 }

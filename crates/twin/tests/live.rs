@@ -188,19 +188,27 @@ request = "ping"
         ] {
             assert!(topics.contains(&t), "{t} missing from {topics:?}");
         }
+        // Protobuf, as the recording: the schema (base64, the protocol's form of a binary
+        // schema) is the recording's schema of that channel kind.
         for c in &channels {
-            assert_eq!(c["encoding"], "json", "{c}");
-            assert_eq!(c["schemaEncoding"], "jsonschema", "{c}");
-            let schema: Value = serde_json::from_str(c["schema"].as_str().unwrap()).unwrap();
-            assert_eq!(schema["title"], c["schemaName"], "{c}");
+            assert_eq!(c["encoding"], "protobuf", "{c}");
+            assert_eq!(c["schemaEncoding"], "protobuf", "{c}");
+            let kind = m6p_twin::record::CHANNEL_KINDS
+                .iter()
+                .find(|k| k.schema_name() == c["schemaName"])
+                .unwrap_or_else(|| panic!("unknown schema in {c}"));
+            let schema = base64_decode(c["schema"].as_str().unwrap());
+            assert_eq!(schema, kind.schema_data().unwrap(), "{c}");
         }
         let by_topic = |t: &str| channels.iter().find(|c| c["topic"] == t).unwrap();
         assert_eq!(by_topic("/csp/packets")["schemaName"], "m6p.CspPacket");
         assert_eq!(by_topic("/log")["schemaName"], "foxglove.Log");
-        assert_eq!(by_topic("/can/main/frames")["schemaName"], "m6p.CanFrame");
+        assert_eq!(by_topic("/can/main/frames")["schemaName"], "m6p.CanFrames");
         assert_eq!(by_topic("/can/main/frames")["metadata"]["bus"], "main");
 
         let csp = by_topic("/csp/packets")["id"].as_u64().unwrap();
+        let csp_schema: std::sync::Arc<[u8]> =
+            base64_decode(by_topic("/csp/packets")["schema"].as_str().unwrap()).into();
         let sub = serde_json::json!({
             "op": "subscribe",
             "subscriptions": [{"id": 7, "channelId": csp}],
@@ -222,7 +230,13 @@ request = "ping"
                     let sub_id = u32::from_le_bytes(b[1..5].try_into().unwrap());
                     let log_time = u64::from_le_bytes(b[5..13].try_into().unwrap());
                     assert_eq!(sub_id, 7);
-                    let p: Value = serde_json::from_slice(&b[13..]).unwrap();
+                    let p: Value = m6p_twin::protobuf::decode(
+                        "m6p.CspPacket",
+                        "protobuf",
+                        &csp_schema,
+                        &b[13..],
+                    )
+                    .unwrap();
                     assert!(p["src"].is_u64() && p["dst"].is_u64(), "{p}");
                     // The log time is simulated: start epoch + the packet's t_ns.
                     assert_eq!(log_time, start_ns + p["t_ns"].as_u64().unwrap(), "{p}");
@@ -260,4 +274,24 @@ request = "ping"
             }
         }
     }
+}
+
+/// Standard base64 (RFC 4648, with padding), as the Foxglove WebSocket protocol sends a
+/// binary schema.
+#[cfg(feature = "live")]
+fn base64_decode(text: &str) -> Vec<u8> {
+    const ALPHABET: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = Vec::new();
+    let (mut acc, mut bits) = (0u32, 0);
+    for c in text.bytes().filter(|&c| c != b'=') {
+        let v = ALPHABET.iter().position(|&a| a == c).expect("base64") as u32;
+        acc = acc << 6 | v;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    out
 }

@@ -286,7 +286,7 @@ fn the_seed_on_the_command_line_draws_the_initial_attitude() {
             .map(Result::unwrap)
             .find(|m| &*m.topic == "/fc/truth/tf")
             .unwrap();
-        let v: serde_json::Value = serde_json::from_slice(&tf.data).unwrap();
+        let v = tf.json().unwrap();
         let _ = std::fs::remove_file(&file);
         v["rotation"].to_string()
     };

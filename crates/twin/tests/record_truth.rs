@@ -146,11 +146,17 @@ fn record(path: &Path, events: &[RunEvent]) -> RecordingStats {
 use common::on;
 
 fn decode<T: serde::de::DeserializeOwned>(m: &RecordedMessage) -> T {
-    serde_json::from_slice(&m.data).unwrap()
+    m.decode().unwrap()
 }
 
-fn text(m: &RecordedMessage) -> &str {
-    std::str::from_utf8(&m.data).unwrap()
+/// The message as decoded JSON text (fields in schema order).
+fn text(m: &RecordedMessage) -> String {
+    String::from_utf8(m.json_text().unwrap()).unwrap()
+}
+
+/// An array of the recording's numbers with the non-finite ones as `None` (null).
+fn o<const N: usize>(v: [f64; N]) -> [Option<f64>; N] {
+    v.map(|x| x.is_finite().then_some(x))
 }
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
@@ -209,35 +215,40 @@ fn truth_samples_get_their_channels_schemas_and_counts() {
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     let mut chans: Vec<_> = summary.channels.values().collect();
     chans.sort_by_key(|c| c.id);
+    // Protobuf: the schema is a FileDescriptorSet holding the message its name names.
     let schema_of = |topic: &str| {
         let c = chans.iter().find(|c| c.topic == topic).unwrap();
-        assert_eq!(c.message_encoding, "json", "{topic}");
+        assert_eq!(c.message_encoding, "protobuf", "{topic}");
         let s = c.schema.as_ref().unwrap();
-        assert_eq!(s.encoding, "jsonschema", "{topic}");
-        let schema: Value = serde_json::from_slice(&s.data).unwrap();
-        (s.name.clone(), s.id, schema)
+        assert_eq!(s.encoding, "protobuf", "{topic}");
+        let fds = <prost_types::FileDescriptorSet as prost::Message>::decode(&*s.data).unwrap();
+        let (package, message) = s.name.rsplit_once('.').unwrap();
+        let m = fds
+            .file
+            .iter()
+            .filter(|f| f.package() == package)
+            .flat_map(|f| f.message_type.iter())
+            .find(|m| m.name() == message)
+            .unwrap_or_else(|| panic!("{topic}: {} not in its schema", s.name))
+            .clone();
+        (s.name.clone(), s.id, m)
     };
-    let (name, tf_id, schema) = schema_of("/fc/truth/tf");
+    let (name, tf_id, _) = schema_of("/fc/truth/tf");
     assert_eq!(name, "foxglove.FrameTransform");
-    assert_eq!(schema["title"], "foxglove.FrameTransform");
     let (name, est_id, _) = schema_of("/fc/estimate/tf");
     assert_eq!(name, "foxglove.FrameTransform");
     assert_eq!(tf_id, est_id, "the two transforms share one schema record");
-    let (name, _, schema) = schema_of("/fc/truth/location");
+    let (name, _, _) = schema_of("/fc/truth/location");
     assert_eq!(name, "foxglove.LocationFix");
-    assert_eq!(schema["title"], "foxglove.LocationFix");
-    let (name, _, schema) = schema_of("/fc/scene");
+    let (name, _, _) = schema_of("/fc/scene");
     assert_eq!(name, "foxglove.SceneUpdate");
-    assert_eq!(schema["title"], "foxglove.SceneUpdate");
-    let (name, _, schema) = schema_of("/fc/truth/state");
+    let (name, _, m) = schema_of("/fc/truth/state");
     assert_eq!(name, "m6p.TruthState");
-    assert_eq!(schema["title"], "m6p.TruthState");
-    // Nullable numbers: a non-finite value is written as null.
-    let lat = schema["properties"]["lat_deg"]["type"].to_string();
-    assert!(lat.contains("null") && lat.contains("number"), "{lat}");
-    let (name, _, schema) = schema_of("/fc/adcs");
+    // Optional numbers have presence: a non-finite value is left out (null when read).
+    let lat = m.field.iter().find(|f| f.name() == "lat_deg").unwrap();
+    assert!(lat.proto3_optional(), "{lat:?}");
+    let (name, _, _) = schema_of("/fc/adcs");
     assert_eq!(name, "m6p.Adcs");
-    assert_eq!(schema["title"], "m6p.Adcs");
     // Every schema in the file is used by a channel: none is written for kinds the run
     // never had (no KISS link here).
     let used: std::collections::BTreeSet<u16> = chans
@@ -316,7 +327,7 @@ fn location_is_the_geodetic_position_of_the_ecef_point() {
     assert!(close(s.alt_m.unwrap(), ALT_M, 1e-3));
     let want = Geodetic::from_deg(LAT_DEG, LON_DEG, ALT_M).to_ecef_m();
     for i in 0..3 {
-        assert!(close(s.r_ecef_m[i].unwrap(), want[i], 1e-6), "{s:?}");
+        assert!(close(s.r_ecef_m[i], want[i], 1e-6), "{s:?}");
     }
     // Sample 1 (7000 km on J2000 +X) is near the equator (the equator of date has moved by
     // precession since J2000, about 0.15 deg in 2026) and 621.863 km up.
@@ -334,22 +345,22 @@ fn state_and_adcs_carry_units_in_their_names() {
     record(f.path(), &samples());
     let s: TruthStateMsg = decode(&on(f.path(), "/fc/truth/state")[0]);
     assert_eq!(s.t_ns, 1_000_000_000);
-    assert_eq!(s.r_eci_m, [Some(7_000_000.0), Some(0.0), Some(0.0)]);
-    assert_eq!(s.v_eci_m_s, [Some(0.0), Some(7_500.0), Some(0.0)]);
+    assert_eq!(o(s.r_eci_m), [Some(7_000_000.0), Some(0.0), Some(0.0)]);
+    assert_eq!(o(s.v_eci_m_s), [Some(0.0), Some(7_500.0), Some(0.0)]);
     // The sun is along ECI +Y, which is body +X; the field along Z is the same in both.
-    let sun = s.sun_body_unit.map(Option::unwrap);
+    let sun = s.sun_body_unit;
     assert!(
         close(sun[0], 1.0, 1e-12) && close(sun[1], 0.0, 1e-12),
         "{sun:?}"
     );
-    assert!(close(s.b_body_nt[2].unwrap(), 30_000.0, 1e-9));
-    assert!(close(s.w_body_deg_s[2].unwrap(), 1.0, 1e-12));
+    assert!(close(s.b_body_nt[2], 30_000.0, 1e-9));
+    assert!(close(s.w_body_deg_s[2], 1.0, 1e-12));
     assert!(close(s.rate_deg_s.unwrap(), 1.0, 1e-12));
     // 100 rad/s = 100 * 60 / (2 pi) rpm.
     let rpm = 100.0 * 60.0 / std::f64::consts::TAU;
-    assert!(close(s.wheel_speed_rpm[0].unwrap(), rpm, 1e-9));
-    assert!(close(s.wheel_speed_rpm[1].unwrap(), -rpm, 1e-9));
-    assert_eq!(s.mtq_dipole_am2, [Some(0.1), Some(-0.2), Some(0.0)]);
+    assert!(close(s.wheel_speed_rpm[0], rpm, 1e-9));
+    assert!(close(s.wheel_speed_rpm[1], -rpm, 1e-9));
+    assert_eq!(o(s.mtq_dipole_am2), [Some(0.1), Some(-0.2), Some(0.0)]);
     assert_eq!(s.sun_visible_fraction, Some(1.0));
     assert!(close(s.q_eci_from_body.w.unwrap(), FRAC_1_SQRT_2, 1e-15));
 
@@ -367,7 +378,7 @@ fn state_and_adcs_carry_units_in_their_names() {
     assert_eq!(a.estimation_error_deg, None);
     assert_eq!(a.rw_state, [1; 4]);
     assert_eq!(
-        a.wheel_torque_cmd_nm,
+        o(a.wheel_torque_cmd_nm),
         [Some(1e-4), Some(0.0), Some(-1e-4), Some(0.0)]
     );
     let raw = text(&adcs[0]);
@@ -389,7 +400,10 @@ fn non_finite_numbers_are_null_and_foxglove_messages_with_them_are_left_out() {
     for topic in ["/fc/truth/state", "/fc/adcs", "/fc/scene"] {
         for m in on(f.path(), topic) {
             let raw = text(&m);
-            assert!(serde_json::from_str::<Value>(raw).is_ok(), "{topic}: {raw}");
+            assert!(
+                serde_json::from_str::<Value>(&raw).is_ok(),
+                "{topic}: {raw}"
+            );
             for bad in ["NaN", "nan", "inf", "Infinity"] {
                 assert!(!raw.contains(bad), "{topic}: {raw}");
             }
@@ -397,12 +411,12 @@ fn non_finite_numbers_are_null_and_foxglove_messages_with_them_are_left_out() {
     }
     let states = on(f.path(), "/fc/truth/state");
     let s: TruthStateMsg = decode(&states[2]);
-    assert_eq!(s.r_eci_m, [None, Some(7_000_000.0), Some(0.0)]);
+    assert_eq!(o(s.r_eci_m), [None, Some(7_000_000.0), Some(0.0)]);
     assert_eq!((s.lat_deg, s.lon_deg, s.alt_m), (None, None, None));
     assert_eq!(s.q_eci_from_body.w, None);
-    assert_eq!(s.w_body_deg_s[0], None);
+    assert!(s.w_body_deg_s[0].is_nan());
     assert_eq!(s.rate_deg_s, None);
-    assert_eq!(s.sun_body_unit, [None, None, None]);
+    assert_eq!(o(s.sun_body_unit), [None, None, None]);
     let raw = text(&states[2]);
     assert!(raw.contains("\"r_eci_m\":[null,7000000.0,0.0]"), "{raw}");
     assert!(raw.contains("\"lat_deg\":null"), "{raw}");
@@ -411,7 +425,7 @@ fn non_finite_numbers_are_null_and_foxglove_messages_with_them_are_left_out() {
     assert_eq!(a.pointing_error_deg, None);
     let est = a.q_eci_from_body_est.unwrap();
     assert_eq!((est.w, est.x, est.y, est.z), (None, None, None, None));
-    assert_eq!(a.wheel_torque_cmd_nm[0], None);
+    assert!(a.wheel_torque_cmd_nm[0].is_nan());
 
     // The scene keeps the box and the body axes; the sun and nadir arrows need the
     // attitude.
@@ -449,7 +463,7 @@ fn scene_draws_the_body_its_axes_and_the_sun_and_nadir_in_body() {
     assert!(near(dir(3), [1.0, 0.0, 0.0]), "{:?}", dir(3));
     assert!(near(dir(4), [0.0, 1.0, 0.0]), "{:?}", dir(4));
     // The primitives Foxglove's schema requires are there, empty.
-    let raw: Value = serde_json::from_slice(&scenes[0].data).unwrap();
+    let raw: Value = scenes[0].json().unwrap();
     for k in [
         "spheres",
         "cylinders",
@@ -652,7 +666,7 @@ fn the_foxglove_layout_names_recorded_topics_and_fields() {
         if !topic.starts_with("/fc/") || field.is_empty() {
             continue;
         }
-        let msg: Value = serde_json::from_slice(&on(f.path(), topic)[0].data).unwrap();
+        let msg: Value = on(f.path(), topic)[0].json().unwrap();
         let mut at = &msg;
         for part in field.split('.') {
             let (name, index) = match part.split_once('[') {

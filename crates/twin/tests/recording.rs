@@ -141,11 +141,51 @@ fn record(path: &Path, events: &[RunEvent]) -> RecordingStats {
 
 use common::on;
 
+/// Medium messages of `events`: a KISS frame or a packet each, and a CAN train per run of
+/// frames one sender put on one bus one after the other (at most 64 frames over 100 ms).
 fn medium_count(events: &[RunEvent]) -> u64 {
     events
         .iter()
-        .filter(|e| matches!(e, RunEvent::Medium(_) | RunEvent::Kiss { .. }))
+        .filter(|e| {
+            matches!(e, RunEvent::Kiss { .. })
+                || matches!(e, RunEvent::Medium(m) if !matches!(m.frame, TraceFrame::Can(_)))
+        })
         .count() as u64
+        + ["main", "payload"]
+            .iter()
+            .map(|b| trains(events, b))
+            .sum::<u64>()
+}
+
+/// The `/can/<bus>/frames` messages of `events`: one per train (see [`medium_count`]).
+fn trains(events: &[RunEvent], bus: &str) -> u64 {
+    let mut n = 0;
+    let mut open: Option<(String, u64, usize)> = None;
+    for e in events {
+        let RunEvent::Medium(m) = e else { continue };
+        if !matches!(m.frame, TraceFrame::Can(_)) || &*m.medium != bus {
+            continue;
+        }
+        let t = m.t.as_ns();
+        match &mut open {
+            Some((from, t0, k)) if **from == *m.from && *k < 64 && t - *t0 < 100_000_000 => {
+                *k += 1;
+            }
+            _ => {
+                n += 1;
+                open = Some((m.from.to_string(), t, 1));
+            }
+        }
+    }
+    n
+}
+
+/// The CAN frames recorded on `topic`, over all its trains.
+fn frames_on(path: &std::path::Path, topic: &str) -> usize {
+    on(path, topic)
+        .iter()
+        .map(|m| m.json().unwrap()["can_id"].as_array().unwrap().len())
+        .sum()
 }
 
 #[test]
@@ -190,8 +230,12 @@ fn stats_count_every_channel() {
             .find(|c| c.topic == topic)
             .map(|c| c.messages)
     };
-    assert_eq!(count("/can/main/frames"), Some(8));
-    assert_eq!(count("/can/payload/frames"), Some(6));
+    // Every frame, in trains.
+    let ev = events();
+    assert_eq!(count("/can/main/frames"), Some(trains(&ev, "main")));
+    assert_eq!(count("/can/payload/frames"), Some(trains(&ev, "payload")));
+    assert_eq!(frames_on(f.path(), "/can/main/frames"), 8);
+    assert_eq!(frames_on(f.path(), "/can/payload/frames"), 6);
     assert_eq!(count("/ground/packets"), Some(2));
     // Request and reply on main and on ground, the resent packet on payload; not the one
     // that lost a frame.
@@ -201,7 +245,11 @@ fn stats_count_every_channel() {
     assert_eq!(count("/faults"), Some(1));
     assert_eq!(count("/commands"), Some(2));
     assert_eq!(count("/expectations"), Some(1));
-    assert_eq!(s.messages, 27);
+    let all_frames = 8 + 6;
+    assert_eq!(
+        s.messages,
+        27 - all_frames + trains(&ev, "main") + trains(&ev, "payload")
+    );
     assert_eq!(s.chunks, 1);
     assert_eq!(
         s.cfp_drops, 1,
@@ -256,8 +304,9 @@ fn diff_names_the_first_divergence() {
         index, 2,
         "ground packet, BEGIN, then this MORE in the event list"
     );
-    // diff indexes within the channel: the BEGIN, then this MORE.
-    let index = 1;
+    // diff indexes within the channel: the BEGIN and this MORE are one train, message 0;
+    // the report names the frame within it.
+    let index = 0;
     let b = TempFile::new("diff-b");
     record(b.path(), &changed);
     match recording::diff(a.path(), b.path()).unwrap() {
@@ -275,6 +324,7 @@ fn diff_names_the_first_divergence() {
             assert!(expected.contains("data 0e151c232a31383f"), "{expected}");
             assert!(actual.contains("data 0f151c232a31383f"), "{actual}");
             assert!(expected.contains("MORE") && expected.contains("from COMM1"));
+            assert!(expected.contains("(frame 2 of "), "{expected}");
         }
         other => panic!("expected a divergence, got {other:?}"),
     }
@@ -299,7 +349,7 @@ fn diff_names_the_first_divergence() {
     let d = recording::diff(a.path(), c.path()).unwrap();
     let text = d.to_string();
     assert!(
-        text.contains("on /can/main/frames (message 4 of that channel)"),
+        text.contains("on /can/main/frames (message 1 of that channel)"),
         "{text}"
     );
     assert!(text.contains("CSP prio 2 3:1 -> 16:40"), "{text}");
@@ -326,19 +376,32 @@ fn diff_names_the_first_divergence() {
 
 /// Rebuild CSP packets from the recorded CAN frames of one bus without the project's
 /// reassembler: BEGIN gives header and length, MOREs append, keyed by CFP src/dst/ident.
-fn packets_from_frames(frames: &[RecordedMessage]) -> Vec<Vec<u8>> {
+fn packets_from_frames(trains: &[RecordedMessage]) -> Vec<Vec<u8>> {
     let mut partial: Vec<(u32, usize, Vec<u8>)> = Vec::new();
     let mut done = Vec::new();
-    for m in frames {
-        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
-        if v["dropped"].as_bool().unwrap() {
+    // Each message is a train: frame i is can_id[i] with dlc[i] bytes of `data`.
+    let frames = trains.iter().flat_map(|m| {
+        let v = m.json().unwrap();
+        let ids: Vec<u32> = serde_json::from_value(v["can_id"].clone()).unwrap();
+        let dlcs: Vec<usize> = serde_json::from_value(v["dlc"].clone()).unwrap();
+        let dropped: Vec<usize> = serde_json::from_value(v["dropped"].clone()).unwrap();
+        let data = hex::decode(v["data"].as_str().unwrap()).unwrap();
+        let mut at = 0;
+        let mut out = Vec::new();
+        for (i, (id, n)) in ids.into_iter().zip(dlcs).enumerate() {
+            out.push((id, data[at..at + n].to_vec(), dropped.contains(&i)));
+            at += n;
+        }
+        out
+    });
+    for (id, data, dropped) in frames {
+        if dropped {
             continue;
         }
-        let id = v["can_id"].as_u64().unwrap() as u32;
         let key = id & 0x1FF8_03FF;
-        let data = hex::decode(v["data_hex"].as_str().unwrap()).unwrap();
         let pos = partial.iter().position(|p| p.0 == key);
-        if v["cfp"]["type"] == "BEGIN" {
+        // CFP type bit (bit 18 of the id, docs/protocol.md): 0 BEGIN.
+        if id & (1 << 18) == 0 {
             let len = usize::from(u16::from_be_bytes([data[4], data[5]]));
             let mut bytes = data[..4].to_vec();
             bytes.extend_from_slice(&data[6..]);
@@ -368,7 +431,7 @@ fn csp_bytes(p: &CspPacketMsg) -> Vec<u8> {
         flags: p.flags,
     };
     let mut out = h.to_bytes().to_vec();
-    out.extend_from_slice(&hex::decode(&p.data_hex).unwrap());
+    out.extend_from_slice(&p.data);
     out
 }
 
@@ -378,7 +441,7 @@ fn decoded_csp_packets_equal_the_bytes_on_the_bus() {
     record(f.path(), &events());
     let csp: Vec<CspPacketMsg> = on(f.path(), "/csp/packets")
         .iter()
-        .map(|m| serde_json::from_slice(&m.data).unwrap())
+        .map(|m| m.decode().unwrap())
         .collect();
     let media: Vec<&str> = csp.iter().map(|p| p.medium.as_str()).collect();
     assert_eq!(media, ["ground", "main", "main", "ground", "payload"]);
@@ -387,7 +450,7 @@ fn decoded_csp_packets_equal_the_bytes_on_the_bus() {
     let req = ping();
     let p = &csp[1];
     assert_eq!((p.src, p.dst, p.dport, p.sport), (16, 3, 1, 40));
-    assert_eq!(p.data_hex, hex::encode(&req.data));
+    assert_eq!(hex::encode(&p.data), hex::encode(&req.data));
     assert_eq!(p.len, 20);
     assert_eq!(p.service.as_deref(), Some("ping"));
     assert_eq!(p.icd, None);
@@ -414,8 +477,8 @@ fn decoded_csp_packets_equal_the_bytes_on_the_bus() {
     let ground: Vec<Vec<u8>> = on(f.path(), "/ground/packets")
         .iter()
         .map(|m| {
-            let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
-            hex::decode(v["bytes_hex"].as_str().unwrap()).unwrap()
+            let v = m.json().unwrap();
+            hex::decode(v["bytes"].as_str().unwrap()).unwrap()
         })
         .collect();
     let decoded: Vec<Vec<u8>> = csp
@@ -437,7 +500,7 @@ fn messages_carry_simulated_time() {
         .collect();
     assert_eq!(all[0].log_time, START_NS + 5_000_000_000);
     for m in &all {
-        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        let v = m.json().unwrap();
         let t_ns = match v.get("t_ns") {
             Some(t) => t.as_u64().unwrap(),
             // foxglove.Log has its own timestamp: simulated UTC.
@@ -451,7 +514,7 @@ fn messages_carry_simulated_time() {
     }
     let log = &on(f.path(), "/log")[0];
     assert_eq!(&*log.schema, "foxglove.Log");
-    let v: serde_json::Value = serde_json::from_slice(&log.data).unwrap();
+    let v = log.json().unwrap();
     assert_eq!(v["level"], 2);
     assert_eq!(v["name"], "GS16");
 }
@@ -469,12 +532,15 @@ fn summary_and_meta_describe_the_run() {
     assert_eq!(s.seed(), Some(42));
     assert_eq!(s.library, "m6p-twin 0.1.0");
     assert_eq!(s.incomplete, None);
-    assert_eq!(s.messages, 27);
+    assert_eq!(
+        s.messages,
+        27 - (8 + 6) + trains(&ev, "main") + trains(&ev, "payload")
+    );
     assert_eq!(
         s.duration_ns, 6_000_000_000,
         "the expectation at 6 s is last"
     );
-    assert_eq!(s.count("/can/main/frames"), 8);
+    assert_eq!(s.count("/can/main/frames"), trains(&ev, "main"));
     assert_eq!(s.count("/csp/packets"), 5);
     assert_eq!(s.count("/kiss/listen_127.0.0.1:52001/in"), 1);
     assert_eq!(s.channels.len(), 9);
@@ -509,7 +575,7 @@ fn csv_export_flattens_fields() {
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(
         lines[0],
-        "log_time_ns,t_ns,from,can_id,dlc,data_hex,cfp.src,cfp.dst,cfp.type,cfp.remain,\
+        "log_time_ns,t_ns,from,can_id,dlc,data,cfp.src,cfp.dst,cfp.type,cfp.remain,\
          cfp.ident,dropped,csp.prio,csp.src,csp.dst,csp.dport,csp.sport,csp.flags,csp.len"
     );
     assert_eq!(lines.len(), 9);
@@ -533,11 +599,14 @@ fn csv_export_flattens_fields() {
     assert!(format!("{err:#}").contains("no channel /nope"), "{err:#}");
 }
 
+/// Packets of [`many_events`].
+const MANY_PACKETS: u32 = 16_000;
+
 /// Enough traffic for several 1 MiB chunks.
 fn many_events() -> Vec<RunEvent> {
     let mut ev = Vec::new();
     let mut t = SimTime::ZERO;
-    for i in 0..3000u32 {
+    for i in 0..MANY_PACKETS {
         let p = Packet::new(
             Header::new(16, 3, 1, 40),
             (0..64u32)
@@ -663,9 +732,16 @@ fn a_killed_run_reads_up_to_the_last_complete_chunk() {
     // As if the process died: nothing more reaches the file (no summary, no footer).
     std::mem::forget(r);
     let s = recording::read_summary(f.path()).unwrap();
-    let frames = s.count("/can/main/frames");
-    assert!(frames >= first.len() as u64, "{s}");
-    assert!(frames < ev.len() as u64, "{s}");
+    // The frames of the complete chunks: at least those flushed, not all of them.
+    let frames: usize = recording::messages(f.path())
+        .unwrap()
+        .map_while(Result::ok)
+        .filter(|m| &*m.topic == "/can/main/frames")
+        .map(|m| m.json().unwrap()["can_id"].as_array().unwrap().len())
+        .sum();
+    // The train open at the flush is handed out after it (at most 64 frames).
+    assert!(frames + 64 >= first.len(), "{frames} frames\n{s}");
+    assert!(frames < ev.len(), "{frames} frames\n{s}");
     let why = s.incomplete.unwrap();
     assert!(why.contains("last complete chunk"), "{why}");
     assert_eq!(recording::load_meta(f.path()).unwrap(), meta());
