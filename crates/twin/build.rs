@@ -4,9 +4,10 @@
 //! - the User-Mode Linux probe of `crates/bus/build.rs`, shared rather than copied: emits
 //!   `cfg(uml_available)` for `tests/socketcan_uml.rs` under the same conditions as for the
 //!   bus crate's `tests/vcan_uml.rs` (see `tools/uml/README.md`);
-//! - `cfg(python_mcap)`: `python3` can import the `mcap` package (the generic reader the
-//!   recording tests decode with). Under `CI` it is always set, so a missing package fails
-//!   those tests there (`.ci/run` installs it) instead of ignoring them. Set
+//! - `cfg(python_mcap)`: `python3` can import the `mcap` and `mcap_protobuf` packages (the
+//!   generic reader and Google's protobuf decoder the recording tests decode with). Under
+//!   `CI` it is always set, so a missing package fails those tests there (`.ci/run`
+//!   installs them) instead of ignoring them. Set
 //!   `M6P_PYTHON_PROBE=off` to force "not available" outside CI.
 //! - `cfg(slurm_available)`: running as root with Debian's `slurm-wlm` and `munge` installed
 //!   (`tests/campaign_slurm.rs` starts a one-node cluster with `tools/slurm/cluster.sh`).
@@ -97,7 +98,7 @@ fn python_probe() {
         .args([
             "-c",
             "import site, sys\n\
-             try:\n    import mcap.reader, os\n    print('found', os.path.dirname(mcap.__file__))\n\
+             try:\n    import mcap.reader, mcap_protobuf.decoder, os\n    print('found', os.path.dirname(mcap.__file__))\n\
              except Exception:\n    print('missing')\n\
              for d in site.getsitepackages() + [site.getusersitepackages()]:\n    print('dir', d)",
         ])

@@ -276,12 +276,13 @@ fn replay_names_the_first_divergence_after_a_behaviour_change() {
 )]
 fn a_real_recording_decodes_with_the_python_mcap_package() {
     let ok = Command::new("python3")
-        .args(["-c", "import mcap"])
+        .args(["-c", "import mcap.reader, mcap_protobuf.decoder"])
         .status()
         .is_ok_and(|s| s.success());
     assert!(
         ok,
-        "this test needs python3 with the `mcap` package: pip install mcap (.ci/run installs it)"
+        "this test needs python3 with the `mcap` and `mcap-protobuf-support` packages: \
+         pip install mcap mcap-protobuf-support (.ci/run installs them)"
     );
     let f = tmp("py.mcap");
     assert_eq!(
@@ -302,6 +303,17 @@ fn a_real_recording_decodes_with_the_python_mcap_package() {
     let text = succeeded(&out);
     assert!(
         text.contains("/csp/packets") && text.trim_end().ends_with("ok"),
+        "{text}"
+    );
+    // And with Google's protobuf, as Foxglove reads it: every message decodes.
+    let out = Command::new("python3")
+        .arg(repo().join("tests/decode_mcap_protobuf.py"))
+        .arg(&f)
+        .output()
+        .unwrap();
+    let text = succeeded(&out);
+    assert!(
+        text.contains("/can/main/frames") && text.trim_end().ends_with("ok"),
         "{text}"
     );
 }
