@@ -57,7 +57,8 @@ use rand_core::{Rng, SeedableRng};
 
 use crate::stream::DataStream;
 pub use crate::stream::{
-    Generator, StreamCheck, check_counter_stream, counter_frame, counter_stream,
+    Generator, StreamCheck, StreamChecker, StreamEnd, check_counter_stream, counter_frame,
+    counter_stream,
 };
 use crate::wire::{CMD_POLL, CMD_SYNC, MAX_PUSH_BYTES, MAX_REPLY_DATA_BYTES, PayloadCommand};
 

@@ -47,6 +47,11 @@ const CYCLE_FRAMES: u64 = 64;
 pub const CYCLE_BYTES: u64 = 4960;
 /// At most this many missing seqs are listed in a [`StreamCheck`] (all are counted).
 pub const MAX_LISTED_MISSING: usize = 1024;
+/// The longest frame: header, 95 data bytes, CRC.
+pub const MAX_FRAME_BYTES: usize = FRAME_OVERHEAD_BYTES + DATA_LEN_MIN + 63;
+/// Bytes before the first good frame that a [`StreamChecker`] keeps (it counts them all).
+/// More than a frame of them can never be the end of a frame cut by the stream's start.
+pub const KEPT_LEAD_BYTES: usize = 2 * MAX_FRAME_BYTES;
 
 const CRC32C: Crc<u32> = Crc::<u32>::new(&CRC_32_ISCSI);
 
@@ -220,38 +225,124 @@ fn candidate(rest: &[u8]) -> Candidate {
     }
 }
 
-/// Verify a received Counter stream (see the module doc); never panics.
-pub fn check_counter_stream(bytes: &[u8]) -> StreamCheck {
-    let mut check = StreamCheck::default();
-    let mut i = 0;
-    // Whether the previous bytes were a good frame, so a frame must start at `i`.
-    let mut synced = false;
-    while let Some(rest) = bytes.get(i..).filter(|r| !r.is_empty()) {
+/// The walk of [`check_counter_stream`]: what it found so far.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+struct Walk {
+    check: StreamCheck,
+    /// Whether the previous bytes were a good frame, so a frame must start here.
+    synced: bool,
+    /// The first [`KEPT_LEAD_BYTES`] bytes before the first good frame.
+    lead: Vec<u8>,
+}
+
+impl Walk {
+    /// One step at the start of `rest` (not empty): the bytes walked, or `None` when
+    /// `rest` ends inside what may be a frame (never with [`MAX_FRAME_BYTES`] or more).
+    fn step(&mut self, rest: &[u8]) -> Option<usize> {
         match candidate(rest) {
             Candidate::Good(addr, seq, flen) => {
-                check.record(addr, seq, flen);
-                i += flen;
-                synced = true;
+                self.check.record(addr, seq, flen);
+                self.synced = true;
+                Some(flen)
             }
-            Candidate::Incomplete => {
-                check.tail_bytes = rest.len() as u64;
-                break;
-            }
+            Candidate::Incomplete => None,
             Candidate::Bad => {
-                if synced {
-                    check.frames_bad += 1;
-                    synced = false;
+                if self.synced {
+                    self.check.frames_bad += 1;
+                    self.synced = false;
                 }
-                if check.frames_ok == 0 {
-                    check.lead_bytes += 1;
+                if self.check.frames_ok == 0 {
+                    self.check.lead_bytes += 1;
+                    if self.lead.len() < KEPT_LEAD_BYTES {
+                        self.lead.extend_from_slice(&rest[..1]);
+                    }
                 } else {
-                    check.skipped_bytes += 1;
+                    self.check.skipped_bytes += 1;
                 }
-                i += 1;
+                Some(1)
             }
         }
     }
-    check
+
+    /// Walk `bytes` to their end: the index where the frame cut by their end starts
+    /// (`bytes.len()` when none is).
+    fn walk_to_end(&mut self, bytes: &[u8]) -> usize {
+        let mut i = 0;
+        while let Some(rest) = bytes.get(i..).filter(|r| !r.is_empty()) {
+            match self.step(rest) {
+                Some(n) => i += n,
+                None => {
+                    self.check.tail_bytes = rest.len() as u64;
+                    break;
+                }
+            }
+        }
+        i
+    }
+}
+
+/// Verify a received Counter stream (see the module doc); never panics.
+pub fn check_counter_stream(bytes: &[u8]) -> StreamCheck {
+    let mut walk = Walk::default();
+    walk.walk_to_end(bytes);
+    walk.check
+}
+
+/// [`check_counter_stream`] of a stream received in pieces, as they arrive: it holds the
+/// bytes it cannot judge yet (less than a frame, beside the last piece), the first
+/// [`KEPT_LEAD_BYTES`] bytes before the first good frame, and the listed missing seqs, so
+/// that a long stream costs no memory.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct StreamChecker {
+    walk: Walk,
+    /// Bytes received and not walked yet.
+    pending: Vec<u8>,
+}
+
+/// What a [`StreamChecker`] found in every byte it was given.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StreamEnd<'a> {
+    /// The check, as [`check_counter_stream`] of all the bytes gives it.
+    pub check: StreamCheck,
+    /// The bytes before the first good frame (`check.lead_bytes` of them), or the first
+    /// [`KEPT_LEAD_BYTES`] when there were more.
+    pub lead: Vec<u8>,
+    /// The frame cut by the end (`check.tail_bytes` bytes).
+    pub tail: &'a [u8],
+}
+
+impl StreamEnd<'_> {
+    /// Whether `lead` holds every byte before the first good frame.
+    pub fn lead_whole(&self) -> bool {
+        self.lead.len() as u64 == self.check.lead_bytes
+    }
+}
+
+impl StreamChecker {
+    /// The next bytes of the stream.
+    pub fn push(&mut self, bytes: &[u8]) {
+        self.pending.extend_from_slice(bytes);
+        let mut i = 0;
+        // With a longest frame's bytes ahead, each step is the one the whole stream takes.
+        while self.pending.len() - i >= MAX_FRAME_BYTES {
+            match self.walk.step(&self.pending[i..]) {
+                Some(n) => i += n,
+                None => break,
+            }
+        }
+        self.pending.drain(..i);
+    }
+
+    /// The check of every byte so far (the stream may go on).
+    pub fn end(&self) -> StreamEnd<'_> {
+        let mut walk = self.walk.clone();
+        let cut = walk.walk_to_end(&self.pending);
+        StreamEnd {
+            check: walk.check,
+            lead: walk.lead,
+            tail: &self.pending[cut..],
+        }
+    }
 }
 
 /// Where the payload's data comes from.
@@ -475,6 +566,115 @@ mod tests {
 
     fn off_of(seq: u32) -> usize {
         (0..seq).map(frame_len).sum()
+    }
+
+    #[test]
+    fn max_frame_bytes_is_the_longest_frame() {
+        assert_eq!(MAX_FRAME_BYTES, (0..64u32).map(frame_len).max().unwrap());
+    }
+
+    #[test]
+    fn a_stream_checked_in_pieces_is_checked_as_a_whole() {
+        // Clean, from the middle, with frames missing, a flipped bit, garbage before the
+        // first frame (more than is kept), and garbage only.
+        let clean = counter_stream(12, 0, 20_000);
+        let middle = counter_stream(12, 3000, 9000);
+        let mut holes = clean[..off_of(10)].to_vec();
+        holes.extend_from_slice(&clean[off_of(13)..off_of(40) + 20]);
+        holes.extend_from_slice(&clean[off_of(40) + 30..]);
+        let mut flipped = clean.clone();
+        flipped[5000] ^= 0x10;
+        let mut garbage_first = vec![0x55; 1000];
+        garbage_first.extend_from_slice(&middle);
+        let garbage: Vec<u8> = (0..3000u32).map(|i| (i * 7) as u8).collect();
+        for s in [clean, middle, holes, flipped, garbage_first, garbage] {
+            let whole = check_counter_stream(&s);
+            let lead = &s[..(whole.lead_bytes as usize).min(KEPT_LEAD_BYTES)];
+            let tail = &s[s.len() - whole.tail_bytes as usize..];
+            for piece in [1, 7, 108, 109, 200, 254, 4096, s.len()] {
+                let mut c = StreamChecker::default();
+                for p in s.chunks(piece) {
+                    c.push(p);
+                    assert!(c.pending.len() < MAX_FRAME_BYTES);
+                }
+                let end = c.end();
+                assert_eq!(end.check, whole, "pieces of {piece}");
+                assert_eq!(end.lead, lead, "pieces of {piece}");
+                assert_eq!(end.tail, tail, "pieces of {piece}");
+                assert_eq!(
+                    end.lead_whole(),
+                    whole.lead_bytes as usize <= KEPT_LEAD_BYTES
+                );
+            }
+        }
+    }
+
+    /// One damage to a clean stream: where (a fraction of its length) and what.
+    #[derive(Debug, Clone)]
+    enum Damage {
+        Flip(u8),
+        Cut(usize),
+        Insert(Vec<u8>),
+    }
+
+    fn damage() -> impl proptest::strategy::Strategy<Value = (f64, Damage)> {
+        use proptest::prelude::*;
+        let what = prop_oneof![
+            any::<u8>().prop_map(Damage::Flip),
+            (1usize..300).prop_map(Damage::Cut),
+            // Garbage, sync markers among it (false starts of frames).
+            proptest::collection::vec(prop_oneof![any::<u8>(), Just(0x1A), Just(0xCF)], 1..300)
+                .prop_map(Damage::Insert),
+        ];
+        (0.0..1.0f64, what)
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+
+        #[test]
+        fn any_stream_in_any_pieces_is_checked_as_a_whole(
+            addr in 1u8..32,
+            from in proptest::prop_oneof![0u64..20_000, (u64::from(u32::MAX) - 10) * CYCLE_BYTES / 64..(u64::from(u32::MAX) + 10) * CYCLE_BYTES / 64],
+            len in 0usize..4000,
+            damages in proptest::collection::vec(damage(), 0..6),
+            pieces in proptest::collection::vec(1usize..400, 1..8),
+        ) {
+            let mut s = counter_stream(addr, from, len);
+            for (at, d) in damages {
+                let i = ((s.len() as f64) * at) as usize;
+                match d {
+                    Damage::Flip(m) if i < s.len() => s[i] ^= m.max(1),
+                    Damage::Flip(_) => {}
+                    Damage::Cut(n) => {
+                        s.drain(i..(i + n).min(s.len()));
+                    }
+                    Damage::Insert(g) => {
+                        s.splice(i..i, g);
+                    }
+                }
+            }
+            let mut c = StreamChecker::default();
+            let mut given = 0;
+            for &p in pieces.iter().cycle() {
+                if given == s.len() {
+                    break;
+                }
+                let next = (given + p).min(s.len());
+                c.push(&s[given..next]);
+                given = next;
+                proptest::prop_assert!(c.pending.len() < MAX_FRAME_BYTES);
+                // What it says so far is the check of the stream so far.
+                let so_far = &s[..given];
+                let whole = check_counter_stream(so_far);
+                let end = c.end();
+                proptest::prop_assert_eq!(&end.check, &whole);
+                let lead = &so_far[..(whole.lead_bytes as usize).min(KEPT_LEAD_BYTES)];
+                proptest::prop_assert_eq!(end.lead.as_slice(), lead);
+                proptest::prop_assert_eq!(end.tail, &so_far[given - whole.tail_bytes as usize..]);
+            }
+            proptest::prop_assert_eq!(c.end().check, check_counter_stream(&s));
+        }
     }
 
     #[test]
