@@ -9,9 +9,10 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use crate::events::RunEvent;
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, When};
+use crate::expectations::{
+    CheckCx, ExpectCx, ExpectKind, Extremes, Judged, Occurrence, Watch, WatchCx, When,
+};
 use crate::faults::{FaultAction, TimedFault};
-use crate::runtime::RunReport;
 use crate::scenario::{Dur, PathStep, Scenario};
 
 fn key(k: &str) -> PathStep {
@@ -491,27 +492,17 @@ impl AttitudeSample {
     }
 }
 
-/// The FC's published samples of a run, gathered from its events.
-#[derive(Default)]
-pub struct AttitudeObserver {
-    samples: Vec<AttitudeSample>,
+/// The FC's published snapshots as [`AttitudeSample`]s.
+#[derive(Debug, Default)]
+pub struct AttitudeSampler {
     /// The scenario TLE's own SGP4 orbit, to measure how far the truth has left it.
     tle_orbit: Option<orbit::propagate::Sgp4Propagator>,
 }
 
-impl std::fmt::Debug for AttitudeObserver {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("AttitudeObserver")
-            .field("samples", &self.samples.len())
-            .finish_non_exhaustive()
-    }
-}
-
-impl AttitudeObserver {
-    /// An observer measuring the truth's distance from the orbit of `tle` (if any).
+impl AttitudeSampler {
+    /// A sampler measuring the truth's distance from the orbit of `tle` (if any).
     pub fn new(tle: Option<&(String, String)>) -> Self {
-        AttitudeObserver {
-            samples: Vec::new(),
+        AttitudeSampler {
             tle_orbit: tle.and_then(|(l1, l2)| {
                 orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict)
                     .ok()
@@ -520,24 +511,97 @@ impl AttitudeObserver {
         }
     }
 
-    /// Take in one event.
-    pub fn observe(&mut self, ev: &RunEvent) {
-        if let RunEvent::Truth { t, truth, adcs } = ev {
-            let mut sample = AttitudeSample::of(*t, truth, adcs);
-            if let Some(p) = self.tle_orbit.as_mut() {
-                use orbit::propagate::Propagator as _;
-                sample.tle_offset_m = p
-                    .state_j2000(orbit::time::UtcTime::from_unix_ns(truth.unix_ns))
-                    .ok()
-                    .map(|s| (truth.r_eci_m - s.r_km * 1e3).norm());
-            }
-            self.samples.push(sample);
+    /// The sample of an event, if it is a published snapshot.
+    pub fn sample(&mut self, ev: &RunEvent) -> Option<AttitudeSample> {
+        let RunEvent::Truth { t, truth, adcs } = ev else {
+            return None;
+        };
+        let mut sample = AttitudeSample::of(*t, truth, adcs);
+        if let Some(p) = self.tle_orbit.as_mut() {
+            use orbit::propagate::Propagator as _;
+            sample.tle_offset_m = p
+                .state_j2000(orbit::time::UtcTime::from_unix_ns(truth.unix_ns))
+                .ok()
+                .map(|s| (truth.r_eci_m - s.r_km * 1e3).norm());
+        }
+        Some(sample)
+    }
+}
+
+/// Below this body rate (deg/s) a run that started tumbling has detumbled (a campaign's
+/// `detumble_s`).
+pub const DETUMBLED_DEG_S: f64 = 0.5;
+
+/// What every published FC sample of a run adds up to (kept whether or not the samples
+/// are).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct AttitudeSummary {
+    /// Samples published.
+    pub samples: u64,
+    /// The first sample.
+    pub first: Option<AttitudeSample>,
+    /// The highest body rate, deg/s.
+    pub max_rate_deg_s: Option<f64>,
+    /// When the body rate was first below [`DETUMBLED_DEG_S`].
+    pub first_detumbled: Option<SimTime>,
+}
+
+impl AttitudeSummary {
+    fn add(&mut self, s: &AttitudeSample) {
+        self.samples += 1;
+        self.first.get_or_insert(*s);
+        self.max_rate_deg_s = Some(
+            self.max_rate_deg_s
+                .map_or(s.rate_deg_s, |m| m.max(s.rate_deg_s)),
+        );
+        if self.first_detumbled.is_none() && s.rate_deg_s < DETUMBLED_DEG_S {
+            self.first_detumbled = Some(s.t);
+        }
+    }
+}
+
+/// The FC's published samples of a run, gathered from its events.
+#[derive(Default)]
+pub struct AttitudeObserver {
+    samples: Vec<AttitudeSample>,
+    summary: AttitudeSummary,
+    sampler: AttitudeSampler,
+    /// Keep only the summary (one sample a second is 430 kB per simulated hour).
+    pub forget_samples: bool,
+}
+
+impl std::fmt::Debug for AttitudeObserver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AttitudeObserver")
+            .field("samples", &self.samples.len())
+            .field("summary", &self.summary)
+            .field("forget_samples", &self.forget_samples)
+            .finish_non_exhaustive()
+    }
+}
+
+impl AttitudeObserver {
+    /// An observer measuring the truth's distance from the orbit of `tle` (if any).
+    pub fn new(tle: Option<&(String, String)>) -> Self {
+        AttitudeObserver {
+            sampler: AttitudeSampler::new(tle),
+            ..AttitudeObserver::default()
         }
     }
 
-    /// The samples, in time order.
-    pub fn finish(self) -> Vec<AttitudeSample> {
-        self.samples
+    /// Take in one event.
+    pub fn observe(&mut self, ev: &RunEvent) {
+        if let Some(sample) = self.sampler.sample(ev) {
+            self.summary.add(&sample);
+            if !self.forget_samples {
+                self.samples.push(sample);
+            }
+        }
+    }
+
+    /// The samples, in time order (none if forgotten), and their summary.
+    pub fn finish(self) -> (Vec<AttitudeSample>, AttitudeSummary) {
+        (self.samples, self.summary)
     }
 }
 
@@ -619,36 +683,52 @@ impl ExpectKind for AttitudeExpect {
     }
 
     fn check(&self, cx: &CheckCx<'_>) -> Judged {
-        let report = cx.report;
-        let to = self.to.map_or(report.sim_time, |d| SimTime::ZERO + d.0);
-        match check_attitude(
-            report,
-            AttitudeCheck {
-                quantity: &self.quantity,
-                occurrence: self.occurrence.unwrap_or(Occurrence::Every),
-                below: self.below,
-                above: self.above,
-                from: self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),
-                to,
-                when: self.when.unwrap_or(When::Always),
-                min_elevation_deg: self.min_elevation_deg.unwrap_or(10.0),
-            },
-        ) {
-            Ok((t, ok)) => (true, t, ok),
-            Err((t, why)) => (false, t, why),
+        let mut tally = AttitudeTally::default();
+        for s in &cx.report.attitude {
+            self.tally(&mut tally, s);
         }
+        self.judge(&tally, cx.report.sim_time)
+    }
+
+    fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
+        // Only the distance from the TLE's orbit needs its propagation.
+        let tle = cx.tle.filter(|_| self.quantity == "tle_offset_m");
+        Some(Box::new(AttitudeWatch {
+            expect: self.clone(),
+            sampler: AttitudeSampler::new(tle),
+            tally: AttitudeTally::default(),
+        }))
     }
 }
 
-struct AttitudeCheck<'a> {
-    quantity: &'a str,
-    occurrence: Occurrence,
-    below: Option<f64>,
-    above: Option<f64>,
-    from: SimTime,
-    to: SimTime,
-    when: When,
-    min_elevation_deg: f64,
+/// An `attitude` expectation's figures over the samples it selected so far.
+#[derive(Debug, Clone, Default)]
+struct AttitudeTally {
+    n: usize,
+    /// Of the selected samples that have the quantity.
+    range: Extremes,
+    failures: usize,
+    /// The first failing sample: when, and why.
+    first: Option<(SimTime, String)>,
+}
+
+/// An `attitude` expectation judged as the run goes: its samples are not kept.
+struct AttitudeWatch {
+    expect: AttitudeExpect,
+    sampler: AttitudeSampler,
+    tally: AttitudeTally,
+}
+
+impl Watch for AttitudeWatch {
+    fn observe(&mut self, ev: &RunEvent) {
+        if let Some(s) = self.sampler.sample(ev) {
+            self.expect.tally(&mut self.tally, &s);
+        }
+    }
+
+    fn judge(&self, cx: &CheckCx<'_>) -> Judged {
+        self.expect.judge(&self.tally, cx.report.sim_time)
+    }
 }
 
 /// The named figure of a sample (`None`: it does not apply, for example no target).
@@ -666,71 +746,83 @@ fn quantity(s: &AttitudeSample, name: &str) -> Option<f64> {
     }
 }
 
-/// Every selected sample in the window within bounds: `Ok((end, summary))` or
-/// `Err((first failing time, why))`.
-fn check_attitude(
-    report: &RunReport,
-    c: AttitudeCheck<'_>,
-) -> Result<(SimTime, String), (SimTime, String)> {
-    let selected = report.attitude.iter().filter(|s| {
-        s.t >= c.from
-            && s.t <= c.to
-            && match c.when {
+impl AttitudeExpect {
+    /// Take in the next sample, if the window (`from` to `to`; without `to`, to the end
+    /// of the run, after which no sample comes) and `when` select it.
+    fn tally(&self, k: &mut AttitudeTally, s: &AttitudeSample) {
+        let from = self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0);
+        let min_elevation_deg = self.min_elevation_deg.unwrap_or(10.0);
+        let selected = s.t >= from
+            && self.to.is_none_or(|d| s.t <= SimTime::ZERO + d.0)
+            && match self.when.unwrap_or(When::Always) {
                 When::Always => true,
                 When::Sunlit => s.sun_visible_fraction >= 1.0,
                 When::Eclipse => s.sun_visible_fraction <= 0.0,
                 When::TargetVisible => s
                     .target_elevation_deg
-                    .is_some_and(|e| e >= c.min_elevation_deg),
-            }
-    });
-    let (mut n, mut lo, mut hi) = (0usize, f64::INFINITY, f64::NEG_INFINITY);
-    let mut failures = 0usize;
-    let mut first: Option<(SimTime, String)> = None;
-    for s in selected {
-        n += 1;
-        let v = quantity(s, c.quantity);
+                    .is_some_and(|e| e >= min_elevation_deg),
+            };
+        if !selected {
+            return;
+        }
+        k.n += 1;
+        let v = quantity(s, &self.quantity);
         let problem = match v {
-            None => Some(format!("no `{}` at this time", c.quantity)),
-            Some(v) if c.below.is_some_and(|b| v.is_nan() || v >= b) => Some(format!(
+            None => Some(format!("no `{}` at this time", self.quantity)),
+            Some(v) if self.below.is_some_and(|b| v.is_nan() || v >= b) => Some(format!(
                 "{} = {v:.4} (expected below {})",
-                c.quantity,
-                c.below.unwrap_or_default()
+                self.quantity,
+                self.below.unwrap_or_default()
             )),
-            Some(v) if c.above.is_some_and(|a| v.is_nan() || v <= a) => Some(format!(
+            Some(v) if self.above.is_some_and(|a| v.is_nan() || v <= a) => Some(format!(
                 "{} = {v:.4} (expected above {})",
-                c.quantity,
-                c.above.unwrap_or_default()
+                self.quantity,
+                self.above.unwrap_or_default()
             )),
             Some(_) => None,
         };
         if let Some(v) = v {
-            lo = lo.min(v);
-            hi = hi.max(v);
+            k.range.add(v);
         }
         if let Some(p) = problem {
-            failures += 1;
-            first.get_or_insert((s.t, p));
+            k.failures += 1;
+            k.first.get_or_insert((s.t, p));
         }
     }
-    let window = format!("{} to {} ({:?})", c.from, c.to, c.when);
-    if n == 0 {
-        return Err((c.to, format!("no FC samples in {window}")));
-    }
-    let range = format!(
-        "{n} samples in {window}, {} from {lo:.4} to {hi:.4}",
-        c.quantity
-    );
-    if c.occurrence == Occurrence::Any {
-        return if failures < n {
-            Ok((c.to, format!("{} of {range} within bounds", n - failures)))
-        } else {
-            Err((c.to, format!("none of {range} within bounds")))
-        };
-    }
-    match first {
-        Some((t, p)) => Err((t, format!("{failures} of {range}; first at {t}: {p}"))),
-        None => Ok((c.to, range)),
+
+    /// Every selected sample in the window within bounds (or, with `any`, one), the run
+    /// having ended at `end`: the end, or the first failing time, and what was seen.
+    fn judge(&self, k: &AttitudeTally, end: SimTime) -> Judged {
+        let from = self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0);
+        let to = self.to.map_or(end, |d| SimTime::ZERO + d.0);
+        let window = format!("{from} to {to} ({:?})", self.when.unwrap_or(When::Always));
+        let n = k.n;
+        if n == 0 {
+            return (false, to, format!("no FC samples in {window}"));
+        }
+        let range = format!(
+            "{n} samples in {window}, {} from {:.4} to {:.4}",
+            self.quantity, k.range.lo, k.range.hi
+        );
+        if self.occurrence.unwrap_or(Occurrence::Every) == Occurrence::Any {
+            return if k.failures < n {
+                (
+                    true,
+                    to,
+                    format!("{} of {range} within bounds", n - k.failures),
+                )
+            } else {
+                (false, to, format!("none of {range} within bounds"))
+            };
+        }
+        match &k.first {
+            Some((t, p)) => (
+                false,
+                *t,
+                format!("{} of {range}; first at {t}: {p}", k.failures),
+            ),
+            None => (true, to, range),
+        }
     }
 }
 

@@ -103,25 +103,22 @@ pub fn run_text(file: &str, text: &str) -> RunVerdict {
 /// `max_rate_deg_s` (the highest body rate published).
 pub fn metrics(report: &crate::runtime::RunReport) -> BTreeMap<String, f64> {
     let mut m = BTreeMap::new();
-    if let Some(min) = report.power.iter().map(|p| p.soc).reduce(f64::min) {
+    if let Some(min) = report.power_summary.min_soc {
         m.insert("min_soc".to_owned(), min);
     }
     if report.sessions.held.is_some() || !report.sessions.downlinked.is_empty() {
         let bytes: u64 = report.sessions.downlinked.values().sum();
         m.insert("downlinked_bytes".to_owned(), bytes as f64);
     }
-    if let Some(max) = report
-        .attitude
-        .iter()
-        .map(|a| a.rate_deg_s)
-        .reduce(f64::max)
-    {
+    let a = &report.attitude_summary;
+    if let Some(max) = a.max_rate_deg_s {
         m.insert("max_rate_deg_s".to_owned(), max);
         // A run that starts tumbling (0.5 deg/s or more): when it first fell below.
-        if report.attitude.first().is_some_and(|a| a.rate_deg_s >= 0.5)
-            && let Some(a) = report.attitude.iter().find(|a| a.rate_deg_s < 0.5)
+        if a.first
+            .is_some_and(|f| f.rate_deg_s >= crate::adcs::DETUMBLED_DEG_S)
+            && let Some(t) = a.first_detumbled
         {
-            m.insert("detumble_s".to_owned(), a.t.as_secs_f64());
+            m.insert("detumble_s".to_owned(), t.as_secs_f64());
         }
     }
     m

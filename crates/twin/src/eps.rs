@@ -9,8 +9,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use crate::events::RunEvent;
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, When};
-use crate::runtime::RunReport;
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Extremes, Judged, Watch, WatchCx, When};
 use crate::scenario::{Dur, PathStep, Scenario};
 
 fn key(k: &str) -> PathStep {
@@ -152,15 +151,9 @@ pub struct PowerSample {
     pub load_w: f64,
 }
 
-/// The EPS's samples of a run, gathered from its events.
-#[derive(Debug, Default)]
-pub struct PowerObserver {
-    samples: Vec<PowerSample>,
-}
-
-impl PowerObserver {
-    /// Take in one event.
-    pub fn observe(&mut self, ev: &RunEvent) {
+impl PowerSample {
+    /// The sample an event carries, if it is the EPS's.
+    pub fn of(ev: &RunEvent) -> Option<Self> {
         if let RunEvent::Eps(o) = ev
             && let nodes_eps::EpsOutput::Sample {
                 t,
@@ -172,20 +165,59 @@ impl PowerObserver {
                 ..
             } = **o
         {
-            self.samples.push(PowerSample {
+            Some(PowerSample {
                 t,
                 soc,
                 battery_v,
                 battery_a,
                 solar_w,
                 load_w,
-            });
+            })
+        } else {
+            None
+        }
+    }
+}
+
+/// What every EPS sample of a run adds up to (kept whether or not the samples are).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PowerSummary {
+    /// Samples published.
+    pub samples: u64,
+    /// The lowest state of charge.
+    pub min_soc: Option<f64>,
+}
+
+impl PowerSummary {
+    fn add(&mut self, s: &PowerSample) {
+        self.samples += 1;
+        self.min_soc = Some(self.min_soc.map_or(s.soc, |m| m.min(s.soc)));
+    }
+}
+
+/// The EPS's samples of a run, gathered from its events.
+#[derive(Debug, Default)]
+pub struct PowerObserver {
+    samples: Vec<PowerSample>,
+    summary: PowerSummary,
+    /// Keep only the summary (one sample a second is 170 kB per simulated hour).
+    pub forget_samples: bool,
+}
+
+impl PowerObserver {
+    /// Take in one event.
+    pub fn observe(&mut self, ev: &RunEvent) {
+        if let Some(s) = PowerSample::of(ev) {
+            self.summary.add(&s);
+            if !self.forget_samples {
+                self.samples.push(s);
+            }
         }
     }
 
-    /// The samples, in time order.
-    pub fn finish(self) -> Vec<PowerSample> {
-        self.samples
+    /// The samples, in time order (none if forgotten), and their summary.
+    pub fn finish(self) -> (Vec<PowerSample>, PowerSummary) {
+        (self.samples, self.summary)
     }
 }
 
@@ -274,98 +306,156 @@ impl ExpectKind for PowerExpect {
     }
 
     fn check(&self, cx: &CheckCx<'_>) -> Judged {
-        let report = cx.report;
-        check_power(
-            report,
-            &self.quantity,
-            (
-                self.statistic.unwrap_or(Statistic::Every),
-                self.when.unwrap_or(When::Always),
-            ),
-            (self.below, self.above),
-            self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0),
-            self.to.map_or(report.sim_time, |d| SimTime::ZERO + d.0),
-        )
+        let mut tally = PowerTally::default();
+        for s in &cx.report.power {
+            self.tally(&mut tally, s);
+        }
+        self.judge(&tally, cx.report.sim_time)
+    }
+
+    fn watch(&self, _cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
+        Some(Box::new(PowerWatch {
+            expect: self.clone(),
+            tally: PowerTally::default(),
+        }))
     }
 }
 
-/// Judge a `power` expectation over the EPS samples in `[from, to]`.
-fn check_power(
-    report: &RunReport,
-    quantity: &str,
-    (statistic, when): (Statistic, When),
-    (below, above): (Option<f64>, Option<f64>),
-    from: SimTime,
-    to: SimTime,
-) -> (bool, SimTime, String) {
-    let value = |s: &PowerSample| match quantity {
-        "soc" => s.soc,
-        "battery_v" => s.battery_v,
-        "battery_a" => s.battery_a,
-        "solar_w" => s.solar_w,
-        "load_w" => s.load_w,
-        _ => s.solar_w - s.load_w,
-    };
-    let samples: Vec<(SimTime, f64)> = report
-        .power
-        .iter()
-        .filter(|s| s.t >= from && s.t <= to)
-        .filter(|s| match when {
-            When::Sunlit => s.solar_w > 0.0,
-            When::Eclipse => s.solar_w <= 0.0,
-            _ => true,
-        })
-        .map(|s| (s.t, value(s)))
-        .collect();
-    if samples.is_empty() {
-        return (
-            false,
-            to,
-            format!("no EPS sample ({when:?}) between {from} and {to} (is the EPS running?)"),
-        );
+/// A `power` expectation's figures over the samples it selected so far, in time order.
+#[derive(Debug, Clone)]
+struct PowerTally {
+    n: usize,
+    range: Extremes,
+    sum: f64,
+    /// The first sample out of bounds: when, and its value.
+    first_bad: Option<(SimTime, f64)>,
+}
+
+impl Default for PowerTally {
+    fn default() -> Self {
+        PowerTally {
+            n: 0,
+            range: Extremes::default(),
+            // As `Iterator::sum` of f64 starts.
+            sum: -0.0,
+            first_bad: None,
+        }
     }
-    let ok = |v: f64| below.is_none_or(|b| v < b) && above.is_none_or(|a| v > a);
-    let (lo, hi) = samples
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(_, v)| {
-            (a.min(v), b.max(v))
-        });
-    let mean = samples.iter().map(|s| s.1).sum::<f64>() / samples.len() as f64;
-    let n = samples.len();
-    let range = format!(
-        "{n} samples in {from} to {to}, {quantity} from {lo:.4} to {hi:.4}, mean {mean:.4}"
-    );
-    let bounds = match (above, below) {
-        (Some(a), Some(b)) => format!("within ({a}, {b})"),
-        (Some(a), None) => format!("above {a}"),
-        (None, Some(b)) => format!("below {b}"),
-        (None, None) => "any".into(),
-    };
-    match statistic {
-        Statistic::Every => match samples.iter().find(|s| !ok(s.1)) {
-            Some(&(t, v)) => (
-                false,
-                t,
-                format!("{range}; first at {t}: {quantity} = {v:.4} (expected {bounds})"),
-            ),
-            None => (true, to, range),
-        },
-        Statistic::Mean | Statistic::Min | Statistic::Max => {
-            let (name, v) = match statistic {
-                Statistic::Mean => ("mean", mean),
-                Statistic::Min => ("min", lo),
-                _ => ("max", hi),
+}
+
+/// A `power` expectation judged as the run goes: its samples are not kept.
+#[derive(Debug)]
+struct PowerWatch {
+    expect: PowerExpect,
+    tally: PowerTally,
+}
+
+impl Watch for PowerWatch {
+    fn observe(&mut self, ev: &RunEvent) {
+        if let Some(s) = PowerSample::of(ev) {
+            self.expect.tally(&mut self.tally, &s);
+        }
+    }
+
+    fn judge(&self, cx: &CheckCx<'_>) -> Judged {
+        self.expect.judge(&self.tally, cx.report.sim_time)
+    }
+}
+
+impl PowerExpect {
+    fn value(&self, s: &PowerSample) -> f64 {
+        match self.quantity.as_str() {
+            "soc" => s.soc,
+            "battery_v" => s.battery_v,
+            "battery_a" => s.battery_a,
+            "solar_w" => s.solar_w,
+            "load_w" => s.load_w,
+            _ => s.solar_w - s.load_w,
+        }
+    }
+
+    fn ok(&self, v: f64) -> bool {
+        self.below.is_none_or(|b| v < b) && self.above.is_none_or(|a| v > a)
+    }
+
+    /// Take in the next sample, if the window (`from` to `to`; without `to`, to the end
+    /// of the run, after which no sample comes) and `when` select it.
+    fn tally(&self, k: &mut PowerTally, s: &PowerSample) {
+        let from = self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0);
+        let selected = s.t >= from
+            && self.to.is_none_or(|d| s.t <= SimTime::ZERO + d.0)
+            && match self.when.unwrap_or(When::Always) {
+                When::Sunlit => s.solar_w > 0.0,
+                When::Eclipse => s.solar_w <= 0.0,
+                _ => true,
             };
-            let held = ok(v);
-            (
-                held,
+        if !selected {
+            return;
+        }
+        let v = self.value(s);
+        k.n += 1;
+        k.range.add(v);
+        k.sum += v;
+        if k.first_bad.is_none() && !self.ok(v) {
+            k.first_bad = Some((s.t, v));
+        }
+    }
+
+    /// The verdict on the samples taken in, the run having ended at `end`.
+    fn judge(&self, k: &PowerTally, end: SimTime) -> Judged {
+        let (statistic, when) = (
+            self.statistic.unwrap_or(Statistic::Every),
+            self.when.unwrap_or(When::Always),
+        );
+        let (below, above) = (self.below, self.above);
+        let from = self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0);
+        let to = self.to.map_or(end, |d| SimTime::ZERO + d.0);
+        let quantity = &self.quantity;
+        if k.n == 0 {
+            return (
+                false,
                 to,
-                if held {
-                    range
-                } else {
-                    format!("{range} ({name} {v:.4}, expected {bounds})")
-                },
-            )
+                format!("no EPS sample ({when:?}) between {from} and {to} (is the EPS running?)"),
+            );
+        }
+        let ok = |v: f64| self.ok(v);
+        let (lo, hi, n) = (k.range.lo, k.range.hi, k.n);
+        let mean = k.sum / n as f64;
+        let range = format!(
+            "{n} samples in {from} to {to}, {quantity} from {lo:.4} to {hi:.4}, mean {mean:.4}"
+        );
+        let bounds = match (above, below) {
+            (Some(a), Some(b)) => format!("within ({a}, {b})"),
+            (Some(a), None) => format!("above {a}"),
+            (None, Some(b)) => format!("below {b}"),
+            (None, None) => "any".into(),
+        };
+        match statistic {
+            Statistic::Every => match k.first_bad {
+                Some((t, v)) => (
+                    false,
+                    t,
+                    format!("{range}; first at {t}: {quantity} = {v:.4} (expected {bounds})"),
+                ),
+                None => (true, to, range),
+            },
+            Statistic::Mean | Statistic::Min | Statistic::Max => {
+                let (name, v) = match statistic {
+                    Statistic::Mean => ("mean", mean),
+                    Statistic::Min => ("min", lo),
+                    _ => ("max", hi),
+                };
+                let held = ok(v);
+                (
+                    held,
+                    to,
+                    if held {
+                        range
+                    } else {
+                        format!("{range} ({name} {v:.4}, expected {bounds})")
+                    },
+                )
+            }
         }
     }
 }

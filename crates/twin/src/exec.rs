@@ -8,7 +8,7 @@ use anyhow::Context as _;
 use csp::SimTime;
 
 use crate::events::RunEvent;
-use crate::expectations::{Verdict, check_all};
+use crate::expectations::{Verdict, WatchCx, check_watched};
 use crate::plan::{Compiled, compile};
 use crate::runtime::{RunReport, run_with};
 use crate::scenario::Scenario;
@@ -103,8 +103,11 @@ impl Outcome {
 }
 
 /// Run a compiled scenario, handing every event (expectation verdicts last) to `sink`.
+/// The expectations that can judge the run as it goes do, and the report keeps only the
+/// summaries of the samples and of the downlinked bytes, so that memory does not grow
+/// with the simulated time.
 pub async fn execute(
-    compiled: Compiled,
+    mut compiled: Compiled,
     sink: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<Outcome> {
     let (tx, rx) = tokio::sync::oneshot::channel();
@@ -116,9 +119,23 @@ pub async fn execute(
         }
     };
     let net = compiled.opts.network.clone();
-    let (report, ()) = tokio::join!(run_with(compiled.opts, Some(tx), sink), print_listen);
+    let cx = WatchCx {
+        tle: compiled.opts.tle.as_ref(),
+    };
+    let mut watches: Vec<_> = compiled.expectations.iter().map(|x| x.watch(&cx)).collect();
+    compiled.opts.keep_series = false;
+    let mut watched = |ev: &RunEvent| {
+        for w in watches.iter_mut().flatten() {
+            w.observe(ev);
+        }
+        sink(ev);
+    };
+    let (report, ()) = tokio::join!(
+        run_with(compiled.opts, Some(tx), &mut watched),
+        print_listen
+    );
     let report = report?;
-    let verdicts = check_all(&compiled.expectations, &report, &net);
+    let verdicts = check_watched(&compiled.expectations, &watches, &report, &net);
     for v in &verdicts {
         sink(&RunEvent::Expectation {
             t: v.t.min(report.sim_time),

@@ -13,6 +13,7 @@ use schemars::JsonSchema;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Deserializer};
 
+use crate::events::RunEvent;
 use crate::network::NetworkSpec;
 use crate::runtime::RunReport;
 use crate::scenario::{Dur, PathStep, Scenario};
@@ -34,6 +35,33 @@ pub struct Verdict {
 /// What a check found: whether it held, when (the failing occurrence, or the end), and what
 /// was observed.
 pub type Judged = (bool, SimTime, String);
+
+/// The lowest and highest of the values a [`Watch`] (or a check) took in so far: infinite
+/// before the first.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Extremes {
+    /// The lowest.
+    pub lo: f64,
+    /// The highest.
+    pub hi: f64,
+}
+
+impl Default for Extremes {
+    fn default() -> Self {
+        Extremes {
+            lo: f64::INFINITY,
+            hi: f64::NEG_INFINITY,
+        }
+    }
+}
+
+impl Extremes {
+    /// Take in one more value.
+    pub fn add(&mut self, v: f64) {
+        self.lo = self.lo.min(v);
+        self.hi = self.hi.max(v);
+    }
+}
 
 /// Which occurrences of a repeated command (or which samples) an expectation covers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
@@ -100,6 +128,22 @@ pub struct CheckCx<'a> {
     pub net: &'a NetworkSpec,
 }
 
+/// What an expectation watching a run may need besides its events.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct WatchCx<'a> {
+    /// The satellite's two TLE lines (the truth's distance from their orbit).
+    pub tle: Option<&'a (String, String)>,
+}
+
+/// An expectation judged while the run goes, from its events, so that what it looks at
+/// (a sample every second, for days) need not be kept in the report.
+pub trait Watch: Send {
+    /// Take in one event of the run, in the order they happen.
+    fn observe(&mut self, ev: &RunEvent);
+    /// The verdict, once the run has ended.
+    fn judge(&self, cx: &CheckCx<'_>) -> Judged;
+}
+
 /// A kind of expectation (see the module doc).
 pub trait ExpectKind:
     DeserializeOwned + JsonSchema + std::fmt::Debug + Clone + Send + Sync + 'static
@@ -112,12 +156,18 @@ pub trait ExpectKind:
     fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String));
     /// Judge the run.
     fn check(&self, cx: &CheckCx<'_>) -> Judged;
+    /// Judge the run as it goes instead ([`Watch`]; the same verdict as `check` on a
+    /// report that kept everything). `None`: `check` judges it from the report.
+    fn watch(&self, _cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
+        None
+    }
 }
 
 /// An expectation of any kind.
 trait AnyExpect: std::fmt::Debug + Send + Sync {
     fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String));
     fn check(&self, cx: &CheckCx<'_>) -> Judged;
+    fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>>;
 }
 
 impl<K: ExpectKind> AnyExpect for K {
@@ -126,6 +176,9 @@ impl<K: ExpectKind> AnyExpect for K {
     }
     fn check(&self, cx: &CheckCx<'_>) -> Judged {
         ExpectKind::check(self, cx)
+    }
+    fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
+        ExpectKind::watch(self, cx)
     }
 }
 
@@ -170,7 +223,16 @@ impl Expectation {
 
     /// The verdict on `report`.
     pub fn check(&self, report: &RunReport, net: &NetworkSpec) -> Verdict {
-        let (passed, t, observed) = self.kind.check(&CheckCx { report, net });
+        self.verdict(self.kind.check(&CheckCx { report, net }))
+    }
+
+    /// Its [`Watch`], when its kind judges a run as it goes: feed it every event of the
+    /// run, then [`check_watched`] takes its verdict.
+    pub fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
+        self.kind.watch(cx)
+    }
+
+    fn verdict(&self, (passed, t, observed): Judged) -> Verdict {
         Verdict {
             name: self.name.clone(),
             passed,
@@ -294,13 +356,32 @@ pub fn compile(s: &Scenario) -> Vec<Expectation> {
         .collect()
 }
 
-/// Check every expectation.
+/// Check every expectation on a report that kept everything it looks at
+/// (`RunOptions::keep_series`).
 pub fn check_all(
     expectations: &[Expectation],
     report: &RunReport,
     net: &NetworkSpec,
 ) -> Vec<Verdict> {
-    expectations.iter().map(|x| x.check(report, net)).collect()
+    check_watched(expectations, &[], report, net)
+}
+
+/// Check every expectation: by its watch when it has one (`watches[i]`, from
+/// [`Expectation::watch`], fed the run's events), else on the report.
+pub fn check_watched(
+    expectations: &[Expectation],
+    watches: &[Option<Box<dyn Watch>>],
+    report: &RunReport,
+    net: &NetworkSpec,
+) -> Vec<Verdict> {
+    expectations
+        .iter()
+        .enumerate()
+        .map(|(i, x)| match watches.get(i).and_then(|w| w.as_deref()) {
+            Some(w) => x.verdict(w.judge(&CheckCx { report, net })),
+            None => x.check(report, net),
+        })
+        .collect()
 }
 
 /// `a..=b`, `>= a`, `<= b` or `any`.

@@ -107,6 +107,12 @@ impl Invariants {
         if let RunEvent::Medium(m) = ev {
             self.reply_length(m);
         }
+        // As the samples come: a run's report need not keep them.
+        if let Some(p) = crate::eps::PowerSample::of(ev)
+            && !(0.0..=1.0).contains(&p.soc)
+        {
+            self.broken("soc-range", p.t, || format!("state of charge {}", p.soc));
+        }
         if let RunEvent::Truth { t, truth, adcs } = ev {
             let norm = truth.q_eci_from_body.quaternion().norm();
             if (norm - 1.0).abs() > UNIT_TOLERANCE || !norm.is_finite() {
@@ -229,6 +235,8 @@ mod tests {
             started: Some(SimTime(from)),
             ended: to.map(|t| (SimTime(t), 0, 0)),
             bytes: Vec::new(),
+            len: 0,
+            stream: Default::default(),
         };
         report.sessions.runs = vec![run(1, 10, Some(20)), run(2, 20, Some(30)), run(3, 25, None)];
         report.sessions.pc_balanced = Some(false);

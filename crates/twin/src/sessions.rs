@@ -550,8 +550,14 @@ pub struct SessionRun {
     pub started: Option<SimTime>,
     /// When it ended and how (`None`: still ACTIVE at the end of the run).
     pub ended: Option<(SimTime, u8, u32)>,
-    /// Bytes downlinked while it was the session's latest run, in order.
+    /// Bytes downlinked while it was the session's latest run, in order (none kept when
+    /// the report forgets them: [`SessionsReport::forget_bytes`]).
     pub bytes: Vec<u8>,
+    /// How many bytes were downlinked while it was the session's latest run.
+    pub len: u64,
+    /// Those bytes checked as a Counter stream as they arrived (what `downlink`
+    /// expectations judge).
+    pub stream: nodes_payload::StreamChecker,
 }
 
 /// What a run's PC and payloads did, gathered from the event stream.
@@ -575,6 +581,9 @@ pub struct SessionsReport {
     /// Packets in transit on the CAN buses (a payload's packets lost there count as
     /// dropped, with the bus's reason).
     pub transit: crate::transit::Transit,
+    /// Keep only each run's length and stream check, not its bytes (a long run's memory
+    /// then does not grow with what it downlinks; the S-band sink's files have them).
+    pub forget_bytes: bool,
 }
 
 impl SessionsReport {
@@ -589,6 +598,8 @@ impl SessionsReport {
                     started: Some(*t),
                     ended: None,
                     bytes: Vec::new(),
+                    len: 0,
+                    stream: Default::default(),
                 }),
                 O::SessionEnded {
                     t,
@@ -604,6 +615,8 @@ impl SessionsReport {
                             started: None,
                             ended: end,
                             bytes: Vec::new(),
+                            len: 0,
+                            stream: Default::default(),
                         }),
                     }
                 }
@@ -614,13 +627,18 @@ impl SessionsReport {
                     ..
                 } => {
                     *self.downlinked.entry(*payload_addr).or_default() += bytes.len() as u64;
+                    let keep = !self.forget_bytes;
                     if let Some(r) = self
                         .runs
                         .iter_mut()
                         .rev()
                         .find(|r| r.session == *session_id)
                     {
-                        r.bytes.extend_from_slice(bytes);
+                        r.len += bytes.len() as u64;
+                        r.stream.push(bytes);
+                        if keep {
+                            r.bytes.extend_from_slice(bytes);
+                        }
                     }
                 }
                 O::Dropped {
@@ -727,7 +745,8 @@ impl SessionsReport {
             .filter(|r| r.ended.is_none())
     }
 
-    /// Every byte downlinked for `session`, over all its runs.
+    /// Every byte downlinked for `session`, over all its runs (none when the report
+    /// forgets them).
     pub fn session_bytes(&self, session: u8) -> Vec<u8> {
         self.runs
             .iter()
@@ -1055,8 +1074,13 @@ impl ExpectKind for DownlinkExpect {
         let session = &self.session;
         let (min, max, intact) = (&self.min, &self.max, &self.intact);
 
-        let bytes = r.session_bytes(*session);
-        let n = bytes.len() as u64;
+        // Counted, not gathered: a copy of every byte would double the peak memory.
+        let n: u64 = r
+            .runs
+            .iter()
+            .filter(|x| x.session == *session)
+            .map(|x| x.len)
+            .sum();
         let mut why = Vec::new();
         if min.is_some_and(|m| n < m) || max.is_some_and(|m| n > m) {
             why.push(format!("expected {} bytes", bounds(*min, *max)));
@@ -1071,12 +1095,18 @@ impl ExpectKind for DownlinkExpect {
             let (mut first, mut last) = (None, None::<u32>);
             let mut examples = Vec::new();
             let mut tail: Vec<u8> = Vec::new();
+            // Whether `tail` holds all its bytes: a run's lead bytes beyond what its
+            // checker keeps (more than a frame) can never join two runs anyway.
+            let mut tail_whole = true;
             for run in r.runs.iter().filter(|x| x.session == *session) {
-                let c = nodes_payload::check_counter_stream(&run.bytes);
+                let end = run.stream.end();
+                let c = &end.check;
                 if c.first_seq.is_none() && c.frames_bad == 0 {
-                    // No whole frame: all of it belongs to the frame the runs around it
-                    // cut (a short run between two others).
-                    tail.extend_from_slice(&run.bytes);
+                    // No whole frame: all of it (its lead and its tail) belongs to the
+                    // frame the runs around it cut (a short run between two others).
+                    tail.extend_from_slice(&end.lead);
+                    tail.extend_from_slice(end.tail);
+                    tail_whole &= end.lead_whole();
                     continue;
                 }
                 ok += c.frames_ok;
@@ -1084,20 +1114,21 @@ impl ExpectKind for DownlinkExpect {
                 missing += c.missing_count;
                 examples.extend(c.missing_seqs.iter().take(8).copied());
                 if let (Some(prev), Some(a)) = (last, c.first_seq) {
-                    let head = &run.bytes[..(c.lead_bytes as usize).min(run.bytes.len())];
-                    let joined =
-                        nodes_payload::check_counter_stream(&[tail.as_slice(), head].concat());
                     // Whole when the bytes between the runs' whole frames are exactly
                     // the frames in between (one cut by a run's end, or more when a short
                     // run in the middle held no whole frame).
                     let gap = u64::from(a.saturating_sub(prev).saturating_sub(1));
-                    let spanned = gap > 0
-                        && joined.frames_ok == gap
-                        && joined.first_seq == Some(prev.wrapping_add(1))
-                        && joined.missing_count == 0
-                        && joined.lead_bytes == 0
-                        && joined.tail_bytes == 0
-                        && joined.skipped_bytes == 0;
+                    let spanned = gap > 0 && tail_whole && end.lead_whole() && {
+                        let joined = nodes_payload::check_counter_stream(
+                            &[tail.as_slice(), end.lead.as_slice()].concat(),
+                        );
+                        joined.frames_ok == gap
+                            && joined.first_seq == Some(prev.wrapping_add(1))
+                            && joined.missing_count == 0
+                            && joined.lead_bytes == 0
+                            && joined.tail_bytes == 0
+                            && joined.skipped_bytes == 0
+                    };
                     if spanned {
                         ok += gap;
                     } else if gap > 0 {
@@ -1105,8 +1136,8 @@ impl ExpectKind for DownlinkExpect {
                         examples.push(prev + 1);
                     }
                 }
-                tail = run.bytes[run.bytes.len() - (c.tail_bytes as usize).min(run.bytes.len())..]
-                    .to_vec();
+                tail = end.tail.to_vec();
+                tail_whole = true;
                 first = first.or(c.first_seq);
                 last = c.last_seq.or(last);
             }

@@ -24,7 +24,7 @@ fn detumble_failures(seeds: std::ops::RangeInclusive<u64>) -> Vec<String> {
         for v in outcome.verdicts.iter().filter(|v| !v.passed) {
             failures.push(format!("seed {seed}: {}: {}", v.name, v.observed));
         }
-        let axis = outcome.report.attitude.first().map(|a| a.rate_deg_s);
+        let axis = outcome.report.attitude_summary.first.map(|a| a.rate_deg_s);
         assert!(
             axis.is_some_and(|r| (r - 10.0).abs() < 0.5),
             "seed {seed}: the run starts at 10 deg/s ({axis:?})"

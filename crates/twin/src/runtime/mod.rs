@@ -69,6 +69,13 @@ pub struct RunOptions {
     pub tle: Option<(String, String)>,
     /// Keep the trace of every frame and packet in the report.
     pub trace: bool,
+    /// Keep every FC and EPS sample and every downlinked byte in the report (`attitude`,
+    /// `power`, each session run's `bytes`), for the programs and tests that read them.
+    /// Without, the report has their summaries only (`attitude_summary`,
+    /// `power_summary`, each run's `len` and `stream`), so that memory does not grow with
+    /// the simulated time; [`crate::exec::execute`] runs so, its expectations judging the
+    /// run as it goes.
+    pub keep_series: bool,
     /// Faults to apply, in time order.
     pub faults: Vec<TimedFault>,
     /// Recorded input of outside links to feed again (`replay`), one connection per link.
@@ -194,6 +201,7 @@ impl RunOptions {
             epoch_unix_s: 1_577_836_800,
             tle: None,
             trace: false,
+            keep_series: true,
             faults: Vec::new(),
             kiss_replay: Vec::new(),
             outside: Vec::new(),
@@ -401,7 +409,7 @@ pub async fn run_with(
     }
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
-    let mut observer = Observer::new(opts.trace, opts.tle.as_ref());
+    let mut observer = Observer::new(opts.trace, opts.keep_series, opts.tle.as_ref());
     let kiss_budget = kiss.budget.clone();
     let mut handle_event = |ev: RunEvent, observer: &mut Observer| {
         sink(&ev);
@@ -527,8 +535,10 @@ pub async fn run_with(
         results,
         trace: observed.trace,
         attitude: observed.attitude,
+        attitude_summary: observed.attitude_summary,
         sessions: observed.sessions,
         power: observed.power,
+        power_summary: observed.power_summary,
         beacons: observed.beacons,
         contact: observed.contact,
     })

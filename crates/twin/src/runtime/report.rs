@@ -54,12 +54,17 @@ pub struct RunReport {
     pub results: Vec<RequestResult>,
     /// Every frame and packet, when tracing was asked for.
     pub trace: Vec<TraceEvent>,
-    /// The FC's published attitude samples, in time order (for expectations).
+    /// The FC's published attitude samples, in time order (empty unless the run kept
+    /// them: `RunOptions::keep_series`).
     pub attitude: Vec<AttitudeSample>,
+    /// What every published attitude sample added up to.
+    pub attitude_summary: crate::adcs::AttitudeSummary,
     /// The PC's sessions, downlinked and dropped bytes, and what the payloads produced.
     pub sessions: crate::sessions::SessionsReport,
-    /// The EPS's samples, in time order (for expectations).
+    /// The EPS's samples, in time order (empty unless the run kept them).
     pub power: Vec<PowerSample>,
+    /// What every EPS sample added up to.
+    pub power_summary: crate::eps::PowerSummary,
     /// Beacons received on the ground: (time, sending COMM, sequence number).
     pub beacons: Vec<(SimTime, u8, u32)>,
     /// UHF contact switches applied (pass modelling): (time, in contact).
@@ -83,12 +88,16 @@ pub struct Observer {
 pub struct Observed {
     /// Every frame and packet, when kept.
     pub trace: Vec<TraceEvent>,
-    /// The FC's published attitude samples.
+    /// The FC's published attitude samples (if kept).
     pub attitude: Vec<AttitudeSample>,
+    /// Their summary.
+    pub attitude_summary: crate::adcs::AttitudeSummary,
     /// The PC's sessions and the payloads' bytes.
     pub sessions: crate::sessions::SessionsReport,
-    /// The EPS's samples.
+    /// The EPS's samples (if kept).
     pub power: Vec<PowerSample>,
+    /// Their summary.
+    pub power_summary: crate::eps::PowerSummary,
     /// Beacons received on the ground.
     pub beacons: Vec<(SimTime, u8, u32)>,
     /// UHF contact switches.
@@ -96,15 +105,23 @@ pub struct Observed {
 }
 
 impl Observer {
-    /// An observer keeping the trace of every frame when `keep_trace`; `tle` is the
+    /// An observer keeping the trace of every frame when `keep_trace`, and every sample
+    /// and downlinked byte when `keep_series` (else their summaries); `tle` is the
     /// scenario's orbit (for the truth's distance from it).
-    pub fn new(keep_trace: bool, tle: Option<&(String, String)>) -> Self {
+    pub fn new(keep_trace: bool, keep_series: bool, tle: Option<&(String, String)>) -> Self {
+        let mut attitude = crate::adcs::AttitudeObserver::new(tle);
+        attitude.forget_samples = !keep_series;
+        let mut power = crate::eps::PowerObserver::default();
+        power.forget_samples = !keep_series;
         Observer {
             trace: keep_trace.then(Vec::new),
-            attitude: crate::adcs::AttitudeObserver::new(tle),
-            power: crate::eps::PowerObserver::default(),
+            attitude,
+            power,
             link: crate::comm::LinkObserver::default(),
-            sessions: crate::sessions::SessionsReport::default(),
+            sessions: crate::sessions::SessionsReport {
+                forget_bytes: !keep_series,
+                ..Default::default()
+            },
         }
     }
 
@@ -127,11 +144,15 @@ impl Observer {
     /// Everything gathered.
     pub fn finish(self) -> Observed {
         let (beacons, contact) = self.link.finish();
+        let (attitude, attitude_summary) = self.attitude.finish();
+        let (power, power_summary) = self.power.finish();
         Observed {
             trace: self.trace.unwrap_or_default(),
-            attitude: self.attitude.finish(),
+            attitude,
+            attitude_summary,
             sessions: self.sessions,
-            power: self.power.finish(),
+            power,
+            power_summary,
             beacons,
             contact,
         }
