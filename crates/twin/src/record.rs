@@ -2424,6 +2424,92 @@ mod tests {
         assert_eq!(trains[1].t_ns, 3_000_200_000);
     }
 
+    /// The frames of a train, one `/can/main/frames` message each, in the order handed out,
+    /// with the other messages' kinds in between.
+    fn trains_of(events: &[RunEvent]) -> Vec<Result<Vec<u64>, ChannelKind>> {
+        let mut enc = EventEncoder::new(0);
+        let mut out = Vec::new();
+        let mut emit = |m: Encoded<'_>| -> anyhow::Result<()> {
+            if m.kind == ChannelKind::Can {
+                let data: Arc<[u8]> = m.kind.schema_data()?.into();
+                let v =
+                    crate::protobuf::decode(m.kind.schema_name(), SCHEMA_ENCODING, &data, m.data)?;
+                let train: CanFramesMsg = serde_json::from_value(v)?;
+                out.push(Ok(train.frames().map(|f| f.0).collect()));
+            } else {
+                out.push(Err(m.kind));
+            }
+            Ok(())
+        };
+        for e in events {
+            enc.encode(e, &mut emit).unwrap();
+        }
+        enc.finish(&mut emit).unwrap();
+        out
+    }
+
+    /// A MORE frame (no CSP packet completes) from `from` on the main bus at `t_ns`.
+    fn more_frame(t_ns: u64, from: &str) -> RunEvent {
+        // CFP MORE (bit 18), src 3, dst 1, remain 5.
+        let f = CanFrame::new(0x0308_0000 | 1 << 18 | 5 << 10, &[0; 8]).unwrap();
+        RunEvent::Medium(TraceEvent {
+            t: SimTime(t_ns),
+            medium: Arc::from("main"),
+            from: Arc::from(from),
+            frame: TraceFrame::Can(f),
+            dropped: false,
+        })
+    }
+
+    #[test]
+    fn a_train_ends_at_64_frames_at_100_ms_and_at_another_sender() {
+        // 70 frames from the FC 100 us apart: 64, then 6.
+        let ev: Vec<RunEvent> = (0..70)
+            .map(|k| more_frame(1_000_000 + 100_000 * k, "FC"))
+            .collect();
+        let got = trains_of(&ev);
+        let sizes: Vec<usize> = got.iter().map(|t| t.as_ref().unwrap().len()).collect();
+        assert_eq!(sizes, [64, 6]);
+        assert_eq!(got[1].as_ref().unwrap()[0], 1_000_000 + 100_000 * 64);
+
+        // The same sender 100 ms after the train began starts another; another sender too.
+        let ev = [
+            more_frame(0, "FC"),
+            more_frame(TRAIN_MAX_SPAN_NS - 1, "FC"),
+            more_frame(TRAIN_MAX_SPAN_NS, "FC"),
+            more_frame(TRAIN_MAX_SPAN_NS + 1, "EPS"),
+        ];
+        let got: Vec<Vec<u64>> = trains_of(&ev).into_iter().map(Result::unwrap).collect();
+        assert_eq!(
+            got,
+            [
+                vec![0, TRAIN_MAX_SPAN_NS - 1],
+                vec![TRAIN_MAX_SPAN_NS],
+                vec![TRAIN_MAX_SPAN_NS + 1]
+            ]
+        );
+    }
+
+    #[test]
+    fn an_idle_bus_hands_its_train_out_at_the_next_event_100_ms_on() {
+        let log = |t_ns: u64| RunEvent::Log {
+            t: SimTime(t_ns),
+            source: "run".into(),
+            level: crate::events::Level::Info,
+            message: "tick".into(),
+        };
+        let ev = [
+            more_frame(0, "FC"),
+            log(TRAIN_MAX_SPAN_NS - 1), // too early: the train stays open
+            log(TRAIN_MAX_SPAN_NS),     // the train goes out before this line
+        ];
+        let got = trains_of(&ev);
+        assert_eq!(
+            got,
+            [Err(ChannelKind::Log), Ok(vec![0]), Err(ChannelKind::Log)]
+        );
+    }
+
     #[test]
     fn zero_or_non_finite_positions_have_no_location() {
         let stamp = foxglove_time(0, SimTime::ZERO);
