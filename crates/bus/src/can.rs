@@ -370,7 +370,9 @@ struct State {
     bus_off_since: BTreeMap<usize, u64>,
     /// Whether any error frame has happened (until then no counter moves).
     errors_seen: bool,
-    in_flight: BTreeMap<(SimTime, u64), Delivery>,
+    /// What is on its way, in order of (time, sequence): a queue kept sorted (nearly every
+    /// entry goes at the back: frames end in order).
+    in_flight: VecDeque<((SimTime, u64), Delivery)>,
     seq: u64,
     stats: BusStats,
     impair: Impairments,
@@ -474,7 +476,7 @@ impl CanBus {
                 recessive_seqs: 0,
                 bus_off_since: BTreeMap::new(),
                 errors_seen: false,
-                in_flight: BTreeMap::new(),
+                in_flight: VecDeque::new(),
                 seq: 0,
                 stats,
                 impair: Impairments::default(),
@@ -734,7 +736,7 @@ impl State {
             rec: p.stats.rec,
         };
         self.seq += 1;
-        self.in_flight.insert((t, self.seq), Delivery::Error(ev));
+        self.in_flight_insert((t, self.seq), Delivery::Error(ev));
     }
 
     /// Port `i`'s counters changed at `t`: move it to the state they say, with its events;
@@ -1015,7 +1017,7 @@ impl State {
             }
             let at = end + self.impair.delay;
             self.seq += 1;
-            self.in_flight.insert(
+            self.in_flight_insert(
                 (at, self.seq),
                 Delivery::Frame {
                     from: winner,
@@ -1078,12 +1080,20 @@ impl State {
         }
     }
 
+    /// Put `d` on its way, in order.
+    fn in_flight_insert(&mut self, key: (SimTime, u64), d: Delivery) {
+        let i = self.in_flight.partition_point(|(k, _)| *k < key);
+        self.in_flight.insert(i, (key, d));
+    }
+
     fn deliver_due(&mut self, now: SimTime) {
-        while let Some(entry) = self.in_flight.first_entry() {
-            if entry.key().0 > now {
+        while let Some(((t, _), _)) = self.in_flight.front() {
+            if *t > now {
                 return;
             }
-            let ((t, _), d) = entry.remove_entry();
+            let Some(((t, _), d)) = self.in_flight.pop_front() else {
+                return;
+            };
             let (from, frame, fate) = match d {
                 Delivery::Frame { from, frame, fate } => (from, frame, fate),
                 Delivery::Error(ev) => {
@@ -1167,7 +1177,7 @@ impl State {
     }
 
     fn next_wake(&self) -> SimTime {
-        let delivery = self.in_flight.first_key_value().map(|((t, _), _)| *t);
+        let delivery = self.in_flight.front().map(|((t, _), _)| *t);
         let pick = self
             .candidates()
             .map(|c| c.ready)
@@ -1189,32 +1199,49 @@ impl State {
 /// Bits an extended CAN data frame occupies on the bus, stuff bits and the 3-bit
 /// intermission included (ISO 11898-1).
 ///
-/// A byte at a time, with no allocation: the stuffed part (SOF .. CRC, at most 118 bits)
-/// is one `u128`; its CRC-15 (over SOF .. data) and its stuff bits come from two tables
-/// indexed by byte ([`CRC15_TABLE`], [`STUFF_TABLE`]), the few bits before the first whole
-/// byte one at a time.
+/// A byte at a time, with no allocation: the CRC-15 (over SOF .. data) and the stuff bits
+/// (SOF .. CRC) come from two tables indexed by byte ([`CRC15_TABLE`], [`STUFF_TABLE`]),
+/// the few bits before the first whole byte one at a time.
 pub fn frame_bits(frame: &CanFrame) -> u32 {
     let id = u64::from(frame.id & csp::cfp::CAN_EFF_MASK);
     let dlc = frame.dlc.min(8);
     // SOF 0 | base id (11) | SRR 1 | IDE 1 | extended id (18) | RTR 0 | r1 r0 00 | DLC (4).
     let header = (id >> 18) << 27 | 1 << 26 | 1 << 25 | (id & 0x3FFFF) << 7 | u64::from(dlc);
-    // The 7 bits before the header's last four bytes, then bytes.
+    // CRC-15 and stuffing side by side (two independent chains the CPU overlaps): the 7
+    // bits before the header's last four bytes one at a time, then bytes, then the CRC.
     let mut crc = 0u16;
+    let mut state = 0u8;
+    let mut stuffed = 0u32;
     for i in (32..HEADER_BITS).rev() {
-        let next = ((header >> i) as u16 ^ (crc >> 14)) & 1;
+        let bit = ((header >> i) & 1) as u8;
+        let next = (u16::from(bit) ^ (crc >> 14)) & 1;
         crc = ((crc << 1) & 0x7FFF) ^ (0x4599 * next);
+        let (s, k) = stuff_step(state, bit);
+        state = s;
+        stuffed += u32::from(k);
     }
-    let mut bits = u128::from(header);
-    for b in (header as u32).to_be_bytes().iter().chain(frame.data()) {
-        crc = ((crc << 8) & 0x7FFF) ^ CRC15_TABLE[usize::from(((crc >> 7) as u8) ^ b)];
+    let mut byte = |b: u8, crc: &mut u16| {
+        *crc = ((*crc << 8) & 0x7FFF) ^ CRC15_TABLE[usize::from(((*crc >> 7) as u8) ^ b)];
+        let e = STUFF_TABLE[usize::from(state)][usize::from(b)];
+        state = e & 0xF;
+        stuffed += u32::from(e >> 4);
+    };
+    for b in (header as u32).to_be_bytes() {
+        byte(b, &mut crc);
     }
     for &b in frame.data() {
-        bits = bits << 8 | u128::from(b);
+        byte(b, &mut crc);
     }
+    // The CRC's 15 bits: 7 one at a time, then a byte.
+    for i in (8..15).rev() {
+        let (s, k) = stuff_step(state, ((crc >> i) & 1) as u8);
+        state = s;
+        stuffed += u32::from(k);
+    }
+    stuffed += u32::from(STUFF_TABLE[usize::from(state)][usize::from(crc as u8)] >> 4);
     let n = HEADER_BITS + 8 * frame.data().len() as u32 + 15;
-    bits = bits << 15 | u128::from(crc);
     // CRC delimiter, ACK slot, ACK delimiter, EOF (7), intermission (3).
-    n + stuff_bits(bits, n) + 1 + 1 + 1 + 7 + 3
+    n + stuffed + 1 + 1 + 1 + 7 + 3
 }
 
 /// Bits of an extended frame's header, SOF to DLC.
@@ -1284,26 +1311,6 @@ const STUFF_TABLE: [[u8; 256]; 16] = {
     }
     t
 };
-
-/// Stuff bits in the `n` low bits of `bits` (most significant first).
-fn stuff_bits(bits: u128, n: u32) -> u32 {
-    let mut x = bits << (128 - n);
-    let mut state = 0;
-    let mut stuffed = 0;
-    for _ in 0..n % 8 {
-        let (next, k) = stuff_step(state, (x >> 127) as u8);
-        state = next;
-        stuffed += u32::from(k);
-        x <<= 1;
-    }
-    for _ in 0..n / 8 {
-        let e = STUFF_TABLE[usize::from(state)][(x >> 120) as usize];
-        state = e & 0xF;
-        stuffed += u32::from(e >> 4);
-        x <<= 8;
-    }
-    stuffed
-}
 
 #[cfg(test)]
 mod tests {

@@ -4,10 +4,18 @@
 //! An inbox holds at most [`INBOX_DEPTH`] arrivals not yet taken, like a controller's
 //! receive FIFO or a socket's receive buffer: a medium delivering to a full inbox loses the
 //! arrival, and counts it as the endpoint's `rx_overflow`.
+//!
+//! The inbox is a queue under a mutex and one waker: a medium delivers every frame through
+//! it, and a bounded tokio channel cost about twice as much per frame (a semaphore permit
+//! taken and given back under its lock, besides the queue and the waker).
+
+use std::collections::VecDeque;
+use std::future::poll_fn;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::task::{Poll, Waker};
 
 use csp::cfp::CanFrame;
 use csp::{Packet, SimTime};
-use tokio::sync::mpsc;
 
 /// A frame or packet arriving at an endpoint.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -33,12 +41,38 @@ pub struct Inbound {
 /// saturated 1 Mbit/s bus, several times what a node's task takes to catch up.
 pub const INBOX_DEPTH: usize = 1024;
 
-/// The sending half of an endpoint's inbox.
-#[derive(Debug, Clone)]
-pub struct InboxTx(mpsc::Sender<Inbound>);
+/// The sending half of an endpoint's inbox; clones send to the same inbox, and the inbox
+/// closes when the last one is dropped.
+#[derive(Debug)]
+pub struct InboxTx(Arc<Shared>);
 
 /// The receiving half of an endpoint's inbox.
-pub type InboxRx = mpsc::Receiver<Inbound>;
+#[derive(Debug)]
+pub struct InboxRx(Arc<Shared>);
+
+#[derive(Debug)]
+struct Shared {
+    state: Mutex<State>,
+}
+
+#[derive(Debug)]
+struct State {
+    queue: VecDeque<Inbound>,
+    depth: usize,
+    senders: usize,
+    receiver: bool,
+    /// The receiver's task while it waits for an arrival.
+    waker: Option<Waker>,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, State> {
+        // Nothing panics while holding the lock; a poisoned inbox is still a queue.
+        self.state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
 
 /// Why an arrival did not get into an inbox.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -51,13 +85,110 @@ pub enum InboxError {
     Closed,
 }
 
+/// Why [`InboxRx::try_recv`] returned nothing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum TryRecvError {
+    /// Nothing waiting now.
+    #[error("inbox empty")]
+    Empty,
+    /// Nothing waiting, and every sender is gone.
+    #[error("inbox closed")]
+    Closed,
+}
+
 impl InboxTx {
     /// Put an arrival in the inbox, never waiting: lost when the inbox is full.
     pub fn send(&self, a: Inbound) -> Result<(), InboxError> {
-        self.0.try_send(a).map_err(|e| match e {
-            mpsc::error::TrySendError::Full(_) => InboxError::Full,
-            mpsc::error::TrySendError::Closed(_) => InboxError::Closed,
+        let waker = {
+            let mut st = self.0.lock();
+            if !st.receiver {
+                return Err(InboxError::Closed);
+            }
+            if st.queue.len() >= st.depth {
+                return Err(InboxError::Full);
+            }
+            st.queue.push_back(a);
+            st.waker.take()
+        };
+        if let Some(w) = waker {
+            w.wake();
+        }
+        Ok(())
+    }
+}
+
+impl Clone for InboxTx {
+    fn clone(&self) -> Self {
+        self.0.lock().senders += 1;
+        InboxTx(Arc::clone(&self.0))
+    }
+}
+
+impl Drop for InboxTx {
+    fn drop(&mut self) {
+        let waker = {
+            let mut st = self.0.lock();
+            st.senders -= 1;
+            if st.senders == 0 {
+                st.waker.take()
+            } else {
+                None
+            }
+        };
+        if let Some(w) = waker {
+            w.wake();
+        }
+    }
+}
+
+impl InboxRx {
+    /// The next arrival; `None` once the inbox is empty and every sender is gone.
+    /// Cancel-safe: an arrival is taken only by the call that returns it.
+    pub async fn recv(&mut self) -> Option<Inbound> {
+        poll_fn(|cx| {
+            let mut st = self.0.lock();
+            if let Some(a) = st.queue.pop_front() {
+                return Poll::Ready(Some(a));
+            }
+            if st.senders == 0 {
+                return Poll::Ready(None);
+            }
+            match &mut st.waker {
+                Some(w) if w.will_wake(cx.waker()) => {}
+                w => *w = Some(cx.waker().clone()),
+            }
+            Poll::Pending
         })
+        .await
+    }
+
+    /// The next arrival if there is one now.
+    pub fn try_recv(&mut self) -> Result<Inbound, TryRecvError> {
+        let mut st = self.0.lock();
+        match st.queue.pop_front() {
+            Some(a) => Ok(a),
+            None if st.senders == 0 => Err(TryRecvError::Closed),
+            None => Err(TryRecvError::Empty),
+        }
+    }
+
+    /// Arrivals waiting.
+    pub fn len(&self) -> usize {
+        self.0.lock().queue.len()
+    }
+
+    /// Whether no arrival is waiting.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl Drop for InboxRx {
+    fn drop(&mut self) {
+        let mut st = self.0.lock();
+        st.receiver = false;
+        st.queue.clear();
+        st.waker = None;
     }
 }
 
@@ -68,6 +199,86 @@ pub fn inbox() -> (InboxTx, InboxRx) {
 
 /// A new inbox of `depth` arrivals.
 pub fn inbox_with(depth: usize) -> (InboxTx, InboxRx) {
-    let (tx, rx) = mpsc::channel(depth.max(1));
-    (InboxTx(tx), rx)
+    let shared = Arc::new(Shared {
+        state: Mutex::new(State {
+            queue: VecDeque::new(),
+            depth: depth.max(1),
+            senders: 1,
+            receiver: true,
+            waker: None,
+        }),
+    });
+    (InboxTx(Arc::clone(&shared)), InboxRx(shared))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn frame(t: u64) -> Inbound {
+        Inbound {
+            t: SimTime::from_ns(t),
+            iface: 0,
+            what: Arrival::Can(CanFrame::new(1, &[t as u8]).unwrap()),
+        }
+    }
+
+    #[test]
+    fn holds_depth_arrivals_in_order_and_refuses_more() {
+        let (tx, mut rx) = inbox_with(2);
+        assert_eq!(tx.send(frame(1)), Ok(()));
+        assert_eq!(tx.send(frame(2)), Ok(()));
+        assert_eq!(tx.send(frame(3)), Err(InboxError::Full));
+        assert_eq!(rx.len(), 2);
+        assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(1));
+        assert_eq!(tx.send(frame(4)), Ok(()));
+        assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(2));
+        assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(4));
+        assert_eq!(rx.try_recv(), Err(TryRecvError::Empty));
+    }
+
+    #[test]
+    fn closes_when_the_last_sender_goes_after_what_is_waiting() {
+        let (tx, mut rx) = inbox();
+        let tx2 = tx.clone();
+        drop(tx);
+        tx2.send(frame(1)).unwrap();
+        drop(tx2);
+        assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(1));
+        assert_eq!(rx.try_recv(), Err(TryRecvError::Closed));
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        assert_eq!(rt.block_on(rx.recv()), None);
+    }
+
+    #[test]
+    fn a_send_to_a_dropped_receiver_is_refused() {
+        let (tx, rx) = inbox();
+        drop(rx);
+        assert_eq!(tx.send(frame(1)), Err(InboxError::Closed));
+    }
+
+    /// A receiver waiting in `recv` is woken by a send from another task, and by the last
+    /// sender going.
+    #[test]
+    fn a_waiting_receiver_is_woken() {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            let (tx, mut rx) = inbox();
+            let got = tokio::spawn(async move {
+                let a = rx.recv().await.map(|a| a.t);
+                let b = rx.recv().await.map(|a| a.t);
+                (a, b)
+            });
+            tokio::task::yield_now().await;
+            tx.send(frame(7)).unwrap();
+            tokio::task::yield_now().await;
+            drop(tx);
+            assert_eq!(got.await.unwrap(), (Some(SimTime::from_ns(7)), None));
+        });
+    }
 }

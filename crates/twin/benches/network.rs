@@ -16,7 +16,7 @@ use csp::reqrep::Client;
 use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use m6p_twin::network::NetworkSpec;
-use m6p_twin::runtime::{RunOptions, build_runtime, run};
+use m6p_twin::runtime::{RunOptions, build_runtime_for, build_virtual_runtime, run};
 
 /// Pings node 3 back to back: each reply sends the next request.
 struct PingPong {
@@ -64,7 +64,8 @@ fn node_cfg(name: &str, addr: u8) -> NodeConfig {
 
 /// Run `n` round trips; returns (wall time, simulated time).
 fn round_trips(n: u64) -> (Duration, SimTime) {
-    let rt = build_runtime(ClockMode::Virtual).expect("runtime");
+    // As the twin runs in virtual time: the paused clock's timer, no IO driver.
+    let rt = build_virtual_runtime().expect("runtime");
     rt.block_on(async move {
         let clock = Clock::new(ClockMode::Virtual);
         let bus = CanBus::new(CanBusConfig::new("bench"), 1);
@@ -135,7 +136,7 @@ fn bench_default_network(c: &mut Criterion) {
             let mut opts = RunOptions::new(net.clone(), Duration::from_secs(3600));
             opts.ground_plan
                 .insert(16, m6p_twin::default_plan(&net, Duration::from_secs(3600)));
-            let rt = build_runtime(opts.clock).expect("runtime");
+            let rt = build_runtime_for(&opts).expect("runtime");
             rt.block_on(run(opts, None)).expect("run")
         })
     });
@@ -149,7 +150,7 @@ fn default_scenario_10min(record: Option<&std::path::Path>) -> u64 {
     let loaded = load_default().expect("default scenario");
     let mut compiled = compile_loaded(&loaded);
     with_duration(&mut compiled, Duration::from_secs(600));
-    let rt = build_runtime(compiled.opts.clock).expect("runtime");
+    let rt = build_runtime_for(&compiled.opts).expect("runtime");
     let (outcome, stats) = rt
         .block_on(execute_recorded(&loaded, compiled, record))
         .expect("run");

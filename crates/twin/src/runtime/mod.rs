@@ -275,6 +275,12 @@ pub fn build_runtime_for(opts: &RunOptions) -> anyhow::Result<tokio::runtime::Ru
     if opts.clock != ClockMode::Virtual || opts.has_outside_links() {
         return build_runtime(opts.clock);
     }
+    build_virtual_runtime()
+}
+
+/// The runtime of a run in virtual time with no link to the outside: tokio's paused clock
+/// and its timer, no IO driver.
+pub fn build_virtual_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_current_thread()
         .enable_time()
         .start_paused(true)
