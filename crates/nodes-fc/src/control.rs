@@ -72,7 +72,7 @@
 //! - Null motion: bias 600 rpm (a tenth of the speed limit), gain 0.02 1/s, torque at most
 //!   5 % of the wheel limit.
 
-use nalgebra::{Matrix3, Matrix3x4, UnitQuaternion, Vector3, Vector4};
+use nalgebra::{Matrix3, Matrix3x4, Matrix4x3, UnitQuaternion, Vector3, Vector4};
 
 use crate::guidance::GuidanceTarget;
 use crate::truth::{BodyConfig, WheelConfig};
@@ -277,6 +277,23 @@ fn axis_matrix(wheels: &[WheelConfig; 4], healthy: [bool; 4]) -> Matrix3x4<f64> 
     })
 }
 
+/// The minimum-norm pseudo-inverse of the axis matrix, singular values below 1e-9 (axes
+/// coplanar to 1e-9 rad) counting as zero. At full rank (three healthy non-coplanar wheels
+/// or more: every tick of a healthy ADCS) it is `A^T (A A^T)^-1`, a 3x3 inverse; only near a
+/// rank loss does it take the SVD.
+fn pseudo_inverse(a: &Matrix3x4<f64>) -> Option<Matrix4x3<f64>> {
+    let aat = a * a.transpose();
+    let (tr, det) = (aat.trace(), aat.determinant());
+    // The smallest eigenvalue of A A^T is at least 4 det / tr^2 (the other two multiply to
+    // at most tr^2 / 4): above 1e-12, every singular value is above 1e-6.
+    if tr > 0.0 && 4.0 * det / (tr * tr) > 1e-12 {
+        if let Some(inv) = aat.try_inverse() {
+            return Some(a.transpose() * inv);
+        }
+    }
+    a.pseudo_inverse(1e-9).ok()
+}
+
 /// Unscaled minimum-norm motor torques for a body torque (see the module doc).
 fn allocate_unscaled(
     torque_body_nm: &Vector3<f64>,
@@ -287,8 +304,7 @@ fn allocate_unscaled(
         return Vector4::zeros();
     }
     let a = axis_matrix(wheels, healthy);
-    // Singular values below 1e-9 (axes coplanar to 1e-9 rad) count as zero.
-    let Ok(pinv) = a.pseudo_inverse(1e-9) else {
+    let Some(pinv) = pseudo_inverse(&a) else {
         return Vector4::zeros();
     };
     let mut tau = -(pinv * torque_body_nm);
@@ -411,6 +427,38 @@ pub fn mtq_torque_body_nm(m_body_am2: &Vector3<f64>, b_body_nt: &Vector3<f64>) -
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    /// The closed form is the SVD's pseudo-inverse wherever it is taken, and the SVD is
+    /// taken where the axes are (nearly) coplanar or fewer than three.
+    #[test]
+    fn the_pseudo_inverse_is_the_svds() {
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for k in 0..500 {
+            let mut a = Matrix3x4::from_fn(|_, _| next());
+            // Some with a column dropped, some with the last axis in the first two's plane.
+            match k % 5 {
+                3 => a.set_column(k % 4, &Vector3::zeros()),
+                4 => {
+                    let c = a.column(0) * 0.3 + a.column(1) * -0.7;
+                    a.set_column(3, &c);
+                    a.set_column(2, &(a.column(0) * 2.0));
+                }
+                _ => {}
+            }
+            let svd = a.pseudo_inverse(1e-9).unwrap();
+            let ours = pseudo_inverse(&a).unwrap();
+            assert!(
+                (svd - ours).norm() < 1e-9 * (1.0 + svd.norm()),
+                "k {k}:\n{svd}\n{ours}"
+            );
+        }
+    }
 
     fn body_torque(tau: &[f64; 4], wheels: &[WheelConfig; 4]) -> Vector3<f64> {
         -wheels
