@@ -370,14 +370,14 @@ impl ActivityBoard {
         let Some(v) = log.switches.get(&what) else {
             return 0.0;
         };
+        // The log is in time order: the switches inside the interval by binary search (the
+        // log holds up to 4096 per activity, and the EPS asks for six at every step).
+        let first = v.partition_point(|(t, _)| *t <= from);
+        let last = v.partition_point(|(t, _)| *t < to).max(first);
         let mut on_ns = 0u64;
-        let mut state = v
-            .iter()
-            .rev()
-            .find(|(t, _)| *t <= from)
-            .is_some_and(|&(_, on)| on);
+        let mut state = first.checked_sub(1).is_some_and(|i| v[i].1);
         let mut since = from;
-        for &(t, on) in v.iter().filter(|(t, _)| *t > from && *t < to) {
+        for &(t, on) in &v[first..last] {
             if state {
                 on_ns += (t - since).as_nanos() as u64;
             }
@@ -554,6 +554,41 @@ mod tests {
             Activity::UhfTx,
             ms(1_100_000) + std::time::Duration::from_nanos(1)
         ));
+    }
+
+    /// Duty by binary search equals the integral of the switches taken one by one, at
+    /// interval ends on, between and beside switches.
+    #[test]
+    fn duty_equals_the_switches_summed_one_by_one() {
+        let ns = SimTime::from_ns;
+        let a = ActivityBoard::new();
+        let mut log = Vec::new();
+        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut t = 0;
+        for _ in 0..300 {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            t += (seed >> 40) % 50;
+            let on = (seed >> 20) & 1 == 1;
+            a.set(Activity::SbandTx, ns(t), on).unwrap();
+            log.push((t, on));
+        }
+        let reference = |from: u64, to: u64| {
+            let on_at = |x: u64| log.iter().rev().find(|(t, _)| *t <= x).is_some_and(|l| l.1);
+            let on = (from..to).filter(|&x| on_at(x)).count();
+            on as f64 / (to - from) as f64
+        };
+        for (from, to) in [
+            (0, 1),
+            (0, t + 10),
+            (7, 93),
+            (100, 100),
+            (250, 1000),
+            (t, t + 5),
+        ] {
+            let d = ActivityBoard::duty(&a, Activity::SbandTx, ns(from), ns(to));
+            let r = if to > from { reference(from, to) } else { 0.0 };
+            assert!((d - r).abs() < 1e-12, "[{from}, {to}): {d} vs {r}");
+        }
     }
 
     #[test]
