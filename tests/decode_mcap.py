@@ -135,11 +135,24 @@ def resolve(messages: dict, scope: str, type_name: str) -> str:
         scope = scope.rpartition(".")[0]
 
 
+def f32_decimal(v: bytes) -> float:
+    """A single-precision value as its shortest decimal (0.1, not 0.10000000149011612), as
+    the twin's own decoder gives it."""
+    x = struct.unpack("<f", v)[0]
+    if x != x or abs(x) == float("inf"):
+        return x
+    for digits in range(1, 10):
+        d = float(f"{x:.{digits}g}")
+        if struct.pack("<f", d) == v:
+            return d
+    return x
+
+
 def scalar(ty: int, wt: int, v):
     if ty == T_DOUBLE:
         x = struct.unpack("<d", v)[0]
     elif ty == T_FLOAT:
-        x = struct.unpack("<f", v)[0]
+        x = f32_decimal(v)
     elif ty in (T_STRING,):
         return v.decode("utf-8", "replace")
     elif ty == T_BYTES:

@@ -299,11 +299,17 @@ fn float(x: f64) -> Value {
     Number::from_f64(x).map_or(Value::Null, Value::Number)
 }
 
+/// A single-precision value as the double nearest its shortest decimal (0.1f32 reads 0.1,
+/// not 0.10000000149011612): what was recorded, in the digits it has.
+fn f32_decimal(x: f32) -> f64 {
+    x.to_string().parse().unwrap_or(f64::NAN)
+}
+
 /// A scalar of type `ty` from one wire value.
 fn scalar(ty: Type, w: &Wire<'_>) -> anyhow::Result<Value> {
     Ok(match (ty, w) {
         (Type::Double, Wire::Fixed64(v)) => float(f64::from_bits(*v)),
-        (Type::Float, Wire::Fixed32(v)) => float(f64::from(f32::from_bits(*v))),
+        (Type::Float, Wire::Fixed32(v)) => float(f32_decimal(f32::from_bits(*v))),
         (Type::Uint64 | Type::Fixed64, Wire::Varint(v) | Wire::Fixed64(v)) => Value::from(*v),
         (Type::Int64 | Type::Sfixed64, Wire::Varint(v) | Wire::Fixed64(v)) => {
             Value::from(*v as i64)
@@ -492,6 +498,28 @@ pub mod nan_null {
         let n = v.len();
         <[Option<f64>; N]>::try_from(v)
             .map(|a| a.map(|x| x.unwrap_or(f64::NAN)))
+            .map_err(|_| serde::de::Error::invalid_length(n, &"the array's length"))
+    }
+}
+
+/// Serde for `[f32; N]` of which a non-finite element is null in JSON (single-precision
+/// fields of the recording): [`nan_null`]'s twin.
+pub mod nan_null32 {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    /// Each element, null when not finite.
+    pub fn serialize<S: Serializer, const N: usize>(v: &[f32; N], s: S) -> Result<S::Ok, S::Error> {
+        v.map(|x| x.is_finite().then_some(x)).serialize(s)
+    }
+
+    /// Each element, NaN for null.
+    pub fn deserialize<'de, D: Deserializer<'de>, const N: usize>(
+        d: D,
+    ) -> Result<[f32; N], D::Error> {
+        let v = Vec::<Option<f32>>::deserialize(d)?;
+        let n = v.len();
+        <[Option<f32>; N]>::try_from(v)
+            .map(|a| a.map(|x| x.unwrap_or(f32::NAN)))
             .map_err(|_| serde::de::Error::invalid_length(n, &"the array's length"))
     }
 }

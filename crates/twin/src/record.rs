@@ -105,7 +105,7 @@ pub const METADATA_NAME: &str = "m6p-twin";
 /// Name of the attachment holding the scenario text.
 pub const SCENARIO_ATTACHMENT: &str = "scenario.toml";
 /// Version of the recording layout (channels and fields), stored in the metadata.
-pub const FORMAT_VERSION: &str = "3";
+pub const FORMAT_VERSION: &str = "4";
 
 /// Topic of every decoded CSP packet.
 pub const TOPIC_CSP: &str = "/csp/packets";
@@ -474,23 +474,23 @@ pub struct PayloadMsg {
     pub msg: Option<bytes::Bytes>,
 }
 
-/// `/eps/power`: the EPS's state after one of its ticks.
+/// `/eps/power`: the EPS's state after one of its ticks (single precision: 7 digits).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, foxglove::Encode)]
 pub struct EpsPowerMsg {
     /// Simulated ns since the start of the run.
     pub t_ns: u64,
     /// State of charge, 0..1.
-    pub soc: f64,
+    pub soc: f32,
     /// Battery terminal voltage, V.
-    pub battery_v: f64,
+    pub battery_v: f32,
     /// Battery current, A (positive charging).
-    pub battery_a: f64,
+    pub battery_a: f32,
     /// Solar array power, W.
-    pub solar_w: f64,
+    pub solar_w: f32,
     /// Total load, W.
-    pub load_w: f64,
+    pub load_w: f32,
     /// Power of each panel, W (in the EPS's panel order).
-    pub panels_w: Vec<f64>,
+    pub panels_w: Vec<f32>,
     /// Channels on (bit = channel id: COMM1, COMM2, ECU, PC, PL12-PL15, S-band).
     pub channels: u16,
 }
@@ -698,21 +698,22 @@ pub struct SceneUpdateMsg {
 }
 
 /// A quaternion in the project's JSON: scalar first, as nalgebra and the ICD write it;
-/// a non-finite component is null.
+/// a non-finite component is null. Single precision: 6e-8, about 0.01 arcsecond.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, foxglove::Encode)]
 pub struct QuatWxyz {
     /// Scalar component.
-    pub w: Option<f64>,
+    pub w: Option<f32>,
     /// i component.
-    pub x: Option<f64>,
+    pub x: Option<f32>,
     /// j component.
-    pub y: Option<f64>,
+    pub y: Option<f32>,
     /// k component.
-    pub z: Option<f64>,
+    pub z: Option<f32>,
 }
 
 /// `/fc/truth/state`: the FC's true state at one instant. Vectors are `[x, y, z]` in the
-/// frame their name says; a non-finite number is null.
+/// frame their name says; a non-finite number is null. Positions, velocity and the geodetic
+/// point are double precision; the rest single (7 digits: 0.01 arcsecond of attitude).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, foxglove::Encode)]
 pub struct TruthStateMsg {
     /// Simulated ns since the start of the run.
@@ -735,33 +736,34 @@ pub struct TruthStateMsg {
     /// Height above the WGS-84 ellipsoid, m.
     pub alt_m: Option<f64>,
     /// Unit vector to the sun, ECI.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub sun_eci_unit: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub sun_eci_unit: [f32; 3],
     /// Unit vector to the sun, body frame.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub sun_body_unit: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub sun_body_unit: [f32; 3],
     /// Visible fraction of the solar disc: 1 sunlit, 0 umbra.
-    pub sun_visible_fraction: Option<f64>,
+    pub sun_visible_fraction: Option<f32>,
     /// Geomagnetic field, ECI, nT.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub b_eci_nt: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub b_eci_nt: [f32; 3],
     /// Geomagnetic field, body frame, nT.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub b_body_nt: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub b_body_nt: [f32; 3],
     /// Body rate relative to ECI, body frame, deg/s.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub w_body_deg_s: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub w_body_deg_s: [f32; 3],
     /// Norm of the body rate, deg/s.
-    pub rate_deg_s: Option<f64>,
+    pub rate_deg_s: Option<f32>,
     /// Reaction wheel speeds relative to the body, rpm (wheels 1-4).
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub wheel_speed_rpm: [f64; 4],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub wheel_speed_rpm: [f32; 4],
     /// Magnetorquer dipoles as applied, body X, Y, Z, A m^2.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub mtq_dipole_am2: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub mtq_dipole_am2: [f32; 3],
 }
 
 /// `/fc/adcs`: what the ADCS believes and does at one instant; a non-finite number is null.
+/// Single precision (7 digits), as flight software computes it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, foxglove::Encode)]
 pub struct AdcsMsg {
     /// Simulated ns since the start of the run.
@@ -775,29 +777,29 @@ pub struct AdcsMsg {
     /// Estimated attitude (body to ECI), null until the estimator is initialised.
     pub q_eci_from_body_est: Option<QuatWxyz>,
     /// Estimated body rate, body frame, deg/s.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub w_body_deg_s_est: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub w_body_deg_s_est: [f32; 3],
     /// Estimated gyro bias, body frame, deg/s.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub gyro_bias_deg_s_est: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub gyro_bias_deg_s_est: [f32; 3],
     /// Target attitude (body to ECI) of the mode in effect, null when it has none.
     pub q_eci_from_body_target: Option<QuatWxyz>,
     /// Rotation angle from the true to the target attitude, deg.
-    pub pointing_error_deg: Option<f64>,
+    pub pointing_error_deg: Option<f32>,
     /// Angle between the mode's pointing axis and its target direction, deg.
-    pub axis_error_deg: Option<f64>,
+    pub axis_error_deg: Option<f32>,
     /// Elevation of the satellite from the ground target, deg (earth-target modes).
-    pub target_elevation_deg: Option<f64>,
+    pub target_elevation_deg: Option<f32>,
     /// Rotation angle from the true to the estimated attitude, deg.
-    pub estimation_error_deg: Option<f64>,
+    pub estimation_error_deg: Option<f32>,
     /// Reaction wheel states: 0 off, 1 on, 2 fault.
     pub rw_state: [u8; 4],
     /// Commanded wheel motor torques, N m.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub wheel_torque_cmd_nm: [f64; 4],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub wheel_torque_cmd_nm: [f32; 4],
     /// Commanded magnetorquer dipoles, body X, Y, Z, A m^2.
-    #[serde(with = "crate::protobuf::nan_null")]
-    pub mtq_dipole_cmd_am2: [f64; 3],
+    #[serde(with = "crate::protobuf::nan_null32")]
+    pub mtq_dipole_cmd_am2: [f32; 3],
     /// Magnetorquer states: 0 off, 1 positive, 2 negative.
     pub mtq_state: [u8; 3],
 }
@@ -1146,6 +1148,17 @@ fn nums<const N: usize>(xs: [f64; N]) -> [f64; N] {
     xs.map(|x| if x.is_finite() { x } else { f64::NAN })
 }
 
+/// `x` in single precision when finite there, else `None` (JSON null).
+fn num32(x: f64) -> Option<f32> {
+    let y = x as f32;
+    y.is_finite().then_some(y)
+}
+
+/// Each element in single precision, NaN when not finite there.
+fn nums32<const N: usize>(xs: [f64; N]) -> [f32; N] {
+    xs.map(|x| num32(x).unwrap_or(f32::NAN))
+}
+
 /// The components of a 3-vector (an nalgebra `Vector3<f64>`).
 fn xyz<V: std::ops::Index<usize, Output = f64>>(v: &V) -> [f64; 3] {
     [v[0], v[1], v[2]]
@@ -1169,10 +1182,10 @@ fn quat_xyzw([w, x, y, z]: [f64; 4]) -> Option<QuatMsg> {
 /// A quaternion `[w, x, y, z]` in the project's JSON.
 fn quat_wxyz([w, x, y, z]: [f64; 4]) -> QuatWxyz {
     QuatWxyz {
-        w: num(w),
-        x: num(x),
-        y: num(y),
-        z: num(z),
+        w: num32(w),
+        x: num32(x),
+        y: num32(y),
+        z: num32(z),
     }
 }
 
@@ -1212,15 +1225,15 @@ fn truth_state(t_ns: u64, truth: &TruthSnapshot) -> TruthStateMsg {
         lat_deg: geo.map(|g| g.lat_deg()).and_then(num),
         lon_deg: geo.map(|g| g.lon_deg()).and_then(num),
         alt_m: geo.map(|g| g.alt_m).and_then(num),
-        sun_eci_unit: nums(xyz(&truth.sun_eci_unit)),
-        sun_body_unit: nums(xyz(&eci_to_body(q, &truth.sun_eci_unit))),
-        sun_visible_fraction: num(truth.in_eclipse_fraction_visible),
-        b_eci_nt: nums(xyz(&truth.b_eci_nt)),
-        b_body_nt: nums(xyz(&eci_to_body(q, &truth.b_eci_nt))),
-        w_body_deg_s: nums(w_body_deg_s),
-        rate_deg_s: num(rate_deg_s),
-        wheel_speed_rpm: nums(truth.wheel_speed_rad_s.map(|w| w * RAD_S_TO_RPM)),
-        mtq_dipole_am2: nums(truth.mtq_dipole_am2),
+        sun_eci_unit: nums32(xyz(&truth.sun_eci_unit)),
+        sun_body_unit: nums32(xyz(&eci_to_body(q, &truth.sun_eci_unit))),
+        sun_visible_fraction: num32(truth.in_eclipse_fraction_visible),
+        b_eci_nt: nums32(xyz(&truth.b_eci_nt)),
+        b_body_nt: nums32(xyz(&eci_to_body(q, &truth.b_eci_nt))),
+        w_body_deg_s: nums32(w_body_deg_s),
+        rate_deg_s: num32(rate_deg_s),
+        wheel_speed_rpm: nums32(truth.wheel_speed_rad_s.map(|w| w * RAD_S_TO_RPM)),
+        mtq_dipole_am2: nums32(truth.mtq_dipole_am2),
     }
 }
 
@@ -1254,8 +1267,8 @@ fn location_fix(timestamp: LogTime, state: &TruthStateMsg) -> Option<LocationFix
 
 /// The `/fc/adcs` message of `adcs` at `t_ns`.
 fn adcs_msg(t_ns: u64, adcs: &AdcsSnapshot) -> AdcsMsg {
-    let deg = |v: [f64; 3]| nums(v.map(f64::to_degrees));
-    let fin = |x: Option<f64>| x.and_then(num);
+    let deg = |v: [f64; 3]| nums32(v.map(f64::to_degrees));
+    let fin = |x: Option<f64>| x.and_then(num32);
     AdcsMsg {
         t_ns,
         mode_in_effect: adcs.mode_in_effect,
@@ -1276,8 +1289,8 @@ fn adcs_msg(t_ns: u64, adcs: &AdcsSnapshot) -> AdcsMsg {
         target_elevation_deg: fin(adcs.target_elevation_deg),
         estimation_error_deg: fin(adcs.estimation_error_deg),
         rw_state: adcs.rw_state,
-        wheel_torque_cmd_nm: nums(adcs.wheel_torque_cmd_nm),
-        mtq_dipole_cmd_am2: nums(adcs.mtq_dipole_cmd_am2),
+        wheel_torque_cmd_nm: nums32(adcs.wheel_torque_cmd_nm),
+        mtq_dipole_cmd_am2: nums32(adcs.mtq_dipole_cmd_am2),
         mtq_state: adcs.mtq_state,
     }
 }
@@ -1835,12 +1848,12 @@ impl EventEncoder {
                 } => {
                     let msg = EpsPowerMsg {
                         t_ns,
-                        soc: *soc,
-                        battery_v: *battery_v,
-                        battery_a: *battery_a,
-                        solar_w: *solar_w,
-                        load_w: *load_w,
-                        panels_w: panels_w.clone(),
+                        soc: *soc as f32,
+                        battery_v: *battery_v as f32,
+                        battery_a: *battery_a as f32,
+                        solar_w: *solar_w as f32,
+                        load_w: *load_w as f32,
+                        panels_w: panels_w.iter().map(|&w| w as f32).collect(),
                         channels: *channels,
                     };
                     emit_msg(buf, base_ns, (ChannelKind::EpsPower, ""), *t, &msg, emit)

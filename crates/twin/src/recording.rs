@@ -900,8 +900,8 @@ impl fmt::Display for Summary {
                 opt(x.lat_deg, 3),
                 opt(x.lon_deg, 3),
                 opt(x.alt_m.map(|a| a / 1e3), 3),
-                opt(x.rate_deg_s, 4),
-                opt(x.sun_visible_fraction, 2)
+                opt(x.rate_deg_s.map(f64::from), 4),
+                opt(x.sun_visible_fraction.map(f64::from), 2)
             )?;
         }
         if let Some(a) = &self.adcs_last {
@@ -912,8 +912,8 @@ impl fmt::Display for Summary {
                 a.mode_in_effect,
                 a.mode_commanded,
                 a.state,
-                opt(a.pointing_error_deg, 3),
-                opt(a.estimation_error_deg, 3)
+                opt(a.pointing_error_deg.map(f64::from), 3),
+                opt(a.estimation_error_deg.map(f64::from), 3)
             )?;
         }
         if !self.expectations.is_empty() {
