@@ -9,17 +9,19 @@
 //!   environment, sensors, flight software, the truth's integration), without the network,
 //!   the other nodes or publishing. It is the floor a run of the scenario cannot go below.
 //!
-//! Each run is timed in CPU time (user + system of the process, `getrusage`) and in wall
-//! time; the report gives medians and spreads (min and max) per variant, the ratios of the
-//! medians, and the peak resident memory of each variant (VmHWM, reset before each run
-//! through `/proc/self/clear_refs` where the kernel allows it).
+//! Each run is a process of its own (`m6p-twin` runs itself with a hidden `bench-run`
+//! command, [`run_one`]), so that no run inherits the heap an earlier one left behind: it
+//! is timed in CPU time (user + system, `getrusage`) and wall time around the run (not the
+//! process's start and the scenario's loading), and its peak resident memory is the
+//! process's (VmHWM). The report gives medians and spreads (min and max) per variant, the
+//! ratios of the medians and the peak memory of each variant.
 
 use std::time::{Duration, Instant};
 
 use csp::SimTime;
 use csp::node::{Host, IfaceConfig, NodeConfig};
 use csp::router::Route;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::exec::{self, Loaded};
 
@@ -46,17 +48,26 @@ impl Variant {
             Variant::AdcsFloor => "adcs_floor",
         }
     }
+
+    /// The variant of a name.
+    pub fn from_name(name: &str) -> Option<Variant> {
+        Variant::ALL.into_iter().find(|v| v.name() == name)
+    }
 }
 
-/// One timed run.
-#[derive(Debug, Clone, Copy, Default)]
+/// One timed run, as the `bench-run` process reports it.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct Sample {
     /// CPU seconds (user + system).
     pub cpu_s: f64,
     /// Wall seconds.
     pub wall_s: f64,
-    /// Peak resident memory during the run, MiB (when the kernel tells it).
+    /// Peak resident memory of the run's process, MiB (when the kernel tells it).
     pub peak_rss_mib: Option<f64>,
+    /// The recording's bytes (recorded runs).
+    pub mcap_bytes: u64,
+    /// Its messages.
+    pub messages: u64,
 }
 
 /// Median, minimum and maximum of a set of figures.
@@ -206,11 +217,6 @@ fn cpu_now_s() -> f64 {
     f64::NAN
 }
 
-/// Reset the peak resident memory (VmHWM) to the current one: `5` to clear_refs (Linux).
-fn reset_peak_rss() {
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
-}
-
 /// The peak resident memory (VmHWM), MiB.
 pub fn peak_rss_mib() -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -247,41 +253,66 @@ fn adcs_floor_host(loaded: &Loaded, duration: Duration) -> (Host<nodes_fc::FcApp
     (host, events)
 }
 
-/// Measure `loaded` over `duration`, `runs` runs of each variant, interleaved.
-pub fn run(loaded: &Loaded, duration: Duration, runs: usize) -> anyhow::Result<BenchReport> {
+/// One run of `variant` over `duration` in this process (recorded to `record`), timed:
+/// what the hidden `bench-run` command does and prints.
+pub fn run_one(
+    loaded: &Loaded,
+    duration: Duration,
+    variant: Variant,
+    record: &std::path::Path,
+) -> anyhow::Result<Sample> {
+    let cpu0 = cpu_now_s();
+    let wall0 = Instant::now();
+    let mut stats = None;
+    match variant {
+        Variant::AdcsFloor => {
+            std::hint::black_box(adcs_floor(loaded, duration));
+        }
+        Variant::Plain | Variant::Recorded => {
+            let mut compiled = exec::compile_loaded(loaded);
+            compiled.opts.duration = Some(duration);
+            compiled.opts.clock = bus::ClockMode::Virtual;
+            let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
+            let record = (variant == Variant::Recorded).then_some(record);
+            stats = rt
+                .block_on(exec::execute_recorded_without_files(
+                    loaded, compiled, record,
+                ))?
+                .1;
+        }
+    }
+    Ok(Sample {
+        cpu_s: cpu_now_s() - cpu0,
+        wall_s: wall0.elapsed().as_secs_f64(),
+        peak_rss_mib: peak_rss_mib(),
+        mcap_bytes: stats.as_ref().map_or(0, |s| s.bytes),
+        messages: stats.as_ref().map_or(0, |s| s.messages),
+    })
+}
+
+/// Measure `loaded` over `duration`, `runs` runs of each variant, interleaved; `one` runs
+/// one (in a process of its own: see the module docs), recording to the file it is given.
+pub fn run(
+    loaded: &Loaded,
+    duration: Duration,
+    runs: usize,
+    mut one: impl FnMut(Variant, &std::path::Path) -> anyhow::Result<Sample>,
+) -> anyhow::Result<BenchReport> {
     let runs = runs.max(1);
     let file = std::env::temp_dir().join(format!("m6p-twin-bench-{}.mcap", std::process::id()));
     let mut samples: std::collections::BTreeMap<&str, Vec<Sample>> = Default::default();
-    let mut last_stats = None;
+    let mut last_recorded = None;
     for round in 0..runs {
         for k in 0..Variant::ALL.len() {
             let v = Variant::ALL[(round + k) % Variant::ALL.len()];
-            reset_peak_rss();
-            let cpu0 = cpu_now_s();
-            let wall0 = Instant::now();
-            match v {
-                Variant::AdcsFloor => {
-                    std::hint::black_box(adcs_floor(loaded, duration));
-                }
-                Variant::Plain | Variant::Recorded => {
-                    let mut compiled = exec::compile_loaded(loaded);
-                    compiled.opts.duration = Some(duration);
-                    compiled.opts.clock = bus::ClockMode::Virtual;
-                    let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
-                    let record = (v == Variant::Recorded).then_some(file.as_path());
-                    let (_, stats) = rt.block_on(exec::execute_recorded_without_files(
-                        loaded, compiled, record,
-                    ))?;
-                    if stats.is_some() {
-                        last_stats = stats;
-                    }
-                }
+            let sample = one(v, &file);
+            if sample.is_err() {
+                let _ = std::fs::remove_file(&file);
             }
-            let sample = Sample {
-                cpu_s: cpu_now_s() - cpu0,
-                wall_s: wall0.elapsed().as_secs_f64(),
-                peak_rss_mib: peak_rss_mib(),
-            };
+            let sample = sample?;
+            if v == Variant::Recorded {
+                last_recorded = Some(sample);
+            }
             samples.entry(v.name()).or_default().push(sample);
         }
     }
@@ -302,7 +333,7 @@ pub fn run(loaded: &Loaded, duration: Duration, runs: usize) -> anyhow::Result<B
     let wall = |v: Variant| variants.get(v.name()).map_or(f64::NAN, |r| r.wall_s.median);
     let sim_s = duration.as_secs_f64();
     let sim_h = sim_s / 3600.0;
-    let (bytes, messages) = last_stats.map_or((0, 0), |s| (s.bytes, s.messages));
+    let (bytes, messages) = last_recorded.map_or((0, 0), |s| (s.mcap_bytes, s.messages));
     let peak = variants
         .values()
         .filter_map(|r| r.peak_rss_mib.map(|m| m.max))

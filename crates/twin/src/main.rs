@@ -79,6 +79,22 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// One run of `bench` in a process of its own (what `bench` runs; prints its figures as
+    /// JSON).
+    #[command(hide = true)]
+    BenchRun {
+        /// Scenario file [default: the embedded default scenario].
+        scenario: Option<PathBuf>,
+        /// `plain`, `recorded` or `adcs_floor`.
+        #[arg(long)]
+        variant: String,
+        /// Simulated duration, ns.
+        #[arg(long)]
+        duration_ns: u64,
+        /// Where a recorded run records.
+        #[arg(long)]
+        record: PathBuf,
+    },
     /// Join a running twin over KISS/TCP as a ground node and send requests.
     Gs(GsArgs),
     /// List the passes of a scenario's orbit over its ground stations (`[comm] stations`,
@@ -367,7 +383,10 @@ fn main() -> ExitCode {
     let cli =
         <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     // A benchmark runs the scenario many times: only warnings, unless RUST_LOG says more.
-    let default_filter = if matches!(cli.command, Command::Bench { .. } | Command::Campaign(_)) {
+    let default_filter = if matches!(
+        cli.command,
+        Command::Bench { .. } | Command::BenchRun { .. } | Command::Campaign(_)
+    ) {
         "warn"
     } else {
         "info,foxglove=warn"
@@ -413,6 +432,12 @@ fn main() -> ExitCode {
             runs,
             json,
         } => cmd_bench(scenario.as_deref(), duration, runs, json),
+        Command::BenchRun {
+            scenario,
+            variant,
+            duration_ns,
+            record,
+        } => cmd_bench_run(scenario.as_deref(), &variant, duration_ns, &record),
         Command::Gs(a) => cmd_gs(a),
         Command::Passes {
             scenario,
@@ -724,12 +749,55 @@ fn cmd_bench(
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
     };
-    let report = m6p_twin::bench::run(&loaded, duration, runs)?;
+    let exe = std::env::current_exe().context("finding the m6p-twin executable")?;
+    let report = m6p_twin::bench::run(&loaded, duration, runs, |variant, record| {
+        let mut cmd = std::process::Command::new(&exe);
+        cmd.arg("bench-run")
+            .args(["--variant", variant.name()])
+            .args(["--duration-ns", &duration.as_nanos().to_string()])
+            .arg("--record")
+            .arg(record);
+        if let Some(p) = scenario {
+            cmd.arg(p);
+        }
+        let out = cmd
+            .stdin(std::process::Stdio::null())
+            .output()
+            .with_context(|| format!("running {}", exe.display()))?;
+        if !out.status.success() {
+            anyhow::bail!(
+                "the {} run failed ({}): {}",
+                variant.name(),
+                out.status,
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+        }
+        serde_json::from_slice(&out.stdout)
+            .with_context(|| format!("reading the {} run's figures", variant.name()))
+    })?;
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print!("{}", report.text());
     }
+    Ok(true)
+}
+
+fn cmd_bench_run(
+    scenario: Option<&std::path::Path>,
+    variant: &str,
+    duration_ns: u64,
+    record: &std::path::Path,
+) -> anyhow::Result<bool> {
+    let variant = m6p_twin::bench::Variant::from_name(variant)
+        .with_context(|| format!("no bench variant {variant:?}"))?;
+    let loaded = match scenario {
+        Some(p) => exec::load(p)?,
+        None => exec::load_default()?,
+    };
+    let sample =
+        m6p_twin::bench::run_one(&loaded, Duration::from_nanos(duration_ns), variant, record)?;
+    println!("{}", serde_json::to_string(&sample)?);
     Ok(true)
 }
 
