@@ -306,12 +306,25 @@ impl ReplyPattern {
         if body.len() % 2 != 0 {
             return Err(format!("`{s}` is not hex bytes: an odd number of digits"));
         }
-        let bytes = (0..body.len() / 2)
-            .map(|i| match &body[2 * i..2 * i + 2] {
-                "??" => Ok(None),
-                pair => u8::from_str_radix(pair, 16)
+        // By bytes, not by string slices: a character of several bytes is not hex, and a
+        // slice through it would panic.
+        if let Some(c) = body.chars().find(|c| !c.is_ascii()) {
+            return Err(format!("`{s}` is not hex bytes: `{c}`"));
+        }
+        let bytes = body
+            .as_bytes()
+            .chunks(2)
+            .map(|pair| match pair {
+                b"??" => Ok(None),
+                _ => std::str::from_utf8(pair)
+                    .ok()
+                    .filter(|p| p.bytes().all(|c| c.is_ascii_hexdigit()))
+                    .and_then(|p| u8::from_str_radix(p, 16).ok())
                     .map(Some)
-                    .map_err(|_| format!("`{s}` is not hex bytes: `{pair}` (use ?? for any byte)")),
+                    .ok_or_else(|| {
+                        let pair = String::from_utf8_lossy(pair);
+                        format!("`{s}` is not hex bytes: `{pair}` (use ?? for any byte)")
+                    }),
             })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(ReplyPattern { bytes, open_end })
@@ -586,8 +599,18 @@ mod tests {
         assert_eq!(p.to_string(), "0101??01...");
         let exact = ReplyPattern::parse("ff00").unwrap();
         assert!(exact.matches(&[0xff, 0]) && !exact.matches(&[0xff, 0, 0]));
-        for bad in ["0", "zz", "01 0?", "... 01"] {
+        for bad in ["0", "zz", "01 0?", "... 01", "+f"] {
             assert!(ReplyPattern::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    /// A character of more than one byte is an error, not a panic (the fuzzer's
+    /// scenario_parser found `data = "... f\u{45d}0506 ..."` slicing inside the character).
+    #[test]
+    fn a_reply_pattern_with_a_multibyte_character_is_an_error() {
+        for bad in ["f\u{45d}0506b9", "\u{45d}", "0\u{e9}", "01 \u{1f600} ..."] {
+            let e = ReplyPattern::parse(bad).unwrap_err();
+            assert!(e.contains("not hex bytes"), "{bad}: {e}");
         }
     }
 }
