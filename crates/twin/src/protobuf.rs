@@ -480,46 +480,50 @@ pub mod hex_bytes_opt {
     }
 }
 
-/// Serde for `[f64; N]` whose non-finite elements are null (the decoded JSON's form of a
-/// NaN in a repeated `double`).
+/// Serde for `[f64; N]` and `[f32; N]` whose non-finite elements are null (the decoded
+/// JSON's form of a NaN in a repeated `double` or `float`).
 pub mod nan_null {
+    use serde::de::DeserializeOwned;
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
+    /// A float that can be null in JSON.
+    pub trait Float: Copy + Serialize + DeserializeOwned {
+        /// Not-a-number, for null.
+        const NAN: Self;
+        /// Whether neither infinite nor NaN.
+        fn finite(self) -> bool;
+    }
+
+    impl Float for f64 {
+        const NAN: Self = f64::NAN;
+        fn finite(self) -> bool {
+            self.is_finite()
+        }
+    }
+
+    impl Float for f32 {
+        const NAN: Self = f32::NAN;
+        fn finite(self) -> bool {
+            self.is_finite()
+        }
+    }
+
     /// Each element, null when not finite.
-    pub fn serialize<S: Serializer, const N: usize>(v: &[f64; N], s: S) -> Result<S::Ok, S::Error> {
-        v.map(|x| x.is_finite().then_some(x)).serialize(s)
+    pub fn serialize<S: Serializer, T: Float, const N: usize>(
+        v: &[T; N],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        v.map(|x| x.finite().then_some(x)).serialize(s)
     }
 
     /// Each element, NaN for null.
-    pub fn deserialize<'de, D: Deserializer<'de>, const N: usize>(
+    pub fn deserialize<'de, D: Deserializer<'de>, T: Float, const N: usize>(
         d: D,
-    ) -> Result<[f64; N], D::Error> {
-        let v = Vec::<Option<f64>>::deserialize(d)?;
+    ) -> Result<[T; N], D::Error> {
+        let v = Vec::<Option<T>>::deserialize(d)?;
         let n = v.len();
-        <[Option<f64>; N]>::try_from(v)
-            .map(|a| a.map(|x| x.unwrap_or(f64::NAN)))
-            .map_err(|_| serde::de::Error::invalid_length(n, &"the array's length"))
-    }
-}
-
-/// Serde for `[f32; N]` of which a non-finite element is null in JSON (single-precision
-/// fields of the recording): [`nan_null`]'s twin.
-pub mod nan_null32 {
-    use serde::{Deserialize, Deserializer, Serialize, Serializer};
-
-    /// Each element, null when not finite.
-    pub fn serialize<S: Serializer, const N: usize>(v: &[f32; N], s: S) -> Result<S::Ok, S::Error> {
-        v.map(|x| x.is_finite().then_some(x)).serialize(s)
-    }
-
-    /// Each element, NaN for null.
-    pub fn deserialize<'de, D: Deserializer<'de>, const N: usize>(
-        d: D,
-    ) -> Result<[f32; N], D::Error> {
-        let v = Vec::<Option<f32>>::deserialize(d)?;
-        let n = v.len();
-        <[Option<f32>; N]>::try_from(v)
-            .map(|a| a.map(|x| x.unwrap_or(f32::NAN)))
+        <[Option<T>; N]>::try_from(v)
+            .map(|a| a.map(|x| x.unwrap_or(T::NAN)))
             .map_err(|_| serde::de::Error::invalid_length(n, &"the array's length"))
     }
 }

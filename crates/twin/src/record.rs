@@ -736,29 +736,29 @@ pub struct TruthStateMsg {
     /// Height above the WGS-84 ellipsoid, m.
     pub alt_m: Option<f64>,
     /// Unit vector to the sun, ECI.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub sun_eci_unit: [f32; 3],
     /// Unit vector to the sun, body frame.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub sun_body_unit: [f32; 3],
     /// Visible fraction of the solar disc: 1 sunlit, 0 umbra.
     pub sun_visible_fraction: Option<f32>,
     /// Geomagnetic field, ECI, nT.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub b_eci_nt: [f32; 3],
     /// Geomagnetic field, body frame, nT.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub b_body_nt: [f32; 3],
     /// Body rate relative to ECI, body frame, deg/s.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub w_body_deg_s: [f32; 3],
     /// Norm of the body rate, deg/s.
     pub rate_deg_s: Option<f32>,
     /// Reaction wheel speeds relative to the body, rpm (wheels 1-4).
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub wheel_speed_rpm: [f32; 4],
     /// Magnetorquer dipoles as applied, body X, Y, Z, A m^2.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub mtq_dipole_am2: [f32; 3],
 }
 
@@ -777,10 +777,10 @@ pub struct AdcsMsg {
     /// Estimated attitude (body to ECI), null until the estimator is initialised.
     pub q_eci_from_body_est: Option<QuatWxyz>,
     /// Estimated body rate, body frame, deg/s.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub w_body_deg_s_est: [f32; 3],
     /// Estimated gyro bias, body frame, deg/s.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub gyro_bias_deg_s_est: [f32; 3],
     /// Target attitude (body to ECI) of the mode in effect, null when it has none.
     pub q_eci_from_body_target: Option<QuatWxyz>,
@@ -795,10 +795,10 @@ pub struct AdcsMsg {
     /// Reaction wheel states: 0 off, 1 on, 2 fault.
     pub rw_state: [u8; 4],
     /// Commanded wheel motor torques, N m.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub wheel_torque_cmd_nm: [f32; 4],
     /// Commanded magnetorquer dipoles, body X, Y, Z, A m^2.
-    #[serde(with = "crate::protobuf::nan_null32")]
+    #[serde(with = "crate::protobuf::nan_null")]
     pub mtq_dipole_cmd_am2: [f32; 3],
     /// Magnetorquer states: 0 off, 1 positive, 2 negative.
     pub mtq_state: [u8; 3],
