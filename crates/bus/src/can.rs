@@ -38,11 +38,11 @@
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard};
+use std::task::Waker;
 use std::time::Duration;
 
 use csp::SimTime;
 use csp::cfp::{CanFrame, CfpId};
-use tokio::sync::Notify;
 
 use crate::clock::Clock;
 use crate::impair::{Fate, ImpairRng, ImpairmentSet, Impairments};
@@ -384,13 +384,18 @@ struct State {
     trace: Option<TraceTx>,
     /// The last frame whose bits were counted, and its count.
     last_bits: Option<(CanFrame, u32)>,
+    /// Something the bus task waits for changed (a queue that was empty has a frame, a
+    /// fault came or went) since it last looked; under the state's lock, so that telling
+    /// the task costs no lock of its own.
+    bell: bool,
+    /// The bus task, while it waits.
+    bus_waker: Option<Waker>,
 }
 
 /// A CAN segment; clone it freely (all clones are the same bus).
 #[derive(Debug, Clone)]
 pub struct CanBus {
     state: Arc<Mutex<State>>,
-    wake: Arc<Notify>,
 }
 
 /// An endpoint's handle for sending on the bus.
@@ -403,40 +408,30 @@ pub struct CanPort {
 impl CanPort {
     /// Queue `frame`, ready to go at `t`.
     pub fn send(&self, t: SimTime, frame: CanFrame) {
-        {
+        self.send_train(t, frame, || None);
+    }
+
+    /// Queue `first` and then each frame `more` gives until it gives none, all ready to go
+    /// at `t`, under one lock of the bus (a packet's fragments).
+    pub fn send_train(
+        &self,
+        t: SimTime,
+        first: CanFrame,
+        mut more: impl FnMut() -> Option<CanFrame>,
+    ) {
+        let waker = {
             let mut st = self.bus.lock();
-            let limit = st.cfg.tx_queue_frames;
-            let st = &mut *st;
-            let Some(port) = st.ports.get_mut(self.idx) else {
-                return;
-            };
-            port.stats.offered += 1;
-            if !port.enabled {
-                port.stats.off_drops += 1;
-                port.stats.sent_while_off += 1;
-                port.stats.first_sent_while_off.get_or_insert(t);
-                lost(
-                    &st.trace,
-                    &st.name,
-                    &port.stats.name,
-                    t,
-                    frame,
-                    FrameLoss::Off,
-                );
-                return;
+            let mut ring = false;
+            let mut frame = Some(first);
+            while let Some(f) = frame {
+                ring |= st.queue(self.idx, t, f);
+                frame = more();
             }
-            if port.queue.len() >= limit {
-                let name = &port.stats.name;
-                crate::count_loss(&mut port.stats.tx_overflow, |n| {
-                    format!("{name}: transmit queue full ({limit} frames): frame lost ({n} so far)")
-                });
-                lost(&st.trace, &st.name, name, t, frame, FrameLoss::QueueFull);
-                return;
-            }
-            port.queue.push_back((t, frame));
-            port.stats.tx_queue_max = port.stats.tx_queue_max.max(port.queue.len() as u64);
+            if ring { st.ring() } else { None }
+        };
+        if let Some(w) = waker {
+            w.wake();
         }
-        self.bus.wake.notify_one();
     }
     /// Frames the transmit queue can still take (a sender that must not lose part of a
     /// packet checks this first).
@@ -486,8 +481,9 @@ impl CanBus {
                 rng,
                 trace: None,
                 last_bits: None,
+                bell: false,
+                bus_waker: None,
             })),
-            wake: Arc::new(Notify::new()),
         }
     }
 
@@ -606,8 +602,10 @@ impl CanBus {
                 st.babble_next.remove(&id);
             }
         }
-        drop(st);
-        self.wake.notify_one();
+        if let Some(w) = st.ring() {
+            drop(st);
+            w.wake();
+        }
     }
 
     /// Send every frame that crosses the bus to `tx`.
@@ -630,21 +628,39 @@ impl CanBus {
         s
     }
 
+    /// Ready once something the bus task waits for changed ([`State::ring`]).
+    fn rung(&self) -> impl std::future::Future<Output = ()> + '_ {
+        std::future::poll_fn(|cx| {
+            let mut st = self.lock();
+            if st.bell {
+                st.bell = false;
+                return std::task::Poll::Ready(());
+            }
+            match &mut st.bus_waker {
+                Some(w) if w.will_wake(cx.waker()) => {}
+                w => *w = Some(cx.waker().clone()),
+            }
+            std::task::Poll::Pending
+        })
+    }
+
     /// The bus task: serialise, arbitrate and deliver until the runtime stops.
     pub async fn run(self, clock: Clock) {
+        let mut timer = crate::clock::Timer::new(clock);
         loop {
             let next_wake = {
                 let mut st = self.lock();
                 let now = clock.now();
+                // Whatever rang the bell is seen now.
+                st.bell = false;
                 st.schedule(now);
                 st.deliver_due(now);
                 st.next_wake()
             };
-            let notified = self.wake.notified();
             tokio::select! {
                 biased;
-                () = notified => {}
-                () = clock.sleep_until(next_wake) => {}
+                () = self.rung() => {}
+                () = timer.sleep_until(next_wake) => {}
             }
         }
     }
@@ -887,11 +903,41 @@ impl State {
         queued.chain(babblers)
     }
 
+    /// The instant the first candidate is ready, and the winner of the arbitration held
+    /// when the bus is free for it: among the frames ready by then, the lowest id wins
+    /// (ties, impossible on a real bus, by attachment order, a port's own queue before its
+    /// babble). One pass over the candidates (a bus-off port's purge, which may come
+    /// between, takes none of them).
+    fn contest(&self) -> Option<(SimTime, Candidate)> {
+        let key = |c: &Candidate| (c.id, c.port, c.babble.is_some());
+        let better =
+            |c: &Candidate, best: &Option<Candidate>| best.is_none_or(|b| key(c) < key(&b));
+        // The best of those ready when the bus frees, and the best of the earliest.
+        let (mut by_free, mut first): (Option<Candidate>, Option<Candidate>) = (None, None);
+        for c in self.candidates() {
+            if c.ready <= self.busy_until && better(&c, &by_free) {
+                by_free = Some(c);
+            }
+            match first {
+                Some(f) if c.ready > f.ready => {}
+                Some(f) if c.ready == f.ready => {
+                    if better(&c, &first) {
+                        first = Some(c);
+                    }
+                }
+                _ => first = Some(c),
+            }
+        }
+        let first = first?;
+        Some((first.ready, by_free.unwrap_or(first)))
+    }
+
     /// Pick and schedule frames while the bus is free within the lookahead.
     fn schedule(&mut self, now: SimTime) {
         let horizon = now + LOOKAHEAD;
         loop {
-            let earliest = self.candidates().map(|c| c.ready).min();
+            let contest = self.contest();
+            let earliest = contest.map(|(e, _)| e);
             // Recoveries due on an idle bus before the next frame (or the horizon).
             if let Some(r) = self.idle_recovery()
                 && r <= horizon
@@ -901,7 +947,7 @@ impl State {
                 self.purge_bus_off(r);
                 continue;
             }
-            let Some(earliest) = earliest else {
+            let Some((earliest, w)) = contest else {
                 self.purge_bus_off(horizon);
                 return;
             };
@@ -911,16 +957,6 @@ impl State {
                 return;
             }
             self.purge_bus_off(start);
-            // Arbitration among the frames ready when the bus becomes free: the lowest id
-            // wins (ties, impossible on a real bus, by attachment order, a port's own queue
-            // before its babble).
-            let Some(w) = self
-                .candidates()
-                .filter(|c| c.ready <= start)
-                .min_by_key(|c| (c.id, c.port, c.babble.is_some()))
-            else {
-                return;
-            };
             let winner = w.port;
             if !self.bus_off_since.is_empty() {
                 self.idle_until(start);
@@ -1080,6 +1116,55 @@ impl State {
         }
     }
 
+    /// Port `idx` queues `frame` at `t` (or loses it, counted and traced); whether the bus
+    /// task must look again (the queue was empty: a frame behind another changes nothing it
+    /// waits for, as its next wake-up counts the queue's first frame).
+    fn queue(&mut self, idx: usize, t: SimTime, frame: CanFrame) -> bool {
+        let limit = self.cfg.tx_queue_frames;
+        let Some(port) = self.ports.get_mut(idx) else {
+            return false;
+        };
+        port.stats.offered += 1;
+        if !port.enabled {
+            port.stats.off_drops += 1;
+            port.stats.sent_while_off += 1;
+            port.stats.first_sent_while_off.get_or_insert(t);
+            lost(
+                &self.trace,
+                &self.name,
+                &port.stats.name,
+                t,
+                frame,
+                FrameLoss::Off,
+            );
+            return false;
+        }
+        if port.queue.len() >= limit {
+            let name = &port.stats.name;
+            crate::count_loss(&mut port.stats.tx_overflow, |n| {
+                format!("{name}: transmit queue full ({limit} frames): frame lost ({n} so far)")
+            });
+            lost(
+                &self.trace,
+                &self.name,
+                name,
+                t,
+                frame,
+                FrameLoss::QueueFull,
+            );
+            return false;
+        }
+        port.queue.push_back((t, frame));
+        port.stats.tx_queue_max = port.stats.tx_queue_max.max(port.queue.len() as u64);
+        port.queue.len() == 1
+    }
+
+    /// Tell the bus task to look again: the waker to wake once the lock is let go.
+    fn ring(&mut self) -> Option<Waker> {
+        self.bell = true;
+        self.bus_waker.take()
+    }
+
     /// Put `d` on its way, in order.
     fn in_flight_insert(&mut self, key: (SimTime, u64), d: Delivery) {
         let i = self.in_flight.partition_point(|(k, _)| *k < key);
@@ -1113,7 +1198,8 @@ impl State {
             if dropped {
                 self.stats.dropped += 1;
             }
-            let dst = CfpId::from_can_id(frame.id).dst;
+            let cfp = CfpId::from_can_id(frame.id);
+            let (dst, more) = (cfp.dst, cfp.remain > 0);
             let claimed_by = self.claims.get(&dst).copied();
             if let Some(tr) = &self.trace {
                 let sender = self
@@ -1160,11 +1246,18 @@ impl State {
                 if wants {
                     p.stats.frames_rx += 1;
                     p.stats.bytes_rx += u64::from(frame.dlc);
-                    let sent = p.inbox.send(Inbound {
+                    let a = Inbound {
                         t,
                         iface: p.iface,
                         what: Arrival::Can(frame),
-                    });
+                    };
+                    // A frame with more of its packet to come wakes no node task (see
+                    // `crate::inbox`).
+                    let sent = if more {
+                        p.inbox.send_quiet(a)
+                    } else {
+                        p.inbox.send(a)
+                    };
                     if sent == Err(crate::inbox::InboxError::Full) {
                         let name = &p.stats.name;
                         crate::count_loss(&mut p.stats.rx_overflow, |n| {
@@ -1208,18 +1301,13 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
     // SOF 0 | base id (11) | SRR 1 | IDE 1 | extended id (18) | RTR 0 | r1 r0 00 | DLC (4).
     let header = (id >> 18) << 27 | 1 << 26 | 1 << 25 | (id & 0x3FFFF) << 7 | u64::from(dlc);
     // CRC-15 and stuffing side by side (two independent chains the CPU overlaps): the 7
-    // bits before the header's last four bytes one at a time, then bytes, then the CRC.
-    let mut crc = 0u16;
-    let mut state = 0u8;
-    let mut stuffed = 0u32;
-    for i in (32..HEADER_BITS).rev() {
-        let bit = ((header >> i) & 1) as u8;
-        let next = (u16::from(bit) ^ (crc >> 14)) & 1;
-        crc = ((crc << 1) & 0x7FFF) ^ (0x4599 * next);
-        let (s, k) = stuff_step(state, bit);
-        state = s;
-        stuffed += u32::from(k);
-    }
+    // bits before the header's last four bytes, then bytes, then the CRC's top 7 bits and
+    // its last byte, each a table step.
+    let top = ((header >> 32) & 0x7F) as usize;
+    let mut crc = CRC15_TOP7[top];
+    let e = STUFF7_TABLE[0][top];
+    let mut state = e & 0xF;
+    let mut stuffed = u32::from(e >> 4);
     let mut byte = |b: u8, crc: &mut u16| {
         *crc = ((*crc << 8) & 0x7FFF) ^ CRC15_TABLE[usize::from(((*crc >> 7) as u8) ^ b)];
         let e = STUFF_TABLE[usize::from(state)][usize::from(b)];
@@ -1232,12 +1320,10 @@ pub fn frame_bits(frame: &CanFrame) -> u32 {
     for &b in frame.data() {
         byte(b, &mut crc);
     }
-    // The CRC's 15 bits: 7 one at a time, then a byte.
-    for i in (8..15).rev() {
-        let (s, k) = stuff_step(state, ((crc >> i) & 1) as u8);
-        state = s;
-        stuffed += u32::from(k);
-    }
+    // The CRC's 15 bits: the top 7, then a byte.
+    let e = STUFF7_TABLE[usize::from(state)][usize::from((crc >> 8) as u8 & 0x7F)];
+    state = e & 0xF;
+    stuffed += u32::from(e >> 4);
     stuffed += u32::from(STUFF_TABLE[usize::from(state)][usize::from(crc as u8)] >> 4);
     let n = HEADER_BITS + 8 * frame.data().len() as u32 + 15;
     // CRC delimiter, ACK slot, ACK delimiter, EOF (7), intermission (3).
@@ -1288,29 +1374,55 @@ const fn stuff_step(state: u8, bit: u8) -> (u8, u8) {
     (last << 3 | run, stuffed)
 }
 
-/// For each stuffing state and next byte (most significant bit first): the state after it
-/// (low 4 bits) and the stuff bits it caused (high 4 bits).
-const STUFF_TABLE: [[u8; 256]; 16] = {
-    let mut t = [[0u8; 256]; 16];
+/// The CRC-15 register after the frame's first 7 bits (SOF and the base id's top 6), from
+/// a zero register, for each value of those bits.
+const CRC15_TOP7: [u16; 128] = {
+    let mut t = [0u16; 128];
+    let mut i = 0;
+    while i < 128 {
+        let mut r = 0u16;
+        let mut k = 0;
+        while k < 7 {
+            let bit = ((i >> (6 - k)) & 1) as u16;
+            let next = (bit ^ (r >> 14)) & 1;
+            r = ((r << 1) & 0x7FFF) ^ (0x4599 * next);
+            k += 1;
+        }
+        t[i] = r;
+        i += 1;
+    }
+    t
+};
+
+/// [`stuff_table`] for 7 bits (the header's first, the CRC's top).
+const STUFF7_TABLE: [[u8; 128]; 16] = stuff_table::<128>(7);
+
+/// [`stuff_table`] for a byte.
+const STUFF_TABLE: [[u8; 256]; 16] = stuff_table::<256>(8);
+
+/// For each stuffing state and next `bits`-bit value (`N = 2^bits` of them, most significant
+/// bit first): the state after it (low 4 bits) and the stuff bits it caused (high 4 bits).
+const fn stuff_table<const N: usize>(bits: usize) -> [[u8; N]; 16] {
+    let mut t = [[0u8; N]; 16];
     let mut state = 0;
     while state < 16 {
-        let mut byte = 0;
-        while byte < 256 {
+        let mut v = 0;
+        while v < N {
             let (mut s, mut stuffed) = (state as u8, 0);
             let mut k = 0;
-            while k < 8 {
-                let (next, n) = stuff_step(s, ((byte >> (7 - k)) & 1) as u8);
+            while k < bits {
+                let (next, n) = stuff_step(s, ((v >> (bits - 1 - k)) & 1) as u8);
                 s = next;
                 stuffed += n;
                 k += 1;
             }
-            t[state][byte] = stuffed << 4 | s;
-            byte += 1;
+            t[state][v] = stuffed << 4 | s;
+            v += 1;
         }
         state += 1;
     }
     t
-};
+}
 
 #[cfg(test)]
 mod tests {

@@ -164,6 +164,51 @@ impl Clock {
     }
 }
 
+/// A task's one timer, kept from one wait to the next: waiting again for the same instant
+/// keeps the timer where it is (a fresh sleep registers a timer and takes it out again on
+/// every turn of a task's loop, and a node task turns for every arrival).
+#[derive(Debug)]
+pub struct Timer {
+    clock: Clock,
+    sleep: std::pin::Pin<Box<tokio::time::Sleep>>,
+    /// The instant the sleep is set for, if any.
+    armed: Option<SimTime>,
+}
+
+impl Timer {
+    /// A timer on `clock`, not set.
+    pub fn new(clock: Clock) -> Self {
+        Timer {
+            clock,
+            sleep: Box::pin(tokio::time::sleep_until(clock.instant_of(SimTime::MAX))),
+            armed: None,
+        }
+    }
+
+    /// [`Clock::sleep_until`], with this timer.
+    pub async fn sleep_until(&mut self, t: SimTime) {
+        if t == SimTime::MAX || self.clock.wall_clock_at(t) {
+            self.disarm();
+            return self.clock.sleep_until(t).await;
+        }
+        if self.armed != Some(t) {
+            self.sleep.as_mut().reset(self.clock.instant_of(t));
+            self.armed = Some(t);
+        }
+        self.sleep.as_mut().await;
+    }
+
+    /// Take the timer out (a task with nothing to wait for is not woken by its last
+    /// instant).
+    pub fn disarm(&mut self) {
+        if self.armed.take().is_some() {
+            self.sleep
+                .as_mut()
+                .reset(self.clock.instant_of(SimTime::MAX));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

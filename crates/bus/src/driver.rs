@@ -11,7 +11,7 @@ use tokio::sync::mpsc;
 
 use crate::can::CanPort;
 use crate::clock::Clock;
-use crate::inbox::{Arrival, InboxRx};
+use crate::inbox::{Arrival, Inbound, InboxRx};
 use crate::net::NetPort;
 
 /// Where one interface of a node is attached.
@@ -159,6 +159,10 @@ async fn run<A: App, O: Outputs<A::Event>>(
     let mut t = SimTime::ZERO;
     let mut powered = true;
     let mut hung = false;
+    // Frames with more of their packet to come need no wake-up of their own: they are
+    // taken before anything else the node does (a timer, a command, the next arrival).
+    inbox.take_quiet();
+    let mut timer = crate::clock::Timer::new(clock);
     loop {
         flush(&mut host, &ports, t, &mut out);
         let deadline = if powered && !hung {
@@ -166,24 +170,29 @@ async fn run<A: App, O: Outputs<A::Event>>(
         } else {
             None
         };
+        if deadline.is_none() {
+            timer.disarm();
+        }
         tokio::select! {
             biased;
             c = ctl.recv() => {
                 let Some((at, c)) = c else { break };
+                let listening = powered && !hung;
+                // Frames that came quietly were there before the command (had they woken
+                // the task, it would have taken them then), with the timers due before each.
+                while let Some(m) = inbox.try_recv_quiet() {
+                    if listening {
+                        timers_due(&mut host, &ports, &mut t, &mut out, |d| d < m.t);
+                    }
+                    t = t.max(m.t);
+                    arrive(&mut host, m, t, listening);
+                    flush(&mut host, &ports, t, &mut out);
+                }
                 // The node's own timers due by the command's instant come first, so that a
                 // command meets the same node whichever task ran first at that instant
                 // (a beacon due at the instant the EPS switches its COMM off goes out).
-                // (Bounded: an application whose timer never moves on cannot hang the loop here.)
-                for _ in 0..10_000 {
-                    if !powered || hung || c == NodeCtl::Stop {
-                        break;
-                    }
-                    let Some(due) = host.poll_timeout().filter(|&d| d <= at) else {
-                        break;
-                    };
-                    t = t.max(due);
-                    host.handle_timeout(t);
-                    flush(&mut host, &ports, t, &mut out);
+                if listening && c != NodeCtl::Stop {
+                    timers_due(&mut host, &ports, &mut t, &mut out, |d| d <= at);
                 }
                 t = t.max(at);
                 match c {
@@ -215,14 +224,15 @@ async fn run<A: App, O: Outputs<A::Event>>(
                 // biased select would take it (no control command can have come in
                 // meanwhile: it would come from a task of this runtime), without a select
                 // and a timer per frame. At most INBOX_BATCH, then the select again.
+                // The node's timers due before each arrival's instant come first: its events
+                // in the order of their instants, however late the arrival woke the task
+                // (frames that came quietly wake nobody).
                 for left in (0..INBOX_BATCH).rev() {
-                    t = t.max(m.t);
                     if powered && !hung {
-                        match m.what {
-                            Arrival::Can(f) => host.handle_frame(m.iface, &f, t),
-                            Arrival::Packet(p) => host.handle_packet(m.iface, p, t),
-                        }
+                        timers_due(&mut host, &ports, &mut t, &mut out, |d| d < m.t);
                     }
+                    t = t.max(m.t);
+                    arrive(&mut host, m, t, powered && !hung);
                     if left == 0 || !ctl.is_empty() {
                         break;
                     }
@@ -231,13 +241,42 @@ async fn run<A: App, O: Outputs<A::Event>>(
                     m = next;
                 }
             }
-            () = clock.sleep_until(deadline.unwrap_or(SimTime::MAX)), if deadline.is_some() => {
+            () = timer.sleep_until(deadline.unwrap_or(SimTime::MAX)), if deadline.is_some() => {
                 t = t.max(deadline.unwrap_or(t));
                 host.handle_timeout(t);
             }
         }
     }
     host
+}
+
+/// Run the node's timers while the next is `due` (bounded: an application whose timer
+/// never moves on cannot hang the task here).
+fn timers_due<A: App>(
+    host: &mut Host<A>,
+    ports: &[Attachment],
+    t: &mut SimTime,
+    out: &mut impl Outputs<A::Event>,
+    due: impl Fn(SimTime) -> bool,
+) {
+    for _ in 0..10_000 {
+        let Some(d) = host.poll_timeout().filter(|&d| due(d)) else {
+            return;
+        };
+        *t = (*t).max(d);
+        host.handle_timeout(*t);
+        flush(host, ports, *t, out);
+    }
+}
+
+/// Hand an arrival to the host (a node off or hung takes nothing).
+fn arrive<A: App>(host: &mut Host<A>, m: Inbound, t: SimTime, listening: bool) {
+    if listening {
+        match m.what {
+            Arrival::Can(f) => host.handle_frame(m.iface, &f, t),
+            Arrival::Packet(p) => host.handle_packet(m.iface, p, t),
+        }
+    }
 }
 
 fn flush<A: App>(
@@ -249,7 +288,9 @@ fn flush<A: App>(
     while let Some(tx) = host.node.poll_transmit() {
         match tx {
             Transmit::Can { iface, frame } => match ports.get(iface) {
-                Some(Attachment::Can(p)) => p.send(t, frame),
+                Some(Attachment::Can(p)) => {
+                    p.send_train(t, frame, || host.node.poll_transmit_can(iface));
+                }
                 _ => tracing::warn!(
                     node = host.node.name(),
                     iface,
@@ -334,25 +375,58 @@ mod tests {
         }
     }
 
+    /// Run a node whose one timer is `due` for 10 s, after `before` has put what it wants
+    /// in its inbox and control channel before the task first runs; when its timer fired.
+    async fn timer_fires(
+        due: SimTime,
+        before: impl FnOnce(&crate::inbox::InboxTx, &CtlTx),
+    ) -> Vec<SimTime> {
+        let clock = Clock::new(ClockMode::Virtual);
+        let app = Timer {
+            at: due,
+            fired: Vec::new(),
+        };
+        let host = Host::new(NodeConfig::new("X", 3), app, SimTime::ZERO);
+        let (in_tx, in_rx) = inbox();
+        let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
+        before(&in_tx, &ctl_tx);
+        let task = tokio::spawn(run_node(host, Vec::new(), in_rx, ctl_rx, clock));
+        tokio::time::sleep(Duration::from_secs(10)).await;
+        ctl_tx.send((SimTime::ZERO, NodeCtl::Stop)).unwrap();
+        task.await.unwrap().app.fired
+    }
+
     /// A power-off for instant T read before the node's own timer at T has run (the other
     /// task ran first at T): the timer still runs, before the power goes.
     #[tokio::test(start_paused = true)]
     async fn a_timer_due_at_a_commands_instant_runs_before_the_command() {
-        let clock = Clock::new(ClockMode::Virtual);
         let t5 = SimTime::from_secs(5);
-        let app = Timer {
-            at: t5,
-            fired: Vec::new(),
-        };
-        let host = Host::new(NodeConfig::new("X", 3), app, SimTime::ZERO);
-        let (_in_tx, in_rx) = inbox();
-        let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
         // Queued before the task first runs: it reads the command before its timer is due.
-        ctl_tx.send((t5, NodeCtl::Power(false))).unwrap();
-        let task = tokio::spawn(run_node(host, Vec::new(), in_rx, ctl_rx, clock));
-        tokio::time::sleep(Duration::from_secs(10)).await;
-        ctl_tx.send((SimTime::ZERO, NodeCtl::Stop)).unwrap();
-        let host = task.await.unwrap();
-        assert_eq!(host.app.fired, vec![t5]);
+        let fired = timer_fires(t5, |_, ctl| {
+            ctl.send((t5, NodeCtl::Power(false))).unwrap();
+        })
+        .await;
+        assert_eq!(fired, vec![t5]);
+    }
+
+    /// A node's events run in the order of their instants: a timer due before an
+    /// arrival's stamp runs first and at its own instant, however the task found the two
+    /// (here the arrival is already waiting when the task starts; it used to be taken
+    /// first and the timer then ran at the arrival's later instant).
+    #[tokio::test(start_paused = true)]
+    async fn a_timer_due_before_an_arrival_runs_first_at_its_own_instant() {
+        let due = SimTime::from_ns(5_200_000);
+        let fired = timer_fires(due, |inbox, _| {
+            let packet = csp::Packet::new(csp::Header::new(16, 3, 20, 40), vec![1, 2, 3]);
+            inbox
+                .send(Inbound {
+                    t: SimTime::from_ns(5_800_000),
+                    iface: 0,
+                    what: Arrival::Packet(packet),
+                })
+                .unwrap();
+        })
+        .await;
+        assert_eq!(fired, vec![due]);
     }
 }

@@ -8,6 +8,13 @@
 //! The inbox is a queue under a mutex and one waker: a medium delivers every frame through
 //! it, and a bounded tokio channel cost about twice as much per frame (a semaphore permit
 //! taken and given back under its lock, besides the queue and the waker).
+//!
+//! A medium may deliver an arrival *quietly* ([`InboxTx::send_quiet`]): a CAN frame with
+//! more of its packet still to come, which nothing in the node acts on before the last
+//! one. A quiet arrival is queued without waking the receiver, when the receiver said it
+//! takes quiet arrivals ([`InboxRx::take_quiet`]: the node task, which handles them before
+//! its next timer or command, in the order they came). A receiver that did not (a bridge
+//! to the outside, forwarding frame by frame) is woken for every arrival.
 
 use std::collections::VecDeque;
 use std::future::poll_fn;
@@ -63,6 +70,11 @@ struct State {
     receiver: bool,
     /// The receiver's task while it waits for an arrival.
     waker: Option<Waker>,
+    /// Whether the receiver takes quiet arrivals ([`InboxRx::take_quiet`]).
+    quiet_ok: bool,
+    /// How many arrivals at the front of the queue came quietly (every one before the
+    /// first that woke the receiver).
+    quiet_front: usize,
 }
 
 impl Shared {
@@ -115,6 +127,29 @@ impl InboxTx {
         }
         Ok(())
     }
+
+    /// [`send`](Self::send) an arrival that needs no attention before the next one (a CAN
+    /// frame with more of its packet to come): queued without waking a receiver that takes
+    /// quiet arrivals, sent as usual to one that does not.
+    pub fn send_quiet(&self, a: Inbound) -> Result<(), InboxError> {
+        {
+            let mut st = self.0.lock();
+            if st.quiet_ok {
+                if !st.receiver {
+                    return Err(InboxError::Closed);
+                }
+                if st.queue.len() >= st.depth {
+                    return Err(InboxError::Full);
+                }
+                if st.quiet_front == st.queue.len() {
+                    st.quiet_front += 1;
+                }
+                st.queue.push_back(a);
+                return Ok(());
+            }
+        }
+        self.send(a)
+    }
 }
 
 impl Clone for InboxTx {
@@ -148,6 +183,7 @@ impl InboxRx {
         poll_fn(|cx| {
             let mut st = self.0.lock();
             if let Some(a) = st.queue.pop_front() {
+                st.quiet_front = st.quiet_front.saturating_sub(1);
                 return Poll::Ready(Some(a));
             }
             if st.senders == 0 {
@@ -166,10 +202,31 @@ impl InboxRx {
     pub fn try_recv(&mut self) -> Result<Inbound, TryRecvError> {
         let mut st = self.0.lock();
         match st.queue.pop_front() {
-            Some(a) => Ok(a),
+            Some(a) => {
+                st.quiet_front = st.quiet_front.saturating_sub(1);
+                Ok(a)
+            }
             None if st.senders == 0 => Err(TryRecvError::Closed),
             None => Err(TryRecvError::Empty),
         }
+    }
+
+    /// From now on, take quiet arrivals ([`InboxTx::send_quiet`]) without being woken: the
+    /// receiver promises to take them ([`try_recv_quiet`](Self::try_recv_quiet)) before it
+    /// acts on anything else.
+    pub fn take_quiet(&mut self) {
+        self.0.lock().quiet_ok = true;
+    }
+
+    /// The first arrival if it came quietly (it would have been taken before anything
+    /// that happens now, had it woken the receiver).
+    pub fn try_recv_quiet(&mut self) -> Option<Inbound> {
+        let mut st = self.0.lock();
+        if st.quiet_front == 0 {
+            return None;
+        }
+        st.quiet_front -= 1;
+        st.queue.pop_front()
     }
 
     /// Arrivals waiting.
@@ -188,6 +245,7 @@ impl Drop for InboxRx {
         let mut st = self.0.lock();
         st.receiver = false;
         st.queue.clear();
+        st.quiet_front = 0;
         st.waker = None;
     }
 }
@@ -206,6 +264,8 @@ pub fn inbox_with(depth: usize) -> (InboxTx, InboxRx) {
             senders: 1,
             receiver: true,
             waker: None,
+            quiet_ok: false,
+            quiet_front: 0,
         }),
     });
     (InboxTx(Arc::clone(&shared)), InboxRx(shared))
@@ -280,5 +340,52 @@ mod tests {
             drop(tx);
             assert_eq!(got.await.unwrap(), (Some(SimTime::from_ns(7)), None));
         });
+    }
+
+    /// Quiet arrivals wake only a receiver that does not take them; one that does finds
+    /// them first in the queue, in order, and only those before the first loud one count as
+    /// quiet.
+    #[test]
+    fn quiet_arrivals_wake_only_a_receiver_that_does_not_take_them() {
+        use std::sync::atomic::{AtomicBool, Ordering};
+        struct Flag(AtomicBool);
+        impl std::task::Wake for Flag {
+            fn wake(self: Arc<Self>) {
+                self.0.store(true, Ordering::SeqCst);
+            }
+        }
+        for takes in [false, true] {
+            let (tx, mut rx) = inbox();
+            if takes {
+                rx.take_quiet();
+            }
+            let flag = Arc::new(Flag(AtomicBool::new(false)));
+            let waker = Waker::from(Arc::clone(&flag));
+            let mut cx = std::task::Context::from_waker(&waker);
+            {
+                let mut recv = std::pin::pin!(rx.recv());
+                assert!(recv.as_mut().poll(&mut cx).is_pending());
+            }
+            tx.send_quiet(frame(1)).unwrap();
+            assert_eq!(
+                flag.0.load(Ordering::SeqCst),
+                !takes,
+                "takes quiet: {takes}"
+            );
+            tx.send_quiet(frame(2)).unwrap();
+            tx.send(frame(3)).unwrap();
+            tx.send_quiet(frame(4)).unwrap();
+            let quiet: Vec<_> = std::iter::from_fn(|| rx.try_recv_quiet())
+                .map(|a| a.t.as_ns())
+                .collect();
+            assert_eq!(quiet, if takes { vec![1, 2] } else { vec![] });
+            if !takes {
+                assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(1));
+                assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(2));
+            }
+            assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(3));
+            assert_eq!(rx.try_recv_quiet(), None, "behind a loud one, or not taken");
+            assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(4));
+        }
     }
 }

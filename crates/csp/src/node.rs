@@ -741,6 +741,17 @@ impl Node {
     pub fn poll_transmit(&mut self) -> Option<Transmit> {
         self.tx.pop_front()
     }
+    /// The next CAN frame to transmit if it goes out on interface `iface` (the rest of a
+    /// packet's fragments, taken together).
+    pub fn poll_transmit_can(&mut self, iface: usize) -> Option<CanFrame> {
+        match self.tx.front() {
+            Some(Transmit::Can { iface: i, .. }) if *i == iface => match self.tx.pop_front() {
+                Some(Transmit::Can { frame, .. }) => Some(frame),
+                _ => None,
+            },
+            _ => None,
+        }
+    }
     /// The next packet for a bound application port.
     pub fn poll_delivery(&mut self) -> Option<Packet> {
         self.rx.pop_front()
