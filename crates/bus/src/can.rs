@@ -334,6 +334,8 @@ struct Port {
     queue: VecDeque<(SimTime, CanFrame)>,
     inbox: InboxTx,
     iface: usize,
+    /// Delivered, not yet handed to the inbox: each arrival, and whether it is quiet.
+    arrivals: Vec<(Inbound, bool)>,
 }
 
 #[derive(Debug)]
@@ -521,6 +523,7 @@ impl CanBus {
             enabled: true,
             queue: VecDeque::new(),
             inbox,
+            arrivals: Vec::new(),
             iface,
         });
         CanPort {
@@ -655,6 +658,7 @@ impl CanBus {
                 st.bell = false;
                 st.schedule(now);
                 st.deliver_due(now);
+                st.hand_over();
                 st.next_wake()
             };
             tokio::select! {
@@ -1167,6 +1171,11 @@ impl State {
 
     /// Put `d` on its way, in order.
     fn in_flight_insert(&mut self, key: (SimTime, u64), d: Delivery) {
+        // Nearly always at the back: frames end in order.
+        if self.in_flight.back().is_none_or(|(k, _)| *k < key) {
+            self.in_flight.push_back((key, d));
+            return;
+        }
         let i = self.in_flight.partition_point(|(k, _)| *k < key);
         self.in_flight.insert(i, (key, d));
     }
@@ -1253,18 +1262,24 @@ impl State {
                     };
                     // A frame with more of its packet to come wakes no node task (see
                     // `crate::inbox`).
-                    let sent = if more {
-                        p.inbox.send_quiet(a)
-                    } else {
-                        p.inbox.send(a)
-                    };
-                    if sent == Err(crate::inbox::InboxError::Full) {
-                        let name = &p.stats.name;
-                        crate::count_loss(&mut p.stats.rx_overflow, |n| {
-                            format!("{name}: inbox full: frame lost ({n} so far)")
-                        });
-                    }
+                    p.arrivals.push((a, more));
                 }
+            }
+        }
+    }
+
+    /// Hand what [`deliver_due`](Self::deliver_due) delivered to each endpoint's inbox, in
+    /// order, under one lock of each.
+    fn hand_over(&mut self) {
+        for p in &mut self.ports {
+            if p.arrivals.is_empty() {
+                continue;
+            }
+            for _ in 0..p.inbox.send_all(&mut p.arrivals) {
+                let name = &p.stats.name;
+                crate::count_loss(&mut p.stats.rx_overflow, |n| {
+                    format!("{name}: inbox full: frame lost ({n} so far)")
+                });
             }
         }
     }

@@ -163,6 +163,7 @@ async fn run<A: App, O: Outputs<A::Event>>(
     // taken before anything else the node does (a timer, a command, the next arrival).
     inbox.take_quiet();
     let mut timer = crate::clock::Timer::new(clock);
+    let mut batch = std::collections::VecDeque::with_capacity(INBOX_BATCH);
     loop {
         flush(&mut host, &ports, t, &mut out);
         let deadline = if powered && !hung {
@@ -218,27 +219,24 @@ async fn run<A: App, O: Outputs<A::Event>>(
                     NodeCtl::Fault(id, f) => host.fault(id, f, t),
                 }
             }
-            m = inbox.recv() => {
-                let Some(mut m) = m else { break };
-                // Whatever else is waiting in the inbox is taken now, one at a time, as the
-                // biased select would take it (no control command can have come in
-                // meanwhile: it would come from a task of this runtime), without a select
-                // and a timer per frame. At most INBOX_BATCH, then the select again.
-                // The node's timers due before each arrival's instant come first: its events
-                // in the order of their instants, however late the arrival woke the task
-                // (frames that came quietly wake nobody).
-                for left in (0..INBOX_BATCH).rev() {
+            n = inbox.recv_many(&mut batch, INBOX_BATCH) => {
+                if n == 0 {
+                    break;
+                }
+                // Whatever was waiting in the inbox is taken now (at most INBOX_BATCH), one
+                // at a time, as the biased select would take it (no control command can come
+                // in meanwhile: it would come from a task of this single-threaded runtime),
+                // without a select and a timer per frame. The node's timers due before each
+                // arrival's instant come first: its events in the order of their instants,
+                // however late the arrival woke the task (frames that came quietly wake
+                // nobody).
+                while let Some(m) = batch.pop_front() {
                     if powered && !hung {
                         timers_due(&mut host, &ports, &mut t, &mut out, |d| d < m.t);
                     }
                     t = t.max(m.t);
                     arrive(&mut host, m, t, powered && !hung);
-                    if left == 0 || !ctl.is_empty() {
-                        break;
-                    }
                     flush(&mut host, &ports, t, &mut out);
-                    let Ok(next) = inbox.try_recv() else { break };
-                    m = next;
                 }
             }
             () = timer.sleep_until(deadline.unwrap_or(SimTime::MAX)), if deadline.is_some() => {

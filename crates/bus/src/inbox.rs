@@ -152,6 +152,41 @@ impl InboxTx {
     }
 }
 
+impl InboxTx {
+    /// [`send`](Self::send) (`false`) or [`send_quiet`](Self::send_quiet) (`true`) each of
+    /// `arrivals` in order, under one lock, emptying it; how many were lost to a full inbox.
+    pub fn send_all(&self, arrivals: &mut Vec<(Inbound, bool)>) -> usize {
+        let mut full = 0;
+        let waker = {
+            let mut st = self.0.lock();
+            if !st.receiver {
+                arrivals.clear();
+                return 0;
+            }
+            let mut wake = false;
+            for (a, quiet) in arrivals.drain(..) {
+                if st.queue.len() >= st.depth {
+                    full += 1;
+                    continue;
+                }
+                if quiet && st.quiet_ok {
+                    if st.quiet_front == st.queue.len() {
+                        st.quiet_front += 1;
+                    }
+                } else {
+                    wake = true;
+                }
+                st.queue.push_back(a);
+            }
+            if wake { st.waker.take() } else { None }
+        };
+        if let Some(w) = waker {
+            w.wake();
+        }
+        full
+    }
+}
+
 impl Clone for InboxTx {
     fn clone(&self) -> Self {
         self.0.lock().senders += 1;
@@ -188,6 +223,29 @@ impl InboxRx {
             }
             if st.senders == 0 {
                 return Poll::Ready(None);
+            }
+            match &mut st.waker {
+                Some(w) if w.will_wake(cx.waker()) => {}
+                w => *w = Some(cx.waker().clone()),
+            }
+            Poll::Pending
+        })
+        .await
+    }
+
+    /// Wait for arrivals and move up to `max` of them (at least one) to the back of `buf`;
+    /// 0 once the inbox is empty and every sender is gone. Cancel-safe, as [`recv`](Self::recv).
+    pub async fn recv_many(&mut self, buf: &mut VecDeque<Inbound>, max: usize) -> usize {
+        poll_fn(|cx| {
+            let mut st = self.0.lock();
+            if !st.queue.is_empty() {
+                let n = st.queue.len().min(max.max(1));
+                buf.extend(st.queue.drain(..n));
+                st.quiet_front = st.quiet_front.saturating_sub(n);
+                return Poll::Ready(n);
+            }
+            if st.senders == 0 {
+                return Poll::Ready(0);
             }
             match &mut st.waker {
                 Some(w) if w.will_wake(cx.waker()) => {}
@@ -387,5 +445,40 @@ mod tests {
             assert_eq!(rx.try_recv_quiet(), None, "behind a loud one, or not taken");
             assert_eq!(rx.try_recv().unwrap().t, SimTime::from_ns(4));
         }
+    }
+
+    /// A batch goes in in order, under the depth (the rest counted as lost), quiet ones
+    /// counted at the front, and `recv_many` takes them out in order.
+    #[test]
+    fn a_batch_goes_in_and_comes_out_in_order() {
+        let (tx, mut rx) = inbox_with(3);
+        rx.take_quiet();
+        let mut batch = vec![
+            (frame(1), true),
+            (frame(2), false),
+            (frame(3), true),
+            (frame(4), false),
+        ];
+        assert_eq!(
+            tx.send_all(&mut batch),
+            1,
+            "the fourth finds the inbox full"
+        );
+        assert!(batch.is_empty());
+        assert_eq!(rx.try_recv_quiet().map(|a| a.t.as_ns()), Some(1));
+        assert_eq!(
+            rx.try_recv_quiet(),
+            None,
+            "2 woke the receiver: 3 is behind it"
+        );
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        let mut out = VecDeque::new();
+        assert_eq!(rt.block_on(rx.recv_many(&mut out, 8)), 2);
+        let ts: Vec<_> = out.iter().map(|a| a.t.as_ns()).collect();
+        assert_eq!(ts, [2, 3]);
+        drop(tx);
+        assert_eq!(rt.block_on(rx.recv_many(&mut out, 8)), 0, "closed");
     }
 }
