@@ -1208,7 +1208,7 @@ impl State {
                 self.stats.dropped += 1;
             }
             let cfp = CfpId::from_can_id(frame.id);
-            let (dst, more) = (cfp.dst, cfp.remain > 0);
+            let (dst, more) = (cfp.dst, self.next_on_its_way(from, &cfp));
             let claimed_by = self.claims.get(&dst).copied();
             if let Some(tr) = &self.trace {
                 let sender = self
@@ -1260,12 +1260,35 @@ impl State {
                         iface: p.iface,
                         what: Arrival::Can(frame),
                     };
-                    // A frame with more of its packet to come wakes no node task (see
+                    // A frame followed on the wire wakes no node task (see
                     // `crate::inbox`).
                     p.arrivals.push((a, more));
                 }
             }
         }
+    }
+
+    /// Whether the next frame of `cfp`'s packet from port `from` is on the wire, to be
+    /// delivered (not dropped): a frame followed by one is quiet (see `crate::inbox`), as
+    /// the next one reaches the same endpoints. Whatever else happens (the next frame
+    /// dropped, not yet picked), the frame wakes its receivers, so that they meet a lost
+    /// fragment's reassembly timeout in time.
+    fn next_on_its_way(&self, from: usize, cfp: &CfpId) -> bool {
+        cfp.remain > 0
+            && self.in_flight.iter().any(|(_, d)| match d {
+                Delivery::Frame {
+                    from: f,
+                    frame,
+                    fate: Fate::Deliver,
+                } if *f == from => {
+                    let n = CfpId::from_can_id(frame.id);
+                    n.src == cfp.src
+                        && n.dst == cfp.dst
+                        && n.ident == cfp.ident
+                        && n.remain + 1 == cfp.remain
+                }
+                _ => false,
+            })
     }
 
     /// Hand what [`deliver_due`](Self::deliver_due) delivered to each endpoint's inbox, in
@@ -1578,6 +1601,45 @@ mod tests {
         assert_eq!(s.frames, 3);
         assert_eq!(s.ports[0].frames_tx, 2);
         assert_eq!(s.ports[2].frames_rx, 2);
+    }
+
+    /// A frame whose packet's next frame is on the wire reaches a node's inbox quietly;
+    /// the packet's last frame, and a frame whose next never comes, wake the node.
+    #[tokio::test(start_paused = true)]
+    async fn only_a_frame_followed_on_the_wire_is_quiet() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let bus = CanBus::new(CanBusConfig::new("main"), 1);
+        let (tx_a, _rx_a) = inbox();
+        let (tx_b, mut rx_b) = inbox();
+        rx_b.take_quiet();
+        let a = bus.attach("A", &[1], false, tx_a, 0);
+        let _b = bus.attach("B", &[2], false, tx_b, 0);
+        tokio::spawn(bus.clone().run(clock));
+        let f = |remain: u32, ident: u32, first: bool| {
+            let more = u32::from(!first) << 18;
+            CanFrame::new(1 << 24 | 2 << 19 | more | remain << 10 | ident, &[0; 8]).unwrap()
+        };
+        let frame = |a: Option<Inbound>| a.map(|a| a.what);
+        a.send(SimTime::ZERO, f(1, 7, true));
+        a.send(SimTime::ZERO, f(0, 7, false));
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert_eq!(
+            frame(rx_b.try_recv_quiet()),
+            Some(Arrival::Can(f(1, 7, true)))
+        );
+        assert_eq!(frame(rx_b.try_recv_quiet()), None, "the last frame is loud");
+        assert_eq!(
+            frame(rx_b.try_recv().ok()),
+            Some(Arrival::Can(f(0, 7, false)))
+        );
+        // The first of two frames, the second never sent (its sender lost power).
+        a.send(clock.now(), f(1, 8, true));
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert_eq!(frame(rx_b.try_recv_quiet()), None);
+        assert_eq!(
+            frame(rx_b.try_recv().ok()),
+            Some(Arrival::Can(f(1, 8, true)))
+        );
     }
 
     /// Every frame queued ends in the trace once: crossed, crossed but not taken (its

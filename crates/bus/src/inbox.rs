@@ -9,9 +9,9 @@
 //! it, and a bounded tokio channel cost about twice as much per frame (a semaphore permit
 //! taken and given back under its lock, besides the queue and the waker).
 //!
-//! A medium may deliver an arrival *quietly* ([`InboxTx::send_quiet`]): a CAN frame with
-//! more of its packet still to come, which nothing in the node acts on before the last
-//! one. A quiet arrival is queued without waking the receiver, when the receiver said it
+//! A medium may deliver an arrival *quietly* ([`InboxTx::send_quiet`]): a CAN frame whose
+//! packet's next frame is already on the wire, which nothing in the node acts on before
+//! that next one arrives. A quiet arrival is queued without waking the receiver, when the receiver said it
 //! takes quiet arrivals ([`InboxRx::take_quiet`]: the node task, which handles them before
 //! its next timer or command, in the order they came). A receiver that did not (a bridge
 //! to the outside, forwarding frame by frame) is woken for every arrival.
@@ -129,7 +129,7 @@ impl InboxTx {
     }
 
     /// [`send`](Self::send) an arrival that needs no attention before the next one (a CAN
-    /// frame with more of its packet to come): queued without waking a receiver that takes
+    /// frame whose packet's next frame is on the wire): queued without waking a receiver that takes
     /// quiet arrivals, sent as usual to one that does not.
     pub fn send_quiet(&self, a: Inbound) -> Result<(), InboxError> {
         {
