@@ -1274,21 +1274,27 @@ impl State {
     /// dropped, not yet picked), the frame wakes its receivers, so that they meet a lost
     /// fragment's reassembly timeout in time.
     fn next_on_its_way(&self, from: usize, cfp: &CfpId) -> bool {
-        cfp.remain > 0
-            && self.in_flight.iter().any(|(_, d)| match d {
-                Delivery::Frame {
-                    from: f,
-                    frame,
-                    fate: Fate::Deliver,
-                } if *f == from => {
-                    let n = CfpId::from_can_id(frame.id);
-                    n.src == cfp.src
-                        && n.dst == cfp.dst
-                        && n.ident == cfp.ident
-                        && n.remain + 1 == cfp.remain
-                }
-                _ => false,
-            })
+        if cfp.remain == 0 {
+            return false;
+        }
+        // A port's frames cross in the order it queued them: its next frame on the wire
+        // is the first of its frames in flight.
+        let next = self.in_flight.iter().find_map(|(_, d)| match d {
+            Delivery::Frame {
+                from: f,
+                frame,
+                fate,
+            } if *f == from => Some((frame, fate)),
+            _ => None,
+        });
+        next.is_some_and(|(frame, fate)| {
+            let n = CfpId::from_can_id(frame.id);
+            matches!(fate, Fate::Deliver)
+                && n.src == cfp.src
+                && n.dst == cfp.dst
+                && n.ident == cfp.ident
+                && n.remain + 1 == cfp.remain
+        })
     }
 
     /// Hand what [`deliver_due`](Self::deliver_due) delivered to each endpoint's inbox, in
