@@ -246,4 +246,27 @@ mod tests {
             assert!(clock.now() >= from + Duration::from_millis(200));
         });
     }
+
+    /// A kept timer fires at each instant it is set for: again at once for the instant it
+    /// fired at, and at the earlier of two when set for a later one first.
+    #[tokio::test(start_paused = true)]
+    async fn a_kept_timer_fires_at_each_instant_it_is_set_for() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let mut timer = Timer::new(clock);
+        let s = SimTime::from_secs;
+        timer.sleep_until(s(2)).await;
+        assert_eq!(clock.now(), s(2));
+        timer.sleep_until(s(2)).await;
+        assert_eq!(clock.now(), s(2), "already past: at once");
+        tokio::select! {
+            biased;
+            () = timer.sleep_until(s(9)) => panic!("9 s is not there yet"),
+            () = tokio::task::yield_now() => {}
+        }
+        timer.sleep_until(s(7)).await;
+        assert_eq!(clock.now(), s(7));
+        timer.disarm();
+        timer.sleep_until(s(8)).await;
+        assert_eq!(clock.now(), s(8));
+    }
 }

@@ -159,8 +159,8 @@ async fn run<A: App, O: Outputs<A::Event>>(
     let mut t = SimTime::ZERO;
     let mut powered = true;
     let mut hung = false;
-    // Frames with more of their packet to come need no wake-up of their own: they are
-    // taken before anything else the node does (a timer, a command, the next arrival).
+    // Frames whose packet's next frame is on the wire need no wake-up of their own: they
+    // are taken before anything else the node does (a timer, a command, the next arrival).
     inbox.take_quiet();
     let mut timer = crate::clock::Timer::new(clock);
     let mut batch = std::collections::VecDeque::with_capacity(INBOX_BATCH);
