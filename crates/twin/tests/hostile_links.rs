@@ -200,7 +200,9 @@ fn bare(name: &str, secs: u64) -> PathBuf {
 }
 
 fn write_scenario(name: &str, text: &str) -> PathBuf {
-    let p = std::env::temp_dir().join(format!("m6p-hostile-{}-{name}.toml", std::process::id()));
+    // Under the target directory (cargo clean takes it), not left behind in /tmp.
+    let p = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("hostile-{}-{name}.toml", std::process::id()));
     std::fs::write(&p, text).unwrap();
     p
 }
@@ -352,7 +354,8 @@ fn a_passive_payload_serves_a_whole_session_beside_a_console_on_another_link() {
             "[[links]]\nkind = \"kiss-listen\"\naddr = \"127.0.0.1:0\"\n\n[pc]\n",
         );
     assert_eq!(text.matches("[[links]]").count(), 2, "{text}");
-    let dir = std::env::temp_dir().join(format!("m6p-hostile-{}-passive", std::process::id()));
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("hostile-{}-passive", std::process::id()));
     let text = text.replace("/tmp/outside_payload.downlink", dir.to_str().unwrap());
     let scenario = write_scenario("passive", &text);
     let twin = Twin::start(&[scenario.to_str().unwrap()], 2);

@@ -38,7 +38,9 @@ mod with_live {
     use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
     fn tmp(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("m6p-twin-live-{}", std::process::id()));
+        // Under the target directory (cargo clean takes it), not left behind in /tmp.
+        let dir =
+            PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("live-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         dir.join(name)
     }

@@ -259,7 +259,8 @@ timeout = "4s"
 /// seed given on the command line reproduces the plain run.
 #[test]
 fn the_seed_on_the_command_line_draws_the_initial_attitude() {
-    let dir = std::env::temp_dir().join(format!("m6p-twin-seed-{}", std::process::id()));
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("seed-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let first_attitude = |seed: Option<&str>| {
         let file = dir.join(format!("seed-{}.mcap", seed.unwrap_or("file")));
