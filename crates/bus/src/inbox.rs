@@ -9,7 +9,7 @@
 //! it, and a bounded tokio channel cost about twice as much per frame (a semaphore permit
 //! taken and given back under its lock, besides the queue and the waker).
 //!
-//! A medium may deliver an arrival *quietly* ([`InboxTx::send_quiet`]): a CAN frame whose
+//! A medium may deliver an arrival *quietly* ([`InboxTx::send_all`]): a CAN frame whose
 //! packet's next frame is already on the wire, which nothing in the node acts on before
 //! that next one arrives. A quiet arrival is queued without waking the receiver, when the receiver said it
 //! takes quiet arrivals ([`InboxRx::take_quiet`]: the node task, which handles them before
@@ -113,13 +113,7 @@ impl InboxTx {
     pub fn send(&self, a: Inbound) -> Result<(), InboxError> {
         let waker = {
             let mut st = self.0.lock();
-            if !st.receiver {
-                return Err(InboxError::Closed);
-            }
-            if st.queue.len() >= st.depth {
-                return Err(InboxError::Full);
-            }
-            st.queue.push_back(a);
+            st.push(a, false)?;
             st.waker.take()
         };
         if let Some(w) = waker {
@@ -128,55 +122,21 @@ impl InboxTx {
         Ok(())
     }
 
-    /// [`send`](Self::send) an arrival that needs no attention before the next one (a CAN
-    /// frame whose packet's next frame is on the wire): queued without waking a receiver that takes
-    /// quiet arrivals, sent as usual to one that does not.
-    pub fn send_quiet(&self, a: Inbound) -> Result<(), InboxError> {
-        {
-            let mut st = self.0.lock();
-            if st.quiet_ok {
-                if !st.receiver {
-                    return Err(InboxError::Closed);
-                }
-                if st.queue.len() >= st.depth {
-                    return Err(InboxError::Full);
-                }
-                if st.quiet_front == st.queue.len() {
-                    st.quiet_front += 1;
-                }
-                st.queue.push_back(a);
-                return Ok(());
-            }
-        }
-        self.send(a)
-    }
-}
-
-impl InboxTx {
-    /// [`send`](Self::send) (`false`) or [`send_quiet`](Self::send_quiet) (`true`) each of
-    /// `arrivals` in order, under one lock, emptying it; how many were lost to a full inbox.
+    /// [`send`](Self::send) each of `arrivals` in order, under one lock, emptying it; an
+    /// arrival marked `true` is quiet: it needs no attention before the next one (a CAN
+    /// frame whose packet's next frame is on the wire) and is queued without waking a
+    /// receiver that takes quiet arrivals. How many were lost to a full inbox.
     pub fn send_all(&self, arrivals: &mut Vec<(Inbound, bool)>) -> usize {
         let mut full = 0;
+        let mut wake = false;
         let waker = {
             let mut st = self.0.lock();
-            if !st.receiver {
-                arrivals.clear();
-                return 0;
-            }
-            let mut wake = false;
             for (a, quiet) in arrivals.drain(..) {
-                if st.queue.len() >= st.depth {
-                    full += 1;
-                    continue;
+                match st.push(a, quiet) {
+                    Ok(woken) => wake |= woken,
+                    Err(InboxError::Full) => full += 1,
+                    Err(InboxError::Closed) => {}
                 }
-                if quiet && st.quiet_ok {
-                    if st.quiet_front == st.queue.len() {
-                        st.quiet_front += 1;
-                    }
-                } else {
-                    wake = true;
-                }
-                st.queue.push_back(a);
             }
             if wake { st.waker.take() } else { None }
         };
@@ -184,6 +144,25 @@ impl InboxTx {
             w.wake();
         }
         full
+    }
+}
+
+impl State {
+    /// Queue `a` (quietly if `quiet` and the receiver takes quiet arrivals); whether the
+    /// receiver is to be woken.
+    fn push(&mut self, a: Inbound, quiet: bool) -> Result<bool, InboxError> {
+        if !self.receiver {
+            return Err(InboxError::Closed);
+        }
+        if self.queue.len() >= self.depth {
+            return Err(InboxError::Full);
+        }
+        let quiet = quiet && self.quiet_ok;
+        if quiet && self.quiet_front == self.queue.len() {
+            self.quiet_front += 1;
+        }
+        self.queue.push_back(a);
+        Ok(!quiet)
     }
 }
 
@@ -269,7 +248,7 @@ impl InboxRx {
         }
     }
 
-    /// From now on, take quiet arrivals ([`InboxTx::send_quiet`]) without being woken: the
+    /// From now on, take quiet arrivals ([`InboxTx::send_all`]) without being woken: the
     /// receiver promises to take them ([`try_recv_quiet`](Self::try_recv_quiet)) before it
     /// acts on anything else.
     pub fn take_quiet(&mut self) {
@@ -333,6 +312,14 @@ pub fn inbox_with(depth: usize) -> (InboxTx, InboxRx) {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    /// A quiet arrival on its own.
+    fn send_quiet(tx: &InboxTx, a: Inbound) -> Result<(), InboxError> {
+        match tx.send_all(&mut vec![(a, true)]) {
+            0 => Ok(()),
+            _ => Err(InboxError::Full),
+        }
+    }
 
     fn frame(t: u64) -> Inbound {
         Inbound {
@@ -424,15 +411,15 @@ mod tests {
                 let mut recv = std::pin::pin!(rx.recv());
                 assert!(recv.as_mut().poll(&mut cx).is_pending());
             }
-            tx.send_quiet(frame(1)).unwrap();
+            send_quiet(&tx, frame(1)).unwrap();
             assert_eq!(
                 flag.0.load(Ordering::SeqCst),
                 !takes,
                 "takes quiet: {takes}"
             );
-            tx.send_quiet(frame(2)).unwrap();
+            send_quiet(&tx, frame(2)).unwrap();
             tx.send(frame(3)).unwrap();
-            tx.send_quiet(frame(4)).unwrap();
+            send_quiet(&tx, frame(4)).unwrap();
             let quiet: Vec<_> = std::iter::from_fn(|| rx.try_recv_quiet())
                 .map(|a| a.t.as_ns())
                 .collect();
