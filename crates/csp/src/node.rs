@@ -14,7 +14,12 @@
 //!   the interface it came from;
 //! - the CRC32 is appended only by the originating node when the CRC flag is set, and
 //!   verified and stripped on local delivery; a mismatch is a counted drop;
-//! - ports 0-6 are answered by the service handler; packets to unbound ports are dropped.
+//! - ports 0-6 are answered by the service handler; packets to unbound ports are dropped;
+//! - built as the M6P's libcsp (ICD 1.6: CRC32 but no XTEA, HMAC or RDP), a local packet
+//!   flagged XTEA, HMAC or RDP is discarded and counted (`xtea`, `hmac`, `rdp`), checked in
+//!   libcsp's order: XTEA, CRC32, HMAC, RDP, after the port lookup. Forwarded packets are
+//!   not checked. libcsp also leaves the connection an RDP packet opened behind (one of its
+//!   `CSP_CONN_MAX`); the twin has no connection table, so that is not modelled.
 //!
 //! [`Host`] pairs a node with an [`App`] (the node's own behaviour: FC, PC, payload...).
 
@@ -23,7 +28,7 @@ use std::fmt;
 use std::time::Duration;
 
 use crate::cfp::{self as cfp, CanFrame, CfpDrop, Fragmenter, Reassembler, ReassemblerConfig};
-use crate::header::{BROADCAST, EPHEMERAL_PORT_MIN, MAX_PORT};
+use crate::header::{BROADCAST, EPHEMERAL_PORT_MIN, MAX_PORT, flags};
 use crate::router::{IfaceId, Route, RoutingTable};
 use crate::service::{self, ServiceAction, ServiceConfig};
 use crate::{Header, Packet, SimTime, crc32};
@@ -392,6 +397,7 @@ pub struct Node {
     next_port: u8,
     boot: SimTime,
     clock_offset_ns: i128,
+    clock_sets: u64,
     reboot_requested: bool,
     counters: NodeCounters,
     frames: Vec<CanFrame>,
@@ -434,6 +440,7 @@ impl Node {
             next_port: cfg.first_ephemeral_port.clamp(EPHEMERAL_PORT_MIN, MAX_PORT),
             boot: now,
             clock_offset_ns: 0,
+            clock_sets: 0,
             reboot_requested: false,
             counters: NodeCounters::default(),
             frames: Vec::new(),
@@ -494,6 +501,10 @@ impl Node {
             + i128::from(now.as_ns())
             + self.clock_offset_ns
             + self.clock_errors.error_ns(now)
+    }
+    /// How many times CMP CLOCK set the node's clock (since the start of the run).
+    pub fn clock_sets(&self) -> u64 {
+        self.clock_sets
     }
     /// The errors of the node's clock.
     pub fn clock_errors(&self) -> &ClockErrors {
@@ -600,16 +611,42 @@ impl Node {
     }
 
     fn deliver_local(&mut self, mut packet: Packet, now: SimTime) {
-        if packet.header.has_crc() && !crc32::verify_and_strip(&mut packet.data) {
-            self.note_drop(now, "crc32", packet.header.to_string());
-            return;
-        }
         let dport = packet.header.dport;
-        if self.cfg.services && dport <= service::MAX_SERVICE_PORT {
-            self.serve(packet, now);
-        } else if self.is_bound(dport) {
-            self.counters.delivered += 1;
-            self.rx.push_back(packet);
+        let service = self.cfg.services && dport <= service::MAX_SERVICE_PORT;
+        if service || self.is_bound(dport) {
+            // csp_route_work: a socket is found first, then csp_route_security_check (XTEA,
+            // CRC32, HMAC in that order) and the transport (RDP or UDP).
+            let flag = |f: u8| packet.header.flags & f != 0;
+            let refused = if flag(flags::XTEA) {
+                Some(("xtea", "XTEA encrypted"))
+            } else if packet.header.has_crc() && !crc32::verify_and_strip(&mut packet.data) {
+                self.note_drop(now, "crc32", packet.header.to_string());
+                return;
+            } else if flag(flags::HMAC) {
+                Some(("hmac", "HMAC authenticated"))
+            } else if flag(flags::RDP) {
+                Some(("rdp", "RDP"))
+            } else {
+                None
+            };
+            if let Some((reason, what)) = refused {
+                // libcsp 1.4 built as the M6P's (ICD 1.6: no XTEA, HMAC or RDP) logs and
+                // discards these.
+                self.note_drop(
+                    now,
+                    reason,
+                    format!(
+                        "{}: received {what} packet, but CSP was compiled without {} support",
+                        packet.header,
+                        reason.to_uppercase()
+                    ),
+                );
+            } else if service {
+                self.serve(packet, now);
+            } else {
+                self.counters.delivered += 1;
+                self.rx.push_back(packet);
+            }
         } else {
             self.counters.drop("unbound port");
             self.push_event(NodeEvent::Drop {
@@ -649,6 +686,7 @@ impl Node {
             ServiceAction::SetClock { tv_sec, tv_nsec } => {
                 let want = i128::from(tv_sec) * 1_000_000_000 + i128::from(tv_nsec);
                 self.clock_offset_ns += want - self.clock_unix_ns(now);
+                self.clock_sets += 1;
                 vec![service::clock_reply((tv_sec, tv_nsec))]
             }
             ServiceAction::None => vec![],
@@ -908,6 +946,9 @@ pub trait App: Send + 'static {
     /// The run ends at `now`: report final figures (accounting, counters) through the
     /// application's own outputs. Nothing is sent on the network any more.
     fn finish(&mut self, _node: &mut Node, _now: SimTime) {}
+    /// The node's CSP clock was set through CMP CLOCK (service port 0) at `now`: an
+    /// application that keeps times against it re-reads it.
+    fn clock_set(&mut self, _node: &mut Node, _now: SimTime) {}
 }
 
 /// An application that binds nothing: the node only routes and answers ports 0-6.
@@ -939,13 +980,23 @@ impl<A: App> Host<A> {
 
     /// A CAN frame arrived on `iface`.
     pub fn handle_frame(&mut self, iface: IfaceId, frame: &CanFrame, now: SimTime) {
+        let sets = self.node.clock_sets();
         self.node.handle_frame(iface, frame, now);
+        self.clock_check(sets, now);
         self.after_input(now);
     }
     /// A packet arrived on packet interface `iface`.
     pub fn handle_packet(&mut self, iface: IfaceId, packet: Packet, now: SimTime) {
+        let sets = self.node.clock_sets();
         self.node.handle_packet(iface, packet, now);
+        self.clock_check(sets, now);
         self.after_input(now);
+    }
+    /// Tell the application if the input set the node's clock.
+    fn clock_check(&mut self, sets_before: u64, now: SimTime) {
+        if self.node.clock_sets() != sets_before {
+            self.app.clock_set(&mut self.node, now);
+        }
     }
     /// The earliest time [`Host::handle_timeout`] has work.
     pub fn poll_timeout(&self) -> Option<SimTime> {
@@ -1065,6 +1116,9 @@ impl<T: App + ?Sized> App for Box<T> {
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         (**self).finish(node, now)
     }
+    fn clock_set(&mut self, node: &mut Node, now: SimTime) {
+        (**self).clock_set(node, now)
+    }
 }
 
 /// An application whose events are mapped by `f` (for a run that gathers every node's
@@ -1122,6 +1176,9 @@ where
     }
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         self.app.finish(node, now)
+    }
+    fn clock_set(&mut self, node: &mut Node, now: SimTime) {
+        self.app.clock_set(node, now)
     }
 }
 
@@ -1198,6 +1255,10 @@ impl<A: App> App for Tap<A> {
     }
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         self.app.finish(node, now);
+        self.pull();
+    }
+    fn clock_set(&mut self, node: &mut Node, now: SimTime) {
+        self.app.clock_set(node, now);
         self.pull();
     }
 }
@@ -1289,6 +1350,58 @@ mod tests {
         n.handle_packet(0, Packet::new(h, vec![9, 0, 0, 0, 0]), SimTime::ZERO);
         assert!(drain(&mut n).is_empty());
         assert_eq!(n.counters().drops.get("crc32"), Some(&1));
+    }
+
+    #[test]
+    fn xtea_hmac_and_rdp_packets_are_discarded_at_their_destination_in_libcsps_order() {
+        let ping = |flags_: u8, data: Vec<u8>, dport: u8| {
+            let mut h = Header::new(3, 6, dport, 40);
+            h.flags = flags_;
+            Packet::new(h, data)
+        };
+        let with_crc = |d: &[u8]| {
+            let mut v = d.to_vec();
+            crc32::append(&mut v);
+            v
+        };
+        let bad_crc = vec![9, 0, 0, 0, 0];
+        let cases: [(u8, Vec<u8>, u8, &str); 8] = [
+            (flags::XTEA, vec![1, 2], 1, "xtea"),
+            (flags::HMAC, vec![1, 2], 1, "hmac"),
+            (flags::RDP, vec![1, 2], 1, "rdp"),
+            // XTEA is checked before the CRC, the CRC before HMAC, HMAC before RDP.
+            (flags::XTEA | flags::CRC32, bad_crc.clone(), 1, "xtea"),
+            (flags::HMAC | flags::CRC32, bad_crc.clone(), 1, "crc32"),
+            (flags::HMAC | flags::RDP, vec![1], 1, "hmac"),
+            (flags::RDP | flags::CRC32, with_crc(&[1, 2]), 20, "rdp"),
+            // No socket: dropped before any check, as libcsp does.
+            (flags::XTEA, vec![1], 21, "unbound port"),
+        ];
+        for (f, data, dport, reason) in cases {
+            let mut n = router_node();
+            n.bind(20);
+            n.handle_packet(0, ping(f, data, dport), SimTime::ZERO);
+            assert!(drain(&mut n).is_empty(), "flags {f:#04x}: no reply");
+            assert!(n.poll_delivery().is_none(), "flags {f:#04x}: not delivered");
+            assert_eq!(n.counters().drops.get(reason), Some(&1), "flags {f:#04x}");
+            assert_eq!(n.counters().total_drops(), 1, "flags {f:#04x}");
+        }
+        // The plain ping and the FRAG bit (unused in 1.4, never checked) are answered.
+        for f in [0, flags::FRAG] {
+            let mut n = router_node();
+            n.handle_packet(0, ping(f, vec![1, 2], 1), SimTime::ZERO);
+            assert_eq!(reassemble(&drain(&mut n)).len(), 1, "flags {f:#04x}");
+        }
+        // A router forwards flagged packets untouched: only the destination checks.
+        let mut n = router_node();
+        let mut h = Header::new(3, 12, 1, 40);
+        h.flags = flags::XTEA | flags::HMAC | flags::RDP;
+        let p = Packet::new(h, vec![7; 9]);
+        for fr in frames_of(&p, 6) {
+            n.handle_frame(0, &fr, SimTime::ZERO);
+        }
+        assert_eq!(reassemble(&drain(&mut n)), vec![(1, p)]);
+        assert_eq!(n.counters().total_drops(), 0);
     }
 
     #[test]
