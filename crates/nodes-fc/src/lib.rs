@@ -32,6 +32,7 @@ pub mod estimator;
 pub mod guidance;
 pub mod scripts;
 pub mod sensors;
+pub mod timesync;
 pub mod truth;
 pub mod wire;
 
@@ -86,6 +87,25 @@ pub struct FcPorts {
     pub attitude: u8,
     /// Mission-controller scripts.
     pub scripts: u8,
+}
+
+impl FcPorts {
+    /// Whether ICD 4.1 stars `command` on `port` for payloads: TMGEN, TMATP, TMACD and
+    /// TMSENS on the telemetry port and RTCSTMGET on the RTC port. The attitude port is
+    /// starred but none of its commands, and the scripts port is not in 4.1.
+    pub fn open_to_payloads(&self, port: u8, command: Option<u8>) -> bool {
+        match command {
+            Some(c) if port == self.telemetry => [
+                wire::cmd::TMGEN,
+                wire::cmd::TMATP,
+                wire::cmd::TMACD,
+                wire::cmd::TMSENS,
+            ]
+            .contains(&c),
+            Some(c) if port == self.rtc => c == wire::cmd::RTCSTMGET,
+            _ => false,
+        }
+    }
 }
 
 impl Default for FcPorts {
@@ -203,6 +223,10 @@ pub struct FcConfig {
     pub initial_target_point: Option<[f64; 3]>,
     /// Scripts and faults at their times.
     pub timeline: Vec<TimedFcEvent>,
+    /// What a payload (12-15) may ask of the FC (ICD 4.1's stars by default).
+    pub payload_access: platform::addr::PayloadAccess,
+    /// Where the FC sends its RTC (CMP CLOCK), and how often.
+    pub time_sync: timesync::TimeSyncConfig,
 }
 
 impl Default for FcConfig {
@@ -227,6 +251,8 @@ impl Default for FcConfig {
             initial_target_attitude: None,
             initial_target_point: None,
             timeline: Vec::new(),
+            payload_access: platform::addr::PayloadAccess::default(),
+            time_sync: timesync::TimeSyncConfig::default(),
         }
     }
 }
@@ -319,6 +345,8 @@ pub struct FcApp {
     // --- flight software (volatile) ---
     fsw: Fsw,
     refused: u64,
+    denied: u64,
+    time_sync: timesync::TimeSync,
     log: Vec<NodeEvent>,
     out: Outbox<Published>,
     truth_board: Option<platform::board::TruthBoard>,
@@ -408,6 +436,8 @@ impl FcApp {
             reset_cause: RESET_POWER_ON,
             fsw,
             refused: 0,
+            denied: 0,
+            time_sync: timesync::TimeSync::new(cfg.time_sync.clone()),
             log: Vec::new(),
             out: Outbox::default(),
             truth_board: None,
@@ -439,9 +469,15 @@ impl FcApp {
         &self.fsw.target
     }
 
-    /// Requests answered with the failure reply because they did not parse.
+    /// Requests answered with the failure reply (malformed, out of range or denied).
     pub fn refused(&self) -> u64 {
         self.refused
+    }
+
+    /// Requests from payloads refused by [`FcConfig::payload_access`] (also in
+    /// [`refused`](Self::refused)).
+    pub fn denied(&self) -> u64 {
+        self.denied
     }
 
     /// The true attitude state.
@@ -971,6 +1007,7 @@ impl FcApp {
                 self.rtc_offset_ns = i128::from(t.rtc_timestamp) * 1_000_000_000
                     - self.true_unix_ns(now)
                     - self.clock.error_ns(now);
+                self.time_sync.soon(now);
                 Vec::new()
             }
             RtcCommand::Get => RtcTimestamp {
@@ -991,12 +1028,19 @@ impl FcApp {
             }
             AttitudeCommand::GetPoint => TargetPoint { p: target.point }.to_vec(),
             AttitudeCommand::SetPoint(p) => {
+                if !point_fits_mode(p, target.mode) {
+                    return Err(RESULT_FAILURE);
+                }
                 target.point = p;
                 target.point_set = true;
                 Vec::new()
             }
             AttitudeCommand::GetMode => TargetModeRepr { mode: target.mode }.to_vec(),
             AttitudeCommand::SetMode(m) => {
+                // The held point must make sense in the mode that reads it.
+                if target.point_set && !point_fits_mode(target.point, m) {
+                    return Err(RESULT_FAILURE);
+                }
                 target.mode = m;
                 Vec::new()
             }
@@ -1026,6 +1070,20 @@ impl FcApp {
     }
 }
 
+/// Whether target point `p` is valid in `mode`: ECI vector tracking reads it as a
+/// direction (any non-zero length); every other mode as a geodetic point for earth target
+/// (latitude -90..=90 deg, longitude -180..=360 deg, height -1 km..=100 km).
+fn point_fits_mode(p: [f64; 3], mode: TargetMode) -> bool {
+    if mode == TargetMode::EciVector {
+        p.iter().any(|&x| x != 0.0)
+    } else {
+        let [lat_deg, lon_deg, height_m] = p;
+        (-90.0..=90.0).contains(&lat_deg)
+            && (-180.0..=360.0).contains(&lon_deg)
+            && (-1_000.0..=100_000.0).contains(&height_m)
+    }
+}
+
 fn sat_i8(x: f64) -> i8 {
     if x.is_nan() {
         0
@@ -1047,21 +1105,47 @@ impl App for FcApp {
             node.bind(port);
         }
         self.catch_up(now);
+        self.time_sync.start(node, now);
+        self.time_sync.run(node, now, self.rtc_unix_ns(now));
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
         self.clock = node.clock_errors().clone();
         let p = self.cfg.ports;
         let dport = packet.header.dport;
-        let (reply, refused) = if dport == p.telemetry {
+        let src = packet.header.src;
+        let command = packet.data.first().copied();
+        if self.time_sync.handle_reply(&packet) {
+            return;
+        }
+        let (reply, refused) = if ![p.telemetry, p.rtc, p.attitude, p.scripts].contains(&dport) {
+            return;
+        } else if self
+            .cfg
+            .payload_access
+            .refuses(src, p.open_to_payloads(dport, command))
+        {
+            self.denied += 1;
+            self.log.push(NodeEvent::warning(
+                now,
+                format!(
+                    "fc: payload {src} refused port {dport} command {}: not available to payloads (ICD 4.1)",
+                    command.map_or("(none)".to_owned(), |c| c.to_string())
+                ),
+            ));
+            (
+                reqrep::failure(command.unwrap_or(0)),
+                Some(reqrep::RequestError::Empty),
+            )
+        } else if dport == p.telemetry {
             serve::<TelemetryCommand>(&packet.data, |c| self.telemetry(node, c, now))
         } else if dport == p.rtc {
             serve::<RtcCommand>(&packet.data, |c| Ok(self.rtc(c, now)))
         } else if dport == p.attitude {
             serve::<AttitudeCommand>(&packet.data, |c| self.attitude_cmd(c))
-        } else if dport == p.scripts {
-            // ICD 1.5 text; the first byte stands for the command id in the reply.
-            let command = packet.data.first().copied().unwrap_or(0);
+        } else {
+            // Scripts (ICD 1.5 text); the first byte stands for the command id in the reply.
+            let command = command.unwrap_or(0);
             match self.submit_script(&packet.data, now) {
                 Ok(()) => (vec![command, RESULT_SUCCESS], None),
                 Err(why) => {
@@ -1075,19 +1159,22 @@ impl App for FcApp {
                     (reqrep::failure(command), Some(reqrep::RequestError::Empty))
                 }
             }
-        } else {
-            return;
         };
         if refused.is_some() {
             self.refused += 1;
         }
         // A send failure is already counted by the node.
         let _ = node.send(Packet::new(packet.header.reply(node.addr()), reply), now);
+        // After an RTCSTMSET, the new time goes out at once.
+        self.time_sync.run(node, now, self.rtc_unix_ns(now));
         self.flush_log(node);
     }
 
     fn poll_timeout(&self) -> Option<SimTime> {
-        self.next_tick
+        match (self.next_tick, self.time_sync.due()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
@@ -1097,6 +1184,7 @@ impl App for FcApp {
             self.tick(t, true);
             self.next_tick = Some(t + std::time::Duration::from_nanos(self.dt_ns));
         }
+        self.time_sync.run(node, now, self.rtc_unix_ns(now));
         self.flush_log(node);
     }
 
@@ -1143,28 +1231,202 @@ mod tests {
         c
     }
 
+    /// The FC without time distribution: every packet it sends is a reply.
     fn host(tle: Option<(&str, &str)>) -> Host<FcApp> {
         let c = node_cfg();
         let app = FcApp::new(FcConfig {
             epoch_unix_s: START,
             tle: tle.map(|(a, b)| (a.to_owned(), b.to_owned())),
+            time_sync: timesync::TimeSyncConfig {
+                to: Vec::new(),
+                period: None,
+            },
             ..FcConfig::default()
         });
         Host::new(c, app, SimTime::ZERO)
     }
 
-    fn ask(h: &mut Host<FcApp>, port: u8, req: &[u8], t: SimTime) -> Vec<u8> {
+    /// The CMP CLOCK requests the FC sent: (time sent, destination, tv_sec, tv_nsec).
+    fn clock_sets(h: &mut Host<FcApp>, t: SimTime) -> Vec<(SimTime, u8, u32, u32)> {
+        std::iter::from_fn(|| h.node.poll_transmit())
+            .filter_map(|tx| match tx {
+                Transmit::Packet { packet, .. } if packet.header.dport == 0 => {
+                    let d = &packet.data;
+                    assert_eq!(d[..2], [0, 6], "CMP CLOCK request");
+                    assert_eq!(d.len(), 10);
+                    let be = |i: usize| u32::from_be_bytes(d[i..i + 4].try_into().unwrap());
+                    Some((t, packet.header.dst, be(2), be(6)))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_rtc_goes_to_the_pc_at_boot_after_rtcstmset_and_every_period() {
+        let mut h = Host::new(
+            node_cfg(),
+            FcApp::new(FcConfig {
+                epoch_unix_s: START,
+                ..FcConfig::default()
+            }),
+            SimTime::ZERO,
+        );
+        let start = u32::try_from(START).unwrap();
+        assert_eq!(
+            clock_sets(&mut h, SimTime::ZERO),
+            vec![(SimTime::ZERO, 6, start, 0)]
+        );
+        // RTCSTMSET +1000 s at 12.5 s: the reply, then the new time at once.
+        let t = SimTime::from_ms(12_500);
+        let set = [vec![1], (start + 1_012).to_le_bytes().to_vec()].concat();
+        h.handle_packet(0, Packet::new(Header::new(16, 3, 11, 40), set), t);
+        let Some(Transmit::Packet { packet, .. }) = h.node.poll_transmit() else {
+            panic!("no reply")
+        };
+        assert_eq!(packet.data, vec![1, 1]);
+        assert_eq!(clock_sets(&mut h, t), vec![(t, 6, start + 1_012, 0)]);
+        // The period runs from the last send: 72.5 s, 132.5 s; the RTC runs on from its set.
+        let mut sent = Vec::new();
+        while let Some(due) = h.poll_timeout().filter(|&d| d <= SimTime::from_secs(135)) {
+            h.handle_timeout(due);
+            sent.extend(clock_sets(&mut h, due));
+        }
+        assert_eq!(
+            sent,
+            vec![
+                (SimTime::from_ms(72_500), 6, start + 1_072, 0),
+                (SimTime::from_ms(132_500), 6, start + 1_132, 0),
+            ]
+        );
+        // The PC's answer is taken on the FC's port, not refused or dropped.
+        let port = 32;
+        let mut reply = vec![0xff, 6];
+        reply.extend_from_slice(&[0; 8]);
         h.handle_packet(
             0,
-            Packet::new(Header::new(16, 3, port, 40), req.to_vec()),
+            Packet::new(Header::new(6, 3, port, 0), reply),
+            SimTime::from_secs(133),
+        );
+        assert!(h.node.poll_transmit().is_none());
+        assert_eq!(h.node.counters().total_drops(), 0);
+        assert_eq!((h.app.time_sync.sent, h.app.time_sync.replies), (4, 1));
+    }
+
+    fn ask(h: &mut Host<FcApp>, port: u8, req: &[u8], t: SimTime) -> Vec<u8> {
+        ask_from(h, 16, port, req, t)
+    }
+
+    fn ask_from(h: &mut Host<FcApp>, src: u8, port: u8, req: &[u8], t: SimTime) -> Vec<u8> {
+        h.handle_packet(
+            0,
+            Packet::new(Header::new(src, 3, port, 40), req.to_vec()),
             t,
         );
-        let Some(Transmit::Packet { packet, .. }) = h.node.poll_transmit() else {
+        // The time sent to the PC (CMP CLOCK) is not a reply.
+        let mut out = std::iter::from_fn(|| h.node.poll_transmit()).filter(
+            |tx| !matches!(tx, Transmit::Packet { packet, .. } if packet.header.dport == 0),
+        );
+        let Some(Transmit::Packet { packet, .. }) = out.next() else {
             panic!("no reply to port {port} {req:02x?}")
         };
-        assert_eq!(packet.header, Header::new(3, 16, 40, port));
-        assert!(h.node.poll_transmit().is_none(), "one reply per request");
+        assert_eq!(packet.header, Header::new(3, src, 40, port));
+        assert!(out.next().is_none(), "one reply per request");
         packet.data
+    }
+
+    #[test]
+    fn atcptset_is_range_checked_in_the_reading_of_the_commanded_mode() {
+        let mut h = host(Some((L1, L2)));
+        let t = SimTime::from_secs(1);
+        let set = |p: [f64; 3]| {
+            let mut v = vec![4];
+            for x in p {
+                v.extend_from_slice(&x.to_le_bytes());
+            }
+            v
+        };
+        // Geodetic (every mode but ECI vector tracking): lat, lon deg, height m.
+        for (p, ok) in [
+            ([954.7, 0.0, 0.0], false),
+            ([90.5, 0.0, 0.0], false),
+            ([-90.5, 0.0, 0.0], false),
+            ([0.0, 360.5, 0.0], false),
+            ([0.0, -180.5, 0.0], false),
+            ([0.0, 0.0, 100_001.0], false),
+            ([0.0, 0.0, -1_001.0], false),
+            ([54.7, 25.3, 120.0], true),
+            ([-90.0, 359.0, -400.0], true),
+        ] {
+            assert_eq!(ask(&mut h, 12, &set(p), t), vec![4, u8::from(ok)], "{p:?}");
+        }
+        assert_eq!(h.app.target().point, [-90.0, 359.0, -400.0]);
+        // ECI vector tracking (6): any non-zero direction.
+        assert_eq!(ask(&mut h, 12, &[6, 6], t), vec![6, 1]);
+        assert_eq!(ask(&mut h, 12, &set([954.7, 3.0, 1.0]), t), vec![4, 1]);
+        assert_eq!(ask(&mut h, 12, &set([0.0; 3]), t), vec![4, 0]);
+        // Earth target (5) refuses the direction held: the mode stays.
+        assert_eq!(ask(&mut h, 12, &[6, 5], t), vec![6, 0]);
+        assert_eq!(ask(&mut h, 12, &[5], t), vec![5, 1, 6]);
+        assert_eq!(ask(&mut h, 12, &set([54.7, 25.3, 0.0]), t), vec![4, 1]);
+        assert_eq!(ask(&mut h, 12, &[6, 5], t), vec![6, 1]);
+    }
+
+    #[test]
+    fn a_payload_gets_only_the_commands_icd_4_1_stars_unless_access_is_open() {
+        use platform::addr::PayloadAccess;
+        let starred: [(u8, Vec<u8>); 5] = [
+            (10, vec![1]),
+            (10, vec![2]),
+            (10, vec![3]),
+            (10, vec![4]),
+            (11, vec![2]),
+        ];
+        let others: [(u8, Vec<u8>); 8] = [
+            (10, vec![5]),
+            (10, vec![6]),
+            (11, [vec![1], 1_000u32.to_le_bytes().to_vec()].concat()),
+            (12, vec![1]),
+            (12, vec![5]),
+            (12, vec![6, 3]),
+            (12, vec![8]),
+            (13, b"adcs 1 2 pointECI 1 0 0 0".to_vec()),
+        ];
+        for access in [PayloadAccess::Icd, PayloadAccess::Open] {
+            let mut h = host(Some((L1, L2)));
+            h.app.cfg.payload_access = access;
+            let t = SimTime::from_secs(10);
+            for (port, req) in &starred {
+                let r = ask_from(&mut h, 12, *port, req, t);
+                assert_eq!(r[..2], [req[0], 1], "{access:?} port {port} {req:02x?}");
+            }
+            for (port, req) in &others {
+                for pl in [12, 13, 14, 15] {
+                    let r = ask_from(&mut h, pl, *port, req, t);
+                    let ground = ask(&mut h, *port, req, t);
+                    match access {
+                        PayloadAccess::Icd => assert_eq!(r, vec![req[0], 0], "{port} {req:02x?}"),
+                        PayloadAccess::Open => assert_eq!(r[1], ground[1], "{port} {req:02x?}"),
+                    }
+                }
+            }
+            // An empty request is refused either way; no other node is a payload.
+            assert_eq!(ask_from(&mut h, 13, 10, &[], t), vec![0, 0]);
+            for src in [1, 2, 4, 5, 6, 16, 20] {
+                assert_eq!(ask_from(&mut h, src, 10, &[6], t)[..2], [6, 1]);
+            }
+            let denied = match access {
+                PayloadAccess::Icd => 4 * others.len() as u64 + 1,
+                PayloadAccess::Open => 0,
+            };
+            assert_eq!(h.app.denied(), denied, "{access:?}");
+        }
+        // Refused, a payload's ATCMDSET changes nothing.
+        let mut h = host(Some((L1, L2)));
+        let t = SimTime::from_secs(10);
+        let before = *h.app.target();
+        assert_eq!(ask_from(&mut h, 12, 12, &[6, 3], t), vec![6, 0]);
+        assert_eq!(*h.app.target(), before);
     }
 
     #[test]

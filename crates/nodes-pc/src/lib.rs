@@ -192,6 +192,9 @@ pub struct PcConfig {
     pub telemetry_port: u8,
     /// Scenario events (sorted by time when the app is built).
     pub timeline: Vec<TimedPcEvent>,
+    /// Whether payloads are refused SETUP and ABORT (ICD 3.1.1), the default, or may use
+    /// them (a lab bench).
+    pub payload_access: platform::addr::PayloadAccess,
 }
 
 impl Default for PcConfig {
@@ -204,6 +207,7 @@ impl Default for PcConfig {
             ingest_port: wire::PORT_INGEST,
             telemetry_port: wire::PORT_TELEMETRY,
             timeline: Vec::new(),
+            payload_access: platform::addr::PayloadAccess::default(),
         }
     }
 }
@@ -477,6 +481,8 @@ pub struct SessionStatus {
 pub struct PcCounters {
     /// Requests on ports 10 and 12 answered with failure.
     pub refused: u64,
+    /// Of those, SETUP and ABORT from payloads refused by [`PcConfig::payload_access`].
+    pub denied: u64,
     /// SYNC requests sent.
     pub syncs_sent: u64,
     /// POLL requests sent (retries included).
@@ -1450,7 +1456,23 @@ impl App for PcApp {
         let dport = packet.header.dport;
         if dport == self.cfg.control_port || dport == self.cfg.telemetry_port {
             let mut start_now = None;
-            let (reply, refused) = if dport == self.cfg.control_port {
+            let src = packet.header.src;
+            let command = packet.data.first().copied();
+            // ICD 3.1.1: a payload has no direct access to session configuration.
+            let configures = matches!(command, Some(wire::cmd::SETUP | wire::cmd::ABORT));
+            let (reply, refused) = if dport == self.cfg.control_port
+                && self.cfg.payload_access.refuses(src, !configures)
+            {
+                self.counters.denied += 1;
+                self.log.push(NodeEvent::warning(
+                    now,
+                    format!(
+                        "pc: payload {src} refused {}: session configuration is the mission's (ICD 3.1.1)",
+                        if command == Some(wire::cmd::SETUP) { "SETUP" } else { "ABORT" }
+                    ),
+                ));
+                (csp::reqrep::failure(command.unwrap_or(0)), None)
+            } else if dport == self.cfg.control_port {
                 serve::<ControlCommand>(&packet.data, |c| {
                     self.control(node, c, now, &mut start_now)
                 })
@@ -1479,6 +1501,21 @@ impl App for PcApp {
 
     fn poll_timeout(&self) -> Option<SimTime> {
         self.next_due()
+    }
+
+    fn clock_set(&mut self, node: &mut Node, now: SimTime) {
+        let clock_ns = node.clock_unix_ns(now);
+        for id in self.table.reanchor(now, clock_ns) {
+            self.log.push(NodeEvent::info(
+                now,
+                format!(
+                    "pc: clock set to {}.{:09} s: PENDING session {id} starts when it reads its timestamp",
+                    clock_ns.div_euclid(1_000_000_000),
+                    clock_ns.rem_euclid(1_000_000_000)
+                ),
+            ));
+        }
+        self.flush_log(node);
     }
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {

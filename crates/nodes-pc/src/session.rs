@@ -261,6 +261,29 @@ impl SessionTable {
         }
     }
 
+    /// The PC's clock was set (it reads `now_unix_ns` at `now`): each PENDING session now
+    /// starts when the clock reads its timestamp, at once if that has passed. An ACTIVE
+    /// session keeps its end (its duration is elapsed time). The PENDING sessions moved.
+    pub fn reanchor(&mut self, now: SimTime, now_unix_ns: i128) -> Vec<u8> {
+        let mut moved = Vec::new();
+        for s in self
+            .slots
+            .iter_mut()
+            .filter(|s| s.state == SessionState::Pending)
+        {
+            let ahead_ns =
+                u64::try_from((s.window_unix_ns.0 - now_unix_ns).max(0)).unwrap_or(u64::MAX);
+            let duration_ns = s.end_at.as_ns().saturating_sub(s.start_at.as_ns());
+            let start_at = now + Duration::from_nanos(ahead_ns);
+            if start_at != s.start_at {
+                moved.push(s.spec.session_id);
+            }
+            s.start_at = start_at;
+            s.end_at = start_at + Duration::from_nanos(duration_ns);
+        }
+        moved
+    }
+
     /// Make slot `i` ACTIVE at `now` (packet counter from zero).
     pub fn activate(&mut self, i: usize, now: SimTime) {
         if let Some(s) = self.slots.get_mut(i) {

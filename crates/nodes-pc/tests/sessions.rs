@@ -788,3 +788,78 @@ fn finish_reports_the_final_accounting() {
     assert_eq!(accounting.session(2).unwrap().buffered_now, 100);
     assert_eq!(accounting, s.host.app.accounting());
 }
+
+#[test]
+fn a_payload_is_refused_setup_and_abort_but_not_status_unless_access_is_open() {
+    use platform::addr::PayloadAccess;
+    for access in [PayloadAccess::Icd, PayloadAccess::Open] {
+        let mut c = cfg();
+        c.payload_access = access;
+        let mut s = Sim::new(c, vec![FakePayload::normal(12), FakePayload::normal(14)]);
+        let icd = access == PayloadAccess::Icd;
+        // Payload 15 has no fake behind it: the PC's replies to it are the stray packets.
+        let ask = |s: &mut Sim, sport: u8, req: &[u8]| {
+            s.send_from(15, sport, wire::PORT_CONTROL, req);
+            let r = s.stray.pop().unwrap();
+            assert_eq!((r.header.dst, r.header.dport), (15, sport));
+            r.data
+        };
+        let setup = session(1, ts(100), 60, 0, 64, b"").to_request();
+        assert_eq!(ask(&mut s, 40, &setup), vec![1, u8::from(!icd)]);
+        let want = if icd {
+            SessionState::NotActive
+        } else {
+            SessionState::Pending
+        };
+        assert_eq!(s.status(1).unwrap().state, want);
+        if icd {
+            assert_eq!(s.setup(&session(1, ts(100), 60, 0, 64, b"")), 1);
+        }
+        // STATUS is answered to a payload either way.
+        assert_eq!(ask(&mut s, 41, &[wire::cmd::STATUS, 1])[..2], [2, 1]);
+        assert_eq!(
+            ask(&mut s, 42, &[wire::cmd::ABORT, 1]),
+            vec![3, u8::from(!icd)]
+        );
+        let want = if icd {
+            SessionState::Pending
+        } else {
+            SessionState::NotActive
+        };
+        assert_eq!(s.status(1).unwrap().state, want);
+        assert_eq!(s.host.app.counters().denied, if icd { 2 } else { 0 });
+    }
+}
+
+/// A CMP CLOCK set of the PC's clock to `unix_s` (as the FC sends its RTC).
+fn clock_set(s: &mut Sim, unix_s: u32) {
+    let mut req = vec![0x00, 6];
+    req.extend_from_slice(&unix_s.to_be_bytes());
+    req.extend_from_slice(&0u32.to_be_bytes());
+    s.send_from(3, 40, 0, &req);
+    let r = s.stray.pop().unwrap();
+    assert_eq!((r.header.dst, &r.data[..2]), (3, &[0xff, 6][..]));
+}
+
+#[test]
+fn a_pending_session_starts_when_the_pc_clock_reads_its_timestamp_after_the_clock_is_set() {
+    // A session timed for 100 s, the clock set at 10 s: 50 s ahead, it starts at 50 s (and
+    // keeps its 10 s); past the timestamp, at once; back to the epoch, 100 s later.
+    for (set_to_s, start_s) in [(60, 50), (150, 10), (0, 110)] {
+        let mut s = sim();
+        assert_eq!(s.setup(&session(1, ts(100), 10, 0, 64, b"")), 1);
+        s.run_until(SimTime::from_secs(10));
+        clock_set(&mut s, ts(set_to_s));
+        s.run_until(SimTime::from_secs(200));
+        assert_eq!(
+            s.starts(),
+            vec![(SimTime::from_secs(start_s), 1)],
+            "set to {set_to_s}"
+        );
+        assert_eq!(
+            s.ends()[0].0,
+            SimTime::from_secs(start_s + 10),
+            "set to {set_to_s}"
+        );
+    }
+}

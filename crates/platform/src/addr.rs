@@ -75,6 +75,30 @@ impl Segment {
     }
 }
 
+/// What the platform lets a payload (12-15) ask of it.
+///
+/// ICD 4.1 stars the FC commands available to a payload (TMGEN, TMATP, TMACD, TMSENS,
+/// RTCSTMGET, the service handler's ping and uptime), and ICD 3.1.1 keeps session
+/// configuration (the PC's SETUP and ABORT) on the mission side. Under [`Icd`](Self::Icd)
+/// anything else from a payload gets the failure reply, counted and logged; a lab bench may
+/// open everything ([`Open`](Self::Open)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PayloadAccess {
+    /// The ICD's rules (the default).
+    #[default]
+    Icd,
+    /// A payload may use every command (a lab bench).
+    Open,
+}
+
+impl PayloadAccess {
+    /// Whether a request from `src` is refused, given whether its command is open to
+    /// payloads.
+    pub fn refuses(self, src: u8, open_to_payloads: bool) -> bool {
+        self == PayloadAccess::Icd && PAYLOADS.contains(&src) && !open_to_payloads
+    }
+}
+
 /// The name of a platform node by its address (`COMM1`, `FC`, `PL12`, `GS16`), `None` for
 /// reserved and unused addresses.
 pub fn node_name(addr: u8) -> Option<String> {

@@ -37,6 +37,7 @@ pub mod plan;
 pub mod protobuf;
 pub mod record;
 pub mod recording;
+pub mod rules;
 pub mod runtime;
 pub mod scenario;
 pub mod sessions;

@@ -107,6 +107,9 @@ pub struct Scenario {
     /// Per-node options, keyed by node name.
     #[serde(default)]
     pub nodes: BTreeMap<String, NodeOptions>,
+    /// What payloads may ask of the platform (`crate::rules`).
+    #[serde(default)]
+    pub rules: crate::rules::RulesSpec,
     /// Links to programs outside the twin.
     #[serde(default)]
     pub links: Vec<LinkSpec>,
@@ -675,6 +678,7 @@ impl Scenario {
         crate::eps::validate(self, &mut err);
         crate::comm::validate(self, &mut err);
         crate::clock::validate(self, &mut err);
+        crate::rules::validate(self, &net, &mut err);
         crate::expectations::validate(self, &net, &mut err);
         if errs.is_empty() {
             Ok(())

@@ -704,10 +704,19 @@ initial_rate_deg_s = 0.5
 
 /// A `clock` fault on the FC: its RTC jumps 60 s ahead at 100 s, so a script the ground
 /// timed for 300 s..400 s (true UTC) runs from 240 s to 340 s; the RTC it reports is 60 s
-/// ahead; once corrected (500 s) it reads true time again. The PC's clock, 30 s ahead from
-/// 100 s, starts a session SETUP timed for 400 s at 370 s (ICD 3.1: the PC's clock).
+/// ahead; once corrected (500 s) it reads true time again. With the FC's time distribution
+/// off (`[rules] time_sync_to = []`), the PC's clock, 30 s ahead from 100 s, starts a session
+/// SETUP timed for 400 s at 370 s (ICD 3.1: the PC's clock). With it on (the default), the
+/// PC's clock follows the FC's RTC (sent at boot and every 60 s: at 120 s it takes the FC's
+/// 60 s over its own 30 s), and the session starts at 340 s.
 #[test]
 fn a_clock_fault_moves_what_runs_on_that_clock() {
+    for (rules, session_at) in [("[rules]\ntime_sync_to = []\n", 370), ("", 340)] {
+        clock_fault_run(rules, session_at);
+    }
+}
+
+fn clock_fault_run(rules: &str, session_at: u64) {
     // 2026-04-30T18:00:00Z.
     let start = 1_777_572_000u64;
     let text = format!(
@@ -716,7 +725,7 @@ name = "clock"
 duration = "600s"
 start = "2026-04-30T18:00:00Z"
 {TLE}
-[fc]
+{rules}[fc]
 mode = "nadir"
 initial_rate_deg_s = 0.5
 
@@ -801,7 +810,7 @@ jump_s = 60
         _ => None,
     });
     eprintln!("clock: the PC's session timed for 400 s started at {session_start:?} s");
-    assert_eq!(session_start, Some(370));
+    assert_eq!(session_start, Some(session_at), "{rules}");
     assert_eq!(rtc("rtc"), start + 200 + 60);
     assert_eq!(rtc("rtc-corrected"), start + 550);
 }
