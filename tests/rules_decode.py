@@ -44,12 +44,14 @@ def main():
     ap.add_argument("--rtc-step", type=int, default=1000)
     ap.add_argument("--session", type=int, default=1)
     ap.add_argument("--lead", type=int, default=4)
+    ap.add_argument("--quiet", type=float, default=3.0)
     a = ap.parse_args()
     check = Checks()
     ground = Peer(a.connect, a.me)
 
-    # ICD 1.6: flagged pings first (each from a port of its own), then the plain ones. A node
-    # answers in order, so a reply to a flagged ping would come before its plain echo.
+    # ICD 1.6: flagged pings (each from a port of its own), every frame that comes back in
+    # the next --quiet seconds kept (the whole burst's air time and back is about 1 s), then
+    # the same ping unflagged, which every node echoes.
     nodes = [int(x) for x in a.nodes.split(",")]
     flagged = {}
     sport = 40
@@ -58,13 +60,13 @@ def main():
             flagged[sport] = (dst, name)
             ground.sock.sendall(kiss_frame(header(2, a.me, dst, PORT_PING, sport, flag), b"flag"))
             sport += 1
-    for dst in nodes:
-        h, d = ground.request(dst, PORT_PING, b"plain ping", timeout=5.0)
-        check(f"plain ping to {dst} is echoed", d == b"plain ping", f"got {d!r}")
-    stray = [(h, d) for h, d in ground.reader.frames(1.5)]
+    back = list(ground.reader.frames(a.quiet))
     for sp, (dst, name) in sorted(flagged.items()):
-        got = [d for h, d in stray if h["dport"] == sp]
+        got = [d for h, d in back if h["dport"] == sp]
         check(f"{name}-flagged ping to {dst} is not answered", not got, f"replies {got!r}")
+    for dst in nodes:
+        h, d = ground.request(dst, PORT_PING, b"flag", timeout=5.0)
+        check(f"the same ping unflagged to {dst} is echoed", d == b"flag", f"got {d!r}")
 
     # ICD 4.1 (the stars) and 3.1.1 (the session configuration is the mission's).
     pl = Peer(a.connect, a.payload)
@@ -83,8 +85,12 @@ def main():
         res, d = ask(pl, FC, port, cmd)
         check(f"payload's {name} is answered ({size} bytes)", res == 1 and len(d) == size,
               f"result {res} data {d!r}")
+    # The RTCSTMSET asks for the time the RTC reads, so that even if it were taken it would
+    # not move the clock the session check below reads.
+    res, d = ask(pl, FC, PORT_RTC, 2)
+    rtc = struct.unpack("<I", d)[0] if res == 1 and len(d) == 4 else 0
     for name, port, cmd, data in (("TMALL", PORT_TM, 6, b""), ("TMRAWSENS", PORT_TM, 5, b""),
-                                  ("RTCSTMSET", PORT_RTC, 1, struct.pack("<I", 1)),
+                                  ("RTCSTMSET", PORT_RTC, 1, struct.pack("<I", rtc)),
                                   ("ATCMDSET", PORT_ATC, 6, bytes([3]))):
         res, d = ask(pl, FC, port, cmd, data)
         check(f"payload's {name} gets the failure reply", res == 0 and d == b"",
