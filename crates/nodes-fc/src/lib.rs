@@ -63,7 +63,7 @@ pub const PORTS: &[u8] = &[
     wire::PORT_SCRIPTS,
 ];
 
-/// Reset cause in TMGEN: power-on (the start of the run).
+/// Reset cause in TMGEN: power-on (the start of the run, or power back after a loss).
 pub const RESET_POWER_ON: u8 = 0;
 /// Reset cause in TMGEN: software reboot (CSP reboot service or a scenario fault).
 pub const RESET_SOFTWARE: u8 = 1;
@@ -342,6 +342,8 @@ pub struct FcApp {
     clock: csp::node::ClockErrors,
     power_on: Option<SimTime>,
     reset_cause: u8,
+    /// Power was lost since the last boot: the next boot is a power-on.
+    power_was_lost: bool,
     // --- flight software (volatile) ---
     fsw: Fsw,
     refused: u64,
@@ -434,6 +436,7 @@ impl FcApp {
             clock: csp::node::ClockErrors::default(),
             power_on: None,
             reset_cause: RESET_POWER_ON,
+            power_was_lost: false,
             fsw,
             refused: 0,
             denied: 0,
@@ -1037,8 +1040,11 @@ impl FcApp {
             }
             AttitudeCommand::GetMode => TargetModeRepr { mode: target.mode }.to_vec(),
             AttitudeCommand::SetMode(m) => {
-                // The held point must make sense in the mode that reads it.
-                if target.point_set && !point_fits_mode(target.point, m) {
+                // The held point must make sense in the mode that reads it; ECI vector
+                // tracking has no direction before one is set.
+                if (target.point_set || m == TargetMode::EciVector)
+                    && !point_fits_mode(target.point, m)
+                {
                     return Err(RESULT_FAILURE);
                 }
                 target.mode = m;
@@ -1072,14 +1078,15 @@ impl FcApp {
 
 /// Whether target point `p` is valid in `mode`: ECI vector tracking reads it as a
 /// direction (any non-zero length); every other mode as a geodetic point for earth target
-/// (latitude -90..=90 deg, longitude -180..=360 deg, height -1 km..=100 km).
+/// (latitude -90..=90 deg, longitude -180..<360 deg, height -1 km..=100 km: the ranges of
+/// the ICD 1.5 script's pointGEO).
 fn point_fits_mode(p: [f64; 3], mode: TargetMode) -> bool {
     if mode == TargetMode::EciVector {
         p.iter().any(|&x| x != 0.0)
     } else {
         let [lat_deg, lon_deg, height_m] = p;
         (-90.0..=90.0).contains(&lat_deg)
-            && (-180.0..=360.0).contains(&lon_deg)
+            && (-180.0..360.0).contains(&lon_deg)
             && (-1_000.0..=100_000.0).contains(&height_m)
     }
 }
@@ -1200,7 +1207,15 @@ impl App for FcApp {
         // A power cycle or reboot leaves the actuators off until the software commands them.
         self.wheel_cmd_nm = [0.0; 4];
         self.mtq_applied_am2 = Vector3::zeros();
-        self.reset_cause = RESET_SOFTWARE;
+        self.reset_cause = if std::mem::take(&mut self.power_was_lost) {
+            RESET_POWER_ON
+        } else {
+            RESET_SOFTWARE
+        };
+    }
+
+    fn power_lost(&mut self, _node: &mut Node, _now: SimTime) {
+        self.power_was_lost = true;
     }
 }
 
@@ -1339,6 +1354,8 @@ mod tests {
     fn atcptset_is_range_checked_in_the_reading_of_the_commanded_mode() {
         let mut h = host(Some((L1, L2)));
         let t = SimTime::from_secs(1);
+        // ECI vector tracking with no direction set is refused.
+        assert_eq!(ask(&mut h, 12, &[6, 6], t), vec![6, 0]);
         let set = |p: [f64; 3]| {
             let mut v = vec![4];
             for x in p {
@@ -1352,6 +1369,7 @@ mod tests {
             ([90.5, 0.0, 0.0], false),
             ([-90.5, 0.0, 0.0], false),
             ([0.0, 360.5, 0.0], false),
+            ([0.0, 360.0, 0.0], false),
             ([0.0, -180.5, 0.0], false),
             ([0.0, 0.0, 100_001.0], false),
             ([0.0, 0.0, -1_001.0], false),
@@ -1492,6 +1510,15 @@ mod tests {
             TargetMode::Detumble as u8,
             "target is volatile"
         );
+        // A power cycle is a power-on (it read as a software reset); a reboot after it is
+        // a software reset again.
+        h.power_lost(SimTime::from_secs(300));
+        h.reboot(SimTime::from_secs(310));
+        let g = TmGen::parse(&ask(&mut h, 10, &[1], SimTime::from_secs(320))[2..]).unwrap();
+        assert_eq!((g.uptime_s, g.reset_cause), (10, RESET_POWER_ON));
+        h.reboot(SimTime::from_secs(400));
+        let g = TmGen::parse(&ask(&mut h, 10, &[1], SimTime::from_secs(401))[2..]).unwrap();
+        assert_eq!(g.reset_cause, RESET_SOFTWARE);
     }
 
     #[test]

@@ -544,10 +544,15 @@ impl CommandSet for TelemetryCommand {
     }
 }
 
+/// The earliest time RTCSTMSET accepts: 2000-01-01T00:00:00Z. An RTC set before the mission
+/// is a mistake (a zero or a byte-order slip), and 0 is also CMP CLOCK's "read", so the
+/// time the FC distributes could not be 0.
+pub const RTC_MIN_UNIX_S: u32 = 946_684_800;
+
 /// The RTC port's commands (port 11).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RtcCommand {
-    /// RTCSTMSET 1: set the RTC (any u32 is accepted).
+    /// RTCSTMSET 1: set the RTC (from [`RTC_MIN_UNIX_S`]).
     Set(RtcTimestamp),
     /// RTCSTMGET 2.
     Get,
@@ -556,7 +561,16 @@ pub enum RtcCommand {
 impl CommandSet for RtcCommand {
     fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
         match r.command {
-            cmd::RTCSTMSET => data(r, "4").map(RtcCommand::Set),
+            cmd::RTCSTMSET => data::<RtcTimestamp>(r, "4").and_then(|t| {
+                if t.rtc_timestamp >= RTC_MIN_UNIX_S {
+                    Ok(RtcCommand::Set(t))
+                } else {
+                    Err(RequestError::OutOfRange {
+                        command: r.command,
+                        field: "rtc_timestamp",
+                    })
+                }
+            }),
             cmd::RTCSTMGET => no_data(r, RtcCommand::Get),
             c => Err(RequestError::UnknownCommand(c)),
         }
@@ -906,9 +920,18 @@ mod tests {
             TelemetryCommand::parse(&req(1, &[0])),
             Err(RequestError::WrongLength { .. })
         ));
+        // From 2000-01-01 on: 0 (and 1) refused, 946684800 taken.
+        for t in [0u32, 1, RTC_MIN_UNIX_S - 1] {
+            assert!(matches!(
+                RtcCommand::parse(&req(1, &t.to_le_bytes())),
+                Err(RequestError::OutOfRange { .. })
+            ));
+        }
         assert_eq!(
-            RtcCommand::parse(&req(1, &[1, 0, 0, 0])),
-            Ok(RtcCommand::Set(RtcTimestamp { rtc_timestamp: 1 }))
+            RtcCommand::parse(&req(1, &RTC_MIN_UNIX_S.to_le_bytes())),
+            Ok(RtcCommand::Set(RtcTimestamp {
+                rtc_timestamp: RTC_MIN_UNIX_S
+            }))
         );
         assert!(RtcCommand::parse(&req(1, &[1, 0, 0])).is_err());
         assert!(RtcCommand::parse(&req(2, &[0])).is_err());
