@@ -52,11 +52,8 @@ def main():
     p = Peer(a.connect, a.me)
 
     def ask(port, cmd, data=b""):
-        """Send `cmd | data`; return (result, reply data) or (None, None)."""
-        h, d = p.request(a.fc, port, bytes([cmd]) + data)
-        if d is None or len(d) < 2 or d[0] != cmd:
-            return None, d
-        return d[1], d[2:]
+        """Send `cmd | data`; return (result, reply data) or (None, what came)."""
+        return p.ask(a.fc, port, cmd, data)
 
     def rtc_ok(t):
         return abs(t - a.start) <= 86400

@@ -131,6 +131,14 @@ class Peer:
                 return h, d
         return None, None
 
+    def ask(self, dst, dport, cmd, data=b"", timeout=3.0):
+        """An ICD request `cmd | data` (ICD 1.8): (result, reply data after `cmd | result`),
+        or (None, what came back) when no reply to that command came."""
+        h, d = self.request(dst, dport, bytes([cmd]) + data, timeout)
+        if d is None or len(d) < 2 or d[0] != cmd:
+            return None, d
+        return d[1], d[2:]
+
 
 class Checks:
     """Prints one PASS/FAIL line per check and counts the failures."""

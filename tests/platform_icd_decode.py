@@ -110,10 +110,7 @@ def main():
 
     def ask(node, cmd, data=b""):
         """Send `cmd | data` to port 10; return (result, reply data) or (None, raw reply)."""
-        h, d = p.request(node, PORT, bytes([cmd]) + data)
-        if d is None or len(d) < 2 or d[0] != cmd:
-            return None, d
-        return d[1], d[2:]
+        return p.ask(node, PORT, cmd, data)
 
     def failed(name, node, cmd, data=b""):
         res, d = ask(node, cmd, data)

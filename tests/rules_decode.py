@@ -72,10 +72,7 @@ def main():
     pl = Peer(a.connect, a.payload)
 
     def ask(peer, dst, port, cmd, data=b""):
-        h, d = peer.request(dst, port, bytes([cmd]) + data, timeout=5.0)
-        if d is None or len(d) < 2 or d[0] != cmd:
-            return None, d
-        return d[1], d[2:]
+        return peer.ask(dst, port, cmd, data, timeout=5.0)
 
     h, d = pl.request(FC, PORT_PING, b"from a payload", timeout=5.0)
     check(f"payload {a.payload}'s ping to the FC is echoed", d == b"from a payload", f"{d!r}")

@@ -373,6 +373,7 @@ pub mod le {
         read_fn!(i8, i8);
         read_fn!(u16, u16);
         read_fn!(u32, u32);
+        read_fn!(u64, u64);
         read_fn!(i32, i32);
         read_fn!(f32, f32);
         read_fn!(f64, f64);
@@ -409,6 +410,7 @@ pub mod le {
         write_fn!(i8, i8);
         write_fn!(u16, u16);
         write_fn!(u32, u32);
+        write_fn!(u64, u64);
         write_fn!(i32, i32);
         write_fn!(f32, f32);
         write_fn!(f64, f64);

@@ -65,17 +65,23 @@ use std::fmt;
 use std::time::Duration;
 
 use csp::node::{App, Node, NodeEvent, Outbox};
+use csp::reqrep::le::Repr;
 use csp::reqrep::{Reply, serve};
 use csp::{Header, Packet, SimTime};
 
 pub use crate::sband::{Sband, SbandConfig};
 pub use crate::session::{Accepted, Refusal, SessionTable};
-use crate::wire::{ControlCommand, TelemetryCommand, Tmpc, TmpcSlot, cmd};
+use crate::wire::{ControlCommand, FileStat, FilesCommand, TelemetryCommand, Tmpc, TmpcSlot, cmd};
 pub use crate::wire::{SessionConfig, SessionResult, SessionState, Status};
 
 /// The ports this node binds for its ICD services by default (INTERPRETATION.md section 4,
-/// plus the twin's PC telemetry on 12).
-pub const PORTS: &[u8] = &[wire::PORT_CONTROL, wire::PORT_INGEST, wire::PORT_TELEMETRY];
+/// plus the twin's PC telemetry on 12 and buffer files on 13).
+pub const PORTS: &[u8] = &[
+    wire::PORT_CONTROL,
+    wire::PORT_INGEST,
+    wire::PORT_TELEMETRY,
+    wire::PORT_FILES,
+];
 
 /// Sessions the PC serves (one per payload, CSP 12-15).
 pub const MAX_SESSIONS: usize = 4;
@@ -190,6 +196,8 @@ pub struct PcConfig {
     pub ingest_port: u8,
     /// PC telemetry port (12).
     pub telemetry_port: u8,
+    /// Buffer files port (13, the twin's: FLIST, FSTAT, FREAD, FDELETE).
+    pub files_port: u8,
     /// Scenario events (sorted by time when the app is built).
     pub timeline: Vec<TimedPcEvent>,
     /// Whether payloads are refused SETUP and ABORT (ICD 3.1.1), the default, or may use
@@ -206,6 +214,7 @@ impl Default for PcConfig {
             control_port: wire::PORT_CONTROL,
             ingest_port: wire::PORT_INGEST,
             telemetry_port: wire::PORT_TELEMETRY,
+            files_port: wire::PORT_FILES,
             timeline: Vec::new(),
             payload_access: platform::addr::PayloadAccess::default(),
         }
@@ -284,11 +293,13 @@ pub enum DropReason {
     PowerLoss,
     /// A reply to a POLL with the wrong command id or without a result byte.
     Malformed,
+    /// In a buffer file emptied by FDELETE.
+    Deleted,
 }
 
 impl DropReason {
     /// Every reason, in order.
-    pub const ALL: [DropReason; 8] = [
+    pub const ALL: [DropReason; 9] = [
         DropReason::BufferFull,
         DropReason::Oversize,
         DropReason::Late,
@@ -297,6 +308,7 @@ impl DropReason {
         DropReason::UnknownSource,
         DropReason::PowerLoss,
         DropReason::Malformed,
+        DropReason::Deleted,
     ];
     /// A short name for logs and tables.
     pub fn as_str(self) -> &'static str {
@@ -309,6 +321,7 @@ impl DropReason {
             DropReason::UnknownSource => "unknown-source",
             DropReason::PowerLoss => "power-loss",
             DropReason::Malformed => "malformed",
+            DropReason::Deleted => "deleted",
         }
     }
     fn index(self) -> usize {
@@ -481,8 +494,15 @@ pub struct SessionStatus {
 pub struct PcCounters {
     /// Requests on ports 10 and 12 answered with failure.
     pub refused: u64,
-    /// Of those, SETUP and ABORT from payloads refused by [`PcConfig::payload_access`].
+    /// Of those, requests from payloads refused by [`PcConfig::payload_access`]: SETUP,
+    /// ABORT and anything on the files port.
     pub denied: u64,
+    /// FREAD requests answered, and the bytes they returned.
+    pub file_reads: u64,
+    /// Bytes FREAD returned.
+    pub file_bytes_read: u64,
+    /// FDELETE requests answered.
+    pub file_deletes: u64,
     /// SYNC requests sent.
     pub syncs_sent: u64,
     /// POLL requests sent (retries included).
@@ -504,11 +524,23 @@ pub struct PcCounters {
 struct ByteFifo {
     buf: Vec<u8>,
     head: usize,
+    /// Bytes taken or cleared from the head since the start of the run: the stream offset
+    /// of the first byte held.
+    removed: u64,
 }
 
 impl ByteFifo {
     fn len(&self) -> usize {
         self.buf.len() - self.head
+    }
+    fn head_offset(&self) -> u64 {
+        self.removed
+    }
+    /// Up to `n` bytes from `from` bytes past the head, without taking them.
+    fn peek(&self, from: usize, n: usize) -> &[u8] {
+        let start = self.head.saturating_add(from).min(self.buf.len());
+        let end = start.saturating_add(n).min(self.buf.len());
+        self.buf.get(start..end).unwrap_or_default()
     }
     fn push(&mut self, b: &[u8]) {
         if self.head > 4096 && self.head * 2 > self.buf.len() {
@@ -519,13 +551,16 @@ impl ByteFifo {
     }
     fn take(&mut self, n: usize) -> &[u8] {
         let start = self.head;
-        self.head += n.min(self.len());
+        let n = n.min(self.len());
+        self.head += n;
+        self.removed += n as u64;
         self.buf.get(start..self.head).unwrap_or_default()
     }
     fn clear(&mut self) -> u64 {
         let n = self.len() as u64;
         self.buf = Vec::new();
         self.head = 0;
+        self.removed += n;
         n
     }
 }
@@ -768,6 +803,76 @@ impl PcApp {
         t.sband_queue_bytes = sat(self.sband.total_pending_bytes());
         t.sband_downlinked_bytes = sat(self.tm_sband_downlinked);
         t
+    }
+
+    // ---- buffer files (ICD 3.1.5: "a regular file system interface") ----
+
+    /// The slot of `payload_addr`'s buffer file (its buffering session).
+    fn file_slot(&self, payload_addr: u8) -> Option<usize> {
+        self.table.slots().iter().position(|s| {
+            s.spec.payload_addr == payload_addr && s.spec.mode == SessionMode::Buffering
+        })
+    }
+
+    fn file_stat(&self, i: usize) -> FileStat {
+        let sat = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+        let file = self.runs.get(i).map(|r| &r.file);
+        FileStat {
+            payload_addr: self.payload_addr(i),
+            session_id: self.session_id(i),
+            size_bytes: sat(file.map_or(0, |f| f.len() as u64)),
+            capacity_bytes: sat(self.spec(i).map_or(0, |s| s.buffer_capacity_bytes)),
+            head_offset: file.map_or(0, ByteFifo::head_offset),
+        }
+    }
+
+    fn files(&mut self, c: FilesCommand, src: u8, now: SimTime) -> Result<Vec<u8>, u8> {
+        let slot = |a| self.file_slot(a).ok_or(csp::reqrep::RESULT_FAILURE);
+        match c {
+            FilesCommand::List => {
+                let slots: Vec<usize> = (0..self.table.slots().len())
+                    .filter(|&i| {
+                        self.spec(i)
+                            .is_some_and(|s| s.mode == SessionMode::Buffering)
+                    })
+                    .collect();
+                let mut v = vec![u8::try_from(slots.len()).unwrap_or(u8::MAX)];
+                for i in slots {
+                    self.file_stat(i).emit(&mut v);
+                }
+                Ok(v)
+            }
+            FilesCommand::Stat { payload_addr } => Ok(self.file_stat(slot(payload_addr)?).to_vec()),
+            FilesCommand::Read(q) => {
+                let i = slot(q.payload_addr)?;
+                let file = &self.runs.get(i).ok_or(csp::reqrep::RESULT_FAILURE)?.file;
+                let head = file.head_offset();
+                let end = head + file.len() as u64;
+                let served = q.offset.clamp(head, end);
+                let from = usize::try_from(served - head).unwrap_or(usize::MAX);
+                let data = file.peek(from, usize::from(q.length));
+                let mut v = served.to_le_bytes().to_vec();
+                v.extend_from_slice(data);
+                self.counters.file_reads += 1;
+                self.counters.file_bytes_read += data.len() as u64;
+                Ok(v)
+            }
+            FilesCommand::Delete { payload_addr } => {
+                let i = slot(payload_addr)?;
+                let n = self.runs.get_mut(i).map_or(0, |r| r.file.clear());
+                self.counters.file_deletes += 1;
+                self.log.push(NodeEvent::info(
+                    now,
+                    format!(
+                        "pc: buffer file of payload {payload_addr} deleted by {src}: {n} bytes"
+                    ),
+                ));
+                if n > 0 {
+                    self.drop_bytes(now, Some(i), payload_addr, DropReason::Deleted, n);
+                }
+                Ok(u32::try_from(n).unwrap_or(u32::MAX).to_le_bytes().to_vec())
+            }
+        }
     }
 
     // ---- outputs and bookkeeping ----
@@ -1446,6 +1551,7 @@ impl App for PcApp {
             self.cfg.control_port,
             self.cfg.ingest_port,
             self.cfg.telemetry_port,
+            self.cfg.files_port,
         ] {
             node.bind(p);
         }
@@ -1454,31 +1560,47 @@ impl App for PcApp {
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
         let dport = packet.header.dport;
-        if dport == self.cfg.control_port || dport == self.cfg.telemetry_port {
+        let c = &self.cfg;
+        if [c.control_port, c.telemetry_port, c.files_port].contains(&dport) {
             let mut start_now = None;
             let src = packet.header.src;
             let command = packet.data.first().copied();
-            // ICD 3.1.1: a payload has no direct access to session configuration.
-            let configures = matches!(command, Some(wire::cmd::SETUP | wire::cmd::ABORT));
-            let (reply, refused) = if dport == self.cfg.control_port
-                && self.cfg.payload_access.refuses(src, !configures)
-            {
-                self.counters.denied += 1;
-                self.log.push(NodeEvent::warning(
-                    now,
-                    format!(
-                        "pc: payload {src} refused {}: session configuration is the mission's (ICD 3.1.1)",
-                        if command == Some(wire::cmd::SETUP) { "SETUP" } else { "ABORT" }
-                    ),
-                ));
-                (csp::reqrep::failure(command.unwrap_or(0)), None)
-            } else if dport == self.cfg.control_port {
-                serve::<ControlCommand>(&packet.data, |c| {
-                    self.control(node, c, now, &mut start_now)
-                })
+            // What a payload may not ask: session configuration (ICD 3.1.1) and the file
+            // system (ICD 3.1.5).
+            let closed = if dport == c.control_port {
+                match command {
+                    Some(wire::cmd::SETUP) => {
+                        Some("SETUP: session configuration is the mission's (ICD 3.1.1)")
+                    }
+                    Some(wire::cmd::ABORT) => {
+                        Some("ABORT: session configuration is the mission's (ICD 3.1.1)")
+                    }
+                    _ => None,
+                }
+            } else if dport == c.files_port {
+                Some(
+                    "the buffer files: the file system interface is denied to payloads (ICD 3.1.5)",
+                )
             } else {
-                serve::<TelemetryCommand>(&packet.data, |_| Ok(self.tmpc().to_vec()))
+                None
             };
+            let (reply, refused) =
+                if let Some(why) = closed.filter(|_| c.payload_access.refuses(src, false)) {
+                    self.counters.denied += 1;
+                    self.log.push(NodeEvent::warning(
+                        now,
+                        format!("pc: payload {src} refused {why}"),
+                    ));
+                    (csp::reqrep::failure(command.unwrap_or(0)), None)
+                } else if dport == c.control_port {
+                    serve::<ControlCommand>(&packet.data, |c| {
+                        self.control(node, c, now, &mut start_now)
+                    })
+                } else if dport == c.files_port {
+                    serve::<FilesCommand>(&packet.data, |c| self.files(c, src, now))
+                } else {
+                    serve::<TelemetryCommand>(&packet.data, |_| Ok(self.tmpc().to_vec()))
+                };
             if let Some(e) = refused {
                 self.log
                     .push(NodeEvent::info(now, format!("pc: request refused: {e}")));

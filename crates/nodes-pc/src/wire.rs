@@ -22,11 +22,15 @@
 //! | payload | POLL 2 | frame size, 1 | 0..=frame size |
 //! | 11 | (none: raw data) | 0..=256 bytes, no command byte, no reply | - |
 //! | 12 | TMPC 1 | 0 | [`Tmpc`] 89 (the twin's layout) |
+//! | 13 | FLIST 1 | 0 | count u8, then count x [`FileStat`] 18 |
+//! | 13 | FSTAT 2 | payload address, 1 | [`FileStat`] 18 |
+//! | 13 | FREAD 3 | [`FileRead`] 10 | offset u64, then 0..=length bytes |
+//! | 13 | FDELETE 4 | payload address, 1 | bytes deleted u32 |
 //!
 //! So a whole SETUP request is `11 + N` bytes on the wire, a whole STATUS reply `13 + N`.
 
 use csp::Error;
-use csp::reqrep::le::{Reader, Writer};
+use csp::reqrep::le::{Reader, Repr, Writer};
 use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
 
 /// Default port of session control (INTERPRETATION.md section 4).
@@ -35,6 +39,9 @@ pub const PORT_CONTROL: u8 = 10;
 pub const PORT_INGEST: u8 = 11;
 /// Default port of the PC's own telemetry (the twin's addition; docs/protocol.md).
 pub const PORT_TELEMETRY: u8 = 12;
+/// Default port of the buffer files (ICD 3.1.5 "a regular file system interface"; the
+/// twin's layout, docs/protocol.md).
+pub const PORT_FILES: u8 = 13;
 /// Default SYNC/POLL port of a payload (INTERPRETATION.md section 4).
 pub const PORT_PAYLOAD: u8 = 10;
 
@@ -52,7 +59,19 @@ pub mod cmd {
     pub const POLL: u8 = 2;
     /// Telemetry port: the PC's sessions and S-band.
     pub const TMPC: u8 = 1;
+    /// Files port: every buffer file.
+    pub const FLIST: u8 = 1;
+    /// Files port: one buffer file.
+    pub const FSTAT: u8 = 2;
+    /// Files port: read bytes of a buffer file.
+    pub const FREAD: u8 = 3;
+    /// Files port: empty a buffer file.
+    pub const FDELETE: u8 = 4;
 }
+
+/// Most bytes one FREAD returns (its reply, 2 + 8 + 200 bytes, stays within libcsp 1.4's
+/// 248-byte KISS receive limit).
+pub const FREAD_MAX_LEN: u8 = 200;
 
 /// Bytes of SETUP request data before the sync message (ICD table 4: "10 + N").
 pub const SETUP_FIXED_LEN: usize = 10;
@@ -393,6 +412,115 @@ impl Tmpc {
     }
 }
 
+/// One buffer file (FSTAT's reply, FLIST's entries; 18 bytes). A file holds the bytes of
+/// the stream a buffering payload pushed that are still on board; offsets count the
+/// stream's bytes since the start of the run, so `head_offset` is where the oldest byte
+/// held sits in it and `head_offset + size_bytes` where the next pushed byte will.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FileStat {
+    /// The payload's CSP address (the file's name).
+    pub payload_addr: u8,
+    /// Its buffering session's id.
+    pub session_id: u8,
+    /// Bytes held now.
+    pub size_bytes: u32,
+    /// The file's capacity (saturating).
+    pub capacity_bytes: u32,
+    /// Stream offset of the first byte held.
+    pub head_offset: u64,
+}
+
+impl Repr for FileStat {
+    const LEN: usize = 18;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(FileStat {
+            payload_addr: r.u8()?,
+            session_id: r.u8()?,
+            size_bytes: r.u32()?,
+            capacity_bytes: r.u32()?,
+            head_offset: r.u64()?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u8(self.payload_addr)
+            .u8(self.session_id)
+            .u32(self.size_bytes)
+            .u32(self.capacity_bytes)
+            .u64(self.head_offset);
+    }
+}
+
+/// FREAD request data (10 bytes): up to `length` bytes of `payload_addr`'s file from stream
+/// offset `offset`. The reply is the offset actually served (the request's, moved up to
+/// the file's head if the S-band already took those bytes, and no further than its end)
+/// and the bytes from there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FileRead {
+    /// The file (its payload's address).
+    pub payload_addr: u8,
+    /// Stream offset to read from.
+    pub offset: u64,
+    /// Bytes wanted, 1..=[`FREAD_MAX_LEN`].
+    pub length: u8,
+}
+
+impl Repr for FileRead {
+    const LEN: usize = 10;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(FileRead {
+            payload_addr: r.u8()?,
+            offset: r.u64()?,
+            length: r.u8()?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u8(self.payload_addr).u64(self.offset).u8(self.length);
+    }
+}
+
+/// A command on the files port, parsed and range-checked (which files exist is the PC's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FilesCommand {
+    /// FLIST 1.
+    List,
+    /// FSTAT 2.
+    Stat {
+        /// The file.
+        payload_addr: u8,
+    },
+    /// FREAD 3.
+    Read(FileRead),
+    /// FDELETE 4.
+    Delete {
+        /// The file.
+        payload_addr: u8,
+    },
+}
+
+impl CommandSet for FilesCommand {
+    fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
+        let addr = |r: &Request<'_>| expect_len(r, 1, "1").map(|_| r.data[0]);
+        match r.command {
+            cmd::FLIST => expect_len(r, 0, "0").map(|_| FilesCommand::List),
+            cmd::FSTAT => addr(r).map(|payload_addr| FilesCommand::Stat { payload_addr }),
+            cmd::FREAD => {
+                expect_len(r, FileRead::LEN, "10")?;
+                let q = FileRead::parse(r.data).map_err(|_| RequestError::Empty)?;
+                if (1..=FREAD_MAX_LEN).contains(&q.length) {
+                    Ok(FilesCommand::Read(q))
+                } else {
+                    Err(RequestError::OutOfRange {
+                        command: r.command,
+                        field: "length",
+                    })
+                }
+            }
+            cmd::FDELETE => addr(r).map(|payload_addr| FilesCommand::Delete { payload_addr }),
+            c => Err(RequestError::UnknownCommand(c)),
+        }
+    }
+}
+
 /// A SYNC request to a payload: `01 | message`.
 pub fn sync_request(message: &[u8]) -> Vec<u8> {
     let mut v = Vec::with_capacity(1 + message.len());
@@ -602,6 +730,52 @@ mod tests {
         assert_eq!(t(&[1]), Ok(TelemetryCommand::Tmpc));
         assert!(t(&[1, 0]).is_err());
         assert!(t(&[2]).is_err());
+    }
+
+    #[test]
+    fn file_port_layouts_and_commands() {
+        let st = FileStat {
+            payload_addr: 13,
+            session_id: 2,
+            size_bytes: 0x0403_0201,
+            capacity_bytes: 256 << 20,
+            head_offset: 0x0102_0304_0506_0708,
+        };
+        let b = st.to_vec();
+        assert_eq!(b.len(), 18);
+        assert_eq!(b[..6], [13, 2, 1, 2, 3, 4]);
+        assert_eq!(b[10..], [8, 7, 6, 5, 4, 3, 2, 1]);
+        assert_eq!(FileStat::parse(&b), Ok(st));
+        let f = |c: u8, d: &[u8]| {
+            let mut v = vec![c];
+            v.extend_from_slice(d);
+            FilesCommand::parse(&Request::parse(&v).unwrap())
+        };
+        assert_eq!(f(1, &[]), Ok(FilesCommand::List));
+        assert!(f(1, &[0]).is_err());
+        assert_eq!(f(2, &[13]), Ok(FilesCommand::Stat { payload_addr: 13 }));
+        assert_eq!(f(4, &[12]), Ok(FilesCommand::Delete { payload_addr: 12 }));
+        assert!(f(4, &[]).is_err());
+        let read = |len: u8| {
+            let q = FileRead {
+                payload_addr: 13,
+                offset: 1 << 40,
+                length: len,
+            };
+            assert_eq!(q.to_vec()[..2], [13, 0]);
+            f(3, &q.to_vec())
+        };
+        assert!(
+            matches!(read(200), Ok(FilesCommand::Read(q)) if q.offset == 1 << 40 && q.length == 200)
+        );
+        for bad in [0, 201, 255] {
+            assert!(
+                matches!(read(bad), Err(RequestError::OutOfRange { .. })),
+                "{bad}"
+            );
+        }
+        assert!(f(3, &[13; 9]).is_err());
+        assert_eq!(f(5, &[]), Err(RequestError::UnknownCommand(5)));
     }
 
     #[test]

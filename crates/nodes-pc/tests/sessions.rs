@@ -863,3 +863,88 @@ fn a_pending_session_starts_when_the_pc_clock_reads_its_timestamp_after_the_cloc
         );
     }
 }
+
+#[test]
+fn buffer_files_are_listed_read_at_stream_offsets_and_deleted_into_the_accounting() {
+    use csp::reqrep::le::Repr;
+    use m6p_nodes_pc::wire::{FileRead, FileStat, PORT_FILES};
+    let mut s = Sim::new(cfg(), vec![]);
+    let stat = |s: &mut Sim| FileStat::parse(&s.request(PORT_FILES, &[2, 13])[2..]).unwrap();
+    let read = |s: &mut Sim, offset: u64, length: u8| {
+        let q = FileRead {
+            payload_addr: 13,
+            offset,
+            length,
+        };
+        let r = s.request(PORT_FILES, &[[3].as_slice(), &q.to_vec()].concat());
+        assert_eq!(r[..2], [3, 1]);
+        (
+            u64::from_le_bytes(r[2..10].try_into().unwrap()),
+            r[10..].to_vec(),
+        )
+    };
+    for chunk in stream_bytes(13, 0, 1000).chunks(100) {
+        s.send_from(13, 40, 11, chunk);
+    }
+    // FLIST: the one buffering session's file (payload 12 polls: no file).
+    let l = s.request(PORT_FILES, &[1]);
+    assert_eq!(l[..3], [1, 1, 1]);
+    let want = FileStat {
+        payload_addr: 13,
+        session_id: 2,
+        size_bytes: 1000,
+        capacity_bytes: u32::try_from(m6p_nodes_pc::DEFAULT_BUFFER_CAPACITY_BYTES).unwrap(),
+        head_offset: 0,
+    };
+    assert_eq!(FileStat::parse(&l[3..]).unwrap(), want);
+    assert_eq!(stat(&mut s), want);
+    // Reading takes nothing; the end gives no bytes.
+    assert_eq!(read(&mut s, 100, 200), (100, stream_bytes(13, 100, 200)));
+    assert_eq!(read(&mut s, 900, 200), (900, stream_bytes(13, 900, 100)));
+    assert_eq!(read(&mut s, 5000, 10), (1000, vec![]));
+    assert_eq!(stat(&mut s).size_bytes, 1000);
+    // A session takes 3 packets of 64 from the head: the offsets stay the stream's.
+    assert_eq!(s.setup(&session(2, 0, 60, 3, 64, b"")), 1);
+    s.run_until(SimTime::from_ms(100));
+    for chunk in stream_bytes(13, 1000, 500).chunks(100) {
+        s.send_from(13, 40, 11, chunk);
+    }
+    let st = stat(&mut s);
+    assert_eq!(
+        (st.head_offset, st.size_bytes),
+        (1000, 500),
+        "flushed at the end"
+    );
+    assert_eq!(read(&mut s, 0, 50), (1000, stream_bytes(13, 1000, 50)));
+    assert_eq!(read(&mut s, 1450, 200), (1450, stream_bytes(13, 1450, 50)));
+    // FDELETE: the bytes are dropped as deleted; the file goes on from the end.
+    assert_eq!(s.request(PORT_FILES, &[4, 13]), vec![4, 1, 0xf4, 1, 0, 0]);
+    let st = stat(&mut s);
+    assert_eq!((st.head_offset, st.size_bytes), (1500, 0));
+    let a = s.host.app.accounting();
+    assert_eq!(a.session(2).unwrap().dropped(DropReason::Deleted), 500);
+    s.assert_balanced();
+    let c = s.host.app.counters().clone();
+    assert_eq!(
+        (c.file_reads, c.file_bytes_read, c.file_deletes),
+        (5, 400, 1)
+    );
+    // Failure replies: no such file, wrong lengths, a read of 0 or 201 bytes, a payload.
+    for bad in [
+        vec![2, 12],
+        vec![2, 14],
+        vec![4, 12],
+        vec![1, 0],
+        vec![2],
+        vec![3, 13, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+        vec![3, 13, 0, 0, 0, 0, 0, 0, 0, 0, 201],
+        vec![9],
+    ] {
+        assert_eq!(s.request(PORT_FILES, &bad), vec![bad[0], 0], "{bad:02x?}");
+    }
+    let denied = c.denied;
+    s.send_from(13, 41, PORT_FILES, &[1]);
+    let r = s.stray.pop().unwrap();
+    assert_eq!((r.header.dst, r.data.clone()), (13, vec![1, 0]));
+    assert_eq!(s.host.app.counters().denied, denied + 1);
+}

@@ -129,6 +129,19 @@ impl IcdTable {
             (platform::addr::PC, opts.pc.telemetry_port),
             cmds(&[(pc::cmd::TMPC, Len::Exact(HEAD + pc::Tmpc::LEN))]),
         );
+        let files = nodes_pc::MAX_SESSIONS * pc::FileStat::LEN;
+        ports.insert(
+            (platform::addr::PC, opts.pc.files_port),
+            cmds(&[
+                (pc::cmd::FLIST, Len::Range(HEAD + 1, HEAD + 1 + files)),
+                (pc::cmd::FSTAT, ok::<pc::FileStat>()),
+                (
+                    pc::cmd::FREAD,
+                    Len::Range(HEAD + 8, HEAD + 8 + usize::from(pc::FREAD_MAX_LEN)),
+                ),
+                (pc::cmd::FDELETE, Len::Exact(HEAD + 4)),
+            ]),
+        );
         ports.insert(
             (platform::addr::EPS, opts.eps.port),
             cmds(&[
@@ -220,6 +233,14 @@ mod tests {
         // PC STATUS: 11 + a sync message of up to 128 bytes.
         assert_eq!(t.check(&reply(6, 10), 13 + 128, &[2, 1]), Ok(true));
         assert!(t.check(&reply(6, 10), 14 + 128, &[2, 1]).is_err());
+        // PC files: FREAD 8 + 0..=200, FLIST 1 + 18 per file, FSTAT 18, FDELETE 4.
+        assert_eq!(t.check(&reply(6, 13), 2 + 8, &[3, 1]), Ok(true));
+        assert_eq!(t.check(&reply(6, 13), 2 + 8 + 200, &[3, 1]), Ok(true));
+        assert!(t.check(&reply(6, 13), 2 + 8 + 201, &[3, 1]).is_err());
+        assert_eq!(t.check(&reply(6, 13), 2 + 1 + 18, &[1, 1]), Ok(true));
+        assert_eq!(t.check(&reply(6, 13), 2 + 18, &[2, 1]), Ok(true));
+        assert!(t.check(&reply(6, 13), 2 + 4, &[2, 1]).is_err());
+        assert_eq!(t.check(&reply(6, 13), 2 + 4, &[4, 1]), Ok(true));
         // With a CRC, 4 more bytes.
         let mut h = reply(4, 10);
         h.flags |= csp::header::flags::CRC32;

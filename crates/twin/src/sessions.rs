@@ -119,6 +119,9 @@ pub struct PcPortsSpec {
     /// The PC's telemetry (default 12).
     #[serde(default)]
     pub telemetry: Option<u8>,
+    /// The buffer files (default 13).
+    #[serde(default)]
+    pub files: Option<u8>,
 }
 
 /// A simulated payload (`[[payload]]`).
@@ -333,6 +336,7 @@ pub fn validate(s: &Scenario, err: &mut impl FnMut(Vec<PathStep>, String)) {
             ("control", p.control),
             ("ingest", p.ingest),
             ("telemetry", p.telemetry),
+            ("files", p.files),
         ] {
             if v.is_some_and(|v| v > 63) {
                 err(vec![key("pc"), key("ports"), key(f)], "must be 0-63".into());
@@ -461,6 +465,7 @@ pub fn compile_pc(s: &Scenario) -> nodes_pc::PcConfig {
         c.control_port = p.control.unwrap_or(c.control_port);
         c.ingest_port = p.ingest.unwrap_or(c.ingest_port);
         c.telemetry_port = p.telemetry.unwrap_or(c.telemetry_port);
+        c.files_port = p.files.unwrap_or(c.files_port);
     }
     c.timeline = pc
         .events

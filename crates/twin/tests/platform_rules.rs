@@ -9,9 +9,7 @@
 
 use std::time::Duration;
 
-use bus::trace::TraceFrame;
 use csp::SimTime;
-use csp::cfp::{Reassembler, ReassemblerConfig};
 
 #[path = "common/decoder.rs"]
 mod decoder;
@@ -55,23 +53,17 @@ fn python_client_finds_flags_discarded_payloads_limited_and_sessions_on_platform
         .parse()
         .unwrap();
     let started = report.sessions.runs.first().unwrap().started.unwrap();
-    let mut cfp = Reassembler::new(ReassemblerConfig::default());
-    let mut syncs = Vec::new();
-    for ev in &report.trace {
-        let TraceFrame::Can(frame) = &ev.frame else {
-            continue;
-        };
-        if &*ev.medium != "main" || &*ev.from != "FC" || ev.dropped {
-            continue;
-        }
-        if let Some(Ok(p)) = cfp.handle(frame, ev.t) {
-            if p.header.dst == 6 && p.header.dport == 0 && p.data.get(..2) == Some(&[0, 6]) {
-                let be =
-                    |i: usize| i128::from(u32::from_be_bytes(p.data[i..i + 4].try_into().unwrap()));
-                syncs.push((ev.t, be(2) * 1_000_000_000 + be(6)));
-            }
-        }
-    }
+    let syncs: Vec<(SimTime, i128)> = decoder::packets_on(&report, "main", "FC")
+        .into_iter()
+        .filter(|(_, p)| {
+            p.header.dst == 6 && p.header.dport == 0 && p.data.get(..2) == Some(&[0, 6])
+        })
+        .map(|(t, p)| {
+            let be =
+                |i: usize| i128::from(u32::from_be_bytes(p.data[i..i + 4].try_into().unwrap()));
+            (t, be(2) * 1_000_000_000 + be(6))
+        })
+        .collect();
     assert!(syncs.len() >= 2, "at boot and after RTCSTMSET: {syncs:?}");
     let (taken, clock_ns) = *syncs.iter().rev().find(|(t, _)| *t <= started).unwrap();
     let ahead_ns = u64::try_from(timestamp_s * 1_000_000_000 - clock_ns).unwrap();

@@ -76,3 +76,29 @@ pub fn run_decoder(
     assert!(text.matches("PASS").count() >= min_pass, "{text}");
     (text, report)
 }
+
+/// The CSP packets `from` sent on CAN bus `medium` ("main", "payload"), reassembled from the
+/// run's trace (`opts.trace` on), each with the instant its last frame left the bus (when
+/// its receiver took it).
+#[allow(dead_code)]
+pub fn packets_on(
+    report: &RunReport,
+    medium: &str,
+    from: &str,
+) -> Vec<(csp::SimTime, csp::Packet)> {
+    use bus::trace::TraceFrame;
+    use csp::cfp::{Reassembler, ReassemblerConfig};
+    let mut cfp = Reassembler::new(ReassemblerConfig::default());
+    let mut out = Vec::new();
+    for ev in &report.trace {
+        let TraceFrame::Can(frame) = &ev.frame else {
+            continue;
+        };
+        if &*ev.medium == medium && &*ev.from == from && !ev.dropped {
+            if let Some(Ok(p)) = cfp.handle(frame, ev.t) {
+                out.push((ev.t, p));
+            }
+        }
+    }
+    out
+}
