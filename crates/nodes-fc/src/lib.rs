@@ -30,6 +30,7 @@ pub mod control;
 pub mod environment;
 pub mod estimator;
 pub mod guidance;
+pub mod safe;
 pub mod scripts;
 pub mod sensors;
 pub mod timesync;
@@ -227,6 +228,8 @@ pub struct FcConfig {
     pub payload_access: platform::addr::PayloadAccess,
     /// Where the FC sends its RTC (CMP CLOCK), and how often.
     pub time_sync: timesync::TimeSyncConfig,
+    /// When the FC goes SAFE (TMGEN `current_state`).
+    pub safe: safe::SafeConfig,
 }
 
 impl Default for FcConfig {
@@ -253,6 +256,7 @@ impl Default for FcConfig {
             timeline: Vec::new(),
             payload_access: platform::addr::PayloadAccess::default(),
             time_sync: timesync::TimeSyncConfig::default(),
+            safe: safe::SafeConfig::default(),
         }
     }
 }
@@ -349,6 +353,7 @@ pub struct FcApp {
     refused: u64,
     denied: u64,
     time_sync: timesync::TimeSync,
+    safe: safe::SafeMonitor,
     log: Vec<NodeEvent>,
     out: Outbox<Published>,
     truth_board: Option<platform::board::TruthBoard>,
@@ -441,6 +446,7 @@ impl FcApp {
             refused: 0,
             denied: 0,
             time_sync: timesync::TimeSync::new(cfg.time_sync.clone()),
+            safe: safe::SafeMonitor::new(cfg.safe.clone()),
             log: Vec::new(),
             out: Outbox::default(),
             truth_board: None,
@@ -605,7 +611,8 @@ impl FcApp {
     }
 
     /// The pointing of the ATCMDSET mode.
-    fn mode_request(&self) -> adcs::Request {
+    /// The ADCS request for `mode` with the commanded attitude and point.
+    fn request_for(&self, mode: TargetMode) -> adcs::Request {
         let t = &self.fsw.target;
         let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
             t.attitude[0],
@@ -615,7 +622,7 @@ impl FcApp {
         ));
         let p = Vector3::new(t.point[0], t.point[1], t.point[2]);
         let z = Vector3::z();
-        let pointing = match t.mode {
+        let pointing = match mode {
             TargetMode::Idle | TargetMode::Detumble => None,
             TargetMode::VelocityPointing => Some(Pointing::Velocity),
             TargetMode::Nadir => Some(Pointing::Nadir),
@@ -636,10 +643,7 @@ impl FcApp {
             TargetMode::FixedLvlh => Some(Pointing::FixedLvlh(q)),
             TargetMode::FixedTnw => Some(Pointing::FixedTnw(q)),
         };
-        adcs::Request {
-            mode: t.mode,
-            pointing,
-        }
+        adcs::Request { mode, pointing }
     }
 
     /// Submit a script line to the mission controller at `now`.
@@ -746,8 +750,10 @@ impl FcApp {
             let rtc_s = self.rtc_unix_s_f64(t);
             self.fsw.scripts.expire(rtc_s);
             let request = match self.fsw.scripts.active(rtc_s) {
+                // A low battery points the arrays at the sun whatever was asked (safe.rs).
+                _ if self.safe.low_battery() => self.request_for(TargetMode::SunMaxPower),
                 Some(s) => Self::script_request(s),
-                None => self.mode_request(),
+                None => self.request_for(self.fsw.target.mode),
             };
             self.fsw.request_mode = Some(request.mode);
             let before = self.fsw.output.map(|o| o.mode_in_effect);
@@ -773,6 +779,13 @@ impl FcApp {
                 ));
             }
             self.fsw.output = Some(out);
+            if let Some((warn, line)) = self.safe.update(self.fsw.adcs.fallback_reason()) {
+                self.log.push(if warn {
+                    NodeEvent::warning(t, line)
+                } else {
+                    NodeEvent::info(t, line)
+                });
+            }
             self.wheel_cmd_nm = out.wheel_torque_cmd_nm;
             self.mtq_applied_am2 =
                 truth::mtq_dipole_applied_am2(&self.cfg.body, &out.mtq_dipole_cmd_am2);
@@ -927,7 +940,7 @@ impl FcApp {
             uptime_s: secs(node.uptime(now)),
             global_on_time_s: secs(on),
             current_mode: mode as u8,
-            current_state: 0,
+            current_state: self.safe.state(),
             mcu_temp_c: self.readings.as_ref().map_or(20, |r| sat_i8(r.mcu_temp_c)),
             reset_cause: self.reset_cause,
         }
@@ -1114,6 +1127,8 @@ impl App for FcApp {
         self.catch_up(now);
         self.time_sync.start(node, now);
         self.time_sync.run(node, now, self.rtc_unix_ns(now));
+        self.safe.start(node, now);
+        self.safe.run(node, now);
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
@@ -1122,7 +1137,7 @@ impl App for FcApp {
         let dport = packet.header.dport;
         let src = packet.header.src;
         let command = packet.data.first().copied();
-        if self.time_sync.handle_reply(&packet) {
+        if self.time_sync.handle_reply(&packet) || self.safe.handle_reply(&packet) {
             return;
         }
         let (reply, refused) = if ![p.telemetry, p.rtc, p.attitude, p.scripts].contains(&dport) {
@@ -1178,10 +1193,10 @@ impl App for FcApp {
     }
 
     fn poll_timeout(&self) -> Option<SimTime> {
-        match (self.next_tick, self.time_sync.due()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        [self.next_tick, self.time_sync.due(), self.safe.due()]
+            .into_iter()
+            .flatten()
+            .min()
     }
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
@@ -1192,6 +1207,7 @@ impl App for FcApp {
             self.next_tick = Some(t + std::time::Duration::from_nanos(self.dt_ns));
         }
         self.time_sync.run(node, now, self.rtc_unix_ns(now));
+        self.safe.run(node, now);
         self.flush_log(node);
     }
 
@@ -1246,7 +1262,8 @@ mod tests {
         c
     }
 
-    /// The FC without time distribution: every packet it sends is a reply.
+    /// The FC without time distribution and EPS housekeeping: every packet it sends is a
+    /// reply.
     fn host(tle: Option<(&str, &str)>) -> Host<FcApp> {
         let c = node_cfg();
         let app = FcApp::new(FcConfig {
@@ -1255,6 +1272,10 @@ mod tests {
             time_sync: timesync::TimeSyncConfig {
                 to: Vec::new(),
                 period: None,
+            },
+            safe: safe::SafeConfig {
+                eps_poll: None,
+                ..safe::SafeConfig::default()
             },
             ..FcConfig::default()
         });
@@ -1338,9 +1359,10 @@ mod tests {
             Packet::new(Header::new(src, 3, port, 40), req.to_vec()),
             t,
         );
-        // The time sent to the PC (CMP CLOCK) is not a reply.
+        // The time sent to the PC (CMP CLOCK) and the EPS housekeeping are not replies.
+        // (They go to ports 0 and 10; replies come back to the asker's port 40.)
         let mut out = std::iter::from_fn(|| h.node.poll_transmit()).filter(
-            |tx| !matches!(tx, Transmit::Packet { packet, .. } if packet.header.dport == 0),
+            |tx| !matches!(tx, Transmit::Packet { packet, .. } if packet.header.dport != 40),
         );
         let Some(Transmit::Packet { packet, .. }) = out.next() else {
             panic!("no reply to port {port} {req:02x?}")
@@ -1348,6 +1370,71 @@ mod tests {
         assert_eq!(packet.header, Header::new(3, src, 40, port));
         assert!(out.next().is_none(), "one reply per request");
         packet.data
+    }
+
+    #[test]
+    fn a_low_battery_makes_the_fc_safe_and_points_the_arrays_at_the_sun_until_it_recovers() {
+        let mut h = Host::new(
+            node_cfg(),
+            FcApp::new(FcConfig {
+                epoch_unix_s: START,
+                tle: Some((L1.to_owned(), L2.to_owned())),
+                ..FcConfig::default()
+            }),
+            SimTime::ZERO,
+        );
+        // The FC's TMEPS requests to the EPS (4, port 10): the port each came from.
+        let polls = |h: &mut Host<FcApp>| -> Vec<u8> {
+            std::iter::from_fn(|| h.node.poll_transmit())
+                .filter_map(|tx| match tx {
+                    Transmit::Packet { packet, .. } if packet.header.dst == 4 => {
+                        assert_eq!((packet.header.dport, packet.data.clone()), (10, vec![1]));
+                        Some(packet.header.sport)
+                    }
+                    _ => None,
+                })
+                .collect()
+        };
+        let answer = |h: &mut Host<FcApp>, port: u8, soc: f32, t: SimTime| {
+            let mut d = vec![1, 1];
+            nodes_eps::wire::TmEps {
+                soc,
+                ..Default::default()
+            }
+            .emit(&mut d);
+            h.handle_packet(0, Packet::new(Header::new(4, 3, port, 10), d), t);
+        };
+        let run_to = |h: &mut Host<FcApp>, until: SimTime| {
+            while let Some(due) = h.poll_timeout().filter(|&d| d <= until) {
+                h.handle_timeout(due);
+            }
+        };
+        let state = |h: &mut Host<FcApp>, t| {
+            TmGen::parse(&ask(h, 10, &[1], t)[2..])
+                .unwrap()
+                .current_state
+        };
+        let port = polls(&mut h)[0];
+        ask(&mut h, 12, &[6, 3], SimTime::from_ms(1));
+        answer(&mut h, port, 0.12, SimTime::from_ms(5));
+        run_to(&mut h, SimTime::from_secs(2));
+        assert_eq!(state(&mut h, SimTime::from_secs(2)), safe::STATE_SAFE);
+        assert_eq!(h.app.fsw.request_mode, Some(TargetMode::SunMaxPower));
+        // The commanded mode stays nadir (TMACD trgt_mode), and comes back with the battery.
+        assert_eq!(ask(&mut h, 12, &[5], SimTime::from_secs(2)), vec![5, 1, 3]);
+        // Every 30 s; 25 % is not yet back (the way back is at 30 %).
+        run_to(&mut h, SimTime::from_secs(30));
+        assert_eq!(polls(&mut h), vec![port]);
+        answer(&mut h, port, 0.25, SimTime::from_ms(30_005));
+        run_to(&mut h, SimTime::from_secs(31));
+        assert_eq!(state(&mut h, SimTime::from_secs(31)), safe::STATE_SAFE);
+        run_to(&mut h, SimTime::from_secs(60));
+        polls(&mut h);
+        answer(&mut h, port, 0.31, SimTime::from_ms(60_005));
+        run_to(&mut h, SimTime::from_secs(61));
+        assert_eq!(state(&mut h, SimTime::from_secs(61)), safe::STATE_NOMINAL);
+        assert_eq!(h.app.fsw.request_mode, Some(TargetMode::Nadir));
+        assert_eq!((h.app.safe.polls, h.app.safe.replies), (3, 3));
     }
 
     #[test]

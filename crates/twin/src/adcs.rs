@@ -81,6 +81,41 @@ pub struct FcSpec {
     /// Sensor and wheel faults.
     #[serde(default)]
     pub faults: Vec<FcFaultSpec>,
+    /// When the FC goes SAFE on a low battery (`nodes_fc::safe`).
+    #[serde(default)]
+    pub safe: Option<FcSafeSpec>,
+}
+
+/// `[fc.safe]`: the FC's low-battery SAFE state.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcSafeSpec {
+    /// State of charge below which the battery is low, 0-1 (default 0.15).
+    #[serde(default)]
+    pub enter_soc: Option<f64>,
+    /// State of charge at which it is no longer low, 0-1, not below `enter_soc` (default
+    /// 0.30).
+    #[serde(default)]
+    pub exit_soc: Option<f64>,
+    /// How often the FC reads the EPS's TMEPS (default 30 s; "0s": never, no low-battery
+    /// SAFE).
+    #[serde(default)]
+    pub eps_poll: Option<Dur>,
+}
+
+impl FcSafeSpec {
+    fn config(&self) -> nodes_fc::safe::SafeConfig {
+        let d = nodes_fc::safe::SafeConfig::default();
+        nodes_fc::safe::SafeConfig {
+            enter_soc: self.enter_soc.unwrap_or(d.enter_soc),
+            exit_soc: self.exit_soc.unwrap_or(d.exit_soc),
+            eps_poll: match self.eps_poll {
+                Some(p) => Some(p.0).filter(|p| !p.is_zero()),
+                None => d.eps_poll,
+            },
+            ..d
+        }
+    }
 }
 
 /// Target modes by name (docs/protocol.md, "Target modes").
@@ -187,6 +222,9 @@ pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
         && h > fc.adcs_hz.unwrap_or(10)
     {
         err(p("publish_hz"), "must not exceed `adcs_hz`".into());
+    }
+    if let Some(e) = fc.safe.and_then(|sf| sf.config().validate().err()) {
+        err(p("safe"), e);
     }
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
     let nonzero = |v: &[f64]| finite(v) && v.iter().any(|x| *x != 0.0);
@@ -367,6 +405,9 @@ pub fn compile(s: &Scenario, faults: &mut Vec<TimedFault>) -> nodes_fc::FcConfig
     }
     if let Some(n) = f.panel_normal_body {
         c.adcs.panel_normal_body = Vector3::from(n).normalize();
+    }
+    if let Some(sf) = f.safe {
+        c.safe = sf.config();
     }
     if let Some(p) = f.ports {
         let d = nodes_fc::FcPorts::default();

@@ -814,3 +814,79 @@ jump_s = 60
     assert_eq!(rtc("rtc"), start + 200 + 60);
     assert_eq!(rtc("rtc-corrected"), start + 550);
 }
+
+/// The FC's state in TMGEN: SAFE while the ADCS's estimator monitor holds it in its
+/// fallback (a 1 deg/s gyro bias jump in sunlight trips it, as `nodes-fc/tests/health.rs`
+/// shows), NOMINAL before and again once the restarted estimator has relearnt the bias;
+/// each change is a log line of the FC's.
+#[test]
+fn the_fc_is_safe_while_the_adcs_falls_back_from_its_estimator() {
+    // 2026-04-30T19:06:40Z: the default orbit, in sunlight for an hour.
+    let text = format!(
+        r#"
+name = "safe"
+duration = "1500s"
+start = "2026-04-30T19:06:40Z"
+{TLE}
+[fc]
+mode = "nadir"
+
+[[fc.faults]]
+at = "600s"
+sensor = "gyro"
+fault = "bias:0.0174533"
+
+[[commands]]
+name = "tmgen"
+at = "10s"
+every = "10s"
+count = 149
+to = "FC"
+request = "raw"
+port = 10
+data = "01"
+"#
+    );
+    let (out, events) = run(&text);
+    // TMGEN's current_state (reply byte 2 + 13) by send time.
+    let states: Vec<(u64, u8)> = out
+        .report
+        .results
+        .iter()
+        .filter_map(|r| match &r.outcome {
+            Outcome::Reply { data, .. } => Some((r.sent.as_secs(), data[15])),
+            _ => None,
+        })
+        .collect();
+    let safe_at = states.iter().find(|(_, s)| *s == 1).map(|(t, _)| *t);
+    let logs: Vec<(u64, String)> = events
+        .iter()
+        .filter_map(|e| match e {
+            RunEvent::Log {
+                t, message, source, ..
+            } if source == "FC" && message.starts_with("fc: ") => {
+                Some((t.as_secs(), message.clone()))
+            }
+            _ => None,
+        })
+        .collect();
+    eprintln!("safe: first SAFE TMGEN at {safe_at:?} s; FC state lines {logs:?}");
+    assert!(states.len() > 140, "{states:?}");
+    assert!(
+        states.iter().all(|&(t, s)| t >= 600 || s == 0),
+        "NOMINAL before the fault: {states:?}"
+    );
+    assert!(safe_at.is_some_and(|t| t > 600), "{states:?}");
+    assert!(
+        logs.iter()
+            .any(|(t, m)| *t > 600 && m.contains("SAFE: the ADCS fell back from its estimator")),
+        "{logs:?}"
+    );
+    // The monitor restarts the estimator, which relearns the bias: NOMINAL again.
+    assert!(
+        logs.last()
+            .is_some_and(|(_, m)| m.starts_with("fc: NOMINAL")),
+        "{logs:?}"
+    );
+    assert_eq!(states.last().map(|s| s.1), Some(0), "{states:?}");
+}
