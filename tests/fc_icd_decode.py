@@ -12,7 +12,11 @@ tests/kiss_peer.py's, itself written from libcsp 1.4) and asks the FC (node 3):
   four above concatenated (165 bytes);
 - port 11 RTCSTMGET 2: `<I` UTC unix seconds;
 - port 12 ATCMDSET 6 / ATCMDGET 5 (u8 mode), ATCATSET 2 / ATCATGET 1 (`<4d`, 32 bytes);
-- an unknown command and a short request: the failure reply `cmd 00`.
+- an unknown command and a short request: the failure reply `cmd 00`;
+- port 10 TMPERSET 7 / TMPERGET 8 (docs/protocol.md "Periodic telemetry", 7 bytes `<BBIB`:
+  destination, port, period ms, mask of telemetry commands): TMGEN and TMATP every 250 ms
+  to this client's port 20 arrive as their replies would (`cmd 01 data`, from port 10), and
+  stop when the period is set to 0.
 
 Checks sizes and plausible values: |position| between --rmin-km and --rmax-km, RTC within
 a day of --start. Exit 0 when every check passes; prints one line per check.
@@ -33,6 +37,7 @@ TMACD = struct.Struct("<IB4B4B3BBBB")      # 19
 TMSENS = struct.Struct("<I3d3f3f3f6b")     # 70
 RTC = struct.Struct("<I")                  # 4 (ICD 4.2.2)
 QUAT = struct.Struct("<4d")                # 32 (ICD 4.2.3, INTERPRETATION.md 5)
+PERIODIC = struct.Struct("<BBIB")          # 7 (the twin's TMPERSET/TMPERGET)
 assert (TMGEN.size, TMATP.size, TMACD.size, TMSENS.size, RTC.size, QUAT.size) == (16, 60, 19, 70, 4, 32)
 
 PORT_TM, PORT_RTC, PORT_ATC = 10, 11, 12
@@ -123,6 +128,28 @@ def main():
     check("unknown telemetry command fails (cmd 00)", res == 0 and d == b"", f"result {res} data {d}")
     res, d = ask(PORT_ATC, 2, bytes(16))
     check("ATCATSET with the ICD's 16 bytes fails (cmd 00)", res == 0 and d == b"", f"result {res} data {d}")
+
+    # Periodic telemetry to ourselves, port 20: TMGEN | TMATP every 250 ms.
+    res, d = ask(PORT_TM, 7, PERIODIC.pack(a.me, 20, 250, 0x03))
+    check("TMPERSET TMGEN|TMATP every 250 ms succeeds", res == 1 and d == b"", f"result {res} {d!r}")
+    res, d = ask(PORT_TM, 8)
+    check("TMPERGET returns it", res == 1 and d == PERIODIC.pack(a.me, 20, 250, 0x03), f"{d!r}")
+    got = [(h, d) for h, d in p.reader.frames(2.0) if h["dport"] == 20]
+    gens = [d for h, d in got if d[:2] == b"\x01\x01" and len(d) == 2 + TMGEN.size]
+    atps = [d for h, d in got if d[:2] == b"\x02\x01" and len(d) == 2 + TMATP.size]
+    check("periodic TMGEN and TMATP arrive from the FC's port 10, about 8 each in 2 s",
+          all(h["src"] == a.fc and h["sport"] == PORT_TM for h, _ in got)
+          and 5 <= len(gens) <= 10 and 5 <= len(atps) <= 10 and len(got) == len(gens) + len(atps),
+          f"{len(gens)} TMGEN, {len(atps)} TMATP of {len(got)}")
+    ups = [TMGEN.unpack(g[2:])[1] for g in gens]
+    check("the periodic TMGEN's uptime runs on", ups == sorted(ups) and ups[-1] > ups[0], f"{ups}")
+    res, d = ask(PORT_TM, 7, PERIODIC.pack(0, 0, 0, 0))
+    check("TMPERSET with period 0 stops it", res == 1, f"result {res}")
+    list(p.reader.frames(0.5))
+    late = [d for h, d in p.reader.frames(1.0) if h["dport"] == 20]
+    check("nothing periodic after the stop", not late, f"{len(late)} packets")
+    res, d = ask(PORT_TM, 7, PERIODIC.pack(a.me, 3, 250, 0x01))
+    check("TMPERSET to a service port fails (cmd 00)", res == 0 and d == b"", f"result {res} {d!r}")
 
     sys.exit(1 if check.failures else 0)
 

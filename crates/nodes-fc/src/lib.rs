@@ -38,8 +38,8 @@ pub mod truth;
 pub mod wire;
 
 use csp::node::{App, Node, NodeEvent, Outbox};
-use csp::reqrep::{self, RESULT_FAILURE, RESULT_SUCCESS, serve};
-use csp::{Packet, SimTime};
+use csp::reqrep::{self, CommandSet, RESULT_FAILURE, RESULT_SUCCESS, Request, serve};
+use csp::{Header, Packet, SimTime};
 use nalgebra::{UnitQuaternion, Vector3};
 use orbit::propagate::Sgp4Propagator;
 use orbit::tle::{ChecksumMode, Tle};
@@ -230,6 +230,8 @@ pub struct FcConfig {
     pub time_sync: timesync::TimeSyncConfig,
     /// When the FC goes SAFE (TMGEN `current_state`).
     pub safe: safe::SafeConfig,
+    /// Periodic real-time telemetry from boot (TMPERSET changes it until the next boot).
+    pub periodic: Option<wire::Periodic>,
 }
 
 impl Default for FcConfig {
@@ -257,6 +259,7 @@ impl Default for FcConfig {
             payload_access: platform::addr::PayloadAccess::default(),
             time_sync: timesync::TimeSyncConfig::default(),
             safe: safe::SafeConfig::default(),
+            periodic: None,
         }
     }
 }
@@ -352,6 +355,8 @@ pub struct FcApp {
     fsw: Fsw,
     refused: u64,
     denied: u64,
+    periodic: wire::Periodic,
+    periodic_next: Option<SimTime>,
     time_sync: timesync::TimeSync,
     safe: safe::SafeMonitor,
     log: Vec<NodeEvent>,
@@ -445,6 +450,8 @@ impl FcApp {
             fsw,
             refused: 0,
             denied: 0,
+            periodic: wire::Periodic::default(),
+            periodic_next: None,
             time_sync: timesync::TimeSync::new(cfg.time_sync.clone()),
             safe: safe::SafeMonitor::new(cfg.safe.clone()),
             log: Vec::new(),
@@ -1013,7 +1020,63 @@ impl FcApp {
                 sensors: self.tm_sens(now),
             }
             .to_vec(),
+            TelemetryCommand::SetPeriodic(p) => {
+                if p.out_of_range(node.addr()).is_some() {
+                    return Err(RESULT_FAILURE);
+                }
+                self.set_periodic(p, now);
+                Vec::new()
+            }
+            TelemetryCommand::GetPeriodic => self.periodic.to_vec(),
         })
+    }
+
+    /// Send `p`'s telemetry from `now` on (the first one period later).
+    fn set_periodic(&mut self, p: wire::Periodic, now: SimTime) {
+        self.periodic = p;
+        self.periodic_next = (p.period_ms > 0)
+            .then(|| now + std::time::Duration::from_millis(u64::from(p.period_ms)));
+        self.log.push(NodeEvent::info(
+            now,
+            match self.periodic_next {
+                Some(_) => format!(
+                    "fc: periodic telemetry {:#04x} to {}:{} every {} ms",
+                    p.mask, p.dst, p.dport, p.period_ms
+                ),
+                None => "fc: periodic telemetry off".to_owned(),
+            },
+        ));
+    }
+
+    /// The periodic telemetry due by `now`: each of its commands as the bytes a request
+    /// would get, from the telemetry port. Periods missed (the FC was off or hung) are not
+    /// made up.
+    fn send_periodic(&mut self, node: &mut Node, now: SimTime) {
+        let Some(due) = self.periodic_next.filter(|&t| t <= now) else {
+            return;
+        };
+        let p = self.periodic;
+        let period = std::time::Duration::from_millis(u64::from(p.period_ms.max(1)));
+        let mut next = due + period;
+        while next <= now {
+            next = next + period;
+        }
+        self.periodic_next = Some(next);
+        for c in p.commands() {
+            let data = match Request::parse(&[c])
+                .ok()
+                .and_then(|r| TelemetryCommand::parse(&r).ok())
+            {
+                Some(cmd) => match self.telemetry(node, cmd, now) {
+                    Ok(d) => reqrep::success(c, &d),
+                    Err(code) => vec![c, code],
+                },
+                None => reqrep::failure(c),
+            };
+            let header = Header::new(node.addr(), p.dst, p.dport, self.cfg.ports.telemetry);
+            // A send failure is counted by the node.
+            let _ = node.send(Packet::new(header, data), now);
+        }
     }
 
     fn rtc(&mut self, c: RtcCommand, now: SimTime) -> Vec<u8> {
@@ -1129,6 +1192,11 @@ impl App for FcApp {
         self.time_sync.run(node, now, self.rtc_unix_ns(now));
         self.safe.start(node, now);
         self.safe.run(node, now);
+        self.periodic_next = None;
+        self.periodic = wire::Periodic::default();
+        if let Some(p) = self.cfg.periodic {
+            self.set_periodic(p, now);
+        }
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
@@ -1193,10 +1261,15 @@ impl App for FcApp {
     }
 
     fn poll_timeout(&self) -> Option<SimTime> {
-        [self.next_tick, self.time_sync.due(), self.safe.due()]
-            .into_iter()
-            .flatten()
-            .min()
+        [
+            self.next_tick,
+            self.time_sync.due(),
+            self.safe.due(),
+            self.periodic_next,
+        ]
+        .into_iter()
+        .flatten()
+        .min()
     }
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
@@ -1208,6 +1281,7 @@ impl App for FcApp {
         }
         self.time_sync.run(node, now, self.rtc_unix_ns(now));
         self.safe.run(node, now);
+        self.send_periodic(node, now);
         self.flush_log(node);
     }
 
@@ -1438,6 +1512,90 @@ mod tests {
     }
 
     #[test]
+    fn periodic_telemetry_goes_where_tmperset_says_until_it_is_stopped_or_the_fc_reboots() {
+        let mut h = host(Some((L1, L2)));
+        let set = |dst: u8, dport: u8, period_ms: u32, mask: u8| {
+            let mut v = vec![wire::cmd::TMPERSET];
+            wire::Periodic {
+                dst,
+                dport,
+                period_ms,
+                mask,
+            }
+            .emit(&mut v);
+            v
+        };
+        // Out of range: period, destination (broadcast, the FC itself), a service port, mask.
+        for bad in [
+            set(16, 20, 99, 1),
+            set(16, 20, 3_600_001, 1),
+            set(31, 20, 500, 1),
+            set(3, 20, 500, 1),
+            set(16, 6, 500, 1),
+            set(16, 20, 500, 0),
+            set(16, 20, 500, 0x40),
+        ] {
+            assert_eq!(
+                ask(&mut h, 10, &bad, SimTime::ZERO),
+                vec![7, 0],
+                "{bad:02x?}"
+            );
+        }
+        assert_eq!(
+            ask(&mut h, 10, &set(16, 20, 500, 0x03), SimTime::ZERO),
+            vec![7, 1]
+        );
+        assert_eq!(
+            ask(&mut h, 10, &[8], SimTime::ZERO),
+            vec![8, 1, 16, 20, 0xf4, 1, 0, 0, 3]
+        );
+        let mut sent = Vec::new();
+        let run_to = |h: &mut Host<FcApp>, until: SimTime, sent: &mut Vec<(SimTime, Packet)>| {
+            while let Some(due) = h.poll_timeout().filter(|&d| d <= until) {
+                h.handle_timeout(due);
+                while let Some(tx) = h.node.poll_transmit() {
+                    if let Transmit::Packet { packet, .. } = tx {
+                        sent.push((due, packet));
+                    }
+                }
+            }
+        };
+        run_to(&mut h, SimTime::from_ms(2_100), &mut sent);
+        let got: Vec<(u64, u8, usize)> = sent
+            .iter()
+            .map(|(t, p)| {
+                assert_eq!(p.header, Header::new(3, 16, 20, 10));
+                assert_eq!(p.data[1], 1);
+                (t.as_ms(), p.data[0], p.data.len())
+            })
+            .collect();
+        let want: Vec<(u64, u8, usize)> = [500, 1000, 1500, 2000]
+            .into_iter()
+            .flat_map(|t| [(t, 1, 2 + TmGen::LEN), (t, 2, 2 + TmAtp::LEN)])
+            .collect();
+        assert_eq!(got, want);
+        // The TMGEN sent is the one a request gets at that instant.
+        let g = TmGen::parse(&sent[6].1.data[2..]).unwrap();
+        assert_eq!(g.uptime_s, 2);
+        // Stopped: nothing more. A reboot returns to the configuration (none here).
+        assert_eq!(
+            ask(&mut h, 10, &set(0, 0, 0, 0), SimTime::from_ms(2_100)),
+            vec![7, 1]
+        );
+        sent.clear();
+        run_to(&mut h, SimTime::from_secs(4), &mut sent);
+        assert!(sent.is_empty(), "{sent:?}");
+        ask(&mut h, 10, &set(16, 20, 500, 0x01), SimTime::from_secs(4));
+        h.reboot(SimTime::from_secs(5));
+        run_to(&mut h, SimTime::from_secs(7), &mut sent);
+        assert!(sent.iter().all(|(_, p)| p.header.dport != 20), "{sent:?}");
+        assert_eq!(
+            ask(&mut h, 10, &[8], SimTime::from_secs(7)),
+            vec![8, 1, 0, 0, 0, 0, 0, 0, 0]
+        );
+    }
+
+    #[test]
     fn atcptset_is_range_checked_in_the_reading_of_the_commanded_mode() {
         let mut h = host(Some((L1, L2)));
         let t = SimTime::from_secs(1);
@@ -1487,9 +1645,10 @@ mod tests {
             (10, vec![4]),
             (11, vec![2]),
         ];
-        let others: [(u8, Vec<u8>); 8] = [
+        let others: [(u8, Vec<u8>); 9] = [
             (10, vec![5]),
             (10, vec![6]),
+            (10, vec![8]),
             (11, [vec![1], 1_000u32.to_le_bytes().to_vec()].concat()),
             (12, vec![1]),
             (12, vec![5]),

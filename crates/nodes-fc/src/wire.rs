@@ -21,6 +21,7 @@
 //! | TMSENS 4 | - | [`TmSens`] 70 |
 //! | TMRAWSENS 5 | - | [`TmRawSens`] 46 (the twin's layout) |
 //! | TMALL 6 | - | [`TmAll`] 165 (the twin's layout) |
+//! | TMPERSET 7 / TMPERGET 8 (the twin's) | [`Periodic`] 7 / - | - / [`Periodic`] 7 |
 //! | RTCSTMSET 1 | [`RtcTimestamp`] 4 | - |
 //! | RTCSTMGET 2 | - | [`RtcTimestamp`] 4 |
 //! | ATCATGET 1 / ATCATSET 2 | - / [`TargetAttitude`] 32 | [`TargetAttitude`] 32 / - |
@@ -57,6 +58,10 @@ pub mod cmd {
     pub const TMRAWSENS: u8 = 5;
     /// Telemetry port: all beacon telemetry.
     pub const TMALL: u8 = 6;
+    /// Telemetry port: set the periodic real-time telemetry (the twin's).
+    pub const TMPERSET: u8 = 7;
+    /// Telemetry port: get the periodic real-time telemetry (the twin's).
+    pub const TMPERGET: u8 = 8;
     /// RTC port: set the RTC.
     pub const RTCSTMSET: u8 = 1;
     /// RTC port: get the RTC.
@@ -512,7 +517,69 @@ fn data<T: Repr>(r: &Request<'_>, expected: &'static str) -> Result<T, RequestEr
     })
 }
 
-/// The telemetry port's commands (port 10; none carries request data).
+/// Shortest period of the periodic telemetry, ms.
+pub const PERIODIC_MIN_MS: u32 = 100;
+/// Longest period of the periodic telemetry, ms (an hour).
+pub const PERIODIC_MAX_MS: u32 = 3_600_000;
+
+/// TMPERSET request and TMPERGET reply (the twin's, 7 bytes): the FC sends the telemetry of
+/// `mask` (bit `n - 1` for telemetry command `n`: TMGEN 0x01 ... TMALL 0x20) to `dst`:`dport`
+/// every `period_ms`, each as the bytes a request for it would get (`cmd | result | data`),
+/// from the telemetry port. `period_ms` 0 stops it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Periodic {
+    /// Destination address (0-30, not the FC's own).
+    pub dst: u8,
+    /// Destination port (7-63: not a service port).
+    pub dport: u8,
+    /// Period, ms: 0 (off) or [`PERIODIC_MIN_MS`]..=[`PERIODIC_MAX_MS`].
+    pub period_ms: u32,
+    /// Telemetry sent: bit `n - 1` for command `n` (1-6).
+    pub mask: u8,
+}
+
+impl Periodic {
+    /// The telemetry command ids of `mask`, in order.
+    pub fn commands(&self) -> impl Iterator<Item = u8> + '_ {
+        (cmd::TMGEN..=cmd::TMALL).filter(|c| self.mask & (1 << (c - 1)) != 0)
+    }
+    /// The field out of range, if any (`own`: the FC's address).
+    pub fn out_of_range(&self, own: u8) -> Option<&'static str> {
+        if self.period_ms == 0 {
+            None
+        } else if !(PERIODIC_MIN_MS..=PERIODIC_MAX_MS).contains(&self.period_ms) {
+            Some("period_ms")
+        } else if self.dst > 30 || self.dst == own {
+            Some("dst")
+        } else if !(7..=63).contains(&self.dport) {
+            Some("dport")
+        } else if self.mask == 0 || self.mask > 0x3f {
+            Some("mask")
+        } else {
+            None
+        }
+    }
+}
+
+impl Repr for Periodic {
+    const LEN: usize = 7;
+    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
+        Ok(Periodic {
+            dst: r.u8()?,
+            dport: r.u8()?,
+            period_ms: r.u32()?,
+            mask: r.u8()?,
+        })
+    }
+    fn write(&self, w: &mut Writer) {
+        w.u8(self.dst)
+            .u8(self.dport)
+            .u32(self.period_ms)
+            .u8(self.mask);
+    }
+}
+
+/// The telemetry port's commands (port 10).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TelemetryCommand {
     /// TMGEN 1.
@@ -527,6 +594,10 @@ pub enum TelemetryCommand {
     TmRawSens,
     /// TMALL 6.
     TmAll,
+    /// TMPERSET 7 (ranges checked against the FC's address by the FC).
+    SetPeriodic(Periodic),
+    /// TMPERGET 8.
+    GetPeriodic,
 }
 
 impl CommandSet for TelemetryCommand {
@@ -539,6 +610,8 @@ impl CommandSet for TelemetryCommand {
             cmd::TMSENS => no_data(r, TmSens),
             cmd::TMRAWSENS => no_data(r, TmRawSens),
             cmd::TMALL => no_data(r, TmAll),
+            cmd::TMPERSET => data(r, "7").map(SetPeriodic),
+            cmd::TMPERGET => no_data(r, GetPeriodic),
             c => Err(RequestError::UnknownCommand(c)),
         }
     }
@@ -913,8 +986,26 @@ mod tests {
             Ok(TelemetryCommand::TmAtp)
         );
         assert_eq!(
+            TelemetryCommand::parse(&req(9, &[])),
+            Err(RequestError::UnknownCommand(9))
+        );
+        // TMPERSET takes 7 bytes, TMPERGET none.
+        assert!(matches!(
             TelemetryCommand::parse(&req(7, &[])),
-            Err(RequestError::UnknownCommand(7))
+            Err(RequestError::WrongLength { .. })
+        ));
+        assert_eq!(
+            TelemetryCommand::parse(&req(7, &[16, 20, 0xf4, 1, 0, 0, 3])),
+            Ok(TelemetryCommand::SetPeriodic(Periodic {
+                dst: 16,
+                dport: 20,
+                period_ms: 500,
+                mask: 3
+            }))
+        );
+        assert_eq!(
+            TelemetryCommand::parse(&req(8, &[])),
+            Ok(TelemetryCommand::GetPeriodic)
         );
         assert!(matches!(
             TelemetryCommand::parse(&req(1, &[0])),

@@ -13,7 +13,8 @@ use crate::expectations::{
     CheckCx, ExpectCx, ExpectKind, Extremes, Judged, Occurrence, Watch, WatchCx, When,
 };
 use crate::faults::{FaultAction, TimedFault};
-use crate::scenario::{Dur, PathStep, Scenario};
+use crate::network::NetworkSpec;
+use crate::scenario::{Dur, NodeRef, PathStep, Scenario};
 
 fn key(k: &str) -> PathStep {
     PathStep::Key(k.to_owned())
@@ -84,6 +85,63 @@ pub struct FcSpec {
     /// When the FC goes SAFE on a low battery (`nodes_fc::safe`).
     #[serde(default)]
     pub safe: Option<FcSafeSpec>,
+    /// Periodic real-time telemetry from boot (as TMPERSET sets it).
+    #[serde(default)]
+    pub periodic: Option<FcPeriodicSpec>,
+}
+
+/// `[fc.periodic]`: the FC sends chosen telemetry to a node and port at a period.
+#[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FcPeriodicSpec {
+    /// The destination node (a ground station or a payload).
+    pub to: NodeRef,
+    /// Its port, 7-63.
+    pub port: u8,
+    /// The period, 100 ms to 1 h.
+    pub every: Dur,
+    /// Telemetry commands by name: TMGEN, TMATP, TMACD, TMSENS, TMRAWSENS, TMALL.
+    pub telemetry: Vec<String>,
+}
+
+impl FcPeriodicSpec {
+    /// The TMPERSET contents, or the first field that is wrong (its key and why).
+    fn periodic(
+        &self,
+        net: &NetworkSpec,
+    ) -> Result<nodes_fc::wire::Periodic, (&'static str, String)> {
+        const NAMES: [&str; 6] = ["TMGEN", "TMATP", "TMACD", "TMSENS", "TMRAWSENS", "TMALL"];
+        let dst = net.resolve(&self.to).map_err(|e| ("to", e))?;
+        let mut mask = 0u8;
+        for name in &self.telemetry {
+            let i = NAMES
+                .iter()
+                .position(|n| n.eq_ignore_ascii_case(name))
+                .ok_or_else(|| {
+                    (
+                        "telemetry",
+                        format!("`{name}` is not one of {}", NAMES.join(", ")),
+                    )
+                })?;
+            mask |= 1 << i;
+        }
+        let p = nodes_fc::wire::Periodic {
+            dst,
+            dport: self.port,
+            period_ms: u32::try_from(self.every.0.as_millis()).unwrap_or(u32::MAX),
+            mask,
+        };
+        match p.out_of_range(platform::addr::FC) {
+            None if p.period_ms > 0 => Ok(p),
+            None | Some("period_ms") => Err(("every", "must be 100 ms to 1 h".into())),
+            Some("dst") => Err(("to", "must be a node other than the FC".into())),
+            Some("dport") => Err(("port", "must be 7-63 (0-6 are the service ports)".into())),
+            Some(_) => Err((
+                "telemetry",
+                "must name at least one telemetry command".into(),
+            )),
+        }
+    }
 }
 
 /// `[fc.safe]`: the FC's low-battery SAFE state.
@@ -212,9 +270,12 @@ pub struct FcFaultSpec {
 }
 
 /// Check the `[fc]` table.
-pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
     let fc = &s.fc;
     let p = |n: &str| vec![key("fc"), key(n)];
+    if let Some(Err((field, e))) = fc.periodic.as_ref().map(|sp| sp.periodic(net)) {
+        err(vec![key("fc"), key("periodic"), key(field)], e);
+    }
     if fc.adcs_hz.is_some_and(|h| !(1..=100).contains(&h)) {
         err(p("adcs_hz"), "must be 1-100".into());
     }
@@ -350,7 +411,11 @@ fn random_rotation(seed: u64, salt: u64) -> nalgebra::UnitQuaternion<f64> {
 
 /// The FC's configuration from the `[fc]` table (validated), its faults added to the
 /// recorded fault timeline.
-pub fn compile(s: &Scenario, faults: &mut Vec<TimedFault>) -> nodes_fc::FcConfig {
+pub fn compile(
+    s: &Scenario,
+    net: &NetworkSpec,
+    faults: &mut Vec<TimedFault>,
+) -> nodes_fc::FcConfig {
     use nalgebra::{Quaternion, UnitQuaternion, Vector3};
     use nodes_fc::{FcEvent, TimedFcEvent};
     let f = &s.fc;
@@ -409,6 +474,7 @@ pub fn compile(s: &Scenario, faults: &mut Vec<TimedFault>) -> nodes_fc::FcConfig
     if let Some(sf) = f.safe {
         c.safe = sf.config();
     }
+    c.periodic = f.periodic.as_ref().and_then(|sp| sp.periodic(net).ok());
     if let Some(p) = f.ports {
         let d = nodes_fc::FcPorts::default();
         c.ports = nodes_fc::FcPorts {

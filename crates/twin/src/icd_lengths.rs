@@ -88,6 +88,8 @@ impl IcdTable {
                 (fc::cmd::TMSENS, ok::<fc::TmSens>()),
                 (fc::cmd::TMRAWSENS, ok::<fc::TmRawSens>()),
                 (fc::cmd::TMALL, ok::<fc::TmAll>()),
+                (fc::cmd::TMPERSET, NONE),
+                (fc::cmd::TMPERGET, ok::<fc::Periodic>()),
             ]),
         );
         ports.insert(

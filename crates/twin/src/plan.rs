@@ -46,7 +46,7 @@ pub fn compile(s: &Scenario) -> Compiled {
     opts.ground_plan = crate::commands::compile(s, &net);
     // The node configurations first: a fault may put events on a node's own timeline.
     let mut fc_faults = Vec::new();
-    opts.fc = crate::adcs::compile(s, &mut fc_faults);
+    opts.fc = crate::adcs::compile(s, &net, &mut fc_faults);
     opts.eps = crate::eps::compile(s);
     opts.comm = crate::comm::compile(s);
     opts.pc = crate::sessions::compile_pc(s);

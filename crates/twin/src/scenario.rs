@@ -673,7 +673,7 @@ impl Scenario {
         }
         crate::commands::validate(self, &net, &mut err);
         crate::faults::validate(self, &net, &mut err);
-        crate::adcs::validate(self, &mut err);
+        crate::adcs::validate(self, &net, &mut err);
         crate::sessions::validate(self, &mut err);
         crate::eps::validate(self, &mut err);
         crate::comm::validate(self, &mut err);

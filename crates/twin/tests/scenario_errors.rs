@@ -352,3 +352,44 @@ fn array_entries_are_named_whatever_the_header_spacing_and_comments() {
     assert!(m.contains("missing field `to`"), "{m}");
     assert_eq!(f, "commands[1]");
 }
+
+#[test]
+fn fc_periodic_telemetry_and_safe_settings_are_checked_where_they_are_written() {
+    let periodic = |body: &str| format!("duration = \"1m\"\n[fc.periodic]\n{body}");
+    assert_error(
+        &periodic("to = \"GS16\"\nport = 3\nevery = \"1s\"\ntelemetry = [\"TMGEN\"]\n"),
+        4,
+        "fc.periodic.port",
+        "7-63",
+    );
+    assert_error(
+        &periodic("to = \"GS16\"\nport = 20\nevery = \"50ms\"\ntelemetry = [\"TMGEN\"]\n"),
+        5,
+        "fc.periodic.every",
+        "100 ms to 1 h",
+    );
+    assert_error(
+        &periodic("to = \"FC\"\nport = 20\nevery = \"1s\"\ntelemetry = [\"TMGEN\"]\n"),
+        3,
+        "fc.periodic.to",
+        "other than the FC",
+    );
+    assert_error(
+        &periodic("to = \"GS16\"\nport = 20\nevery = \"1s\"\ntelemetry = [\"TMPC\"]\n"),
+        6,
+        "fc.periodic.telemetry",
+        "`TMPC` is not one of TMGEN",
+    );
+    assert_error(
+        "duration = \"1m\"\n[fc.safe]\nenter_soc = 0.4\nexit_soc = 0.2\n",
+        2,
+        "fc.safe",
+        "below the entry's",
+    );
+    // A good one parses.
+    Scenario::parse(
+        "ok.toml",
+        &periodic("to = \"GS16\"\nport = 20\nevery = \"1s\"\ntelemetry = [\"tmgen\", \"TMATP\"]\n"),
+    )
+    .unwrap();
+}
