@@ -200,8 +200,8 @@ pub struct PcConfig {
     pub files_port: u8,
     /// Scenario events (sorted by time when the app is built).
     pub timeline: Vec<TimedPcEvent>,
-    /// Whether payloads are refused SETUP and ABORT (ICD 3.1.1), the default, or may use
-    /// them (a lab bench).
+    /// Whether payloads are refused SETUP and ABORT (ICD 3.1.1) and the buffer files (ICD
+    /// 3.1.5), the default, or may use them (a lab bench).
     pub payload_access: platform::addr::PayloadAccess,
 }
 
@@ -497,7 +497,7 @@ pub struct PcCounters {
     /// Of those, requests from payloads refused by [`PcConfig::payload_access`]: SETUP,
     /// ABORT and anything on the files port.
     pub denied: u64,
-    /// FREAD requests answered, and the bytes they returned.
+    /// FREAD requests answered.
     pub file_reads: u64,
     /// Bytes FREAD returned.
     pub file_bytes_read: u64,
@@ -1420,12 +1420,7 @@ impl PcApp {
     fn ingest(&mut self, node: &mut Node, packet: &Packet, now: SimTime) {
         let src = packet.header.src;
         let n = packet.data.len();
-        let slot = self
-            .table
-            .slots()
-            .iter()
-            .position(|s| s.spec.payload_addr == src && s.spec.mode == SessionMode::Buffering);
-        let Some(i) = slot else {
+        let Some(i) = self.file_slot(src) else {
             self.received(None, n);
             self.drop_bytes(now, None, src, DropReason::UnknownSource, n as u64);
             return;
