@@ -56,6 +56,9 @@ pub enum NodeCtl {
     /// Fault `id` acts on the node's core (`Some`) or is lifted ([`Host::fault`]); applied
     /// whether or not the node is powered (its clock keeps its error).
     Fault(u32, Option<csp::node::NodeFault>),
+    /// A console line ([`crate::console`]): run at the command's instant when the node is
+    /// powered and not hung, and answered; otherwise answered `None`.
+    Console(crate::console::ConsoleRequest),
     /// Stop the task and hand the host back.
     Stop,
 }
@@ -217,6 +220,16 @@ async fn run<A: App, O: Outputs<A::Event>>(
                     NodeCtl::Hang(h) => hung = h,
                     NodeCtl::Switch(name, on) => host.switch(name, on, t),
                     NodeCtl::Fault(id, f) => host.fault(id, f, t),
+                    NodeCtl::Console(req) => {
+                        if listening {
+                            // The line is in the node's log (and so in the recording).
+                            host.node.log(t, format!("console: {}", req.line()));
+                            let text = host.console(req.line(), t);
+                            req.answer(Some(text));
+                        } else {
+                            req.answer(None);
+                        }
+                    }
                 }
             }
             n = inbox.recv_many(&mut batch, INBOX_BATCH) => {

@@ -139,8 +139,15 @@ impl Pty {
         }
     }
 
+    /// Wait until the program that had it open has closed it.
+    pub async fn wait_closed(&self) {
+        while self.opened() {
+            tokio::time::sleep(OPEN_POLL).await;
+        }
+    }
+
     /// The pty as a stream for one connection.
-    fn stream(&mut self) -> PtyStream<'_> {
+    pub fn stream(&mut self) -> PtyStream<'_> {
         PtyStream {
             rx: &mut self.rx,
             tx: &mut self.tx,
@@ -159,7 +166,8 @@ impl Drop for Pty {
 
 /// One connection's view of the pty: reading `EIO` (the program closed its side) is the
 /// end of the stream.
-struct PtyStream<'a> {
+#[derive(Debug)]
+pub struct PtyStream<'a> {
     rx: &'a mut pipe::Receiver,
     tx: &'a mut pipe::Sender,
 }
@@ -215,8 +223,6 @@ pub async fn serve(
         bump(&stats, |s| s.disconnects += 1);
         // The program may still hold it for a moment after its last byte: wait for the
         // hang-up before looking for the next opener.
-        while pty.opened() {
-            tokio::time::sleep(OPEN_POLL).await;
-        }
+        pty.wait_closed().await;
     }
 }

@@ -12,6 +12,7 @@
 
 pub mod can;
 pub mod clock;
+pub mod console;
 pub mod driver;
 pub mod gate;
 pub mod impair;

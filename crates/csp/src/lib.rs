@@ -14,11 +14,13 @@
 //! - [`reqrep`]: the ICD's request-reply framing (command id, result code, little-endian).
 
 pub mod cfp;
+pub mod console;
 pub mod crc32;
 pub mod header;
 pub mod kiss;
 pub mod node;
 pub mod packet;
+pub mod params;
 pub mod reqrep;
 pub mod router;
 pub mod service;

@@ -172,6 +172,10 @@ pub struct NodeCounters {
     pub service_replies: u64,
     /// Reboots.
     pub reboots: u64,
+    /// Requests answered on the platform port ([`crate::params`]), refused ones included.
+    pub platform_requests: u64,
+    /// Platform-port requests refused (malformed, out of range, or not for this source).
+    pub platform_refused: u64,
     /// Dropped packets and frames by reason.
     pub drops: BTreeMap<&'static str, u64>,
 }
@@ -400,6 +404,8 @@ pub struct Node {
     clock_sets: u64,
     reboot_requested: bool,
     counters: NodeCounters,
+    /// The last [`RECENT_EVENTS`] events, read or not (the console's `log`).
+    recent: VecDeque<NodeEvent>,
     frames: Vec<CanFrame>,
     faults: BTreeMap<u32, NodeFault>,
     clock_errors: ClockErrors,
@@ -413,6 +419,9 @@ pub struct Node {
 
 /// Keep at most this many unread events (older ones are counted, not kept).
 const MAX_EVENTS: usize = 1024;
+
+/// The node keeps its last this many events for the console's `log`.
+pub const RECENT_EVENTS: usize = 64;
 
 /// The interface index of the loopback (a packet this node sent to itself).
 const LOOPBACK_IFACE: IfaceId = usize::MAX;
@@ -443,6 +452,7 @@ impl Node {
             clock_sets: 0,
             reboot_requested: false,
             counters: NodeCounters::default(),
+            recent: VecDeque::new(),
             frames: Vec::new(),
             faults: BTreeMap::new(),
             clock_errors: ClockErrors::default(),
@@ -858,6 +868,10 @@ impl Node {
         self.tx.clear();
         self.rx.clear();
     }
+    /// The node's last [`RECENT_EVENTS`] events (drops and log lines), oldest first.
+    pub fn recent_events(&self) -> impl Iterator<Item = &NodeEvent> {
+        self.recent.iter()
+    }
     /// Whether the service handler asked for a reboot (cleared by [`Node::reboot`]).
     pub fn reboot_requested(&self) -> bool {
         self.reboot_requested
@@ -901,6 +915,10 @@ impl Node {
 
     /// An application's event for the run's log (bounded like the node's own).
     pub fn push_event(&mut self, e: NodeEvent) {
+        if self.recent.len() == RECENT_EVENTS {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(e.clone());
         if self.events.len() < MAX_EVENTS {
             self.events.push_back(e);
         }
@@ -949,6 +967,37 @@ pub trait App: Send + 'static {
     /// The node's CSP clock was set through CMP CLOCK (service port 0) at `now`: an
     /// application that keeps times against it re-reads it.
     fn clock_set(&mut self, _node: &mut Node, _now: SimTime) {}
+    /// The node's parameter table ([`crate::params`]): with one, the [`Host`] binds the
+    /// platform port ([`crate::params::PORT`]) and keeps its non-volatile copy.
+    fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
+        None
+    }
+    /// Whether the platform port refuses a request from `src` (a payload, under ICD 4.1's
+    /// rules where the node applies them).
+    fn platform_port_refuses(&self, _src: u8) -> bool {
+        false
+    }
+    /// The node's self-test at `now`: each component's health from the twin's state.
+    fn self_test(&mut self, _node: &Node, _now: SimTime) -> Vec<crate::params::Check> {
+        Vec::new()
+    }
+    /// The application's own console commands (beyond the node's: [`crate::console`]).
+    fn console_commands(&self) -> &'static [crate::console::Command] {
+        &[]
+    }
+    /// Run one of [`App::console_commands`] (`words[0]` is its name): the text to print, or
+    /// a one-line error.
+    fn console(
+        &mut self,
+        _node: &mut Node,
+        words: &[&str],
+        _now: SimTime,
+    ) -> Result<String, String> {
+        Err(format!(
+            "unknown command {:?}",
+            words.first().unwrap_or(&"")
+        ))
+    }
 }
 
 /// An application that binds nothing: the node only routes and answers ports 0-6.
@@ -968,14 +1017,36 @@ pub struct Host<A> {
     pub node: Node,
     /// Its application.
     pub app: A,
+    /// The node's non-volatile parameter memory (survives reboots and power loss).
+    pub nv: crate::params::ParamStore,
 }
 
 impl<A: App> Host<A> {
     /// Boot a node with its application at `now`.
-    pub fn new(cfg: NodeConfig, mut app: A, now: SimTime) -> Self {
-        let mut node = Node::new(cfg, now);
-        app.start(&mut node, now);
-        Host { node, app }
+    pub fn new(cfg: NodeConfig, app: A, now: SimTime) -> Self {
+        let node = Node::new(cfg, now);
+        let mut host = Host {
+            node,
+            app,
+            nv: crate::params::ParamStore::default(),
+        };
+        // The scenario's values are the factory defaults.
+        if let Some(t) = host.app.params() {
+            host.nv.capture_defaults(t);
+        }
+        host.start(now);
+        host
+    }
+    /// Boot the application: the saved parameters (or the defaults) first, then its start.
+    fn start(&mut self, now: SimTime) {
+        if let Some(t) = self.app.params() {
+            for e in self.nv.load(t) {
+                self.node
+                    .warn(now, format!("parameter not restored at boot: {e}"));
+            }
+            self.node.bind(crate::params::PORT);
+        }
+        self.app.start(&mut self.node, now);
     }
 
     /// A CAN frame arrived on `iface`.
@@ -1035,7 +1106,55 @@ impl<A: App> Host<A> {
     pub fn reboot(&mut self, now: SimTime) {
         self.node.reboot(now);
         self.app.reset(now);
-        self.app.start(&mut self.node, now);
+        self.start(now);
+    }
+
+    /// A request on the platform port: parameters and self-test ([`crate::params`]).
+    fn platform_port(&mut self, packet: Packet, now: SimTime) {
+        use crate::params::Effect;
+        let src = packet.header.src;
+        let (reply, effect, why) = if self.app.platform_port_refuses(src) {
+            self.node.counters.platform_refused += 1;
+            let command = packet.data.first().copied().unwrap_or(0);
+            self.node.warn(
+                now,
+                format!("platform port: node {src} refused command {command} (ICD 4.1: not for payloads)"),
+            );
+            (crate::reqrep::failure(command), Effect::None, None)
+        } else {
+            let checks = if packet.data.first() == Some(&crate::params::cmd::SELFTEST) {
+                self.app.self_test(&self.node, now)
+            } else {
+                Vec::new()
+            };
+            let Some(table) = self.app.params() else {
+                return;
+            };
+            crate::params::serve(table, &mut self.nv, || checks, &packet.data)
+        };
+        match effect {
+            Effect::None => {}
+            Effect::Set { name, value } => self.node.log(
+                now,
+                format!("parameter {name} set to {value} by node {src}"),
+            ),
+            Effect::Saved => self
+                .node
+                .log(now, format!("parameters saved by node {src}")),
+            Effect::Defaults => self
+                .node
+                .log(now, format!("parameters reset to defaults by node {src}")),
+        }
+        if let Some(why) = why {
+            self.node.counters.platform_refused += 1;
+            self.node.log(now, format!("platform port: {why}"));
+        }
+        self.node.counters.platform_requests += 1;
+        // A send failure is already counted by the node.
+        let _ = self.node.send(
+            Packet::new(packet.header.reply(self.node.addr()), reply),
+            now,
+        );
     }
 
     fn after_input(&mut self, now: SimTime) {
@@ -1044,7 +1163,11 @@ impl<A: App> Host<A> {
             let Some(packet) = self.node.poll_delivery() else {
                 break;
             };
-            self.app.handle_packet(&mut self.node, packet, now);
+            if packet.header.dport == crate::params::PORT && self.app.params().is_some() {
+                self.platform_port(packet, now);
+            } else {
+                self.app.handle_packet(&mut self.node, packet, now);
+            }
         }
         if self.node.reboot_requested() {
             self.reboot(now);
@@ -1119,6 +1242,21 @@ impl<T: App + ?Sized> App for Box<T> {
     fn clock_set(&mut self, node: &mut Node, now: SimTime) {
         (**self).clock_set(node, now)
     }
+    fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
+        (**self).params()
+    }
+    fn platform_port_refuses(&self, src: u8) -> bool {
+        (**self).platform_port_refuses(src)
+    }
+    fn self_test(&mut self, node: &Node, now: SimTime) -> Vec<crate::params::Check> {
+        (**self).self_test(node, now)
+    }
+    fn console_commands(&self) -> &'static [crate::console::Command] {
+        (**self).console_commands()
+    }
+    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+        (**self).console(node, words, now)
+    }
 }
 
 /// An application whose events are mapped by `f` (for a run that gathers every node's
@@ -1179,6 +1317,21 @@ where
     }
     fn clock_set(&mut self, node: &mut Node, now: SimTime) {
         self.app.clock_set(node, now)
+    }
+    fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
+        self.app.params()
+    }
+    fn platform_port_refuses(&self, src: u8) -> bool {
+        self.app.platform_port_refuses(src)
+    }
+    fn self_test(&mut self, node: &Node, now: SimTime) -> Vec<crate::params::Check> {
+        self.app.self_test(node, now)
+    }
+    fn console_commands(&self) -> &'static [crate::console::Command] {
+        self.app.console_commands()
+    }
+    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+        self.app.console(node, words, now)
     }
 }
 
@@ -1260,6 +1413,23 @@ impl<A: App> App for Tap<A> {
     fn clock_set(&mut self, node: &mut Node, now: SimTime) {
         self.app.clock_set(node, now);
         self.pull();
+    }
+    fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
+        self.app.params()
+    }
+    fn platform_port_refuses(&self, src: u8) -> bool {
+        self.app.platform_port_refuses(src)
+    }
+    fn self_test(&mut self, node: &Node, now: SimTime) -> Vec<crate::params::Check> {
+        self.app.self_test(node, now)
+    }
+    fn console_commands(&self) -> &'static [crate::console::Command] {
+        self.app.console_commands()
+    }
+    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+        let r = self.app.console(node, words, now);
+        self.pull();
+        r
     }
 }
 

@@ -36,9 +36,15 @@
 //!
 //! # Reboot
 //! Volatile ([`App::reset`]): the beacon sequence (restarts at 1), the period (back to the
-//! configured one), the schedule, the "since boot" counters of TMCOMM. The role, the
-//! active flag and the run counters ([`CommApp::counters`]) survive.
+//! saved parameter table, PSAVE, or the factory default), the schedule, the "since boot"
+//! counters of TMCOMM. The role, the active flag and the run counters
+//! ([`CommApp::counters`]) survive.
+//!
+//! # Platform port 14
+//! The parameter table and self-test of [`config`] (`csp::params`): `beacon_period` is the
+//! period BEACONGET reads and BEACONSET sets.
 
+pub mod config;
 pub mod link;
 pub mod wire;
 
@@ -214,8 +220,9 @@ pub struct CommApp {
     sites: Vec<GroundSite>,
     truth: Option<TruthBoard>,
     active: bool,
-    /// Became active since the last timer: arm the schedule at the next timeout.
-    activation_pending: bool,
+    /// Became active, or the beacon period parameter changed, since the last timer: arm
+    /// the schedule at the next timeout.
+    arm_pending: bool,
     period: Duration,
     next_beacon: Option<SimTime>,
     /// Beacons sent since boot (the last sequence number).
@@ -233,7 +240,7 @@ impl CommApp {
             sites: cfg.stations.iter().map(Station::site).collect(),
             truth: None,
             active: cfg.role == CommRole::Primary,
-            activation_pending: false,
+            arm_pending: false,
             period: cfg.beacon_period,
             next_beacon: None,
             seq: 0,
@@ -258,7 +265,7 @@ impl CommApp {
             return;
         }
         self.active = active;
-        self.activation_pending = active;
+        self.arm_pending = active;
         if !active {
             self.next_beacon = None;
         }
@@ -465,7 +472,7 @@ impl App for CommApp {
     fn start(&mut self, node: &mut Node, now: SimTime) {
         node.bind(self.cfg.port);
         self.last_now = now;
-        self.activation_pending = false;
+        self.arm_pending = false;
         self.arm(now);
     }
 
@@ -487,7 +494,7 @@ impl App for CommApp {
     }
 
     fn poll_timeout(&self) -> Option<SimTime> {
-        if self.activation_pending {
+        if self.arm_pending {
             return Some(self.last_now);
         }
         self.next_beacon
@@ -495,8 +502,8 @@ impl App for CommApp {
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
         self.last_now = self.last_now.max(now);
-        if self.activation_pending {
-            self.activation_pending = false;
+        if self.arm_pending {
+            self.arm_pending = false;
             self.arm(now);
         }
         let Some(due) = self.next_beacon.filter(|&t| t <= now) else {
@@ -519,17 +526,25 @@ impl App for CommApp {
         if name == RADIO_SWITCH {
             self.last_now = self.last_now.max(now);
             self.set_active(on);
-            if self.activation_pending {
-                self.activation_pending = false;
+            if self.arm_pending {
+                self.arm_pending = false;
                 self.arm(now);
             }
         }
     }
 
+    fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
+        Some(self)
+    }
+
+    fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {
+        self.checks(now)
+    }
+
     fn reset(&mut self, now: SimTime) {
         self.period = self.cfg.beacon_period;
         self.next_beacon = None;
-        self.activation_pending = false;
+        self.arm_pending = false;
         self.seq = 0;
         self.air_since_boot = Duration::ZERO;
         self.refused_since_boot = 0;

@@ -476,3 +476,110 @@ proptest! {
         }
     }
 }
+
+/// Send `req` from the ground (16, port 41) to the platform port (14) at `t`; the one
+/// reply's data.
+fn platform(h: &mut Host<CommApp>, req: &[u8], t: SimTime) -> Vec<u8> {
+    let addr = h.node.addr();
+    let port = csp::params::PORT;
+    h.handle_packet(
+        1,
+        Packet::new(Header::new(16, addr, port, 41), req.to_vec()),
+        t,
+    );
+    let out = uhf_out(h);
+    assert_eq!(out.len(), 1, "exactly one reply to {req:?}");
+    assert_eq!(out[0].header, Header::new(addr, 16, 41, port));
+    out[0].data.clone()
+}
+
+#[test]
+fn platform_beacon_period_is_beaconsets_and_reverts_at_reboot_unless_saved() {
+    let mut h = host(CommConfig::default());
+    let s = SimTime::from_secs;
+    // PGET: id 1, type u16, 60 s.
+    assert_eq!(platform(&mut h, &[1, 1], s(1)), [1, 1, 1, 2, 60, 0]);
+    // PSET 120 s at 10 s: BEACONGET agrees, and the schedule restarts from then.
+    assert_eq!(
+        platform(&mut h, &[2, 1, 120, 0], s(10)),
+        [2, 1, 1, 2, 120, 0]
+    );
+    assert_eq!(request(&mut h, &[3], s(10)), [3, 1, 120, 0]);
+    h.handle_timeout(s(10));
+    assert_eq!(h.app.next_beacon(), Some(s(130)));
+    let b = drive(&mut h, s(130));
+    assert_eq!(b.iter().map(|x| x.0).collect::<Vec<_>>(), [s(130)]);
+    // BEACONSET: PGET agrees.
+    assert_eq!(request(&mut h, &[2, 30, 0], s(140)), [2, 1]);
+    assert_eq!(platform(&mut h, &[1, 1], s(140)), [1, 1, 1, 2, 30, 0]);
+    // Out of range (above 3600), and between 0 and 10: refused, unchanged.
+    assert_eq!(platform(&mut h, &[2, 1, 0x11, 0x0e], s(141)), [2, 0]);
+    assert_eq!(platform(&mut h, &[2, 1, 5, 0], s(141)), [2, 0]);
+    assert_eq!(platform(&mut h, &[2, 2, 21], s(141)), [2, 0]);
+    assert_eq!(request(&mut h, &[3], s(141)), [3, 1, 30, 0]);
+    // The beacon destination and the EIRP (f32).
+    assert_eq!(platform(&mut h, &[2, 2, 17], s(142)), [2, 1, 2, 1, 17]);
+    let mut set = vec![2, 3];
+    set.extend_from_slice(&33.0f32.to_le_bytes());
+    let mut echo = vec![2, 1, 3, 5];
+    echo.extend_from_slice(&33.0f32.to_le_bytes());
+    assert_eq!(platform(&mut h, &set, s(142)), echo);
+    // A reboot without PSAVE: the factory table.
+    h.reboot(s(150));
+    assert_eq!(request(&mut h, &[3], s(150)), [3, 1, 60, 0]);
+    assert_eq!(platform(&mut h, &[1, 2], s(150)), [1, 1, 2, 1, 16]);
+    assert_eq!(h.app.config().link.eirp_dbm, 29.0);
+    // Set, saved, reboot: kept, and the first beacon a period after the boot.
+    assert_eq!(
+        platform(&mut h, &[2, 1, 20, 0], s(160)),
+        [2, 1, 1, 2, 20, 0]
+    );
+    assert_eq!(platform(&mut h, &[5], s(160)), [5, 1]);
+    h.reboot(s(170));
+    assert_eq!(request(&mut h, &[3], s(170)), [3, 1, 20, 0]);
+    let b = drive(&mut h, s(190));
+    assert_eq!(b.len(), 1);
+    assert_eq!(b[0].0, s(190));
+    assert_eq!(b[0].1.header.dst, 16);
+}
+
+#[test]
+fn selftest_reports_radio_link_and_beacons() {
+    let at = |el| truth_seen_from_vilnius(el, 0.0, 700.0);
+    let mut h = host_with(
+        CommApp::new(CommConfig::default()).with_truth(board_with(&at(45.0))),
+        1,
+    );
+    drive(&mut h, SimTime::from_secs(120));
+    let r = platform(&mut h, &[7], SimTime::from_secs(121));
+    assert_eq!(r[..2], [7, 1]);
+    assert_eq!(r[3], 3);
+    assert_eq!(r.len(), 4 + 3 * 5);
+    let entry = |i: usize| {
+        let at = 4 + 5 * i;
+        (
+            r[at],
+            f32::from_le_bytes(r[at + 1..at + 5].try_into().unwrap()),
+        )
+    };
+    assert_eq!(entry(0), (0, 29.0), "radio active, EIRP");
+    let tm = tmcomm(&mut h, SimTime::from_secs(121));
+    assert_eq!(entry(1), (0, tm.rssi_dbm), "in contact: TMCOMM's RSSI");
+    assert_eq!(entry(2), (0, 2.0), "two beacons");
+    assert_eq!(r[2], 0);
+    // A stronger transmitter: a stronger signal at the ground.
+    let mut set = vec![2, 3];
+    set.extend_from_slice(&35.0f32.to_le_bytes());
+    assert_eq!(platform(&mut h, &set, SimTime::from_secs(122))[..2], [2, 1]);
+    let louder = tmcomm(&mut h, SimTime::from_secs(122));
+    assert!((louder.snr_db - tm.snr_db - 6.0).abs() < 1e-3, "{louder:?}");
+    // The secondary on standby without truth: radio, link and beacons off, overall ok.
+    let mut h = host(CommConfig::secondary());
+    let r = platform(&mut h, &[7], SimTime::from_secs(1));
+    assert_eq!(r[..4], [7, 1, 0, 3]);
+    assert_eq!([r[4], r[9], r[14]], [3, 3, 3]);
+    // Active without truth: no link budget (degraded).
+    h.switch(RADIO_SWITCH, true, SimTime::from_secs(2));
+    let r = platform(&mut h, &[7], SimTime::from_secs(3));
+    assert_eq!([r[2], r[4], r[9], r[14]], [1, 0, 1, 0]);
+}

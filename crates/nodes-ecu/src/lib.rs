@@ -42,8 +42,13 @@
 //! [`App::power_lost`], and the ECU charges the burn up to then, re-posts it with that end
 //! and switches its heater and firing activities off there (the EPS stops charging them).
 //! A software reboot while firing cuts the burn at the reboot the same way
-//! ([`App::reset`]).
+//! ([`App::reset`]). The running parameters (the longest burn, the warm-up) return at boot
+//! to the saved table (PSAVE) or the factory defaults.
+//!
+//! # Platform port 14
+//! The parameter table and self-test of [`config`] (`csp::params`).
 
+pub mod config;
 pub mod thruster;
 pub mod wire;
 
@@ -544,6 +549,14 @@ impl App for EcuApp {
             ),
         ));
         self.flush_log(node);
+    }
+
+    fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
+        Some(self)
+    }
+
+    fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {
+        self.checks(now)
     }
 
     fn reset(&mut self, now: SimTime) {

@@ -175,6 +175,13 @@ impl Battery {
     pub fn config(&self) -> &BatteryConfig {
         &self.cfg
     }
+    /// Set the largest charge power at the terminals, W (the charge regulator's limit; a
+    /// parameter, [`crate::config`]).
+    pub fn set_max_charge_w(&mut self, w: f64) {
+        if w.is_finite() && w >= 0.0 {
+            self.cfg.max_charge_w = w;
+        }
+    }
     /// Energy stored, Wh.
     pub fn energy_wh(&self) -> f64 {
         self.energy_wh

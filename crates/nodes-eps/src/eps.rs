@@ -163,6 +163,20 @@ impl Eps {
     pub fn thresholds(&self) -> Thresholds {
         self.thresholds
     }
+    /// Set the thresholds in use and the ones a reboot returns to (the parameter table's
+    /// set, [`crate::config`]; checked by the caller).
+    pub fn set_configured_thresholds(&mut self, t: Thresholds) {
+        self.configured_thresholds = t;
+        self.thresholds = t;
+    }
+    /// Set the battery's charge power limit, W ([`Battery::set_max_charge_w`]).
+    pub fn set_max_charge_w(&mut self, w: f64) {
+        self.battery.set_max_charge_w(w);
+    }
+    /// Which panels have failed (by index in the array, the panels in use).
+    pub fn failed_panels(&self) -> &[bool] {
+        &self.failed_panels
+    }
     /// Mark panel `i` failed or working (ignored past the panels in use).
     pub fn set_panel_failed(&mut self, i: usize, failed: bool) {
         if let Some(f) = self.failed_panels.get_mut(i) {

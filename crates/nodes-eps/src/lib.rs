@@ -29,13 +29,20 @@
 //! # Reboot
 //! The battery and the channel states are physical, and the protection's memory is
 //! non-volatile: all survive an EPS reboot ([`App::reset`]), and the energy is integrated
-//! up to the reboot. Volatile: thresholds set by THRSET (back to the configuration), the
-//! energy counters of TMEPS (from zero), the refused-request counter.
+//! up to the reboot. Volatile: the energy counters of TMEPS (from zero), the
+//! refused-request counter, and the running parameters: thresholds set by THRSET or PSET
+//! and the charge limit return at boot to the saved parameter table (PSAVE) or the
+//! factory defaults ([`config`]).
 //!
 //! # Port 10
 //! TMEPS 1, CHGET 2, CHSET 3, THRGET 4, THRSET 5 ([`wire`] has the layouts and sizes).
+//!
+//! # Platform port 14
+//! The parameter table and self-test of [`config`] (`csp::params`): the thresholds are the
+//! same values THRGET reads and THRSET sets.
 
 pub mod battery;
+pub mod config;
 pub mod eps;
 pub mod loads;
 pub mod protect;
@@ -231,6 +238,9 @@ pub struct EpsApp {
     booted: bool,
     cut_off: bool,
     refused: u64,
+    /// Between a reset and the start: the boot applies the parameter table, whose values
+    /// are taken whole ([`config`]).
+    booting: bool,
     log: Vec<NodeEvent>,
 }
 
@@ -253,6 +263,7 @@ impl EpsApp {
             booted: false,
             cut_off: false,
             refused: 0,
+            booting: true,
             log: Vec::new(),
         }
     }
@@ -487,6 +498,17 @@ impl App for EpsApp {
             }
         }
         self.next_tick = self.next_tick_after(now);
+        self.booting = false;
+        if let Err(f) = self.eps.thresholds().validate() {
+            // The parameter table at boot broke a rule (only a bad scenario can): the
+            // documented defaults instead.
+            node.warn(
+                now,
+                format!("eps: thresholds at boot refused ({f}): the defaults instead"),
+            );
+            self.cfg.thresholds = Thresholds::default();
+            self.eps.set_configured_thresholds(Thresholds::default());
+        }
         self.flush_log(node);
     }
 
@@ -537,10 +559,21 @@ impl App for EpsApp {
         self.advance(now);
         self.eps.reset_volatile();
         self.refused = 0;
+        self.booting = true;
         self.log.push(NodeEvent::info(
             now,
             "eps: reboot: battery and channels kept".to_owned(),
         ));
+    }
+
+    fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
+        Some(self)
+    }
+
+    fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {
+        // As a request on port 10 would: the power system up to now.
+        self.advance(now);
+        self.checks(now)
     }
 
     fn finish(&mut self, node: &mut Node, now: SimTime) {

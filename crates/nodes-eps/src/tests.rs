@@ -664,3 +664,124 @@ fn default_6u_in_a_520_km_sso_has_a_positive_balance_in_nadir() {
     }
     println!("{}", figures.join("\n"));
 }
+
+/// Send `req` to the platform port (14) at `t`; the one reply's data.
+fn platform(h: &mut Host<Tap<EpsApp>>, req: &[u8], t: SimTime) -> Vec<u8> {
+    run_until(h, t);
+    h.handle_packet(
+        0,
+        Packet::new(Header::new(GS, 4, csp::params::PORT, 41), req.to_vec()),
+        t,
+    );
+    let out: Vec<Packet> = std::iter::from_fn(|| h.node.poll_transmit())
+        .filter_map(|x| match x {
+            Transmit::Packet { packet, .. } => Some(packet),
+            Transmit::Can { .. } => None,
+        })
+        .collect();
+    assert_eq!(out.len(), 1, "exactly one reply to {req:?}");
+    assert_eq!(out[0].header, Header::new(4, GS, 41, csp::params::PORT));
+    out[0].data.clone()
+}
+
+#[test]
+fn platform_parameters_are_the_thrset_thresholds_and_revert_at_reboot_unless_saved() {
+    let (mut h, _) = host(app());
+    let s = SimTime::from_secs;
+    // PGET: id 1, type u8, 30 %.
+    assert_eq!(platform(&mut h, &[1, 1], s(1)), [1, 1, 1, 1, 30]);
+    // PSET payload shed 25 %: THRGET agrees.
+    assert_eq!(platform(&mut h, &[2, 1, 25], s(1)), [2, 1, 1, 1, 25]);
+    assert_eq!(one_reply(&mut h, &[4], s(1)), [4, 1, 25, 40, 20, 30]);
+    // THRSET: PGET agrees.
+    assert_eq!(one_reply(&mut h, &[5, 28, 40, 15, 30], s(2)), [5, 1]);
+    assert_eq!(platform(&mut h, &[1, 1], s(2)), [1, 1, 1, 1, 28]);
+    assert_eq!(platform(&mut h, &[1, 3], s(2)), [1, 1, 3, 1, 15]);
+    // Out of range (max 99), and THRSET's rule (shed below restore 40): refused, unchanged.
+    assert_eq!(platform(&mut h, &[2, 1, 100], s(2)), [2, 0]);
+    assert_eq!(platform(&mut h, &[2, 1, 40], s(2)), [2, 0]);
+    assert_eq!(platform(&mut h, &[2, 4, 15], s(2)), [2, 0]);
+    assert_eq!(platform(&mut h, &[2, 1, 25, 0], s(2)), [2, 0], "wrong size");
+    assert_eq!(one_reply(&mut h, &[4], s(2)), [4, 1, 28, 40, 15, 30]);
+    // The charge limit, f32.
+    let mut set = vec![2, 5];
+    set.extend_from_slice(&20.0f32.to_le_bytes());
+    let mut echo = vec![2, 1, 5, 5];
+    echo.extend_from_slice(&20.0f32.to_le_bytes());
+    assert_eq!(platform(&mut h, &set, s(3)), echo);
+    assert_eq!(h.app.eps().battery().config().max_charge_w, 20.0);
+    // A reboot without PSAVE: the factory table again.
+    h.reboot(s(4));
+    assert_eq!(one_reply(&mut h, &[4], s(4)), [4, 1, 30, 40, 20, 30]);
+    assert_eq!(h.app.eps().battery().config().max_charge_w, 40.0);
+    // Raised thresholds, saved; then changed again (crossing the saved ones) and not saved:
+    // the boot restores the saved table whole.
+    assert_eq!(platform(&mut h, &[2, 2, 60], s(5)), [2, 1, 2, 1, 60]);
+    assert_eq!(platform(&mut h, &[2, 1, 50], s(5)), [2, 1, 1, 1, 50]);
+    assert_eq!(platform(&mut h, &[5], s(5)), [5, 1]);
+    assert_eq!(one_reply(&mut h, &[5, 10, 20, 5, 10], s(6)), [5, 1]);
+    h.reboot(s(7));
+    assert_eq!(h.node.counters().reboots, 2);
+    assert_eq!(one_reply(&mut h, &[4], s(7)), [4, 1, 50, 60, 20, 30]);
+    assert_eq!(platform(&mut h, &[1, 1], s(7)), [1, 1, 1, 1, 50]);
+    // Their effect: at 80 % nothing is shed; raise both payload thresholds above it and the
+    // next tick sheds the payload group.
+    assert_eq!(h.app.eps().channels_on(), 0x1ff);
+    assert_eq!(platform(&mut h, &[2, 2, 95], s(8)), [2, 1, 2, 1, 95]);
+    assert_eq!(platform(&mut h, &[2, 1, 90], s(8)), [2, 1, 1, 1, 90]);
+    run_until(&mut h, s(9));
+    assert_eq!(h.app.eps().channels_on(), 0x00f);
+    // PDEFAULTS: the factory table, running and saved.
+    assert_eq!(platform(&mut h, &[6], s(10)), [6, 1]);
+    assert_eq!(one_reply(&mut h, &[4], s(10)), [4, 1, 30, 40, 20, 30]);
+}
+
+#[test]
+fn selftest_reports_battery_arrays_and_each_channel() {
+    let s = SimTime::from_secs;
+    let activity = ActivityBoard::new();
+    let cfg = EpsConfig {
+        timeline: vec![TimedEpsEvent {
+            at: s(1),
+            event: EpsEvent::PanelFail(0),
+        }],
+        ..EpsConfig::default()
+    };
+    let (mut h, _) = host(EpsApp::new(cfg).with_activity(activity.clone()));
+    one_reply(&mut h, &[3, 3, 0], s(1)); // PC off
+    // A power fault holds payload 12 off with its channel on.
+    activity
+        .set(Activity::PowerFault(12), SimTime::from_ms(1500), true)
+        .unwrap();
+    let r = platform(&mut h, &[7], s(2));
+    assert_eq!(r[..2], [7, 1]);
+    let count = usize::from(r[3]);
+    assert_eq!(count, 3 + CHANNELS);
+    assert_eq!(r.len(), 4 + 5 * count);
+    let entry = |i: usize| {
+        let at = 4 + 5 * i;
+        (
+            r[at],
+            f32::from_le_bytes(r[at + 1..at + 5].try_into().unwrap()),
+        )
+    };
+    // Battery 80 %, full capacity; no truth: no sun, no power; one panel failed.
+    assert_eq!(entry(0).0, 0);
+    assert!((entry(0).1 - 80.0).abs() < 0.01, "{:?}", entry(0));
+    assert_eq!(entry(1), (0, 77.0));
+    assert_eq!(entry(2), (1, 0.0));
+    // COMM1 on (0.5 W at about 8 V), the PC off (health 3), payload 12 held off (failed,
+    // drawing half its 0.5 W over the last second).
+    assert_eq!(entry(3).0, 0);
+    assert!((entry(3).1 - 62.0).abs() < 3.0, "{:?}", entry(3));
+    assert_eq!(entry(3 + 3), (3, 0.0));
+    assert_eq!(entry(3 + 4).0, 2);
+    assert!((entry(3 + 4).1 - entry(3).1 / 2.0).abs() < 0.5);
+    assert_eq!(entry(3 + 5).0, 0);
+    // Overall: the worst that is not merely off.
+    assert_eq!(r[2], 2);
+    let checks = h.app.checks(s(2));
+    assert_eq!(checks.len(), count);
+    assert_eq!(checks[2].name, "solar_array");
+    assert_eq!(checks[3 + 8].name, "ch_sband");
+}

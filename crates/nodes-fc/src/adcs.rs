@@ -172,6 +172,30 @@ pub struct AdcsConfig {
     pub panel_normal_body: Vector3<f64>,
     /// Estimator health thresholds.
     pub health: HealthConfig,
+    /// Which sensors the flight software uses (a switched-off one is read as absent).
+    pub use_sensors: SensorUse,
+}
+
+/// Which sensors the determination uses (platform parameters `use_gyro`, `use_mag`,
+/// `use_sun`): an unused sensor's reading is taken as absent, as a dead one's is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SensorUse {
+    /// The gyroscope (without it the MEKF carries the rate, gyro-less).
+    pub gyro: bool,
+    /// The magnetometer.
+    pub mag: bool,
+    /// The coarse sun sensors' sun vector.
+    pub sun: bool,
+}
+
+impl Default for SensorUse {
+    fn default() -> Self {
+        SensorUse {
+            gyro: true,
+            mag: true,
+            sun: true,
+        }
+    }
 }
 
 impl Default for AdcsConfig {
@@ -195,6 +219,7 @@ impl Default for AdcsConfig {
             tracking_threshold_rad: 2.0_f64.to_radians(),
             panel_normal_body: guidance::DEFAULT_PANEL_NORMAL_BODY,
             health: HealthConfig::default(),
+            use_sensors: SensorUse::default(),
         }
     }
 }
@@ -265,6 +290,10 @@ pub struct Adcs {
 }
 
 impl Adcs {
+    /// The running configuration (platform parameters change it in flight).
+    pub fn config_mut(&mut self) -> &mut AdcsConfig {
+        &mut self.cfg
+    }
     /// A freshly booted ADCS (detumbling, no estimate).
     pub fn new(cfg: AdcsConfig, body: BodyConfig) -> Self {
         let mekf = Mekf::new(cfg.mekf);
@@ -502,11 +531,15 @@ impl Adcs {
     }
 
     fn step_inner(&mut self, inp: &Inputs<'_>, h_wheels: &Vector3<f64>, dt_s: f64) -> Output {
+        let used = self.cfg.use_sensors;
         let calibrated = SensorReadings {
             mag_body_nt: inp
                 .readings
                 .mag_body_nt
+                .filter(|_| used.mag)
                 .map(|b| b - self.cfg.mag_calibration_bias_nt),
+            gyro_body_rad_s: inp.readings.gyro_body_rad_s.filter(|_| used.gyro),
+            sun_body_unit: inp.readings.sun_body_unit.filter(|_| used.sun),
             ..*inp.readings
         };
         let r = &calibrated;

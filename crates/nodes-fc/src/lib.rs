@@ -26,6 +26,7 @@
 
 pub mod adcs;
 pub mod burns;
+pub mod config;
 pub mod control;
 pub mod environment;
 pub mod estimator;
@@ -33,6 +34,7 @@ pub mod guidance;
 pub mod safe;
 pub mod scripts;
 pub mod sensors;
+pub mod store;
 pub mod timesync;
 pub mod truth;
 pub mod wire;
@@ -232,6 +234,8 @@ pub struct FcConfig {
     pub safe: safe::SafeConfig,
     /// Periodic real-time telemetry from boot (TMPERSET changes it until the next boot).
     pub periodic: Option<wire::Periodic>,
+    /// The on-board telemetry store's collection.
+    pub store: store::StoreConfig,
 }
 
 impl Default for FcConfig {
@@ -260,6 +264,7 @@ impl Default for FcConfig {
             time_sync: timesync::TimeSyncConfig::default(),
             safe: safe::SafeConfig::default(),
             periodic: None,
+            store: store::StoreConfig::default(),
         }
     }
 }
@@ -359,6 +364,10 @@ pub struct FcApp {
     periodic_next: Option<SimTime>,
     time_sync: timesync::TimeSync,
     safe: safe::SafeMonitor,
+    /// The telemetry store (non-volatile: not reset by a reboot).
+    store: store::Store,
+    /// The last instant of an input (a parameter set counts the store's period from it).
+    store_now: Option<SimTime>,
     log: Vec<NodeEvent>,
     out: Outbox<Published>,
     truth_board: Option<platform::board::TruthBoard>,
@@ -454,6 +463,8 @@ impl FcApp {
             periodic_next: None,
             time_sync: timesync::TimeSync::new(cfg.time_sync.clone()),
             safe: safe::SafeMonitor::new(cfg.safe.clone()),
+            store: store::Store::new(cfg.store.clone()),
+            store_now: None,
             log: Vec::new(),
             out: Outbox::default(),
             truth_board: None,
@@ -1028,7 +1039,43 @@ impl FcApp {
                 Vec::new()
             }
             TelemetryCommand::GetPeriodic => self.periodic.to_vec(),
+            TelemetryCommand::StoreInfo => self.store.info(),
+            TelemetryCommand::StoreGet { from, to, skip } => {
+                self.store.get(from, to, skip).ok_or(RESULT_FAILURE)?
+            }
+            TelemetryCommand::StoreClear => {
+                let n = self.store.clear();
+                self.log.push(NodeEvent::info(
+                    now,
+                    format!("fc: telemetry store erased ({n} records)"),
+                ));
+                n.to_le_bytes().to_vec()
+            }
         })
+    }
+
+    /// The store's collection due at `now`: the FC's own telemetry at once, the EPS's and the
+    /// COMM's when they answer.
+    fn collect(&mut self, node: &mut Node, now: SimTime) {
+        if !self.store.take_due(now) {
+            return;
+        }
+        let mask = self.store.config().mask;
+        let rtc_s = self.rtc_unix_s(now);
+        for (kind, c) in [
+            (1, TelemetryCommand::TmGen),
+            (2, TelemetryCommand::TmAtp),
+            (3, TelemetryCommand::TmAcd),
+            (4, TelemetryCommand::TmSens),
+            (5, TelemetryCommand::TmRawSens),
+        ] {
+            if mask & (1 << (kind - 1)) != 0
+                && let Ok(data) = self.telemetry(node, c, now)
+            {
+                self.store.push(rtc_s, kind, data);
+            }
+        }
+        self.store.ask_others(node, now);
     }
 
     /// Send `p`'s telemetry from `now` on (the first one period later).
@@ -1192,6 +1239,8 @@ impl App for FcApp {
         self.time_sync.run(node, now, self.rtc_unix_ns(now));
         self.safe.start(node, now);
         self.safe.run(node, now);
+        self.store.start(node, now);
+        self.store_now = Some(now);
         self.periodic_next = None;
         self.periodic = wire::Periodic::default();
         if let Some(p) = self.cfg.periodic {
@@ -1201,11 +1250,16 @@ impl App for FcApp {
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
         self.clock = node.clock_errors().clone();
+        self.store_now = Some(now);
         let p = self.cfg.ports;
         let dport = packet.header.dport;
         let src = packet.header.src;
         let command = packet.data.first().copied();
-        if self.time_sync.handle_reply(&packet) || self.safe.handle_reply(&packet) {
+        let rtc_s = self.rtc_unix_s(now);
+        if self.time_sync.handle_reply(&packet)
+            || self.safe.handle_reply(&packet)
+            || self.store.handle_reply(&packet, rtc_s)
+        {
             return;
         }
         let (reply, refused) = if ![p.telemetry, p.rtc, p.attitude, p.scripts].contains(&dport) {
@@ -1265,6 +1319,7 @@ impl App for FcApp {
             self.next_tick,
             self.time_sync.due(),
             self.safe.due(),
+            self.store.due(),
             self.periodic_next,
         ]
         .into_iter()
@@ -1274,6 +1329,7 @@ impl App for FcApp {
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
         self.clock = node.clock_errors().clone();
+        self.store_now = Some(now);
         self.catch_up(now);
         while let Some(t) = self.next_tick.filter(|&t| t <= now) {
             self.tick(t, true);
@@ -1282,6 +1338,7 @@ impl App for FcApp {
         self.time_sync.run(node, now, self.rtc_unix_ns(now));
         self.safe.run(node, now);
         self.send_periodic(node, now);
+        self.collect(node, now);
         self.flush_log(node);
     }
 
@@ -1306,6 +1363,64 @@ impl App for FcApp {
 
     fn power_lost(&mut self, _node: &mut Node, _now: SimTime) {
         self.power_was_lost = true;
+    }
+
+    fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
+        Some(self)
+    }
+
+    fn platform_port_refuses(&self, src: u8) -> bool {
+        self.cfg.payload_access.refuses(src, false)
+    }
+
+    fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {
+        self.checks(now)
+    }
+
+    fn console_commands(&self) -> &'static [csp::console::Command] {
+        config::COMMANDS
+    }
+
+    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+        // As a CSP request at `now` would see the FC.
+        self.clock = node.clock_errors().clone();
+        self.store_now = Some(now);
+        let r = match words {
+            ["tm"] => self.console_tm(node, "gen", now),
+            ["tm", which] => self.console_tm(node, which, now),
+            ["store"] => {
+                let i = self.store.info();
+                let w = |k: usize| u32::from_le_bytes([i[k], i[k + 1], i[k + 2], i[k + 3]]);
+                Ok(format!(
+                    "records {} bytes {} oldest_rtc {} newest_rtc {} overwritten {} (period {} s, mask {:#04x})\n",
+                    w(0),
+                    w(4),
+                    w(8),
+                    w(12),
+                    w(16),
+                    self.store.config().period.map_or(0, |p| p.as_secs()),
+                    self.store.config().mask
+                ))
+            }
+            ["mode"] => {
+                let t = self.fsw.target;
+                let state = self.fsw.output.map_or(0, |o| o.state);
+                Ok(format!(
+                    "target mode {:?} (attitude set {}, point set {}), ADCS state {state}, FC state {}\n",
+                    t.mode,
+                    t.attitude_set,
+                    t.point_set,
+                    if self.safe.state() == safe::STATE_SAFE {
+                        "safe"
+                    } else {
+                        "nominal"
+                    },
+                ))
+            }
+            _ => Err(format!("usage: {}", words.join(" "))),
+        };
+        self.flush_log(node);
+        r
     }
 }
 
@@ -1444,6 +1559,232 @@ mod tests {
         assert_eq!(packet.header, Header::new(3, src, 40, port));
         assert!(out.next().is_none(), "one reply per request");
         packet.data
+    }
+
+    /// A console line's `key value...` answer lines.
+    fn console_fields(text: &str) -> std::collections::BTreeMap<String, String> {
+        text.lines()
+            .filter_map(|l| l.split_once(' '))
+            .map(|(k, v)| (k.to_owned(), v.to_owned()))
+            .collect()
+    }
+
+    #[test]
+    fn the_console_reads_the_telemetry_a_csp_request_gets_at_the_same_instant() {
+        let mut h = host(Some((L1, L2)));
+        let t = SimTime::from_ms(95_300);
+        run_until(&mut h, t);
+        let csp = wire::TmGen::parse(&ask(&mut h, 10, &[1], t)[2..]).unwrap();
+        let text = h.console("tm gen", t);
+        let f = console_fields(&text);
+        assert_eq!(
+            f["rtc_timestamp"],
+            format!("{} s", csp.rtc_timestamp),
+            "{text}"
+        );
+        assert_eq!(f["uptime"], format!("{} s", csp.uptime_s));
+        assert_eq!(f["current_mode"], format!("{} Detumble", csp.current_mode));
+        assert_eq!(f["current_state"], "0 nominal");
+        assert_eq!(f["reset_cause"], "0 power-on");
+        assert_eq!(f["mcu_temp"], format!("{} degC", csp.mcu_temp_c));
+        let sens = wire::TmSens::parse(&ask(&mut h, 10, &[4], t)[2..]).unwrap();
+        let f = console_fields(&h.console("tm sens", t));
+        let b: Vec<f64> = f["b_body"]
+            .trim_end_matches(" nT")
+            .split(' ')
+            .map(|x| x.parse().unwrap())
+            .collect();
+        for (c, k) in b.iter().zip(sens.b_body_nt) {
+            assert!(
+                (c - f64::from(k)).abs() < 1e-6,
+                "{b:?} {:?}",
+                sens.b_body_nt
+            );
+        }
+        let atp = wire::TmAtp::parse(&ask(&mut h, 10, &[2], t)[2..]).unwrap();
+        let f = console_fields(&h.console("tm atp", t));
+        let q: Vec<f64> = f["q_eci_from_body"]
+            .split(' ')
+            .map(|x| x.parse().unwrap())
+            .collect();
+        for (c, k) in q.iter().zip(atp.q_eci_from_body) {
+            assert!((c - k).abs() < 1e-6);
+        }
+        // Every telemetry has its readout; a bad one is a one-line error.
+        for w in ["acd", "rawsens", "all"] {
+            assert!(
+                !h.console(&format!("tm {w}"), t).starts_with("error"),
+                "{w}"
+            );
+        }
+        assert_eq!(
+            h.console("tm nothing", t),
+            "error: tm: no telemetry \"nothing\" (gen, atp, acd, sens, rawsens, all)\n"
+        );
+        assert!(
+            h.console("frobnicate", t)
+                .starts_with("error: frobnicate: unknown command")
+        );
+    }
+
+    #[test]
+    fn help_lists_every_command_and_the_console_and_csp_share_one_parameter_table() {
+        let mut h = host(Some((L1, L2)));
+        let help = h.console("help", SimTime::ZERO);
+        for c in csp::console::NODE_COMMANDS.iter().chain(config::COMMANDS) {
+            assert!(
+                help.lines().any(|l| l.starts_with(c.name)),
+                "{} in {help}",
+                c.name
+            );
+        }
+        let t = SimTime::from_secs(5);
+        // Set on the console, read over CSP (PGET bdot_gain, id 1, f32).
+        assert!(h.console("param set bdot_gain 0.25", t).contains("0.25"));
+        let got = ask(&mut h, csp::params::PORT, &[1, 1], t);
+        assert_eq!(got[..4], [1, 1, 1, 5]);
+        assert_eq!(f32::from_le_bytes(got[4..8].try_into().unwrap()), 0.25);
+        assert_eq!(h.app.fsw.adcs.config().control.bdot_gain, 0.25, "in effect");
+        // Out of range: one line naming the range; a rule between two parameters.
+        let e = h.console("param set bdot_gain 7", t);
+        assert!(
+            e.starts_with("error: param: bdot_gain: 7 out of range 0..=1"),
+            "{e}"
+        );
+        let e = h.console("param set safe_exit_soc 10", t);
+        assert!(e.contains("below safe_enter_soc"), "{e}");
+        // Not saved: a reboot restores the default.
+        h.reboot(SimTime::from_secs(6));
+        let d = ask(&mut h, csp::params::PORT, &[1, 1], SimTime::from_secs(6));
+        assert_ne!(f32::from_le_bytes(d[4..8].try_into().unwrap()), 0.25);
+        // Saved: it survives a reboot and a power cycle; `defaults` brings the factory value.
+        h.console("param set bdot_gain 0.25", SimTime::from_secs(7));
+        assert_eq!(h.console("param save", SimTime::from_secs(7)), "saved\n");
+        h.power_lost(SimTime::from_secs(8));
+        h.reboot(SimTime::from_secs(9));
+        let got = ask(&mut h, csp::params::PORT, &[1, 1], SimTime::from_secs(9));
+        assert_eq!(f32::from_le_bytes(got[4..8].try_into().unwrap()), 0.25);
+        assert_eq!(
+            h.app.fsw.adcs.config().control.bdot_gain,
+            0.25,
+            "in effect after boot"
+        );
+        assert_eq!(
+            ask(&mut h, csp::params::PORT, &[6], SimTime::from_secs(9)),
+            [6, 1]
+        );
+        assert_eq!(
+            ask(&mut h, csp::params::PORT, &[1, 1], SimTime::from_secs(9)),
+            d
+        );
+        // A payload may not configure the FC (ICD 4.1).
+        let r = ask_from(
+            &mut h,
+            14,
+            csp::params::PORT,
+            &[2, 7, 0],
+            SimTime::from_secs(9),
+        );
+        assert_eq!(r, [2, 0]);
+        assert_eq!(h.node.counters().platform_refused, 1);
+        // The self-test: one line per component, the wire in the same order.
+        let st = ask(&mut h, csp::params::PORT, &[7], SimTime::from_secs(9));
+        let checks = h.app.checks(SimTime::from_secs(9));
+        assert_eq!(st[3] as usize, checks.len());
+        assert_eq!(st.len(), 4 + 5 * checks.len());
+        let text = h.console("selftest", SimTime::from_secs(9));
+        assert_eq!(text.lines().count(), 1 + checks.len(), "{text}");
+    }
+
+    #[test]
+    fn the_store_keeps_the_telemetry_over_reboots_and_gives_it_by_time_range() {
+        let mut h = host(Some((L1, L2)));
+        // Every second: TMGEN and the EPS's TMEPS.
+        let p = csp::params::PORT;
+        assert_eq!(
+            ask(&mut h, p, &[2, 14, 1, 0, 0, 0], SimTime::ZERO)[..2],
+            [2, 1]
+        );
+        assert_eq!(ask(&mut h, p, &[2, 15, 0x41], SimTime::ZERO)[..2], [2, 1]);
+        // TMALL's bit is refused.
+        assert_eq!(ask(&mut h, p, &[2, 15, 0x20], SimTime::ZERO), [2, 0]);
+        let mut eps_asks = Vec::new();
+        let end = SimTime::from_ms(3_500);
+        while let Some(t) = h.poll_timeout().filter(|&t| t <= end) {
+            h.handle_timeout(t);
+            while let Some(tx) = h.node.poll_transmit() {
+                if let Transmit::Packet { packet, .. } = tx
+                    && packet.header.dst == 4
+                {
+                    eps_asks.push((t, packet));
+                }
+            }
+        }
+        assert_eq!(eps_asks.len(), 3, "at 1, 2 and 3 s");
+        // The EPS answers the last one.
+        let (t, ask_eps) = &eps_asks[2];
+        let mut reply = vec![1, 1];
+        reply.extend([7u8; 88]);
+        h.handle_packet(0, Packet::new(ask_eps.header.reply(4), reply), *t);
+        let start = u32::try_from(START).unwrap();
+        let info = ask(&mut h, 10, &[9], end);
+        assert_eq!(info[2..6], 4u32.to_le_bytes(), "3 TMGEN and a TMEPS");
+        assert_eq!(info[10..14], (start + 1).to_le_bytes());
+        // Reboot: the records stay; TMGEN's uptime says which boot took them.
+        h.reboot(end);
+        let mut req = vec![10];
+        for v in [start + 2, start + 3, 0] {
+            req.extend(v.to_le_bytes());
+        }
+        let got = ask(&mut h, 10, &req, end);
+        assert_eq!(got[..2], [10, 1]);
+        assert_eq!(
+            got[2..6],
+            3u32.to_le_bytes(),
+            "2 s: TMGEN; 3 s: TMGEN and TMEPS"
+        );
+        assert_eq!(got[6], 3, "5 + 22 + 22 + 94 bytes fit in 200");
+        let rec = &got[7..];
+        assert_eq!(
+            rec[..6],
+            [(start + 2).to_le_bytes().as_slice(), &[1, 16]].concat()
+        );
+        let g = wire::TmGen::parse(&rec[6..22]).unwrap();
+        assert_eq!(g.uptime_s, 2);
+        assert_eq!(rec[22 + 4..22 + 6], [1, 16]);
+        req[9..13].copy_from_slice(&2u32.to_le_bytes());
+        let rest = ask(&mut h, 10, &req, end);
+        assert_eq!(rest[2..7], [3, 0, 0, 0, 1], "skipping two: the TMEPS");
+        assert_eq!(rest[7 + 4..7 + 6], [7, 88]);
+        assert_eq!(rest[7 + 6..], [7u8; 88]);
+        // A range backwards, a payload: refused. Clear: the count.
+        let mut back = vec![10];
+        for v in [start + 3, start + 2, 0] {
+            back.extend(v.to_le_bytes());
+        }
+        assert_eq!(ask(&mut h, 10, &back, end), [10, 0]);
+        assert_eq!(ask_from(&mut h, 13, 10, &req, end), [10, 0]);
+        assert_eq!(ask(&mut h, 10, &[11], end), [11, 1, 4, 0, 0, 0]);
+        assert!(h.console("store", end).starts_with("records 0 "));
+    }
+
+    #[test]
+    fn a_dead_wheel_and_an_unused_sensor_show_in_the_self_test() {
+        let mut h = host(Some((L1, L2)));
+        run_until(&mut h, SimTime::from_secs(2));
+        h.app.wheel_fault[2] = Some(WheelFault::Stuck);
+        h.console("param set use_mag off", SimTime::from_secs(2));
+        let text = h.console("selftest", SimTime::from_secs(2));
+        let line = |name: &str| {
+            text.lines()
+                .find(|l| l.starts_with(name))
+                .unwrap()
+                .to_owned()
+        };
+        assert!(line("wheel3").contains("FAILED"), "{text}");
+        assert!(line("wheel1").contains(" ok "), "{text}");
+        assert!(line("magnetometer").contains(" off "), "{text}");
+        assert!(text.starts_with("overall FAILED"), "{text}");
     }
 
     #[test]

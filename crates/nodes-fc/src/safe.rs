@@ -102,6 +102,10 @@ pub struct SafeMonitor {
 }
 
 impl SafeMonitor {
+    /// The running configuration (platform parameters change it).
+    pub fn config_mut(&mut self) -> &mut SafeConfig {
+        &mut self.cfg
+    }
     /// A monitor by `cfg`, NOMINAL, not polling yet.
     pub fn new(cfg: SafeConfig) -> Self {
         SafeMonitor {

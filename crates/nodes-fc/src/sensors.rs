@@ -669,6 +669,10 @@ pub struct Sensors {
 }
 
 impl Sensors {
+    /// The running configuration (the `gps_enabled` platform parameter changes it).
+    pub fn config_mut(&mut self) -> &mut SensorConfig {
+        &mut self.cfg
+    }
     /// A sensor set for `cfg` whose noise (and random turn-on bias) comes from `seed`.
     pub fn new(cfg: SensorConfig, seed: u64) -> Self {
         let mut gyro_rng = Noise::new(seed, 1);

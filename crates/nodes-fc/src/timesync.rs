@@ -47,6 +47,11 @@ pub struct TimeSync {
 }
 
 impl TimeSync {
+    /// The running configuration (platform parameters change it; a new period counts from
+    /// the next distribution).
+    pub fn config_mut(&mut self) -> &mut TimeSyncConfig {
+        &mut self.cfg
+    }
     /// Distribution by `cfg`, not started.
     pub fn new(cfg: TimeSyncConfig) -> Self {
         TimeSync {

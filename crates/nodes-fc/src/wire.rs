@@ -22,6 +22,7 @@
 //! | TMRAWSENS 5 | - | [`TmRawSens`] 46 (the twin's layout) |
 //! | TMALL 6 | - | [`TmAll`] 165 (the twin's layout) |
 //! | TMPERSET 7 / TMPERGET 8 (the twin's) | [`Periodic`] 7 / - | - / [`Periodic`] 7 |
+//! | TMSTOREINFO 9 / TMSTOREGET 10 / TMSTORECLEAR 11 (the twin's) | - / 12: `u32 from_rtc, u32 to_rtc, u32 skip` / - | [`crate::store`] |
 //! | RTCSTMSET 1 | [`RtcTimestamp`] 4 | - |
 //! | RTCSTMGET 2 | - | [`RtcTimestamp`] 4 |
 //! | ATCATGET 1 / ATCATSET 2 | - / [`TargetAttitude`] 32 | [`TargetAttitude`] 32 / - |
@@ -62,6 +63,12 @@ pub mod cmd {
     pub const TMPERSET: u8 = 7;
     /// Telemetry port: get the periodic real-time telemetry (the twin's).
     pub const TMPERGET: u8 = 8;
+    /// Telemetry port: the telemetry store's fill (the twin's).
+    pub const TMSTOREINFO: u8 = 9;
+    /// Telemetry port: stored telemetry by time range (the twin's).
+    pub const TMSTOREGET: u8 = 10;
+    /// Telemetry port: erase the telemetry store (the twin's).
+    pub const TMSTORECLEAR: u8 = 11;
     /// RTC port: set the RTC.
     pub const RTCSTMSET: u8 = 1;
     /// RTC port: get the RTC.
@@ -598,6 +605,19 @@ pub enum TelemetryCommand {
     SetPeriodic(Periodic),
     /// TMPERGET 8.
     GetPeriodic,
+    /// TMSTOREINFO 9.
+    StoreInfo,
+    /// TMSTOREGET 10: records with an RTC in `from..=to`, from the `skip`-th on.
+    StoreGet {
+        /// First RTC, unix s.
+        from: u32,
+        /// Last RTC, unix s.
+        to: u32,
+        /// Matching records already read.
+        skip: u32,
+    },
+    /// TMSTORECLEAR 11.
+    StoreClear,
 }
 
 impl CommandSet for TelemetryCommand {
@@ -612,6 +632,19 @@ impl CommandSet for TelemetryCommand {
             cmd::TMALL => no_data(r, TmAll),
             cmd::TMPERSET => data(r, "7").map(SetPeriodic),
             cmd::TMPERGET => no_data(r, GetPeriodic),
+            cmd::TMSTOREINFO => no_data(r, StoreInfo),
+            cmd::TMSTOREGET => {
+                expect_len(r, 12, "12")?;
+                let w = |i: usize| {
+                    u32::from_le_bytes([r.data[i], r.data[i + 1], r.data[i + 2], r.data[i + 3]])
+                };
+                Ok(StoreGet {
+                    from: w(0),
+                    to: w(4),
+                    skip: w(8),
+                })
+            }
+            cmd::TMSTORECLEAR => no_data(r, StoreClear),
             c => Err(RequestError::UnknownCommand(c)),
         }
     }
@@ -986,8 +1019,8 @@ mod tests {
             Ok(TelemetryCommand::TmAtp)
         );
         assert_eq!(
-            TelemetryCommand::parse(&req(9, &[])),
-            Err(RequestError::UnknownCommand(9))
+            TelemetryCommand::parse(&req(12, &[])),
+            Err(RequestError::UnknownCommand(12))
         );
         // TMPERSET takes 7 bytes, TMPERGET none.
         assert!(matches!(

@@ -41,8 +41,15 @@
 //! The stream position, the rate clock (started at the first boot), the behaviour, the
 //! timeline and the `SilentFor` count survive: the payload's data is its own, and the
 //! scenario's fault timeline is not the payload's memory. Push slots that fell while the
-//! payload was off are skipped, not sent in a burst.
+//! payload was off are skipped, not sent in a burst. The running parameters return to the
+//! saved table (PSAVE) or the factory defaults.
+//!
+//! # Platform port 14
+//! The parameter table and self-test of [`config`] (`csp::params`): the push (filling)
+//! rate and packet size, the stream's rate, the reply latency (ICD 3.1.5: "a payload
+//! should be able to change its filling rate").
 
+pub mod config;
 pub mod stream;
 pub mod wire;
 
@@ -368,6 +375,12 @@ pub struct PayloadApp {
     addr: u8,
     counters: PayloadCounters,
     out: Outbox<PayloadOutput>,
+    /// The latest instant the payload was called at.
+    last_now: SimTime,
+    /// The stream's rate parameter changed: re-anchor it at the next call with a time.
+    stream_rate_pending: bool,
+    /// The push parameters changed: restart the push schedule at the next call with a time.
+    push_pending: bool,
 }
 
 impl PayloadApp {
@@ -390,7 +403,37 @@ impl PayloadApp {
             addr: 0,
             counters: PayloadCounters::default(),
             out: Outbox::default(),
+            last_now: SimTime::ZERO,
+            stream_rate_pending: false,
+            push_pending: false,
             cfg,
+        }
+    }
+
+    /// Apply parameter changes that count from an instant ([`config`]) at `now`: the
+    /// stream's new rate from `now`, the push schedule restarted one new period after
+    /// `now` (unless it has not started yet).
+    fn apply_pending(&mut self, now: SimTime) {
+        self.last_now = self.last_now.max(now);
+        if std::mem::take(&mut self.stream_rate_pending) {
+            self.stream.set_rate(self.cfg.rate_bytes_per_s, now);
+        }
+        if std::mem::take(&mut self.push_pending)
+            && let Some(p) = &mut self.cfg.push
+        {
+            if p.start <= now {
+                let bytes = p.packet_len() as u128;
+                let period_ns = if p.rate_bytes_per_s > 0 {
+                    bytes * 1_000_000_000 / u128::from(p.rate_bytes_per_s)
+                } else {
+                    0
+                };
+                p.start = SimTime::from_ns(
+                    now.as_ns()
+                        .saturating_add(u64::try_from(period_ns).unwrap_or(u64::MAX)),
+                );
+            }
+            self.push_slot = 0;
         }
     }
 
@@ -605,6 +648,7 @@ impl App for PayloadApp {
         node.bind(self.cfg.port);
         self.addr = node.addr();
         self.stream.begin(self.addr, now);
+        self.apply_pending(now);
         self.apply_timeline(node, now);
         if let Some(p) = &self.cfg.push {
             // Slots that fell while the payload was off are skipped.
@@ -613,6 +657,7 @@ impl App for PayloadApp {
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
+        self.last_now = self.last_now.max(now);
         if packet.header.dport != self.cfg.port {
             return;
         }
@@ -643,7 +688,9 @@ impl App for PayloadApp {
     }
 
     fn poll_timeout(&self) -> Option<SimTime> {
+        let pending = self.stream_rate_pending || self.push_pending;
         [
+            pending.then_some(self.last_now),
             self.queue.front().map(|q| q.due),
             self.next_push(),
             self.cfg.timeline.get(self.next_event).map(|(t, _)| *t),
@@ -654,6 +701,7 @@ impl App for PayloadApp {
     }
 
     fn handle_timeout(&mut self, node: &mut Node, now: SimTime) {
+        self.apply_pending(now);
         self.apply_timeline(node, now);
         while self.queue.front().is_some_and(|q| q.due <= now) {
             if let Some(q) = self.queue.pop_front() {
@@ -674,9 +722,18 @@ impl App for PayloadApp {
         }
     }
 
-    fn reset(&mut self, _now: SimTime) {
+    fn reset(&mut self, now: SimTime) {
+        self.last_now = self.last_now.max(now);
         self.counters.lost_on_reset += self.queue.len() as u64;
         self.queue.clear();
+    }
+
+    fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
+        Some(self)
+    }
+
+    fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {
+        self.checks(now)
     }
 }
 

@@ -26,7 +26,9 @@
 //! [`Generator::Counter`] is the stream above; [`Generator::Bytes`] is a file's bytes, sent
 //! once, after which the stream is exhausted. [`DataStream`] adds the rate limit: with a
 //! rate, byte `n` (counting from 0) is available once `n + 1 <= rate * (now - t0)`, `t0`
-//! being the payload's first boot; without one, everything is available at once.
+//! being the payload's first boot; without one, everything is available at once. A new
+//! rate ([`DataStream::set_rate`]) counts from its instant: what the old rate made by then
+//! stays made.
 
 use std::sync::Arc;
 
@@ -395,6 +397,8 @@ pub struct DataStream {
     rate_bytes_per_s: Option<u64>,
     addr: u8,
     t0: Option<SimTime>,
+    /// Bytes made before `t0` (by earlier rates).
+    made_before_t0: u64,
     position: u64,
 }
 
@@ -406,8 +410,48 @@ impl DataStream {
             rate_bytes_per_s,
             addr: 0,
             t0: None,
+            made_before_t0: 0,
             position: 0,
         }
+    }
+
+    /// The rate limit in force, bytes/s (`None`: everything at once).
+    pub fn rate(&self) -> Option<u64> {
+        self.rate_bytes_per_s
+    }
+
+    /// Change the rate at `now`: bytes made until `now` stay made, the new rate makes the
+    /// next ones from `now` on. From no limit, the new rate starts from what was taken.
+    pub fn set_rate(&mut self, rate_bytes_per_s: Option<u64>, now: SimTime) {
+        if let Some(t0) = self.t0 {
+            let made = match self.rate_bytes_per_s {
+                None => self.position,
+                Some(_) => self.made(t0, now),
+            };
+            self.made_before_t0 = made;
+            self.t0 = Some(now.max(t0));
+        }
+        self.rate_bytes_per_s = rate_bytes_per_s;
+    }
+
+    /// Bytes made by the rate from `t0` to `now` (saturating).
+    fn made(&self, t0: SimTime, now: SimTime) -> u64 {
+        match self.rate_bytes_per_s {
+            None => u64::MAX,
+            Some(rate) => {
+                let made = u128::from(rate) * now.saturating_since(t0).as_nanos() / 1_000_000_000;
+                u64::try_from(made)
+                    .unwrap_or(u64::MAX)
+                    .saturating_add(self.made_before_t0)
+            }
+        }
+    }
+
+    /// Whether a finite stream has been taken whole.
+    pub fn is_exhausted(&self) -> bool {
+        self.generator
+            .total_bytes()
+            .is_some_and(|n| self.position >= n)
     }
 
     /// The payload booted at `now` with address `addr`: the first call starts the rate clock.
@@ -426,13 +470,7 @@ impl DataStream {
         let Some(t0) = self.t0 else {
             return 0;
         };
-        let by_rate = match self.rate_bytes_per_s {
-            None => u64::MAX,
-            Some(rate) => {
-                let made = u128::from(rate) * now.saturating_since(t0).as_nanos() / 1_000_000_000;
-                u64::try_from(made).unwrap_or(u64::MAX)
-            }
-        };
+        let by_rate = self.made(t0, now);
         let by_end = self.generator.total_bytes().unwrap_or(u64::MAX);
         by_rate.min(by_end).saturating_sub(self.position)
     }
@@ -693,6 +731,24 @@ mod tests {
         assert_eq!(s.position(), 500);
         s.untake(100);
         assert_eq!(s.position(), 400);
+    }
+
+    #[test]
+    fn a_new_rate_counts_from_its_instant() {
+        let mut s = DataStream::new(Generator::Counter, Some(1000));
+        s.set_rate(Some(500), SimTime::ZERO);
+        s.begin(12, SimTime::ZERO);
+        assert_eq!(s.available(SimTime::from_secs(2)), 1000);
+        s.set_rate(Some(100), SimTime::from_secs(2));
+        assert_eq!(s.available(SimTime::from_secs(2)), 1000, "made stays made");
+        assert_eq!(s.available(SimTime::from_secs(4)), 1200);
+        assert_eq!(s.take(1100, SimTime::from_secs(4)).len(), 1100);
+        s.set_rate(None, SimTime::from_secs(5));
+        assert_eq!(s.available(SimTime::from_secs(5)), u64::MAX - 1100);
+        s.set_rate(Some(10), SimTime::from_secs(6));
+        assert_eq!(s.available(SimTime::from_secs(6)), 0, "from what was taken");
+        assert_eq!(s.available(SimTime::from_secs(7)), 10);
+        assert_eq!(s.rate(), Some(10));
     }
 
     #[test]

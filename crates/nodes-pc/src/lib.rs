@@ -54,8 +54,16 @@
 //! reboot ([`App::reset`]) loses them and records the lost bytes as dropped (PowerLoss). An
 //! ACTIVE session simply stops (no result is recorded: the table starts empty). An S-band
 //! hardware failure persists; on/off returns to the configured state. The accounting itself
-//! is the twin's record and survives.
+//! is the twin's record and survives. The running parameters (below) return to the saved
+//! table (PSAVE) or the factory defaults.
+//!
+//! # Platform port 14
+//! The parameter table and self-test of [`config`] (`csp::params`): buffer file capacity,
+//! poll period and reply timeout of the sessions, S-band rate. Payloads are refused the
+//! port under ICD 4.1 ([`PcConfig::payload_access`]), as they are refused SETUP, ABORT and
+//! the files.
 
+pub mod config;
 pub mod sband;
 pub mod session;
 pub mod wire;
@@ -1673,6 +1681,18 @@ impl App for PcApp {
         // lost at the instant power goes, and the transmitter stops with its data.
         self.lose_volatile(now, "power lost");
         self.flush_log(node);
+    }
+
+    fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
+        Some(self)
+    }
+
+    fn platform_port_refuses(&self, src: u8) -> bool {
+        self.cfg.payload_access.refuses(src, false)
+    }
+
+    fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {
+        self.checks(now)
     }
 
     fn reset(&mut self, now: SimTime) {

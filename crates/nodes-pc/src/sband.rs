@@ -103,6 +103,11 @@ impl Sband {
     pub fn config(&self) -> &SbandConfig {
         &self.cfg
     }
+    /// Set the bit rate (a parameter): the frame on the air keeps its end, the next frames
+    /// go at the new rate.
+    pub fn set_rate(&mut self, rate_bps: u64) {
+        self.cfg.rate_bps = rate_bps;
+    }
     /// Whether it is switched on.
     pub fn is_on(&self) -> bool {
         self.on

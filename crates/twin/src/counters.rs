@@ -15,6 +15,8 @@ pub const NODE_COUNTERS: &[&str] = &[
     "delivered",
     "service_replies",
     "reboots",
+    "platform_requests",
+    "platform_refused",
     "drops",
 ];
 /// Medium counters an expectation can name.
@@ -46,7 +48,8 @@ pub struct CounterExpect {
     /// The node (name or address), or a medium: `main`, `payload`, `ground`.
     pub target: NodeRef,
     /// Node: `rx_packets`, `tx_packets`, `forwarded`, `delivered`, `service_replies`,
-    /// `reboots`, `drops`, `drops.<reason>`; medium: `frames`, `packets`, `bytes`,
+    /// `reboots`, `platform_requests`, `platform_refused` (the platform port: parameters and
+    /// self-test), `drops`, `drops.<reason>`; medium: `frames`, `packets`, `bytes`,
     /// `dropped`, `corrupted`, CAN `error_frames` and `bus_off` (ground also `no_contact`).
     pub counter: String,
     /// Smallest acceptable value.
@@ -142,6 +145,8 @@ pub fn counter_value(report: &RunReport, target: &CounterTarget, counter: &str) 
                 "delivered" => c.delivered,
                 "service_replies" => c.service_replies,
                 "reboots" => c.reboots,
+                "platform_requests" => c.platform_requests,
+                "platform_refused" => c.platform_refused,
                 "drops" => c.total_drops(),
                 other => {
                     let reason = other.strip_prefix("drops.")?;

@@ -26,7 +26,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run a scenario (default: the embedded default scenario) and print what happened.
-    Run(RunArgs),
+    Run(Box<RunArgs>),
     /// Run scenarios headless for CI: a table, JUnit XML, and a non-zero exit on failure.
     Test(TestArgs),
     /// Validate scenario files without running them.
@@ -165,6 +165,10 @@ struct RunArgs {
     /// Apply libcsp 1.4's KISS receive limit (at most 248 data bytes) to the twin's receiver.
     #[arg(long)]
     libcsp14_kiss_limit: bool,
+    /// A node's text console (its UART, ICD 1.1): NODE=ADDR serves it over TCP (`nc 127.0.0.1
+    /// 5010`), NODE=PATH on a pseudo-terminal linked at PATH (`screen PATH`). Repeatable.
+    #[arg(long = "uart", value_name = "NODE=ADDR|PATH", value_parser = m6p_twin::runtime::UartLink::parse_arg)]
+    uart: Vec<m6p_twin::runtime::UartLink>,
     /// Bridge a bus to a real SocketCAN interface: IFACE[:main|:payload] [default bus:
     /// main]. Needs a build with --features socketcan (Linux).
     #[arg(long = "socketcan", value_name = "IFACE[:main|:payload]", value_parser = SocketCanBus::parse_arg)]
@@ -404,7 +408,7 @@ fn main() -> ExitCode {
             .subcommand_matches("run")
             .ok_or_else(|| anyhow::anyhow!("no run arguments"))
             .and_then(|m| cli_kiss_links(m, &a))
-            .and_then(|links| cmd_run(a, links)),
+            .and_then(|links| cmd_run(*a, links)),
         Command::Test(a) => cmd_test(a),
         Command::Check { files } => cmd_check(&files),
         Command::Schema { campaign } => cmd_schema(campaign),
@@ -533,6 +537,23 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
     }
     opts.kiss_links.extend(cli_links);
     opts.socketcan.extend(a.socketcan);
+    for u in &a.uart {
+        if !opts
+            .network
+            .nodes
+            .iter()
+            .any(|n| n.name.eq_ignore_ascii_case(&u.node))
+        {
+            let names: Vec<&str> = opts.network.nodes.iter().map(|n| n.name.as_str()).collect();
+            anyhow::bail!(
+                "--uart {}: no node {} (nodes: {})",
+                u.label(),
+                u.node,
+                names.join(", ")
+            );
+        }
+    }
+    opts.uart.extend(a.uart);
     if cfg!(not(feature = "live")) && a.live.is_some() {
         anyhow::bail!(
             "--live needs the Foxglove WebSocket server, which this build leaves out: \

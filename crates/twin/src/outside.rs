@@ -37,6 +37,18 @@ pub fn validate(
 ) {
     let Some(l) = s.links.get(i) else { return };
     let p = |f: &str| vec![key("links"), PathStep::Index(i), key(f)];
+    if l.kind == LinkKind::Uart {
+        validate_uart(s, l, net, &p, err);
+        return;
+    }
+    for (f, set) in [("node", l.node.is_some()), ("pty", l.pty.is_some())] {
+        if set {
+            err(
+                p(f),
+                "only a `uart` link (a node's console) has this".to_owned(),
+            );
+        }
+    }
     let kiss = l.kind != LinkKind::Socketcan;
     let mut replaced_addrs = Vec::new();
     for (j, name) in l.replaces.iter().enumerate() {
@@ -186,6 +198,61 @@ pub fn validate(
     }
 }
 
+/// A console link: a node of the twin, and nothing of a CSP link.
+fn validate_uart(
+    s: &Scenario,
+    l: &LinkSpec,
+    net: &NetworkSpec,
+    p: &dyn Fn(&str) -> Vec<PathStep>,
+    err: &mut dyn FnMut(Vec<PathStep>, String),
+) {
+    let s_replaces = |name: &str| {
+        s.links
+            .iter()
+            .any(|o| o.replaces.iter().any(|r| r.eq_ignore_ascii_case(name)))
+    };
+    match &l.node {
+        None => err(
+            p("node"),
+            "name the node whose console this is (node = \"FC\")".to_owned(),
+        ),
+        Some(name) => {
+            if !net.nodes.iter().any(|n| n.name.eq_ignore_ascii_case(name)) {
+                let names: Vec<&str> = net.nodes.iter().map(|n| n.name.as_str()).collect();
+                err(
+                    p("node"),
+                    format!("unknown node `{name}` (nodes: {})", names.join(", ")),
+                );
+            } else if s_replaces(name) {
+                err(
+                    p("node"),
+                    format!(
+                        "{name} is replaced by an outside program: the twin has no console of it"
+                    ),
+                );
+            }
+        }
+    }
+    for (f, set) in [
+        ("addrs", !l.addrs.is_empty()),
+        ("replaces", !l.replaces.is_empty()),
+        ("powered_by", l.powered_by.is_some()),
+        ("libcsp14_rx_limit", l.libcsp14_rx_limit),
+        ("max_connections", l.max_connections.is_some()),
+        ("input_chunks", l.input_chunks.is_some()),
+        ("output_frames", l.output_frames.is_some()),
+    ] {
+        if set {
+            err(
+                p(f),
+                "a uart link is a node's text console: it carries no CSP and has no addresses, \
+                 replaced nodes, power or KISS limits"
+                    .to_owned(),
+            );
+        }
+    }
+}
+
 /// Add the scenario's links to `opts`: each KISS link with its own addresses (its own and
 /// those of the nodes it replaces) and limits, each SocketCAN bridge, the replaced nodes,
 /// and every link's place in `opts.outside`.
@@ -230,6 +297,22 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
                     None => l.addr.clone(),
                 }
             }
+            LinkKind::Uart => {
+                let at = match &l.pty {
+                    Some(path) => Some(crate::runtime::UartAt::Pty(path.into())),
+                    None => l.addr.parse().ok().map(crate::runtime::UartAt::Tcp),
+                };
+                let node = l.node.clone().unwrap_or_default();
+                match at {
+                    Some(at) => {
+                        let link = crate::runtime::UartLink { node, at };
+                        let label = link.label();
+                        opts.uart.push(link);
+                        label
+                    }
+                    None => format!("uart {node}"),
+                }
+            }
             LinkKind::Socketcan => match SocketCanBus::parse_arg(&l.addr) {
                 Ok(link) => {
                     let label = format!("socketcan {}", link.0);
@@ -261,6 +344,70 @@ mod tests {
         match Scenario::parse("t.toml", &text) {
             Ok(_) => String::new(),
             Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn a_console_link_names_a_node_of_the_twin_and_one_place_to_serve_it() {
+        let ok = "[[links]]\nkind = \"uart\"\nnode = \"fc\"\naddr = \"127.0.0.1:5010\"\n\
+                  [[links]]\nkind = \"uart\"\nnode = \"EPS\"\npty = \"/tmp/eps-uart\"\n";
+        assert_eq!(errors(ok), "");
+        let text = format!("name = \"t\"\nduration = \"1m\"\n{ok}");
+        let s = Scenario::parse("t.toml", &text).unwrap();
+        let mut opts = crate::plan::compile(&s).opts;
+        assert_eq!(opts.uart.len(), 2);
+        assert_eq!(opts.uart[0].label(), "uart fc 127.0.0.1:5010");
+        assert_eq!(
+            opts.outside.len(),
+            2,
+            "faults index links in scenario order"
+        );
+        opts.uart.clear();
+        for (links, field, says) in [
+            (
+                "kind = \"uart\"\naddr = \"127.0.0.1:5010\"",
+                "node",
+                "name the node",
+            ),
+            (
+                "kind = \"uart\"\nnode = \"XX\"\naddr = \"127.0.0.1:5010\"",
+                "node",
+                "unknown node `XX`",
+            ),
+            (
+                "kind = \"uart\"\nnode = \"FC\"\naddr = \"1.2.3.4:5\"\npty = \"/tmp/x\"",
+                "pty",
+                "not both",
+            ),
+            ("kind = \"uart\"\nnode = \"FC\"", "addr", "not an address"),
+            (
+                "kind = \"uart\"\nnode = \"FC\"\naddr = \"127.0.0.1:5010\"\naddrs = [3]",
+                "addrs",
+                "carries no CSP",
+            ),
+            (
+                "kind = \"kiss-listen\"\naddr = \"127.0.0.1:5010\"\nnode = \"FC\"",
+                "node",
+                "only a `uart` link",
+            ),
+        ] {
+            let e = errors(&format!("[[links]]\n{links}\n"));
+            assert!(
+                e.contains(&format!("links[0].{field}")) && e.contains(says),
+                "{links}: {e}"
+            );
+        }
+    }
+
+    #[test]
+    fn uart_arguments_are_a_node_and_an_address_or_a_path() {
+        use crate::runtime::{UartAt, UartLink};
+        let l = UartLink::parse_arg("FC=127.0.0.1:5010").unwrap();
+        assert_eq!(l.at, UartAt::Tcp("127.0.0.1:5010".parse().unwrap()));
+        let l = UartLink::parse_arg("EPS=/tmp/eps").unwrap();
+        assert_eq!(l.at, UartAt::Pty("/tmp/eps".into()));
+        for bad in ["FC", "=1.2.3.4:5", "FC=", "FC=localhost"] {
+            assert!(UartLink::parse_arg(bad).is_err(), "{bad}");
         }
     }
 

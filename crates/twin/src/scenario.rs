@@ -271,13 +271,22 @@ pub enum UptimeKind {
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LinkSpec {
-    /// `kiss-listen`, `kiss-connect`, `kiss-pty`, `zmq-hub` or `socketcan`.
+    /// `kiss-listen`, `kiss-connect`, `kiss-pty`, `zmq-hub`, `socketcan` or `uart` (a
+    /// node's text console).
     pub kind: LinkKind,
-    /// TCP address (KISS/TCP), path (`kiss-pty`: where the pty is linked), host
-    /// (`zmq-hub`: `127.0.0.2`, or `127.0.0.2:6000:7000` with the ports the programs
-    /// publish to and subscribe at) or interface name with an optional `:main`/`:payload`
-    /// (SocketCAN).
+    /// TCP address (KISS/TCP, and a `uart` console served over TCP), path (`kiss-pty`:
+    /// where the pty is linked), host (`zmq-hub`: `127.0.0.2`, or `127.0.0.2:6000:7000`
+    /// with the ports the programs publish to and subscribe at) or interface name with an
+    /// optional `:main`/`:payload` (SocketCAN).
+    #[serde(default)]
     pub addr: String,
+    /// `uart`: the node whose console this is (`FC`, `EPS`, ...).
+    #[serde(default)]
+    pub node: Option<String>,
+    /// `uart`: serve the console on a pseudo-terminal linked at this path (for `screen`,
+    /// `minicom`, `picocom`) instead of on `addr`.
+    #[serde(default)]
+    pub pty: Option<String>,
     /// CSP addresses behind the link (default: learned from its packets).
     #[serde(default)]
     pub addrs: Vec<u8>,
@@ -323,6 +332,8 @@ pub enum LinkKind {
     ZmqHub,
     /// Bridge to a SocketCAN interface.
     Socketcan,
+    /// A node's text console (`node`), on a TCP `addr` or a `pty` path.
+    Uart,
 }
 
 /// Recording settings.
@@ -624,6 +635,27 @@ impl Scenario {
                         err(p("addr"), e);
                     }
                 }
+                LinkKind::Uart => match (&l.pty, l.addr.is_empty()) {
+                    (Some(_), false) => err(
+                        p("pty"),
+                        "a console is on a TCP `addr` or a `pty` path, not both".to_owned(),
+                    ),
+                    (Some(path), true) if path.is_empty() => {
+                        err(p("pty"), "the path to link the pty at is empty".to_owned())
+                    }
+                    (Some(_), true) => {}
+                    (None, _) => {
+                        if l.addr.parse::<std::net::SocketAddr>().is_err() {
+                            err(
+                                p("addr"),
+                                format!(
+                                    "`{}` is not an address like 127.0.0.1:5010 (or give `pty`)",
+                                    l.addr
+                                ),
+                            );
+                        }
+                    }
+                },
                 LinkKind::Socketcan => {
                     let bus = l.addr.split_once(':').map(|(_, b)| b);
                     if l.addr.is_empty() || !matches!(bus, None | Some("main") | Some("payload")) {

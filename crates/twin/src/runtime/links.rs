@@ -232,6 +232,79 @@ pub(super) async fn kiss(
 }
 
 /// Warn that a link's server listens beyond this machine.
+/// Serve every console of `opts.uart` on its node's control channel; the bound addresses
+/// of the TCP ones, in order.
+pub(super) async fn uart(
+    opts: &RunOptions,
+    ctls: &std::collections::BTreeMap<u8, bus::driver::CtlTx>,
+    clock: Clock,
+    events: &mpsc::UnboundedSender<RunEvent>,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+) -> anyhow::Result<Vec<SocketAddr>> {
+    let mut bound = Vec::new();
+    for link in &opts.uart {
+        let label = link.label();
+        let node = opts
+            .network
+            .nodes
+            .iter()
+            .find(|n| n.name.eq_ignore_ascii_case(&link.node))
+            .with_context(|| format!("{label}: no node {} in the network", link.node))?;
+        let ctl = ctls.get(&node.addr).with_context(|| {
+            format!(
+                "{label}: {} is not a node of the twin (an outside program replaces it)",
+                node.name
+            )
+        })?;
+        let target = bus::console::ConsoleTarget {
+            node: node.name.clone(),
+            addr: node.addr,
+            ctl: ctl.clone(),
+        };
+        match &link.at {
+            super::UartAt::Tcp(addr) => {
+                let listener = tokio::net::TcpListener::bind(addr)
+                    .await
+                    .with_context(|| format!("{label}: listening on {addr}"))?;
+                let local = listener.local_addr().context("reading the bound address")?;
+                if !local.ip().is_loopback() {
+                    not_loopback(events, clock, &label, format!("console on {local}"));
+                }
+                tracing::info!(
+                    "console of {} on {local} (nc {} {})",
+                    node.name,
+                    local.ip(),
+                    local.port()
+                );
+                bound.push(local);
+                background.push(tokio::spawn(bus::console::serve_tcp(
+                    listener, target, clock,
+                )));
+            }
+            #[cfg(unix)]
+            super::UartAt::Pty(path) => {
+                let pty = open_pty(path)?;
+                tracing::info!(
+                    "console of {} on {} (pseudo-terminal {}; screen {})",
+                    node.name,
+                    path.display(),
+                    pty.device().display(),
+                    path.display()
+                );
+                background.push(tokio::spawn(bus::console::serve_pty(pty, target, clock)));
+            }
+            #[cfg(not(unix))]
+            super::UartAt::Pty(path) => {
+                anyhow::bail!(
+                    "{label}: pseudo-terminals need a Unix system ({})",
+                    path.display()
+                )
+            }
+        }
+    }
+    Ok(bound)
+}
+
 fn not_loopback(events: &mpsc::UnboundedSender<RunEvent>, clock: Clock, label: &str, what: String) {
     let text = format!(
         "{what}: not a loopback address, so programs on other machines can connect and \

@@ -55,6 +55,8 @@ pub struct RunOptions {
     /// KISS/TCP links to programs outside the twin, each with its own addresses and
     /// limits.
     pub kiss_links: Vec<KissLink>,
+    /// Node consoles served to outside programs.
+    pub uart: Vec<UartLink>,
     /// Nodes of the network not started because an outside program takes their place
     /// (`replaces` on a link), by address.
     pub replaced: std::collections::BTreeSet<u8>,
@@ -195,6 +197,7 @@ impl RunOptions {
             clock: ClockMode::Virtual,
             seed: 1,
             kiss_links: Vec::new(),
+            uart: Vec::new(),
             replaced: std::collections::BTreeSet::new(),
             ground_plan: BTreeMap::new(),
             socketcan: Vec::new(),
@@ -216,7 +219,60 @@ impl RunOptions {
 
     /// Whether the run has links to programs outside the twin.
     pub fn has_outside_links(&self) -> bool {
-        !self.kiss_links.is_empty() || !self.socketcan.is_empty()
+        !self.kiss_links.is_empty() || !self.socketcan.is_empty() || !self.uart.is_empty()
+    }
+}
+
+/// A node's text console for people and programs outside the twin (`[[links]] kind =
+/// "uart"`, `--uart NODE=ADDR|PATH`; `bus::console`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UartLink {
+    /// The node's name (`FC`).
+    pub node: String,
+    /// Where it is served.
+    pub at: UartAt,
+}
+
+/// Where a console is served.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum UartAt {
+    /// A TCP server (`nc`, `telnet`).
+    Tcp(SocketAddr),
+    /// A pseudo-terminal linked at the path (`screen`, `minicom`, `picocom`).
+    Pty(std::path::PathBuf),
+}
+
+impl UartLink {
+    /// Parse `--uart`'s `NODE=ADDR` (a TCP address) or `NODE=PATH` (a pty).
+    pub fn parse_arg(s: &str) -> Result<Self, String> {
+        let (node, at) = s
+            .split_once('=')
+            .ok_or_else(|| format!("`{s}`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)"))?;
+        if node.is_empty() || at.is_empty() {
+            return Err(format!(
+                "`{s}`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)"
+            ));
+        }
+        let at = match at.parse::<SocketAddr>() {
+            Ok(a) => UartAt::Tcp(a),
+            Err(_) if at.contains('/') => UartAt::Pty(at.into()),
+            Err(_) => {
+                return Err(format!(
+                    "`{at}` is neither a TCP address like 127.0.0.1:5010 nor a path like /tmp/fc-uart"
+                ));
+            }
+        };
+        Ok(UartLink {
+            node: node.to_owned(),
+            at,
+        })
+    }
+    /// The link's label in logs.
+    pub fn label(&self) -> String {
+        match &self.at {
+            UartAt::Tcp(a) => format!("uart {} {a}", self.node),
+            UartAt::Pty(p) => format!("uart {} {}", self.node, p.display()),
+        }
     }
 }
 
@@ -351,7 +407,8 @@ pub fn mix(seed: u64, salt: u64) -> u64 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
-/// Run the twin. `ready` receives the bound addresses of the KISS servers once they listen.
+/// Run the twin. `ready` receives the bound addresses of the KISS servers, then those of
+/// the TCP consoles (`opts.uart`), once they listen.
 pub async fn run(
     opts: RunOptions,
     ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
@@ -377,7 +434,10 @@ pub async fn run_with(
     let results: Results = Arc::new(Mutex::new(Vec::new()));
     let boards = Boards::default();
     let nodes = build::nodes(&mut opts, &segs, clock, &boards, &results, &ev_tx);
-    let kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
+    let mut kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
+    let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
+    // The KISS servers' addresses, then the TCP consoles'.
+    kiss.bound.extend(consoles);
     if let ClockMode::VirtualThenRealtime { .. } = opts.clock {
         // Virtual time until the scenario's `realtime_from`, the wall clock after it.
         let tx = ev_tx.clone();

@@ -38,7 +38,8 @@ pub fn default_scenario_options(seconds: u64) -> RunOptions {
 }
 
 /// Run the twin with `opts` and `tests/<script>` connected to its KISS server with
-/// `--connect ADDR --as 17` and `args`; the script's output (stdout then stderr), after
+/// `--connect ADDR --as 17`, `--console ADDR` for each TCP console of `opts.uart`, and
+/// `args`; the script's output (stdout then stderr), after
 /// asserting it exited with success and printed no FAIL and at least `min_pass` PASS, and
 /// the run's report.
 pub fn run_decoder(
@@ -53,11 +54,18 @@ pub fn run_decoder(
     let (out, report) = rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
-        let addr = rx.await.unwrap()[0];
+        let bound = rx.await.unwrap();
+        let addr = bound[0];
+        // The TCP consoles (`opts.uart`) follow the KISS server.
+        let consoles: Vec<String> = bound[1..]
+            .iter()
+            .flat_map(|c| ["--console".to_owned(), c.to_string()])
+            .collect();
         let client = tokio::task::spawn_blocking(move || {
             Command::new("python3")
                 .arg(script)
                 .args(["--connect", &addr.to_string(), "--as", "17"])
+                .args(consoles)
                 .args(args)
                 .output()
                 .expect("python3 is needed for this test")

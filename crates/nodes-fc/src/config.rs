@@ -1,0 +1,593 @@
+//! The FC's platform parameters, self-test and console commands (the platform port,
+//! [`csp::params`]; the console, [`csp::console`]). docs/protocol.md "Platform port" lists
+//! the table.
+
+use std::fmt::Write as _;
+
+use csp::console::Command;
+use csp::node::Node;
+use csp::params::{Check, Health, ParamDef, ParamType, Table, def};
+use csp::reqrep::le::Repr;
+
+use crate::wire::{self, TelemetryCommand, TmAcd, TmAtp, TmGen, TmRawSens, TmSens};
+use crate::{FcApp, SimTime};
+
+/// The FC's parameter table.
+pub const PARAMS: &[ParamDef] = &[
+    def(
+        1,
+        "bdot_gain",
+        ParamType::F32,
+        "N m s",
+        0.0,
+        1.0,
+        "B-dot detumbling gain",
+    ),
+    def(
+        2,
+        "natural_freq",
+        ParamType::F32,
+        "rad/s",
+        0.001,
+        1.0,
+        "attitude loop natural frequency",
+    ),
+    def(
+        3,
+        "damping_ratio",
+        ParamType::F32,
+        "",
+        0.1,
+        3.0,
+        "attitude loop damping ratio",
+    ),
+    def(
+        4,
+        "max_rate",
+        ParamType::F32,
+        "deg/s",
+        0.1,
+        10.0,
+        "slew rate limit",
+    ),
+    def(
+        5,
+        "desat_gain",
+        ParamType::F32,
+        "1/s",
+        0.0,
+        1.0,
+        "wheel desaturation gain",
+    ),
+    def(
+        6,
+        "detumble_exit_rate",
+        ParamType::F32,
+        "deg/s",
+        0.05,
+        5.0,
+        "rate below which detumbling may end",
+    ),
+    def(
+        7,
+        "use_gyro",
+        ParamType::Bool,
+        "",
+        0.0,
+        1.0,
+        "the determination uses the gyroscope",
+    ),
+    def(
+        8,
+        "use_mag",
+        ParamType::Bool,
+        "",
+        0.0,
+        1.0,
+        "the determination uses the magnetometer",
+    ),
+    def(
+        9,
+        "use_sun",
+        ParamType::Bool,
+        "",
+        0.0,
+        1.0,
+        "the determination uses the sun sensors",
+    ),
+    def(
+        10,
+        "gps_enabled",
+        ParamType::Bool,
+        "",
+        0.0,
+        1.0,
+        "the GPS receiver is on",
+    ),
+    def(
+        11,
+        "safe_enter_soc",
+        ParamType::U8,
+        "%",
+        0.0,
+        100.0,
+        "battery charge below which the FC goes SAFE",
+    ),
+    def(
+        12,
+        "safe_exit_soc",
+        ParamType::U8,
+        "%",
+        0.0,
+        100.0,
+        "battery charge at which SAFE ends (not below safe_enter_soc)",
+    ),
+    def(
+        13,
+        "time_sync_period",
+        ParamType::U16,
+        "s",
+        0.0,
+        3600.0,
+        "RTC distribution period (0: at boot and RTCSTMSET only)",
+    ),
+    def(
+        14,
+        "store_period",
+        ParamType::U32,
+        "s",
+        0.0,
+        86400.0,
+        "telemetry store collection period (0: not collecting)",
+    ),
+    def(
+        15,
+        "store_mask",
+        ParamType::U8,
+        "",
+        0.0,
+        255.0,
+        "what the store collects: 0x01 TMGEN 0x02 TMATP 0x04 TMACD 0x08 TMSENS 0x10 TMRAWSENS 0x40 EPS 0x80 COMM",
+    ),
+];
+
+fn flag(b: bool) -> f64 {
+    if b { 1.0 } else { 0.0 }
+}
+
+impl Table for FcApp {
+    fn defs(&self) -> &'static [ParamDef] {
+        PARAMS
+    }
+
+    fn get(&self, id: u8) -> Option<f64> {
+        let a = &self.cfg.adcs;
+        let c = &a.control;
+        let s = &self.cfg.safe;
+        Some(match id {
+            1 => c.bdot_gain,
+            2 => c.natural_freq_rad_s,
+            3 => c.damping_ratio,
+            4 => c.max_rate_rad_s.to_degrees(),
+            5 => c.desat_gain,
+            6 => a.detumble_exit_rate_rad_s.to_degrees(),
+            7 => flag(a.use_sensors.gyro),
+            8 => flag(a.use_sensors.mag),
+            9 => flag(a.use_sensors.sun),
+            10 => flag(self.cfg.sensors.gps_enabled),
+            11 => (s.enter_soc * 100.0).round(),
+            12 => (s.exit_soc * 100.0).round(),
+            13 => self
+                .cfg
+                .time_sync
+                .period
+                .map_or(0.0, |p| p.as_secs() as f64),
+            14 => self.cfg.store.period.map_or(0.0, |p| p.as_secs() as f64),
+            15 => f64::from(self.cfg.store.mask),
+            _ => return None,
+        })
+    }
+
+    fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+        let on = v != 0.0;
+        // The scenario's configuration and the running software, together: a reboot
+        // rebuilds the software from the first, and the boot then applies the saved table.
+        let adcs = |app: &mut FcApp, f: &dyn Fn(&mut crate::adcs::AdcsConfig)| {
+            f(&mut app.cfg.adcs);
+            f(app.fsw.adcs.config_mut());
+        };
+        match id {
+            1 => adcs(self, &|a| a.control.bdot_gain = v),
+            2 => adcs(self, &|a| a.control.natural_freq_rad_s = v),
+            3 => adcs(self, &|a| a.control.damping_ratio = v),
+            4 => adcs(self, &|a| a.control.max_rate_rad_s = v.to_radians()),
+            5 => adcs(self, &|a| a.control.desat_gain = v),
+            6 => adcs(self, &|a| a.detumble_exit_rate_rad_s = v.to_radians()),
+            7 => adcs(self, &|a| a.use_sensors.gyro = on),
+            8 => adcs(self, &|a| a.use_sensors.mag = on),
+            9 => adcs(self, &|a| a.use_sensors.sun = on),
+            10 => {
+                self.cfg.sensors.gps_enabled = on;
+                self.sensors.config_mut().gps_enabled = on;
+            }
+            11 | 12 => {
+                let (mut enter, mut exit) = (self.cfg.safe.enter_soc, self.cfg.safe.exit_soc);
+                if id == 11 {
+                    enter = v / 100.0;
+                } else {
+                    exit = v / 100.0;
+                }
+                if exit < enter {
+                    return Err(format!(
+                        "safe_exit_soc {:.0} % would be below safe_enter_soc {:.0} %",
+                        exit * 100.0,
+                        enter * 100.0
+                    ));
+                }
+                for s in [&mut self.cfg.safe, self.safe.config_mut()] {
+                    s.enter_soc = enter;
+                    s.exit_soc = exit;
+                }
+            }
+            13 => {
+                let p = (v > 0.0).then(|| std::time::Duration::from_secs(v as u64));
+                self.cfg.time_sync.period = p;
+                self.time_sync.config_mut().period = p;
+            }
+            14 | 15 => {
+                let mut period = self.cfg.store.period;
+                let mut mask = self.cfg.store.mask;
+                if id == 14 {
+                    period = (v > 0.0).then(|| std::time::Duration::from_secs(v as u64));
+                } else {
+                    mask = v as u8;
+                    if mask & !crate::store::MASK_ALL != 0 {
+                        return Err(format!(
+                            "store_mask {mask:#04x}: bit 0x20 (TMALL) is not offered (it is the sum of the others)"
+                        ));
+                    }
+                }
+                self.cfg.store.period = period;
+                self.cfg.store.mask = mask;
+                // From the last instant the FC saw; a boot sets its own schedule after this.
+                let now = self.store_now;
+                self.store.set(period, mask, now);
+            }
+            _ => return Err(format!("no parameter {id}")),
+        }
+        Ok(())
+    }
+}
+
+/// The FC's console commands.
+pub const COMMANDS: &[Command] = &[
+    Command {
+        name: "tm",
+        args: "[gen|atp|acd|sens|rawsens|all]",
+        help: "telemetry in human units (the bytes a CSP request gets now; default gen)",
+    },
+    Command {
+        name: "store",
+        args: "",
+        help: "the telemetry store: records, bytes, oldest and newest RTC, overwritten",
+    },
+    Command {
+        name: "mode",
+        args: "",
+        help: "the commanded target and the ADCS state",
+    },
+];
+
+fn mode_name(m: u8) -> String {
+    wire::TargetMode::try_from(m).map_or_else(|_| format!("{m}?"), |m| format!("{m:?}"))
+}
+
+fn adcs_state(s: u8) -> &'static str {
+    match s {
+        crate::adcs::STATE_OFF => "off",
+        crate::adcs::STATE_DETUMBLING => "detumbling",
+        crate::adcs::STATE_ACQUIRING => "acquiring",
+        crate::adcs::STATE_TRACKING => "tracking",
+        _ => "?",
+    }
+}
+
+fn v3<T: Into<f64> + Copy>(v: &[T], scale: f64) -> String {
+    v.iter()
+        .map(|x| format!("{:.6}", (*x).into() * scale))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn gen_lines(g: &TmGen, out: &mut String) {
+    let _ = writeln!(out, "rtc_timestamp {} s", g.rtc_timestamp);
+    let _ = writeln!(out, "uptime {} s", g.uptime_s);
+    let _ = writeln!(out, "global_on_time {} s", g.global_on_time_s);
+    let _ = writeln!(
+        out,
+        "current_mode {} {}",
+        g.current_mode,
+        mode_name(g.current_mode)
+    );
+    let state = if g.current_state == crate::safe::STATE_SAFE {
+        "safe"
+    } else {
+        "nominal"
+    };
+    let _ = writeln!(out, "current_state {} {state}", g.current_state);
+    let _ = writeln!(out, "mcu_temp {} degC", g.mcu_temp_c);
+    let cause = if g.reset_cause == crate::RESET_POWER_ON {
+        "power-on"
+    } else {
+        "software"
+    };
+    let _ = writeln!(out, "reset_cause {} {cause}", g.reset_cause);
+}
+
+fn atp_lines(a: &TmAtp, out: &mut String) {
+    let _ = writeln!(out, "rtc_timestamp {} s", a.rtc_timestamp);
+    let _ = writeln!(out, "q_eci_from_body {}", v3(&a.q_eci_from_body, 1.0));
+    let _ = writeln!(out, "r_eci {} km", v3(&a.r_eci_m, 1e-3));
+    let r = a.r_eci_m.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let _ = writeln!(out, "radius {:.3} km", r * 1e-3);
+}
+
+fn acd_lines(a: &TmAcd, out: &mut String) {
+    let _ = writeln!(out, "rtc_timestamp {} s", a.rtc_timestamp);
+    let _ = writeln!(out, "state {} {}", a.state, adcs_state(a.state));
+    let _ = writeln!(
+        out,
+        "rw_state {}",
+        v3(&a.rw_state, 1.0).replace(".000000", "")
+    );
+    let _ = writeln!(
+        out,
+        "rw_speed {} rpm",
+        v3(&a.rw_rpm_100, 100.0).replace(".000000", "")
+    );
+    let _ = writeln!(
+        out,
+        "mtq_state {}",
+        v3(&a.mtq_state, 1.0).replace(".000000", "")
+    );
+    let _ = writeln!(
+        out,
+        "target_mode {} {}",
+        a.target_mode,
+        mode_name(a.target_mode)
+    );
+    let _ = writeln!(out, "target_attitude_set {}", a.target_attitude);
+    let _ = writeln!(out, "target_point_set {}", a.target_point);
+}
+
+fn sens_lines(s: &TmSens, out: &mut String) {
+    let _ = writeln!(out, "rtc_timestamp {} s", s.rtc_timestamp);
+    let _ = writeln!(out, "sun_body {}", v3(&s.sun_body, 1.0));
+    let _ = writeln!(
+        out,
+        "rate_body {} deg/s",
+        v3(&s.rate_body_rad_s, 180.0 / std::f64::consts::PI)
+    );
+    let _ = writeln!(out, "acc_body {} m/s2", v3(&s.acc_body_m_s2, 1.0));
+    let _ = writeln!(out, "b_body {} nT", v3(&s.b_body_nt, 1.0));
+    let temps: Vec<String> = s.temps_c.iter().map(|t| t.to_string()).collect();
+    let _ = writeln!(out, "temps {} degC", temps.join(" "));
+}
+
+fn raw_lines(s: &TmRawSens, out: &mut String) {
+    let _ = writeln!(out, "rtc_timestamp {} s", s.rtc_timestamp);
+    let ints = |v: &[i64]| {
+        v.iter()
+            .map(|x| x.to_string())
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let _ = writeln!(out, "css_counts {}", ints(&s.css_counts.map(i64::from)));
+    let _ = writeln!(
+        out,
+        "gyro_raw {} (0.01 deg/s)",
+        ints(&s.gyro_raw.map(i64::from))
+    );
+    let _ = writeln!(out, "acc_raw {} (mg)", ints(&s.acc_raw.map(i64::from)));
+    let _ = writeln!(out, "mag_raw {} (10 nT)", ints(&s.mag_raw.map(i64::from)));
+    let _ = writeln!(
+        out,
+        "temps_raw {} (0.1 degC)",
+        ints(&s.temps_raw.map(i64::from))
+    );
+}
+
+impl FcApp {
+    /// The console's `tm`: the telemetry a CSP request would get at `now`, decoded.
+    pub(crate) fn console_tm(
+        &mut self,
+        node: &Node,
+        which: &str,
+        now: SimTime,
+    ) -> Result<String, String> {
+        let c = match which {
+            "gen" => TelemetryCommand::TmGen,
+            "atp" => TelemetryCommand::TmAtp,
+            "acd" => TelemetryCommand::TmAcd,
+            "sens" => TelemetryCommand::TmSens,
+            "rawsens" => TelemetryCommand::TmRawSens,
+            "all" => TelemetryCommand::TmAll,
+            other => {
+                return Err(format!(
+                    "no telemetry {other:?} (gen, atp, acd, sens, rawsens, all)"
+                ));
+            }
+        };
+        let bytes = self.telemetry(node, c, now).map_err(|_| {
+            format!(
+                "{which}: refused (no onboard orbit: {})",
+                self.orbit_error().unwrap_or("-")
+            )
+        })?;
+        let bad = |e: csp::Error| format!("{which}: {e}");
+        let mut out = String::new();
+        match c {
+            TelemetryCommand::TmGen => gen_lines(&TmGen::parse(&bytes).map_err(bad)?, &mut out),
+            TelemetryCommand::TmAtp => atp_lines(&TmAtp::parse(&bytes).map_err(bad)?, &mut out),
+            TelemetryCommand::TmAcd => acd_lines(&TmAcd::parse(&bytes).map_err(bad)?, &mut out),
+            TelemetryCommand::TmSens => sens_lines(&TmSens::parse(&bytes).map_err(bad)?, &mut out),
+            TelemetryCommand::TmRawSens => {
+                raw_lines(&TmRawSens::parse(&bytes).map_err(bad)?, &mut out)
+            }
+            _ => {
+                let all = wire::TmAll::parse(&bytes).map_err(bad)?;
+                gen_lines(&all.general, &mut out);
+                atp_lines(&all.attitude_position, &mut out);
+                acd_lines(&all.attitude_control, &mut out);
+                sens_lines(&all.sensors, &mut out);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The FC's self-test: sensors, wheels, magnetorquers, the estimator and the orbit.
+    pub(crate) fn checks(&self, now: SimTime) -> Vec<Check> {
+        use csp::params::check;
+        let mut v = Vec::new();
+        let r = self.readings.as_ref();
+        let used = self.cfg.adcs.use_sensors;
+        let sensor = |name, present: Option<f64>, used: bool, unit| match (present, used) {
+            (Some(x), true) => check(name, Health::Ok, x, unit, String::new()),
+            (Some(x), false) => check(name, Health::Off, x, unit, "not used (parameter)".into()),
+            (None, _) => check(name, Health::Failed, 0.0, unit, "no reading".into()),
+        };
+        v.push(sensor(
+            "gyro",
+            r.and_then(|r| r.gyro_body_rad_s)
+                .map(|w| w.norm().to_degrees()),
+            used.gyro,
+            "deg/s",
+        ));
+        v.push(sensor(
+            "magnetometer",
+            r.and_then(|r| r.mag_body_nt).map(|b| b.norm()),
+            used.mag,
+            "nT",
+        ));
+        let sunlit = self
+            .env
+            .as_ref()
+            .is_some_and(|e| e.sun_visible_fraction > 0.5);
+        let css_total = r.map_or(0.0, |r| r.css_counts.iter().map(|&c| f64::from(c)).sum());
+        v.push(match (r.and_then(|r| r.sun_body_unit), sunlit, used.sun) {
+            (_, _, false) => check(
+                "sun_sensors",
+                Health::Off,
+                css_total,
+                "counts",
+                "not used (parameter)".into(),
+            ),
+            (Some(_), _, true) => check(
+                "sun_sensors",
+                Health::Ok,
+                css_total,
+                "counts",
+                String::new(),
+            ),
+            (None, false, true) => check(
+                "sun_sensors",
+                Health::Ok,
+                css_total,
+                "counts",
+                "in eclipse".into(),
+            ),
+            (None, true, true) => check(
+                "sun_sensors",
+                Health::Degraded,
+                css_total,
+                "counts",
+                "sunlit but no sun vector".into(),
+            ),
+        });
+        v.push(sensor(
+            "accelerometer",
+            r.and_then(|r| r.acc_body_m_s2).map(|a| a.norm()),
+            true,
+            "m/s2",
+        ));
+        v.push(if !self.cfg.sensors.gps_enabled {
+            check("gps", Health::Off, 0.0, "s", "receiver off".into())
+        } else {
+            let age_s = self
+                .fsw
+                .gps_fix
+                .map(|(t_fix, _, _)| (self.true_unix_ns_i64(now) - t_fix) as f64 * 1e-9);
+            match age_s {
+                Some(a) if a * 1e9 <= crate::GPS_FIX_MAX_AGE_NS as f64 => {
+                    check("gps", Health::Ok, a, "s", "fix age".into())
+                }
+                Some(a) => check("gps", Health::Degraded, a, "s", "last fix too old".into()),
+                None => check("gps", Health::Degraded, 0.0, "s", "no fix".into()),
+            }
+        });
+        for (i, name) in ["wheel1", "wheel2", "wheel3", "wheel4"]
+            .into_iter()
+            .enumerate()
+        {
+            let rpm = self.att.wheel_speed_rad_s[i] * 60.0 / std::f64::consts::TAU;
+            v.push(match self.wheel_fault[i] {
+                Some(f) => check(
+                    name,
+                    Health::Failed,
+                    rpm,
+                    "rpm",
+                    format!("{f:?}").to_lowercase(),
+                ),
+                None => check(name, Health::Ok, rpm, "rpm", String::new()),
+            });
+        }
+        v.push(check(
+            "magnetorquers",
+            Health::Ok,
+            self.mtq_applied_am2.norm(),
+            "A m2",
+            String::new(),
+        ));
+        let adcs = &self.fsw.adcs;
+        v.push(match (adcs.estimate(), adcs.fallback_reason()) {
+            (_, Some(why)) => check(
+                "estimator",
+                Health::Degraded,
+                adcs.estimator_restarts() as f64,
+                "restarts",
+                why.to_owned(),
+            ),
+            (None, None) => check(
+                "estimator",
+                Health::Degraded,
+                adcs.estimator_restarts() as f64,
+                "restarts",
+                "not initialised".into(),
+            ),
+            (Some(_), None) => check(
+                "estimator",
+                Health::Ok,
+                adcs.estimator_restarts() as f64,
+                "restarts",
+                String::new(),
+            ),
+        });
+        v.push(match self.orbit_error() {
+            None => check("orbit", Health::Ok, 0.0, "", String::new()),
+            Some(e) => check("orbit", Health::Failed, 0.0, "", e.to_owned()),
+        });
+        let t = r.map_or(f64::NAN, |r| r.mcu_temp_c);
+        v.push(check(
+            "mcu_temp",
+            if (-40.0..=85.0).contains(&t) {
+                Health::Ok
+            } else {
+                Health::Failed
+            },
+            t,
+            "degC",
+            String::new(),
+        ));
+        v
+    }
+}
