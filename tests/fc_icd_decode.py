@@ -8,8 +8,9 @@ tests/kiss_peer.py's, itself written from libcsp 1.4) and asks the FC (node 3):
 
 - port 10 TMGEN 1: 16 bytes `<IIIBBbB` (rtc, uptime, global on time, mode, state, MCU
   temperature, reset cause); TMATP 2: 60 bytes `<I4d3d` (rtc, quaternion r i j k, ECI J2000
-  position in metres); TMACD 3: 19 bytes; TMSENS 4: 70 bytes `<I3d3f3f3f6b`; TMALL 6: the
-  four above concatenated (165 bytes);
+  position in metres); TMACD 3: 19 bytes; TMSENS 4: 70 bytes `<I3d3f3f3f6b`; TMRAWSENS 5:
+  53 bytes `<I6H3h3h3h6h3hB` (the horizon sensor's nadir vector at 1e-4 and its status last);
+  TMALL 6: the four above concatenated and the estimated nadir vector `<3f` (177 bytes);
 - port 11 RTCSTMGET 2: `<I` UTC unix seconds;
 - port 12 ATCMDSET 6 / ATCMDGET 5 (u8 mode), ATCATSET 2 / ATCATGET 1 (`<4d`, 32 bytes);
 - an unknown command and a short request: the failure reply `cmd 00`;
@@ -92,14 +93,29 @@ def main():
     res, d = ask(PORT_TM, 4)
     ok = res == 1 and d is not None and len(d) == TMSENS.size
     check("TMSENS is 2+70 bytes", ok, f"result {res} len {None if d is None else len(d)}")
+    res, d = ask(PORT_TM, 5)
+    raw = struct.Struct("<I6H3h3h3h6h3hB")
+    ok = res == 1 and d is not None and len(d) == raw.size == 53
+    check("TMRAWSENS is 2+53 bytes", ok, f"result {res} len {None if d is None else len(d)}")
+    if ok:
+        v = raw.unpack(d)
+        hz, status = v[22:25], v[25]
+        norm = math.sqrt(sum(x * x for x in hz)) * 1e-4
+        good = (status == 0 and hz == (0, 0, 0)) or (status in (1, 2) and abs(norm - 1) < 1e-3)
+        check("TMRAWSENS horizon: a unit nadir vector with the limb in view, zeros without",
+              good, f"status {status} raw {hz}")
     res, d = ask(PORT_TM, 6)
-    ok = res == 1 and d is not None and len(d) == 165
-    check("TMALL is 2+165 bytes (TMGEN|TMATP|TMACD|TMSENS)", ok,
+    ok = res == 1 and d is not None and len(d) == 177
+    check("TMALL is 2+177 bytes (TMGEN|TMATP|TMACD|TMSENS|nadir)", ok,
           f"result {res} len {None if d is None else len(d)}")
     if ok:
         r = TMATP.unpack(d[16:76])[5:8]
         r_km = math.sqrt(sum(x * x for x in r)) / 1000.0
         check("TMALL's TMATP part is in LEO", a.rmin_km < r_km < a.rmax_km, f"{r_km:.3f} km")
+        n = struct.unpack("<3f", d[165:177])
+        nn = math.sqrt(sum(x * x for x in n))
+        check("TMALL's nadir vector is a unit vector (or zeros before an estimate)",
+              nn == 0 or abs(nn - 1) < 1e-5, f"{n}")
 
     res, d = ask(PORT_RTC, 2)
     ok = res == 1 and d is not None and len(d) == RTC.size

@@ -323,28 +323,12 @@ impl ParamStore {
     /// consistent as a whole loads whatever order its values must go in.
     pub fn load(&self, table: &mut dyn Table) -> Vec<String> {
         let values = self.saved.as_ref().unwrap_or(&self.defaults);
-        let mut pending: Vec<(u8, f64)> = table
+        let all: Vec<(u8, f64)> = table
             .defs()
             .iter()
             .filter_map(|d| Some((d.id, *values.get(&d.id)?)))
-            .filter(|&(id, v)| table.get(id) != Some(v))
             .collect();
-        let mut errors = Vec::new();
-        while !pending.is_empty() {
-            let before = pending.len();
-            errors.clear();
-            pending.retain(|&(id, v)| match table.set(id, v) {
-                Ok(()) => false,
-                Err(e) => {
-                    errors.push(e);
-                    true
-                }
-            });
-            if pending.len() == before {
-                break;
-            }
-        }
-        errors
+        apply(table, &all)
     }
     /// Save the running table.
     pub fn save(&mut self, table: &dyn Table) {
@@ -370,6 +354,33 @@ impl ParamStore {
     pub fn saved_of(&self, id: u8) -> Option<f64> {
         self.saved.as_ref().and_then(|s| s.get(&id).copied())
     }
+}
+
+/// Set `values` (id, value) on `table`, those it refuses for a rule between parameters again
+/// after the others, pass by pass, so that a set consistent as a whole goes in whatever order
+/// its values must take; what is still refused at the end is named.
+pub fn apply(table: &mut dyn Table, values: &[(u8, f64)]) -> Vec<String> {
+    let mut pending: Vec<(u8, f64)> = values
+        .iter()
+        .copied()
+        .filter(|&(id, v)| table.get(id) != Some(v))
+        .collect();
+    let mut errors = Vec::new();
+    while !pending.is_empty() {
+        let before = pending.len();
+        errors.clear();
+        pending.retain(|&(id, v)| match table.set(id, v) {
+            Ok(()) => false,
+            Err(e) => {
+                errors.push(e);
+                true
+            }
+        });
+        if pending.len() == before {
+            break;
+        }
+    }
+    errors
 }
 
 /// Find a parameter by name (case-insensitive) or by its id in decimal.

@@ -149,6 +149,9 @@ pub struct AdcsConfig {
     /// Sun vector direction 1-sigma for the filter, rad (0.5 deg: 10 counts of noise on
     /// 4095 is 0.15 deg with cosine detectors; no albedo in the twin).
     pub sun_sigma_rad: f64,
+    /// Nadir vector direction 1-sigma for the filter, rad (0.5 deg: the sensor's 0.2 deg
+    /// with the whole limb, 0.6 with part of it, and the onboard position's error).
+    pub horizon_sigma_rad: f64,
     /// Hard-iron bias the magnetometer calibration removes, nT (ICD 1.3 "sensors
     /// calibration"): by default the sensor model's bias, i.e. calibrated on the ground; a
     /// scenario's `bias:` fault adds an uncalibrated part on top.
@@ -186,6 +189,9 @@ pub struct SensorUse {
     pub mag: bool,
     /// The coarse sun sensors' sun vector.
     pub sun: bool,
+    /// The Earth-horizon sensor's nadir vector (off by default: the M6P's reference
+    /// determination is sun and field; on, it also holds the attitude in eclipse).
+    pub horizon: bool,
 }
 
 impl Default for SensorUse {
@@ -194,6 +200,7 @@ impl Default for SensorUse {
             gyro: true,
             mag: true,
             sun: true,
+            horizon: false,
         }
     }
 }
@@ -209,6 +216,7 @@ impl Default for AdcsConfig {
             },
             mag_sigma_rad: 0.25_f64.to_radians(),
             sun_sigma_rad: 0.5_f64.to_radians(),
+            horizon_sigma_rad: 0.5_f64.to_radians(),
             mag_calibration_bias_nt: crate::sensors::SensorConfig::default().mag_bias_nt,
             // The FC's default (`FcConfig::default().residual_dipole_am2`).
             residual_dipole_am2: Vector3::new(0.002, 0.002, 0.005),
@@ -414,9 +422,14 @@ impl Adcs {
         self.propagate(r, h_wheels_body_nms, dt_s);
         // Update attempts that reached the gate, rejections, sum of clipped NIS.
         let mut tally = (0u32, 0u32, 0.0f64);
+        let nadir_ref = (-env.r_eci_m).try_normalize(0.0);
         let pairs = [
             (r.mag_body_nt.zip(b_ref), self.cfg.mag_sigma_rad),
             (r.sun_body_unit.zip(sun_ref), self.cfg.sun_sigma_rad),
+            (
+                r.horizon_nadir_body.zip(nadir_ref),
+                self.cfg.horizon_sigma_rad,
+            ),
         ];
         for (pair, sigma) in pairs {
             let Some((meas, reference)) = pair else {
@@ -540,6 +553,7 @@ impl Adcs {
                 .map(|b| b - self.cfg.mag_calibration_bias_nt),
             gyro_body_rad_s: inp.readings.gyro_body_rad_s.filter(|_| used.gyro),
             sun_body_unit: inp.readings.sun_body_unit.filter(|_| used.sun),
+            horizon_nadir_body: inp.readings.horizon_nadir_body.filter(|_| used.horizon),
             ..*inp.readings
         };
         let r = &calibrated;

@@ -149,6 +149,15 @@ pub const PARAMS: &[ParamDef] = &[
         255.0,
         "what the store collects: 0x01 TMGEN 0x02 TMATP 0x04 TMACD 0x08 TMSENS 0x10 TMRAWSENS 0x40 EPS 0x80 COMM",
     ),
+    def(
+        16,
+        "use_horizon",
+        ParamType::Bool,
+        "",
+        0.0,
+        1.0,
+        "the determination uses the Earth-horizon sensor's nadir vector",
+    ),
 ];
 
 fn flag(b: bool) -> f64 {
@@ -184,6 +193,7 @@ impl Table for FcApp {
                 .map_or(0.0, |p| p.as_secs() as f64),
             14 => self.cfg.store.period.map_or(0.0, |p| p.as_secs() as f64),
             15 => f64::from(self.cfg.store.mask),
+            16 => flag(a.use_sensors.horizon),
             _ => return None,
         })
     }
@@ -206,6 +216,7 @@ impl Table for FcApp {
             7 => adcs(self, &|a| a.use_sensors.gyro = on),
             8 => adcs(self, &|a| a.use_sensors.mag = on),
             9 => adcs(self, &|a| a.use_sensors.sun = on),
+            16 => adcs(self, &|a| a.use_sensors.horizon = on),
             10 => {
                 self.cfg.sensors.gps_enabled = on;
                 self.sensors.config_mut().gps_enabled = on;
@@ -395,6 +406,18 @@ fn raw_lines(s: &TmRawSens, out: &mut String) {
         "temps_raw {} (0.1 degC)",
         ints(&s.temps_raw.map(i64::from))
     );
+    let _ = writeln!(
+        out,
+        "horizon_raw {} (1e-4)",
+        ints(&s.horizon_raw.map(i64::from))
+    );
+    let limb = ["no limb", "full limb", "partial limb"];
+    let _ = writeln!(
+        out,
+        "horizon_status {} {}",
+        s.horizon_status,
+        limb.get(usize::from(s.horizon_status)).unwrap_or(&"?")
+    );
 }
 
 impl FcApp {
@@ -440,6 +463,7 @@ impl FcApp {
                 atp_lines(&all.attitude_position, &mut out);
                 acd_lines(&all.attitude_control, &mut out);
                 sens_lines(&all.sensors, &mut out);
+                let _ = writeln!(out, "nadir_body {}", v3(&all.nadir_body, 1.0));
             }
         }
         Ok(out)
@@ -510,6 +534,24 @@ impl FcApp {
             true,
             "m/s2",
         ));
+        let limb = r.map_or(crate::sensors::HORIZON_NO_LIMB, |r| r.horizon_status);
+        let fault = self.sensors.fault(crate::sensors::SensorId::Horizon);
+        v.push(match (fault, limb) {
+            (Some(crate::sensors::SensorFault::Dead), _) => {
+                check("horizon", Health::Failed, 0.0, "", "no output".into())
+            }
+            (_, crate::sensors::HORIZON_FULL_LIMB) => {
+                check("horizon", Health::Ok, 1.0, "", "whole limb in view".into())
+            }
+            (_, crate::sensors::HORIZON_PARTIAL_LIMB) => check(
+                "horizon",
+                Health::Degraded,
+                2.0,
+                "",
+                "part of the limb in view".into(),
+            ),
+            _ => check("horizon", Health::Ok, 0.0, "", "no limb in view".into()),
+        });
         v.push(if !self.cfg.sensors.gps_enabled {
             check("gps", Health::Off, 0.0, "s", "receiver off".into())
         } else {

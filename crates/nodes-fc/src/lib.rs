@@ -1024,13 +1024,25 @@ impl FcApp {
             TelemetryCommand::TmAcd => self.tm_acd(now).to_vec(),
             TelemetryCommand::TmSens => self.tm_sens(now).to_vec(),
             TelemetryCommand::TmRawSens => self.tm_raw_sens(now).to_vec(),
-            TelemetryCommand::TmAll => TmAll {
-                general: self.tm_gen(node, now),
-                attitude_position: self.tm_atp(now).map_err(fail)?,
-                attitude_control: self.tm_acd(now),
-                sensors: self.tm_sens(now),
+            TelemetryCommand::TmAll => {
+                let atp = self.tm_atp(now).map_err(fail)?;
+                // Nadir in the body by the estimate: the Earth-horizon vector the FC knows.
+                let nadir_body = self
+                    .estimate()
+                    .and_then(|q| {
+                        q.inverse_transform_vector(&-Vector3::from(atp.r_eci_m))
+                            .try_normalize(0.0)
+                    })
+                    .map_or([0.0; 3], |v| [v.x as f32, v.y as f32, v.z as f32]);
+                TmAll {
+                    general: self.tm_gen(node, now),
+                    attitude_position: atp,
+                    attitude_control: self.tm_acd(now),
+                    sensors: self.tm_sens(now),
+                    nadir_body,
+                }
+                .to_vec()
             }
-            .to_vec(),
             TelemetryCommand::SetPeriodic(p) => {
                 if p.out_of_range(node.addr()).is_some() {
                     return Err(RESULT_FAILURE);
@@ -2172,7 +2184,7 @@ mod tests {
             (7, 1, 1)
         );
         let all = ask(&mut h, 10, &[6], t);
-        assert_eq!(all.len(), 2 + 165);
+        assert_eq!(all.len(), 2 + 177);
         let all = TmAll::parse(&all[2..]).unwrap();
         assert_eq!(all.attitude_position, atp);
         assert_eq!(all.attitude_control, acd);
@@ -2187,8 +2199,8 @@ mod tests {
             (10, vec![2], 60),
             (10, vec![3], 19),
             (10, vec![4], 70),
-            (10, vec![5], 46),
-            (10, vec![6], 165),
+            (10, vec![5], 53),
+            (10, vec![6], 177),
             (11, vec![2], 4),
             (12, vec![1], 32),
             (12, vec![3], 24),

@@ -211,6 +211,13 @@ pub struct SensorConfig {
     pub gps_position_noise_m: f64,
     /// GPS velocity noise, 1-sigma per ECI axis, m/s.
     pub gps_velocity_noise_m_s: f64,
+    /// Earth-horizon sensor boresight, body, unit.
+    pub horizon_boresight_body: Vector3<f64>,
+    /// Earth-horizon sensor field of view, half-angle, rad.
+    pub horizon_fov_half_angle_rad: f64,
+    /// Earth-horizon sensor nadir direction noise, 1-sigma per axis, rad, with the whole
+    /// limb in view (three times that with part of it).
+    pub horizon_noise_rad: f64,
     /// The six temperature channels ([`TEMP_CHANNELS`] order).
     pub thermal: [ThermalChannel; 6],
     /// The MCU temperature (TMGEN).
@@ -272,6 +279,14 @@ impl Default for SensorConfig {
             // solution (NovAtel OEM7 / SkyTraq Venus838 class, unaided).
             gps_position_noise_m: 10.0,
             gps_velocity_noise_m_s: 0.1,
+            // A static infrared Earth sensor (thermopile array) on the +Z face, the face that
+            // nadir pointing turns to the Earth: an 80-degree half-angle sees the whole limb
+            // (the Earth's angular radius is 66-70 degrees at 400-700 km) within about
+            // 10 degrees of nadir, part of it up to 150 degrees off. 0.2 degrees 1-sigma with
+            // the whole limb: the class of CubeSense Earth or MAI-SES sensors in their specs.
+            horizon_boresight_body: Vector3::z(),
+            horizon_fov_half_angle_rad: 80.0 * deg,
+            horizon_noise_rad: 0.2 * deg,
             thermal: [
                 // IMU on the ADCS board inside the bus: swings about 10 degrees, slow.
                 ThermalChannel::internal(15.0, 25.0, 3000.0),
@@ -309,11 +324,13 @@ pub enum SensorId {
     Accelerometer,
     /// The GPS receiver.
     Gps,
+    /// The Earth-horizon sensor.
+    Horizon,
 }
 
 impl SensorId {
     /// The text names [`FromStr`] accepts, in [`SensorId`] order.
-    pub const NAMES: [&'static str; 11] = [
+    pub const NAMES: [&'static str; 12] = [
         "gyro",
         "magnetometer",
         "css+x",
@@ -325,6 +342,7 @@ impl SensorId {
         "sun-sensors",
         "accelerometer",
         "gps",
+        "horizon",
     ];
 
     /// Whether the id names a real sensor (a sun-sensor face index below 6).
@@ -345,6 +363,7 @@ impl fmt::Display for SensorId {
             SensorId::SunSensors => f.write_str("sun-sensors"),
             SensorId::Accelerometer => f.write_str("accelerometer"),
             SensorId::Gps => f.write_str("gps"),
+            SensorId::Horizon => f.write_str("horizon"),
         }
     }
 }
@@ -377,6 +396,7 @@ impl FromStr for SensorId {
             "sun-sensors" => Ok(SensorId::SunSensors),
             "accelerometer" => Ok(SensorId::Accelerometer),
             "gps" => Ok(SensorId::Gps),
+            "horizon" => Ok(SensorId::Horizon),
             _ => Err(ParseSensorError(format!(
                 "unknown sensor `{}`: expected one of {}",
                 s.trim(),
@@ -514,6 +534,46 @@ pub struct SensorReadings {
     pub mag_raw: [i16; 3],
     /// Temperature counts, 0.1 degrees C per LSB.
     pub temps_raw: [i16; 6],
+    /// Nadir (the Earth's centre) from the horizon sensor, body, unit (`None` with no limb
+    /// in view or the sensor dead).
+    pub horizon_nadir_body: Option<Vector3<f64>>,
+    /// Horizon sensor counts, [`HORIZON_LSB`] per LSB.
+    pub horizon_raw: [i16; 3],
+    /// Horizon sensor status: [`HORIZON_NO_LIMB`], [`HORIZON_FULL_LIMB`] or
+    /// [`HORIZON_PARTIAL_LIMB`].
+    pub horizon_status: u8,
+}
+
+/// Horizon sensor nadir vector resolution, per LSB (unit vector components).
+pub const HORIZON_LSB: f64 = 1.0e-4;
+/// Horizon sensor status: no limb in view (or dead): no nadir vector.
+pub const HORIZON_NO_LIMB: u8 = 0;
+/// Horizon sensor status: the whole limb in view.
+pub const HORIZON_FULL_LIMB: u8 = 1;
+/// Horizon sensor status: part of the limb in view (three times the noise).
+pub const HORIZON_PARTIAL_LIMB: u8 = 2;
+/// Mean Earth radius for the limb, m (the oblate limb moves the apparent nadir by up to
+/// about 0.1 degree; not modelled).
+pub const EARTH_MEAN_RADIUS_M: f64 = 6_371_000.0;
+
+/// What a horizon sensor with boresight `boresight` and field of view `fov_rad` (half-angle)
+/// sees of the Earth whose centre is in direction `nadir` (unit) at angular radius
+/// `earth_rad`: [`HORIZON_NO_LIMB`] when no part of the limb is in view (the disc outside
+/// the field, or the field inside the disc), [`HORIZON_FULL_LIMB`] when all of it is.
+pub fn horizon_view(
+    boresight: &Vector3<f64>,
+    nadir: &Vector3<f64>,
+    earth_rad: f64,
+    fov_rad: f64,
+) -> u8 {
+    let theta = boresight.dot(nadir).clamp(-1.0, 1.0).acos();
+    if theta - earth_rad >= fov_rad || earth_rad - theta >= fov_rad {
+        HORIZON_NO_LIMB
+    } else if theta + earth_rad <= fov_rad {
+        HORIZON_FULL_LIMB
+    } else {
+        HORIZON_PARTIAL_LIMB
+    }
 }
 
 /// A temperature as TMSENS/TMGEN carry it: whole degrees C, rounded, saturating (NaN 0).
@@ -548,6 +608,8 @@ impl SensorReadings {
             acc_raw: self.acc_raw,
             mag_raw: self.mag_raw,
             temps_raw: self.temps_raw,
+            horizon_raw: self.horizon_raw,
+            horizon_status: self.horizon_status,
         }
     }
 
@@ -657,6 +719,7 @@ pub struct Sensors {
     acc_rng: Noise,
     gps_rng: Noise,
     temp_rng: Noise,
+    horizon_rng: Noise,
     gyro_bias_rad_s: Vector3<f64>,
     temps_true_c: [f64; 6],
     mcu_true_c: f64,
@@ -666,6 +729,7 @@ pub struct Sensors {
     last_acc: Option<Held3>,
     last_css: Option<[u16; 6]>,
     last_gps: Option<Option<(Vector3<f64>, Vector3<f64>)>>,
+    last_horizon: Option<(Held3, u8)>,
 }
 
 impl Sensors {
@@ -689,6 +753,7 @@ impl Sensors {
             acc_rng: Noise::new(seed, 4),
             gps_rng: Noise::new(seed, 5),
             temp_rng: Noise::new(seed, 6),
+            horizon_rng: Noise::new(seed, 7),
             gyro_bias_rad_s,
             temps_true_c,
             mcu_true_c,
@@ -698,6 +763,7 @@ impl Sensors {
             last_acc: None,
             last_css: None,
             last_gps: None,
+            last_horizon: None,
         }
     }
 
@@ -852,6 +918,8 @@ impl Sensors {
         });
         let mcu_raw = quantise_i16(self.mcu_true_c + self.temp_rng.gauss() * sigma, TEMP_LSB_C);
 
+        let (horizon_nadir_body, horizon_raw, horizon_status) = self.sample_horizon(inputs);
+
         SensorReadings {
             gyro_body_rad_s,
             mag_body_nt,
@@ -866,7 +934,83 @@ impl Sensors {
             acc_raw,
             mag_raw,
             temps_raw,
+            horizon_nadir_body,
+            horizon_raw,
+            horizon_status,
         }
+    }
+
+    /// The horizon sensor: the nadir direction from the limb it sees, with noise (three
+    /// draws every sample, seen or not).
+    fn sample_horizon(&mut self, inputs: &SensorInputs) -> (Option<Vector3<f64>>, [i16; 3], u8) {
+        let fault = self.fault(SensorId::Horizon);
+        let (extra, k) = fault_bias_and_noise(fault);
+        let n = self.horizon_rng.gauss3();
+        let r = inputs.r_eci_m.norm();
+        let nadir_body = inputs
+            .q_eci_from_body
+            .inverse_transform_vector(&(-inputs.r_eci_m))
+            .try_normalize(0.0);
+        let boresight = self
+            .cfg
+            .horizon_boresight_body
+            .try_normalize(0.0)
+            .unwrap_or_else(Vector3::z);
+        let seen = match nadir_body {
+            Some(nadir) if r > EARTH_MEAN_RADIUS_M && r.is_finite() => {
+                let earth_rad = (EARTH_MEAN_RADIUS_M / r).asin();
+                let status = horizon_view(
+                    &boresight,
+                    &nadir,
+                    earth_rad,
+                    self.cfg.horizon_fov_half_angle_rad,
+                );
+                let sigma = self.cfg.horizon_noise_rad
+                    * k
+                    * if status == HORIZON_PARTIAL_LIMB {
+                        3.0
+                    } else {
+                        1.0
+                    };
+                let m = (nadir + n * sigma + Vector3::repeat(extra)).try_normalize(0.0);
+                m.filter(|_| status != HORIZON_NO_LIMB).map(|m| (m, status))
+            }
+            _ => None,
+        };
+        let fresh = match seen {
+            Some((m, status)) => (
+                Held3 {
+                    raw: quantise3(&m, HORIZON_LSB),
+                    present: true,
+                },
+                status,
+            ),
+            None => (
+                Held3 {
+                    raw: [0; 3],
+                    present: false,
+                },
+                HORIZON_NO_LIMB,
+            ),
+        };
+        let out = match fault {
+            Some(SensorFault::Dead) => (
+                Held3 {
+                    raw: [0; 3],
+                    present: false,
+                },
+                HORIZON_NO_LIMB,
+            ),
+            Some(SensorFault::Stuck) => self.last_horizon.unwrap_or(fresh),
+            _ => fresh,
+        };
+        self.last_horizon = Some(out);
+        let (h, status) = out;
+        let v = h
+            .present
+            .then(|| from_raw3(h.raw, HORIZON_LSB).try_normalize(0.0))
+            .flatten();
+        (v, h.raw, status)
     }
 
     /// The six counts and the sun vector the FC derives from them.

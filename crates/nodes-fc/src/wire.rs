@@ -19,8 +19,8 @@
 //! | TMATP 2 | - | [`TmAtp`] 60 |
 //! | TMACD 3 | - | [`TmAcd`] 19 |
 //! | TMSENS 4 | - | [`TmSens`] 70 |
-//! | TMRAWSENS 5 | - | [`TmRawSens`] 46 (the twin's layout) |
-//! | TMALL 6 | - | [`TmAll`] 165 (the twin's layout) |
+//! | TMRAWSENS 5 | - | [`TmRawSens`] 53 (the twin's layout) |
+//! | TMALL 6 | - | [`TmAll`] 177 (the twin's layout) |
 //! | TMPERSET 7 / TMPERGET 8 (the twin's) | [`Periodic`] 7 / - | - / [`Periodic`] 7 |
 //! | TMSTOREINFO 9 / TMSTOREGET 10 / TMSTORECLEAR 11 (the twin's) | - / 12: `u32 from_rtc, u32 to_rtc, u32 skip` / - | [`crate::store`] |
 //! | RTCSTMSET 1 | [`RtcTimestamp`] 4 | - |
@@ -287,7 +287,7 @@ impl Repr for TmSens {
     }
 }
 
-/// TMRAWSENS reply (the twin's layout, 46 bytes; docs/protocol.md "FC ports"): raw sensor
+/// TMRAWSENS reply (the twin's layout, 53 bytes; docs/protocol.md "FC ports"): raw sensor
 /// counts at each sensor's native resolution.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct TmRawSens {
@@ -303,10 +303,14 @@ pub struct TmRawSens {
     pub mag_raw: [i16; 3],
     /// Sensor temperatures (the six of TMSENS), 0.1 degrees C per LSB.
     pub temps_raw: [i16; 6],
+    /// Earth-horizon sensor nadir vector, BCF, 1e-4 per LSB (zeros with no limb in view).
+    pub horizon_raw: [i16; 3],
+    /// Earth-horizon sensor status: 0 no limb in view, 1 the whole limb, 2 part of it.
+    pub horizon_status: u8,
 }
 
 impl Repr for TmRawSens {
-    const LEN: usize = 46;
+    const LEN: usize = 53;
     fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
         Ok(TmRawSens {
             rtc_timestamp: r.u32()?,
@@ -315,6 +319,8 @@ impl Repr for TmRawSens {
             acc_raw: i16s(r)?,
             mag_raw: i16s(r)?,
             temps_raw: i16s(r)?,
+            horizon_raw: i16s(r)?,
+            horizon_status: r.u8()?,
         })
     }
     fn write(&self, w: &mut Writer) {
@@ -328,13 +334,15 @@ impl Repr for TmRawSens {
             .chain(&self.acc_raw)
             .chain(&self.mag_raw)
             .chain(&self.temps_raw)
+            .chain(&self.horizon_raw)
         {
             w.bytes(&x.to_le_bytes());
         }
+        w.u8(self.horizon_status);
     }
 }
 
-/// TMALL reply (the twin's layout, 165 bytes; docs/protocol.md "FC ports"): the beacon,
+/// TMALL reply (the twin's layout, 177 bytes; docs/protocol.md "FC ports"): the beacon,
 /// the data of TMGEN, TMATP, TMACD and TMSENS from one instant, in that order.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TmAll {
@@ -346,16 +354,20 @@ pub struct TmAll {
     pub attitude_control: TmAcd,
     /// TMSENS data.
     pub sensors: TmSens,
+    /// The estimated nadir (Earth's centre) direction, BCF, unit: the onboard position
+    /// turned into the body by the estimated attitude (zeros without either).
+    pub nadir_body: [f32; 3],
 }
 
 impl Repr for TmAll {
-    const LEN: usize = TmGen::LEN + TmAtp::LEN + TmAcd::LEN + TmSens::LEN;
+    const LEN: usize = TmGen::LEN + TmAtp::LEN + TmAcd::LEN + TmSens::LEN + 12;
     fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
         Ok(TmAll {
             general: TmGen::read(r)?,
             attitude_position: TmAtp::read(r)?,
             attitude_control: TmAcd::read(r)?,
             sensors: TmSens::read(r)?,
+            nadir_body: f32s(r)?,
         })
     }
     fn write(&self, w: &mut Writer) {
@@ -363,6 +375,9 @@ impl Repr for TmAll {
         self.attitude_position.write(w);
         self.attitude_control.write(w);
         self.sensors.write(w);
+        for x in &self.nadir_body {
+            w.f32(*x);
+        }
     }
 }
 
@@ -815,8 +830,8 @@ mod tests {
         assert_eq!(TmAtp::LEN, 60);
         assert_eq!(TmAcd::LEN, 19);
         assert_eq!(TmSens::LEN, 70);
-        assert_eq!(TmRawSens::LEN, 46);
-        assert_eq!(TmAll::LEN, 165);
+        assert_eq!(TmRawSens::LEN, 53);
+        assert_eq!(TmAll::LEN, 177);
         assert_eq!(RtcTimestamp::LEN, 4);
         assert_eq!(TargetAttitude::LEN, 32);
         assert_eq!(TargetPoint::LEN, 24);
@@ -826,8 +841,8 @@ mod tests {
         assert_eq!(TmAtp::default().to_vec().len(), 60);
         assert_eq!(TmAcd::default().to_vec().len(), 19);
         assert_eq!(TmSens::default().to_vec().len(), 70);
-        assert_eq!(TmRawSens::default().to_vec().len(), 46);
-        assert_eq!(TmAll::default().to_vec().len(), 165);
+        assert_eq!(TmRawSens::default().to_vec().len(), 53);
+        assert_eq!(TmAll::default().to_vec().len(), 177);
         assert_eq!(TargetAttitude::default().to_vec().len(), 32);
         assert_eq!(TargetPoint::default().to_vec().len(), 24);
         assert_eq!(TargetModeRepr::default().to_vec().len(), 1);
@@ -919,11 +934,14 @@ mod tests {
             acc_raw: [100, 0, -100],
             mag_raw: [2000, -2000, 0],
             temps_raw: [200, 210, -400, 0, 0, 1],
+            horizon_raw: [0, -3, 10000],
+            horizon_status: 2,
         };
         let b = v.to_vec();
         assert_eq!(&b[4..6], &[0xff, 0x0f]);
         assert_eq!(&b[14..16], &[0x02, 0x01]);
         assert_eq!(&b[16..18], &[0xff, 0xff]);
+        assert_eq!(&b[46..53], &[0, 0, 0xfd, 0xff, 0x10, 0x27, 2]);
         assert_eq!(TmRawSens::parse(&b).unwrap(), v);
 
         let all = TmAll {
@@ -1096,13 +1114,13 @@ mod tests {
     proptest! {
         /// Every bit pattern of every layout parses and emits back to the same bytes.
         #[test]
-        fn any_bytes_of_the_right_length_round_trip(b in proptest::collection::vec(any::<u8>(), 165)) {
+        fn any_bytes_of_the_right_length_round_trip(b in proptest::collection::vec(any::<u8>(), 177)) {
             bytes_round_trip::<TmGen>(&b[..16]);
             bytes_round_trip::<TmAtp>(&b[..60]);
             bytes_round_trip::<TmAcd>(&b[..19]);
             bytes_round_trip::<TmSens>(&b[..70]);
-            bytes_round_trip::<TmRawSens>(&b[..46]);
-            bytes_round_trip::<TmAll>(&b[..165]);
+            bytes_round_trip::<TmRawSens>(&b[..53]);
+            bytes_round_trip::<TmAll>(&b[..177]);
             bytes_round_trip::<RtcTimestamp>(&b[..4]);
             bytes_round_trip::<TargetAttitude>(&b[..32]);
             bytes_round_trip::<TargetPoint>(&b[..24]);
@@ -1124,9 +1142,9 @@ mod tests {
             prop_assert_eq!(TmAcd::parse(&c.to_vec()).unwrap(), c);
             let s = TmSens { rtc_timestamp: rtc, sun_body: r, rate_body_rad_s: f, acc_body_m_s2: f, b_body_nt: f, temps_c: [temp; 6] };
             prop_assert_eq!(TmSens::parse(&s.to_vec()).unwrap(), s);
-            let w = TmRawSens { rtc_timestamp: rtc, gyro_raw: raw, acc_raw: raw, mag_raw: raw, ..Default::default() };
+            let w = TmRawSens { rtc_timestamp: rtc, gyro_raw: raw, acc_raw: raw, mag_raw: raw, horizon_raw: raw, ..Default::default() };
             prop_assert_eq!(TmRawSens::parse(&w.to_vec()).unwrap(), w);
-            let all = TmAll { general: g, attitude_position: a, attitude_control: c, sensors: s };
+            let all = TmAll { general: g, attitude_position: a, attitude_control: c, sensors: s, nadir_body: f };
             prop_assert_eq!(TmAll::parse(&all.to_vec()).unwrap(), all);
             let t = TargetAttitude { q };
             prop_assert_eq!(TargetAttitude::parse(&t.to_vec()).unwrap(), t);

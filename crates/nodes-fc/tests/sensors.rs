@@ -751,6 +751,7 @@ fn sensor_names_parse_display_and_reject_junk() {
         ("css-z", SensorId::SunSensor(5)),
         ("accelerometer", SensorId::Accelerometer),
         ("gps", SensorId::Gps),
+        ("horizon", SensorId::Horizon),
     ];
     for (name, id) in want {
         assert_eq!(name.parse::<SensorId>(), Ok(id), "{name}");
@@ -837,10 +838,12 @@ fn telemetry_carries_the_readings_and_round_trips() {
             acc_raw: r.acc_raw,
             mag_raw: r.mag_raw,
             temps_raw: r.temps_raw,
+            horizon_raw: r.horizon_raw,
+            horizon_status: r.horizon_status,
         }
     );
     let bytes = raw.to_vec();
-    assert_eq!(bytes.len(), 46);
+    assert_eq!(bytes.len(), 53);
     assert_eq!(TmRawSens::parse(&bytes).unwrap(), raw);
     // The layout: css +X at byte 4, gyro x at 16 (0.01 deg/s), temps from 34.
     assert_eq!(u16::from_le_bytes([bytes[4], bytes[5]]), r.css_counts[0]);
@@ -969,4 +972,58 @@ fn raw_values_saturate_at_their_limits() {
     let r = Sensors::new(SensorConfig::default(), 15).sample(&nan, f64::NAN);
     assert_eq!(r.gyro_raw, [0; 3]);
     assert_eq!(r.sun_body_unit, None);
+}
+
+/// The Earth-horizon sensor on +Z at 500 km: the whole limb when +Z points within about 12
+/// degrees of nadir (80 - 67.9), part of it further off, none beyond 80 + 67.9 degrees; its
+/// nadir vector is within its noise (0.2 deg 1-sigma per axis, three times that with part
+/// of the limb) of the true one; dead, it gives nothing.
+#[test]
+fn the_horizon_sensor_sees_the_limb_and_gives_nadir_within_its_noise() {
+    use m6p_nodes_fc::sensors::{
+        HORIZON_FULL_LIMB, HORIZON_NO_LIMB, HORIZON_PARTIAL_LIMB, SensorFault, SensorId,
+    };
+    // The body's +Z turned `off_deg` from nadir (-X in ECI at r = +X).
+    let tilted = |off_deg: f64| {
+        let to_nadir = UnitQuaternion::rotation_between(&Vector3::z(), &-Vector3::x()).unwrap();
+        let tilt = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), off_deg * DEG);
+        SensorInputs {
+            q_eci_from_body: to_nadir * tilt,
+            ..base_inputs()
+        }
+    };
+    let mut s = Sensors::new(SensorConfig::default(), 11);
+    let mut err_deg = Vec::new();
+    for _ in 0..2000 {
+        let r = s.sample(&tilted(0.0), DT);
+        assert_eq!(r.horizon_status, HORIZON_FULL_LIMB);
+        let n = r.horizon_nadir_body.unwrap();
+        err_deg.push(n.angle(&Vector3::z()).to_degrees());
+    }
+    // The angle of a 2-D Gaussian error (Rayleigh): mean sigma * sqrt(pi / 2) = 0.25 deg.
+    let mean = err_deg.iter().sum::<f64>() / err_deg.len() as f64;
+    assert!((0.2..0.3).contains(&mean), "mean error {mean} deg");
+    for (off, status) in [
+        (10.0, HORIZON_FULL_LIMB),
+        (30.0, HORIZON_PARTIAL_LIMB),
+        (140.0, HORIZON_PARTIAL_LIMB),
+        (150.0, HORIZON_NO_LIMB),
+        (180.0, HORIZON_NO_LIMB),
+    ] {
+        let inp = tilted(off);
+        let r = s.sample(&inp, DT);
+        assert_eq!(r.horizon_status, status, "{off} deg off nadir");
+        let truth = inp.q_eci_from_body.inverse_transform_vector(&-Vector3::x());
+        match r.horizon_nadir_body {
+            Some(n) => assert!(n.angle(&truth).to_degrees() < 3.0, "{off}: {n:?} {truth:?}"),
+            None => assert_eq!((status, r.horizon_raw), (HORIZON_NO_LIMB, [0; 3])),
+        }
+    }
+    s.set_fault(SensorId::Horizon, Some(SensorFault::Dead));
+    let r = s.sample(&tilted(0.0), DT);
+    assert_eq!(
+        (r.horizon_nadir_body, r.horizon_raw, r.horizon_status),
+        (None, [0; 3], HORIZON_NO_LIMB)
+    );
+    assert_eq!("horizon".parse::<SensorId>(), Ok(SensorId::Horizon));
 }

@@ -33,6 +33,7 @@ pub mod invariants;
 pub mod live;
 pub mod network;
 pub mod outside;
+pub mod params;
 pub mod plan;
 pub mod protobuf;
 pub mod record;

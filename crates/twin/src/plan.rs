@@ -38,6 +38,7 @@ pub fn compile(s: &Scenario) -> Compiled {
         opts.tle = Some((l1.clone(), l2.clone()));
     }
     crate::outside::compile(s, &net, &mut opts);
+    crate::params::compile(s, &net, &mut opts);
     if let Some(mode) = crate::clock::compile(s, opts.epoch_unix_s) {
         opts.clock = mode;
     } else if opts.has_outside_links() && opts.clock == ClockMode::Virtual {

@@ -249,12 +249,15 @@ impl Default for NetworkCfg {
 }
 
 /// Options of one node.
-#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NodeOptions {
     /// Uptime service format: `libcsp` (u32 BE seconds) or `icd` (u32 LE milliseconds).
     #[serde(default)]
     pub uptime: Option<UptimeKind>,
+    /// Factory values of the node's platform parameters by name (`crate::params`).
+    #[serde(default)]
+    pub params: BTreeMap<String, crate::params::ParamValue>,
 }
 
 /// Uptime service formats (INTERPRETATION.md section 3).
@@ -711,6 +714,7 @@ impl Scenario {
         crate::comm::validate(self, &mut err);
         crate::clock::validate(self, &mut err);
         crate::rules::validate(self, &net, &mut err);
+        crate::params::validate(self, &net, &mut err);
         crate::expectations::validate(self, &net, &mut err);
         if errs.is_empty() {
             Ok(())

@@ -197,7 +197,13 @@ pub(super) fn nodes(
             .collect();
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
-        let app = app_for(spec.role, spec.addr, opts, boards, plan, results);
+        let mut app = app_for(spec.role, spec.addr, opts, boards, plan, results);
+        // The scenario's parameter values are the node's factory values.
+        if let (Some(values), Some(table)) = (opts.params.get(&spec.addr), app.params()) {
+            for e in csp::params::apply(table, values) {
+                tracing::warn!("{}: parameter from the scenario refused: {e}", spec.name);
+            }
+        }
         // Every node boots at the start of the run (in real time, not when its task is made).
         let mut host = Host::new(cfg, app, SimTime::ZERO);
         // What it reported at boot (the EPS's channels configured off) goes out now, in

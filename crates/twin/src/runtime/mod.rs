@@ -57,6 +57,9 @@ pub struct RunOptions {
     pub kiss_links: Vec<KissLink>,
     /// Node consoles served to outside programs.
     pub uart: Vec<UartLink>,
+    /// Factory values of nodes' platform parameters (`[nodes.NAME] params`), by address:
+    /// (parameter id, value), set before the node's first boot.
+    pub params: BTreeMap<u8, Vec<(u8, f64)>>,
     /// Nodes of the network not started because an outside program takes their place
     /// (`replaces` on a link), by address.
     pub replaced: std::collections::BTreeSet<u8>,
@@ -198,6 +201,7 @@ impl RunOptions {
             seed: 1,
             kiss_links: Vec::new(),
             uart: Vec::new(),
+            params: BTreeMap::new(),
             replaced: std::collections::BTreeSet::new(),
             ground_plan: BTreeMap::new(),
             socketcan: Vec::new(),
