@@ -160,9 +160,19 @@ def main():
     same = all(HEALTH[h] == l.split()[1] for (h, _), l in zip(entries, lines[1:]))
     check("selftest: the same health", same and lines[0] == "overall " + HEALTH[overall], lines[0])
 
+    # The FC's state machine: thresholds above the battery's charge make it SAFE at its next
+    # tick (TMGEN current_state 1); the defaults (15 % / 30 %) make it NOMINAL again.
+    peer.ask(FC, PLATFORM, PSET, bytes([info["safe_exit_soc"][0], 100]))
+    peer.ask(FC, PLATFORM, PSET, bytes([info["safe_enter_soc"][0], 99]))
+    time.sleep(0.5)
+    r, d = peer.ask(FC, 10, 1)
+    check("SAFE when the battery is below safe_enter_soc", TMGEN.unpack(d)[4] == 1, f"{TMGEN.unpack(d)}")
     r, d = peer.ask(FC, PLATFORM, PDEFAULTS)
     check("PDEFAULTS restores the factory value", r == 1 and abs(pget(pid) - default) < 1e-6,
           f"{pget(pid)} {default}")
+    time.sleep(0.5)
+    r, d = peer.ask(FC, 10, 1)
+    check("NOMINAL again with the default thresholds", TMGEN.unpack(d)[4] == 0, f"{TMGEN.unpack(d)}")
     time.sleep(2.2)
     r, d = peer.ask(FC, 10, 9)
     n, nbytes, oldest, newest, over = struct.unpack("<IIIII", d)

@@ -53,7 +53,7 @@
  * (`command | result | data`, 2 + the ICD size), from crates/twin/src/icd_lengths.rs
  * (IcdTable::for_run, the FC telemetry port: `ok::<fc::TmGen>()` ...), the sizes being the
  * node crate's wire types (crates/nodes-fc/src/wire.rs `Repr::LEN`: TmGen 16, TmAtp 60,
- * TmAcd 19, TmSens 70, TmRawSens 46, TmAll 165). The port is the run's `fc.ports.telemetry`,
+ * TmAcd 19, TmSens 70, TmRawSens 53, TmAll 177). The port is the run's `fc.ports.telemetry`,
  * 10 by default (nodes-fc wire::PORT_TELEMETRY); --fc-tm-port changes it. A failure reply
  * is `cmd 00`, 2 bytes (TMATP and TMALL fail without an orbit/TLE). */
 static const struct {
@@ -62,7 +62,7 @@ static const struct {
 	int reply_len;
 } fc_telemetry[] = {
 	{1, "TMGEN", 2 + 16},  {2, "TMATP", 2 + 60},     {3, "TMACD", 2 + 19},
-	{4, "TMSENS", 2 + 70}, {5, "TMRAWSENS", 2 + 46}, {6, "TMALL", 2 + 165},
+	{4, "TMSENS", 2 + 70}, {5, "TMRAWSENS", 2 + 53}, {6, "TMALL", 2 + 177},
 };
 #define FC_ADDR 3
 #define FC_TM_PORT_DEFAULT 10

@@ -63,6 +63,47 @@ pub const NODE_COMMANDS: &[Command] = &[
     },
 ];
 
+/// The `tm` command of a node with one telemetry (EPS, COMM, ECU, PC).
+pub const TM: Command = Command {
+    name: "tm",
+    args: "",
+    help: "the node's telemetry now (the bytes its CSP request gets, field by field)",
+};
+
+/// A decoded telemetry as the console prints it: one `field value` line per field (the
+/// fields' names carry their units: `battery_v`, `elevation_deg`), arrays on one line.
+pub fn fields<T: std::fmt::Debug>(t: &T) -> String {
+    let pretty = format!("{t:#?}");
+    let mut out = String::new();
+    let mut array: Option<String> = None;
+    let lines: Vec<&str> = pretty.lines().collect();
+    for line in lines.iter().skip(1).take(lines.len().saturating_sub(2)) {
+        let l = line.trim().trim_end_matches(',');
+        match &mut array {
+            Some(a) if l == "]" => {
+                let _ = writeln!(out, "{a}]");
+                array = None;
+            }
+            Some(a) => {
+                if !a.ends_with('[') {
+                    a.push(' ');
+                }
+                a.push_str(l);
+            }
+            None => match l.split_once(": ") {
+                Some((k, "[")) => array = Some(format!("{k} [")),
+                Some((k, v)) => {
+                    let _ = writeln!(out, "{k} {v}");
+                }
+                None => {
+                    let _ = writeln!(out, "{l}");
+                }
+            },
+        }
+    }
+    out
+}
+
 /// Longest console line taken (longer ones are refused whole).
 pub const MAX_LINE: usize = 256;
 
@@ -266,5 +307,29 @@ impl<A: App> Host<A> {
             Some(other) => return Err(format!("unknown subcommand {other:?}")),
         }
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[derive(Debug)]
+    #[allow(dead_code)] // read through Debug only
+    struct Tm {
+        battery_v: f32,
+        panels_w: [f32; 3],
+        flags: u8,
+    }
+
+    #[test]
+    fn telemetry_fields_one_per_line_arrays_on_one() {
+        let t = Tm {
+            battery_v: 7.5,
+            panels_w: [1.0, 2.5, 0.0],
+            flags: 3,
+        };
+        assert_eq!(
+            super::fields(&t),
+            "battery_v 7.5\npanels_w [1.0 2.5 0.0]\nflags 3\n"
+        );
     }
 }

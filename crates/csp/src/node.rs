@@ -95,6 +95,9 @@ pub struct NodeConfig {
     pub reassembly: ReassemblerConfig,
     /// UTC unix seconds at simulated time zero (for the CMP clock).
     pub epoch_unix_s: u64,
+    /// Whether payloads (12-15) may use the platform port ([`crate::params`]): ICD 4.1 stars
+    /// none of its commands, so by default they are refused.
+    pub payload_access: platform::addr::PayloadAccess,
 }
 
 impl NodeConfig {
@@ -111,6 +114,7 @@ impl NodeConfig {
             first_ephemeral_port: EPHEMERAL_PORT_MIN,
             reassembly: ReassemblerConfig::default(),
             epoch_unix_s: 0,
+            payload_access: platform::addr::PayloadAccess::default(),
         }
     }
 }
@@ -693,6 +697,16 @@ impl Node {
                 self.reboot_requested = true;
                 vec![]
             }
+            // libcsp 1.4 hands any time to the platform's clock_set_time and answers with
+            // clock_get_time; the twin's clock refuses nanoseconds of a second or more, as
+            // POSIX clock_settime does (EINVAL), and answers with the time it keeps.
+            ServiceAction::SetClock { tv_nsec, .. } if tv_nsec >= 1_000_000_000 => {
+                self.log(
+                    now,
+                    format!("CMP CLOCK from node {}: tv_nsec {tv_nsec} is not below one second; clock unchanged", packet.header.src),
+                );
+                vec![service::clock_reply(clock)]
+            }
             ServiceAction::SetClock { tv_sec, tv_nsec } => {
                 let want = i128::from(tv_sec) * 1_000_000_000 + i128::from(tv_nsec);
                 self.clock_offset_ns += want - self.clock_unix_ns(now);
@@ -972,11 +986,6 @@ pub trait App: Send + 'static {
     fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
         None
     }
-    /// Whether the platform port refuses a request from `src` (a payload, under ICD 4.1's
-    /// rules where the node applies them).
-    fn platform_port_refuses(&self, _src: u8) -> bool {
-        false
-    }
     /// The node's self-test at `now`: each component's health from the twin's state.
     fn self_test(&mut self, _node: &Node, _now: SimTime) -> Vec<crate::params::Check> {
         Vec::new()
@@ -1113,7 +1122,7 @@ impl<A: App> Host<A> {
     fn platform_port(&mut self, packet: Packet, now: SimTime) {
         use crate::params::Effect;
         let src = packet.header.src;
-        let (reply, effect, why) = if self.app.platform_port_refuses(src) {
+        let (reply, effect, why) = if self.node.cfg.payload_access.refuses(src, false) {
             self.node.counters.platform_refused += 1;
             let command = packet.data.first().copied().unwrap_or(0);
             self.node.warn(
@@ -1245,9 +1254,6 @@ impl<T: App + ?Sized> App for Box<T> {
     fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
         (**self).params()
     }
-    fn platform_port_refuses(&self, src: u8) -> bool {
-        (**self).platform_port_refuses(src)
-    }
     fn self_test(&mut self, node: &Node, now: SimTime) -> Vec<crate::params::Check> {
         (**self).self_test(node, now)
     }
@@ -1320,9 +1326,6 @@ where
     }
     fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
         self.app.params()
-    }
-    fn platform_port_refuses(&self, src: u8) -> bool {
-        self.app.platform_port_refuses(src)
     }
     fn self_test(&mut self, node: &Node, now: SimTime) -> Vec<crate::params::Check> {
         self.app.self_test(node, now)
@@ -1416,9 +1419,6 @@ impl<A: App> App for Tap<A> {
     }
     fn params(&mut self) -> Option<&mut dyn crate::params::Table> {
         self.app.params()
-    }
-    fn platform_port_refuses(&self, src: u8) -> bool {
-        self.app.platform_port_refuses(src)
     }
     fn self_test(&mut self, node: &Node, now: SimTime) -> Vec<crate::params::Check> {
         self.app.self_test(node, now)
@@ -1738,5 +1738,35 @@ mod tests {
         // A reboot keeps the oscillator's error.
         n.reboot(t1);
         assert_eq!(n.clock_errors().error_ns(t1), 100_000_000);
+    }
+
+    /// CMP CLOCK with nanoseconds of a second or more: the clock is not moved (it was moved
+    /// by up to 4.3 s before) and the answer is the time the node keeps; a valid set moves
+    /// it and is answered with the time set.
+    #[test]
+    fn a_cmp_clock_set_with_tv_nsec_of_a_second_or_more_leaves_the_clock() {
+        let mut cfg = NodeConfig::new("X", 4);
+        cfg.ifaces = vec![IfaceConfig::packet("p")];
+        cfg.routes.set_default(Route::direct(0));
+        cfg.epoch_unix_s = 1_000;
+        let mut host = Host::new(cfg, NoApp, SimTime::ZERO);
+        let t = SimTime::from_secs(5);
+        let ask = |host: &mut Host<NoApp>, sec: u32, nsec: u32| {
+            let mut d = vec![0, 6];
+            d.extend(sec.to_be_bytes());
+            d.extend(nsec.to_be_bytes());
+            host.handle_packet(0, Packet::new(Header::new(16, 4, 0, 40), d), t);
+            let Some(Transmit::Packet { packet, .. }) = host.node.poll_transmit() else {
+                panic!("no reply")
+            };
+            packet.data
+        };
+        let reply = ask(&mut host, 2_000, 0xFFFF_FFFF);
+        assert_eq!(host.node.clock_unix_ns(t), 1_005_000_000_000);
+        assert_eq!(host.node.clock_sets(), 0);
+        assert_eq!(reply[2..], [0, 0, 0x03, 0xED, 0, 0, 0, 0]);
+        let reply = ask(&mut host, 2_000, 999_999_999);
+        assert_eq!(host.node.clock_unix_ns(t), 2_000_999_999_999);
+        assert_eq!(reply[2..6], 2_000u32.to_be_bytes());
     }
 }

@@ -115,6 +115,38 @@ pub fn success(command: u8, data: &[u8]) -> Vec<u8> {
     .to_vec()
 }
 
+/// ICD 4.1 on a node's own port: when `packet` comes from a payload (12-15) that the node's
+/// payload access refuses ([`crate::node::NodeConfig::payload_access`]) and its command is
+/// not in `open` (what payloads may use there), the failure reply, with a warning in the
+/// node's log; `None` to serve it.
+pub fn payload_refusal(
+    node: &mut Node,
+    packet: &Packet,
+    open: &[u8],
+    now: SimTime,
+) -> Option<Vec<u8>> {
+    let command = packet.data.first().copied();
+    let is_open = command.is_some_and(|c| open.contains(&c));
+    if !node
+        .config()
+        .payload_access
+        .refuses(packet.header.src, is_open)
+    {
+        return None;
+    }
+    let name = node.name().to_ascii_lowercase();
+    node.warn(
+        now,
+        format!(
+            "{name}: payload {} refused port {} command {}: not available to payloads (ICD 4.1)",
+            packet.header.src,
+            packet.header.dport,
+            command.map_or("(none)".to_owned(), |c| c.to_string())
+        ),
+    );
+    Some(failure(command.unwrap_or(0)))
+}
+
 /// Why a request was refused (every case becomes a failure reply).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]

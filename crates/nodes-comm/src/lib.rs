@@ -481,8 +481,16 @@ impl App for CommApp {
         if packet.header.dport != self.cfg.port {
             return;
         }
-        let (reply, refused) =
-            serve::<CommCommand>(&packet.data, |c| Ok(self.execute(c, node, now)));
+        // A payload may read the COMM, not set its beacon (ICD 4.1).
+        let open = [wire::cmd::TMCOMM, wire::cmd::BEACONGET];
+        let (reply, refused) = match csp::reqrep::payload_refusal(node, &packet, &open, now) {
+            Some(r) => {
+                self.refused_since_boot += 1;
+                self.counters.refused += 1;
+                (r, None)
+            }
+            None => serve::<CommCommand>(&packet.data, |c| Ok(self.execute(c, node, now))),
+        };
         if let Some(e) = refused {
             self.refused_since_boot += 1;
             self.counters.refused += 1;
@@ -535,6 +543,19 @@ impl App for CommApp {
 
     fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
         Some(self)
+    }
+
+    fn console_commands(&self) -> &'static [csp::console::Command] {
+        &[csp::console::TM]
+    }
+
+    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+        if words != ["tm"] {
+            return Err("usage: tm".to_owned());
+        }
+        self.last_now = self.last_now.max(now);
+        // As TMCOMM on port 10 at `now`.
+        Ok(csp::console::fields(&self.tmcomm(node, now)))
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

@@ -498,7 +498,12 @@ impl App for EcuApp {
         if packet.header.dport != self.cfg.port {
             return;
         }
-        let (reply, malformed) = serve::<EcuCommand>(&packet.data, |c| self.command(c, now));
+        // A payload may read the ECU's telemetry, never arm or fire it (ICD 4.1).
+        let open = [wire::cmd::TMECU];
+        let (reply, malformed) = match csp::reqrep::payload_refusal(node, &packet, &open, now) {
+            Some(r) => (r, None),
+            None => serve::<EcuCommand>(&packet.data, |c| self.command(c, now)),
+        };
         if let Some(e) = malformed {
             self.log
                 .push(NodeEvent::info(now, format!("ecu: request refused: {e}")));
@@ -553,6 +558,26 @@ impl App for EcuApp {
 
     fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
         Some(self)
+    }
+
+    fn console_commands(&self) -> &'static [csp::console::Command] {
+        &[csp::console::TM]
+    }
+
+    fn console(
+        &mut self,
+        _node: &mut Node,
+        words: &[&str],
+        now: SimTime,
+    ) -> Result<String, String> {
+        if words != ["tm"] {
+            return Err("usage: tm".to_owned());
+        }
+        let bytes = self
+            .command(EcuCommand::Telemetry, now)
+            .map_err(|_| "TMECU refused".to_owned())?;
+        let tm = wire::TmEcu::parse(&bytes).map_err(|e| e.to_string())?;
+        Ok(csp::console::fields(&tm))
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

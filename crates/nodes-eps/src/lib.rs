@@ -517,7 +517,12 @@ impl App for EpsApp {
             return;
         }
         self.advance(now);
-        let (reply, refused) = serve::<EpsCommand>(&packet.data, |c| self.command(c, now));
+        // A payload may read the EPS, not switch it (ICD 4.1).
+        let open = [wire::cmd::TMEPS, wire::cmd::CHGET, wire::cmd::THRGET];
+        let (reply, refused) = match csp::reqrep::payload_refusal(node, &packet, &open, now) {
+            Some(r) => (r, None),
+            None => serve::<EpsCommand>(&packet.data, |c| self.command(c, now)),
+        };
         if let Some(e) = refused {
             self.log
                 .push(NodeEvent::info(now, format!("eps: request refused: {e}")));
@@ -568,6 +573,28 @@ impl App for EpsApp {
 
     fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
         Some(self)
+    }
+
+    fn console_commands(&self) -> &'static [csp::console::Command] {
+        &[csp::console::TM]
+    }
+
+    fn console(
+        &mut self,
+        _node: &mut Node,
+        words: &[&str],
+        now: SimTime,
+    ) -> Result<String, String> {
+        if words != ["tm"] {
+            return Err("usage: tm".to_owned());
+        }
+        // As TMEPS on port 10 at `now`.
+        self.advance(now);
+        let bytes = self
+            .command(EpsCommand::TmEps, now)
+            .map_err(|_| "TMEPS refused".to_owned())?;
+        let tm = wire::TmEps::parse(&bytes).map_err(|e| e.to_string())?;
+        Ok(csp::console::fields(&tm))
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

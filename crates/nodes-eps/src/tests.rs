@@ -785,3 +785,39 @@ fn selftest_reports_battery_arrays_and_each_channel() {
     assert_eq!(checks[2].name, "solar_array");
     assert_eq!(checks[3 + 8].name, "ch_sband");
 }
+
+/// ICD 4.1: a payload reads the EPS (TMEPS, CHGET, THRGET) but may not switch a channel or
+/// move a threshold: the failure reply, nothing changed, a warning; a lab bench opens it.
+#[test]
+fn a_payload_reads_the_eps_but_may_not_switch_it() {
+    let (mut h, out) = host(app());
+    let t = SimTime::from_secs(2);
+    let ask = |h: &mut Host<Tap<EpsApp>>, req: &[u8]| {
+        run_until(h, t);
+        h.handle_packet(0, Packet::new(Header::new(14, 4, 10, 40), req.to_vec()), t);
+        match h.node.poll_transmit() {
+            Some(Transmit::Packet { packet, .. }) => packet.data,
+            _ => panic!("no reply"),
+        }
+    };
+    assert_eq!(ask(&mut h, &[3, 3, 0]), [3, 0], "CHSET PC off");
+    assert_eq!(ask(&mut h, &[5, 10, 20, 5, 15]), [5, 0], "THRSET");
+    assert!(switches(&out).is_empty());
+    assert_eq!(ask(&mut h, &[1]).len(), 2 + 88, "TMEPS");
+    assert_eq!(ask(&mut h, &[2])[..2], [2, 1], "CHGET");
+    assert!(
+        h.node.recent_events().any(|e| e
+            .to_string()
+            .contains("payload 14 refused port 10 command 3")),
+        "a warning"
+    );
+    // A lab bench: payload_access = "open".
+    let (app, out) = Tap::new(app());
+    let mut c = NodeConfig::new("EPS", 4);
+    c.ifaces = vec![IfaceConfig::packet("p")];
+    c.routes.set_default(Route::direct(0));
+    c.payload_access = platform::addr::PayloadAccess::Open;
+    let mut bench = Host::new(c, app, SimTime::ZERO);
+    assert_eq!(ask(&mut bench, &[3, 3, 0])[..2], [3, 1]);
+    assert_eq!(switches(&out).len(), 1);
+}

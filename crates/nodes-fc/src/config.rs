@@ -239,6 +239,8 @@ impl Table for FcApp {
                     s.enter_soc = enter;
                     s.exit_soc = exit;
                 }
+                // The FC's state follows at its next tick.
+                self.safe.rejudge();
             }
             13 => {
                 let p = (v > 0.0).then(|| std::time::Duration::from_secs(v as u64));

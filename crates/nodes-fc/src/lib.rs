@@ -79,6 +79,14 @@ const GAP_NS: u64 = 500_000_000;
 /// older than this the FC falls back to its TLE).
 pub const GPS_FIX_MAX_AGE_NS: i64 = 10_000_000_000;
 
+/// How far from the FC's time an uploaded TLE's epoch may be (ATCTLESET), s: 30 days (a
+/// month-old TLE is hundreds of kilometres off; the ground uploads fresh ones).
+pub const TLE_MAX_AGE_S: f64 = 30.0 * 86_400.0;
+
+/// The longest window a script may hold the ADCS for, s (the twin's: a day; the ground
+/// renews the schedule on the next pass).
+pub const MAX_SCRIPT_WINDOW_S: f64 = 86_400.0;
+
 /// The FC's ICD ports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FcPorts {
@@ -667,6 +675,21 @@ impl FcApp {
     /// Submit a script line to the mission controller at `now`.
     fn submit_script(&mut self, bytes: &[u8], now: SimTime) -> Result<(), String> {
         let script = Script::parse_bytes(bytes).map_err(|e| e.to_string())?;
+        // The FC's own limits: one script holds the ADCS for at most a day, and its window
+        // ends within the RTC's range (a line cannot take the attitude for ever).
+        let window_s = script.end_unix_s - script.start_unix_s;
+        if window_s > MAX_SCRIPT_WINDOW_S {
+            return Err(format!(
+                "window of {window_s} s is longer than the FC's {MAX_SCRIPT_WINDOW_S} s (a day)"
+            ));
+        }
+        if script.end_unix_s > f64::from(wire::RTC_MAX_UNIX_S) {
+            return Err(format!(
+                "END {} is after the RTC's range (2100-01-01, {})",
+                script.end_unix_s,
+                wire::RTC_MAX_UNIX_S
+            ));
+        }
         let now_s = self.rtc_unix_s_f64(now);
         self.fsw
             .scripts
@@ -1155,7 +1178,8 @@ impl FcApp {
         }
     }
 
-    fn attitude_cmd(&mut self, c: AttitudeCommand) -> Result<Vec<u8>, u8> {
+    fn attitude_cmd(&mut self, c: AttitudeCommand, now: SimTime) -> Result<Vec<u8>, u8> {
+        let now_ns = self.true_unix_ns_i64(now);
         let target = &mut self.fsw.target;
         Ok(match c {
             AttitudeCommand::GetAttitude => TargetAttitude { q: target.attitude }.to_vec(),
@@ -1175,10 +1199,12 @@ impl FcApp {
             }
             AttitudeCommand::GetMode => TargetModeRepr { mode: target.mode }.to_vec(),
             AttitudeCommand::SetMode(m) => {
-                // The held point must make sense in the mode that reads it; ECI vector
-                // tracking has no direction before one is set.
-                if (target.point_set || m == TargetMode::EciVector)
-                    && !point_fits_mode(target.point, m)
+                // The held point must make sense in the mode that reads it; earth target and
+                // ECI vector tracking have no target before one is set (the default point
+                // would be latitude 0, longitude 0).
+                let needs_point = matches!(m, TargetMode::EarthTarget | TargetMode::EciVector);
+                if (needs_point && !target.point_set)
+                    || (target.point_set && !point_fits_mode(target.point, m))
                 {
                     return Err(RESULT_FAILURE);
                 }
@@ -1187,8 +1213,15 @@ impl FcApp {
             }
             AttitudeCommand::SetTle(lines) => {
                 let (l1, l2) = lines.text();
-                let model = truth_model(Some(&(l1.clone(), l2.clone())));
-                if model.is_err() {
+                let mut model = truth_model(Some(&(l1.clone(), l2.clone())));
+                // A TLE the FC can fly with now: its epoch within TLE_MAX_AGE_S of the FC's
+                // time (SGP4's error grows by kilometres a day), and SGP4 propagating to now
+                // (not decayed).
+                let fresh = Tle::parse(&l1, &l2, ChecksumMode::Strict).is_ok_and(|t| {
+                    (t.epoch.unix_ns() - now_ns).unsigned_abs() as f64 * 1e-9 <= TLE_MAX_AGE_S
+                });
+                let flies = model.as_mut().is_ok_and(|m| m.state_j2000(now_ns).is_ok());
+                if !(fresh && flies) {
                     return Err(RESULT_FAILURE);
                 }
                 let same = self
@@ -1298,7 +1331,7 @@ impl App for FcApp {
         } else if dport == p.rtc {
             serve::<RtcCommand>(&packet.data, |c| Ok(self.rtc(c, now)))
         } else if dport == p.attitude {
-            serve::<AttitudeCommand>(&packet.data, |c| self.attitude_cmd(c))
+            serve::<AttitudeCommand>(&packet.data, |c| self.attitude_cmd(c, now))
         } else {
             // Scripts (ICD 1.5 text); the first byte stands for the command id in the reply.
             let command = command.unwrap_or(0);
@@ -1379,10 +1412,6 @@ impl App for FcApp {
 
     fn params(&mut self) -> Option<&mut dyn csp::params::Table> {
         Some(self)
-    }
-
-    fn platform_port_refuses(&self, src: u8) -> bool {
-        self.cfg.payload_access.refuses(src, false)
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {
@@ -1699,6 +1728,12 @@ mod tests {
         );
         assert_eq!(r, [2, 0]);
         assert_eq!(h.node.counters().platform_refused, 1);
+        // A lab bench opens it.
+        let mut open = node_cfg();
+        open.payload_access = platform::addr::PayloadAccess::Open;
+        let mut bench = Host::new(open, FcApp::new(FcConfig::default()), SimTime::ZERO);
+        let r = ask_from(&mut bench, 14, csp::params::PORT, &[2, 7, 0], SimTime::ZERO);
+        assert_eq!(r, [2, 1, 7, 6, 0]);
         // The self-test: one line per component, the wire in the same order.
         let st = ask(&mut h, csp::params::PORT, &[7], SimTime::from_secs(9));
         let checks = h.app.checks(SimTime::from_secs(9));
@@ -2497,6 +2532,47 @@ mod tests {
         assert_eq!(acd.rw_state, [1; 4]);
     }
 
+    /// The FC's own limits on set commands: a script window of more than a day or ending
+    /// after the RTC's range, earth target before a target point, an RTC beyond 2100.
+    #[test]
+    fn scripts_modes_and_the_rtc_are_held_to_the_fcs_ranges() {
+        let mut h = host(Some((L1, L2)));
+        let t = SimTime::from_secs(10);
+        let start = START;
+        let line = |a: u64, b: u64| format!("adcs {a} {b} pointECI 1 0 0 0");
+        let day = 86_400;
+        assert_eq!(
+            ask(
+                &mut h,
+                13,
+                line(start + 60, start + 60 + day + 1).as_bytes(),
+                t
+            ),
+            [b'a', 0]
+        );
+        assert_eq!(
+            ask(&mut h, 13, line(4_102_444_000, 4_102_445_000).as_bytes(), t),
+            [b'a', 0]
+        );
+        assert_eq!(
+            ask(&mut h, 13, line(start + 60, start + 60 + day).as_bytes(), t),
+            [b'a', 1]
+        );
+        // Earth target needs a target point first.
+        assert_eq!(ask(&mut h, 12, &[6, 5], t), [6, 0]);
+        let mut p = vec![4];
+        for v in [54.6872f64, 25.2797, 100.0] {
+            p.extend(v.to_le_bytes());
+        }
+        assert_eq!(ask(&mut h, 12, &p, t), [4, 1]);
+        assert_eq!(ask(&mut h, 12, &[6, 5], t), [6, 1]);
+        // RTCSTMSET: an all-ones word is refused, 2099 is taken.
+        assert_eq!(ask(&mut h, 11, &[1, 0xff, 0xff, 0xff, 0xff], t), [1, 0]);
+        let mut set = vec![1];
+        set.extend(4_070_908_800u32.to_le_bytes());
+        assert_eq!(ask(&mut h, 11, &set, t), [1, 1]);
+    }
+
     /// The ICD 1.5 examples, verbatim, on port 13, with the RTC set to their 2020 times.
     #[test]
     fn the_four_icd_script_examples_are_flown_on_the_rtc() {
@@ -2582,5 +2658,21 @@ mod tests {
         bad[69] = b'7';
         assert_eq!(ask(&mut h, 12, &bad, t), vec![7, 0]);
         assert_eq!(ask(&mut h, 12, &req[..100], t), vec![7, 0]);
+        // A TLE 40 days old (epoch day 080 instead of 120, checksum redone) is refused;
+        // 20 days old is taken.
+        let with_day = |day: &str| {
+            let mut l1 = L1.replace("26120.75000000", &format!("26{day}.75000000"));
+            let sum: u32 = l1[..68]
+                .chars()
+                .map(|c| c.to_digit(10).unwrap_or(u32::from(c == '-')))
+                .sum();
+            l1.replace_range(68..69, &(sum % 10).to_string());
+            let mut r = vec![7];
+            r.extend_from_slice(l1.as_bytes());
+            r.extend_from_slice(L2.as_bytes());
+            r
+        };
+        assert_eq!(ask(&mut h, 12, &with_day("080"), t), vec![7, 0]);
+        assert_eq!(ask(&mut h, 12, &with_day("100"), t), vec![7, 1]);
     }
 }

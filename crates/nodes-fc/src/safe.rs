@@ -175,6 +175,22 @@ impl SafeMonitor {
         }
     }
 
+    /// The thresholds changed (a platform parameter): judge the last state of charge read
+    /// against them at once, not at the next poll.
+    pub fn rejudge(&mut self) {
+        if let Some(soc) = self.soc {
+            self.judge(soc);
+        }
+    }
+
+    fn judge(&mut self, soc: f64) {
+        if soc < self.cfg.enter_soc {
+            self.low_battery = true;
+        } else if soc >= self.cfg.exit_soc {
+            self.low_battery = false;
+        }
+    }
+
     /// Take `packet` if it is the EPS's answer to a poll; `false` if it is not for us.
     pub fn handle_reply(&mut self, packet: &Packet) -> bool {
         let (eps, eps_port) = self.cfg.eps;
@@ -195,11 +211,7 @@ impl SafeMonitor {
                 self.replies += 1;
                 let soc = f64::from(t.soc);
                 self.soc = Some(soc);
-                if soc < self.cfg.enter_soc {
-                    self.low_battery = true;
-                } else if soc >= self.cfg.exit_soc {
-                    self.low_battery = false;
-                }
+                self.judge(soc);
             }
             None => self.bad_replies += 1,
         }

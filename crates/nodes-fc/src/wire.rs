@@ -670,10 +670,14 @@ impl CommandSet for TelemetryCommand {
 /// time the FC distributes could not be 0.
 pub const RTC_MIN_UNIX_S: u32 = 946_684_800;
 
+/// The latest time RTCSTMSET accepts: 2100-01-01T00:00:00Z. Later is a mistake too (an
+/// all-ones word), and an RTC near the u32 limit would stop there and send that time on.
+pub const RTC_MAX_UNIX_S: u32 = 4_102_444_800;
+
 /// The RTC port's commands (port 11).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RtcCommand {
-    /// RTCSTMSET 1: set the RTC (from [`RTC_MIN_UNIX_S`]).
+    /// RTCSTMSET 1: set the RTC ([`RTC_MIN_UNIX_S`]..=[`RTC_MAX_UNIX_S`]).
     Set(RtcTimestamp),
     /// RTCSTMGET 2.
     Get,
@@ -683,7 +687,7 @@ impl CommandSet for RtcCommand {
     fn parse(r: &Request<'_>) -> Result<Self, RequestError> {
         match r.command {
             cmd::RTCSTMSET => data::<RtcTimestamp>(r, "4").and_then(|t| {
-                if t.rtc_timestamp >= RTC_MIN_UNIX_S {
+                if (RTC_MIN_UNIX_S..=RTC_MAX_UNIX_S).contains(&t.rtc_timestamp) {
                     Ok(RtcCommand::Set(t))
                 } else {
                     Err(RequestError::OutOfRange {
@@ -1062,8 +1066,8 @@ mod tests {
             TelemetryCommand::parse(&req(1, &[0])),
             Err(RequestError::WrongLength { .. })
         ));
-        // From 2000-01-01 on: 0 (and 1) refused, 946684800 taken.
-        for t in [0u32, 1, RTC_MIN_UNIX_S - 1] {
+        // From 2000-01-01 to 2100-01-01: 0, 1 and an all-ones word refused, 946684800 taken.
+        for t in [0u32, 1, RTC_MIN_UNIX_S - 1, RTC_MAX_UNIX_S + 1, u32::MAX] {
             assert!(matches!(
                 RtcCommand::parse(&req(1, &t.to_le_bytes())),
                 Err(RequestError::OutOfRange { .. })

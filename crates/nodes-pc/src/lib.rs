@@ -1687,8 +1687,21 @@ impl App for PcApp {
         Some(self)
     }
 
-    fn platform_port_refuses(&self, src: u8) -> bool {
-        self.cfg.payload_access.refuses(src, false)
+    fn console_commands(&self) -> &'static [csp::console::Command] {
+        &[csp::console::TM]
+    }
+
+    fn console(
+        &mut self,
+        _node: &mut Node,
+        words: &[&str],
+        _now: SimTime,
+    ) -> Result<String, String> {
+        if words != ["tm"] {
+            return Err("usage: tm".to_owned());
+        }
+        // As TMPC on port 12.
+        Ok(csp::console::fields(&self.tmpc()))
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

@@ -76,6 +76,7 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
     };
     opts.fc.payload_access = access;
     opts.pc.payload_access = access;
+    opts.payload_access = access;
     if let Some(to) = &s.rules.time_sync_to {
         opts.fc.time_sync.to = to.iter().filter_map(|r| net.resolve(r).ok()).collect();
     }

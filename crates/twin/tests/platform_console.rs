@@ -66,9 +66,11 @@ fn a_console_on_a_pty_answers_lines_ended_by_cr() {
             until_prompts(&mut tty, 1, &mut seen);
             tty.write_all(b"uptime\r").unwrap();
             until_prompts(&mut tty, 2, &mut seen);
+            tty.write_all(b"tm\r\n").unwrap();
+            until_prompts(&mut tty, 3, &mut seen);
             tty.write_all(&[b'x'; 300]).unwrap();
             tty.write_all(b"\r").unwrap();
-            until_prompts(&mut tty, 3, &mut seen);
+            until_prompts(&mut tty, 4, &mut seen);
             seen
         });
         let seen = client.await.unwrap();
@@ -77,6 +79,10 @@ fn a_console_on_a_pty_answers_lines_ended_by_cr() {
     });
     assert!(text.starts_with("M6P twin: EPS console (CSP 4)"), "{text}");
     assert!(text.contains("EPS (CSP 4) uptime "), "{text}");
+    // TMEPS field by field, CR LF ended (a CR LF line is one line, not two).
+    assert!(text.contains("eps> battery_v "), "{text}");
+    assert!(text.contains("\r\nsoc "), "{text}");
+    assert_eq!(text.matches("eps> ").count(), 4, "{text}");
     assert!(
         text.contains("error: line longer than 256 characters\r\neps> "),
         "{text}"

@@ -156,6 +156,7 @@ pub(super) fn nodes(
         cfg.cfp_first_ident = (mix(opts.seed, salt) % 1024) as u16;
         cfg.first_ephemeral_port = 32 + (mix(opts.seed, salt + 0x40) % 32) as u8;
         cfg.epoch_unix_s = opts.epoch_unix_s;
+        cfg.payload_access = opts.payload_access;
         let (inbox_tx, inbox_rx) = inbox();
         let ports: Vec<Attachment> = media
             .iter()

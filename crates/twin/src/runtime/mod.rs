@@ -57,6 +57,9 @@ pub struct RunOptions {
     pub kiss_links: Vec<KissLink>,
     /// Node consoles served to outside programs.
     pub uart: Vec<UartLink>,
+    /// What payloads may ask of every node's platform port (`[rules] payload_access`; the
+    /// FC and the PC have their own copy for their ICD ports).
+    pub payload_access: platform::addr::PayloadAccess,
     /// Factory values of nodes' platform parameters (`[nodes.NAME] params`), by address:
     /// (parameter id, value), set before the node's first boot.
     pub params: BTreeMap<u8, Vec<(u8, f64)>>,
@@ -201,6 +204,7 @@ impl RunOptions {
             seed: 1,
             kiss_links: Vec::new(),
             uart: Vec::new(),
+            payload_access: platform::addr::PayloadAccess::default(),
             params: BTreeMap::new(),
             replaced: std::collections::BTreeSet::new(),
             ground_plan: BTreeMap::new(),
