@@ -17,6 +17,7 @@ pub mod cfp;
 pub mod console;
 pub mod crc32;
 pub mod header;
+pub mod icd;
 pub mod kiss;
 pub mod node;
 pub mod packet;

@@ -21,8 +21,7 @@
 //! The periodic beacon is an unsolicited BEACON 4 "reply": the packet data is
 //! `04 | 01 | Beacon` (173 bytes), so a ground decoder of request-reply handles it as is.
 
-use csp::Error;
-use csp::reqrep::le::{Reader, Writer};
+use csp::icd::{Command, Data, Port};
 use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
 
 /// Default port of the COMM commands (INTERPRETATION.md section 4).
@@ -67,245 +66,161 @@ pub const BEACON_IN_CONTACT: u8 = 0x02;
 pub const BEACON_SECONDARY: u8 = 0x04;
 
 pub use csp::reqrep::le::Repr;
-use csp::reqrep::le::f32s;
 
-fn put_f32s(w: &mut Writer, a: &[f32]) {
-    for &x in a {
-        w.f32(x);
+/// TMCOMM and beacon `role` by name.
+pub const ROLES: &[(i64, &str)] = &[(1, "primary"), (2, "secondary")];
+
+/// Beacon `flags` by bit.
+pub const BEACON_FLAG_BITS: &[(i64, &str)] =
+    &[(0, "truth valid"), (1, "in contact"), (2, "secondary")];
+
+/// Port 10 as data (`csp::icd`).
+pub const ICD_PORT: Port = Port {
+    port: PORT,
+    name: "comm",
+    commands: &[
+        Command::new(
+            cmd::TMCOMM,
+            "TMCOMM",
+            "link state, beacon state and counters",
+        )
+        .reply(Data::of::<TmComm>())
+        .twin(),
+        Command::new(cmd::BEACONSET, "BEACONSET", "set the beacon period")
+            .request(Data::of::<BeaconPeriod>())
+            .examples(&[&[60, 0]])
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::BEACONGET, "BEACONGET", "read the beacon period")
+            .reply(Data::of::<BeaconPeriod>())
+            .twin(),
+        Command::new(
+            cmd::BEACON,
+            "BEACON",
+            "the beacon now (also the periodic beacon's data)",
+        )
+        .reply(Data::of::<Beacon>())
+        .twin(),
+    ],
+};
+
+csp::wire_struct! {
+    /// TMCOMM reply (58 bytes): link state towards the best ground station, beacon state and
+    /// traffic counters.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TmComm {
+        /// [`role::PRIMARY`] or [`role::SECONDARY`].
+        pub role: u8 { values: ROLES },
+        /// 1: the radio is active (on the UHF route, beaconing); 0: standby.
+        pub radio_active: u8 { values: &[(0, "standby"), (1, "active")] },
+        /// 1: a configured station sees the satellite at or above the elevation mask.
+        pub in_contact: u8 { values: &[(0, "no"), (1, "yes")] },
+        /// Index of the station reported below (configuration order), [`NO_STATION`] if none.
+        pub station: u8,
+        /// Elevation of the satellite over that station, deg.
+        pub elevation_deg: f32 { unit: "deg" },
+        /// Azimuth of the satellite from that station, deg from north through east.
+        pub azimuth_deg: f32 { unit: "deg" },
+        /// Slant range to that station, km.
+        pub range_km: f32 { unit: "km" },
+        /// Received signal strength estimate at that station, dBm (the noise floor out of
+        /// contact).
+        pub rssi_dbm: f32 { unit: "dBm" },
+        /// Signal-to-noise ratio in the receiver bandwidth, dB (0 out of contact).
+        pub snr_db: f32 { unit: "dB" },
+        /// COMM uptime, s.
+        pub uptime_s: u32 { unit: "s" },
+        /// Beacons sent since boot.
+        pub beacons_sent: u32,
+        /// Beacon period in effect, s (0 = off).
+        pub beacon_period_s: u16 { unit: "s" },
+        /// UHF transmitter time spent on beacons since boot, ms.
+        pub beacon_air_ms: u32 { unit: "ms" },
+        /// CSP packets received by the node (local and to forward), since the run started.
+        pub rx_packets: u32,
+        /// CSP packets sent by the node (originated and forwarded).
+        pub tx_packets: u32,
+        /// CSP packets forwarded between the main bus and the radio.
+        pub forwarded: u32,
+        /// CSP packets and frames dropped by the node, any reason.
+        pub drops: u32,
+        /// Port 10 requests answered with failure since boot.
+        pub refused: u32,
     }
 }
 
-/// TMCOMM reply (58 bytes): link state towards the best ground station, beacon state and
-/// traffic counters.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TmComm {
-    /// [`role::PRIMARY`] or [`role::SECONDARY`].
-    pub role: u8,
-    /// 1: the radio is active (on the UHF route, beaconing); 0: standby.
-    pub radio_active: u8,
-    /// 1: a configured station sees the satellite at or above the elevation mask.
-    pub in_contact: u8,
-    /// Index of the station reported below (configuration order), [`NO_STATION`] if none.
-    pub station: u8,
-    /// Elevation of the satellite over that station, deg.
-    pub elevation_deg: f32,
-    /// Azimuth of the satellite from that station, deg from north through east.
-    pub azimuth_deg: f32,
-    /// Slant range to that station, km.
-    pub range_km: f32,
-    /// Received signal strength estimate at that station, dBm (the noise floor out of
-    /// contact).
-    pub rssi_dbm: f32,
-    /// Signal-to-noise ratio in the receiver bandwidth, dB (0 out of contact).
-    pub snr_db: f32,
-    /// COMM uptime, s.
-    pub uptime_s: u32,
-    /// Beacons sent since boot.
-    pub beacons_sent: u32,
-    /// Beacon period in effect, s (0 = off).
-    pub beacon_period_s: u16,
-    /// UHF transmitter time spent on beacons since boot, ms.
-    pub beacon_air_ms: u32,
-    /// CSP packets received by the node (local and to forward), since the run started.
-    pub rx_packets: u32,
-    /// CSP packets sent by the node (originated and forwarded).
-    pub tx_packets: u32,
-    /// CSP packets forwarded between the main bus and the radio.
-    pub forwarded: u32,
-    /// CSP packets and frames dropped by the node, any reason.
-    pub drops: u32,
-    /// Port 10 requests answered with failure since boot.
-    pub refused: u32,
-}
-
-impl Repr for TmComm {
-    const LEN: usize = 4 + 5 * 4 + 4 + 4 + 2 + 4 + 5 * 4;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmComm {
-            role: r.u8()?,
-            radio_active: r.u8()?,
-            in_contact: r.u8()?,
-            station: r.u8()?,
-            elevation_deg: r.f32()?,
-            azimuth_deg: r.f32()?,
-            range_km: r.f32()?,
-            rssi_dbm: r.f32()?,
-            snr_db: r.f32()?,
-            uptime_s: r.u32()?,
-            beacons_sent: r.u32()?,
-            beacon_period_s: r.u16()?,
-            beacon_air_ms: r.u32()?,
-            rx_packets: r.u32()?,
-            tx_packets: r.u32()?,
-            forwarded: r.u32()?,
-            drops: r.u32()?,
-            refused: r.u32()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.role)
-            .u8(self.radio_active)
-            .u8(self.in_contact)
-            .u8(self.station)
-            .f32(self.elevation_deg)
-            .f32(self.azimuth_deg)
-            .f32(self.range_km)
-            .f32(self.rssi_dbm)
-            .f32(self.snr_db)
-            .u32(self.uptime_s)
-            .u32(self.beacons_sent)
-            .u16(self.beacon_period_s)
-            .u32(self.beacon_air_ms)
-            .u32(self.rx_packets)
-            .u32(self.tx_packets)
-            .u32(self.forwarded)
-            .u32(self.drops)
-            .u32(self.refused);
+csp::wire_struct! {
+    /// BEACONSET request and BEACONGET reply (2 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct BeaconPeriod {
+        /// Beacon period, s: 0 = off, else [`BEACON_PERIOD_MIN_S`]..=[`BEACON_PERIOD_MAX_S`].
+        pub period_s: u16 { unit: "s", range: (0.0, 3600.0), except: (1.0, 9.0), values: &[(0, "off")] },
     }
 }
 
-/// BEACONSET request and BEACONGET reply (2 bytes).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct BeaconPeriod {
-    /// Beacon period, s: 0 = off, else [`BEACON_PERIOD_MIN_S`]..=[`BEACON_PERIOD_MAX_S`].
-    pub period_s: u16,
-}
-
-impl Repr for BeaconPeriod {
-    const LEN: usize = 2;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(BeaconPeriod { period_s: r.u16()? })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u16(self.period_s);
-    }
-}
-
-/// The beacon (171 bytes, sized like the FC's TMALL): a one-packet summary of the
-/// spacecraft for the ground, from COMM's clock and counters and the FC's latest truth
-/// snapshot. Order on the wire is the field order here.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Beacon {
-    /// Beacon sequence number: 1 for the first beacon after boot, +1 per beacon sent.
-    /// BEACON 4 requests report the number of the last beacon sent.
-    pub seq: u32,
-    /// COMM's clock, UTC unix seconds.
-    pub utc_s: u32,
-    /// COMM uptime, s.
-    pub uptime_s: u32,
-    /// [`BEACON_TRUTH_VALID`] | [`BEACON_IN_CONTACT`] | [`BEACON_SECONDARY`].
-    pub flags: u8,
-    /// UTC unix seconds of the truth snapshot the fields below come from.
-    pub truth_utc_s: u32,
-    /// Position, ECI J2000, km.
-    pub r_eci_km: [f32; 3],
-    /// Velocity, ECI J2000, km/s.
-    pub v_eci_km_s: [f32; 3],
-    /// Sub-satellite point: geodetic latitude, deg (WGS-84).
-    pub lat_deg: f32,
-    /// Sub-satellite point: longitude, deg, in (-180, 180].
-    pub lon_deg: f32,
-    /// Height above the WGS-84 ellipsoid, km.
-    pub alt_km: f32,
-    /// Reported attitude: the active rotation body -> ECI J2000, scalar first (r, i, j, k).
-    pub q_eci_from_body: [f32; 4],
-    /// Body rate relative to ECI in the body frame, deg/s.
-    pub w_body_deg_s: [f32; 3],
-    /// Unit vector to the sun in the body frame.
-    pub sun_body_unit: [f32; 3],
-    /// Visible fraction of the solar disc, percent (0 umbra .. 100 sunlit).
-    pub sun_visible_pct: u8,
-    /// Geomagnetic field in the body frame, nT.
-    pub b_body_nt: [f32; 3],
-    /// Reaction wheel speeds, rpm.
-    pub wheel_speed_rpm: [f32; 4],
-    /// Magnetorquer dipoles along body X, Y, Z, A m^2.
-    pub mtq_dipole_am2: [f32; 3],
-    /// The station of the link fields below ([`NO_STATION`] if none).
-    pub station: u8,
-    /// Elevation over that station, deg.
-    pub elevation_deg: f32,
-    /// Azimuth from that station, deg.
-    pub azimuth_deg: f32,
-    /// Slant range, km.
-    pub range_km: f32,
-    /// RSSI estimate at that station, dBm (as [`TmComm::rssi_dbm`]).
-    pub rssi_dbm: f32,
-    /// CSP packets received by COMM.
-    pub rx_packets: u32,
-    /// CSP packets sent by COMM.
-    pub tx_packets: u32,
-    /// CSP packets forwarded.
-    pub forwarded: u32,
-    /// CSP packets and frames dropped.
-    pub drops: u32,
-    /// COMM reboots since the run started (saturating).
-    pub reboots: u16,
-    /// Beacon period in effect, s.
-    pub beacon_period_s: u16,
-}
-
-impl Repr for Beacon {
-    const LEN: usize = 171;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(Beacon {
-            seq: r.u32()?,
-            utc_s: r.u32()?,
-            uptime_s: r.u32()?,
-            flags: r.u8()?,
-            truth_utc_s: r.u32()?,
-            r_eci_km: f32s(r)?,
-            v_eci_km_s: f32s(r)?,
-            lat_deg: r.f32()?,
-            lon_deg: r.f32()?,
-            alt_km: r.f32()?,
-            q_eci_from_body: f32s(r)?,
-            w_body_deg_s: f32s(r)?,
-            sun_body_unit: f32s(r)?,
-            sun_visible_pct: r.u8()?,
-            b_body_nt: f32s(r)?,
-            wheel_speed_rpm: f32s(r)?,
-            mtq_dipole_am2: f32s(r)?,
-            station: r.u8()?,
-            elevation_deg: r.f32()?,
-            azimuth_deg: r.f32()?,
-            range_km: r.f32()?,
-            rssi_dbm: r.f32()?,
-            rx_packets: r.u32()?,
-            tx_packets: r.u32()?,
-            forwarded: r.u32()?,
-            drops: r.u32()?,
-            reboots: r.u16()?,
-            beacon_period_s: r.u16()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.seq)
-            .u32(self.utc_s)
-            .u32(self.uptime_s)
-            .u8(self.flags)
-            .u32(self.truth_utc_s);
-        put_f32s(w, &self.r_eci_km);
-        put_f32s(w, &self.v_eci_km_s);
-        w.f32(self.lat_deg).f32(self.lon_deg).f32(self.alt_km);
-        put_f32s(w, &self.q_eci_from_body);
-        put_f32s(w, &self.w_body_deg_s);
-        put_f32s(w, &self.sun_body_unit);
-        w.u8(self.sun_visible_pct);
-        put_f32s(w, &self.b_body_nt);
-        put_f32s(w, &self.wheel_speed_rpm);
-        put_f32s(w, &self.mtq_dipole_am2);
-        w.u8(self.station)
-            .f32(self.elevation_deg)
-            .f32(self.azimuth_deg)
-            .f32(self.range_km)
-            .f32(self.rssi_dbm)
-            .u32(self.rx_packets)
-            .u32(self.tx_packets)
-            .u32(self.forwarded)
-            .u32(self.drops)
-            .u16(self.reboots)
-            .u16(self.beacon_period_s);
+csp::wire_struct! {
+    /// The beacon (171 bytes, sized like the FC's TMALL): a one-packet summary of the
+    /// spacecraft for the ground, from COMM's clock and counters and the FC's latest truth
+    /// snapshot. Order on the wire is the field order here.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct Beacon {
+        /// Beacon sequence number: 1 for the first beacon after boot, +1 per beacon sent.
+        /// BEACON 4 requests report the number of the last beacon sent.
+        pub seq: u32,
+        /// COMM's clock, UTC unix seconds.
+        pub utc_s: u32 { unit: "s" },
+        /// COMM uptime, s.
+        pub uptime_s: u32 { unit: "s" },
+        /// [`BEACON_TRUTH_VALID`] | [`BEACON_IN_CONTACT`] | [`BEACON_SECONDARY`].
+        pub flags: u8 { bits: BEACON_FLAG_BITS },
+        /// UTC unix seconds of the truth snapshot the fields below come from.
+        pub truth_utc_s: u32 { unit: "s" },
+        /// Position, ECI J2000, km.
+        pub r_eci_km: [f32; 3] { unit: "km" },
+        /// Velocity, ECI J2000, km/s.
+        pub v_eci_km_s: [f32; 3] { unit: "km/s" },
+        /// Sub-satellite point: geodetic latitude, deg (WGS-84).
+        pub lat_deg: f32 { unit: "deg" },
+        /// Sub-satellite point: longitude, deg, in (-180, 180].
+        pub lon_deg: f32 { unit: "deg" },
+        /// Height above the WGS-84 ellipsoid, km.
+        pub alt_km: f32 { unit: "km" },
+        /// Reported attitude: the active rotation body -> ECI J2000, scalar first (r, i, j, k).
+        pub q_eci_from_body: [f32; 4],
+        /// Body rate relative to ECI in the body frame, deg/s.
+        pub w_body_deg_s: [f32; 3] { unit: "deg/s" },
+        /// Unit vector to the sun in the body frame.
+        pub sun_body_unit: [f32; 3],
+        /// Visible fraction of the solar disc, percent (0 umbra .. 100 sunlit).
+        pub sun_visible_pct: u8 { unit: "%" },
+        /// Geomagnetic field in the body frame, nT.
+        pub b_body_nt: [f32; 3] { unit: "nT" },
+        /// Reaction wheel speeds, rpm.
+        pub wheel_speed_rpm: [f32; 4] { unit: "rpm" },
+        /// Magnetorquer dipoles along body X, Y, Z, A m^2.
+        pub mtq_dipole_am2: [f32; 3] { unit: "A m^2" },
+        /// The station of the link fields below ([`NO_STATION`] if none).
+        pub station: u8,
+        /// Elevation over that station, deg.
+        pub elevation_deg: f32 { unit: "deg" },
+        /// Azimuth from that station, deg.
+        pub azimuth_deg: f32 { unit: "deg" },
+        /// Slant range, km.
+        pub range_km: f32 { unit: "km" },
+        /// RSSI estimate at that station, dBm (as [`TmComm::rssi_dbm`]).
+        pub rssi_dbm: f32 { unit: "dBm" },
+        /// CSP packets received by COMM.
+        pub rx_packets: u32,
+        /// CSP packets sent by COMM.
+        pub tx_packets: u32,
+        /// CSP packets forwarded.
+        pub forwarded: u32,
+        /// CSP packets and frames dropped.
+        pub drops: u32,
+        /// COMM reboots since the run started (saturating).
+        pub reboots: u16,
+        /// Beacon period in effect, s.
+        pub beacon_period_s: u16 { unit: "s" },
     }
 }
 
@@ -366,7 +281,18 @@ impl CommandSet for CommCommand {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use csp::Error;
     use proptest::prelude::*;
+
+    #[test]
+    fn the_icd_description_agrees_with_the_parser() {
+        let bad = csp::icd::range_disagreements(&ICD_PORT, |c, d| {
+            let mut b = vec![c];
+            b.extend_from_slice(d);
+            req(&b).is_ok()
+        });
+        assert!(bad.is_empty(), "{bad:#?}");
+    }
 
     fn req(b: &[u8]) -> Result<CommCommand, RequestError> {
         CommCommand::parse(&Request::parse(b).unwrap())

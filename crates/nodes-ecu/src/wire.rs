@@ -19,8 +19,7 @@
 //!
 //! A refused or malformed request gets `cmd | 00` and no data.
 
-use csp::Error;
-use csp::reqrep::le::{Reader, Writer};
+use csp::icd::{Command, Data, Port};
 use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
 
 /// Default port of the ECU's telemetry and control (INTERPRETATION.md section 4).
@@ -71,127 +70,99 @@ impl EcuState {
 
 pub use csp::reqrep::le::Repr;
 
-/// TMECU reply data (42 bytes): the ECU's state, tank and totals.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TmEcu {
-    /// [`EcuState`] as a byte (0 safe, 1 warming, 2 armed, 3 firing).
-    pub state: u8,
-    /// Heaters: 0 off, 1 on (on while armed, firing included).
-    pub heater: u8,
-    /// Warm-up left before FIRE is accepted, ms (0 unless warming).
-    pub warmup_left_ms: u32,
-    /// Time left of the current burn, ms (0 unless firing).
-    pub burn_left_ms: u32,
-    /// Propellant left, kg.
-    pub propellant_kg: f32,
-    /// Tank pressure, kPa.
-    pub tank_pressure_kpa: f32,
-    /// Thrust now if firing, else the thrust the next burn would start with, N.
-    pub thrust_n: f32,
-    /// Spacecraft mass (dry + propellant), kg.
-    pub mass_kg: f32,
-    /// Total impulse delivered since the start of the run, N s.
-    pub total_impulse_n_s: f32,
-    /// Burns started since the start of the run.
-    pub burns: u32,
-    /// Duration of the last finished burn, ms.
-    pub last_burn_ms: u32,
-    /// Requests refused since the ECU's last boot.
-    pub refused: u32,
-}
+/// [`EcuState`]'s values by name (TMECU `state`).
+pub const ECU_STATES: &[(i64, &str)] = &[(0, "safe"), (1, "warming"), (2, "armed"), (3, "firing")];
 
-impl Repr for TmEcu {
-    const LEN: usize = 42;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmEcu {
-            state: r.u8()?,
-            heater: r.u8()?,
-            warmup_left_ms: r.u32()?,
-            burn_left_ms: r.u32()?,
-            propellant_kg: r.f32()?,
-            tank_pressure_kpa: r.f32()?,
-            thrust_n: r.f32()?,
-            mass_kg: r.f32()?,
-            total_impulse_n_s: r.f32()?,
-            burns: r.u32()?,
-            last_burn_ms: r.u32()?,
-            refused: r.u32()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.state)
-            .u8(self.heater)
-            .u32(self.warmup_left_ms)
-            .u32(self.burn_left_ms)
-            .f32(self.propellant_kg)
-            .f32(self.tank_pressure_kpa)
-            .f32(self.thrust_n)
-            .f32(self.mass_kg)
-            .f32(self.total_impulse_n_s)
-            .u32(self.burns)
-            .u32(self.last_burn_ms)
-            .u32(self.refused);
-    }
-}
+/// Port 10 as data (`csp::icd`).
+pub const ICD_PORT: Port = Port {
+    port: PORT_ECU,
+    name: "ecu",
+    commands: &[
+        Command::new(cmd::TMECU, "TMECU", "the ECU's state, tank and totals")
+            .reply(Data::of::<TmEcu>())
+            .twin(),
+        Command::new(
+            cmd::ARM,
+            "ARM",
+            "heaters on; FIRE is accepted after the warm-up",
+        )
+        .reply(Data::of::<ArmReply>())
+        .no_payloads()
+        .twin(),
+        Command::new(
+            cmd::FIRE,
+            "FIRE",
+            "fire for a duration (the ECU grants at most its maximum burn)",
+        )
+        .request(Data::of::<FireRequest>())
+        .reply(Data::of::<FireReply>())
+        .examples(&[&[0x10, 0x27, 0, 0]])
+        .no_payloads()
+        .twin(),
+        Command::new(cmd::SAFE, "SAFE", "stop firing, heaters off, disarm")
+            .no_payloads()
+            .twin(),
+    ],
+};
 
-/// ARM reply data (4 bytes).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct ArmReply {
-    /// Warm-up left before FIRE is accepted, ms (0: ready now).
-    pub warmup_left_ms: u32,
-}
-
-impl Repr for ArmReply {
-    const LEN: usize = 4;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(ArmReply {
-            warmup_left_ms: r.u32()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.warmup_left_ms);
+csp::wire_struct! {
+    /// TMECU reply data (42 bytes): the ECU's state, tank and totals.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TmEcu {
+        /// [`EcuState`] as a byte (0 safe, 1 warming, 2 armed, 3 firing).
+        pub state: u8 { values: ECU_STATES },
+        /// Heaters: 0 off, 1 on (on while armed, firing included).
+        pub heater: u8 { values: csp::icd::OFF_ON },
+        /// Warm-up left before FIRE is accepted, ms (0 unless warming).
+        pub warmup_left_ms: u32 { unit: "ms" },
+        /// Time left of the current burn, ms (0 unless firing).
+        pub burn_left_ms: u32 { unit: "ms" },
+        /// Propellant left, kg.
+        pub propellant_kg: f32 { unit: "kg" },
+        /// Tank pressure, kPa.
+        pub tank_pressure_kpa: f32 { unit: "kPa" },
+        /// Thrust now if firing, else the thrust the next burn would start with, N.
+        pub thrust_n: f32 { unit: "N" },
+        /// Spacecraft mass (dry + propellant), kg.
+        pub mass_kg: f32 { unit: "kg" },
+        /// Total impulse delivered since the start of the run, N s.
+        pub total_impulse_n_s: f32 { unit: "N s" },
+        /// Burns started since the start of the run.
+        pub burns: u32,
+        /// Duration of the last finished burn, ms.
+        pub last_burn_ms: u32 { unit: "ms" },
+        /// Requests refused since the ECU's last boot.
+        pub refused: u32,
     }
 }
 
-/// FIRE request data (4 bytes).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct FireRequest {
-    /// Burn duration, ms (1 to the configured maximum, 60 000 by default).
-    pub duration_ms: u32,
-}
-
-impl Repr for FireRequest {
-    const LEN: usize = 4;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(FireRequest {
-            duration_ms: r.u32()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.duration_ms);
+csp::wire_struct! {
+    /// ARM reply data (4 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct ArmReply {
+        /// Warm-up left before FIRE is accepted, ms (0: ready now).
+        pub warmup_left_ms: u32 { unit: "ms" },
     }
 }
 
-/// FIRE reply data (8 bytes).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct FireReply {
-    /// The duration granted, ms: the one asked for, or shorter when the propellant left
-    /// lasts less.
-    pub granted_ms: u32,
-    /// Thrust of this burn, N.
-    pub thrust_n: f32,
+csp::wire_struct! {
+    /// FIRE request data (4 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct FireRequest {
+        /// Burn duration, ms (1 to the configured maximum, 60 000 by default).
+        pub duration_ms: u32 { unit: "ms", range: (1.0, 4294967295.0) },
+    }
 }
 
-impl Repr for FireReply {
-    const LEN: usize = 8;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(FireReply {
-            granted_ms: r.u32()?,
-            thrust_n: r.f32()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.granted_ms).f32(self.thrust_n);
+csp::wire_struct! {
+    /// FIRE reply data (8 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct FireReply {
+        /// The duration granted, ms: the one asked for, or shorter when the propellant left
+        /// lasts less.
+        pub granted_ms: u32 { unit: "ms" },
+        /// Thrust of this burn, N.
+        pub thrust_n: f32 { unit: "N" },
     }
 }
 
@@ -238,7 +209,18 @@ impl CommandSet for EcuCommand {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use csp::Error;
     use proptest::prelude::*;
+
+    #[test]
+    fn the_icd_description_agrees_with_the_parser() {
+        let bad = csp::icd::range_disagreements(&ICD_PORT, |c, d| {
+            let mut b = vec![c];
+            b.extend_from_slice(d);
+            EcuCommand::parse(&Request::parse(&b).unwrap()).is_ok()
+        });
+        assert!(bad.is_empty(), "{bad:#?}");
+    }
 
     #[test]
     fn sizes_are_fixed() {

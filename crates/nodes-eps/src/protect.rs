@@ -57,18 +57,21 @@ impl Group {
     }
 }
 
-/// Shed and restore thresholds, percent of state of charge (the wire layout of THRGET and
-/// THRSET).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Thresholds {
-    /// Shed the payload group below this.
-    pub payload_shed_pct: u8,
-    /// Restore it at or above this.
-    pub payload_restore_pct: u8,
-    /// Shed the platform group below this.
-    pub platform_shed_pct: u8,
-    /// Restore it at or above this.
-    pub platform_restore_pct: u8,
+csp::wire_struct! {
+    /// Shed and restore thresholds, percent of state of charge (the wire layout of THRGET
+    /// and THRSET, 4 bytes). A group is shed below its shed threshold and restored at or
+    /// above its restore threshold; `shed < restore <= 100` for each group.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct Thresholds {
+        /// Shed the payload group below this.
+        pub payload_shed_pct: u8 { unit: "%", range: (0.0, 99.0) },
+        /// Restore it at or above this.
+        pub payload_restore_pct: u8 { unit: "%", range: (1.0, 100.0) },
+        /// Shed the platform group below this.
+        pub platform_shed_pct: u8 { unit: "%", range: (0.0, 99.0) },
+        /// Restore it at or above this.
+        pub platform_restore_pct: u8 { unit: "%", range: (1.0, 100.0) },
+    }
 }
 
 impl Default for Thresholds {

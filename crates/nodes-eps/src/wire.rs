@@ -23,8 +23,7 @@
 //! for switching on a channel whose protection group is shed. Switching a channel to the
 //! state it already has succeeds and changes nothing.
 
-use csp::Error;
-use csp::reqrep::le::{Reader, Writer};
+use csp::icd::{Command, Data, Port};
 use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
 
 use crate::loads::{CHANNELS, Channel};
@@ -50,167 +49,137 @@ pub mod cmd {
 
 pub use csp::reqrep::le::Repr;
 
-/// TMEPS reply (88 bytes): the EPS's telemetry.
-///
-/// | offset | field | type |
-/// |---|---|---|
-/// | 0 | battery voltage, V | f32 |
-/// | 4 | battery current, A (positive charging) | f32 |
-/// | 8 | state of charge, 0..=1 | f32 |
-/// | 12 | stored energy, Wh | f32 |
-/// | 16 | solar array power, W | f32 |
-/// | 20 | total load, W | f32 |
-/// | 24 | panels in use (0..=8) | u8 |
-/// | 25 | power of panel 0..7, W (0 past the count) | f32 x 8 |
-/// | 57 | channels on (bit = channel id) | u16 |
-/// | 59 | channels shed by the protection | u16 |
-/// | 61 | current of channel 0..8, mA at the battery voltage | u16 x 9 |
-/// | 79 | protection: bit 0 payload group shed, bit 1 platform group shed, bit 2 battery empty (cut-off) | u8 |
-/// | 80 | solar energy since the EPS booted, Wh | f32 |
-/// | 84 | load energy since the EPS booted, Wh | f32 |
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TmEps {
-    /// Battery terminal voltage, V.
-    pub battery_v: f32,
-    /// Battery current, A (positive charging).
-    pub battery_a: f32,
-    /// State of charge, 0..=1.
-    pub soc: f32,
-    /// Energy stored, Wh.
-    pub battery_wh: f32,
-    /// Power of the arrays, W.
-    pub solar_w: f32,
-    /// Total load, W.
-    pub load_w: f32,
-    /// Panels in use.
-    pub panel_count: u8,
-    /// Power of each panel, W.
-    pub panels_w: [f32; MAX_PANELS],
-    /// Channels on.
-    pub channels_on: u16,
-    /// Channels shed.
-    pub channels_shed: u16,
-    /// Channel currents, mA.
-    pub channel_ma: [u16; CHANNELS],
-    /// Protection flags.
-    pub protection: u8,
-    /// Solar energy since boot, Wh.
-    pub solar_wh: f32,
-    /// Load energy since boot, Wh.
-    pub load_wh: f32,
+/// Channel ids and names (ICD 4.3's power channels, in id order).
+pub const CHANNEL_NAMES: &[(i64, &str)] = &[
+    (0, "COMM1"),
+    (1, "COMM2"),
+    (2, "ECU"),
+    (3, "PC"),
+    (4, "PL12"),
+    (5, "PL13"),
+    (6, "PL14"),
+    (7, "PL15"),
+    (8, "SBAND"),
+];
+
+/// Channel masks: bit = channel id (the same names).
+pub const CHANNEL_BITS: &[(i64, &str)] = CHANNEL_NAMES;
+
+/// TMEPS protection flags.
+pub const PROTECTION_BITS: &[(i64, &str)] = &[
+    (0, "payload group shed"),
+    (1, "platform group shed"),
+    (2, "battery empty (cut-off)"),
+];
+
+csp::wire_struct! {
+    /// TMEPS reply (88 bytes): the EPS's telemetry.
+    ///
+    /// | offset | field | type |
+    /// |---|---|---|
+    /// | 0 | battery voltage, V | f32 |
+    /// | 4 | battery current, A (positive charging) | f32 |
+    /// | 8 | state of charge, 0..=1 | f32 |
+    /// | 12 | stored energy, Wh | f32 |
+    /// | 16 | solar array power, W | f32 |
+    /// | 20 | total load, W | f32 |
+    /// | 24 | panels in use (0..=8) | u8 |
+    /// | 25 | power of panel 0..7, W (0 past the count) | f32 x 8 |
+    /// | 57 | channels on (bit = channel id) | u16 |
+    /// | 59 | channels shed by the protection | u16 |
+    /// | 61 | current of channel 0..8, mA at the battery voltage | u16 x 9 |
+    /// | 79 | protection: bit 0 payload group shed, bit 1 platform group shed, bit 2 battery empty (cut-off) | u8 |
+    /// | 80 | solar energy since the EPS booted, Wh | f32 |
+    /// | 84 | load energy since the EPS booted, Wh | f32 |
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TmEps {
+        /// Battery terminal voltage.
+        pub battery_v: f32 { unit: "V" },
+        /// Battery current (positive charging).
+        pub battery_a: f32 { unit: "A" },
+        /// State of charge, 0..=1.
+        pub soc: f32,
+        /// Energy stored.
+        pub battery_wh: f32 { unit: "Wh" },
+        /// Power of the arrays.
+        pub solar_w: f32 { unit: "W" },
+        /// Total load.
+        pub load_w: f32 { unit: "W" },
+        /// Panels in use (0..=8).
+        pub panel_count: u8,
+        /// Power of each panel (0 past the count).
+        pub panels_w: [f32; MAX_PANELS] { unit: "W" },
+        /// Channels on (bit = channel id).
+        pub channels_on: u16 { bits: CHANNEL_BITS },
+        /// Channels switched off by the protection, to be restored.
+        pub channels_shed: u16 { bits: CHANNEL_BITS },
+        /// Current of each channel at the battery voltage.
+        pub channel_ma: [u16; CHANNELS] { unit: "mA" },
+        /// Protection flags.
+        pub protection: u8 { bits: PROTECTION_BITS },
+        /// Solar energy since the EPS booted.
+        pub solar_wh: f32 { unit: "Wh" },
+        /// Load energy since the EPS booted.
+        pub load_wh: f32 { unit: "Wh" },
+    }
 }
 
 /// TMEPS protection flag: the battery is empty and the loads are not all supplied.
 pub const PROTECTION_CUT_OFF: u8 = 1 << 2;
 
-impl Repr for TmEps {
-    const LEN: usize = 88;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        let mut t = TmEps {
-            battery_v: r.f32()?,
-            battery_a: r.f32()?,
-            soc: r.f32()?,
-            battery_wh: r.f32()?,
-            solar_w: r.f32()?,
-            load_w: r.f32()?,
-            panel_count: r.u8()?,
-            ..TmEps::default()
-        };
-        for p in &mut t.panels_w {
-            *p = r.f32()?;
-        }
-        t.channels_on = r.u16()?;
-        t.channels_shed = r.u16()?;
-        for c in &mut t.channel_ma {
-            *c = r.u16()?;
-        }
-        t.protection = r.u8()?;
-        t.solar_wh = r.f32()?;
-        t.load_wh = r.f32()?;
-        Ok(t)
-    }
-    fn write(&self, w: &mut Writer) {
-        w.f32(self.battery_v)
-            .f32(self.battery_a)
-            .f32(self.soc)
-            .f32(self.battery_wh)
-            .f32(self.solar_w)
-            .f32(self.load_w)
-            .u8(self.panel_count);
-        for p in &self.panels_w {
-            w.f32(*p);
-        }
-        w.u16(self.channels_on).u16(self.channels_shed);
-        for c in &self.channel_ma {
-            w.u16(*c);
-        }
-        w.u8(self.protection).f32(self.solar_wh).f32(self.load_wh);
+csp::wire_struct! {
+    /// CHGET and CHSET reply (4 bytes): `on u16 | shed u16`, channel masks.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct ChannelStates {
+        /// Channels on (bit = channel id).
+        pub on: u16 { bits: CHANNEL_BITS },
+        /// Channels switched off by the protection, to be restored.
+        pub shed: u16 { bits: CHANNEL_BITS },
     }
 }
 
-/// CHGET and CHSET reply (4 bytes): `on u16 | shed u16`, channel masks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct ChannelStates {
-    /// Channels on (bit = channel id).
-    pub on: u16,
-    /// Channels switched off by the protection, to be restored.
-    pub shed: u16,
-}
-
-impl Repr for ChannelStates {
-    const LEN: usize = 4;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(ChannelStates {
-            on: r.u16()?,
-            shed: r.u16()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u16(self.on).u16(self.shed);
+csp::wire_struct! {
+    /// CHSET request (2 bytes): `channel u8 | on u8`.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct ChannelSwitch {
+        /// Channel id.
+        pub channel: u8 { range: (0.0, 8.0), values: CHANNEL_NAMES },
+        /// 1 on, 0 off.
+        pub on: u8 { range: (0.0, 1.0), values: csp::icd::OFF_ON },
     }
 }
 
-/// CHSET request (2 bytes): `channel u8 | on u8`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct ChannelSwitch {
-    /// Channel id (0..=8: COMM1, COMM2, ECU, PC, PL12, PL13, PL14, PL15, SBAND).
-    pub channel: u8,
-    /// 1 on, 0 off.
-    pub on: u8,
-}
-
-impl Repr for ChannelSwitch {
-    const LEN: usize = 2;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(ChannelSwitch {
-            channel: r.u8()?,
-            on: r.u8()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.channel).u8(self.on);
-    }
-}
-
-/// THRGET reply and THRSET request (4 bytes): payload shed, payload restore, platform shed,
-/// platform restore, each u8 percent of state of charge.
-impl Repr for Thresholds {
-    const LEN: usize = 4;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(Thresholds {
-            payload_shed_pct: r.u8()?,
-            payload_restore_pct: r.u8()?,
-            platform_shed_pct: r.u8()?,
-            platform_restore_pct: r.u8()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.payload_shed_pct)
-            .u8(self.payload_restore_pct)
-            .u8(self.platform_shed_pct)
-            .u8(self.platform_restore_pct);
-    }
-}
+/// Port 10 as data (`csp::icd`): the commands, their layouts and who may send them.
+pub const ICD_PORT: Port = Port {
+    port: PORT_EPS,
+    name: "eps",
+    commands: &[
+        Command::new(
+            cmd::TMEPS,
+            "TMEPS",
+            "the EPS's telemetry: battery, arrays, loads, channels",
+        )
+        .reply(Data::of::<TmEps>())
+        .twin(),
+        Command::new(cmd::CHGET, "CHGET", "read the channel states")
+            .reply(Data::of::<ChannelStates>())
+            .twin(),
+        Command::new(cmd::CHSET, "CHSET", "switch one channel on or off")
+            .request(Data::of::<ChannelSwitch>())
+            .reply(Data::of::<ChannelStates>())
+            .examples(&[&[3, 1]])
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::THRGET, "THRGET", "read the protection thresholds")
+            .reply(Data::of::<Thresholds>())
+            .twin(),
+        Command::new(cmd::THRSET, "THRSET", "set the protection thresholds")
+            .request(Data::of::<Thresholds>())
+            .examples(&[&[30, 40, 20, 30], &[0, 1, 0, 1], &[99, 100, 99, 100]])
+            .no_payloads()
+            .twin(),
+    ],
+};
 
 /// A request on port 10, checked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -275,10 +244,28 @@ impl CommandSet for EpsCommand {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+    use csp::Error;
     use proptest::prelude::*;
 
     fn parse(b: &[u8]) -> Result<EpsCommand, RequestError> {
         EpsCommand::parse(&Request::parse(b).unwrap())
+    }
+
+    #[test]
+    fn the_icd_description_agrees_with_the_parser() {
+        let bad = csp::icd::range_disagreements(&ICD_PORT, |c, d| {
+            let mut b = vec![c];
+            b.extend_from_slice(d);
+            parse(&b).is_ok()
+        });
+        assert!(bad.is_empty(), "{bad:#?}");
+        for c in ICD_PORT.commands {
+            assert!(
+                parse(&[c.id]).is_ok() || c.request.fixed_len() != Some(0),
+                "{}",
+                c.name
+            );
+        }
     }
 
     #[test]

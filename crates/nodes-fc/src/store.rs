@@ -216,19 +216,15 @@ impl Store {
     /// TMSTOREINFO's data (20 bytes): `u32 records, u32 bytes, u32 oldest_rtc, u32
     /// newest_rtc, u32 overwritten`.
     pub fn info(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(20);
-        let oldest = self.records.front().map_or(0, |r| r.rtc_s);
-        let newest = self.records.back().map_or(0, |r| r.rtc_s);
-        for v in [
-            self.records.len() as u32,
-            self.bytes as u32,
-            oldest,
-            newest,
-            u32::try_from(self.overwritten).unwrap_or(u32::MAX),
-        ] {
-            out.extend_from_slice(&v.to_le_bytes());
+        use csp::reqrep::le::Repr;
+        crate::wire::StoreInfo {
+            records: self.records.len() as u32,
+            bytes: self.bytes as u32,
+            oldest_rtc: self.records.front().map_or(0, |r| r.rtc_s),
+            newest_rtc: self.records.back().map_or(0, |r| r.rtc_s),
+            overwritten: u32::try_from(self.overwritten).unwrap_or(u32::MAX),
         }
-        out
+        .to_vec()
     }
 
     /// TMSTOREGET's data: `u32 matching, u8 count, count x record`, the records within

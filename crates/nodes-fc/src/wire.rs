@@ -33,6 +33,7 @@
 //! "16" size column contradicts its own types, and the types win (INTERPRETATION.md 5).
 
 use csp::Error;
+use csp::icd::{Command, Data, Port};
 use csp::reqrep::le::{Reader, Writer};
 use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
 
@@ -92,141 +93,60 @@ pub mod cmd {
 }
 
 pub use csp::reqrep::le::Repr;
-use csp::reqrep::le::f32s;
-use csp::reqrep::le::f64s;
-use csp::reqrep::le::i8s;
-use csp::reqrep::le::u16s;
-
-fn u8s<const N: usize>(r: &mut Reader<'_>) -> Result<[u8; N], Error> {
-    let mut a = [0; N];
-    a.copy_from_slice(r.take(N)?);
-    Ok(a)
-}
-
-fn i16s<const N: usize>(r: &mut Reader<'_>) -> Result<[i16; N], Error> {
-    let mut a = [0; N];
-    for x in &mut a {
-        let b = r.take(2)?;
-        *x = i16::from_le_bytes([b[0], b[1]]);
-    }
-    Ok(a)
-}
-
-/// TMGEN reply (ICD 4.2.1, 16 bytes): general telemetry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct TmGen {
-    /// RTC, UTC unix seconds.
-    pub rtc_timestamp: u32,
-    /// Seconds since the FC's last boot.
-    pub uptime_s: u32,
-    /// Seconds the FC has been powered since the start of the run (reboots included).
-    pub global_on_time_s: u32,
-    /// Mode in effect (the [`TargetMode`] enumeration).
-    pub current_mode: u8,
-    /// FC state (0 nominal; see docs/protocol.md "FC ports").
-    pub current_state: u8,
-    /// MCU temperature, degrees C.
-    pub mcu_temp_c: i8,
-    /// Cause of the last reset (0 power-on, 1 software reboot).
-    pub reset_cause: u8,
-}
-
-impl Repr for TmGen {
-    const LEN: usize = 16;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmGen {
-            rtc_timestamp: r.u32()?,
-            uptime_s: r.u32()?,
-            global_on_time_s: r.u32()?,
-            current_mode: r.u8()?,
-            current_state: r.u8()?,
-            mcu_temp_c: r.i8()?,
-            reset_cause: r.u8()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.rtc_timestamp)
-            .u32(self.uptime_s)
-            .u32(self.global_on_time_s)
-            .u8(self.current_mode)
-            .u8(self.current_state)
-            .i8(self.mcu_temp_c)
-            .u8(self.reset_cause);
+csp::wire_struct! {
+    /// TMGEN reply (ICD 4.2.1, 16 bytes): general telemetry.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct TmGen {
+        /// RTC, UTC unix seconds.
+        pub rtc_timestamp: u32 { unit: "s" },
+        /// Seconds since the FC's last boot.
+        pub uptime_s: u32 { unit: "s" },
+        /// Seconds the FC has been powered since the start of the run (reboots included).
+        pub global_on_time_s: u32 { unit: "s" },
+        /// Mode in effect (the [`TargetMode`] enumeration).
+        pub current_mode: u8 { values: TARGET_MODES },
+        /// FC state (0 nominal; see docs/protocol.md "FC ports").
+        pub current_state: u8 { values: &[(0, "nominal"), (1, "SAFE")] },
+        /// MCU temperature, degrees C.
+        pub mcu_temp_c: i8 { unit: "degC" },
+        /// Cause of the last reset (0 power-on, 1 software reboot).
+        pub reset_cause: u8 { values: &[(0, "power-on"), (1, "software reboot")] },
     }
 }
 
-/// TMATP reply (ICD 4.2.1, 60 bytes): attitude and position.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TmAtp {
-    /// RTC, UTC unix seconds.
-    pub rtc_timestamp: u32,
-    /// Attitude of the body in ECI J2000, scalar first (r, i, j, k).
-    pub q_eci_from_body: [f64; 4],
-    /// Position, ECI J2000, metres.
-    pub r_eci_m: [f64; 3],
-}
-
-impl Repr for TmAtp {
-    const LEN: usize = 60;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmAtp {
-            rtc_timestamp: r.u32()?,
-            q_eci_from_body: f64s(r)?,
-            r_eci_m: f64s(r)?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.rtc_timestamp);
-        for x in self.q_eci_from_body.iter().chain(&self.r_eci_m) {
-            w.f64(*x);
-        }
+csp::wire_struct! {
+    /// TMATP reply (ICD 4.2.1, 60 bytes): attitude and position.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TmAtp {
+        /// RTC, UTC unix seconds.
+        pub rtc_timestamp: u32 { unit: "s" },
+        /// Attitude of the body in ECI J2000, scalar first (r, i, j, k).
+        pub q_eci_from_body: [f64; 4],
+        /// Position, ECI J2000, metres.
+        pub r_eci_m: [f64; 3] { unit: "m" },
     }
 }
 
-/// TMACD reply (ICD 4.2.1, 19 bytes): attitude control data.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct TmAcd {
-    /// RTC, UTC unix seconds.
-    pub rtc_timestamp: u32,
-    /// ADCS algorithm state (0 off, 1 detumbling, 2 acquiring, 3 tracking).
-    pub state: u8,
-    /// Reaction wheel states (0 off, 1 on, 2 fault).
-    pub rw_state: [u8; 4],
-    /// Reaction wheel |speed| in units of 100 rpm, saturating at 255.
-    pub rw_rpm_100: [u8; 4],
-    /// Magnetorquer states (0 off, 1 positive, 2 negative).
-    pub mtq_state: [u8; 3],
-    /// Target mode ([`TargetMode`]).
-    pub target_mode: u8,
-    /// 1 when a target attitude was commanded (ATCATSET) since boot, else 0.
-    pub target_attitude: u8,
-    /// 1 when a target point was commanded (ATCPTSET) since boot, else 0.
-    pub target_point: u8,
-}
-
-impl Repr for TmAcd {
-    const LEN: usize = 19;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmAcd {
-            rtc_timestamp: r.u32()?,
-            state: r.u8()?,
-            rw_state: u8s(r)?,
-            rw_rpm_100: u8s(r)?,
-            mtq_state: u8s(r)?,
-            target_mode: r.u8()?,
-            target_attitude: r.u8()?,
-            target_point: r.u8()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.rtc_timestamp)
-            .u8(self.state)
-            .bytes(&self.rw_state)
-            .bytes(&self.rw_rpm_100)
-            .bytes(&self.mtq_state)
-            .u8(self.target_mode)
-            .u8(self.target_attitude)
-            .u8(self.target_point);
+csp::wire_struct! {
+    /// TMACD reply (ICD 4.2.1, 19 bytes): attitude control data.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct TmAcd {
+        /// RTC, UTC unix seconds.
+        pub rtc_timestamp: u32 { unit: "s" },
+        /// ADCS algorithm state (0 off, 1 detumbling, 2 acquiring, 3 tracking).
+        pub state: u8 { values: &[(0, "off"), (1, "detumbling"), (2, "acquiring"), (3, "tracking")] },
+        /// Reaction wheel states (0 off, 1 on, 2 fault).
+        pub rw_state: [u8; 4] { values: &[(0, "off"), (1, "on"), (2, "fault")] },
+        /// Reaction wheel |speed| in units of 100 rpm, saturating at 255.
+        pub rw_rpm_100: [u8; 4] { unit: "100 rpm" },
+        /// Magnetorquer states (0 off, 1 positive, 2 negative).
+        pub mtq_state: [u8; 3] { values: &[(0, "off"), (1, "positive"), (2, "negative")] },
+        /// Target mode ([`TargetMode`]).
+        pub target_mode: u8 { values: TARGET_MODES },
+        /// 1 when a target attitude was commanded (ATCATSET) since boot, else 0.
+        pub target_attitude: u8 { values: &[(0, "no"), (1, "yes")] },
+        /// 1 when a target point was commanded (ATCPTSET) since boot, else 0.
+        pub target_point: u8 { values: &[(0, "no"), (1, "yes")] },
     }
 }
 
@@ -239,172 +159,84 @@ pub fn rw_rpm_byte(rpm: f64) -> u8 {
     (rpm.abs() / 100.0).round() as u8
 }
 
-/// TMSENS reply (ICD 4.2.1, 70 bytes): pre-processed sensor data.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TmSens {
-    /// RTC, UTC unix seconds.
-    pub rtc_timestamp: u32,
-    /// Sun direction, unit vector in BCF (zero when no sun sensor sees the sun).
-    pub sun_body: [f64; 3],
-    /// Angular rate, rad/s, BCF.
-    pub rate_body_rad_s: [f32; 3],
-    /// Acceleration, m/s^2, BCF.
-    pub acc_body_m_s2: [f32; 3],
-    /// Magnetic field, nT, BCF.
-    pub b_body_nt: [f32; 3],
-    /// Sensor temperatures, degrees C.
-    pub temps_c: [i8; 6],
-}
-
-impl Repr for TmSens {
-    const LEN: usize = 70;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmSens {
-            rtc_timestamp: r.u32()?,
-            sun_body: f64s(r)?,
-            rate_body_rad_s: f32s(r)?,
-            acc_body_m_s2: f32s(r)?,
-            b_body_nt: f32s(r)?,
-            temps_c: i8s(r)?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.rtc_timestamp);
-        for x in &self.sun_body {
-            w.f64(*x);
-        }
-        for x in self
-            .rate_body_rad_s
-            .iter()
-            .chain(&self.acc_body_m_s2)
-            .chain(&self.b_body_nt)
-        {
-            w.f32(*x);
-        }
-        for t in &self.temps_c {
-            w.i8(*t);
-        }
+csp::wire_struct! {
+    /// TMSENS reply (ICD 4.2.1, 70 bytes): pre-processed sensor data.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TmSens {
+        /// RTC, UTC unix seconds.
+        pub rtc_timestamp: u32 { unit: "s" },
+        /// Sun direction, unit vector in BCF (zero when no sun sensor sees the sun).
+        pub sun_body: [f64; 3],
+        /// Angular rate, rad/s, BCF.
+        pub rate_body_rad_s: [f32; 3] { unit: "rad/s" },
+        /// Acceleration, m/s^2, BCF.
+        pub acc_body_m_s2: [f32; 3] { unit: "m/s^2" },
+        /// Magnetic field, nT, BCF.
+        pub b_body_nt: [f32; 3] { unit: "nT" },
+        /// Sensor temperatures, degrees C.
+        pub temps_c: [i8; 6] { unit: "degC" },
     }
 }
 
-/// TMRAWSENS reply (the twin's layout, 53 bytes; docs/protocol.md "FC ports"): raw sensor
-/// counts at each sensor's native resolution.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct TmRawSens {
-    /// RTC, UTC unix seconds.
-    pub rtc_timestamp: u32,
-    /// Coarse sun sensors on +X -X +Y -Y +Z -Z, 12-bit ADC counts (4095 full sun on the normal).
-    pub css_counts: [u16; 6],
-    /// Gyroscope, BCF, 0.01 deg/s per LSB.
-    pub gyro_raw: [i16; 3],
-    /// Accelerometer, BCF, 1 mg per LSB.
-    pub acc_raw: [i16; 3],
-    /// Magnetometer, BCF, 10 nT per LSB.
-    pub mag_raw: [i16; 3],
-    /// Sensor temperatures (the six of TMSENS), 0.1 degrees C per LSB.
-    pub temps_raw: [i16; 6],
-    /// Earth-horizon sensor nadir vector, BCF, 1e-4 per LSB (zeros with no limb in view).
-    pub horizon_raw: [i16; 3],
-    /// Earth-horizon sensor status: 0 no limb in view, 1 the whole limb, 2 part of it.
-    pub horizon_status: u8,
-}
-
-impl Repr for TmRawSens {
-    const LEN: usize = 53;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmRawSens {
-            rtc_timestamp: r.u32()?,
-            css_counts: u16s(r)?,
-            gyro_raw: i16s(r)?,
-            acc_raw: i16s(r)?,
-            mag_raw: i16s(r)?,
-            temps_raw: i16s(r)?,
-            horizon_raw: i16s(r)?,
-            horizon_status: r.u8()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.rtc_timestamp);
-        for c in &self.css_counts {
-            w.u16(*c);
-        }
-        for x in self
-            .gyro_raw
-            .iter()
-            .chain(&self.acc_raw)
-            .chain(&self.mag_raw)
-            .chain(&self.temps_raw)
-            .chain(&self.horizon_raw)
-        {
-            w.bytes(&x.to_le_bytes());
-        }
-        w.u8(self.horizon_status);
+csp::wire_struct! {
+    /// TMRAWSENS reply (the twin's layout, 53 bytes; docs/protocol.md "FC ports"): raw sensor
+    /// counts at each sensor's native resolution.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct TmRawSens {
+        /// RTC, UTC unix seconds.
+        pub rtc_timestamp: u32 { unit: "s" },
+        /// Coarse sun sensors on +X -X +Y -Y +Z -Z, 12-bit ADC counts (4095 full sun on the normal).
+        pub css_counts: [u16; 6] { unit: "counts" },
+        /// Gyroscope, BCF, 0.01 deg/s per LSB.
+        pub gyro_raw: [i16; 3] { unit: "0.01 deg/s" },
+        /// Accelerometer, BCF, 1 mg per LSB.
+        pub acc_raw: [i16; 3] { unit: "mg" },
+        /// Magnetometer, BCF, 10 nT per LSB.
+        pub mag_raw: [i16; 3] { unit: "10 nT" },
+        /// Sensor temperatures (the six of TMSENS), 0.1 degrees C per LSB.
+        pub temps_raw: [i16; 6] { unit: "0.1 degC" },
+        /// Earth-horizon sensor nadir vector, BCF, 1e-4 per LSB (zeros with no limb in view).
+        pub horizon_raw: [i16; 3] { unit: "1e-4" },
+        /// Earth-horizon sensor status: 0 no limb in view, 1 the whole limb, 2 part of it.
+        pub horizon_status: u8 { values: &[(0, "no limb"), (1, "whole limb"), (2, "part of the limb")] },
     }
 }
 
-/// TMALL reply (the twin's layout, 177 bytes; docs/protocol.md "FC ports"): the beacon,
-/// the data of TMGEN, TMATP, TMACD and TMSENS from one instant, in that order.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TmAll {
-    /// TMGEN data.
-    pub general: TmGen,
-    /// TMATP data.
-    pub attitude_position: TmAtp,
-    /// TMACD data.
-    pub attitude_control: TmAcd,
-    /// TMSENS data.
-    pub sensors: TmSens,
-    /// The estimated nadir (Earth's centre) direction, BCF, unit: the onboard position
-    /// turned into the body by the estimated attitude (zeros without either).
-    pub nadir_body: [f32; 3],
-}
-
-impl Repr for TmAll {
-    const LEN: usize = TmGen::LEN + TmAtp::LEN + TmAcd::LEN + TmSens::LEN + 12;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmAll {
-            general: TmGen::read(r)?,
-            attitude_position: TmAtp::read(r)?,
-            attitude_control: TmAcd::read(r)?,
-            sensors: TmSens::read(r)?,
-            nadir_body: f32s(r)?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        self.general.write(w);
-        self.attitude_position.write(w);
-        self.attitude_control.write(w);
-        self.sensors.write(w);
-        for x in &self.nadir_body {
-            w.f32(*x);
-        }
+csp::wire_struct! {
+    /// TMALL reply (the twin's layout, 177 bytes; docs/protocol.md "FC ports"): the beacon,
+    /// the data of TMGEN, TMATP, TMACD and TMSENS from one instant, in that order.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TmAll {
+        /// TMGEN data.
+        pub general: TmGen,
+        /// TMATP data.
+        pub attitude_position: TmAtp,
+        /// TMACD data.
+        pub attitude_control: TmAcd,
+        /// TMSENS data.
+        pub sensors: TmSens,
+        /// The estimated nadir (Earth's centre) direction, BCF, unit: the onboard position
+        /// turned into the body by the estimated attitude (zeros without either).
+        pub nadir_body: [f32; 3],
     }
 }
 
-/// RTCSTMGET reply and RTCSTMSET request (ICD 4.2.2, 4 bytes): UTC unix seconds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct RtcTimestamp {
-    /// UTC unix seconds.
-    pub rtc_timestamp: u32,
-}
-
-impl Repr for RtcTimestamp {
-    const LEN: usize = 4;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(RtcTimestamp {
-            rtc_timestamp: r.u32()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u32(self.rtc_timestamp);
+csp::wire_struct! {
+    /// RTCSTMGET reply and RTCSTMSET request (ICD 4.2.2, 4 bytes): UTC unix seconds.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct RtcTimestamp {
+        /// UTC unix seconds (a set: 2000-01-01 to 2100-01-01).
+        pub rtc_timestamp: u32 { unit: "s", range: (946684800.0, 4102444800.0) },
     }
 }
 
-/// ATCATGET reply and ATCATSET request (ICD 4.2.3, 32 bytes): the target attitude.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TargetAttitude {
-    /// Target quaternion, scalar first (r, i, j, k), body in the mode's reference frame.
-    pub q: [f64; 4],
+csp::wire_struct! {
+    /// ATCATGET reply and ATCATSET request (ICD 4.2.3, 32 bytes): the target attitude.
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TargetAttitude {
+        /// Target quaternion, scalar first (r, i, j, k), body in the mode's reference frame.
+        pub q: [f64; 4],
+    }
 }
 
 impl TargetAttitude {
@@ -425,38 +257,16 @@ impl TargetAttitude {
     }
 }
 
-impl Repr for TargetAttitude {
-    const LEN: usize = 32;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TargetAttitude { q: f64s(r)? })
-    }
-    fn write(&self, w: &mut Writer) {
-        for x in &self.q {
-            w.f64(*x);
-        }
-    }
-}
-
-/// ATCPTGET reply and ATCPTSET request (ICD 4.2.3, 24 bytes): the target point.
-///
-/// Read by the mode in effect: in earth target mode (5) geodetic latitude (deg), longitude
-/// (deg) and altitude (m), as ICD 1.5's GeoLocation; in ECI vector tracking (6) a direction
-/// in ECI J2000 (any non-zero length).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TargetPoint {
-    /// The three values.
-    pub p: [f64; 3],
-}
-
-impl Repr for TargetPoint {
-    const LEN: usize = 24;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TargetPoint { p: f64s(r)? })
-    }
-    fn write(&self, w: &mut Writer) {
-        for x in &self.p {
-            w.f64(*x);
-        }
+csp::wire_struct! {
+    /// ATCPTGET reply and ATCPTSET request (ICD 4.2.3, 24 bytes): the target point.
+    ///
+    /// Read by the mode in effect: in earth target mode (5) geodetic latitude (deg), longitude
+    /// (deg) and altitude (m), as ICD 1.5's GeoLocation; in ECI vector tracking (6) a direction
+    /// in ECI J2000 (any non-zero length).
+    #[derive(Debug, Clone, Copy, PartialEq, Default)]
+    pub struct TargetPoint {
+        /// The three values.
+        pub p: [f64; 3],
     }
 }
 
@@ -508,24 +318,215 @@ impl TryFrom<u8> for TargetMode {
     }
 }
 
-/// ATCMDGET reply and ATCMDSET request (ICD 4.2.3, 1 byte): the target mode.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct TargetModeRepr {
-    /// The mode.
-    pub mode: TargetMode,
+/// [`TargetMode`]'s values by name (TMGEN `current_mode`, TMACD `target_mode`, ATCMDSET).
+pub const TARGET_MODES: &[(i64, &str)] = &[
+    (0, "idle"),
+    (1, "detumble"),
+    (2, "velocity pointing"),
+    (3, "nadir"),
+    (4, "sun max power"),
+    (5, "earth target"),
+    (6, "ECI vector"),
+    (7, "fixed ECI"),
+    (8, "fixed LVLH"),
+    (9, "fixed TNW"),
+];
+
+/// A target mode on the wire: one byte, 0..=9; any other byte does not read.
+impl csp::icd::WireField for TargetMode {
+    const WIRE_LEN: usize = 1;
+    const SHAPE: (csp::icd::Ty, usize) = (csp::icd::Ty::U8, 1);
+    fn read_le(r: &mut Reader<'_>) -> Result<Self, Error> {
+        TargetMode::try_from(r.u8()?)
+    }
+    fn write_le(&self, w: &mut Writer) {
+        w.u8(*self as u8);
+    }
 }
 
-impl Repr for TargetModeRepr {
-    const LEN: usize = 1;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TargetModeRepr {
-            mode: TargetMode::try_from(r.u8()?)?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.mode as u8);
+csp::wire_struct! {
+    /// ATCMDGET reply and ATCMDSET request (ICD 4.2.3, 1 byte): the target mode.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct TargetModeRepr {
+        /// The mode.
+        pub mode: TargetMode { range: (0.0, 9.0), values: TARGET_MODES },
     }
 }
+
+/// TMPERSET `mask` and `store_mask` bits: bit `n - 1` for telemetry command `n`.
+pub const TELEMETRY_BITS: &[(i64, &str)] = &[
+    (0, "TMGEN"),
+    (1, "TMATP"),
+    (2, "TMACD"),
+    (3, "TMSENS"),
+    (4, "TMRAWSENS"),
+    (5, "TMALL"),
+];
+
+csp::wire_struct! {
+    /// TMSTOREINFO reply (the twin's, 20 bytes): what the telemetry store holds.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct StoreInfo {
+        /// Records held.
+        pub records: u32,
+        /// Bytes they take.
+        pub bytes: u32 { unit: "B" },
+        /// RTC of the oldest record (0: none).
+        pub oldest_rtc: u32 { unit: "s" },
+        /// RTC of the newest record (0: none).
+        pub newest_rtc: u32 { unit: "s" },
+        /// Records dropped to make room since the store was last erased.
+        pub overwritten: u32,
+    }
+}
+
+csp::wire_struct! {
+    /// TMSTOREGET request (the twin's, 12 bytes): the records with an RTC in
+    /// `from_rtc..=to_rtc`, from the `skip`-th on.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct StoreQuery {
+        /// First RTC, UTC unix seconds.
+        pub from_rtc: u32 { unit: "s" },
+        /// Last RTC, UTC unix seconds.
+        pub to_rtc: u32 { unit: "s" },
+        /// Matching records to skip (the cursor of a chunked read).
+        pub skip: u32,
+    }
+}
+
+csp::wire_struct! {
+    /// TMSTORECLEAR reply (the twin's, 4 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct StoreCleared {
+        /// Records erased.
+        pub records: u32,
+    }
+}
+
+/// Port 10, telemetry, as data (`csp::icd`).
+pub const ICD_TELEMETRY: Port = Port {
+    port: PORT_TELEMETRY,
+    name: "telemetry",
+    commands: &[
+        Command::new(cmd::TMGEN, "TMGEN", "general telemetry").reply(Data::of::<TmGen>()),
+        Command::new(cmd::TMATP, "TMATP", "attitude and position").reply(Data::of::<TmAtp>()),
+        Command::new(cmd::TMACD, "TMACD", "attitude control data").reply(Data::of::<TmAcd>()),
+        Command::new(cmd::TMSENS, "TMSENS", "pre-processed sensor data")
+            .reply(Data::of::<TmSens>()),
+        Command::new(cmd::TMRAWSENS, "TMRAWSENS", "raw sensor counts")
+            .reply(Data::of::<TmRawSens>())
+            .no_payloads(),
+        Command::new(cmd::TMALL, "TMALL", "TMGEN, TMATP, TMACD and TMSENS at one instant, and the estimated nadir")
+            .reply(Data::of::<TmAll>())
+            .no_payloads(),
+        Command::new(cmd::TMPERSET, "TMPERSET", "send telemetry periodically to a node and port")
+            .request(Data::of::<Periodic>())
+            .examples(&[&[16, 20, 0xe8, 0x03, 0, 0, 0x01], &[0, 7, 100, 0, 0, 0, 0x3f], &[30, 63, 0x80, 0xee, 0x36, 0, 0x01]])
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::TMPERGET, "TMPERGET", "read the periodic telemetry setting")
+            .reply(Data::of::<Periodic>())
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::TMSTOREINFO, "TMSTOREINFO", "what the telemetry store holds")
+            .reply(Data::of::<StoreInfo>())
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::TMSTOREGET, "TMSTOREGET", "stored records in an RTC range, in chunks")
+            .request(Data::of::<StoreQuery>())
+            .reply(Data::Variable(
+                "u32 matching, u8 count, count x (u32 rtc, u8 kind, u8 len, data[len]), at most 200 bytes",
+                5,
+                crate::store::CHUNK_BYTES,
+            ))
+            .examples(&[&[0, 0, 0, 0, 0xff, 0xff, 0xff, 0xff, 0, 0, 0, 0]])
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::TMSTORECLEAR, "TMSTORECLEAR", "erase the telemetry store")
+            .reply(Data::of::<StoreCleared>())
+            .no_payloads()
+            .twin(),
+    ],
+};
+
+/// Port 11, RTC, as data (`csp::icd`).
+pub const ICD_RTC: Port = Port {
+    port: PORT_RTC,
+    name: "rtc",
+    commands: &[
+        Command::new(cmd::RTCSTMSET, "RTCSTMSET", "set the RTC")
+            .request(Data::of::<RtcTimestamp>())
+            .examples(&[&[0x00, 0x6e, 0x98, 0x69]])
+            .no_payloads(),
+        Command::new(cmd::RTCSTMGET, "RTCSTMGET", "read the RTC").reply(Data::of::<RtcTimestamp>()),
+    ],
+};
+
+/// Port 12, attitude, as data (`csp::icd`). ATCPTSET's values are read by the mode in
+/// effect (earth target: latitude -90..=90 deg, longitude -180..<360 deg, height -1..=100
+/// km; ECI vector: any non-zero direction); those checks are the FC's, at the command.
+pub const ICD_ATTITUDE: Port = Port {
+    port: PORT_ATTITUDE,
+    name: "attitude",
+    commands: &[
+        Command::new(cmd::ATCATGET, "ATCATGET", "read the target attitude")
+            .reply(Data::of::<TargetAttitude>())
+            .no_payloads(),
+        Command::new(
+            cmd::ATCATSET,
+            "ATCATSET",
+            "set the target attitude (normalised; not all zeros)",
+        )
+        .request(Data::of::<TargetAttitude>())
+        .examples(&[&[
+            0, 0, 0, 0, 0, 0, 0xf0, 0x3f, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+            0, 0, 0, 0, 0,
+        ]])
+        .no_payloads(),
+        Command::new(cmd::ATCPTGET, "ATCPTGET", "read the target point")
+            .reply(Data::of::<TargetPoint>())
+            .no_payloads(),
+        Command::new(
+            cmd::ATCPTSET,
+            "ATCPTSET",
+            "set the target point (read by the mode: geodetic or an ECI direction)",
+        )
+        .request(Data::of::<TargetPoint>())
+        .examples(&[&[0; 24]])
+        .no_payloads(),
+        Command::new(cmd::ATCMDGET, "ATCMDGET", "read the target mode")
+            .reply(Data::of::<TargetModeRepr>())
+            .no_payloads(),
+        Command::new(cmd::ATCMDSET, "ATCMDSET", "set the target mode")
+            .request(Data::of::<TargetModeRepr>())
+            .examples(&[&[3]])
+            .no_payloads(),
+        Command::new(
+            cmd::ATCTLESET,
+            "ATCTLESET",
+            "give the FC a TLE (valid, within 30 days of its time)",
+        )
+        .request(Data::of::<TleLines>())
+        .examples(&[TLE_EXAMPLE])
+        .no_payloads()
+        .twin(),
+        Command::new(cmd::ATCTLEGET, "ATCTLEGET", "read the TLE the FC holds")
+            .reply(Data::of::<TleLines>())
+            .no_payloads()
+            .twin(),
+    ],
+};
+
+/// ATCTLESET's example: the ISS's TLE of ICD 1.5's era (2008), as 69 + 69 bytes.
+const TLE_EXAMPLE: &[u8] = b"1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927\
+2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537";
+
+/// Port 13, scripts (ICD 1.5), as data: one text line per request, answered with no data.
+pub const ICD_SCRIPTS: Port = Port {
+    port: PORT_SCRIPTS,
+    name: "scripts",
+    commands: &[],
+};
 
 fn no_data<T>(r: &Request<'_>, v: T) -> Result<T, RequestError> {
     expect_len(r, 0, "0").map(|_| v)
@@ -544,20 +545,22 @@ pub const PERIODIC_MIN_MS: u32 = 100;
 /// Longest period of the periodic telemetry, ms (an hour).
 pub const PERIODIC_MAX_MS: u32 = 3_600_000;
 
-/// TMPERSET request and TMPERGET reply (the twin's, 7 bytes): the FC sends the telemetry of
-/// `mask` (bit `n - 1` for telemetry command `n`: TMGEN 0x01 ... TMALL 0x20) to `dst`:`dport`
-/// every `period_ms`, each as the bytes a request for it would get (`cmd | result | data`),
-/// from the telemetry port. `period_ms` 0 stops it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Periodic {
-    /// Destination address (0-30, not the FC's own).
-    pub dst: u8,
-    /// Destination port (7-63: not a service port).
-    pub dport: u8,
-    /// Period, ms: 0 (off) or [`PERIODIC_MIN_MS`]..=[`PERIODIC_MAX_MS`].
-    pub period_ms: u32,
-    /// Telemetry sent: bit `n - 1` for command `n` (1-6).
-    pub mask: u8,
+csp::wire_struct! {
+    /// TMPERSET request and TMPERGET reply (the twin's, 7 bytes): the FC sends the telemetry of
+    /// `mask` (bit `n - 1` for telemetry command `n`: TMGEN 0x01 ... TMALL 0x20) to `dst`:`dport`
+    /// every `period_ms`, each as the bytes a request for it would get (`cmd | result | data`),
+    /// from the telemetry port. `period_ms` 0 stops it.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct Periodic {
+        /// Destination address (0-30, not the FC's own).
+        pub dst: u8 { range: (0.0, 30.0) },
+        /// Destination port (7-63: not a service port).
+        pub dport: u8 { range: (7.0, 63.0) },
+        /// Period, ms: 0 (off) or [`PERIODIC_MIN_MS`]..=[`PERIODIC_MAX_MS`].
+        pub period_ms: u32 { unit: "ms", range: (0.0, 3600000.0), except: (1.0, 99.0), values: &[(0, "off")] },
+        /// Telemetry sent: bit `n - 1` for command `n` (1-6).
+        pub mask: u8 { range: (1.0, 63.0), bits: TELEMETRY_BITS },
+    }
 }
 
 impl Periodic {
@@ -580,24 +583,6 @@ impl Periodic {
         } else {
             None
         }
-    }
-}
-
-impl Repr for Periodic {
-    const LEN: usize = 7;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(Periodic {
-            dst: r.u8()?,
-            dport: r.u8()?,
-            period_ms: r.u32()?,
-            mask: r.u8()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.dst)
-            .u8(self.dport)
-            .u32(self.period_ms)
-            .u8(self.mask);
     }
 }
 
@@ -648,17 +633,11 @@ impl CommandSet for TelemetryCommand {
             cmd::TMPERSET => data(r, "7").map(SetPeriodic),
             cmd::TMPERGET => no_data(r, GetPeriodic),
             cmd::TMSTOREINFO => no_data(r, StoreInfo),
-            cmd::TMSTOREGET => {
-                expect_len(r, 12, "12")?;
-                let w = |i: usize| {
-                    u32::from_le_bytes([r.data[i], r.data[i + 1], r.data[i + 2], r.data[i + 3]])
-                };
-                Ok(StoreGet {
-                    from: w(0),
-                    to: w(4),
-                    skip: w(8),
-                })
-            }
+            cmd::TMSTOREGET => data::<StoreQuery>(r, "12").map(|q| StoreGet {
+                from: q.from_rtc,
+                to: q.to_rtc,
+                skip: q.skip,
+            }),
             cmd::TMSTORECLEAR => no_data(r, StoreClear),
             c => Err(RequestError::UnknownCommand(c)),
         }
@@ -724,20 +703,19 @@ pub enum AttitudeCommand {
     GetTle,
 }
 
-/// Two TLE lines as they travel in ATCTLESET / ATCTLEGET: 69 + 69 ASCII bytes, no
-/// separators.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TleLines {
-    /// Line 1.
-    pub line1: [u8; 69],
-    /// Line 2.
-    pub line2: [u8; 69],
+csp::wire_struct! {
+    /// Two TLE lines as they travel in ATCTLESET / ATCTLEGET: 69 + 69 ASCII bytes, no
+    /// separators.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct TleLines {
+        /// Line 1.
+        pub line1: [u8; 69] { text: true },
+        /// Line 2.
+        pub line2: [u8; 69] { text: true },
+    }
 }
 
 impl TleLines {
-    /// Wire length, bytes.
-    pub const LEN: usize = 138;
-
     /// The lines from text; `None` unless each is exactly 69 ASCII bytes.
     pub fn from_text(line1: &str, line2: &str) -> Option<Self> {
         let arr = |l: &str| -> Option<[u8; 69]> {
@@ -759,11 +737,6 @@ impl TleLines {
             String::from_utf8_lossy(&self.line1).into_owned(),
             String::from_utf8_lossy(&self.line2).into_owned(),
         )
-    }
-
-    /// The 138 wire bytes.
-    pub fn to_vec(&self) -> Vec<u8> {
-        [&self.line1[..], &self.line2[..]].concat()
     }
 }
 
@@ -797,7 +770,7 @@ impl CommandSet for AttitudeCommand {
                     .map_err(|_| out_of_range("target mode"))
             }
             cmd::ATCTLESET => {
-                expect_len(r, TleLines::LEN, "138")?;
+                expect_len(r, <TleLines as Repr>::LEN, "138")?;
                 let (a, b) = r.data.split_at(69);
                 let text = |x: &[u8]| std::str::from_utf8(x).ok().map(str::to_owned);
                 match (text(a), text(b)) {
@@ -824,6 +797,32 @@ mod tests {
     // 0.707106 is the ICD 1.5 example's value, deliberately not FRAC_1_SQRT_2.
     #![allow(clippy::approx_constant)]
     use super::*;
+
+    #[test]
+    fn the_icd_description_agrees_with_the_parsers() {
+        fn req(c: u8, d: &[u8]) -> Vec<u8> {
+            let mut b = vec![c];
+            b.extend_from_slice(d);
+            b
+        }
+        let telemetry = csp::icd::range_disagreements(&ICD_TELEMETRY, |c, d| {
+            let b = req(c, d);
+            match TelemetryCommand::parse(&Request::parse(&b).unwrap()) {
+                // The FC's own address (3) is refused as a destination at the command.
+                Ok(TelemetryCommand::SetPeriodic(p)) => p.out_of_range(3).is_none(),
+                r => r.is_ok(),
+            }
+        });
+        assert!(telemetry.is_empty(), "{telemetry:#?}");
+        let rtc = csp::icd::range_disagreements(&ICD_RTC, |c, d| {
+            RtcCommand::parse(&Request::parse(&req(c, d)).unwrap()).is_ok()
+        });
+        assert!(rtc.is_empty(), "{rtc:#?}");
+        let attitude = csp::icd::range_disagreements(&ICD_ATTITUDE, |c, d| {
+            AttitudeCommand::parse(&Request::parse(&req(c, d)).unwrap()).is_ok()
+        });
+        assert!(attitude.is_empty(), "{attitude:#?}");
+    }
     use proptest::prelude::*;
 
     /// Sizes of ICD tables 4.2.1-4.2.3 (with INTERPRETATION.md 5's 32 and 24 for ATC*).

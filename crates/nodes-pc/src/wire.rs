@@ -30,7 +30,8 @@
 //! So a whole SETUP request is `11 + N` bytes on the wire, a whole STATUS reply `13 + N`.
 
 use csp::Error;
-use csp::reqrep::le::{Reader, Repr, Writer};
+use csp::icd::{Command, Data, Port};
+use csp::reqrep::le::{Reader, Repr};
 use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
 
 /// Default port of session control (INTERPRETATION.md section 4).
@@ -151,6 +152,215 @@ impl SessionResult {
     }
 }
 
+/// [`SessionState`]'s values by name.
+pub const SESSION_STATES: &[(i64, &str)] = &[(0, "NOT ACTIVE"), (1, "PENDING"), (2, "ACTIVE")];
+
+/// [`SessionResult`]'s values by name.
+pub const SESSION_RESULTS: &[(i64, &str)] = &[
+    (0, "DONE"),
+    (1, "ABORTED"),
+    (2, "NO ACK"),
+    (3, "S-BAND FAILURE"),
+];
+
+/// TMPC `sband_flags` by bit.
+pub const SBAND_BITS: &[(i64, &str)] = &[(0, "on"), (1, "failed"), (2, "transmitting")];
+
+csp::wire_struct! {
+    /// SETUP request data before the sync message (ICD 3.1.3, table 4, 10 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct SetupHead {
+        /// Session id (the scenario's `[[pc.sessions]]` id).
+        pub session_id: u8,
+        /// Start, UTC unix seconds on the PC's clock (0 or a past time: now).
+        pub timestamp: u32 { unit: "s", values: &[(0, "now")] },
+        /// Session duration.
+        pub duration_s: u16 { unit: "s", range: (5.0, 900.0) },
+        /// Most packets to poll (0: no limit).
+        pub max_packets: u16 { values: &[(0, "no limit")] },
+        /// Poll frame size, bytes.
+        pub poll_frame_size: u8 { unit: "B", range: (1.0, 254.0) },
+    }
+}
+
+csp::wire_struct! {
+    /// STATUS reply data before the sync message (ICD 3.1.3, table 5, 11 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct StatusHead {
+        /// Result of the last finished session.
+        pub last_result: u8 { values: SESSION_RESULTS },
+        /// The session's state now.
+        pub state: u8 { values: SESSION_STATES },
+        /// Start, as SETUP gave it.
+        pub timestamp: u32 { unit: "s" },
+        /// Duration, as SETUP gave it.
+        pub duration_s: u16 { unit: "s" },
+        /// Most packets, as SETUP gave it.
+        pub max_packets: u16,
+        /// Poll frame size, as SETUP gave it.
+        pub poll_frame_size: u8 { unit: "B" },
+    }
+}
+
+csp::wire_struct! {
+    /// STATUS and ABORT request data (1 byte).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct SessionId {
+        /// Session id.
+        pub session_id: u8,
+    }
+}
+
+csp::wire_struct! {
+    /// FSTAT and FDELETE request data (1 byte).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct PayloadAddr {
+        /// The payload whose buffer file it is (12-15).
+        pub payload_addr: u8,
+    }
+}
+
+csp::wire_struct! {
+    /// FDELETE reply data (4 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct Deleted {
+        /// Bytes deleted.
+        pub bytes: u32 { unit: "B" },
+    }
+}
+
+/// Port 10, session control, as data (`csp::icd`).
+pub const ICD_CONTROL: Port = Port {
+    port: PORT_CONTROL,
+    name: "control",
+    commands: &[
+        Command::new(cmd::SETUP, "SETUP", "configure a payload session")
+            .request(Data::with_tail::<SetupHead>(
+                "sync_message",
+                "sent to the payload in SYNC at the session's start",
+                0,
+                SYNC_MAX_LEN,
+            ))
+            .examples(&[
+                &[1, 0, 0, 0, 0, 60, 0, 30, 0, 64, b'g', b'o'],
+                &[1, 0, 0, 0, 0, 5, 0, 0, 0, 1],
+                &[1, 0, 0, 0, 0, 0x84, 3, 0, 0, 254],
+            ])
+            .no_payloads(),
+        Command::new(cmd::STATUS, "STATUS", "a session's state and configuration")
+            .request(Data::of::<SessionId>())
+            .reply(Data::with_tail::<StatusHead>(
+                "sync_message",
+                "as SETUP gave it",
+                0,
+                SYNC_MAX_LEN,
+            ))
+            .examples(&[&[1]]),
+        Command::new(cmd::ABORT, "ABORT", "end a session now")
+            .request(Data::of::<SessionId>())
+            .examples(&[&[1]])
+            .no_payloads(),
+    ],
+};
+
+/// Port 11, buffered ingest, as data: raw payload data with no command byte and no reply.
+pub const ICD_INGEST: Port = Port {
+    port: PORT_INGEST,
+    name: "ingest",
+    commands: &[],
+};
+
+/// Port 12, PC telemetry, as data (`csp::icd`).
+pub const ICD_TELEMETRY: Port = Port {
+    port: PORT_TELEMETRY,
+    name: "telemetry",
+    commands: &[
+        Command::new(cmd::TMPC, "TMPC", "sessions, buffers and the S-band")
+            .reply(Data::of::<Tmpc>())
+            .twin(),
+    ],
+};
+
+/// Port 13, buffer files, as data (`csp::icd`): refused to payloads.
+pub const ICD_FILES: Port = Port {
+    port: PORT_FILES,
+    name: "files",
+    commands: &[
+        Command::new(cmd::FLIST, "FLIST", "every buffer file")
+            .reply(Data::Variable(
+                "count u8, then count x FileStat (18 bytes)",
+                1,
+                1 + crate::MAX_SESSIONS * <FileStat as Repr>::LEN,
+            ))
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::FSTAT, "FSTAT", "one payload's buffer file")
+            .request(Data::of::<PayloadAddr>())
+            .reply(Data::of::<FileStat>())
+            .examples(&[&[12]])
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::FREAD, "FREAD", "read bytes of a buffer file")
+            .request(Data::of::<FileRead>())
+            .reply(Data::Variable(
+                "offset u64, then 0..=length bytes",
+                8,
+                8 + FREAD_MAX_LEN as usize,
+            ))
+            .examples(&[
+                &[12, 0, 0, 0, 0, 0, 0, 0, 0, 200],
+                &[12, 0, 0, 0, 0, 0, 0, 0, 0, 1],
+            ])
+            .no_payloads()
+            .twin(),
+        Command::new(cmd::FDELETE, "FDELETE", "empty a buffer file")
+            .request(Data::of::<PayloadAddr>())
+            .reply(Data::of::<Deleted>())
+            .examples(&[&[12]])
+            .no_payloads()
+            .twin(),
+    ],
+};
+
+csp::wire_struct! {
+    /// POLL request data (ICD 3.1.5, 1 byte).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct PollRequest {
+        /// Most bytes the reply may carry.
+        pub frame_size: u8 { unit: "B", range: (1.0, 254.0) },
+    }
+}
+
+/// A payload's port 10 (ICD 3.1.5), the PC's requests to it, as data (`csp::icd`).
+pub const ICD_PAYLOAD: Port = Port {
+    port: PORT_PAYLOAD,
+    name: "payload",
+    commands: &[
+        Command::new(
+            cmd::SYNC,
+            "SYNC",
+            "the session's sync message; the payload echoes it",
+        )
+        .request(Data::bytes(
+            "message",
+            "SETUP's sync message",
+            0,
+            SYNC_MAX_LEN,
+        ))
+        .reply(Data::bytes("message", "the same bytes", 0, SYNC_MAX_LEN))
+        .examples(&[b"go"]),
+        Command::new(cmd::POLL, "POLL", "one packet of payload data")
+            .request(Data::of::<PollRequest>())
+            .reply(Data::bytes(
+                "data",
+                "0..=frame_size bytes of payload data",
+                0,
+                254,
+            ))
+            .examples(&[&[200]]),
+    ],
+};
+
 /// SETUP request data (ICD 3.1.3, table 4: `10 + N` bytes): one session's configuration.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct SessionConfig {
@@ -178,12 +388,13 @@ impl SessionConfig {
             return Err(Error::TooLong);
         }
         let mut r = Reader::new(buf);
+        let h = SetupHead::read(&mut r)?;
         Ok(SessionConfig {
-            session_id: r.u8()?,
-            timestamp: r.u32()?,
-            duration_s: r.u16()?,
-            max_packets: r.u16()?,
-            poll_frame_size: r.u8()?,
+            session_id: h.session_id,
+            timestamp: h.timestamp,
+            duration_s: h.duration_s,
+            max_packets: h.max_packets,
+            poll_frame_size: h.poll_frame_size,
             sync_message: r.remaining().to_vec(),
         })
     }
@@ -193,14 +404,15 @@ impl SessionConfig {
     }
     /// Append the bytes to `out`.
     pub fn emit(&self, out: &mut Vec<u8>) {
-        let mut w = Writer::new();
-        w.u8(self.session_id)
-            .u32(self.timestamp)
-            .u16(self.duration_s)
-            .u16(self.max_packets)
-            .u8(self.poll_frame_size)
-            .bytes(&self.sync_message);
-        out.extend_from_slice(&w.buf);
+        SetupHead {
+            session_id: self.session_id,
+            timestamp: self.timestamp,
+            duration_s: self.duration_s,
+            max_packets: self.max_packets,
+            poll_frame_size: self.poll_frame_size,
+        }
+        .emit(out);
+        out.extend_from_slice(&self.sync_message);
     }
     /// The bytes.
     pub fn to_vec(&self) -> Vec<u8> {
@@ -258,16 +470,17 @@ impl Status {
             return Err(Error::TooLong);
         }
         let mut r = Reader::new(buf);
+        let h = StatusHead::read(&mut r)?;
         let last_result =
-            SessionResult::from_u8(r.u8()?).ok_or(Error::FieldRange("lastSessionResult"))?;
-        let state = SessionState::from_u8(r.u8()?).ok_or(Error::FieldRange("currState"))?;
+            SessionResult::from_u8(h.last_result).ok_or(Error::FieldRange("lastSessionResult"))?;
+        let state = SessionState::from_u8(h.state).ok_or(Error::FieldRange("currState"))?;
         Ok(Status {
             last_result,
             state,
-            timestamp: r.u32()?,
-            duration_s: r.u16()?,
-            max_packets: r.u16()?,
-            poll_frame_size: r.u8()?,
+            timestamp: h.timestamp,
+            duration_s: h.duration_s,
+            max_packets: h.max_packets,
+            poll_frame_size: h.poll_frame_size,
             sync_message: r.remaining().to_vec(),
         })
     }
@@ -277,15 +490,16 @@ impl Status {
     }
     /// Append the bytes to `out`.
     pub fn emit(&self, out: &mut Vec<u8>) {
-        let mut w = Writer::new();
-        w.u8(self.last_result.to_u8())
-            .u8(self.state.to_u8())
-            .u32(self.timestamp)
-            .u16(self.duration_s)
-            .u16(self.max_packets)
-            .u8(self.poll_frame_size)
-            .bytes(&self.sync_message);
-        out.extend_from_slice(&w.buf);
+        StatusHead {
+            last_result: self.last_result.to_u8(),
+            state: self.state.to_u8(),
+            timestamp: self.timestamp,
+            duration_s: self.duration_s,
+            max_packets: self.max_packets,
+            poll_frame_size: self.poll_frame_size,
+        }
+        .emit(out);
+        out.extend_from_slice(&self.sync_message);
     }
     /// The bytes.
     pub fn to_vec(&self) -> Vec<u8> {
@@ -295,51 +509,26 @@ impl Status {
     }
 }
 
-/// One session slot of [`Tmpc`] (20 bytes).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct TmpcSlot {
-    /// Session id (0 for an unused slot).
-    pub session_id: u8,
-    /// Payload CSP address (0 for an unused slot).
-    pub payload_addr: u8,
-    /// [`SessionState`] value.
-    pub state: u8,
-    /// [`SessionResult`] value of the last finished session.
-    pub last_result: u8,
-    /// Packets counted in the current (or last) session.
-    pub packets: u32,
-    /// Payload bytes of this slot that reached the ground since the PC booted (saturating).
-    pub downlinked_bytes: u32,
-    /// Payload bytes of this slot dropped since the PC booted, any reason (saturating).
-    pub dropped_bytes: u32,
-    /// Bytes in the payload's buffer file now.
-    pub buffer_bytes: u32,
-}
-
-impl TmpcSlot {
-    /// Size in bytes.
-    pub const LEN: usize = 20;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(TmpcSlot {
-            session_id: r.u8()?,
-            payload_addr: r.u8()?,
-            state: r.u8()?,
-            last_result: r.u8()?,
-            packets: r.u32()?,
-            downlinked_bytes: r.u32()?,
-            dropped_bytes: r.u32()?,
-            buffer_bytes: r.u32()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.session_id)
-            .u8(self.payload_addr)
-            .u8(self.state)
-            .u8(self.last_result)
-            .u32(self.packets)
-            .u32(self.downlinked_bytes)
-            .u32(self.dropped_bytes)
-            .u32(self.buffer_bytes);
+csp::wire_struct! {
+    /// One session slot of [`Tmpc`] (20 bytes).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct TmpcSlot {
+        /// Session id (0 for an unused slot).
+        pub session_id: u8,
+        /// Payload CSP address (0 for an unused slot).
+        pub payload_addr: u8,
+        /// [`SessionState`] value.
+        pub state: u8 { values: SESSION_STATES },
+        /// [`SessionResult`] value of the last finished session.
+        pub last_result: u8 { values: SESSION_RESULTS },
+        /// Packets counted in the current (or last) session.
+        pub packets: u32,
+        /// Payload bytes of this slot that reached the ground since the PC booted (saturating).
+        pub downlinked_bytes: u32 { unit: "B" },
+        /// Payload bytes of this slot dropped since the PC booted, any reason (saturating).
+        pub dropped_bytes: u32 { unit: "B" },
+        /// Bytes in the payload's buffer file now.
+        pub buffer_bytes: u32 { unit: "B" },
     }
 }
 
@@ -350,131 +539,55 @@ pub const SBAND_FAILED: u8 = 0x02;
 /// S-band flag: a frame is on the air.
 pub const SBAND_TRANSMITTING: u8 = 0x04;
 
-/// TMPC reply data (the twin's layout, 89 bytes): four session slots in configuration
-/// order (unused slots zero), then the S-band.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Tmpc {
-    /// Session slots.
-    pub slots: [TmpcSlot; TMPC_SLOTS],
-    /// [`SBAND_ON`] | [`SBAND_FAILED`] | [`SBAND_TRANSMITTING`].
-    pub sband_flags: u8,
-    /// Bytes waiting in the transmitter (frame on the air included).
-    pub sband_queue_bytes: u32,
-    /// Payload bytes the S-band delivered to the ground since the PC booted (saturating).
-    pub sband_downlinked_bytes: u32,
-}
-
-impl Tmpc {
-    /// Size in bytes: 4 x 20 + 1 + 4 + 4.
-    pub const LEN: usize = TMPC_SLOTS * TmpcSlot::LEN + 9;
-    /// Parse exactly [`Tmpc::LEN`] bytes.
-    pub fn parse(buf: &[u8]) -> Result<Self, Error> {
-        if buf.len() < Self::LEN {
-            return Err(Error::Truncated);
-        }
-        if buf.len() > Self::LEN {
-            return Err(Error::TooLong);
-        }
-        let mut r = Reader::new(buf);
-        let mut slots = [TmpcSlot::default(); TMPC_SLOTS];
-        for s in &mut slots {
-            *s = TmpcSlot::read(&mut r)?;
-        }
-        let t = Tmpc {
-            slots,
-            sband_flags: r.u8()?,
-            sband_queue_bytes: r.u32()?,
-            sband_downlinked_bytes: r.u32()?,
-        };
-        r.finish()?;
-        Ok(t)
-    }
-    /// Length of the emitted bytes.
-    pub fn buffer_len(&self) -> usize {
-        Self::LEN
-    }
-    /// Append the bytes to `out`.
-    pub fn emit(&self, out: &mut Vec<u8>) {
-        let mut w = Writer::new();
-        for s in &self.slots {
-            s.write(&mut w);
-        }
-        w.u8(self.sband_flags)
-            .u32(self.sband_queue_bytes)
-            .u32(self.sband_downlinked_bytes);
-        out.extend_from_slice(&w.buf);
-    }
-    /// The bytes.
-    pub fn to_vec(&self) -> Vec<u8> {
-        let mut v = Vec::with_capacity(Self::LEN);
-        self.emit(&mut v);
-        v
+csp::wire_struct! {
+    /// TMPC reply data (the twin's layout, 89 bytes): four session slots in configuration
+    /// order (unused slots zero), then the S-band.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct Tmpc {
+        /// Session slots.
+        pub slots: [TmpcSlot; TMPC_SLOTS],
+        /// [`SBAND_ON`] | [`SBAND_FAILED`] | [`SBAND_TRANSMITTING`].
+        pub sband_flags: u8 { bits: SBAND_BITS },
+        /// Bytes waiting in the transmitter (frame on the air included).
+        pub sband_queue_bytes: u32 { unit: "B" },
+        /// Payload bytes the S-band delivered to the ground since the PC booted (saturating).
+        pub sband_downlinked_bytes: u32 { unit: "B" },
     }
 }
 
-/// One buffer file (FSTAT's reply, FLIST's entries; 18 bytes). A file holds the bytes of
-/// the stream a buffering payload pushed that are still on board; offsets count the
-/// stream's bytes since the start of the run, so `head_offset` is where the oldest byte
-/// held sits in it and `head_offset + size_bytes` where the next pushed byte will.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct FileStat {
-    /// The payload's CSP address (the file's name).
-    pub payload_addr: u8,
-    /// Its buffering session's id.
-    pub session_id: u8,
-    /// Bytes held now.
-    pub size_bytes: u32,
-    /// The file's capacity (saturating).
-    pub capacity_bytes: u32,
-    /// Stream offset of the first byte held.
-    pub head_offset: u64,
-}
-
-impl Repr for FileStat {
-    const LEN: usize = 18;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(FileStat {
-            payload_addr: r.u8()?,
-            session_id: r.u8()?,
-            size_bytes: r.u32()?,
-            capacity_bytes: r.u32()?,
-            head_offset: r.u64()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.payload_addr)
-            .u8(self.session_id)
-            .u32(self.size_bytes)
-            .u32(self.capacity_bytes)
-            .u64(self.head_offset);
+csp::wire_struct! {
+    /// One buffer file (FSTAT's reply, FLIST's entries; 18 bytes). A file holds the bytes of
+    /// the stream a buffering payload pushed that are still on board; offsets count the
+    /// stream's bytes since the start of the run, so `head_offset` is where the oldest byte
+    /// held sits in it and `head_offset + size_bytes` where the next pushed byte will.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct FileStat {
+        /// The payload's CSP address (the file's name).
+        pub payload_addr: u8,
+        /// Its buffering session's id.
+        pub session_id: u8,
+        /// Bytes held now.
+        pub size_bytes: u32 { unit: "B" },
+        /// The file's capacity (saturating).
+        pub capacity_bytes: u32 { unit: "B" },
+        /// Stream offset of the first byte held.
+        pub head_offset: u64,
     }
 }
 
-/// FREAD request data (10 bytes): up to `length` bytes of `payload_addr`'s file from stream
-/// offset `offset`. The reply is the offset actually served (the request's, moved up to
-/// the file's head if the S-band already took those bytes, and no further than its end)
-/// and the bytes from there.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct FileRead {
-    /// The file (its payload's address).
-    pub payload_addr: u8,
-    /// Stream offset to read from.
-    pub offset: u64,
-    /// Bytes wanted, 1..=[`FREAD_MAX_LEN`].
-    pub length: u8,
-}
-
-impl Repr for FileRead {
-    const LEN: usize = 10;
-    fn read(r: &mut Reader<'_>) -> Result<Self, Error> {
-        Ok(FileRead {
-            payload_addr: r.u8()?,
-            offset: r.u64()?,
-            length: r.u8()?,
-        })
-    }
-    fn write(&self, w: &mut Writer) {
-        w.u8(self.payload_addr).u64(self.offset).u8(self.length);
+csp::wire_struct! {
+    /// FREAD request data (10 bytes): up to `length` bytes of `payload_addr`'s file from stream
+    /// offset `offset`. The reply is the offset actually served (the request's, moved up to
+    /// the file's head if the S-band already took those bytes, and no further than its end)
+    /// and the bytes from there.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct FileRead {
+        /// The file (its payload's address).
+        pub payload_addr: u8,
+        /// Stream offset to read from.
+        pub offset: u64,
+        /// Bytes wanted, 1..=[`FREAD_MAX_LEN`].
+        pub length: u8 { unit: "B", range: (1.0, 200.0) },
     }
 }
 
@@ -504,7 +617,7 @@ impl CommandSet for FilesCommand {
             cmd::FLIST => expect_len(r, 0, "0").map(|_| FilesCommand::List),
             cmd::FSTAT => addr(r).map(|payload_addr| FilesCommand::Stat { payload_addr }),
             cmd::FREAD => {
-                expect_len(r, FileRead::LEN, "10")?;
+                expect_len(r, <FileRead as Repr>::LEN, "10")?;
                 let q = FileRead::parse(r.data).map_err(|_| RequestError::Empty)?;
                 if (1..=FREAD_MAX_LEN).contains(&q.length) {
                     Ok(FilesCommand::Read(q))
@@ -604,6 +717,26 @@ impl CommandSet for TelemetryCommand {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn the_icd_description_agrees_with_the_parsers() {
+        fn req(c: u8, d: &[u8]) -> Vec<u8> {
+            let mut b = vec![c];
+            b.extend_from_slice(d);
+            b
+        }
+        let control = csp::icd::range_disagreements(&ICD_CONTROL, |c, d| {
+            ControlCommand::parse(&Request::parse(&req(c, d)).unwrap()).is_ok()
+        });
+        assert!(control.is_empty(), "{control:#?}");
+        let files = csp::icd::range_disagreements(&ICD_FILES, |c, d| {
+            FilesCommand::parse(&Request::parse(&req(c, d)).unwrap()).is_ok()
+        });
+        assert!(files.is_empty(), "{files:#?}");
+        assert_eq!(SetupHead::LEN, SETUP_FIXED_LEN);
+        assert_eq!(StatusHead::LEN, STATUS_FIXED_LEN);
+        assert_eq!(Tmpc::LEN, 89);
+    }
     use proptest::prelude::*;
 
     /// ICD table 2's example: session 1 at 2020-01-01T00:00:00Z, 60 s, 30 packets of 64.

@@ -7,6 +7,7 @@ mod util;
 use std::time::Duration;
 
 use csp::SimTime;
+use csp::reqrep::le::Repr;
 use m6p_nodes_pc::wire::{self, Status};
 use m6p_nodes_pc::{
     DropReason, PcEvent, PcOutput, SbandConfig, SessionMode, SessionResult, SessionState,

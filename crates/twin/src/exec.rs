@@ -237,6 +237,9 @@ async fn execute_inner(
             .map(|d| d.as_nanos() as u64),
     };
     let mut recorder = Some(crate::record::Recorder::create(path, meta)?);
+    if let Some(r) = recorder.as_mut() {
+        r.set_icd(crate::icd::IcdMap::for_run(&compiled.opts));
+    }
     let mut failure: Option<anyhow::Error> = None;
     let outcome = execute(compiled, &mut |ev| {
         if let Some(r) = recorder.as_mut()

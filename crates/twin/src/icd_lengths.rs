@@ -3,8 +3,8 @@
 //! request-reply port to a client's ephemeral port) has the length its command's table
 //! gives: `command | result | data`, so 2 + the ICD's size on success (result 1) and exactly
 //! 2 on failure, unknown commands included (ICD 1.8, docs/INTERPRETATION.md 2). Sizes come
-//! from the node crates' own wire types (`Repr::LEN`), the ports from the run's
-//! configuration.
+//! from the ICD's description (`crate::icd`, built from the node crates' own wire types),
+//! the ports from the run's configuration.
 //!
 //! Where the ICD's size column and its types disagree (ATCATGET, ATCPTGET: 16 in the
 //! column, 32 and 24 by the types), the types win, as INTERPRETATION 5 decides. Not
@@ -16,7 +16,6 @@ use std::collections::BTreeMap;
 
 use csp::header::{EPHEMERAL_PORT_MIN, Header};
 use csp::reqrep::RESULT_SUCCESS;
-use csp::reqrep::le::Repr;
 
 use crate::runtime::RunOptions;
 
@@ -49,10 +48,6 @@ impl std::fmt::Display for Len {
 /// `command | result` before a reply's data.
 const HEAD: usize = 2;
 
-const fn ok<T: Repr>() -> Len {
-    Len::Exact(HEAD + T::LEN)
-}
-
 const NONE: Len = Len::Exact(HEAD);
 
 /// What one request-reply port answers: by command, or the same for any (FC scripts).
@@ -69,110 +64,35 @@ pub struct IcdTable {
 }
 
 impl IcdTable {
-    /// The table for the nodes and ports of `opts`.
+    /// The table for the nodes and ports of `opts`: the reply lengths of the ICD's
+    /// description (`crate::icd`) on the ports the run configured. A port with no command
+    /// table (the FC's scripts, the PC's ingest) answers with no data.
     pub fn for_run(opts: &RunOptions) -> Self {
-        use nodes_comm::wire as comm;
-        use nodes_ecu::wire as ecu;
-        use nodes_eps::wire as eps;
-        use nodes_fc::wire as fc;
-        use nodes_pc::wire as pc;
-        let cmds = |rows: &[(u8, Len)]| PortRule::Commands(rows.iter().copied().collect());
         let mut ports = BTreeMap::new();
-        let p = &opts.fc.ports;
-        ports.insert(
-            (platform::addr::FC, p.telemetry),
-            cmds(&[
-                (fc::cmd::TMGEN, ok::<fc::TmGen>()),
-                (fc::cmd::TMATP, ok::<fc::TmAtp>()),
-                (fc::cmd::TMACD, ok::<fc::TmAcd>()),
-                (fc::cmd::TMSENS, ok::<fc::TmSens>()),
-                (fc::cmd::TMRAWSENS, ok::<fc::TmRawSens>()),
-                (fc::cmd::TMALL, ok::<fc::TmAll>()),
-                (fc::cmd::TMPERSET, NONE),
-                (fc::cmd::TMPERGET, ok::<fc::Periodic>()),
-            ]),
-        );
-        ports.insert(
-            (platform::addr::FC, p.rtc),
-            cmds(&[
-                (fc::cmd::RTCSTMSET, NONE),
-                (fc::cmd::RTCSTMGET, ok::<fc::RtcTimestamp>()),
-            ]),
-        );
-        ports.insert(
-            (platform::addr::FC, p.attitude),
-            cmds(&[
-                (fc::cmd::ATCATGET, ok::<fc::TargetAttitude>()),
-                (fc::cmd::ATCATSET, NONE),
-                (fc::cmd::ATCPTGET, ok::<fc::TargetPoint>()),
-                (fc::cmd::ATCPTSET, NONE),
-                (fc::cmd::ATCMDGET, ok::<fc::TargetModeRepr>()),
-                (fc::cmd::ATCMDSET, NONE),
-                (fc::cmd::ATCTLESET, NONE),
-                (fc::cmd::ATCTLEGET, Len::Exact(HEAD + fc::TleLines::LEN)),
-            ]),
-        );
-        ports.insert((platform::addr::FC, p.scripts), PortRule::Any(NONE));
-        ports.insert(
-            (platform::addr::PC, opts.pc.control_port),
-            cmds(&[
-                (pc::cmd::SETUP, NONE),
-                (
-                    pc::cmd::STATUS,
-                    Len::Range(
-                        HEAD + pc::STATUS_FIXED_LEN,
-                        HEAD + pc::STATUS_FIXED_LEN + pc::SYNC_MAX_LEN,
-                    ),
-                ),
-                (pc::cmd::ABORT, NONE),
-            ]),
-        );
-        ports.insert(
-            (platform::addr::PC, opts.pc.telemetry_port),
-            cmds(&[(pc::cmd::TMPC, Len::Exact(HEAD + pc::Tmpc::LEN))]),
-        );
-        let files = nodes_pc::MAX_SESSIONS * pc::FileStat::LEN;
-        ports.insert(
-            (platform::addr::PC, opts.pc.files_port),
-            cmds(&[
-                (pc::cmd::FLIST, Len::Range(HEAD + 1, HEAD + 1 + files)),
-                (pc::cmd::FSTAT, ok::<pc::FileStat>()),
-                (
-                    pc::cmd::FREAD,
-                    Len::Range(HEAD + 8, HEAD + 8 + usize::from(pc::FREAD_MAX_LEN)),
-                ),
-                (pc::cmd::FDELETE, Len::Exact(HEAD + 4)),
-            ]),
-        );
-        ports.insert(
-            (platform::addr::EPS, opts.eps.port),
-            cmds(&[
-                (eps::cmd::TMEPS, ok::<eps::TmEps>()),
-                (eps::cmd::CHGET, ok::<eps::ChannelStates>()),
-                (eps::cmd::CHSET, ok::<eps::ChannelStates>()),
-                (eps::cmd::THRGET, ok::<eps::Thresholds>()),
-                (eps::cmd::THRSET, NONE),
-            ]),
-        );
-        ports.insert(
-            (platform::addr::ECU, opts.ecu.port),
-            cmds(&[
-                (ecu::cmd::TMECU, ok::<ecu::TmEcu>()),
-                (ecu::cmd::ARM, ok::<ecu::ArmReply>()),
-                (ecu::cmd::FIRE, ok::<ecu::FireReply>()),
-                (ecu::cmd::SAFE, NONE),
-            ]),
-        );
-        for addr in [platform::addr::COMM1, platform::addr::COMM2] {
-            ports.insert(
-                (addr, opts.comm.port),
-                cmds(&[
-                    (comm::cmd::TMCOMM, ok::<comm::TmComm>()),
-                    (comm::cmd::BEACONSET, NONE),
-                    (comm::cmd::BEACONGET, ok::<comm::BeaconPeriod>()),
-                    (comm::cmd::BEACON, Len::Exact(comm::Beacon::PACKET_LEN)),
-                ]),
-            );
+        for (&(addr, port), table) in crate::icd::IcdMap::for_run(opts).iter() {
+            if !(platform::addr::COMM1..=platform::addr::PC).contains(&addr) {
+                continue;
+            }
+            let rule = if table.commands.is_empty() {
+                PortRule::Any(NONE)
+            } else {
+                PortRule::Commands(
+                    table
+                        .commands
+                        .iter()
+                        .map(|c| {
+                            let (lo, hi) = c.reply.bounds();
+                            let len = if lo == hi {
+                                Len::Exact(HEAD + lo)
+                            } else {
+                                Len::Range(HEAD + lo, HEAD + hi)
+                            };
+                            (c.id, len)
+                        })
+                        .collect(),
+                )
+            };
+            ports.insert((addr, port), rule);
         }
         IcdTable { ports }
     }
@@ -243,6 +163,13 @@ mod tests {
         assert_eq!(t.check(&reply(6, 13), 2 + 18, &[2, 1]), Ok(true));
         assert!(t.check(&reply(6, 13), 2 + 4, &[2, 1]).is_err());
         assert_eq!(t.check(&reply(6, 13), 2 + 4, &[4, 1]), Ok(true));
+        // The FC's telemetry store (TMSTOREINFO 20, TMSTOREGET 5..=200) and platform port 14
+        // (PGET 3..=6, PSAVE none).
+        assert_eq!(t.check(&reply(3, 20), 2 + 20, &[9, 1]), Ok(true));
+        assert_eq!(t.check(&reply(3, 20), 2 + 200, &[10, 1]), Ok(true));
+        assert!(t.check(&reply(3, 20), 2 + 201, &[10, 1]).is_err());
+        assert_eq!(t.check(&reply(4, 14), 2 + 6, &[1, 1]), Ok(true));
+        assert!(t.check(&reply(4, 14), 2 + 1, &[5, 1]).is_err());
         // With a CRC, 4 more bytes.
         let mut h = reply(4, 10);
         h.flags |= csp::header::flags::CRC32;

@@ -27,6 +27,7 @@ pub mod expectations;
 pub mod faults;
 pub mod ground;
 pub mod gs;
+pub mod icd;
 pub mod icd_lengths;
 pub mod invariants;
 #[cfg(feature = "live")]

@@ -41,6 +41,18 @@ enum Command {
         #[arg(long)]
         campaign: bool,
     },
+    /// Print the ICD as data: every node, port and command, with the request and reply
+    /// fields (type, offset, unit, range, named values), from the twin's own wire types.
+    Icd {
+        /// Only this node (FC, PC, EPS, ECU, COMM, payload).
+        node: Option<String>,
+        /// JSON (format 1) instead of text, for tools and codecs.
+        #[arg(long, conflicts_with = "node")]
+        json: bool,
+        /// The Markdown tables of docs/protocol.md.
+        #[arg(long, conflicts_with_all = ["node", "json"])]
+        markdown: bool,
+    },
     /// Fault campaigns: a scenario run many times with drawn values, every run checked.
     #[command(subcommand)]
     Campaign(CampaignCmd),
@@ -412,6 +424,26 @@ fn main() -> ExitCode {
         Command::Test(a) => cmd_test(a),
         Command::Check { files } => cmd_check(&files),
         Command::Schema { campaign } => cmd_schema(campaign),
+        Command::Icd {
+            node,
+            json,
+            markdown,
+        } => {
+            if markdown {
+                print!("{}", m6p_twin::icd::to_markdown());
+                Ok(true)
+            } else if json {
+                println!("{}", m6p_twin::icd::to_json());
+                Ok(true)
+            } else {
+                m6p_twin::icd::to_text(node.as_deref())
+                    .map(|t| {
+                        print!("{t}");
+                        true
+                    })
+                    .map_err(anyhow::Error::msg)
+            }
+        }
         Command::Campaign(CampaignCmd::Run(a)) => cmd_campaign_run(a),
         Command::Campaign(CampaignCmd::Merge { dirs, out }) => cmd_campaign_merge(&dirs, &out),
         Command::Campaign(CampaignCmd::Resolve { file, run }) => {

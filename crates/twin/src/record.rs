@@ -105,7 +105,7 @@ pub const METADATA_NAME: &str = "m6p-twin";
 /// Name of the attachment holding the scenario text.
 pub const SCENARIO_ATTACHMENT: &str = "scenario.toml";
 /// Version of the recording layout (channels and fields), stored in the metadata.
-pub const FORMAT_VERSION: &str = "4";
+pub const FORMAT_VERSION: &str = "5";
 
 /// Topic of every decoded CSP packet.
 pub const TOPIC_CSP: &str = "/csp/packets";
@@ -310,8 +310,20 @@ pub struct NetPacketMsg {
     pub flags: Option<u8>,
 }
 
+/// One field of an ICD request or reply in `/csp/packets` (`crate::icd`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, foxglove::Encode)]
+pub struct IcdFieldMsg {
+    /// Path in the layout: `current_mode`, `panels_w[3]`, `general.uptime_s`.
+    pub name: String,
+    /// The value (NaN for a text field).
+    pub value: f64,
+    /// The value's meaning, where the ICD names it: an enumerated value (`nadir`), the set
+    /// bits of a mask (`COMM1, PC`), or a text field's text.
+    pub text: Option<String>,
+}
+
 /// `/csp/packets`: one CSP packet a medium delivered, decoded.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, foxglove::Encode)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, foxglove::Encode)]
 pub struct CspPacketMsg {
     /// Simulated ns since the start of the run (its last frame).
     pub t_ns: u64,
@@ -338,8 +350,14 @@ pub struct CspPacketMsg {
     pub len: u32,
     /// Service name when dport (else sport) is a service port 0-6.
     pub service: Option<String>,
-    /// ICD command name (null until the ICD issues fill it).
+    /// ICD command, `NODE.COMMAND` (`FC.TMGEN`), when the packet goes to or comes from a
+    /// port of the ICD (`m6p-twin icd`); else null.
     pub icd: Option<String>,
+    /// `request`, `reply` (success) or `failure` (a failure reply), with `icd`.
+    pub icd_kind: Option<String>,
+    /// The request's or reply's fixed fields, decoded (empty for a failure, a layout of
+    /// varying length, or data that does not fit the layout).
+    pub fields: Vec<IcdFieldMsg>,
 }
 
 /// `/kiss/<link>`: one KISS frame on an outside link.
@@ -1075,6 +1093,8 @@ pub struct EventEncoder {
     trains: Vec<(Arc<str>, Option<Train>)>,
     /// One CFP reassembler per CAN bus, by bus name, in order of appearance.
     reassemblers: Vec<(Arc<str>, Reassembler)>,
+    /// The ICD on the run's ports, to decode `/csp/packets`.
+    icd: crate::icd::IcdMap,
     cfp_drops: u64,
     buf: Vec<u8>,
     key: String,
@@ -1533,10 +1553,17 @@ impl EventEncoder {
             base_ns,
             trains: Vec::new(),
             reassemblers: Vec::new(),
+            icd: crate::icd::IcdMap::defaults(),
             cfp_drops: 0,
             buf: Vec::with_capacity(1024),
             key: String::new(),
         }
+    }
+
+    /// Decode `/csp/packets` with the ICD on these ports (the run's; default: the ICD's
+    /// default ports).
+    pub fn set_icd(&mut self, icd: crate::icd::IcdMap) {
+        self.icd = icd;
     }
 
     /// The run's start, in ns since the Unix epoch.
@@ -2042,6 +2069,12 @@ impl EventEncoder {
         emit: &mut Emit<'_>,
     ) -> anyhow::Result<()> {
         let h = &p.header;
+        let body = if h.has_crc() && p.data.len() >= 4 {
+            &p.data[..p.data.len() - 4]
+        } else {
+            &p.data[..]
+        };
+        let decoded = self.icd.decode(h, body);
         let msg = CspPacketMsg {
             t_ns: m.t.as_ns(),
             medium: m.medium.to_string(),
@@ -2055,10 +2088,42 @@ impl EventEncoder {
             data: bytes::Bytes::copy_from_slice(&p.data),
             len: p.data.len() as u32,
             service: packet_service(h).map(str::to_owned),
-            icd: None,
+            icd: decoded
+                .as_ref()
+                .map(|d| format!("{}.{}", d.node, d.command)),
+            icd_kind: decoded.as_ref().map(|d| {
+                match (d.direction, d.result) {
+                    (crate::icd::Direction::Request, _) => "request",
+                    (_, Some(csp::reqrep::RESULT_SUCCESS)) => "reply",
+                    _ => "failure",
+                }
+                .to_owned()
+            }),
+            fields: decoded
+                .map(|d| d.fields.iter().map(icd_field).collect())
+                .unwrap_or_default(),
         };
         let chan = (ChannelKind::Csp, "");
         emit_msg(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)
+    }
+}
+
+/// A decoded ICD field as `/csp/packets` records it.
+fn icd_field(d: &csp::icd::Decoded) -> IcdFieldMsg {
+    use csp::icd::Value;
+    let text = match &d.value {
+        Value::Text(s) => Some(s.clone()),
+        Value::Int(i) => d
+            .field
+            .value_name(*i)
+            .map(str::to_owned)
+            .or_else(|| (!d.field.bits.is_empty()).then(|| d.field.bit_names(*i))),
+        Value::Float(_) => None,
+    };
+    IcdFieldMsg {
+        name: d.path.clone(),
+        value: d.value.as_f64().unwrap_or(f64::NAN),
+        text,
     }
 }
 
@@ -2220,6 +2285,11 @@ impl Recorder {
             out,
             enc: EventEncoder::new(base_ns),
         })
+    }
+
+    /// Decode `/csp/packets` with the ICD on the run's ports.
+    pub fn set_icd(&mut self, icd: crate::icd::IcdMap) {
+        self.enc.set_icd(icd);
     }
 
     /// Record one event.

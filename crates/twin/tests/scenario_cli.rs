@@ -320,6 +320,79 @@ fn a_real_recording_decodes_with_the_python_mcap_package() {
     );
 }
 
+/// Issue 19: `/csp/packets` carries every ICD request and reply decoded (command name and
+/// fields), so a plot of TMGEN's `current_mode` from the recording shows a mode change, read
+/// with nothing but the Python `mcap` package and the schemas in the file.
+#[test]
+fn a_recorded_tmgen_mode_change_shows_in_the_decoded_packets() {
+    let scenario = tmp("mode-change.toml");
+    std::fs::write(
+        &scenario,
+        r#"name = "mode-change"
+start = "2026-04-30T18:00:00Z"
+duration = "60s"
+seed = 1
+
+[satellite]
+tle = [
+  "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996",
+  "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009",
+]
+
+[[commands]]
+name = "tmgen"
+at = "5s"
+every = "5s"
+count = 10
+to = "FC"
+request = "raw"
+port = 10
+data = "01"
+
+[[commands]]
+name = "idle"
+at = "27s"
+to = "FC"
+request = "raw"
+port = 12
+data = "06 00"
+"#,
+    )
+    .unwrap();
+    let rec = tmp("mode-change.mcap");
+    let (code, out, err) = twin(&[
+        "run",
+        scenario.to_str().unwrap(),
+        "--record",
+        rec.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}{err}");
+    let out = Command::new("python3")
+        .arg(repo().join("tests/icd_fields_mcap.py"))
+        .args([rec.to_str().unwrap(), "FC.TMGEN", "current_mode"])
+        .output()
+        .unwrap();
+    let text = succeeded(&out);
+    let rows: Vec<(f64, f64, String)> = text
+        .lines()
+        .map(|l| {
+            let mut w = l.splitn(3, ' ');
+            (
+                w.next().unwrap().parse().unwrap(),
+                w.next().unwrap().parse().unwrap(),
+                w.next().unwrap_or_default().to_owned(),
+            )
+        })
+        .collect();
+    assert_eq!(rows.len(), 10, "{text}");
+    let (before, after): (Vec<_>, Vec<_>) = rows.iter().partition(|r| r.0 < 27.0);
+    assert!(before.iter().all(|r| r.1 != 0.0), "{text}");
+    assert!(
+        after.iter().all(|r| r.1 == 0.0 && r.2 == "idle"),
+        "after ATCMDSET idle the mode in effect is 0 (idle): {text}"
+    );
+}
+
 /// `m6p-twin args --record rec` started in the repository; the child, the address its
 /// (first) KISS server announced, and the thread draining the rest of its stderr (so the
 /// child never blocks on a full pipe).

@@ -1,0 +1,977 @@
+//! The M6P network's ICD as data: every node, its request-reply ports, their commands and
+//! the layouts of their requests and replies, gathered from the node crates' own tables
+//! (`csp::icd`: the layouts are the wire types themselves, so the description cannot
+//! disagree with the bytes). `m6p-twin icd [--json]` prints it; the recorder decodes CSP
+//! packets with it ([`IcdMap::decode`]); the `icd-reply-length` invariant takes its lengths
+//! from it (`icd_lengths`).
+//!
+//! Port numbers here are the defaults; [`IcdMap::for_run`] places the same tables on the
+//! ports a run configured.
+
+use std::collections::BTreeMap;
+
+use csp::icd::{Access, Command, Data, Decoded, Field, Port, Ty};
+use csp::reqrep::RESULT_SUCCESS;
+use serde::Serialize;
+
+use crate::runtime::RunOptions;
+
+/// Platform port 14 (`csp::params`) as data: the same on every twin node.
+pub const PLATFORM_PORT: Port = Port {
+    port: csp::params::PORT,
+    name: "platform",
+    commands: &[
+        Command::new(csp::params::cmd::PGET, "PGET", "read a parameter")
+            .request(Data::Variable("u8 id", 1, 1))
+            .reply(Data::Variable(
+                "u8 id, u8 type, value (sized by type)",
+                3,
+                6,
+            ))
+            .no_payloads()
+            .twin(),
+        Command::new(
+            csp::params::cmd::PSET,
+            "PSET",
+            "set a parameter (not saved)",
+        )
+        .request(Data::Variable(
+            "u8 id, value (sized by the parameter's type)",
+            2,
+            5,
+        ))
+        .reply(Data::Variable("u8 id, u8 type, value in effect", 3, 6))
+        .no_payloads()
+        .twin(),
+        Command::new(
+            csp::params::cmd::PINFO,
+            "PINFO",
+            "a parameter's type, range, default, name and unit",
+        )
+        .request(Data::Variable("u8 id", 1, 1))
+        .reply(Data::Variable(
+            "u8 id, u8 type, f64 min, f64 max, f64 default, char name[24], char unit[8]",
+            csp::params::PINFO_LEN,
+            csp::params::PINFO_LEN,
+        ))
+        .no_payloads()
+        .twin(),
+        Command::new(csp::params::cmd::PLIST, "PLIST", "parameters from an id on")
+            .request(Data::Variable("u8 first_id", 1, 1))
+            .reply(Data::Variable(
+                "u8 next_id (0xFF: no more), u8 count, count x (u8 id, u8 type, value)",
+                2,
+                csp::params::PLIST_MAX_BYTES,
+            ))
+            .no_payloads()
+            .twin(),
+        Command::new(
+            csp::params::cmd::PSAVE,
+            "PSAVE",
+            "save the parameters to the non-volatile store",
+        )
+        .no_payloads()
+        .twin(),
+        Command::new(
+            csp::params::cmd::PDEFAULTS,
+            "PDEFAULTS",
+            "restore the factory values",
+        )
+        .no_payloads()
+        .twin(),
+        Command::new(
+            csp::params::cmd::SELFTEST,
+            "SELFTEST",
+            "each component's health and reading",
+        )
+        .reply(Data::Variable(
+            "u8 overall, u8 count, count x (u8 health, f32 reading)",
+            2,
+            2 + 255 * 5,
+        ))
+        .no_payloads()
+        .twin(),
+    ],
+};
+
+/// One node of the network and its ports (default numbers).
+#[derive(Debug, Clone)]
+pub struct NodeIcd {
+    /// Name (`FC`, `PC`, `COMM`, `payload`).
+    pub name: &'static str,
+    /// CSP addresses it answers on.
+    pub addrs: Vec<u8>,
+    /// Its request-reply ports.
+    pub ports: Vec<Port>,
+}
+
+/// Every node's ICD, with the default ports.
+pub fn nodes() -> Vec<NodeIcd> {
+    use nodes_fc::wire as fc;
+    use nodes_pc::wire as pc;
+    vec![
+        NodeIcd {
+            name: "COMM",
+            addrs: vec![platform::addr::COMM1, platform::addr::COMM2],
+            ports: vec![nodes_comm::wire::ICD_PORT, PLATFORM_PORT],
+        },
+        NodeIcd {
+            name: "FC",
+            addrs: vec![platform::addr::FC],
+            ports: vec![
+                fc::ICD_TELEMETRY,
+                fc::ICD_RTC,
+                fc::ICD_ATTITUDE,
+                fc::ICD_SCRIPTS,
+                PLATFORM_PORT,
+            ],
+        },
+        NodeIcd {
+            name: "EPS",
+            addrs: vec![platform::addr::EPS],
+            ports: vec![nodes_eps::wire::ICD_PORT, PLATFORM_PORT],
+        },
+        NodeIcd {
+            name: "ECU",
+            addrs: vec![platform::addr::ECU],
+            ports: vec![nodes_ecu::wire::ICD_PORT, PLATFORM_PORT],
+        },
+        NodeIcd {
+            name: "PC",
+            addrs: vec![platform::addr::PC],
+            ports: vec![
+                pc::ICD_CONTROL,
+                pc::ICD_INGEST,
+                pc::ICD_TELEMETRY,
+                pc::ICD_FILES,
+                PLATFORM_PORT,
+            ],
+        },
+        NodeIcd {
+            name: "payload",
+            addrs: vec![12, 13, 14, 15],
+            ports: vec![pc::ICD_PAYLOAD, PLATFORM_PORT],
+        },
+    ]
+}
+
+/// The node named `name` (case-insensitive; `COMM1`/`COMM2` are the COMM, `PL12`.. a
+/// payload).
+pub fn node_named(name: &str) -> Option<NodeIcd> {
+    let n = name.to_ascii_uppercase();
+    let key = match n.as_str() {
+        "COMM1" | "COMM2" => "COMM",
+        s if s.starts_with("PL") || s == "PAYLOAD" => "payload",
+        s => s,
+    };
+    nodes()
+        .into_iter()
+        .find(|x| x.name.eq_ignore_ascii_case(key))
+}
+
+/// The ICD placed on one run's ports: (node address, port) to the port's table.
+#[derive(Debug, Clone, Default)]
+pub struct IcdMap {
+    ports: BTreeMap<(u8, u8), Port>,
+}
+
+/// Request or reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Direction {
+    /// To an ICD port.
+    Request,
+    /// From an ICD port.
+    Reply,
+}
+
+/// A CSP packet's data read with the ICD.
+#[derive(Debug, Clone)]
+pub struct DecodedPacket {
+    /// The node's name (`FC`).
+    pub node: &'static str,
+    /// The command's name (`TMGEN`).
+    pub command: &'static str,
+    /// Request or reply.
+    pub direction: Direction,
+    /// The reply's result byte (replies only).
+    pub result: Option<u8>,
+    /// The fixed fields, decoded (empty for a failure reply, a layout of varying length,
+    /// or data of the wrong length).
+    pub fields: Vec<Decoded>,
+    /// The byte string after a fixed head (SETUP's sync message), if any.
+    pub tail: Option<Vec<u8>>,
+    /// The data's length fits the layout (`false`: the fields could not be read).
+    pub fits: bool,
+}
+
+impl IcdMap {
+    /// The ICD on the default ports.
+    pub fn defaults() -> Self {
+        let mut ports = BTreeMap::new();
+        for n in nodes() {
+            for a in &n.addrs {
+                for p in &n.ports {
+                    ports.insert((*a, p.port), *p);
+                }
+            }
+        }
+        IcdMap { ports }
+    }
+
+    /// The ICD on the ports `opts` configured.
+    pub fn for_run(opts: &RunOptions) -> Self {
+        use nodes_fc::wire as fc;
+        use nodes_pc::wire as pc;
+        let mut ports = BTreeMap::new();
+        let mut put = |addr: u8, number: u8, p: Port| {
+            ports.insert((addr, number), Port { port: number, ..p });
+        };
+        let f = &opts.fc.ports;
+        put(platform::addr::FC, f.telemetry, fc::ICD_TELEMETRY);
+        put(platform::addr::FC, f.rtc, fc::ICD_RTC);
+        put(platform::addr::FC, f.attitude, fc::ICD_ATTITUDE);
+        put(platform::addr::FC, f.scripts, fc::ICD_SCRIPTS);
+        put(platform::addr::PC, opts.pc.control_port, pc::ICD_CONTROL);
+        put(platform::addr::PC, opts.pc.ingest_port, pc::ICD_INGEST);
+        put(
+            platform::addr::PC,
+            opts.pc.telemetry_port,
+            pc::ICD_TELEMETRY,
+        );
+        put(platform::addr::PC, opts.pc.files_port, pc::ICD_FILES);
+        put(
+            platform::addr::EPS,
+            opts.eps.port,
+            nodes_eps::wire::ICD_PORT,
+        );
+        put(
+            platform::addr::ECU,
+            opts.ecu.port,
+            nodes_ecu::wire::ICD_PORT,
+        );
+        for a in [platform::addr::COMM1, platform::addr::COMM2] {
+            put(a, opts.comm.port, nodes_comm::wire::ICD_PORT);
+        }
+        for a in 12..=15 {
+            put(a, pc::PORT_PAYLOAD, pc::ICD_PAYLOAD);
+        }
+        for s in &opts.pc.sessions {
+            put(s.payload_addr, s.payload_port, pc::ICD_PAYLOAD);
+        }
+        for a in [
+            platform::addr::COMM1,
+            platform::addr::COMM2,
+            platform::addr::FC,
+            platform::addr::EPS,
+            platform::addr::ECU,
+            platform::addr::PC,
+            12,
+            13,
+            14,
+            15,
+        ] {
+            put(a, csp::params::PORT, PLATFORM_PORT);
+        }
+        IcdMap { ports }
+    }
+
+    /// The port table at `addr`:`port`.
+    pub fn port(&self, addr: u8, port: u8) -> Option<&Port> {
+        self.ports.get(&(addr, port))
+    }
+
+    /// Every (address, port) with its table, in order.
+    pub fn iter(&self) -> impl Iterator<Item = (&(u8, u8), &Port)> {
+        self.ports.iter()
+    }
+
+    /// Read a packet's data (without a CRC trailer) with the ICD: a request when it goes to
+    /// an ICD port from an ephemeral port (or another node's port), a reply when it comes
+    /// from an ICD port to an ephemeral port. `None` when neither end is an ICD port, or
+    /// the command id is not in the port's table.
+    pub fn decode(&self, header: &csp::Header, data: &[u8]) -> Option<DecodedPacket> {
+        let node_of = |addr: u8| {
+            nodes()
+                .into_iter()
+                .find(|n| n.addrs.contains(&addr))
+                .map_or("?", |n| n.name)
+        };
+        let from_icd = header.dport >= csp::header::EPHEMERAL_PORT_MIN
+            && self.port(header.src, header.sport).is_some();
+        let (port, direction, node) = if from_icd {
+            (
+                self.port(header.src, header.sport)?,
+                Direction::Reply,
+                node_of(header.src),
+            )
+        } else {
+            (
+                self.port(header.dst, header.dport)?,
+                Direction::Request,
+                node_of(header.dst),
+            )
+        };
+        let (&id, rest) = data.split_first()?;
+        let command = port.command(id)?;
+        let (result, body, layout) = match direction {
+            Direction::Request => (None, rest, command.request),
+            Direction::Reply => {
+                let (&r, body) = rest.split_first()?;
+                (Some(r), body, command.reply)
+            }
+        };
+        let mut out = DecodedPacket {
+            node,
+            command: command.name,
+            direction,
+            result,
+            fields: Vec::new(),
+            tail: None,
+            fits: false,
+        };
+        if result.is_some_and(|r| r != RESULT_SUCCESS) {
+            out.fits = body.is_empty();
+            return Some(out);
+        }
+        let (lo, hi) = layout.bounds();
+        out.fits = (lo..=hi).contains(&body.len());
+        if let Some((fields, tail)) = layout.decode(body) {
+            out.fields = fields;
+            out.tail = tail;
+        }
+        Some(out)
+    }
+}
+
+/// A field as `icd --json` prints it.
+#[derive(Debug, Serialize)]
+struct FieldJson {
+    name: &'static str,
+    #[serde(rename = "type")]
+    ty: &'static str,
+    count: usize,
+    offset: usize,
+    size: usize,
+    #[serde(skip_serializing_if = "str::is_empty")]
+    unit: &'static str,
+    #[serde(skip_serializing_if = "String::is_empty")]
+    doc: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    range: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    except: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    values: BTreeMap<String, &'static str>,
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    bits: BTreeMap<String, &'static str>,
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    text: bool,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    fields: Vec<FieldJson>,
+}
+
+fn fields_json(fields: &'static [Field]) -> Vec<FieldJson> {
+    let mut offset = 0;
+    fields
+        .iter()
+        .map(|f| {
+            let j = FieldJson {
+                name: f.name,
+                ty: if f.text { "char" } else { f.ty.name() },
+                count: f.count,
+                offset,
+                size: f.len(),
+                unit: f.unit,
+                doc: f.doc_line(),
+                range: f.range.map(|(a, b)| [a, b]),
+                except: f.except.map(|(a, b)| [a, b]),
+                values: f.values.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+                bits: f.bits.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
+                text: f.text,
+                fields: match f.ty {
+                    Ty::Struct(_, inner) if !f.text => fields_json(inner),
+                    _ => Vec::new(),
+                },
+            };
+            offset += f.len();
+            j
+        })
+        .collect()
+}
+
+#[derive(Debug, Serialize)]
+struct DataJson {
+    #[serde(skip_serializing_if = "str::is_empty")]
+    layout: &'static str,
+    min_bytes: usize,
+    max_bytes: usize,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    fields: Vec<FieldJson>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tail: Option<TailJson>,
+    #[serde(skip_serializing_if = "str::is_empty")]
+    doc: &'static str,
+}
+
+#[derive(Debug, Serialize)]
+struct TailJson {
+    name: &'static str,
+    doc: &'static str,
+    min_bytes: usize,
+    max_bytes: usize,
+}
+
+fn data_json(d: &Data) -> DataJson {
+    let (min_bytes, max_bytes) = d.bounds();
+    match *d {
+        Data::None => DataJson {
+            layout: "",
+            min_bytes,
+            max_bytes,
+            fields: Vec::new(),
+            tail: None,
+            doc: "",
+        },
+        Data::Fixed(name, f) => DataJson {
+            layout: name,
+            min_bytes,
+            max_bytes,
+            fields: fields_json(f),
+            tail: None,
+            doc: "",
+        },
+        Data::Tail(name, f, t) => DataJson {
+            layout: name,
+            min_bytes,
+            max_bytes,
+            fields: fields_json(f),
+            tail: Some(TailJson {
+                name: t.name,
+                doc: t.doc,
+                min_bytes: t.min,
+                max_bytes: t.max,
+            }),
+            doc: "",
+        },
+        Data::Variable(doc, ..) => DataJson {
+            layout: "",
+            min_bytes,
+            max_bytes,
+            fields: Vec::new(),
+            tail: None,
+            doc,
+        },
+    }
+}
+
+#[derive(Debug, Serialize)]
+struct CommandJson {
+    id: u8,
+    name: &'static str,
+    doc: &'static str,
+    access: &'static str,
+    origin: &'static str,
+    request: DataJson,
+    reply: DataJson,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    example: Option<String>,
+}
+
+#[derive(Debug, Serialize)]
+struct PortJson {
+    port: u8,
+    name: &'static str,
+    commands: Vec<CommandJson>,
+}
+
+#[derive(Debug, Serialize)]
+struct NodeJson {
+    name: &'static str,
+    addrs: Vec<u8>,
+    ports: Vec<PortJson>,
+}
+
+#[derive(Debug, Serialize)]
+struct IcdJson {
+    format: u32,
+    framing: &'static str,
+    nodes: Vec<NodeJson>,
+}
+
+fn access_name(a: Access) -> &'static str {
+    match a {
+        Access::Any => "any",
+        Access::NoPayloads => "no-payloads",
+    }
+}
+
+/// The whole ICD as JSON (`m6p-twin icd --json`): format 1.
+pub fn to_json() -> String {
+    let j = IcdJson {
+        format: 1,
+        framing: "request: command u8 | data; reply: command u8 | result u8 (1 success, 0 \
+                  failure) | data on success; little-endian, IEEE-754",
+        nodes: nodes()
+            .into_iter()
+            .map(|n| NodeJson {
+                name: n.name,
+                addrs: n.addrs,
+                ports: n
+                    .ports
+                    .iter()
+                    .map(|p| PortJson {
+                        port: p.port,
+                        name: p.name,
+                        commands: p
+                            .commands
+                            .iter()
+                            .map(|c| CommandJson {
+                                id: c.id,
+                                name: c.name,
+                                doc: c.doc,
+                                access: access_name(c.access),
+                                origin: if c.twin { "twin" } else { "icd" },
+                                request: data_json(&c.request),
+                                reply: data_json(&c.reply),
+                                example: c.examples.first().map(|e| {
+                                    e.iter().map(|b| format!("{b:02x}")).collect::<String>()
+                                }),
+                            })
+                            .collect(),
+                    })
+                    .collect(),
+            })
+            .collect(),
+    };
+    serde_json::to_string_pretty(&j).unwrap_or_default()
+}
+
+fn field_lines(fields: &'static [Field], indent: &str, out: &mut String) {
+    let mut offset = 0;
+    for f in fields {
+        let ty = f.type_text();
+        let mut extra = Vec::new();
+        if !f.unit.is_empty() {
+            extra.push(f.unit.to_string());
+        }
+        if let Some(r) = f.range_text() {
+            extra.push(format!("range {r}"));
+        }
+        if !f.values.is_empty() {
+            extra.push(
+                f.values
+                    .iter()
+                    .map(|(k, v)| format!("{k} {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            );
+        }
+        if !f.bits.is_empty() {
+            extra.push(format!(
+                "bits: {}",
+                f.bits
+                    .iter()
+                    .map(|(k, v)| format!("{k} {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+        let extra = if extra.is_empty() {
+            String::new()
+        } else {
+            format!(" [{}]", extra.join("; "))
+        };
+        out.push_str(&format!(
+            "{indent}{offset:>3}  {:<22} {ty:<12}{extra}  {}\n",
+            f.name,
+            f.doc_line()
+        ));
+        if let Ty::Struct(_, inner) = f.ty {
+            if !f.text {
+                field_lines(inner, &format!("{indent}     "), out);
+            }
+        }
+        offset += f.len();
+    }
+}
+
+fn data_lines(label: &str, d: &Data, out: &mut String) {
+    match *d {
+        Data::None => out.push_str(&format!("      {label}: none\n")),
+        Data::Fixed(name, f) => {
+            out.push_str(&format!(
+                "      {label}: {name}, {} bytes\n",
+                csp::icd::fields_len(f)
+            ));
+            field_lines(f, "        ", out);
+        }
+        Data::Tail(name, f, t) => {
+            let head = csp::icd::fields_len(f);
+            if f.is_empty() {
+                out.push_str(&format!(
+                    "      {label}: {} ({}..={} bytes): {}\n",
+                    t.name, t.min, t.max, t.doc
+                ));
+            } else {
+                out.push_str(&format!(
+                    "      {label}: {name}, {head} + {}..={} bytes\n",
+                    t.min, t.max
+                ));
+                field_lines(f, "        ", out);
+                out.push_str(&format!(
+                    "        {head:>3}  {:<22} {:<12}  {}\n",
+                    t.name, "bytes", t.doc
+                ));
+            }
+        }
+        Data::Variable(doc, lo, hi) => {
+            out.push_str(&format!("      {label}: {lo}..={hi} bytes: {doc}\n"));
+        }
+    }
+}
+
+/// The whole ICD as text (`m6p-twin icd`), or one node's.
+pub fn to_text(node: Option<&str>) -> Result<String, String> {
+    let list = match node {
+        Some(n) => vec![node_named(n).ok_or_else(|| {
+            format!(
+                "no node {n:?}: the nodes are {}",
+                nodes()
+                    .iter()
+                    .map(|n| n.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })?],
+        None => nodes(),
+    };
+    let mut out = String::from(
+        "Request: command u8 | data. Reply: command u8 | result u8 (1 success, 0 failure) | \
+         data on success. Little-endian, IEEE-754. Offsets are from the start of the data.\n",
+    );
+    for n in list {
+        let addrs: Vec<String> = n.addrs.iter().map(u8::to_string).collect();
+        out.push_str(&format!("\n{} (CSP {})\n", n.name, addrs.join(", ")));
+        for p in &n.ports {
+            out.push_str(&format!("  port {} {}\n", p.port, p.name));
+            if p.commands.is_empty() {
+                out.push_str("    (no command table: see docs/protocol.md)\n");
+            }
+            for c in p.commands {
+                let mut tags = Vec::new();
+                if c.twin {
+                    tags.push("the twin's");
+                }
+                if c.access == Access::NoPayloads {
+                    tags.push("refused to payloads");
+                }
+                let tags = if tags.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", tags.join(", "))
+                };
+                out.push_str(&format!("    {} {}{tags}: {}\n", c.id, c.name, c.doc));
+                data_lines("request", &c.request, &mut out);
+                data_lines("reply", &c.reply, &mut out);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Markers around the generated tables in docs/protocol.md.
+pub const MARKDOWN_BEGIN: &str = "<!-- BEGIN ICD tables: generated by `m6p-twin icd --markdown` from crates/*/src/wire.rs; do not edit -->";
+/// End marker.
+pub const MARKDOWN_END: &str = "<!-- END ICD tables -->";
+
+fn md_data(d: &Data) -> String {
+    match *d {
+        Data::None => "-".to_owned(),
+        Data::Fixed(name, f) => format!("`{name}` {}", csp::icd::fields_len(f)),
+        Data::Tail(_, [], t) => format!("`{}` {}..={}", t.name, t.min, t.max),
+        Data::Tail(name, f, t) => format!(
+            "`{name}` {} + `{}` {}..={}",
+            csp::icd::fields_len(f),
+            t.name,
+            t.min,
+            t.max
+        ),
+        Data::Variable(doc, lo, hi) => format!("{lo}..={hi}: {doc}"),
+    }
+}
+
+fn md_fields(name: &str, fields: &'static [Field], tail: Option<csp::icd::Tail>, out: &mut String) {
+    out.push_str(&format!(
+        "\n`{name}` ({} bytes{}):\n\n| offset | field | type | unit | range, values | meaning |\n|---|---|---|---|---|---|\n",
+        csp::icd::fields_len(fields),
+        tail.map_or(String::new(), |t| format!(" + {} {}..={}", t.name, t.min, t.max))
+    ));
+    let mut offset = 0;
+    for f in fields {
+        let ty = f.type_text();
+        let mut what = Vec::new();
+        if let Some(r) = f.range_text() {
+            what.push(r);
+        }
+        what.extend(f.values.iter().map(|(k, v)| format!("{k} {v}")));
+        what.extend(f.bits.iter().map(|(k, v)| format!("bit {k} {v}")));
+        out.push_str(&format!(
+            "| {offset} | `{}` | {ty} | {} | {} | {} |\n",
+            f.name,
+            f.unit,
+            what.join(", "),
+            f.doc_line().replace('|', "\\|")
+        ));
+        offset += f.len();
+    }
+    if let Some(t) = tail {
+        out.push_str(&format!(
+            "| {offset} | `{}` | u8[{}..={}] | | | {} |\n",
+            t.name, t.min, t.max, t.doc
+        ));
+    }
+}
+
+/// The ICD's tables as Markdown (docs/protocol.md, between [`MARKDOWN_BEGIN`] and
+/// [`MARKDOWN_END`]).
+pub fn to_markdown() -> String {
+    let mut out = String::new();
+    for n in nodes() {
+        let addrs: Vec<String> = n.addrs.iter().map(u8::to_string).collect();
+        out.push_str(&format!("\n### {} (CSP {})\n\n", n.name, addrs.join(", ")));
+        out.push_str("| port | id | command | request data | reply data | payloads | origin |\n|---|---|---|---|---|---|---|\n");
+        let mut layouts: Vec<(&'static str, &'static [Field], Option<csp::icd::Tail>)> = Vec::new();
+        for p in &n.ports {
+            if p.commands.is_empty() {
+                out.push_str(&format!(
+                    "| {} {} | | (no command table) | | | | |\n",
+                    p.port, p.name
+                ));
+            }
+            for c in p.commands {
+                out.push_str(&format!(
+                    "| {} {} | {} | {} | {} | {} | {} | {} |\n",
+                    p.port,
+                    p.name,
+                    c.id,
+                    c.name,
+                    md_data(&c.request),
+                    md_data(&c.reply),
+                    if c.access == Access::Any {
+                        "yes"
+                    } else {
+                        "refused"
+                    },
+                    if c.twin { "twin" } else { "ICD" },
+                ));
+                for d in [c.request, c.reply] {
+                    let entry = match d {
+                        Data::Fixed(name, f) => Some((name, f, None)),
+                        Data::Tail(name, f, t) if !f.is_empty() => Some((name, f, Some(t))),
+                        _ => None,
+                    };
+                    if let Some(e) = entry
+                        && !layouts.iter().any(|l| l.0 == e.0)
+                    {
+                        layouts.push(e);
+                    }
+                }
+            }
+        }
+        // Nested layouts (TMALL's) after their parents.
+        let mut i = 0;
+        while i < layouts.len() {
+            for f in layouts[i].1 {
+                if let Ty::Struct(name, inner) = f.ty
+                    && !f.text
+                    && !layouts.iter().any(|l| l.0 == name)
+                {
+                    layouts.push((name, inner, None));
+                }
+            }
+            i += 1;
+        }
+        for (name, f, t) in layouts {
+            md_fields(name, f, t, &mut out);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use csp::icd::Value;
+
+    #[test]
+    fn every_node_and_command_is_described_and_unique() {
+        let mut names = std::collections::BTreeSet::new();
+        for n in nodes() {
+            for p in &n.ports {
+                let mut ids = std::collections::BTreeSet::new();
+                for c in p.commands {
+                    assert!(
+                        ids.insert(c.id),
+                        "{} port {}: id {} twice",
+                        n.name,
+                        p.port,
+                        c.id
+                    );
+                    names.insert(c.name);
+                }
+            }
+        }
+        for want in [
+            "TMGEN",
+            "TMATP",
+            "TMACD",
+            "TMSENS",
+            "TMRAWSENS",
+            "TMALL",
+            "RTCSTMSET",
+            "ATCMDSET",
+            "ATCTLESET",
+            "SETUP",
+            "STATUS",
+            "ABORT",
+            "TMPC",
+            "FREAD",
+            "SYNC",
+            "POLL",
+            "TMEPS",
+            "CHSET",
+            "THRSET",
+            "TMECU",
+            "FIRE",
+            "TMCOMM",
+            "BEACON",
+            "PSET",
+            "SELFTEST",
+        ] {
+            assert!(names.contains(want), "{want} missing");
+        }
+    }
+
+    #[test]
+    fn a_tmgen_reply_decodes_with_its_mode_named() {
+        let map = IcdMap::defaults();
+        let g = nodes_fc::wire::TmGen {
+            rtc_timestamp: 1_777_000_000,
+            uptime_s: 10,
+            global_on_time_s: 10,
+            current_mode: 3,
+            current_state: 0,
+            mcu_temp_c: 21,
+            reset_cause: 0,
+        };
+        use csp::reqrep::le::Repr;
+        let mut data = vec![1, 1];
+        data.extend(g.to_vec());
+        let d = map.decode(&csp::Header::new(3, 16, 40, 10), &data).unwrap();
+        assert_eq!(
+            (d.node, d.command, d.direction),
+            ("FC", "TMGEN", Direction::Reply)
+        );
+        assert!(d.fits);
+        let mode = d.fields.iter().find(|f| f.path == "current_mode").unwrap();
+        assert_eq!(mode.value, Value::Int(3));
+        assert_eq!(mode.show(), "3 (nadir)");
+        // The request, and a SETUP with its sync message.
+        let r = map.decode(&csp::Header::new(16, 3, 10, 40), &[1]).unwrap();
+        assert_eq!((r.command, r.direction), ("TMGEN", Direction::Request));
+        let s = map
+            .decode(
+                &csp::Header::new(20, 6, 10, 41),
+                &[1, 1, 0, 0, 0, 0, 0x58, 2, 0, 0, 200, b'g', b'o'],
+            )
+            .unwrap();
+        assert_eq!(s.command, "SETUP");
+        let dur = s.fields.iter().find(|f| f.path == "duration_s").unwrap();
+        assert_eq!(dur.show(), "600 s");
+        assert_eq!(s.tail.as_deref(), Some(&b"go"[..]));
+        // A failure reply has no fields; a short reply does not fit.
+        let f = map
+            .decode(&csp::Header::new(3, 16, 40, 10), &[1, 0])
+            .unwrap();
+        assert_eq!((f.result, f.fits, f.fields.len()), (Some(0), true, 0));
+        let short = map
+            .decode(&csp::Header::new(3, 16, 40, 10), &[1, 1, 0])
+            .unwrap();
+        assert!(!short.fits);
+        // Not an ICD port.
+        assert!(
+            map.decode(&csp::Header::new(3, 16, 40, 1), &[1, 1])
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn docs_protocol_md_has_the_generated_tables() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/protocol.md");
+        let doc = std::fs::read_to_string(path).unwrap();
+        let a = doc
+            .find(MARKDOWN_BEGIN)
+            .expect("the BEGIN marker in docs/protocol.md");
+        let b = doc
+            .find(MARKDOWN_END)
+            .expect("the END marker in docs/protocol.md");
+        let have = &doc[a + MARKDOWN_BEGIN.len()..b];
+        let want = format!("\n{}\n", to_markdown());
+        assert!(
+            have == want,
+            "docs/protocol.md's ICD tables are not what the code generates: run tools/icd-docs.sh"
+        );
+    }
+
+    #[test]
+    fn the_payload_port_agrees_with_the_simulated_payload() {
+        use csp::reqrep::CommandSet;
+        let bad = csp::icd::range_disagreements(&nodes_pc::wire::ICD_PAYLOAD, |c, d| {
+            let mut b = vec![c];
+            b.extend_from_slice(d);
+            nodes_payload::wire::PayloadCommand::parse(&csp::reqrep::Request::parse(&b).unwrap())
+                .is_ok()
+        });
+        assert!(bad.is_empty(), "{bad:#?}");
+    }
+
+    #[test]
+    fn the_json_has_every_node_and_the_text_every_command() {
+        let j: serde_json::Value = serde_json::from_str(&to_json()).unwrap();
+        assert_eq!(j["format"], 1);
+        let nodes_j = j["nodes"].as_array().unwrap();
+        assert_eq!(nodes_j.len(), nodes().len());
+        let fc = nodes_j.iter().find(|n| n["name"] == "FC").unwrap();
+        let tmgen = &fc["ports"][0]["commands"][0];
+        assert_eq!(tmgen["name"], "TMGEN");
+        assert_eq!(tmgen["reply"]["max_bytes"], 16);
+        assert_eq!(tmgen["reply"]["fields"][3]["name"], "current_mode");
+        assert_eq!(tmgen["reply"]["fields"][3]["offset"], 12);
+        assert_eq!(tmgen["reply"]["fields"][3]["values"]["3"], "nadir");
+        let text = to_text(None).unwrap();
+        for n in nodes() {
+            for p in &n.ports {
+                for c in p.commands {
+                    assert!(
+                        text.contains(&format!(" {} {}", c.id, c.name)),
+                        "{}",
+                        c.name
+                    );
+                }
+            }
+        }
+        assert!(to_text(Some("eps")).unwrap().contains("THRSET"));
+        let md = to_markdown();
+        assert!(
+            md.contains("| 10 telemetry | 1 | TMGEN | - | `TmGen` 16 | yes | ICD |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("| 12 | `current_mode` | u8 |  | 0 idle, 1 detumble"),
+            "{md}"
+        );
+        assert!(to_text(Some("nope")).unwrap_err().contains("FC"));
+    }
+}
