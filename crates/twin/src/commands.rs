@@ -45,10 +45,25 @@ pub struct CommandSpec {
     /// The sending node (a ground station; default GS16).
     #[serde(default)]
     pub from: Option<NodeRef>,
-    /// The destination node.
-    pub to: NodeRef,
-    /// `ping`, `uptime`, `ident`, `memfree`, `buf-free`, `ps`, `reboot` or `raw`.
-    pub request: RequestKind,
+    /// The destination node (with `command`: default the command's node; COMM1 for a COMM
+    /// command; a payload command needs it).
+    #[serde(default)]
+    pub to: Option<NodeRef>,
+    /// `ping`, `uptime`, `ident`, `memfree`, `buf-free`, `ps`, `reboot` or `raw` (or give
+    /// `command`).
+    #[serde(default)]
+    pub request: Option<RequestKind>,
+    /// An ICD command by name, `NODE.COMMAND` as `m6p-twin icd` lists them (`PC.SETUP`,
+    /// `FC.TMGEN`), with its request fields in `args`; sent to the command's port (`port`
+    /// overrides it where the scenario moved the port).
+    #[serde(default)]
+    pub command: Option<String>,
+    /// The typed command's request fields by name: numbers, value names (`mode =
+    /// "nadir"`), durations for fields in s or ms (`duration_s = "10m"`), arrays for array
+    /// fields, text for text fields and for a trailing byte string (SETUP's `sync_message`).
+    /// Checked against the ICD's types and ranges.
+    #[serde(default)]
+    pub args: Option<BTreeMap<String, serde_json::Value>>,
     /// Ping payload size in bytes (default 16).
     #[serde(default)]
     pub size: Option<usize>,
@@ -156,13 +171,75 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
             Some(Ok(_)) => {}
         }
         match &c.to {
-            NodeRef::Addr(a) if *a >= 31 => {
+            Some(NodeRef::Addr(a)) if *a >= 31 => {
                 err(p("to"), format!("{a} is not a unicast CSP address"))
             }
-            NodeRef::Addr(_) => {}
-            r @ NodeRef::Name(_) => {
+            Some(NodeRef::Addr(_)) => {}
+            Some(r @ NodeRef::Name(_)) => {
                 if let Err(e) = net.resolve(r) {
                     err(p("to"), e);
+                }
+            }
+            None if c.command.is_none() => err(p("to"), "missing: the destination node".into()),
+            None => {}
+        }
+        match (&c.request, &c.command) {
+            (Some(_), Some(_)) => err(
+                p("command"),
+                "give `request` or `command`, not both".into(),
+            ),
+            (None, None) => err(
+                p("request"),
+                "missing: `request` (ping, uptime, ident, memfree, buf-free, ps, reboot, raw) or `command` (an ICD command, NODE.COMMAND)".into(),
+            ),
+            _ => {}
+        }
+        if c.args.is_some() && c.command.is_none() {
+            err(p("args"), "only a typed `command` takes `args`".into());
+        }
+        if let Some(name) = &c.command {
+            if c.data.is_some() || c.text.is_some() {
+                err(
+                    p(if c.data.is_some() { "data" } else { "text" }),
+                    "a typed `command` takes `args`; raw bytes go with `request = \"raw\"`".into(),
+                );
+            }
+            match crate::icd::find_command(name) {
+                Err(e) => err(p("command"), e),
+                Ok((node, _, cmd)) => {
+                    let to = c.to.as_ref().and_then(|r| match r {
+                        NodeRef::Addr(a) => Some(*a),
+                        r => net.resolve(r).ok(),
+                    });
+                    match to {
+                        Some(a) if !node.addrs.contains(&a) => err(
+                            p("to"),
+                            format!(
+                                "{name} goes to the {} ({}), not to {a}",
+                                node.name,
+                                node.addrs
+                                    .iter()
+                                    .map(u8::to_string)
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ),
+                        ),
+                        None if c.to.is_none() && node.name == "payload" => err(
+                            p("to"),
+                            format!("missing: which payload {name} goes to (12-15)"),
+                        ),
+                        _ => {}
+                    }
+                    let args = c.args.clone().unwrap_or_default();
+                    if let Err((field, e)) = crate::icd::encode_args(cmd, &args) {
+                        let mut at = p("args");
+                        if !field.is_empty() && args.contains_key(&field) {
+                            at.push(key(&field));
+                        } else if c.args.is_none() {
+                            at = p("command");
+                        }
+                        err(at, e);
+                    }
                 }
             }
         }
@@ -181,11 +258,12 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
         if c.count.unwrap_or(1) > 1_000_000 {
             err(p("count"), "at most 1000000 repetitions".into());
         }
-        let raw = c.request == RequestKind::Raw;
+        let raw = c.request == Some(RequestKind::Raw);
         if raw && c.port.is_none() {
             err(p("request"), "a `raw` request needs `port`".into());
         }
-        if !raw && (c.port.is_some() || c.data.is_some() || c.text.is_some()) {
+        if !raw && c.command.is_none() && (c.port.is_some() || c.data.is_some() || c.text.is_some())
+        {
             err(
                 p(if c.port.is_some() {
                     "port"
@@ -214,7 +292,7 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
         {
             err(p("data"), e);
         }
-        if c.size.is_some() && c.request != RequestKind::Ping {
+        if c.size.is_some() && c.request != Some(RequestKind::Ping) {
             err(p("size"), "only a `ping` takes `size`".into());
         }
         if c.size.is_some_and(|s| s > 256) {
@@ -242,30 +320,47 @@ pub fn compile(s: &Scenario, net: &NetworkSpec) -> BTreeMap<u8, Vec<PlannedReque
             .and_then(|r| net.resolve(r).ok())
             .or(default_gs)
             .unwrap_or(16);
-        let to = match &c.to {
-            NodeRef::Addr(a) => *a,
-            r => net.resolve(r).unwrap_or(0),
+        let typed = c
+            .command
+            .as_deref()
+            .and_then(|n| crate::icd::find_command(n).ok());
+        let to = match (&c.to, &typed) {
+            (Some(NodeRef::Addr(a)), _) => *a,
+            (Some(r), _) => net.resolve(r).unwrap_or(0),
+            (None, Some((node, _, _))) => node.addrs.first().copied().unwrap_or(0),
+            (None, None) => 0,
         };
-        let (dport, data) = match c.request {
-            RequestKind::Ping => (1, crate::ground::ping_payload(c.size.unwrap_or(16))),
-            RequestKind::Uptime => (6, vec![]),
-            RequestKind::Ident => (0, vec![0x00, 0x01]),
-            RequestKind::Memfree => (3, vec![]),
-            RequestKind::BufFree => (5, vec![]),
-            RequestKind::Ps => (2, vec![]),
-            RequestKind::Reboot => (4, csp::service::REBOOT_MAGIC.to_be_bytes().to_vec()),
-            RequestKind::Raw => (
-                c.port.unwrap_or(0),
-                match &c.text {
-                    Some(t) => t.as_bytes().to_vec(),
-                    None => c
-                        .data
-                        .as_deref()
-                        .map(parse_hex)
-                        .and_then(Result::ok)
+        let (dport, data) = match (c.request, typed) {
+            (_, Some((_, port, cmd))) => {
+                let mut data = vec![cmd.id];
+                data.extend(
+                    crate::icd::encode_args(cmd, &c.args.clone().unwrap_or_default())
                         .unwrap_or_default(),
-                },
-            ),
+                );
+                (c.port.unwrap_or(port.port), data)
+            }
+            (None, None) => (0, Vec::new()),
+            (Some(kind), None) => match kind {
+                RequestKind::Ping => (1, crate::ground::ping_payload(c.size.unwrap_or(16))),
+                RequestKind::Uptime => (6, vec![]),
+                RequestKind::Ident => (0, vec![0x00, 0x01]),
+                RequestKind::Memfree => (3, vec![]),
+                RequestKind::BufFree => (5, vec![]),
+                RequestKind::Ps => (2, vec![]),
+                RequestKind::Reboot => (4, csp::service::REBOOT_MAGIC.to_be_bytes().to_vec()),
+                RequestKind::Raw => (
+                    c.port.unwrap_or(0),
+                    match &c.text {
+                        Some(t) => t.as_bytes().to_vec(),
+                        None => c
+                            .data
+                            .as_deref()
+                            .map(parse_hex)
+                            .and_then(Result::ok)
+                            .unwrap_or_default(),
+                    },
+                ),
+            },
         };
         let timeout = c.timeout.map_or(Duration::from_secs(5), |d| d.0);
         let every = c.every.map_or(Duration::ZERO, |d| d.0);

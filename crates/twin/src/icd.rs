@@ -680,6 +680,201 @@ pub fn to_text(node: Option<&str>) -> Result<String, String> {
     Ok(out)
 }
 
+/// The node and command named `NODE.COMMAND` (`PC.SETUP`, `FC.TMGEN`, case-insensitive),
+/// with the port it is on (default number). The error lists what exists.
+pub fn find_command(name: &str) -> Result<(NodeIcd, Port, &'static Command), String> {
+    let (node, cmd) = name.split_once('.').ok_or_else(|| {
+        format!("`{name}` is not NODE.COMMAND (for example FC.TMGEN; `m6p-twin icd` lists them)")
+    })?;
+    let n = node_named(node).ok_or_else(|| {
+        format!(
+            "no node `{node}`: {}",
+            nodes()
+                .iter()
+                .map(|n| n.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    })?;
+    for p in &n.ports {
+        if let Some(c) = p.command_named(cmd) {
+            return Ok((n.clone(), *p, c));
+        }
+    }
+    let all: Vec<&str> = n
+        .ports
+        .iter()
+        .flat_map(|p| p.commands.iter().map(|c| c.name))
+        .collect();
+    Err(format!(
+        "the {} has no command `{cmd}`: {}",
+        n.name,
+        all.join(", ")
+    ))
+}
+
+/// A number for field `f` from an argument: a number, a value's name (`nadir`), or a
+/// duration for a field in seconds or milliseconds (`"10m"`).
+fn arg_number(f: &Field, v: &serde_json::Value) -> Result<f64, String> {
+    match v {
+        serde_json::Value::Number(n) => n.as_f64().ok_or_else(|| "not a number".to_owned()),
+        serde_json::Value::Bool(b) => Ok(f64::from(u8::from(*b))),
+        serde_json::Value::String(s) => {
+            if let Some((k, _)) = f.values.iter().find(|(_, n)| n.eq_ignore_ascii_case(s)) {
+                return Ok(*k as f64);
+            }
+            let scale = match f.unit {
+                "s" => Some(1.0),
+                "ms" => Some(1000.0),
+                _ => None,
+            };
+            if let Some(scale) = scale
+                && let Ok(d) = crate::duration::parse_duration(s)
+            {
+                return Ok(d.as_secs_f64() * scale);
+            }
+            let mut also = Vec::new();
+            if scale.is_some() {
+                also.push("a duration such as \"10m\"".to_owned());
+            }
+            if !f.values.is_empty() {
+                also.push(format!(
+                    "one of {}",
+                    f.values
+                        .iter()
+                        .map(|(_, n)| format!("\"{n}\""))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+            Err(if also.is_empty() {
+                format!("`{s}` is not a number")
+            } else {
+                format!("`{s}` is not a number or {}", also.join(" or "))
+            })
+        }
+        other => Err(format!("{other} is not a number")),
+    }
+}
+
+/// Encode a command's request data from named arguments (the scenario's `args`, `gs`'s
+/// `name=value`s): one per top-level field of its layout (an array field takes an array of
+/// its count, a text field a string), then the tail's, as text, if the layout has one
+/// (omitted: empty). Every value is checked against its type and the ICD's range. The
+/// error names the argument (empty for the command as a whole) and says why, with the
+/// range.
+pub fn encode_args(
+    command: &Command,
+    args: &BTreeMap<String, serde_json::Value>,
+) -> Result<Vec<u8>, (String, String)> {
+    use csp::icd::Value;
+    let whole = |m: String| (String::new(), m);
+    let Some((fields, tail)) = command.request.parts() else {
+        return Err(whole(format!(
+            "{} takes request data of varying length: give it as `data` (hex) with `request = \"raw\"`",
+            command.name
+        )));
+    };
+    let known: Vec<&str> = fields
+        .iter()
+        .map(|f| f.name)
+        .chain(tail.map(|t| t.name))
+        .collect();
+    if let Some(k) = args.keys().find(|k| !known.contains(&k.as_str())) {
+        return Err((
+            k.clone(),
+            if known.is_empty() {
+                format!("{} takes no arguments", command.name)
+            } else {
+                format!(
+                    "{} has no argument `{k}`: {}",
+                    command.name,
+                    known.join(", ")
+                )
+            },
+        ));
+    }
+    let mut values = Vec::new();
+    for f in fields {
+        let v = args.get(f.name).ok_or_else(|| {
+            (
+                f.name.to_owned(),
+                format!(
+                    "missing: {} needs {} ({}{})",
+                    command.name,
+                    f.name,
+                    f.type_text(),
+                    f.range_text().map_or(String::new(), |r| format!(", {r}"))
+                ),
+            )
+        })?;
+        let bad = |m: String| (f.name.to_owned(), m);
+        if f.text {
+            let serde_json::Value::String(t) = v else {
+                return Err(bad("text expected".into()));
+            };
+            values.push(Value::Text(t.clone()));
+            continue;
+        }
+        if matches!(f.ty, Ty::Struct(..)) {
+            return Err(bad("a nested layout: give the request as raw data".into()));
+        }
+        let items: Vec<&serde_json::Value> = match (f.count, v) {
+            (1, v) => vec![v],
+            (n, serde_json::Value::Array(a)) if a.len() == n => a.iter().collect(),
+            (n, _) => return Err(bad(format!("an array of {n} values expected"))),
+        };
+        for item in items {
+            let x = arg_number(f, item).map_err(bad)?;
+            if !f.accepts(x) {
+                return Err(bad(format!(
+                    "{x} is outside the ICD's range {} for {}.{}",
+                    f.range_text().unwrap_or_default(),
+                    command.name,
+                    f.name
+                )));
+            }
+            values.push(if f.ty.is_integer() {
+                if x.fract() != 0.0 {
+                    return Err(bad(format!("{x} is not a whole number ({})", f.ty.name())));
+                }
+                Value::Int(x as i64)
+            } else {
+                Value::Float(x)
+            });
+        }
+    }
+    let mut data = csp::icd::encode(fields, &values).map_err(|m| {
+        let field = m.split(':').next().unwrap_or_default();
+        let name = field
+            .split(['[', '.'])
+            .next()
+            .unwrap_or_default()
+            .to_owned();
+        (name, m)
+    })?;
+    if let Some(t) = tail {
+        let bytes = match args.get(t.name) {
+            None => Vec::new(),
+            Some(serde_json::Value::String(s)) => s.as_bytes().to_vec(),
+            Some(_) => return Err((t.name.to_owned(), "text expected".into())),
+        };
+        if bytes.len() < t.min || bytes.len() > t.max {
+            return Err((
+                t.name.to_owned(),
+                format!(
+                    "{} bytes; the ICD allows {}..={}",
+                    bytes.len(),
+                    t.min,
+                    t.max
+                ),
+            ));
+        }
+        data.extend(bytes);
+    }
+    Ok(data)
+}
+
 /// Markers around the generated tables in docs/protocol.md.
 pub const MARKDOWN_BEGIN: &str = "<!-- BEGIN ICD tables: generated by `m6p-twin icd --markdown` from crates/*/src/wire.rs; do not edit -->";
 /// End marker.
@@ -923,6 +1118,57 @@ mod tests {
             have == want,
             "docs/protocol.md's ICD tables are not what the code generates: run tools/icd-docs.sh"
         );
+    }
+
+    fn args(v: serde_json::Value) -> BTreeMap<String, serde_json::Value> {
+        serde_json::from_value(v).unwrap()
+    }
+
+    #[test]
+    fn typed_arguments_encode_with_units_names_and_ranges() {
+        let (n, p, setup) = find_command("pc.setup").unwrap();
+        assert_eq!((n.name, p.port, setup.id), ("PC", 10, 1));
+        let ok = encode_args(
+            setup,
+            &args(
+                serde_json::json!({"session_id": 1, "timestamp": "now", "duration_s": "10m",
+                "max_packets": 0, "poll_frame_size": 200, "sync_message": "go"}),
+            ),
+        )
+        .unwrap();
+        assert_eq!(ok, [1, 0, 0, 0, 0, 0x58, 2, 0, 0, 200, b'g', b'o']);
+        let e = encode_args(
+            setup,
+            &args(
+                serde_json::json!({"session_id": 1, "timestamp": 0, "duration_s": 1000,
+                "max_packets": 0, "poll_frame_size": 200}),
+            ),
+        )
+        .unwrap_err();
+        assert_eq!(e.0, "duration_s");
+        assert!(e.1.contains("outside the ICD's range 5..=900"), "{}", e.1);
+        let e = encode_args(setup, &args(serde_json::json!({"session_id": 1}))).unwrap_err();
+        assert_eq!(e.0, "timestamp");
+        let e = encode_args(setup, &args(serde_json::json!({"sesion_id": 1}))).unwrap_err();
+        assert!(e.1.contains("no argument `sesion_id`"), "{}", e.1);
+        let (_, _, mode) = find_command("FC.ATCMDSET").unwrap();
+        assert_eq!(
+            encode_args(mode, &args(serde_json::json!({"mode": "nadir"}))).unwrap(),
+            [3]
+        );
+        let e = encode_args(mode, &args(serde_json::json!({"mode": "nadirr"}))).unwrap_err();
+        assert!(e.1.contains("\"nadir\""), "{}", e.1);
+        let (_, _, att) = find_command("FC.ATCATSET").unwrap();
+        assert_eq!(
+            encode_args(att, &args(serde_json::json!({"q": [1, 0, 0, 0]})))
+                .unwrap()
+                .len(),
+            32
+        );
+        let (_, _, tmgen) = find_command("FC.TMGEN").unwrap();
+        assert!(encode_args(tmgen, &BTreeMap::new()).unwrap().is_empty());
+        assert!(find_command("FC.NOPE").unwrap_err().contains("TMGEN"));
+        assert!(find_command("XX.TMGEN").unwrap_err().contains("FC"));
     }
 
     #[test]

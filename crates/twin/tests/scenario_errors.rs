@@ -393,3 +393,41 @@ fn fc_periodic_telemetry_and_safe_settings_are_checked_where_they_are_written() 
     )
     .unwrap();
 }
+
+/// Issue 19: a typed ICD command is checked against the ICD's ranges before the run, and
+/// the error names the file, the line, the field and the range.
+#[test]
+fn a_typed_setup_of_1000_s_is_refused_with_the_icd_range() {
+    let text = "duration = \"1m\"\n\
+                [network]\npayloads = [12]\n\
+                [[commands]]\nfrom = \"GS16\"\nat = \"1s\"\ncommand = \"PC.SETUP\"\n\
+                args = { session_id = 1, timestamp = \"now\", max_packets = 0, poll_frame_size = 200,\n\
+                \x20 duration_s = 1000 }\n";
+    assert_error(
+        text,
+        9,
+        "commands[0].args.duration_s",
+        "1000 is outside the ICD's range 5..=900 for SETUP.duration_s",
+    );
+    // The same with the good duration passes; a wrong node, a missing field and an unknown
+    // command are named.
+    Scenario::parse("ok.toml", &text.replace("1000", "\"10m\"")).unwrap();
+    assert_error(
+        &text.replace("command = \"PC.SETUP\"", "to = \"FC\"\ncommand = \"PC.SETUP\""),
+        7,
+        "commands[0].to",
+        "goes to the PC (6), not to 3",
+    );
+    assert_error(
+        &text.replace("timestamp = \"now\", ", ""),
+        8,
+        "commands[0].args",
+        "missing: SETUP needs timestamp",
+    );
+    assert_error(
+        &text.replace("PC.SETUP", "PC.SETPU"),
+        7,
+        "commands[0].command",
+        "the PC has no command `SETPU`: SETUP, STATUS, ABORT",
+    );
+}
