@@ -641,12 +641,19 @@ impl Decoded {
     /// enumerated value (`1 (detumble)`).
     pub fn show(&self) -> String {
         let mut s = match &self.value {
+            // A single's shortest decimal (0.3, not 0.30000001192092896).
+            Value::Float(x) if matches!(self.field.ty, Ty::F32) => format!("{}", *x as f32),
             Value::Float(x) => format!("{x}"),
             v => v.to_string(),
         };
-        if !self.field.unit.is_empty() {
+        let unit = self.field.unit;
+        if unit.starts_with(|c: char| c.is_ascii_digit()) {
+            // A scaled count: `10 x 0.01 deg/s`.
+            s.push_str(" x ");
+            s.push_str(unit);
+        } else if !unit.is_empty() {
             s.push(' ');
-            s.push_str(self.field.unit);
+            s.push_str(unit);
         }
         if let Value::Int(i) = self.value {
             if let Some(n) = self.field.value_name(i) {

@@ -180,7 +180,10 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
                     err(p("to"), e);
                 }
             }
-            None if c.command.is_none() => err(p("to"), "missing: the destination node".into()),
+            None if c.command.is_none() => err(
+                vec![key("commands"), PathStep::Index(i)],
+                "missing field `to` (the destination node)".into(),
+            ),
             None => {}
         }
         match (&c.request, &c.command) {

@@ -95,6 +95,12 @@ pub async fn ping(
     interval: Duration,
     timeout: Duration,
 ) -> anyhow::Result<bool> {
+    if size > csp::kiss::KISS_MTU {
+        bail!(
+            "a ping of {size} bytes does not fit a CSP packet: at most {} bytes",
+            csp::kiss::KISS_MTU
+        );
+    }
     let payload = crate::ground::ping_payload(size);
     let mut rtts = Vec::new();
     for seq in 1..=count {
@@ -295,6 +301,168 @@ pub async fn pc_request(
         }
         other => {
             println!("{name}: unexpected reply {}", hex::encode(other));
+            Ok(false)
+        }
+    }
+}
+
+/// Arguments `name=value` as the ICD's encoder takes them: a number where the text is one,
+/// an array for `a,b,c`, else the text (a value's name, a duration, text).
+pub fn parse_args(
+    words: &[String],
+) -> anyhow::Result<std::collections::BTreeMap<String, serde_json::Value>> {
+    fn value(s: &str) -> serde_json::Value {
+        if let Ok(i) = s.parse::<i64>() {
+            return i.into();
+        }
+        match s.parse::<f64>() {
+            Ok(x) if x.is_finite() => {
+                serde_json::Number::from_f64(x).map_or_else(|| s.into(), serde_json::Value::Number)
+            }
+            _ => s.into(),
+        }
+    }
+    let mut out = std::collections::BTreeMap::new();
+    for w in words {
+        let Some((k, v)) = w.split_once('=') else {
+            bail!("`{w}` is not NAME=VALUE (`m6p-twin icd NODE` lists a command's fields)");
+        };
+        let v = if v.contains(',') {
+            serde_json::Value::Array(v.split(',').map(|x| value(x.trim())).collect())
+        } else {
+            value(v)
+        };
+        out.insert(k.to_owned(), v);
+    }
+    Ok(out)
+}
+
+/// The CSP address of a node name as `gs` takes it: `FC`, `COMM2`, `PL12`, or a number.
+fn node_addr(name: &str, icd_node: &crate::icd::NodeIcd) -> Option<u8> {
+    if let Ok(a) = name.parse::<u8>() {
+        return Some(a);
+    }
+    let n = name.to_ascii_uppercase();
+    if let Some(rest) = n.strip_prefix("PL") {
+        return rest.parse().ok();
+    }
+    match n.as_str() {
+        "COMM2" => Some(2),
+        _ => icd_node
+            .addrs
+            .first()
+            .copied()
+            .filter(|_| icd_node.addrs.len() == 1 || n == "COMM" || n == "COMM1"),
+    }
+}
+
+/// `gs NODE COMMAND [NAME=VALUE ...]`: any ICD command by name (`fc tmatp`, `pc setup
+/// session_id=1 timestamp=now duration_s=10m max_packets=0 poll_frame_size=200`), its
+/// arguments checked against the ICD before anything is sent, and the reply decoded with
+/// units and value names. `port` overrides the ICD's default port. Succeeds when the node
+/// answers with result 1.
+pub async fn icd_command(
+    gs: &mut GsClient,
+    words: &[String],
+    port: Option<u8>,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
+    let [node, command, args @ ..] = words else {
+        bail!(
+            "usage: m6p-twin gs --connect ADDR NODE COMMAND [NAME=VALUE ...] (`m6p-twin icd` lists them)"
+        );
+    };
+    let (icd_node, icd_port, cmd) =
+        crate::icd::find_command(&format!("{node}.{command}")).map_err(anyhow::Error::msg)?;
+    let Some(dst) = node_addr(node, &icd_node) else {
+        bail!(
+            "which {} is `{node}`? Name one: {}",
+            icd_node.name,
+            icd_node
+                .addrs
+                .iter()
+                .map(u8::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    };
+    if !icd_node.addrs.contains(&dst) {
+        bail!(
+            "{} {} goes to the {}, not to {dst}",
+            icd_node.name,
+            cmd.name,
+            icd_node.name
+        );
+    }
+    let args = parse_args(args)?;
+    let data = crate::icd::encode_args(cmd, &args).map_err(|(field, m)| {
+        if field.is_empty() {
+            anyhow::anyhow!("{}: {m}", cmd.name)
+        } else {
+            anyhow::anyhow!("{}.{field}: {m}", cmd.name)
+        }
+    })?;
+    let dport = port.unwrap_or(icd_port.port);
+    let mut request = vec![cmd.id];
+    request.extend(data);
+    let Some((reply, rtt)) = gs.request(dst, dport, request, timeout).await? else {
+        return no_reply(dst, timeout);
+    };
+    let ms = rtt.as_secs_f64() * 1e3;
+    let map = crate::icd::IcdMap::defaults();
+    let mut h = reply.header;
+    // Read it as a reply from the ICD's default port, wherever the node answered from.
+    h.sport = icd_port.port;
+    h.dport = h.dport.max(csp::header::EPHEMERAL_PORT_MIN);
+    let body = &reply.data[..];
+    match map.decode(&h, body) {
+        Some(d) if d.result == Some(csp::reqrep::RESULT_SUCCESS) && d.command == cmd.name => {
+            println!(
+                "{}.{} from {dst}: ok, {} bytes ({ms:.3} ms)",
+                icd_node.name,
+                cmd.name,
+                body.len().saturating_sub(2)
+            );
+            for f in &d.fields {
+                println!("  {:<36} {}", f.path, f.show());
+            }
+            if let Some(t) = &d.tail {
+                let name = cmd
+                    .reply
+                    .parts()
+                    .and_then(|p| p.1)
+                    .map_or("(tail)", |t| t.name);
+                if t.iter().all(|b| (0x20..0x7f).contains(b)) {
+                    println!("  {name:<36} {:?}", String::from_utf8_lossy(t));
+                } else {
+                    println!("  {name:<36} {} ({} bytes)", hex::encode(t), t.len());
+                }
+            }
+            if d.fields.is_empty() && d.tail.is_none() && body.len() > 2 {
+                println!("  data {}", hex::encode(&body[2..]));
+            }
+            if !d.fits {
+                println!("  (the reply's length does not fit the ICD's layout)");
+                return Ok(false);
+            }
+            Ok(true)
+        }
+        Some(d) if d.command == cmd.name => {
+            println!(
+                "{}.{} from {dst}: refused (result {}; the reason is in the run log, `/log` of the recording) ({ms:.3} ms)",
+                icd_node.name,
+                cmd.name,
+                d.result.unwrap_or(0)
+            );
+            Ok(false)
+        }
+        _ => {
+            println!(
+                "{}.{}: unexpected reply {}",
+                icd_node.name,
+                cmd.name,
+                hex::encode(body)
+            );
             Ok(false)
         }
     }

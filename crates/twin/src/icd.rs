@@ -828,10 +828,8 @@ pub fn encode_args(
             let x = arg_number(f, item).map_err(bad)?;
             if !f.accepts(x) {
                 return Err(bad(format!(
-                    "{x} is outside the ICD's range {} for {}.{}",
+                    "{x} is outside the ICD's range {}",
                     f.range_text().unwrap_or_default(),
-                    command.name,
-                    f.name
                 )));
             }
             values.push(if f.ty.is_integer() {

@@ -295,9 +295,13 @@ struct GsArgs {
     /// The twin's KISS/TCP server.
     #[arg(long, value_name = "ADDR")]
     connect: SocketAddr,
-    /// This ground node's CSP address.
-    #[arg(long = "as", default_value_t = 17, value_name = "ID")]
+    /// This ground node's CSP address (0-30).
+    #[arg(long = "as", default_value_t = 17, value_name = "ID",
+          value_parser = clap::value_parser!(u8).range(0..=30))]
     as_addr: u8,
+    /// For an ICD command: the port to send it to, where the scenario moved it.
+    #[arg(long, value_name = "PORT")]
+    port: Option<u8>,
     /// How long to wait for each reply.
     #[arg(long, default_value = "2s", value_parser = parse_duration)]
     timeout: Duration,
@@ -350,19 +354,25 @@ enum GsRequest {
         /// Start, UTC unix seconds of the M6P clock (0: now).
         #[arg(long, default_value_t = 0)]
         start: u32,
-        /// Duration, seconds (5-900).
-        #[arg(long, default_value_t = 60)]
-        duration: u16,
+        /// Duration: seconds, or with a unit (`10m`); the ICD allows 5 s to 15 min.
+        #[arg(long, default_value = "60")]
+        duration: String,
         /// Packets after which the session ends (0: no limit).
         #[arg(long, default_value_t = 0)]
-        max_packets: u16,
+        max_packets: u32,
         /// POLL frame size, bytes (1-254).
         #[arg(long, default_value_t = 64)]
-        frame: u8,
+        frame: u32,
         /// Sync message (text, at most 128 bytes).
         #[arg(long, default_value = "")]
         sync: String,
     },
+    /// Any ICD command by name: `gs --connect ADDR NODE COMMAND [NAME=VALUE ...]`, for
+    /// example `fc tmatp`, `eps chset channel=PC on=off`, `pc setup session_id=1
+    /// timestamp=now duration_s=10m max_packets=0 poll_frame_size=200 sync_message=go`
+    /// (`m6p-twin icd NODE` lists the commands and their fields). The reply is decoded.
+    #[command(external_subcommand)]
+    Icd(Vec<String>),
     /// PC STATUS: a session's state, last result and configuration.
     Status {
         /// Session id.
@@ -1280,6 +1290,7 @@ fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
             } => gs::ping(&mut client, node, count, size, interval, a.timeout).await,
             GsRequest::Uptime { node, icd } => gs::uptime(&mut client, node, a.timeout, icd).await,
             GsRequest::Ident { node } => gs::ident(&mut client, node, a.timeout).await,
+            GsRequest::Icd(words) => gs::icd_command(&mut client, &words, a.port, a.timeout).await,
             GsRequest::Raw { node, port, data } => {
                 let bytes = m6p_twin::commands::parse_hex(&data).map_err(anyhow::Error::msg)?;
                 gs::raw(&mut client, node, port, bytes, a.timeout).await
@@ -1292,16 +1303,31 @@ fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
                 frame,
                 sync,
             } => {
-                let cfg = nodes_pc::wire::SessionConfig {
-                    session_id: session,
-                    timestamp: start,
-                    duration_s: duration,
-                    max_packets,
-                    poll_frame_size: frame,
-                    sync_message: sync.into_bytes(),
-                };
+                let mut words = vec![
+                    format!("session_id={session}"),
+                    format!("timestamp={start}"),
+                    format!("duration_s={duration}"),
+                    format!("max_packets={max_packets}"),
+                    format!("poll_frame_size={frame}"),
+                ];
+                let (_, _, cmd) =
+                    m6p_twin::icd::find_command("PC.SETUP").map_err(anyhow::Error::msg)?;
+                let mut args = gs::parse_args(&words)?;
+                args.insert("sync_message".into(), sync.into());
+                words.clear();
+                let data = m6p_twin::icd::encode_args(cmd, &args).map_err(|(field, m)| {
+                    let flag = match field.as_str() {
+                        "duration_s" => "--duration",
+                        "poll_frame_size" => "--frame",
+                        "max_packets" => "--max-packets",
+                        "timestamp" => "--start",
+                        "sync_message" => "--sync",
+                        _ => "SESSION",
+                    };
+                    anyhow::anyhow!("SETUP {flag}: {m}")
+                })?;
                 let mut req = vec![nodes_pc::wire::cmd::SETUP];
-                cfg.emit(&mut req);
+                req.extend(data);
                 gs::pc_request(&mut client, req, a.timeout).await
             }
             GsRequest::Status { session } => {

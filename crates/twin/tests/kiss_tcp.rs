@@ -95,6 +95,74 @@ fn gs_client_binary_pings_the_fc_over_a_real_socket() {
     });
 }
 
+/// Issue 19: `gs NODE COMMAND [NAME=VALUE ...]` sends any ICD command by name and prints
+/// the reply decoded with units and value names; arguments outside the ICD's range, a
+/// ground address that is not one, and a ping larger than a packet are refused before
+/// anything is sent.
+#[test]
+fn gs_sends_icd_commands_by_name_and_decodes_the_replies() {
+    let gs = |addr: SocketAddr, args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+            .args(["gs", "--connect", &addr.to_string(), "--timeout", "4s"])
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned()
+                + &String::from_utf8_lossy(&out.stderr),
+        )
+    };
+    with_twin(8, move |addr| {
+        let (ok, text) = gs(addr, &["fc", "tmgen"]);
+        assert!(ok, "{text}");
+        assert!(text.starts_with("FC.TMGEN from 3: ok, 16 bytes"), "{text}");
+        assert!(
+            text.contains("current_state                        0 (nominal)"),
+            "{text}"
+        );
+        let (ok, text) = gs(addr, &["eps", "tmeps"]);
+        assert!(
+            ok && text.contains("battery_v") && text.contains(" V\n"),
+            "{text}"
+        );
+        let (ok, text) = gs(addr, &["fc", "atcmdset", "mode=nadir"]);
+        assert!(ok, "{text}");
+        let (ok, text) = gs(addr, &["fc", "atcmdget"]);
+        assert!(
+            ok && text.contains("mode                                 3 (nadir)"),
+            "{text}"
+        );
+        let (ok, text) = gs(
+            addr,
+            &[
+                "pc",
+                "setup",
+                "session_id=1",
+                "timestamp=now",
+                "duration_s=1000",
+                "max_packets=0",
+                "poll_frame_size=200",
+            ],
+        );
+        assert!(
+            !ok && text.contains("SETUP.duration_s: 1000 is outside the ICD's range 5..=900"),
+            "{text}"
+        );
+        let (ok, text) = gs(addr, &["setup", "1", "--frame", "300"]);
+        assert!(
+            !ok && text.contains("--frame: 300 is outside the ICD's range 1..=254"),
+            "{text}"
+        );
+        let (ok, text) = gs(addr, &["--as", "40", "fc", "tmgen"]);
+        assert!(!ok && text.contains("0..=30"), "{text}");
+        let (ok, text) = gs(addr, &["ping", "3", "--size", "300", "--count", "1"]);
+        assert!(!ok && text.contains("at most 256 bytes"), "{text}");
+        let (ok, text) = gs(addr, &["fc", "nope"]);
+        assert!(!ok && text.contains("TMGEN, TMATP"), "{text}");
+    });
+}
+
 #[test]
 fn thirty_seconds_of_random_bytes_then_pings_still_answered() {
     let report = with_twin(45, |addr| {
