@@ -169,10 +169,11 @@ pub fn node_named(name: &str) -> Option<NodeIcd> {
         .find(|x| x.name.eq_ignore_ascii_case(key))
 }
 
-/// The ICD placed on one run's ports: (node address, port) to the port's table.
+/// The ICD placed on one run's ports: (node address, port) to the node's name and the
+/// port's table.
 #[derive(Debug, Clone, Default)]
 pub struct IcdMap {
-    ports: BTreeMap<(u8, u8), Port>,
+    ports: BTreeMap<(u8, u8), (&'static str, Port)>,
 }
 
 /// Request or reply.
@@ -212,7 +213,7 @@ impl IcdMap {
         for n in nodes() {
             for a in &n.addrs {
                 for p in &n.ports {
-                    ports.insert((*a, p.port), *p);
+                    ports.insert((*a, p.port), (n.name, *p));
                 }
             }
         }
@@ -223,9 +224,14 @@ impl IcdMap {
     pub fn for_run(opts: &RunOptions) -> Self {
         use nodes_fc::wire as fc;
         use nodes_pc::wire as pc;
+        let names: BTreeMap<u8, &'static str> = nodes()
+            .iter()
+            .flat_map(|n| n.addrs.iter().map(|a| (*a, n.name)))
+            .collect();
         let mut ports = BTreeMap::new();
         let mut put = |addr: u8, number: u8, p: Port| {
-            ports.insert((addr, number), Port { port: number, ..p });
+            let name = names.get(&addr).copied().unwrap_or("?");
+            ports.insert((addr, number), (name, Port { port: number, ..p }));
         };
         let f = &opts.fc.ports;
         put(platform::addr::FC, f.telemetry, fc::ICD_TELEMETRY);
@@ -278,12 +284,12 @@ impl IcdMap {
 
     /// The port table at `addr`:`port`.
     pub fn port(&self, addr: u8, port: u8) -> Option<&Port> {
-        self.ports.get(&(addr, port))
+        self.ports.get(&(addr, port)).map(|(_, p)| p)
     }
 
     /// Every (address, port) with its table, in order.
     pub fn iter(&self) -> impl Iterator<Item = (&(u8, u8), &Port)> {
-        self.ports.iter()
+        self.ports.iter().map(|(k, (_, p))| (k, p))
     }
 
     /// Read a packet's data (without a CRC trailer) with the ICD: a request when it goes to
@@ -291,27 +297,17 @@ impl IcdMap {
     /// from an ICD port to an ephemeral port. `None` when neither end is an ICD port, or
     /// the command id is not in the port's table.
     pub fn decode(&self, header: &csp::Header, data: &[u8]) -> Option<DecodedPacket> {
-        let node_of = |addr: u8| {
-            nodes()
-                .into_iter()
-                .find(|n| n.addrs.contains(&addr))
-                .map_or("?", |n| n.name)
-        };
-        let from_icd = header.dport >= csp::header::EPHEMERAL_PORT_MIN
-            && self.port(header.src, header.sport).is_some();
-        let (port, direction, node) = if from_icd {
-            (
-                self.port(header.src, header.sport)?,
-                Direction::Reply,
-                node_of(header.src),
-            )
-        } else {
-            (
-                self.port(header.dst, header.dport)?,
+        let reply = (header.dport >= csp::header::EPHEMERAL_PORT_MIN)
+            .then(|| self.ports.get(&(header.src, header.sport)))
+            .flatten();
+        let ((node, port), direction) = match reply {
+            Some(e) => (e, Direction::Reply),
+            None => (
+                self.ports.get(&(header.dst, header.dport))?,
                 Direction::Request,
-                node_of(header.dst),
-            )
+            ),
         };
+        let node = *node;
         let (&id, rest) = data.split_first()?;
         let command = port.command(id)?;
         let (result, body, layout) = match direction {
