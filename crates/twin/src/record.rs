@@ -2117,7 +2117,7 @@ fn icd_field(d: &csp::icd::Decoded) -> IcdFieldMsg {
             .field
             .value_name(*i)
             .map(str::to_owned)
-            .or_else(|| (!d.field.bits.is_empty()).then(|| d.field.bit_names(*i))),
+            .or_else(|| Some(d.field.bit_names(*i)).filter(|t| !t.is_empty())),
         Value::Float(_) => None,
     };
     IcdFieldMsg {
@@ -2362,6 +2362,20 @@ pub fn start_ns(start_utc: &str) -> anyhow::Result<u64> {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    /// A mask's `text` names its set bits, and is null when none is set (it was "").
+    #[test]
+    fn an_icd_mask_field_names_its_bits_or_nothing() {
+        const F: csp::icd::Field =
+            csp::icd::Field::new("mask", (csp::icd::Ty::U8, 1), "").bits(&[(0, "A"), (1, "B")]);
+        let d = |v| csp::icd::Decoded {
+            path: "mask".into(),
+            value: csp::icd::Value::Int(v),
+            field: &F,
+        };
+        assert_eq!(icd_field(&d(3)).text.as_deref(), Some("A, B"));
+        assert_eq!(icd_field(&d(0)).text, None);
+    }
 
     /// `v` rotated by `q` (`v + 2w (q x v) + 2 q x (q x v)`).
     fn rotate(q: QuatMsg, v: [f64; 3]) -> [f64; 3] {
