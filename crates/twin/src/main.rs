@@ -168,7 +168,8 @@ struct RunArgs {
     /// A CSP address behind the --kiss-listen, --kiss-connect, --kiss-pty or --zmq-hub
     /// before it (repeat for more);
     /// claimed when a program connects, and the only sources that link accepts. A link
-    /// without any learns them from the packets it receives.
+    /// without any learns them from the packets it receives. The address of a simulated
+    /// node (a payload, the FC, a ground station) replaces that node: it is not started.
     #[arg(long = "kiss-addr", value_name = "ID")]
     kiss_addr: Vec<u8>,
     /// Connections each --kiss-listen serves at once; more are refused and logged.
@@ -577,6 +578,15 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
     if let Some(d) = a.duration {
         opts.duration = Some(d);
     }
+    let replaced = m6p_twin::outside::cli_replaces(&opts.network, cli_links.iter().map(|l| &l.cfg))
+        .map_err(|e| anyhow::anyhow!(e))?;
+    for (addr, name) in replaced {
+        if opts.replaced.insert(addr) {
+            eprintln!(
+                "note: --kiss-addr {addr}: the link's program takes {name}'s place (not started)"
+            );
+        }
+    }
     opts.kiss_links.extend(cli_links);
     opts.socketcan.extend(a.socketcan);
     for u in &a.uart {
@@ -921,6 +931,15 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
                 r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
             }
         }
+        // A command-line link's addresses replaced the twin's nodes there, as in `run`
+        // (a scenario link's are replaced already).
+        let replaced =
+            m6p_twin::outside::cli_replaces(&compiled.opts.network, input.iter().map(|r| &r.cfg))
+                .map_err(|e| anyhow::anyhow!("the recorded links: {e}"))?;
+        compiled
+            .opts
+            .replaced
+            .extend(replaced.into_iter().map(|(a, _)| a));
         compiled.opts.kiss_links.clear();
         compiled.opts.clock = bus::ClockMode::Virtual;
         compiled.opts.kiss_replay = input;

@@ -11,7 +11,7 @@
 //! - a node sitting on two media (the PC on both buses, a COMM with its radio) cannot be
 //!   replaced over KISS; the PC can be over two `socketcan` links, one per bus.
 
-use bus::kiss_tcp::KissLimits;
+use bus::kiss_tcp::{KissLimits, KissLinkConfig};
 use platform::addr::Segment;
 
 use crate::network::{NetworkSpec, Role};
@@ -253,6 +253,43 @@ fn validate_uart(
     }
 }
 
+/// The command line's links (`--kiss-addr` after `--kiss-listen` and the others) take the
+/// place of the twin's nodes at their addresses, as a scenario link's `replaces` does:
+/// `--kiss-addr 12` is the user's payload 12, so the simulated PL12 is not started (before,
+/// the link could never claim 12 and only logged a warning). Returns the replaced nodes'
+/// addresses and names, each once; a COMM (the twin's radio) or the PC (on both buses) cannot be
+/// replaced over KISS, as in a scenario.
+pub fn cli_replaces<'a>(
+    net: &NetworkSpec,
+    links: impl IntoIterator<Item = &'a KissLinkConfig>,
+) -> Result<Vec<(u8, String)>, String> {
+    let mut out: Vec<(u8, String)> = Vec::new();
+    for cfg in links {
+        for &a in &cfg.addrs {
+            let Some(node) = net.nodes.iter().find(|n| n.addr == a) else {
+                continue;
+            };
+            let why = match node.role {
+                Role::CommPrimary | Role::CommSecondary => {
+                    "a COMM carries the twin's UHF radio: it cannot be replaced by an outside program"
+                }
+                Role::Pc => {
+                    "the PC sits on both CAN buses and a KISS link joins one segment: replace it \
+                     with two socketcan links, one per bus"
+                }
+                _ => "",
+            };
+            if !why.is_empty() {
+                return Err(format!("--kiss-addr {a} is {}'s address: {why}", node.name));
+            }
+            if !out.iter().any(|(b, _)| *b == a) {
+                out.push((a, node.name.clone()));
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Add the scenario's links to `opts`: each KISS link with its own addresses (its own and
 /// those of the nodes it replaces) and limits, each SocketCAN bridge, the replaced nodes,
 /// and every link's place in `opts.outside`.
@@ -409,6 +446,29 @@ mod tests {
         for bad in ["FC", "=1.2.3.4:5", "FC=", "FC=localhost"] {
             assert!(UartLink::parse_arg(bad).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn a_command_line_address_of_a_twin_node_replaces_it_unless_it_is_the_pc_or_a_comm() {
+        let net = NetworkSpec::default_m6p();
+        let link = |addrs: &[u8]| {
+            let mut l = KissLink::listen("127.0.0.1:0".parse().unwrap());
+            l.cfg.addrs = addrs.to_vec();
+            l
+        };
+        let replaces = |links: &[KissLink]| cli_replaces(&net, links.iter().map(|l| &l.cfg));
+        assert_eq!(
+            replaces(&[link(&[17]), link(&[12])]).unwrap(),
+            vec![(12, "PL12".to_owned())]
+        );
+        assert!(
+            replaces(&[link(&[6])])
+                .unwrap_err()
+                .contains("both CAN buses")
+        );
+        assert!(replaces(&[link(&[1])]).unwrap_err().contains("UHF radio"));
+        // Two connections of one link (a replay's) name it once.
+        assert_eq!(replaces(&[link(&[12]), link(&[12])]).unwrap().len(), 1);
     }
 
     #[test]
