@@ -201,6 +201,7 @@ def main():
           any(b < a for a, b in zip(ups, ups[1:])), str(ups))
     err = con.run("param set nothing 1")
     check("a bad line is one error line", err.startswith("error: ") and err.count("\n") == 1, err)
+    check.icd(peer)
     sys.exit(1 if check.failures else 0)
 
 

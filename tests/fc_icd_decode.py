@@ -29,7 +29,7 @@ import struct
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from kiss_peer import Checks, Peer  # noqa: E402  (KISS framing and CSP header, from the spec)
+from kiss_peer import Checks, Peer  # noqa: E402  (the m6p package's framing; its ICD cross-checked)
 
 # ICD 4.2.1 (reply data after `command | result`), little-endian.
 TMGEN = struct.Struct("<IIIBBbB")          # 16
@@ -69,6 +69,7 @@ def main():
     check("TMGEN is 2+16 bytes", ok, f"result {res} data {None if d is None else d.hex()}")
     if ok:
         rtc, up, on, mode, state, temp, cause = TMGEN.unpack(d)
+        check.agree("TMGEN", TMGEN.unpack(d), p.last_reply)
         check("TMGEN rtc within a day of the start", rtc_ok(rtc), f"rtc {rtc} start {a.start}")
         check("TMGEN uptime and on-time plausible", 0 <= up <= on < 86400, f"uptime {up} on {on}")
         check("TMGEN mode, state, temperature, reset cause plausible",
@@ -80,6 +81,7 @@ def main():
     check("TMATP is 2+60 bytes", ok, f"result {res} len {None if d is None else len(d)}")
     if ok:
         v = TMATP.unpack(d)
+        check.agree("TMATP", v, p.last_reply)
         rtc, q, r = v[0], v[1:5], v[5:8]
         r_km = math.sqrt(sum(x * x for x in r)) / 1000.0
         check("TMATP |position| in LEO (metres, ECI)", a.rmin_km < r_km < a.rmax_km, f"{r_km:.3f} km")
@@ -88,17 +90,22 @@ def main():
         check("TMATP rtc within a day of the start", rtc_ok(rtc), f"{rtc}")
 
     res, d = ask(PORT_TM, 3)
-    check("TMACD is 2+19 bytes", res == 1 and d is not None and len(d) == TMACD.size,
-          f"result {res} len {None if d is None else len(d)}")
+    ok = res == 1 and d is not None and len(d) == TMACD.size
+    check("TMACD is 2+19 bytes", ok, f"result {res} len {None if d is None else len(d)}")
+    if ok:
+        check.agree("TMACD", TMACD.unpack(d), p.last_reply)
     res, d = ask(PORT_TM, 4)
     ok = res == 1 and d is not None and len(d) == TMSENS.size
     check("TMSENS is 2+70 bytes", ok, f"result {res} len {None if d is None else len(d)}")
+    if ok:
+        check.agree("TMSENS", TMSENS.unpack(d), p.last_reply)
     res, d = ask(PORT_TM, 5)
     raw = struct.Struct("<I6H3h3h3h6h3hB")
     ok = res == 1 and d is not None and len(d) == raw.size == 53
     check("TMRAWSENS is 2+53 bytes", ok, f"result {res} len {None if d is None else len(d)}")
     if ok:
         v = raw.unpack(d)
+        check.agree("TMRAWSENS", v, p.last_reply)
         hz, status = v[22:25], v[25]
         norm = math.sqrt(sum(x * x for x in hz)) * 1e-4
         good = (status == 0 and hz == (0, 0, 0)) or (status in (1, 2) and abs(norm - 1) < 1e-3)
@@ -109,6 +116,9 @@ def main():
     check("TMALL is 2+177 bytes (TMGEN|TMATP|TMACD|TMSENS|nadir)", ok,
           f"result {res} len {None if d is None else len(d)}")
     if ok:
+        parts = (TMGEN.unpack(d[:16]) + TMATP.unpack(d[16:76]) + TMACD.unpack(d[76:95])
+                 + TMSENS.unpack(d[95:165]) + struct.unpack("<3f", d[165:177]))
+        check.agree("TMALL", parts, p.last_reply)
         r = TMATP.unpack(d[16:76])[5:8]
         r_km = math.sqrt(sum(x * x for x in r)) / 1000.0
         check("TMALL's TMATP part is in LEO", a.rmin_km < r_km < a.rmax_km, f"{r_km:.3f} km")
@@ -122,6 +132,7 @@ def main():
     check("RTCSTMGET is 2+4 bytes", ok, f"result {res} data {None if d is None else d.hex()}")
     if ok:
         (rtc,) = RTC.unpack(d)
+        check.agree("RTCSTMGET", RTC.unpack(d), p.last_reply)
         check("RTCSTMGET within a day of the start", rtc_ok(rtc), f"{rtc}")
 
     res, d = ask(PORT_ATC, 6, bytes([3]))
@@ -139,6 +150,7 @@ def main():
     check("ATCATGET is 2+32 bytes", ok, f"result {res} len {None if d is None else len(d)}")
     if ok:
         check("ATCATGET returns the set quaternion", QUAT.unpack(d) == q, f"{QUAT.unpack(d)}")
+        check.agree("ATCATGET", QUAT.unpack(d), p.last_reply)
 
     res, d = ask(PORT_TM, 0x77)
     check("unknown telemetry command fails (cmd 00)", res == 0 and d == b"", f"result {res} data {d}")
@@ -150,7 +162,8 @@ def main():
     check("TMPERSET TMGEN|TMATP every 250 ms succeeds", res == 1 and d == b"", f"result {res} {d!r}")
     res, d = ask(PORT_TM, 8)
     check("TMPERGET returns it", res == 1 and d == PERIODIC.pack(a.me, 20, 250, 0x03), f"{d!r}")
-    got = [(h, d) for h, d in p.reader.frames(2.0) if h["dport"] == 20]
+    check.agree("TMPERGET", PERIODIC.unpack(d), p.last_reply)
+    got = [(h, d) for h, d in p.frames(2.0) if h["dport"] == 20]
     gens = [d for h, d in got if d[:2] == b"\x01\x01" and len(d) == 2 + TMGEN.size]
     atps = [d for h, d in got if d[:2] == b"\x02\x01" and len(d) == 2 + TMATP.size]
     check("periodic TMGEN and TMATP arrive from the FC's port 10, about 8 each in 2 s",
@@ -161,12 +174,13 @@ def main():
     check("the periodic TMGEN's uptime runs on", ups == sorted(ups) and ups[-1] > ups[0], f"{ups}")
     res, d = ask(PORT_TM, 7, PERIODIC.pack(0, 0, 0, 0))
     check("TMPERSET with period 0 stops it", res == 1, f"result {res}")
-    list(p.reader.frames(0.5))
-    late = [d for h, d in p.reader.frames(1.0) if h["dport"] == 20]
+    list(p.frames(0.5))
+    late = [d for h, d in p.frames(1.0) if h["dport"] == 20]
     check("nothing periodic after the stop", not late, f"{len(late)} packets")
     res, d = ask(PORT_TM, 7, PERIODIC.pack(a.me, 3, 250, 0x01))
     check("TMPERSET to a service port fails (cmd 00)", res == 0 and d == b"", f"result {res} {d!r}")
 
+    check.icd(p)
     sys.exit(1 if check.failures else 0)
 
 

@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
-"""An outside CSP 1.4 node speaking libcsp 1.4's KISS format over TCP, written from the
-wire spec (docs/protocol.md, libcsp v1.4 csp_if_kiss.c), not from the twin's code.
+"""An outside CSP 1.4 node speaking libcsp 1.4's KISS format over TCP, on the project's
+Python package (`m6p`: its framing is written from the wire spec, docs/protocol.md and
+libcsp v1.4 csp_if_kiss.c, and checked against libcsp 1.4's own vectors; not the twin's
+code). The other decoders here build on its `Peer` and `Checks`.
 
 It joins a running twin (`m6p-twin run --kiss-listen ADDR`) and checks, byte for byte:
 ping echoes from the FC and a payload (including payloads that need KISS escapes),
@@ -11,122 +13,61 @@ for that long, then checks that the twin still answers.
 Exit 0 when every check passes; prints one line per check.
 """
 import argparse
+import dataclasses
 import os
 import random
 import socket
 import sys
 import time
 
-FEND, FESC, TFEND, TFESC = 0xC0, 0xDB, 0xDC, 0xDD
+try:
+    import m6p  # noqa: F401
+except ImportError:  # a checkout without `pip install ./python`
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python", "src"))
 
-
-def crc32c(data: bytes) -> int:
-    """CRC-32C (Castagnoli), reflected, init/xorout 0xFFFFFFFF (libcsp csp_crc32.c)."""
-    crc = 0xFFFFFFFF
-    for b in data:
-        crc ^= b
-        for _ in range(8):
-            crc = (crc >> 1) ^ (0x82F63B78 if crc & 1 else 0)
-    return crc ^ 0xFFFFFFFF
-
-
-assert crc32c(b"123456789") == 0xE3069283
-
-
-def header(prio, src, dst, dport, sport, flags=0) -> bytes:
-    word = prio << 30 | src << 25 | dst << 20 | dport << 14 | sport << 8 | flags
-    return word.to_bytes(4, "big")
-
-
-def parse_header(b: bytes):
-    w = int.from_bytes(b[:4], "big")
-    return dict(prio=w >> 30, src=(w >> 25) & 31, dst=(w >> 20) & 31,
-                dport=(w >> 14) & 63, sport=(w >> 8) & 63, flags=w & 255)
-
-
-def kiss_frame(hdr: bytes, data: bytes) -> bytes:
-    body = hdr + data + crc32c(data).to_bytes(4, "big")
-    out = bytearray([FEND, 0x00])
-    for b in body:
-        if b == FEND:
-            out += bytes([FESC, TFEND])
-        elif b == FESC:
-            out += bytes([FESC, TFESC])
-        else:
-            out.append(b)
-    out.append(FEND)
-    return bytes(out)
-
-
-class KissReader:
-    """libcsp 1.4 receiver semantics: every frame starts at a FEND, the command byte is
-    skipped, escapes undone, the trailing CRC32C verified and stripped."""
-
-    def __init__(self, sock):
-        self.sock = sock
-        self.buf = bytearray()
-
-    def frames(self, timeout):
-        deadline = time.monotonic() + timeout
-        while True:
-            while True:
-                try:
-                    start = self.buf.index(FEND)
-                except ValueError:
-                    self.buf.clear()
-                    break
-                del self.buf[:start]
-                # skip repeated FENDs
-                while len(self.buf) > 1 and self.buf[1] == FEND:
-                    del self.buf[0]
-                try:
-                    end = self.buf.index(FEND, 1)
-                except ValueError:
-                    break
-                raw = bytes(self.buf[2:end])  # skip FEND and command byte
-                del self.buf[:end + 1]
-                body = bytearray()
-                i = 0
-                while i < len(raw):
-                    if raw[i] == FESC and i + 1 < len(raw):
-                        body.append(FEND if raw[i + 1] == TFEND else FESC)
-                        i += 2
-                    else:
-                        body.append(raw[i])
-                        i += 1
-                if len(body) < 8:
-                    continue
-                data, crc = bytes(body[4:-4]), int.from_bytes(body[-4:], "big")
-                if crc32c(data) != crc:
-                    print("  (frame with bad CRC ignored)")
-                    continue
-                yield parse_header(body), data
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return
-            self.sock.settimeout(left)
-            try:
-                chunk = self.sock.recv(4096)
-            except socket.timeout:
-                return
-            if not chunk:
-                raise RuntimeError("twin closed the connection")
-            self.buf += chunk
+from m6p.csp import Header, Packet  # noqa: E402
+from m6p.icd import Icd  # noqa: E402
+from m6p.links import KissTcp  # noqa: E402
 
 
 class Peer:
+    """A CSP node over KISS/TCP (the `m6p` package's framing, checked against libcsp
+    1.4's vectors) that waits for one reply at a time, as these checks want it.
+
+    Every successful ICD reply `ask` gets is also decoded with the package's generated
+    ICD (`m6p.icd`, from the twin's `icd --json`): `icd_problems` lists the replies it
+    does not decode, and `Checks.agree` compares a decoder's own reading, written from
+    the ICD document, with the package's."""
+
     def __init__(self, addr, me):
-        host, port = addr.rsplit(":", 1)
-        self.sock = socket.create_connection((host, int(port)), timeout=5)
-        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.reader = KissReader(self.sock)
+        self.link = KissTcp(addr, connect_timeout_s=5.0)
         self.me = me
         self.sport = 40
+        self.icd = Icd.load()
+        self.icd_decoded = 0
+        self.icd_problems = []
+        self.last_reply = None
+
+    def send(self, dst, dport, sport, data, flags=0, prio=2):
+        """One packet as it is (no CSP CRC added, whatever the flags)."""
+        self.link.send(Packet(Header(prio, self.me, dst, dport, sport, flags), bytes(data)))
+
+    def frames(self, timeout):
+        """Every packet for the next `timeout` seconds: (header fields, data)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return
+            p = self.link.recv(left)
+            if p is None:
+                return
+            yield dataclasses.asdict(p.header), p.data
 
     def request(self, dst, dport, data, timeout=3.0):
         self.sport = 32 + (self.sport - 31) % 32
-        self.sock.sendall(kiss_frame(header(2, self.me, dst, dport, self.sport), data))
-        for h, d in self.reader.frames(timeout):
+        self.send(dst, dport, self.sport, data)
+        for h, d in self.frames(timeout):
             if h["src"] == dst and h["dport"] == self.sport and h["sport"] == dport and h["dst"] == self.me:
                 return h, d
         return None, None
@@ -135,8 +76,16 @@ class Peer:
         """An ICD request `cmd | data` (ICD 1.8): (result, reply data after `cmd | result`),
         or (None, what came back) when no reply to that command came."""
         h, d = self.request(dst, dport, bytes([cmd]) + data, timeout)
+        self.last_reply = None
         if d is None or len(d) < 2 or d[0] != cmd:
             return None, d
+        command = self.icd.on_port(dst, dport, cmd)
+        if d[1] == 1 and command is not None:
+            try:
+                self.last_reply = command.decode_reply(d)
+                self.icd_decoded += 1
+            except ValueError as e:
+                self.icd_problems.append(f"{command.full_name}: {e}")
         return d[1], d[2:]
 
 
@@ -149,6 +98,19 @@ class Checks:
     def __call__(self, name, ok, detail=""):
         print(("PASS " if ok else "FAIL ") + name + (": " + detail if detail else ""))
         self.failures += 0 if ok else 1
+
+    def agree(self, name, hand, reply):
+        """This decoder's own values (`hand`, in wire order) are the package's decoding
+        of the same reply (`reply`, Peer.last_reply), value for value."""
+        theirs = None if reply is None else [leaf.value for leaf in reply.leaves()]
+        same = theirs == list(hand)
+        self(f"{name}: the m6p package's decoding agrees ({len(hand)} values)", same,
+             "" if same else f"here {list(hand)}, m6p {theirs}")
+
+    def icd(self, peer):
+        """The package decoded every successful ICD reply this peer got."""
+        self(f"the m6p package decodes the {peer.icd_decoded} ICD replies",
+             peer.icd_decoded > 0 and not peer.icd_problems, "; ".join(peer.icd_problems))
 
 
 def main():

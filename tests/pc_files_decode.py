@@ -109,6 +109,7 @@ def main():
         res, d = ask(pl, cmd, data)
         check(f"payload {a.as_payload}'s {name} is refused", res == 0 and d == b"",
               f"result {res} {d!r}")
+    check.icd(g)
     sys.exit(1 if check.failures else 0)
 
 

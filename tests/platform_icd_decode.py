@@ -127,6 +127,7 @@ def main():
     tm_on = None
     if sized("TMEPS", res, d, TMEPS.size):
         v = TMEPS.unpack(d)
+        check.agree("TMEPS", v, p.last_reply)
         volt, amp, soc, wh, array_w, load_w, panels = v[0:7]
         panel_w = v[7:15]
         on, shed = v[15], v[16]
@@ -211,6 +212,7 @@ def main():
     if sized("TMECU", res, d, TMECU.size):
         (state, heater, warm_ms, burn_ms, prop_kg, p_kpa, thrust_n, mass_kg, imp_ns,
          burns, last_ms, refused0) = TMECU.unpack(d)
+        check.agree("TMECU", TMECU.unpack(d), p.last_reply)
         check("TMECU state SAFE (0), heater off, nothing burning",
               state == SAFE and heater == 0 and burn_ms == 0, f"state {state} heater {heater} "
               f"warm-up {warm_ms} ms burn {burn_ms} ms")
@@ -258,6 +260,7 @@ def main():
         refused0 = None
         if sized(f"{n} TMCOMM", res, d, TMCOMM.size):
             v = TMCOMM.unpack(d)
+            check.agree(f"{n} TMCOMM", v, p.last_reply)
             role, active, contact, station = v[0:4]
             el, az, rng, rssi, snr = v[4:9]
             uptime, sent, period, air_ms, rx, tx, fwd, drops, refused = v[9:]
@@ -305,6 +308,9 @@ def main():
         if not sized(f"{n} BEACON", res, d, BEACON_SIZE):
             continue
         seq, utc, up, flags, truth_utc = field(d, B_HEAD)
+        beacon = [x for f in (B_HEAD, B_R, B_V, B_LLA, B_Q, B_W, B_SUN, B_SUNPCT, B_B, B_WHEELS,
+                              B_MTQ, B_LINK, B_COUNTERS, B_TAIL) for x in field(d, f)]
+        check.agree(f"{n} BEACON", beacon, p.last_reply)
         check(f"{n} BEACON truth valid (flags bit 0)", flags & F_TRUTH, f"flags {flags:#04x}")
         check(f"{n} BEACON seq 0 (none sent), flags use bits 0-2, secondary bit "
               f"{'set' if node != 1 else 'clear'}",
@@ -341,6 +347,7 @@ def main():
               f"station {station} rx {rx} tx {tx} fwd {fwd} drops {drops} reboots {reboots} "
               f"period {period}")
 
+    check.icd(p)
     sys.exit(1 if check.failures else 0)
 
 

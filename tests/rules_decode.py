@@ -26,7 +26,7 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from kiss_peer import Checks, Peer, header, kiss_frame  # noqa: E402
+from kiss_peer import Checks, Peer  # noqa: E402
 
 FC, PC = 3, 6
 PORT_TM, PORT_RTC, PORT_ATC, PORT_PING = 10, 11, 12, 1
@@ -58,9 +58,9 @@ def main():
     for dst in nodes:
         for name, flag in (("RDP", RDP), ("XTEA", XTEA), ("HMAC", HMAC)):
             flagged[sport] = (dst, name)
-            ground.sock.sendall(kiss_frame(header(2, a.me, dst, PORT_PING, sport, flag), b"flag"))
+            ground.send(dst, PORT_PING, sport, b"flag", flags=flag)
             sport += 1
-    back = list(ground.reader.frames(a.quiet))
+    back = list(ground.frames(a.quiet))
     for sp, (dst, name) in sorted(flagged.items()):
         got = [d for h, d in back if h["dport"] == sp]
         check(f"{name}-flagged ping to {dst} is not answered", not got, f"replies {got!r}")
@@ -127,6 +127,7 @@ def main():
         time.sleep(0.2)
     check("the session goes PENDING, then ACTIVE", states[:1] == [1] and states[-1:] == [2],
           f"states {states}")
+    check.icd(ground)
     sys.exit(1 if check.failures else 0)
 
 

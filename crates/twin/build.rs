@@ -9,6 +9,9 @@
 //!   `CI` it is always set, so a missing package fails those tests there (`.ci/run`
 //!   installs them) instead of ignoring them. Set
 //!   `M6P_PYTHON_PROBE=off` to force "not available" outside CI.
+//! - `cfg(python_pytest)`: `python3` can import `pytest` and `zmq` (pyzmq), which the
+//!   Python package's own tests need (`tests/python_package.rs`). Under `CI` it is always
+//!   set (`.ci/run` installs them); `M6P_PYTHON_PROBE=off` forces "not available".
 //! - `cfg(slurm_available)`: running as root with Debian's `slurm-wlm` and `munge` installed
 //!   (`tests/campaign_slurm.rs` starts a one-node cluster with `tools/slurm/cluster.sh`).
 //!   Under `CI` it is always set (`.ci/run` installs them); `M6P_SLURM_PROBE=off` forces
@@ -25,6 +28,7 @@ fn main() {
     println!("cargo::rerun-if-changed=../bus/build.rs");
     uml_probe::main();
     python_probe();
+    pytest_probe();
     slurm_probe();
     libcsp_probe();
 }
@@ -120,5 +124,23 @@ fn python_probe() {
     }
     if found {
         println!("cargo::rustc-cfg=python_mcap");
+    }
+}
+
+fn pytest_probe() {
+    println!("cargo::rustc-check-cfg=cfg(python_pytest)");
+    if std::env::var_os("CI").is_some() {
+        println!("cargo::rustc-cfg=python_pytest");
+        return;
+    }
+    if std::env::var("M6P_PYTHON_PROBE").is_ok_and(|v| v == "off") {
+        return;
+    }
+    let found = std::process::Command::new("python3")
+        .args(["-c", "import pytest, zmq"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if found {
+        println!("cargo::rustc-cfg=python_pytest");
     }
 }

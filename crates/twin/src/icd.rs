@@ -1097,6 +1097,16 @@ mod tests {
     }
 
     #[test]
+    fn the_python_package_carries_the_current_icd() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../python/src/m6p/icd.json");
+        let have = std::fs::read_to_string(path).unwrap();
+        assert!(
+            have.trim_end() == to_json().trim_end(),
+            "python/src/m6p/icd.json is not `m6p-twin icd --json`: run tools/icd-docs.sh"
+        );
+    }
+
+    #[test]
     fn docs_protocol_md_has_the_generated_tables() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/protocol.md");
         let doc = std::fs::read_to_string(path).unwrap();

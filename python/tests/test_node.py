@@ -1,0 +1,91 @@
+"""CspNode over an in-memory link: requests, servers, pings, CRC, timeouts."""
+import queue
+
+import pytest
+
+from m6p.csp import FLAG_CRC32, Packet
+from m6p.node import CspNode, CspTimeout
+
+
+class Wire:
+    """Two ends of an in-memory link."""
+
+    def __init__(self):
+        self.a, self.b = queue.Queue(), queue.Queue()
+
+    def end(self, inbox, outbox):
+        class End:
+            def send(self, p):
+                outbox.put(p)
+
+            def recv(self, timeout_s):
+                try:
+                    return inbox.get(timeout=timeout_s)
+                except queue.Empty:
+                    return None
+
+            def close(self):
+                pass
+
+        return End()
+
+
+@pytest.fixture
+def pair():
+    w = Wire()
+    a = CspNode(w.end(w.a, w.b), 17, timeout_s=1.0)
+    b = CspNode(w.end(w.b, w.a), 12, timeout_s=1.0)
+    yield a, b
+    a.close()
+    b.close()
+
+
+def test_a_request_gets_the_servers_reply_and_pings_are_echoed(pair):
+    ground, payload = pair
+    seen = []
+
+    def handler(p: Packet):
+        seen.append(p.header)
+        return b"\x01\x01" + p.data[1:]
+
+    payload.serve(10, handler)
+    assert ground.request(12, 10, b"\x01go") == b"\x01\x01go"
+    h = seen[0]
+    assert (h.src, h.dst, h.dport) == (17, 12, 10) and 32 <= h.sport <= 63
+    assert ground.ping(12, size=100) < 1.0
+
+
+def test_a_crc_request_gets_a_crc_reply_and_nobody_answers_an_unbound_port(pair):
+    ground, payload = pair
+    payload.serve(10, lambda p: p.data)
+    assert ground.request(12, 10, b"abc", flags=FLAG_CRC32) == b"abc"
+    with pytest.raises(CspTimeout, match="no reply from 12:11"):
+        ground.request(12, 11, b"x", timeout_s=0.2)
+    assert payload.unhandled == 1
+
+
+def test_a_handlers_exception_is_counted_and_the_node_goes_on(pair):
+    ground, payload = pair
+    calls = []
+
+    def handler(p):
+        calls.append(p)
+        if len(calls) == 1:
+            raise RuntimeError("a bug in the payload")
+        return b"ok"
+
+    payload.serve(10, handler)
+    with pytest.raises(CspTimeout):
+        ground.request(12, 10, b"1", timeout_s=0.2)
+    assert ground.request(12, 10, b"2") == b"ok"
+    assert payload.handler_errors == 1
+
+
+def test_icd_commands_by_name_between_two_python_nodes(pair):
+    ground, fc = pair
+    tmgen = fc.icd.command("FC.TMGEN")
+    fc.serve(10, lambda p: tmgen.reply_bytes(
+        rtc_timestamp=1, uptime_s=2, global_on_time_s=3, current_mode="nadir",
+        current_state=0, mcu_temp_c=-5, reset_cause=0))
+    r = ground.command("FC.TMGEN", to=12)
+    assert r.ok and r.name("current_mode") == "nadir" and r["mcu_temp_c"] == -5
