@@ -119,8 +119,11 @@ pub async fn execute(
         }
     };
     let net = compiled.opts.network.clone();
+    let icd = crate::icd::IcdMap::for_run(&compiled.opts);
     let cx = WatchCx {
         tle: compiled.opts.tle.as_ref(),
+        net: Some(&net),
+        icd: Some(&icd),
     };
     let mut watches: Vec<_> = compiled.expectations.iter().map(|x| x.watch(&cx)).collect();
     compiled.opts.keep_series = false;

@@ -133,6 +133,10 @@ pub struct CheckCx<'a> {
 pub struct WatchCx<'a> {
     /// The satellite's two TLE lines (the truth's distance from their orbit).
     pub tle: Option<&'a (String, String)>,
+    /// The run's network (default: the M6P's).
+    pub net: Option<&'a NetworkSpec>,
+    /// The ICD on the run's ports (default: the ICD's ports).
+    pub icd: Option<&'a crate::icd::IcdMap>,
 }
 
 /// An expectation judged while the run goes, from its events, so that what it looks at
@@ -306,6 +310,7 @@ registry! {
     crate::eps::PowerExpect,
     crate::comm::BeaconExpect,
     crate::can::CanExpect,
+    crate::fields::FieldExpect,
 }
 
 type Parsed = (Common, std::sync::Arc<dyn AnyExpect>);

@@ -81,7 +81,7 @@ use std::sync::Arc;
 
 use anyhow::Context as _;
 use bus::trace::{TraceEvent, TraceFrame};
-use csp::cfp::{CFP_MAX_DATA, CanFrame, CfpId, FrameType, Reassembler, ReassemblerConfig};
+use csp::cfp::{CanFrame, CfpId, FrameType};
 use csp::header::{HEADER_LEN, Header};
 use csp::{Packet, SimTime};
 use mcap::records::{MessageHeader, Metadata};
@@ -1091,11 +1091,10 @@ pub struct EventEncoder {
     base_ns: u64,
     /// The CAN frame train being gathered on each bus, by bus name, in order of appearance.
     trains: Vec<(Arc<str>, Option<Train>)>,
-    /// One CFP reassembler per CAN bus, by bus name, in order of appearance.
-    reassemblers: Vec<(Arc<str>, Reassembler)>,
+    /// The run's packets (CFP reassembled per bus), for `/csp/packets`.
+    tap: crate::packets::PacketTap,
     /// The ICD on the run's ports, to decode `/csp/packets`.
     icd: crate::icd::IcdMap,
-    cfp_drops: u64,
     buf: Vec<u8>,
     key: String,
 }
@@ -1104,7 +1103,7 @@ impl std::fmt::Debug for EventEncoder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("EventEncoder")
             .field("base_ns", &self.base_ns)
-            .field("cfp_drops", &self.cfp_drops)
+            .field("cfp_drops", &self.tap.cfp_drops())
             .finish_non_exhaustive()
     }
 }
@@ -1552,9 +1551,8 @@ impl EventEncoder {
         EventEncoder {
             base_ns,
             trains: Vec::new(),
-            reassemblers: Vec::new(),
+            tap: crate::packets::PacketTap::new(),
             icd: crate::icd::IcdMap::defaults(),
-            cfp_drops: 0,
             buf: Vec::with_capacity(1024),
             key: String::new(),
         }
@@ -1573,7 +1571,7 @@ impl EventEncoder {
 
     /// CFP frames or partial packets the reassemblers dropped (lost frames).
     pub fn cfp_drops(&self) -> u64 {
-        self.cfp_drops
+        self.tap.cfp_drops()
     }
 
     /// Hand out the CAN frame trains still being gathered (at the end of a run, before
@@ -1984,17 +1982,8 @@ impl EventEncoder {
         match &m.frame {
             TraceFrame::Can(f) | TraceFrame::CanUnreceived(f, _) => {
                 self.add_frame(m, f, emit)?;
-                if m.dropped {
-                    return Ok(());
-                }
-                let r = self.reassembler(&m.medium);
-                r.handle_timeout(m.t);
-                match r.handle(f, m.t) {
-                    Some(Ok(p)) => self.encode_csp(m, &p, emit),
-                    Some(Err(_)) => {
-                        self.cfp_drops += 1;
-                        Ok(())
-                    }
+                match self.tap.take(m) {
+                    Some(p) => self.encode_csp(m, &p, emit),
                     None => Ok(()),
                 }
             }
@@ -2034,31 +2023,12 @@ impl EventEncoder {
                 };
                 let chan = (ChannelKind::Net, &*m.medium);
                 emit_msg(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)?;
-                match Packet::parse(bytes) {
-                    Ok(p) if !m.dropped => self.encode_csp(m, &p, emit),
-                    _ => Ok(()),
+                match self.tap.take(m) {
+                    Some(p) => self.encode_csp(m, &p, emit),
+                    None => Ok(()),
                 }
             }
         }
-    }
-
-    /// The reassembler of CAN bus `bus`, created on first use. It keys partial packets by
-    /// src, dst and ident like libcsp; it has more slots than a node (it sees every
-    /// conversation on the bus) and accepts whatever length CFP can carry.
-    fn reassembler(&mut self, bus: &Arc<str>) -> &mut Reassembler {
-        let i = match self.reassemblers.iter().position(|(b, _)| b == bus) {
-            Some(i) => i,
-            None => {
-                let cfg = ReassemblerConfig {
-                    slots: 64,
-                    mtu: CFP_MAX_DATA,
-                    ..ReassemblerConfig::default()
-                };
-                self.reassemblers.push((bus.clone(), Reassembler::new(cfg)));
-                self.reassemblers.len() - 1
-            }
-        };
-        &mut self.reassemblers[i].1
     }
 
     /// The `/csp/packets` message of a packet `m`'s medium delivered.
@@ -2344,7 +2314,7 @@ impl Recorder {
             channels,
             chunks,
             bytes,
-            cfp_drops: enc.cfp_drops,
+            cfp_drops: enc.cfp_drops(),
         })
     }
 }

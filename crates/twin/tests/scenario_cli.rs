@@ -44,6 +44,18 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// A minute of the default scenario's 6U from 2026-04-30T18:00:00Z, seed 1.
+const MINUTE_6U: &str = r#"start = "2026-04-30T18:00:00Z"
+duration = "60s"
+seed = 1
+
+[satellite]
+tle = [
+  "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996",
+  "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009",
+]
+"#;
+
 #[test]
 fn repository_scenarios_pass_under_m6p_twin_test() {
     let mut files: Vec<String> = std::fs::read_dir(repo().join("scenarios"))
@@ -328,16 +340,8 @@ fn a_recorded_tmgen_mode_change_shows_in_the_decoded_packets() {
     let scenario = tmp("mode-change.toml");
     std::fs::write(
         &scenario,
-        r#"name = "mode-change"
-start = "2026-04-30T18:00:00Z"
-duration = "60s"
-seed = 1
-
-[satellite]
-tle = [
-  "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996",
-  "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009",
-]
+        format!("name = \"mode-change\"\n{MINUTE_6U}")
+            + r#"
 
 [[commands]]
 name = "tmgen"
@@ -953,4 +957,116 @@ fn ctrl_c_stops_a_virtual_run_and_finishes_its_recording() {
         .parse()
         .unwrap();
     assert!(secs < 7.0 * 86_400.0, "{all}");
+}
+
+/// Issue 19: `field` expectations judge TMGEN's decoded mode over time (every reply of the
+/// scenario's polls: the FC detumbles, then idles after ATCMDSET at 27 s): `at`,
+/// `eventually` and `always` hold where they should and fail, naming the reply, where they
+/// should not.
+#[test]
+fn field_expectations_follow_tmgens_mode_over_time() {
+    let scenario = tmp("field-over-time.toml");
+    std::fs::write(
+        &scenario,
+        format!("name = \"field-over-time\"\n{MINUTE_6U}")
+            + r#"
+
+[[commands]]
+name = "tmgen"
+at = "5s"
+every = "5s"
+count = 10
+command = "FC.TMGEN"
+
+[[commands]]
+name = "idle"
+at = "27s"
+command = "FC.ATCMDSET"
+args = { mode = "idle" }
+
+[[expectations]]
+name = "detumbling at 20 s"
+kind = "field"
+field = "FC.TMGEN.current_mode"
+when = "at"
+at = "20s"
+equals = "detumble"
+
+[[expectations]]
+name = "idle at 40 s"
+kind = "field"
+field = "FC.TMGEN.current_mode"
+when = "at"
+at = "40s"
+equals = 0
+
+[[expectations]]
+name = "eventually idle"
+kind = "field"
+field = "FC.TMGEN.current_mode"
+when = "eventually"
+equals = "idle"
+
+[[expectations]]
+name = "always detumbling (fails)"
+kind = "field"
+field = "FC.TMGEN.current_mode"
+equals = "detumble"
+
+[[expectations]]
+name = "never nadir (fails)"
+kind = "field"
+field = "FC.TMGEN.current_mode"
+when = "eventually"
+equals = "nadir"
+
+[[expectations]]
+name = "no TMATP polled (fails)"
+kind = "field"
+field = "FC.TMATP.rtc_timestamp"
+above = 0
+"#,
+    )
+    .unwrap();
+    let (code, out, err) = twin(&["run", scenario.to_str().unwrap()]);
+    std::fs::remove_file(&scenario).ok();
+    assert_eq!(code, 1, "{out}{err}");
+    let line = |name: &str| {
+        out.lines()
+            .find(|l| l.contains(name))
+            .unwrap_or_else(|| panic!("no verdict `{name}`:\n{out}"))
+            .trim()
+            .to_owned()
+    };
+    assert!(line("detumbling at 20 s").starts_with("PASS"), "{out}");
+    assert!(
+        line("detumbling at 20 s").contains("= 1 (detumble) in the latest reply, at 15.0"),
+        "{out}"
+    );
+    assert!(line("idle at 40 s").starts_with("PASS"), "{out}");
+    let eventually = line("eventually idle");
+    assert!(eventually.starts_with("PASS"), "{out}");
+    assert!(eventually.contains("= 0 (idle) at 30.0"), "{eventually}");
+    assert!(
+        eventually.contains("10 replies, seen: 0..=1"),
+        "{eventually}"
+    );
+    let always = line("always detumbling");
+    assert!(always.starts_with("FAIL"), "{out}");
+    assert!(
+        always.contains("FC.TMGEN.current_mode = 0 (idle) at 30.0"),
+        "{always}"
+    );
+    assert!(always.contains("not = 1 (detumble)"), "{always}");
+    let never = line("never nadir");
+    assert!(
+        never.starts_with("FAIL") && never.contains("never = 3 (nadir) (10 replies"),
+        "{never}"
+    );
+    let none = line("no TMATP polled");
+    assert!(
+        none.starts_with("FAIL") && none.contains("no successful FC.TMATP reply in the window"),
+        "{none}"
+    );
+    assert!(out.contains("3 passed, 3 failed"), "{out}");
 }

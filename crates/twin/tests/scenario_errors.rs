@@ -434,3 +434,43 @@ fn a_typed_setup_of_1000_s_is_refused_with_the_icd_range() {
         "the PC has no command `SETPU`: SETUP, STATUS, ABORT",
     );
 }
+
+/// Issue 19: a `field` expectation names an ICD reply's field; a wrong node, command, field
+/// or value name, or `when = "at"` without `at`, is refused naming the line and the key.
+#[test]
+fn a_field_expectation_is_checked_against_the_icd() {
+    let text = "duration = \"1m\"\n\
+                [[expectations]]\nkind = \"field\"\nfield = \"FC.TMGEN.current_mode\"\n\
+                equals = \"nadir\"\n";
+    Scenario::parse("ok.toml", text).unwrap();
+    assert_error(
+        &text.replace("current_mode", "mode"),
+        4,
+        "expectations[0].field",
+        "FC.TMGEN's reply has no field `mode`: rtc_timestamp, uptime_s",
+    );
+    assert_error(
+        &text.replace("TMGEN", "TMGNE"),
+        4,
+        "expectations[0].field",
+        "the FC has no command `TMGNE`",
+    );
+    assert_error(
+        &text.replace("\"nadir\"", "\"sideways\""),
+        5,
+        "expectations[0].equals",
+        "`sideways` is not a value of `current_mode`: idle, detumble",
+    );
+    assert_error(
+        &format!("{text}when = \"at\"\n"),
+        2,
+        "expectations[0].at",
+        "`when = \"at\"` needs `at`",
+    );
+    assert_error(
+        &text.replace("equals = \"nadir\"\n", ""),
+        3,
+        "expectations[0].kind",
+        "needs `equals`, `above` or `below`",
+    );
+}
