@@ -113,3 +113,8 @@ def test_unknown_nodes_and_commands_list_what_there_is():
         ICD.command("FC.TMGENX")
     with pytest.raises(IcdError, match="COMM, FC, EPS"):
         ICD.command("OBC.PING")
+
+
+def test_value_names_with_underscores_for_spaces():
+    assert ICD.command("FC.ATCMDSET").encode(mode="velocity_pointing") == b"\x06\x02"
+    assert ICD.command("FC.ATCMDSET").encode(mode="Velocity Pointing") == b"\x06\x02"

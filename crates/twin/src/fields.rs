@@ -134,7 +134,7 @@ impl FieldExpect {
                 let v = leaf
                     .values
                     .iter()
-                    .find(|(_, name)| name.eq_ignore_ascii_case(s));
+                    .find(|(_, name)| crate::icd::value_name_is(name, s));
                 match v {
                     Some((k, _)) => Some(*k as f64),
                     None => {

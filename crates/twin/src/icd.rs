@@ -709,6 +709,16 @@ pub fn find_command(name: &str) -> Result<(NodeIcd, Port, &'static Command), Str
     ))
 }
 
+/// Whether `typed` names the value `name`: case aside, and with `_` or `-` for a space
+/// (`velocity_pointing`, which a command line splits less easily).
+pub fn value_name_is(name: &str, typed: &str) -> bool {
+    name.len() == typed.len()
+        && name
+            .bytes()
+            .zip(typed.bytes())
+            .all(|(a, b)| a.eq_ignore_ascii_case(&b) || (a == b' ' && (b == b'_' || b == b'-')))
+}
+
 /// A number for field `f` from an argument: a number, a value's name (`nadir`), or a
 /// duration for a field in seconds or milliseconds (`"10m"`).
 fn arg_number(f: &Field, v: &serde_json::Value) -> Result<f64, String> {
@@ -716,7 +726,7 @@ fn arg_number(f: &Field, v: &serde_json::Value) -> Result<f64, String> {
         serde_json::Value::Number(n) => n.as_f64().ok_or_else(|| "not a number".to_owned()),
         serde_json::Value::Bool(b) => Ok(f64::from(u8::from(*b))),
         serde_json::Value::String(s) => {
-            if let Some((k, _)) = f.values.iter().find(|(_, n)| n.eq_ignore_ascii_case(s)) {
+            if let Some((k, _)) = f.values.iter().find(|(_, n)| value_name_is(n, s)) {
                 return Ok(*k as f64);
             }
             let scale = match f.unit {
@@ -1141,6 +1151,25 @@ mod tests {
         )
         .unwrap();
         assert_eq!(ok, [1, 0, 0, 0, 0, 0x58, 2, 0, 0, 200, b'g', b'o']);
+        // A value's name with `_` (or `-`) for its spaces, in any case.
+        let (_, _, mode) = find_command("FC.ATCMDSET").unwrap();
+        for typed in [
+            "velocity pointing",
+            "velocity_pointing",
+            "Velocity-Pointing",
+        ] {
+            assert_eq!(
+                encode_args(mode, &args(serde_json::json!({"mode": typed}))),
+                Ok(vec![2])
+            );
+        }
+        assert!(
+            encode_args(
+                mode,
+                &args(serde_json::json!({"mode": "velocity__pointing"}))
+            )
+            .is_err()
+        );
         let e = encode_args(
             setup,
             &args(

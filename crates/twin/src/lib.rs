@@ -28,6 +28,7 @@ pub mod faults;
 pub mod fields;
 pub mod ground;
 pub mod gs;
+pub mod gs_shell;
 pub mod icd;
 pub mod icd_lengths;
 pub mod invariants;

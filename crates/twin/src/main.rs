@@ -306,8 +306,10 @@ struct GsArgs {
     /// How long to wait for each reply.
     #[arg(long, default_value = "2s", value_parser = parse_duration)]
     timeout: Duration,
+    /// The request; without one, the console: interactive on a terminal (history, Tab
+    /// completion), else the lines of standard input.
     #[command(subcommand)]
-    request: GsRequest,
+    request: Option<GsRequest>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -1295,12 +1297,15 @@ fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
 }
 
 fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
+    let Some(request) = a.request else {
+        return m6p_twin::gs_shell::run(a.connect, a.as_addr, a.port, a.timeout);
+    };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
     rt.block_on(async {
         let mut client = gs::GsClient::connect(a.connect, a.as_addr).await?;
-        match a.request {
+        match request {
             GsRequest::Ping {
                 node,
                 count,

@@ -285,3 +285,71 @@ fn a_departed_outside_program_gives_its_address_back() {
         report.results[0].outcome
     );
 }
+
+/// Issue 19: `gs --connect ADDR` without a request is the console. On a terminal (a pty
+/// here, typed into by tests/pty_console.py) Tab completes commands and value names from
+/// the ICD and the lines go to the history file; from a pipe it takes one request per
+/// line, echoes each, answers a bad line with one `error:` line and goes on, and exits 1
+/// when a line was refused.
+#[test]
+fn the_gs_console_completes_remembers_and_takes_scripts() {
+    with_twin(12, move |addr| {
+        let dir = std::env::temp_dir().join(format!("m6p-gs-console-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let history = dir.join("history");
+        let out = Command::new("python3")
+            .arg(repo_root().join("tests/pty_console.py"))
+            .args([
+                r"fc tmg\t\r",
+                r"fc atcmdset mode=velocity_p\t\r",
+                r"fc atcmdget\r",
+                r"\x04",
+            ])
+            .arg("--")
+            .arg(env!("CARGO_BIN_EXE_m6p-twin"))
+            .args(["gs", "--connect", &addr.to_string(), "--timeout", "4s"])
+            .env("M6P_GS_HISTORY", &history)
+            .output()
+            .expect("python3 is needed for this test");
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success(), "{text}");
+        assert!(text.contains("FC.TMGEN from 3: ok, 16 bytes"), "{text}");
+        assert!(text.contains("FC.ATCMDSET from 3: ok"), "{text}");
+        assert!(text.contains("2 (velocity pointing)"), "{text}");
+        let saved = std::fs::read_to_string(&history).unwrap();
+        assert!(
+            saved.contains("fc tmgen\nfc atcmdset mode=velocity_pointing\nfc atcmdget"),
+            "{saved}"
+        );
+
+        let mut child = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+            .args(["gs", "--connect", &addr.to_string(), "--timeout", "4s"])
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        use std::io::Write as _;
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(b"eps tmeps\nfc atcmdset mode=sideways\nping fc 64\nquit\nfc tmgen\n")
+            .unwrap();
+        let out = child.wait_with_output().unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert_eq!(out.status.code(), Some(1), "{text}");
+        assert!(
+            text.starts_with("> eps tmeps\nEPS.TMEPS from 4: ok, 88 bytes"),
+            "{text}"
+        );
+        assert!(
+            text.contains(
+                "> fc atcmdset mode=sideways\nerror: ATCMDSET.mode: `sideways` is not a number"
+            ),
+            "{text}"
+        );
+        assert!(text.contains("reply from 3: seq=1 size=64"), "{text}");
+        assert!(!text.contains("FC.TMGEN"), "nothing after quit: {text}");
+        std::fs::remove_dir_all(&dir).ok();
+    });
+}

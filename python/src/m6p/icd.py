@@ -211,10 +211,13 @@ class Field:
 
 
 def _by_name(names: Mapping[int, str], name: Any) -> Optional[int]:
+    """The value named ``name``: case aside, and with ``_`` or ``-`` for a space
+    (``velocity_pointing``), as the twin takes them."""
     if not isinstance(name, str):
         return None
+    typed = name.lower().replace("_", " ").replace("-", " ")
     for k, n in names.items():
-        if n.lower() == name.lower():
+        if n.lower() == typed:
             return k
     return None
 
