@@ -634,7 +634,17 @@ fn the_foxglove_layout_names_recorded_topics_and_fields() {
     for id in &ids {
         assert!(configs.contains_key(id), "panel {id} has no config");
     }
-    for id in ["3D!attitude", "map!track", "Plot!pointing", "Plot!wheels"] {
+    for id in [
+        "3D!attitude",
+        "map!track",
+        "Plot!pointing",
+        "Plot!wheels",
+        "StateTransitions!pc",
+        "Plot!downlink",
+        "Plot!eps_power",
+        "Plot!eps_battery",
+        "Plot!tmgen_mode",
+    ] {
         assert!(
             ids.iter().any(|i| i == id),
             "{id} is not placed in the layout"
@@ -666,10 +676,35 @@ fn the_foxglove_layout_names_recorded_topics_and_fields() {
     let f = TempFile::new("layout");
     let stats = record(f.path(), &samples());
     let mut fc_fields = 0;
+    let mut decoded = 0;
     for p in &used {
         let (topic, field) = p.split_once('.').unwrap_or((p, ""));
+        // A filter on the decoded packets (`/csp/packets{icd=="PC.TMPC"}...{name=="x"}`):
+        // the command and the field must be the ICD's.
+        let (topic, filters) = topic.split_once('{').unwrap_or((topic, ""));
+        if !filters.is_empty() {
+            let quoted = |key: &str| -> Option<String> {
+                let at = p.find(&format!("{{{key}==\""))? + key.len() + 4;
+                Some(p[at..].split('"').next()?.to_owned())
+            };
+            let (icd, name) = (quoted("icd").unwrap(), quoted("name").unwrap());
+            let (_, _, c) = m6p_twin::icd::find_command(&icd).unwrap();
+            let (fields, _) = c.reply.parts().unwrap();
+            assert!(
+                csp::icd::leaves(fields)
+                    .iter()
+                    .any(|(path, _)| *path == name),
+                "layout path {p}: {icd}'s reply has no field {name}"
+            );
+            decoded += 1;
+        }
+        // A channel of these samples, or one of the recording's fixed topics (the PC's
+        // and the EPS's, which these samples do not have).
         assert!(
-            stats.channels.iter().any(|c| c.topic == topic),
+            stats.channels.iter().any(|c| c.topic == topic)
+                || m6p_twin::record::CHANNEL_KINDS
+                    .iter()
+                    .any(|k| k.topic("") == topic),
             "layout path {p}: no channel {topic}"
         );
         if !topic.starts_with("/fc/") || field.is_empty() {
@@ -694,4 +729,5 @@ fn the_foxglove_layout_names_recorded_topics_and_fields() {
         fc_fields += 1;
     }
     assert!(fc_fields >= 8, "{used:?}");
+    assert!(decoded >= 2, "{used:?}");
 }
