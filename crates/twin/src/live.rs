@@ -113,6 +113,12 @@ impl LiveServer {
         Ok(live)
     }
 
+    /// Decode `/csp/packets` with the ICD on these ports (the run's; default: the ICD's
+    /// default ports), as the recording does.
+    pub fn set_icd(&mut self, icd: crate::icd::IcdMap) {
+        self.enc.set_icd(icd);
+    }
+
     /// The address the server listens on (with the actual port when 0 was asked).
     pub fn addr(&self) -> SocketAddr {
         self.addr

@@ -672,7 +672,11 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
     let rt = build_runtime_for(opts)?;
     #[cfg(feature = "live")]
     let mut live = match a.live {
-        Some(addr) => Some(start_live(addr, compiled.opts.epoch_unix_s)?),
+        Some(addr) => {
+            let mut l = start_live(addr, compiled.opts.epoch_unix_s)?;
+            l.set_icd(m6p_twin::icd::IcdMap::for_run(&compiled.opts));
+            Some(l)
+        }
         None => None,
     };
     #[cfg(feature = "live")]

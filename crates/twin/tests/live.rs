@@ -58,6 +58,18 @@ every = "100ms"
 count = 28
 to = "FC"
 request = "ping"
+
+# TMGEN on a port the scenario moved: the live view decodes it on the run's ports.
+[fc]
+ports = { telemetry = 20 }
+
+[[commands]]
+name = "tmgen"
+at = "150ms"
+every = "200ms"
+count = 12
+command = "FC.TMGEN"
+port = 20
 "#;
 
     /// Kills the child if the test fails half-way.
@@ -219,7 +231,12 @@ request = "ping"
 
         let mut packets = Vec::new();
         let mut times = Vec::new();
-        while packets.len() < 5 || times.len() < 3 {
+        let tmgen = |packets: &Vec<(u64, Value)>| {
+            packets
+                .iter()
+                .any(|(_, p)| p["icd"] == "FC.TMGEN" && p["icd_kind"] == "reply")
+        };
+        while packets.len() < 5 || times.len() < 3 || !tmgen(&packets) {
             let Some(m) = ws.next().await else {
                 panic!("the server closed the connection early");
             };
