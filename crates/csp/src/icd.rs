@@ -525,6 +525,9 @@ pub struct Command {
     /// Valid request data (the first is the one the docs show). Together they accept each
     /// end of every ranged request field (a test checks it against the node's parser).
     pub examples: &'static [&'static [u8]],
+    /// When the node refuses it (the failure reply), beyond a wrong length, a value outside
+    /// a field's range and the access rule (empty: nothing more).
+    pub refused: &'static str,
 }
 
 impl Command {
@@ -539,7 +542,13 @@ impl Command {
             access: Access::Any,
             twin: false,
             examples: &[],
+            refused: "",
         }
+    }
+    /// Refused also when `text` says (the failure reply).
+    pub const fn refused_when(mut self, text: &'static str) -> Command {
+        self.refused = text;
+        self
     }
     /// With valid request data.
     pub const fn examples(mut self, e: &'static [&'static [u8]]) -> Command {

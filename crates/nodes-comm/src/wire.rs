@@ -97,7 +97,7 @@ pub const ICD_PORT: Port = Port {
         Command::new(
             cmd::BEACON,
             "BEACON",
-            "the beacon now (also the periodic beacon's data)",
+            "the beacon now (also the periodic beacon's data; `seq` is the last one sent)",
         )
         .reply(Data::of::<Beacon>())
         .twin(),

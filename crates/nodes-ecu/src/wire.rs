@@ -84,7 +84,7 @@ pub const ICD_PORT: Port = Port {
         Command::new(
             cmd::ARM,
             "ARM",
-            "heaters on; FIRE is accepted after the warm-up",
+            "heaters on; FIRE is accepted after the warm-up (ARM when armed changes nothing)",
         )
         .reply(Data::of::<ArmReply>())
         .no_payloads()
@@ -92,16 +92,24 @@ pub const ICD_PORT: Port = Port {
         Command::new(
             cmd::FIRE,
             "FIRE",
-            "fire for a duration (the ECU grants at most its maximum burn)",
+            "fire for a duration (granted less when the propellant left lasts less)",
+        )
+        .refused_when(
+            "0 ms; longer than max_burn (60 000 ms by default); not ARMED (SAFE, WARMING, \
+             FIRING); the tank empty",
         )
         .request(Data::of::<FireRequest>())
         .reply(Data::of::<FireReply>())
         .examples(&[&[0x10, 0x27, 0, 0]])
         .no_payloads()
         .twin(),
-        Command::new(cmd::SAFE, "SAFE", "stop firing, heaters off, disarm")
-            .no_payloads()
-            .twin(),
+        Command::new(
+            cmd::SAFE,
+            "SAFE",
+            "stop firing, heaters off, disarm (always succeeds)",
+        )
+        .no_payloads()
+        .twin(),
     ],
 };
 

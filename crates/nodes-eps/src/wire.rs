@@ -164,16 +164,23 @@ pub const ICD_PORT: Port = Port {
         Command::new(cmd::CHGET, "CHGET", "read the channel states")
             .reply(Data::of::<ChannelStates>())
             .twin(),
-        Command::new(cmd::CHSET, "CHSET", "switch one channel on or off")
-            .request(Data::of::<ChannelSwitch>())
-            .reply(Data::of::<ChannelStates>())
-            .examples(&[&[3, 1]])
-            .no_payloads()
-            .twin(),
+        Command::new(
+            cmd::CHSET,
+            "CHSET",
+            "switch one channel on or off; the reply is the channels after the switch \
+             (switching to the state it has succeeds and changes nothing)",
+        )
+        .refused_when("switching on a channel whose group the protection has shed")
+        .request(Data::of::<ChannelSwitch>())
+        .reply(Data::of::<ChannelStates>())
+        .examples(&[&[3, 1]])
+        .no_payloads()
+        .twin(),
         Command::new(cmd::THRGET, "THRGET", "read the protection thresholds")
             .reply(Data::of::<Thresholds>())
             .twin(),
         Command::new(cmd::THRSET, "THRSET", "set the protection thresholds")
+            .refused_when("a group's shed threshold not below its restore threshold")
             .request(Data::of::<Thresholds>())
             .examples(&[&[30, 40, 20, 30], &[0, 1, 0, 1], &[99, 100, 99, 100]])
             .no_payloads()

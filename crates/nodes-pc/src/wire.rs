@@ -235,6 +235,11 @@ pub const ICD_CONTROL: Port = Port {
     name: "control",
     commands: &[
         Command::new(cmd::SETUP, "SETUP", "configure a payload session")
+            .refused_when(
+                "the session id unknown; that session PENDING or ACTIVE (reconfigure after \
+                 ABORT); its window overlaps a PENDING or ACTIVE session's; it would start \
+                 at once while another session is ACTIVE",
+            )
             .request(Data::with_tail::<SetupHead>(
                 "sync_message",
                 "sent to the payload in SYNC at the session's start",
@@ -257,6 +262,7 @@ pub const ICD_CONTROL: Port = Port {
             ))
             .examples(&[&[1]]),
         Command::new(cmd::ABORT, "ABORT", "end a session now")
+            .refused_when("the session NOT ACTIVE (nothing changes)")
             .request(Data::of::<SessionId>())
             .examples(&[&[1]])
             .no_payloads(),
@@ -286,34 +292,46 @@ pub const ICD_FILES: Port = Port {
     port: PORT_FILES,
     name: "files",
     commands: &[
-        Command::new(cmd::FLIST, "FLIST", "every buffer file")
-            .reply(Data::Variable(
-                "count u8, then count x FileStat (18 bytes)",
-                1,
-                1 + crate::MAX_SESSIONS * <FileStat as Repr>::LEN,
-            ))
-            .no_payloads()
-            .twin(),
+        Command::new(
+            cmd::FLIST,
+            "FLIST",
+            "every buffer file, in configuration order",
+        )
+        .reply(Data::Variable(
+            "count u8, then count x FileStat (18 bytes)",
+            1,
+            1 + crate::MAX_SESSIONS * <FileStat as Repr>::LEN,
+        ))
+        .no_payloads()
+        .twin(),
         Command::new(cmd::FSTAT, "FSTAT", "one payload's buffer file")
+            .refused_when("a payload without a buffering session")
             .request(Data::of::<PayloadAddr>())
             .reply(Data::of::<FileStat>())
             .examples(&[&[12]])
             .no_payloads()
             .twin(),
-        Command::new(cmd::FREAD, "FREAD", "read bytes of a buffer file")
-            .request(Data::of::<FileRead>())
-            .reply(Data::Variable(
-                "offset u64, then 0..=length bytes",
-                8,
-                8 + FREAD_MAX_LEN as usize,
-            ))
-            .examples(&[
-                &[12, 0, 0, 0, 0, 0, 0, 0, 0, 200],
-                &[12, 0, 0, 0, 0, 0, 0, 0, 0, 1],
-            ])
-            .no_payloads()
-            .twin(),
+        Command::new(
+            cmd::FREAD,
+            "FREAD",
+            "read bytes of a buffer file, from the offset moved up to its head (the reply's \
+             offset says where they start); takes nothing from it",
+        )
+        .refused_when("a payload without a buffering session")
+        .request(Data::of::<FileRead>())
+        .reply(Data::Variable(
+            "offset u64, then 0..=length bytes",
+            8,
+            8 + FREAD_MAX_LEN as usize,
+        ))
+        .examples(&[
+            &[12, 0, 0, 0, 0, 0, 0, 0, 0, 200],
+            &[12, 0, 0, 0, 0, 0, 0, 0, 0, 1],
+        ])
+        .no_payloads()
+        .twin(),
         Command::new(cmd::FDELETE, "FDELETE", "empty a buffer file")
+            .refused_when("a payload without a buffering session")
             .request(Data::of::<PayloadAddr>())
             .reply(Data::of::<Deleted>())
             .examples(&[&[12]])

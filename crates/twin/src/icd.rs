@@ -22,6 +22,7 @@ pub const PLATFORM_PORT: Port = Port {
     name: "platform",
     commands: &[
         Command::new(csp::params::cmd::PGET, "PGET", "read a parameter")
+            .refused_when("an unknown id")
             .request(Data::Variable("u8 id", 1, 1))
             .reply(Data::Variable(
                 "u8 id, u8 type, value (sized by type)",
@@ -34,6 +35,10 @@ pub const PLATFORM_PORT: Port = Port {
             csp::params::cmd::PSET,
             "PSET",
             "set a parameter (not saved)",
+        )
+        .refused_when(
+            "an unknown id; a value not of its type's size, NaN, infinite, outside min..=max, \
+             or breaking a rule between parameters",
         )
         .request(Data::Variable(
             "u8 id, value (sized by the parameter's type)",
@@ -48,6 +53,7 @@ pub const PLATFORM_PORT: Port = Port {
             "PINFO",
             "a parameter's type, range, default, name and unit",
         )
+        .refused_when("an unknown id")
         .request(Data::Variable("u8 id", 1, 1))
         .reply(Data::Variable(
             "u8 id, u8 type, f64 min, f64 max, f64 default, char name[24], char unit[8]",
@@ -472,6 +478,8 @@ struct CommandJson {
     reply: DataJson,
     #[serde(skip_serializing_if = "Option::is_none")]
     example: Option<String>,
+    #[serde(skip_serializing_if = "str::is_empty")]
+    refused_when: &'static str,
 }
 
 #[derive(Debug, Serialize)]
@@ -533,6 +541,7 @@ pub fn to_json() -> String {
                                 example: c.examples.first().map(|e| {
                                     e.iter().map(|b| format!("{b:02x}")).collect::<String>()
                                 }),
+                                refused_when: c.refused,
                             })
                             .collect(),
                     })
@@ -668,6 +677,9 @@ pub fn to_text(node: Option<&str>) -> Result<String, String> {
                     format!(" ({})", tags.join(", "))
                 };
                 out.push_str(&format!("    {} {}{tags}: {}\n", c.id, c.name, c.doc));
+                if !c.refused.is_empty() {
+                    out.push_str(&format!("      refused when: {}\n", c.refused));
+                }
                 data_lines("request", &c.request, &mut out);
                 data_lines("reply", &c.reply, &mut out);
             }
@@ -939,22 +951,23 @@ pub fn to_markdown() -> String {
     for n in nodes() {
         let addrs: Vec<String> = n.addrs.iter().map(u8::to_string).collect();
         out.push_str(&format!("\n### {} (CSP {})\n\n", n.name, addrs.join(", ")));
-        out.push_str("| port | id | command | request data | reply data | payloads | origin |\n|---|---|---|---|---|---|---|\n");
+        out.push_str("| port | id | command | what it does | request data | reply data | payloads | origin | also refused when |\n|---|---|---|---|---|---|---|---|---|\n");
         let mut layouts: Vec<(&'static str, &'static [Field], Option<csp::icd::Tail>)> = Vec::new();
         for p in &n.ports {
             if p.commands.is_empty() {
                 out.push_str(&format!(
-                    "| {} {} | | (no command table) | | | | |\n",
+                    "| {} {} | | (no command table) | | | | | | |\n",
                     p.port, p.name
                 ));
             }
             for c in p.commands {
                 out.push_str(&format!(
-                    "| {} {} | {} | {} | {} | {} | {} | {} |\n",
+                    "| {} {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                     p.port,
                     p.name,
                     c.id,
                     c.name,
+                    c.doc.replace('|', "\\|"),
                     md_data(&c.request),
                     md_data(&c.reply),
                     if c.access == Access::Any {
@@ -963,6 +976,7 @@ pub fn to_markdown() -> String {
                         "refused"
                     },
                     if c.twin { "twin" } else { "ICD" },
+                    c.refused.replace('|', "\\|"),
                 ));
                 for d in [c.request, c.reply] {
                     let entry = match d {
@@ -1106,6 +1120,27 @@ mod tests {
         );
     }
 
+    /// The command tables are the generated ones: outside the generated section no table
+    /// lays out a command's request and reply data again (they drifted before).
+    #[test]
+    fn docs_protocol_md_has_no_hand_written_command_tables() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/protocol.md");
+        let doc = std::fs::read_to_string(path).unwrap();
+        let (a, b) = (
+            doc.find(MARKDOWN_BEGIN).unwrap(),
+            doc.find(MARKDOWN_END).unwrap(),
+        );
+        let outside = format!("{}{}", &doc[..a], &doc[b..]);
+        let tables: Vec<&str> = outside
+            .lines()
+            .filter(|l| l.starts_with('|') && l.contains("request data"))
+            .collect();
+        assert!(
+            tables.is_empty(),
+            "hand-written command tables in docs/protocol.md (the generated section has them): {tables:?}"
+        );
+    }
+
     #[test]
     fn the_python_package_carries_the_current_icd() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../python/src/m6p/icd.json");
@@ -1242,9 +1277,17 @@ mod tests {
             }
         }
         assert!(to_text(Some("eps")).unwrap().contains("THRSET"));
+        assert!(
+            to_text(Some("ecu"))
+                .unwrap()
+                .contains("refused when: 0 ms; longer than max_burn")
+        );
+        assert!(fc["ports"][0]["commands"][0].get("refused_when").is_none());
         let md = to_markdown();
         assert!(
-            md.contains("| 10 telemetry | 1 | TMGEN | - | `TmGen` 16 | yes | ICD |"),
+            md.contains(
+                "| 10 telemetry | 1 | TMGEN | general telemetry | - | `TmGen` 16 | yes | ICD |  |"
+            ),
             "{md}"
         );
         assert!(

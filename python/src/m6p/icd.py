@@ -378,6 +378,9 @@ class Command:
     request: Data
     reply: Data
     example: Optional[bytes] = None
+    #: When the node also refuses it (beyond a wrong length, a value out of range and the
+    #: access rule), in words; empty when nothing more.
+    refused_when: str = ""
 
     @property
     def full_name(self) -> str:
@@ -598,6 +601,7 @@ class Icd:
                             request=Data.from_json(c.get("request")),
                             reply=Data.from_json(c.get("reply")),
                             example=bytes.fromhex(ex) if ex is not None else None,
+                            refused_when=c.get("refused_when", ""),
                         )
                     )
             object.__setattr__(node, "commands", tuple(commands))
