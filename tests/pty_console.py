@@ -10,6 +10,7 @@ it wrote. Used by crates/twin/tests/kiss_tcp.rs for `m6p-twin gs`'s interactive 
 import os
 import pty
 import select
+import signal
 import sys
 import time
 
@@ -45,8 +46,12 @@ def main():
     for k in keys:
         os.write(fd, k)
         out += read_until_quiet(fd)
-    out += read_until_quiet(fd, quiet_s=0.5, limit_s=3.0)
-    _, status = os.waitpid(pid, 0)
+    # Whatever the program still writes until it exits and its side of the pty closes.
+    out += read_until_quiet(fd, quiet_s=30.0, limit_s=30.0)
+    done, status = os.waitpid(pid, os.WNOHANG)
+    if done == 0:  # still running after 30 s: it did not leave
+        os.kill(pid, signal.SIGKILL)
+        _, status = os.waitpid(pid, 0)
     sys.stdout.write(out.decode(errors="replace"))
     sys.exit(os.waitstatus_to_exitcode(status))
 

@@ -118,3 +118,12 @@ def test_unknown_nodes_and_commands_list_what_there_is():
 def test_value_names_with_underscores_for_spaces():
     assert ICD.command("FC.ATCMDSET").encode(mode="velocity_pointing") == b"\x06\x02"
     assert ICD.command("FC.ATCMDSET").encode(mode="Velocity Pointing") == b"\x06\x02"
+
+
+def test_names_with_hyphens_and_the_whole_u64_range():
+    status = ICD.command("PC.STATUS")
+    last = next(f for f in status.reply.fields if f.name == "last_result")
+    assert last.number("s_band_failure") == 3 and last.number("S-BAND FAILURE") == 3
+    fread = ICD.command("PC.FREAD")
+    b = fread.encode(payload_addr=12, offset=2**64 - 1, length=200)
+    assert b[2:10] == b"\xff" * 8

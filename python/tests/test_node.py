@@ -89,3 +89,38 @@ def test_icd_commands_by_name_between_two_python_nodes(pair):
         current_state=0, mcu_temp_c=-5, reset_cause=0))
     r = ground.command("FC.TMGEN", to=12)
     assert r.ok and r.name("current_mode") == "nadir" and r["mcu_temp_c"] == -5
+
+
+def test_a_reply_must_come_from_where_the_request_went_and_close_releases_waiters(pair):
+    ground, payload = pair
+    import threading
+
+    from m6p.csp import Header
+    from m6p.links import LinkClosed
+
+    # A packet to the request's port from another address is not its reply.
+    def impostor(p):
+        payload.link.send(Packet(Header(2, 13, 17, p.header.sport, 10), b"not yours"))
+        return None
+
+    payload.serve(10, impostor)
+    with pytest.raises(CspTimeout):
+        ground.request(12, 10, b"x", timeout_s=0.3)
+    # A request waiting when the node closes ends at once.
+    payload.serve(10, lambda p: None)
+    result = []
+
+    def ask():
+        try:
+            ground.request(12, 10, b"y", timeout_s=10.0)
+        except LinkClosed as e:
+            result.append(e)
+
+    t = threading.Thread(target=ask)
+    t.start()
+    import time
+
+    time.sleep(0.2)
+    ground.close()
+    t.join(timeout=2.0)
+    assert not t.is_alive() and len(result) == 1

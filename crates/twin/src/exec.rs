@@ -110,19 +110,43 @@ pub async fn execute(
     mut compiled: Compiled,
     sink: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<Outcome> {
-    let (tx, rx) = tokio::sync::oneshot::channel();
+    let (tx, rx) = tokio::sync::oneshot::channel::<Vec<std::net::SocketAddr>>();
+    // The CSP addresses of each listening link, in the order the servers are bound, so
+    // that a program starting the twin can tell its links apart (`m6p.Twin` does).
+    let listen_addrs: Vec<Vec<u8>> = compiled
+        .opts
+        .kiss_links
+        .iter()
+        .filter(|l| matches!(l.mode, crate::runtime::KissMode::Listen(_)))
+        .map(|l| l.cfg.addrs.clone())
+        .collect();
     let print_listen = async move {
         if let Ok(addrs) = rx.await {
-            for a in addrs {
-                eprintln!("KISS/TCP: listening on {a} (try: m6p-twin gs --connect {a} ping 3)");
+            for (i, a) in addrs.into_iter().enumerate() {
+                let csp = match listen_addrs.get(i) {
+                    Some(ids) if !ids.is_empty() => format!(
+                        " for CSP {}",
+                        ids.iter().map(u8::to_string).collect::<Vec<_>>().join(", ")
+                    ),
+                    _ => String::new(),
+                };
+                eprintln!(
+                    "KISS/TCP: listening on {a}{csp} (try: m6p-twin gs --connect {a} ping 3)"
+                );
             }
         }
     };
     let net = compiled.opts.network.clone();
     let icd = crate::icd::IcdMap::for_run(&compiled.opts);
+    // The nodes that run: an outside program in a replaced node's place sends under its
+    // link's name, not the node's.
+    let mut running = net.clone();
+    running
+        .nodes
+        .retain(|n| !compiled.opts.replaced.contains(&n.addr));
     let cx = WatchCx {
         tle: compiled.opts.tle.as_ref(),
-        net: Some(&net),
+        net: Some(&running),
         icd: Some(&icd),
     };
     let mut watches: Vec<_> = compiled.expectations.iter().map(|x| x.watch(&cx)).collect();
@@ -238,6 +262,13 @@ async fn execute_inner(
             .duration
             .filter(|d| *d != loaded.scenario.duration.0)
             .map(|d| d.as_nanos() as u64),
+        replaced: compiled.opts.replaced.iter().copied().collect(),
+        link_addrs: compiled
+            .opts
+            .kiss_links
+            .iter()
+            .map(|l| (l.label(), l.cfg.addrs.clone()))
+            .collect(),
     };
     let mut recorder = Some(crate::record::Recorder::create(path, meta)?);
     if let Some(r) = recorder.as_mut() {

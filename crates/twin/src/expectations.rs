@@ -133,7 +133,8 @@ pub struct CheckCx<'a> {
 pub struct WatchCx<'a> {
     /// The satellite's two TLE lines (the truth's distance from their orbit).
     pub tle: Option<&'a (String, String)>,
-    /// The run's network (default: the M6P's).
+    /// The run's network, the nodes that run (those outside programs replaced left out;
+    /// default: the M6P's).
     pub net: Option<&'a NetworkSpec>,
     /// The ICD on the run's ports (default: the ICD's ports).
     pub icd: Option<&'a crate::icd::IcdMap>,

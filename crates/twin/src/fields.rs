@@ -407,3 +407,60 @@ impl Watch for FieldWatch {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use bus::trace::{TraceEvent, TraceFrame};
+
+    /// A TMGEN reply from CSP 3 with mode `mode`, as the ground network carries it, sent by
+    /// `from`.
+    fn tmgen_reply(from: &str, t_s: u64, mode: u8) -> RunEvent {
+        let mut data = vec![1, 1];
+        data.extend([0u8; 12]);
+        data.extend([mode, 0, 20, 0]);
+        let p = csp::Packet::new(csp::Header::new(3, 17, 40, 10), data);
+        RunEvent::Medium(TraceEvent {
+            t: SimTime::from_secs(t_s),
+            medium: "ground".into(),
+            from: from.into(),
+            frame: TraceFrame::Packet(p.to_bytes()),
+            dropped: false,
+        })
+    }
+
+    fn watch(net: &NetworkSpec) -> FieldWatch {
+        let e: FieldExpect = toml::from_str(
+            "field = \"FC.TMGEN.current_mode\"\nequals = \"nadir\"\nwhen = \"eventually\"\n",
+        )
+        .unwrap();
+        FieldWatch {
+            target: e.target().unwrap(),
+            expect: e,
+            icd: IcdMap::defaults(),
+            net: net.clone(),
+            tap: PacketTap::new(),
+            tally: Tally::default(),
+        }
+    }
+
+    #[test]
+    fn a_twin_nodes_reply_counts_on_its_first_hop_and_an_outside_programs_everywhere() {
+        let mut net = NetworkSpec::default_m6p();
+        let mut w = watch(&net);
+        // The FC's own reply counts where the FC sends it, not where the COMM forwards it.
+        w.observe(&tmgen_reply("FC", 1, 1));
+        w.observe(&tmgen_reply("COMM1", 1, 1));
+        assert_eq!(w.tally.n, 1);
+        // An outside program in the FC's place sends under its link's name: with the FC
+        // still listed as a running node, its replies were never counted.
+        w.observe(&tmgen_reply("listen 127.0.0.1:5000#1", 2, 3));
+        assert_eq!(w.tally.n, 1);
+        net.nodes.retain(|n| n.addr != 3);
+        let mut w = watch(&net);
+        w.observe(&tmgen_reply("listen 127.0.0.1:5000#1", 2, 3));
+        assert_eq!(w.tally.n, 1);
+        assert_eq!(w.tally.first_held.map(|(_, x)| x), Some(3.0));
+    }
+}

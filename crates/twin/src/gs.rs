@@ -48,6 +48,8 @@ impl GsClient {
     ) -> anyhow::Result<Option<(Packet, Duration)>> {
         let sport = self.next_port;
         self.next_port = if sport >= 63 { 32 } else { sport + 1 };
+        // A late reply to an earlier request from this port is not this one's.
+        self.pending.retain(|p| p.header.dport != sport);
         let packet = Packet::new(Header::new(self.addr, dst, dport, sport), data);
         let mut wire = Vec::new();
         kiss::encode(&packet, &mut wire);

@@ -240,18 +240,11 @@ pub fn complete(line: &str) -> (usize, Vec<String>) {
         [b] if b.eq_ignore_ascii_case("help") => {
             out.extend(node_names().into_iter().filter(|n| starts(n)).map(cased));
         }
-        [node] | [_, node] if crate::icd::node_named(node).is_some() => {
-            if let Some(n) = crate::icd::node_named(node) {
-                for p in &n.ports {
-                    out.extend(
-                        p.commands
-                            .iter()
-                            .map(|c| c.name)
-                            .filter(|c| starts(c))
-                            .map(cased),
-                    );
-                }
-            }
+        [b, node] if b.eq_ignore_ascii_case("help") && crate::icd::node_named(node).is_some() => {
+            out.extend(commands_of(node, &starts, &cased));
+        }
+        [node] if crate::icd::node_named(node).is_some() => {
+            out.extend(commands_of(node, &starts, &cased));
         }
         [node, cmd, given @ ..] => {
             let Ok((_, _, c)) = crate::icd::find_command(&format!("{node}.{cmd}")) else {
@@ -293,6 +286,24 @@ pub fn complete(line: &str) -> (usize, Vec<String>) {
         _ => {}
     }
     (start, out)
+}
+
+/// A node's command names that `starts`, in `cased` case.
+fn commands_of(
+    node: &str,
+    starts: &dyn Fn(&str) -> bool,
+    cased: &dyn Fn(&str) -> String,
+) -> Vec<String> {
+    crate::icd::node_named(node)
+        .map(|n| {
+            n.ports
+                .iter()
+                .flat_map(|p| p.commands.iter().map(|c| c.name))
+                .filter(|c| starts(c))
+                .map(cased)
+                .collect()
+        })
+        .unwrap_or_default()
 }
 
 /// The history file: `$M6P_GS_HISTORY`, else `~/.m6p-twin-gs-history` (none without a home).
@@ -484,6 +495,9 @@ mod tests {
             ]
         );
         assert_eq!(names("ping c"), ["comm", "comm1", "comm2"]);
+        // After a builtin's node comes no command; after `help NODE`, its commands.
+        assert!(names("ping fc ").is_empty());
+        assert_eq!(names("help pc st"), ["status"]);
         assert_eq!(complete("fc tmg").0, 3);
         assert!(names("xx yy ").is_empty());
     }

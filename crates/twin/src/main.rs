@@ -936,16 +936,16 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
             if link.starts_with("zmq-hub ") {
                 r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
             }
+            // A command-line link's configured addresses, which the scenario lacks.
+            if r.cfg.addrs.is_empty()
+                && let Some(addrs) = meta.link_addrs.get(link)
+            {
+                r.cfg.addrs.clone_from(addrs);
+            }
         }
-        // A command-line link's addresses replaced the twin's nodes there, as in `run`
-        // (a scenario link's are replaced already).
-        let replaced =
-            m6p_twin::outside::cli_replaces(&compiled.opts.network, input.iter().map(|r| &r.cfg))
-                .map_err(|e| anyhow::anyhow!("the recorded links: {e}"))?;
-        compiled
-            .opts
-            .replaced
-            .extend(replaced.into_iter().map(|(a, _)| a));
+        // The nodes the recorded run's outside programs replaced, the command line's
+        // (`--kiss-addr`) included, which the scenario does not name.
+        compiled.opts.replaced.extend(meta.replaced.iter().copied());
         compiled.opts.kiss_links.clear();
         compiled.opts.clock = bus::ClockMode::Virtual;
         compiled.opts.kiss_replay = input;

@@ -179,6 +179,16 @@ pub struct RecordingMeta {
     /// (`--duration`), so that `replay` runs exactly as long; `None` keeps the scenario's.
     #[serde(default)]
     pub duration_ns: Option<u64>,
+    /// Nodes of the network that outside programs replaced (not started), by address:
+    /// the scenario's `replaces` and the command line's `--kiss-addr`, so that `replay`
+    /// starts the same nodes (the command line's links are not in the scenario).
+    #[serde(default)]
+    pub replaced: Vec<u8>,
+    /// The CSP addresses configured on each link to outside programs, by the link's label
+    /// (`listen 127.0.0.1:0`), so that `replay` claims them as the run did (the command
+    /// line's links are not in the scenario).
+    #[serde(default)]
+    pub link_addrs: BTreeMap<String, Vec<u8>>,
 }
 
 /// Messages written to one channel.
@@ -2221,6 +2231,18 @@ impl Recorder {
             (
                 "duration_ns",
                 meta.duration_ns.map_or(String::new(), |d| d.to_string()),
+            ),
+            (
+                "replaced",
+                meta.replaced
+                    .iter()
+                    .map(u8::to_string)
+                    .collect::<Vec<_>>()
+                    .join(","),
+            ),
+            (
+                "link_addrs",
+                crate::recording::format_link_addrs(&meta.link_addrs),
             ),
         ]
         .into_iter()

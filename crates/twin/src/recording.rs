@@ -612,6 +612,33 @@ pub fn messages(path: &Path) -> anyhow::Result<Messages> {
     })
 }
 
+/// The `link_addrs` metadata: `LABEL=ID,ID;LABEL=ID` (links without addresses left out).
+pub fn format_link_addrs(links: &std::collections::BTreeMap<String, Vec<u8>>) -> String {
+    links
+        .iter()
+        .filter(|(_, a)| !a.is_empty())
+        .map(|(l, a)| {
+            let ids: Vec<String> = a.iter().map(u8::to_string).collect();
+            format!("{l}={}", ids.join(","))
+        })
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
+/// Read [`format_link_addrs`]' text; what does not parse is left out.
+pub fn parse_link_addrs(text: &str) -> std::collections::BTreeMap<String, Vec<u8>> {
+    text.split(';')
+        .filter_map(|item| {
+            let (label, ids) = item.rsplit_once('=')?;
+            let ids: Vec<u8> = ids
+                .split(',')
+                .filter_map(|a| a.trim().parse().ok())
+                .collect();
+            Some((label.to_owned(), ids))
+        })
+        .collect()
+}
+
 /// Build the metadata from the `m6p-twin` record and the scenario attachment.
 fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Result<RecordingMeta> {
     let get = |k: &str| {
@@ -642,6 +669,17 @@ fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Resu
         start_utc: get("start_utc")?,
         twin_version: get("twin_version")?,
         duration_ns: m.metadata.get("duration_ns").and_then(|d| d.parse().ok()),
+        link_addrs: m
+            .metadata
+            .get("link_addrs")
+            .map(|l| parse_link_addrs(l))
+            .unwrap_or_default(),
+        // Older recordings have none: only a scenario's `replaces` replaced nodes then.
+        replaced: m
+            .metadata
+            .get("replaced")
+            .map(|r| r.split(',').filter_map(|a| a.trim().parse().ok()).collect())
+            .unwrap_or_default(),
     })
 }
 

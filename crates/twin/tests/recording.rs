@@ -25,6 +25,8 @@ fn meta() -> RecordingMeta {
         start_utc: "2026-03-20T12:00:00Z".into(),
         twin_version: "0.1.0".into(),
         duration_ns: None,
+        replaced: Vec::new(),
+        link_addrs: Default::default(),
     }
 }
 

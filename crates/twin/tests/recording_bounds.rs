@@ -90,6 +90,8 @@ fn small_recording(path: &Path) {
         start_utc: "2026-01-01T00:00:00Z".into(),
         twin_version: "test".into(),
         duration_ns: Some(1_000_000_000),
+        replaced: Vec::new(),
+        link_addrs: Default::default(),
     };
     let mut r = Recorder::create(path, meta).unwrap();
     let mut t = SimTime::ZERO;

@@ -771,13 +771,35 @@ fn a_replayed_connection_opens_when_the_recorded_one_did() {
         .replace("/tmp/outside_payload.downlink", dir.to_str().unwrap());
     let scenario = tmp("reconnect.toml");
     std::fs::write(&scenario, text).unwrap();
+    let ok = served_and_replayed(&scenario, &[], "reconnect", |addr| {
+        drop(std::net::TcpStream::connect(addr).unwrap());
+        std::thread::sleep(std::time::Duration::from_millis(300));
+    });
+    std::fs::remove_file(&scenario).ok();
+    std::fs::remove_dir_all(&dir).ok();
+    ok.unwrap_or_else(|failures| {
+        panic!("three real-time originals diverged from their replays: {failures:#?}")
+    });
+}
+
+/// Run `scenario` in real time and recorded (with `args`), `before(addr)`, then
+/// `examples/outside_payload.py` serving its session over the announced KISS address, then
+/// replay the recording: `Ok` once a replay is identical, else after three tries the three
+/// divergences. Real-time originals can be stamped a fraction of a millisecond late (see
+/// the test above); anything else than a divergence fails at once.
+fn served_and_replayed(
+    scenario: &std::path::Path,
+    args: &[&str],
+    name: &str,
+    before: impl Fn(&str),
+) -> Result<(), Vec<String>> {
     let mut failures = Vec::new();
     for attempt in 0..3 {
-        let rec = tmp(&format!("reconnect-{attempt}.mcap"));
-        let (mut child, addr, drain) =
-            recorded_run_with_kiss(&["run", scenario.to_str().unwrap()], &rec);
-        drop(std::net::TcpStream::connect(&addr).unwrap());
-        std::thread::sleep(std::time::Duration::from_millis(300));
+        let rec = tmp(&format!("{name}-{attempt}.mcap"));
+        let mut run = vec!["run", scenario.to_str().unwrap()];
+        run.extend(args);
+        let (mut child, addr, drain) = recorded_run_with_kiss(&run, &rec);
+        before(&addr);
         let out = Command::new("python3")
             .arg(repo().join("examples/outside_payload.py"))
             .args(["--connect", &addr, "--idle", "1.5", "--seconds", "12"])
@@ -790,16 +812,41 @@ fn a_replayed_connection_opens_when_the_recorded_one_did() {
         let (code, out, err) = twin(&["replay", rec.to_str().unwrap()]);
         std::fs::remove_file(&rec).ok();
         if code == 0 && out.starts_with("identical") {
-            std::fs::remove_file(&scenario).ok();
-            std::fs::remove_dir_all(&dir).ok();
-            return;
+            return Ok(());
         }
-        // Real-time originals can be stamped a fraction of a millisecond late (see the
-        // test above); anything else fails at once.
         assert!(out.contains("first divergence"), "{out}{err}");
         failures.push(format!("{out}{err}"));
     }
-    panic!("three real-time originals diverged from their replays: {failures:#?}");
+    Err(failures)
+}
+
+/// Payload 12 from the command line (`--kiss-listen ... --kiss-addr 12`) on a scenario that
+/// simulates PL12: the link's program takes PL12's place (it serves the session; before, its
+/// claim of 12 was refused and PL12 answered), and the replay replaces PL12 too (the
+/// recording keeps the replaced nodes), so it is identical.
+#[test]
+fn a_command_line_payload_replaces_pl12_in_the_run_and_in_its_replay() {
+    let dir = tmp("cli-payload.downlink");
+    let link = "[[links]]\nkind = \"kiss-listen\"\naddr = \"127.0.0.1:52001\"\naddrs = [12]           # route CSP 12 to this link from the start\n";
+    let readme = common::readme_scenario();
+    assert!(readme.contains(link), "the README's link block changed");
+    let text = readme
+        .replace(link, "")
+        .replace("payloads = [13]", "payloads = [12, 13]")
+        .replace("/tmp/outside_payload.downlink", dir.to_str().unwrap());
+    let scenario = tmp("cli-payload.toml");
+    std::fs::write(&scenario, text).unwrap();
+    let ok = served_and_replayed(
+        &scenario,
+        &["--kiss-listen", "127.0.0.1:0", "--kiss-addr", "12"],
+        "cli-payload",
+        |_| {},
+    );
+    std::fs::remove_file(&scenario).ok();
+    std::fs::remove_dir_all(&dir).ok();
+    ok.unwrap_or_else(|failures| {
+        panic!("three real-time originals diverged from their replays: {failures:#?}")
+    });
 }
 
 /// `campaign run`: a draw that makes a run's scenario invalid is an error naming the

@@ -171,14 +171,14 @@ class Field:
             return f"{self.count} x {self.type}"
         return self.type
 
-    def number(self, v: Any) -> float:
+    def number(self, v: Any) -> Union[int, float]:
         """A number for this field from an argument: a number, a bool, a value's name
         (``"nadir"``), a list of bit names for a bit field, or a duration for a field in
         s or ms (``"10m"``)."""
         if isinstance(v, bool):
-            return float(v)
+            return int(v)
         if isinstance(v, (int, float)):
-            return float(v)
+            return v
         if isinstance(v, (list, tuple)) and self.bits:
             mask = 0
             for name in v:
@@ -188,11 +188,11 @@ class Field:
                         f"`{name}` is not one of the bits " + ", ".join(self.bits.values())
                     )
                 mask |= 1 << bit
-            return float(mask)
+            return mask
         if isinstance(v, str):
             k = _by_name(self.values, v)
             if k is not None:
-                return float(k)
+                return k
             scale = {"s": 1.0, "ms": 1000.0}.get(self.unit or "")
             if scale is not None:
                 try:
@@ -215,9 +215,12 @@ def _by_name(names: Mapping[int, str], name: Any) -> Optional[int]:
     (``velocity_pointing``), as the twin takes them."""
     if not isinstance(name, str):
         return None
-    typed = name.lower().replace("_", " ").replace("-", " ")
+    def norm(s: str) -> str:
+        return s.lower().replace("_", " ").replace("-", " ")
+
+    typed = norm(name)
     for k, n in names.items():
-        if n.lower() == typed:
+        if norm(n) == typed:
             return k
     return None
 
@@ -520,11 +523,11 @@ def _encode_field(f: Field, v: Any, check_range: bool = True) -> bytes:
         if check_range and not f.accepts(x):
             raise IcdError(f.name, f"{_fmt(x)} is outside the ICD's range {f.range_text()}")
         integer = not f.type.startswith("f")
-        if integer and not x.is_integer():
+        if integer and not float(x).is_integer():
             raise IcdError(f.name, f"{_fmt(x)} is not a whole number ({f.type})")
-        if not lo <= x <= hi or math.isnan(x):
+        if isinstance(x, float) and math.isnan(x) or not lo <= x <= hi:
             raise IcdError(f.name, f"{_fmt(x)} is outside {f.type} ({_fmt(lo)}..={_fmt(hi)})")
-        out += struct.pack("<" + _STRUCT[f.type], int(x) if integer else x)
+        out += struct.pack("<" + _STRUCT[f.type], int(x) if integer else float(x))
     return bytes(out)
 
 

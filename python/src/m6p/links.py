@@ -8,6 +8,7 @@ addresses or ports (see :class:`m6p.node.CspNode`).
 
 from __future__ import annotations
 
+import select
 import socket
 import time
 from typing import List, Optional, Protocol, Tuple, Union
@@ -69,6 +70,8 @@ class KissTcp:
                     raise
                 time.sleep(0.1)
         self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        # Blocking: `recv` waits with `select`, so a send never inherits a short timeout.
+        self.sock.settimeout(None)
         self.decoder = KissDecoder(mtu)
         self._ready: List[Packet] = []
         self._closed = False
@@ -84,12 +87,12 @@ class KissTcp:
             left = deadline - time.monotonic()
             if left <= 0:
                 return None
-            self.sock.settimeout(left)
             try:
+                ready, _, _ = select.select([self.sock], [], [], left)
+                if not ready:
+                    return None
                 chunk = self.sock.recv(4096)
-            except socket.timeout:
-                return None
-            except OSError as e:
+            except (OSError, ValueError) as e:
                 self._closed = True
                 raise LinkClosed(str(e)) from e
             if not chunk:
@@ -124,7 +127,7 @@ class ZmqHub:
         publish_port: int = 6000,
         subscribe_port: int = 7000,
         promiscuous: bool = False,
-        settle_s: float = 0.2,
+        settle_s: float = 0.1,
     ) -> None:
         try:
             import zmq

@@ -13,7 +13,7 @@ from __future__ import annotations
 import queue
 import threading
 import time
-from typing import Any, Callable, Dict, Optional
+from typing import Any, Callable, Dict, Optional, Tuple
 
 from .csp import FLAG_CRC32, PORT_PING, PRIO_NORM, Header, Packet
 from .icd import Command, Icd, Reply
@@ -60,7 +60,10 @@ class CspNode:
         self.handler_errors = 0
         self.closed = threading.Event()
         self._lock = threading.Lock()
-        self._waiting: Dict[int, "queue.Queue[Packet]"] = {}
+        # Outstanding requests by their source port: (destination, its port, the queue the
+        # reply goes to; None in it means the link closed).
+        self._waiting: Dict[int, Tuple[int, int, "queue.Queue[Optional[Packet]]"]] = {}
+        self._send_lock = threading.Lock()
         self._next_port = 0
         self._thread = threading.Thread(target=self._read, name=f"csp-{addr}", daemon=True)
         self._thread.start()
@@ -80,7 +83,15 @@ class CspNode:
         p = Packet(Header(self.prio if prio is None else prio, self.addr, dst, dport, sport, flags), bytes(data))
         if flags & FLAG_CRC32:
             p = p.with_csp_crc()
-        self.link.send(p)
+        self._send(p)
+
+    def _send(self, p: Packet) -> None:
+        """One sender at a time (the caller's thread and the reader's: a socket, and a ZMQ
+        socket above all, is not to be written from two threads at once)."""
+        if self.closed.is_set():
+            raise LinkClosed("the link is closed")
+        with self._send_lock:
+            self.link.send(p)
 
     def request(
         self,
@@ -93,18 +104,17 @@ class CspNode:
         """Send ``data`` to ``dst:dport`` from a free ephemeral port and return the data
         of the first packet back to that port (``csp_transaction``);
         :class:`CspTimeout` when none comes in time."""
-        q: "queue.Queue[Packet]" = queue.Queue()
-        sport = self._take_port(q)
+        q: "queue.Queue[Optional[Packet]]" = queue.Queue()
+        sport = self._take_port(dst, dport, q)
+        wait_s = self.timeout_s if timeout_s is None else timeout_s
         try:
             self.send(dst, dport, data, sport=sport, flags=flags)
             try:
-                p = q.get(timeout=self.timeout_s if timeout_s is None else timeout_s)
+                p = q.get(timeout=wait_s)
             except queue.Empty:
-                if self.closed.is_set():
-                    raise LinkClosed("the link closed before the reply came") from None
-                raise CspTimeout(
-                    f"no reply from {dst}:{dport} in {self.timeout_s if timeout_s is None else timeout_s} s"
-                ) from None
+                raise CspTimeout(f"no reply from {dst}:{dport} in {wait_s} s") from None
+            if p is None:
+                raise LinkClosed("the link closed before the reply came")
             return p.data
         finally:
             with self._lock:
@@ -152,15 +162,20 @@ class CspNode:
 
     # -- the reader ----------------------------------------------------------------------
 
-    def _take_port(self, q: "queue.Queue[Packet]") -> int:
+    def _take_port(self, dst: int, dport: int, q: "queue.Queue[Optional[Packet]]") -> int:
         with self._lock:
             for _ in _EPHEMERAL:
                 port = _EPHEMERAL[self._next_port % len(_EPHEMERAL)]
                 self._next_port += 1
                 if port not in self._waiting:
-                    self._waiting[port] = q
+                    self._waiting[port] = (dst, dport, q)
                     return port
         raise RuntimeError("all 32 outgoing ports are waiting for replies")
+
+    def _release_waiters(self) -> None:
+        with self._lock:
+            for _, _, q in self._waiting.values():
+                q.put(None)
 
     def _read(self) -> None:
         while not self.closed.is_set():
@@ -168,6 +183,7 @@ class CspNode:
                 p = self.link.recv(0.1)
             except (LinkClosed, OSError):
                 self.closed.set()
+                self._release_waiters()
                 return
             if p is not None:
                 self._dispatch(p)
@@ -184,8 +200,10 @@ class CspNode:
         p = checked
         with self._lock:
             waiting = self._waiting.get(h.dport)
-        if waiting is not None and h.dport not in self.handlers:
-            waiting.put(p)
+        # A reply: to the request's port, from the address and port it went to (a late
+        # reply to an earlier request from the same port is not this one's).
+        if waiting is not None and (h.src, h.sport) == waiting[:2] and h.dport not in self.handlers:
+            waiting[2].put(p)
             return
         handler = self.handlers.get(h.dport)
         if handler is None and h.dport == PORT_PING:
@@ -209,13 +227,16 @@ class CspNode:
             if h.flags & FLAG_CRC32:
                 out = out.with_csp_crc()
             try:
-                self.link.send(out)
+                self._send(out)
             except OSError:
                 self.closed.set()
+                self._release_waiters()
 
     def close(self) -> None:
-        """Stop the reader and close the link."""
+        """Stop the reader and close the link; requests still waiting get
+        :class:`m6p.links.LinkClosed`."""
         self.closed.set()
+        self._release_waiters()
         self._thread.join(timeout=1.0)
         self.link.close()
 

@@ -54,12 +54,14 @@ def twin(request: pytest.FixtureRequest, twin_options: Dict[str, Any]) -> Iterat
     binary = request.config.getoption("--m6p-twin")
     if binary and "binary" not in opts:
         opts["binary"] = binary
-    t = Twin(**opts).start()
+    t = Twin(**opts)
+    keep = request.config.getoption("--m6p-keep")
     try:
+        t.start()
         yield t
     finally:
         t.stop()
-        if request.config.getoption("--m6p-keep"):
+        if keep:
             print(f"\nm6p: the twin's files are in {t.workdir}")
         else:
             t.cleanup()

@@ -36,7 +36,9 @@ from .node import CspNode
 
 __all__ = ["Twin", "TwinError", "find_binary"]
 
-_LISTENING = re.compile(r"KISS/TCP: listening on (\S+):(\d+)")
+# `KISS/TCP: listening on 127.0.0.1:40123 for CSP 12, 13 (try: ...)`: the twin names each
+# listening link's CSP addresses, so that ours are told apart from a scenario's own links.
+_LISTENING = re.compile(r"KISS/TCP: listening on (\S+):(\d+)(?: for CSP ([0-9, ]+))?")
 
 
 class TwinError(RuntimeError):
@@ -191,16 +193,20 @@ class Twin:
 
     def _read_stderr(self) -> None:
         assert self.proc is not None and self.proc.stderr is not None
-        listening: List[str] = []
-        want = 1 if self.zmq or not self.payload_addrs else 2
+        kiss_payloads = bool(self.payload_addrs) and not self.zmq
         for line in self.proc.stderr:
             self._stderr.append(line)
             m = _LISTENING.search(line)
-            if m and len(listening) < want:
-                listening.append(f"{m.group(1)}:{m.group(2)}")
-                if len(listening) == want:
-                    self.ground_kiss = listening[0]
-                    self.payload_kiss = listening[1] if want == 2 else None
+            if m and m.group(3):
+                ids = [int(a) for a in m.group(3).split(",")]
+                addr = f"{m.group(1)}:{m.group(2)}"
+                if ids == [self.ground_addr]:
+                    self.ground_kiss = addr
+                elif kiss_payloads and ids == list(self.payload_addrs):
+                    self.payload_kiss = addr
+                if self.ground_kiss is not None and (
+                    self.payload_kiss is not None or not kiss_payloads
+                ):
                     self._ready.set()
 
     def _read_stdout(self) -> None:
@@ -293,6 +299,16 @@ class Twin:
             link = KissTcp(self.payload_kiss)
         node = CspNode(link, a, self.icd, timeout_s)
         self._nodes.append(node)
+        # Until the twin has taken the connection (and a hub the subscription), what is
+        # sent to the payload has nowhere to go: a ping to the PC answered says it has.
+        deadline = time.monotonic() + 10.0
+        while True:
+            try:
+                node.ping(6, timeout_s=0.5)
+                break
+            except TimeoutError:
+                if time.monotonic() > deadline:
+                    raise TwinError(f"payload {a}: the PC does not answer its pings") from None
         return node
 
     # -- results -------------------------------------------------------------------------
