@@ -124,6 +124,7 @@ class Twin:
         self._icd: Optional[Icd] = None
         self._nodes: List[CspNode] = []
         self._readers: List[threading.Thread] = []
+        self._unnamed_links = 0
 
     # -- the process ---------------------------------------------------------------------
 
@@ -183,10 +184,14 @@ class Twin:
         while not self._ready.wait(0.05):
             if self.proc.poll() is not None or time.monotonic() > deadline:
                 self.stop()
+                why = "exited" if self.returncode is not None else "not listening in time"
+                if self._unnamed_links and self.ground_kiss is None:
+                    why += (
+                        " (its KISS/TCP lines name no CSP addresses: an m6p-twin older than "
+                        "this package? Rebuild it: cargo build --release -p m6p-twin)"
+                    )
                 raise TwinError(
-                    f"{' '.join(argv)}: "
-                    + ("exited" if self.returncode is not None else "not listening in time")
-                    + f" (status {self.returncode}):\n"
+                    f"{' '.join(argv)}: {why} (status {self.returncode}):\n"
                     + self.output[-4000:]
                 )
         return self
@@ -197,6 +202,8 @@ class Twin:
         for line in self.proc.stderr:
             self._stderr.append(line)
             m = _LISTENING.search(line)
+            if m and not m.group(3):
+                self._unnamed_links += 1
             if m and m.group(3):
                 ids = [int(a) for a in m.group(3).split(",")]
                 addr = f"{m.group(1)}:{m.group(2)}"
