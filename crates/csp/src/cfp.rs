@@ -371,6 +371,10 @@ pub struct Reassembler {
     config: ReassemblerConfig,
     slots: Vec<Option<Slot>>,
     stats: CfpStats,
+    /// No partial packet goes stale before this instant ([`SimTime::MAX`]: none held): a
+    /// lower bound of the earliest `last_used + timeout`, so that the purge called for every
+    /// frame scans the slots only when one may be due.
+    stale_from: SimTime,
 }
 
 impl Default for Reassembler {
@@ -386,6 +390,7 @@ impl Reassembler {
             config,
             slots: vec![None; config.slots],
             stats: CfpStats::default(),
+            stale_from: SimTime::MAX,
         }
     }
 
@@ -462,6 +467,7 @@ impl Reassembler {
             FrameType::More => bytes,
         };
 
+        self.stale_from = self.stale_from.min(now + self.config.timeout);
         let slot = self.slots.get_mut(idx)?.as_mut()?;
         slot.last_used = now;
         if u32::from(cfp.remain) != slot.remain.wrapping_sub(1) {
@@ -504,16 +510,25 @@ impl Reassembler {
         now: SimTime,
         mut on_purge: impl FnMut(u32, Header, usize),
     ) -> usize {
+        if now < self.stale_from {
+            return 0;
+        }
         let timeout = self.config.timeout;
         let mut purged = 0;
+        let mut stale_from = SimTime::MAX;
         for slot in &mut self.slots {
-            if slot.as_ref().is_some_and(|s| now >= s.last_used + timeout) {
+            let Some(s) = slot.as_ref() else { continue };
+            let due = s.last_used + timeout;
+            if now >= due {
                 if let Some(s) = slot.take() {
                     on_purge(s.key, s.header, s.length);
                 }
                 purged += 1;
+            } else {
+                stale_from = stale_from.min(due);
             }
         }
+        self.stale_from = stale_from;
         self.stats.timeout += purged as u64;
         purged
     }
@@ -710,6 +725,36 @@ mod tests {
         assert_eq!(r.poll_timeout(), None);
     }
 
+    /// The purge skips its scan while nothing can be stale, and still purges each partial
+    /// packet at its own instant: packets begun at different times, one refreshed, one
+    /// begun after a purge, and a frame stamped earlier than the last.
+    #[test]
+    fn each_partial_packet_is_purged_at_its_own_instant() {
+        let s = SimTime::from_secs;
+        let mut r = Reassembler::default();
+        let (a, b, c, d) = (
+            frames(&example(), 1),
+            frames(&example(), 2),
+            frames(&example(), 3),
+            frames(&example(), 4),
+        );
+        r.handle(&a[0], s(1));
+        r.handle(&b[0], s(3));
+        r.handle(&a[1], s(6)); // a now stale at 16, b at 13
+        assert_eq!(r.handle_timeout(s(12)), 0);
+        assert_eq!(r.handle_timeout(s(13)), 1, "b at 13");
+        assert_eq!(r.partial_count(), 1);
+        r.handle(&c[0], s(14)); // c at 24
+        r.handle(&d[0], s(2)); // stamped late: d at 12, already due
+        assert_eq!(r.handle_timeout(s(14)), 1, "d, due at 12");
+        assert_eq!(r.handle_timeout(s(15)), 0);
+        assert_eq!(r.handle_timeout(s(16)), 1, "a at 16");
+        assert_eq!(r.handle_timeout(s(23)), 0);
+        assert_eq!(r.handle_timeout(s(24)), 1, "c at 24");
+        assert_eq!(r.partial_count(), 0);
+        assert_eq!(r.stats().timeout, 4);
+        assert_eq!(r.handle_timeout(s(100)), 0);
+    }
     #[test]
     fn strange_frames_do_not_panic() {
         let mut r = Reassembler::default();
