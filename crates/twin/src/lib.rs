@@ -34,6 +34,7 @@ pub mod icd_lengths;
 pub mod invariants;
 #[cfg(feature = "live")]
 pub mod live;
+pub mod mcap_file;
 pub mod network;
 pub mod outside;
 pub mod packets;

@@ -58,14 +58,14 @@
 //! - the header's `library` is `m6p-twin <twin_version>` (not the mcap crate's identifier);
 //! - messages come from structs (field order = declaration order, every field written),
 //!   schemas from the `foxglove` crate (its derive, and its well-known types);
-//! - zstd runs single-threaded at its default level (multithreaded zstd frames depend on
+//! - zstd runs single-threaded at a fixed level, [`ZSTD_LEVEL`] (multithreaded zstd frames depend on
 //!   the worker count, which would tie the bytes to the machine's CPU count), and the mcap
 //!   writer orders its summary by id (checked in mcap 0.26's source: no clock, no RNG, no
 //!   `HashMap` iteration reaches the file).
 //!
 //! # Memory and streaming
 //!
-//! Messages are written into chunks of [`CHUNK_SIZE`] uncompressed bytes (1 MiB), each
+//! Messages are written into chunks of [`CHUNK_SIZE`] uncompressed bytes (4 MiB), each
 //! zstd-compressed as it is written straight to the file, then closed, with a message
 //! index per chunk. What stays in memory is bounded: the open chunk's compressor state,
 //! one chunk index entry (about 100 bytes) per closed chunk for the summary, one CFP
@@ -79,13 +79,12 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use crate::mcap_file::McapFile;
 use anyhow::Context as _;
 use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CanFrame, CfpId, FrameType};
 use csp::header::{HEADER_LEN, Header};
 use csp::{Packet, SimTime};
-use mcap::records::{MessageHeader, Metadata};
-use mcap::{Attachment, Compression, WriteOptions, Writer};
 use serde::{Deserialize, Serialize};
 
 use orbit::frames::{a_ecef_from_eci, eci_to_body};
@@ -95,17 +94,25 @@ use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
 use crate::events::{Direction, RunEvent};
 
-/// Target uncompressed size of one chunk: 1 MiB, mcap's default. Big enough for zstd to
-/// compress repetitive CAN traffic well, small enough that a killed run loses at most about
-/// a second of a busy bus.
-pub const CHUNK_SIZE: u64 = 1024 * 1024;
+/// Target uncompressed size of one chunk: 4 MiB. Measured on `scenarios/full-day.toml`
+/// (docs/recording.md, "Compression"): smaller files than mcap's default of 1 MiB at the
+/// same level, and fewer chunk records to write and index. A run killed without a chance to
+/// finish its recording loses at most this much: about four seconds of a saturated 1 Mbit/s
+/// bus, about 20 minutes of simulated time of the full day.
+pub const CHUNK_SIZE: u64 = 4 * 1024 * 1024;
+
+/// zstd level: 1, zstd's fastest. The compressor runs between the simulation's steps, whose
+/// working set evicts its tables, and level 1's hash table is 32 KiB where level 3's (the
+/// default) tables are 768 KiB: measured on the full day, level 1 halves the recording's CPU
+/// time for 4 % more bytes (docs/recording.md, "Compression").
+pub const ZSTD_LEVEL: i32 = 1;
 
 /// Name of the metadata record that describes the run.
 pub const METADATA_NAME: &str = "m6p-twin";
 /// Name of the attachment holding the scenario text.
 pub const SCENARIO_ATTACHMENT: &str = "scenario.toml";
 /// Version of the recording layout (channels and fields), stored in the metadata.
-pub const FORMAT_VERSION: &str = "5";
+pub const FORMAT_VERSION: &str = "6";
 
 /// Topic of every decoded CSP packet.
 pub const TOPIC_CSP: &str = "/csp/packets";
@@ -479,9 +486,11 @@ pub struct DownlinkMsg {
     pub payload: u8,
     /// Byte count.
     pub len: u32,
-    /// The bytes.
-    #[serde(with = "crate::protobuf::hex_bytes")]
-    pub bytes: bytes::Bytes,
+    /// CRC-32C (Castagnoli, as CSP's) of the bytes. The bytes themselves are in the ground
+    /// sink's file (`<recording>.downlink/session-<id>-run<k>.bin`) and, before that, on the
+    /// payload bus: recording them a third time would double the recording of a payload
+    /// day with incompressible data (format 6).
+    pub crc32c: u32,
 }
 
 /// `/payloads`: a simulated payload produced bytes or received a SYNC.
@@ -1806,7 +1815,7 @@ impl EventEncoder {
                             session: *session_id,
                             payload: *payload_addr,
                             len: bytes.len() as u32,
-                            bytes: bytes::Bytes::copy_from_slice(bytes),
+                            crc32c: csp::crc32::crc32c(bytes),
                         };
                         return emit_msg(buf, base_ns, (ChannelKind::Downlink, ""), t, &msg, emit);
                     }
@@ -2121,7 +2130,7 @@ struct Chan {
 
 /// The MCAP side of a [`Recorder`]: the writer and its channels.
 struct McapOut {
-    writer: Writer<BufWriter<File>>,
+    writer: McapFile<BufWriter<File>>,
     path: PathBuf,
     /// Schema id per kind (`kind as usize`), once written.
     schema_ids: Vec<Option<u16>>,
@@ -2138,18 +2147,18 @@ impl McapOut {
             None => {
                 // Two kinds with the same schema (the two transforms) share one record: the
                 // writer returns the id of identical content.
-                let id = self
-                    .writer
-                    .add_schema(kind.schema_name(), SCHEMA_ENCODING, &kind.schema_data()?)
-                    .with_context(|| format!("writing recording {}", self.path.display()))?;
+                let id = self.writer.add_schema(
+                    kind.schema_name(),
+                    SCHEMA_ENCODING,
+                    &kind.schema_data()?,
+                );
                 self.schema_ids[kind as usize] = Some(id);
                 id
             }
         };
         let id = self
             .writer
-            .add_channel(schema, &topic, MESSAGE_ENCODING, &kind.metadata(key))
-            .with_context(|| format!("writing recording {}", self.path.display()))?;
+            .add_channel(schema, &topic, MESSAGE_ENCODING, &kind.metadata(key));
         self.chans.push(Chan {
             id,
             topic,
@@ -2172,16 +2181,11 @@ impl McapOut {
             None => self.add_channel(m.kind, m.key)?,
         };
         let c = &mut self.chans[chan];
-        let header = MessageHeader {
-            channel_id: c.id,
-            sequence: c.seq,
-            log_time: m.log_time,
-            publish_time: m.log_time,
-        };
+        let (id, seq) = (c.id, c.seq);
         c.seq = c.seq.wrapping_add(1);
         c.messages += 1;
         self.writer
-            .write_to_known_channel(&header, m.data)
+            .message(id, seq, m.log_time, m.log_time, m.data)
             .with_context(|| format!("writing recording {}", self.path.display()))
     }
 }
@@ -2209,16 +2213,15 @@ impl Recorder {
         let base_ns = start_ns(&meta.start_utc)?;
         let file =
             File::create(path).with_context(|| format!("creating recording {}", path.display()))?;
-        let opts = WriteOptions::new()
-            .compression(Some(Compression::Zstd))
-            .compression_threads(0)
-            .chunk_size(Some(CHUNK_SIZE))
-            .profile("")
-            .library(format!("m6p-twin {}", meta.twin_version));
         let ctx = || format!("writing recording {}", path.display());
-        let mut writer = opts
-            .create(BufWriter::with_capacity(256 * 1024, file))
-            .with_context(ctx)?;
+        let mut writer = McapFile::new(
+            BufWriter::with_capacity(256 * 1024, file),
+            "",
+            &format!("m6p-twin {}", meta.twin_version),
+            CHUNK_SIZE as usize,
+            ZSTD_LEVEL,
+        )
+        .with_context(ctx)?;
 
         let metadata: BTreeMap<String, String> = [
             ("format", FORMAT_VERSION.to_owned()),
@@ -2228,6 +2231,7 @@ impl Recorder {
             ("twin_version", meta.twin_version.clone()),
             ("scenario_attachment", SCENARIO_ATTACHMENT.to_owned()),
             ("chunk_size", CHUNK_SIZE.to_string()),
+            ("zstd_level", ZSTD_LEVEL.to_string()),
             (
                 "duration_ns",
                 meta.duration_ns.map_or(String::new(), |d| d.to_string()),
@@ -2249,19 +2253,16 @@ impl Recorder {
         .map(|(k, v)| (k.to_owned(), v))
         .collect();
         writer
-            .write_metadata(&Metadata {
-                name: METADATA_NAME.to_owned(),
-                metadata,
-            })
+            .metadata(METADATA_NAME, &metadata)
             .with_context(ctx)?;
         writer
-            .attach(&Attachment {
-                log_time: base_ns,
-                create_time: base_ns,
-                name: SCENARIO_ATTACHMENT.to_owned(),
-                media_type: "application/toml".to_owned(),
-                data: meta.scenario_toml.as_bytes().into(),
-            })
+            .attach(
+                base_ns,
+                base_ns,
+                SCENARIO_ATTACHMENT,
+                "application/toml",
+                meta.scenario_toml.as_bytes(),
+            )
             .with_context(ctx)?;
 
         let mut out = McapOut {
@@ -2316,14 +2317,8 @@ impl Recorder {
             enc,
         } = self;
         let ctx = || format!("finishing recording {}", path.display());
-        let summary = writer.finish().with_context(ctx)?;
-        let file = writer
-            .into_inner()
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .with_context(ctx)?;
-        let bytes = file.metadata().with_context(ctx)?.len();
-        let chunks = summary.stats.as_ref().map_or(0, |s| s.chunk_count);
+        let written = writer.finish().with_context(ctx)?;
+        let (bytes, chunks) = (written.bytes, written.chunks);
         let channels: Vec<ChannelStats> = chans
             .into_iter()
             .map(|c| ChannelStats {

@@ -28,10 +28,10 @@ use crate::record::{
     TOPIC_CSP, TOPIC_EXPECTATIONS, TOPIC_TRUTH_STATE, TruthStateMsg, service_name,
 };
 
-/// Largest record the reader accepts, compressed or not: four times the recorder's chunk
-/// (a chunk passes its size by at most one message). A corrupt length beyond it is an error,
-/// never an allocation.
-const RECORD_LIMIT: usize = 4 * crate::record::CHUNK_SIZE as usize;
+/// Largest record the reader accepts, compressed or not: twice the recorder's chunk (4 MiB;
+/// a chunk passes its size by at most one message, and recordings before format 6 had 1 MiB
+/// chunks). A corrupt length beyond it is an error, never an allocation.
+const RECORD_LIMIT: usize = 2 * crate::record::CHUNK_SIZE as usize;
 
 /// The reader asks for at most this many bytes of the file at a time, so a record length
 /// beyond the end of the file costs a read to the end, not an allocation of that length.

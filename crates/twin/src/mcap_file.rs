@@ -1,0 +1,723 @@
+//! The recorder's MCAP writer: chunked, zstd-compressed, indexed, written as the run goes.
+//!
+//! It writes what the `mcap` crate's writer wrote for the recorder (the same records in the
+//! same places: [MCAP spec](https://mcap.dev/spec)), for less CPU. The crate's writer passes
+//! every record through a streaming compressor field by field: about seven zstd calls and
+//! seven CRC updates per message, and zstd's slower external-dictionary path as its input
+//! buffer wraps. Here a chunk's records are appended to one buffer and compressed at once
+//! when it is full (one zstd call per chunk, its tables warm, the CRC in one pass), which
+//! measured a third less recording CPU on the full day (docs/recording.md, "Compression").
+//!
+//! Layout: magic, Header, Metadata and Attachment records (outside chunks), chunks holding
+//! each Schema and Channel record before its first use and the Message records, each chunk
+//! followed by one MessageIndex per channel in it (channel id order); then DataEnd (CRC of
+//! the data section), the summary (Schemas, Channels, Statistics, ChunkIndexes,
+//! AttachmentIndexes, MetadataIndexes, each a group with a SummaryOffset), the Footer
+//! (summary CRC) and the magic. Nothing reads a clock or iterates a hash map: the same
+//! calls give the same bytes.
+
+use std::collections::BTreeMap;
+use std::io::{self, Write};
+
+/// MCAP's magic, at both ends of the file.
+const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+
+mod op {
+    pub const HEADER: u8 = 0x01;
+    pub const FOOTER: u8 = 0x02;
+    pub const SCHEMA: u8 = 0x03;
+    pub const CHANNEL: u8 = 0x04;
+    pub const MESSAGE: u8 = 0x05;
+    pub const CHUNK: u8 = 0x06;
+    pub const MESSAGE_INDEX: u8 = 0x07;
+    pub const CHUNK_INDEX: u8 = 0x08;
+    pub const ATTACHMENT: u8 = 0x09;
+    pub const ATTACHMENT_INDEX: u8 = 0x0A;
+    pub const STATISTICS: u8 = 0x0B;
+    pub const METADATA: u8 = 0x0C;
+    pub const METADATA_INDEX: u8 = 0x0D;
+    pub const SUMMARY_OFFSET: u8 = 0x0E;
+    pub const DATA_END: u8 = 0x0F;
+}
+
+/// Little-endian record building.
+trait Put {
+    fn u8(&mut self, v: u8);
+    fn u16(&mut self, v: u16);
+    fn u32(&mut self, v: u32);
+    fn u64(&mut self, v: u64);
+    fn str(&mut self, s: &str);
+    fn map(&mut self, m: &BTreeMap<String, String>);
+    /// A `map<uint16, uint64>` (channel id to a count or an offset).
+    fn id_map(&mut self, m: impl ExactSizeIterator<Item = (u16, u64)>);
+}
+
+impl Put for Vec<u8> {
+    fn u8(&mut self, v: u8) {
+        self.push(v);
+    }
+    fn u16(&mut self, v: u16) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u32(&mut self, v: u32) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u64(&mut self, v: u64) {
+        self.extend_from_slice(&v.to_le_bytes());
+    }
+    fn str(&mut self, s: &str) {
+        self.u32(s.len() as u32);
+        self.extend_from_slice(s.as_bytes());
+    }
+    fn map(&mut self, m: &BTreeMap<String, String>) {
+        let len: usize = m.iter().map(|(k, v)| 8 + k.len() + v.len()).sum();
+        self.u32(len as u32);
+        for (k, v) in m {
+            self.str(k);
+            self.str(v);
+        }
+    }
+    fn id_map(&mut self, m: impl ExactSizeIterator<Item = (u16, u64)>) {
+        self.u32((m.len() * 10) as u32);
+        for (id, v) in m {
+            self.u16(id);
+            self.u64(v);
+        }
+    }
+}
+
+/// One record: opcode, length, then what `body` puts.
+fn record(out: &mut Vec<u8>, opcode: u8, body: impl FnOnce(&mut Vec<u8>)) {
+    out.u8(opcode);
+    let at = out.len();
+    out.u64(0);
+    body(out);
+    let len = (out.len() - at - 8) as u64;
+    out[at..at + 8].copy_from_slice(&len.to_le_bytes());
+}
+
+#[derive(Debug, Clone)]
+struct SchemaRec {
+    id: u16,
+    name: String,
+    encoding: String,
+    data: Vec<u8>,
+}
+
+#[derive(Debug, Clone)]
+struct ChannelRec {
+    id: u16,
+    schema_id: u16,
+    topic: String,
+    message_encoding: String,
+    metadata: BTreeMap<String, String>,
+}
+
+fn put_schema(out: &mut Vec<u8>, s: &SchemaRec) {
+    record(out, op::SCHEMA, |b| {
+        b.u16(s.id);
+        b.str(&s.name);
+        b.str(&s.encoding);
+        b.u32(s.data.len() as u32);
+        b.extend_from_slice(&s.data);
+    });
+}
+
+fn put_channel(out: &mut Vec<u8>, c: &ChannelRec) {
+    record(out, op::CHANNEL, |b| {
+        b.u16(c.id);
+        b.u16(c.schema_id);
+        b.str(&c.topic);
+        b.str(&c.message_encoding);
+        b.map(&c.metadata);
+    });
+}
+
+/// A chunk's place in the file, for the summary.
+#[derive(Debug, Clone)]
+struct ChunkIndexRec {
+    start_ns: u64,
+    end_ns: u64,
+    offset: u64,
+    length: u64,
+    message_index_offsets: Vec<(u16, u64)>,
+    message_index_length: u64,
+    compressed: u64,
+    uncompressed: u64,
+}
+
+#[derive(Debug, Clone)]
+struct AttachmentIndexRec {
+    offset: u64,
+    length: u64,
+    log_time: u64,
+    create_time: u64,
+    data_size: u64,
+    name: String,
+    media_type: String,
+}
+
+/// What [`McapFile::finish`] reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Written {
+    /// Chunks written.
+    pub chunks: u32,
+    /// Messages written.
+    pub messages: u64,
+    /// Bytes in the file.
+    pub bytes: u64,
+}
+
+/// A streaming MCAP writer (see the module docs).
+pub struct McapFile<W: Write> {
+    out: W,
+    /// Bytes written to `out` so far.
+    pos: u64,
+    /// CRC of the data section so far (magic included, as the spec and `mcap` count it).
+    data_crc: crc32fast::Hasher,
+    chunk_size: usize,
+    zstd: zstd::bulk::Compressor<'static>,
+    /// The open chunk's records, uncompressed.
+    chunk: Vec<u8>,
+    /// The open chunk's message times, if it holds a message.
+    chunk_ns: Option<(u64, u64)>,
+    /// The open chunk's message index entries (log time, offset in the chunk), by channel id.
+    index: Vec<Vec<(u64, u64)>>,
+    /// Scratch: a record built outside a chunk, and the compressed chunk.
+    scratch: Vec<u8>,
+    schemas: Vec<SchemaRec>,
+    /// Schemas and channels not yet written to a chunk.
+    schemas_due: Vec<usize>,
+    channels_due: Vec<usize>,
+    channels: Vec<ChannelRec>,
+    counts: BTreeMap<u16, u64>,
+    messages: u64,
+    bounds_ns: Option<(u64, u64)>,
+    chunk_indexes: Vec<ChunkIndexRec>,
+    attachment_indexes: Vec<AttachmentIndexRec>,
+    metadata_indexes: Vec<(u64, u64, String)>,
+    finished: Option<Written>,
+}
+
+impl<W: Write> McapFile<W> {
+    /// Start a file on `out`: magic and header (`profile`, `library`). Chunks close once
+    /// they hold `chunk_size` uncompressed bytes and are compressed with zstd at `level`.
+    pub fn new(
+        out: W,
+        profile: &str,
+        library: &str,
+        chunk_size: usize,
+        level: i32,
+    ) -> io::Result<Self> {
+        let mut w = McapFile {
+            out,
+            pos: 0,
+            data_crc: crc32fast::Hasher::new(),
+            chunk_size,
+            zstd: zstd::bulk::Compressor::new(level)?,
+            chunk: Vec::with_capacity(chunk_size + 64 * 1024),
+            chunk_ns: None,
+            index: Vec::new(),
+            scratch: Vec::new(),
+            schemas: Vec::new(),
+            schemas_due: Vec::new(),
+            channels_due: Vec::new(),
+            channels: Vec::new(),
+            counts: BTreeMap::new(),
+            messages: 0,
+            bounds_ns: None,
+            chunk_indexes: Vec::new(),
+            attachment_indexes: Vec::new(),
+            metadata_indexes: Vec::new(),
+            finished: None,
+        };
+        w.data(MAGIC)?;
+        let mut rec = Vec::new();
+        record(&mut rec, op::HEADER, |b| {
+            b.str(profile);
+            b.str(library);
+        });
+        w.data(&rec)?;
+        Ok(w)
+    }
+
+    /// Write bytes of the data section.
+    fn data(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.out.write_all(bytes)?;
+        self.data_crc.update(bytes);
+        self.pos += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Register a schema; identical content gets the id it already has.
+    pub fn add_schema(&mut self, name: &str, encoding: &str, data: &[u8]) -> u16 {
+        if let Some(s) = self
+            .schemas
+            .iter()
+            .find(|s| s.name == name && s.encoding == encoding && s.data == data)
+        {
+            return s.id;
+        }
+        let id = self.schemas.len() as u16 + 1;
+        self.schemas.push(SchemaRec {
+            id,
+            name: name.to_owned(),
+            encoding: encoding.to_owned(),
+            data: data.to_owned(),
+        });
+        self.schemas_due.push(self.schemas.len() - 1);
+        id
+    }
+
+    /// Register a channel (ids from 1, in order).
+    pub fn add_channel(
+        &mut self,
+        schema_id: u16,
+        topic: &str,
+        message_encoding: &str,
+        metadata: &BTreeMap<String, String>,
+    ) -> u16 {
+        let id = self.channels.len() as u16 + 1;
+        self.channels.push(ChannelRec {
+            id,
+            schema_id,
+            topic: topic.to_owned(),
+            message_encoding: message_encoding.to_owned(),
+            metadata: metadata.clone(),
+        });
+        self.channels_due.push(self.channels.len() - 1);
+        id
+    }
+
+    /// Write one message on channel `channel` (an id [`McapFile::add_channel`] gave).
+    pub fn message(
+        &mut self,
+        channel: u16,
+        sequence: u32,
+        log_time: u64,
+        publish_time: u64,
+        data: &[u8],
+    ) -> io::Result<()> {
+        // A channel's records go into the chunk before its first message (its schema's
+        // before it), as the crate's writer does.
+        if !self.schemas_due.is_empty() || !self.channels_due.is_empty() {
+            for i in std::mem::take(&mut self.schemas_due) {
+                put_schema(&mut self.chunk, &self.schemas[i]);
+            }
+            for i in std::mem::take(&mut self.channels_due) {
+                put_channel(&mut self.chunk, &self.channels[i]);
+            }
+        }
+        let slot = usize::from(channel);
+        if self.index.len() <= slot {
+            self.index.resize_with(slot + 1, Vec::new);
+        }
+        self.index[slot].push((log_time, self.chunk.len() as u64));
+        let c = &mut self.chunk;
+        c.u8(op::MESSAGE);
+        c.u64(2 + 4 + 8 + 8 + data.len() as u64);
+        c.u16(channel);
+        c.u32(sequence);
+        c.u64(log_time);
+        c.u64(publish_time);
+        c.extend_from_slice(data);
+        self.chunk_ns = Some(match self.chunk_ns {
+            None => (log_time, log_time),
+            Some((a, b)) => (a.min(log_time), b.max(log_time)),
+        });
+        self.bounds_ns = Some(match self.bounds_ns {
+            None => (log_time, log_time),
+            Some((a, b)) => (a.min(log_time), b.max(log_time)),
+        });
+        *self.counts.entry(channel).or_insert(0) += 1;
+        self.messages += 1;
+        if self.chunk.len() >= self.chunk_size {
+            self.close_chunk()?;
+        }
+        Ok(())
+    }
+
+    /// Compress and write the open chunk and its message indexes (nothing if it is empty).
+    fn close_chunk(&mut self) -> io::Result<()> {
+        if self.chunk.is_empty() {
+            return Ok(());
+        }
+        let uncompressed = self.chunk.len() as u64;
+        let crc = crc32fast::hash(&self.chunk);
+        let bound = zstd::zstd_safe::compress_bound(self.chunk.len());
+        let mut z = std::mem::take(&mut self.scratch);
+        z.clear();
+        z.reserve(bound);
+        self.zstd.compress_to_buffer(&self.chunk, &mut z)?;
+        let (start_ns, end_ns) = self.chunk_ns.unwrap_or((0, 0));
+        let offset = self.pos;
+        let mut head = Vec::with_capacity(64);
+        head.u8(op::CHUNK);
+        head.u64(8 + 8 + 8 + 4 + 4 + 4 + 8 + z.len() as u64);
+        head.u64(start_ns);
+        head.u64(end_ns);
+        head.u64(uncompressed);
+        head.u32(crc);
+        head.str("zstd");
+        head.u64(z.len() as u64);
+        self.data(&head)?;
+        self.data(&z)?;
+        let length = self.pos - offset;
+        let compressed = z.len() as u64;
+        self.scratch = z;
+
+        // One message index per channel with messages in this chunk, by channel id.
+        let mut rec = Vec::new();
+        let mut offsets = Vec::new();
+        let index_start = self.pos;
+        for (id, entries) in self.index.iter_mut().enumerate() {
+            if entries.is_empty() {
+                continue;
+            }
+            offsets.push((id as u16, index_start + rec.len() as u64));
+            record(&mut rec, op::MESSAGE_INDEX, |b| {
+                b.u16(id as u16);
+                b.u32((entries.len() * 16) as u32);
+                for &(t, o) in entries.iter() {
+                    b.u64(t);
+                    b.u64(o);
+                }
+            });
+            entries.clear();
+        }
+        self.data(&rec)?;
+        self.chunk_indexes.push(ChunkIndexRec {
+            start_ns,
+            end_ns,
+            offset,
+            length,
+            message_index_offsets: offsets,
+            message_index_length: rec.len() as u64,
+            compressed,
+            uncompressed,
+        });
+        self.chunk.clear();
+        self.chunk_ns = None;
+        Ok(())
+    }
+
+    /// Close the open chunk and flush the file.
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.close_chunk()?;
+        self.out.flush()
+    }
+
+    /// A metadata record (outside chunks; the open chunk is closed first so records stay in
+    /// file order).
+    pub fn metadata(&mut self, name: &str, metadata: &BTreeMap<String, String>) -> io::Result<()> {
+        self.close_chunk()?;
+        let mut rec = Vec::new();
+        record(&mut rec, op::METADATA, |b| {
+            b.str(name);
+            b.map(metadata);
+        });
+        let offset = self.pos;
+        self.data(&rec)?;
+        self.metadata_indexes
+            .push((offset, rec.len() as u64, name.to_owned()));
+        Ok(())
+    }
+
+    /// An attachment record (outside chunks).
+    pub fn attach(
+        &mut self,
+        log_time: u64,
+        create_time: u64,
+        name: &str,
+        media_type: &str,
+        data: &[u8],
+    ) -> io::Result<()> {
+        self.close_chunk()?;
+        let mut rec = Vec::new();
+        record(&mut rec, op::ATTACHMENT, |b| {
+            b.u64(log_time);
+            b.u64(create_time);
+            b.str(name);
+            b.str(media_type);
+            b.u64(data.len() as u64);
+            b.extend_from_slice(data);
+            // The CRC covers the record's fields before it.
+            let crc = crc32fast::hash(&b[9..]);
+            b.u32(crc);
+        });
+        let offset = self.pos;
+        self.data(&rec)?;
+        self.attachment_indexes.push(AttachmentIndexRec {
+            offset,
+            length: rec.len() as u64,
+            log_time,
+            create_time,
+            data_size: data.len() as u64,
+            name: name.to_owned(),
+            media_type: media_type.to_owned(),
+        });
+        Ok(())
+    }
+
+    /// Close the last chunk, write the summary and the footer, and flush. Calling it again
+    /// does nothing.
+    pub fn finish(&mut self) -> io::Result<Written> {
+        if let Some(w) = self.finished {
+            return Ok(w);
+        }
+        // Registered but never used: written in a last chunk-less place is not possible,
+        // so they go into a chunk of their own (no messages, times 0).
+        if !self.schemas_due.is_empty() || !self.channels_due.is_empty() {
+            for i in std::mem::take(&mut self.schemas_due) {
+                put_schema(&mut self.chunk, &self.schemas[i]);
+            }
+            for i in std::mem::take(&mut self.channels_due) {
+                put_channel(&mut self.chunk, &self.channels[i]);
+            }
+        }
+        self.close_chunk()?;
+        let mut rec = Vec::new();
+        let crc = self.data_crc.clone().finalize();
+        record(&mut rec, op::DATA_END, |b| b.u32(crc));
+        self.out.write_all(&rec)?;
+        self.pos += rec.len() as u64;
+
+        let summary_start = self.pos;
+        let mut s = Vec::new();
+        let mut groups: Vec<(u8, u64, u64)> = Vec::new();
+        let mut group = |s: &mut Vec<u8>, opcode: u8, f: &mut dyn FnMut(&mut Vec<u8>)| {
+            let start = s.len();
+            f(s);
+            if s.len() > start {
+                groups.push((
+                    opcode,
+                    summary_start + start as u64,
+                    (s.len() - start) as u64,
+                ));
+            }
+        };
+        group(&mut s, op::SCHEMA, &mut |s| {
+            for x in &self.schemas {
+                put_schema(s, x);
+            }
+        });
+        group(&mut s, op::CHANNEL, &mut |s| {
+            for c in &self.channels {
+                put_channel(s, c);
+            }
+        });
+        let (start_ns, end_ns) = self.bounds_ns.unwrap_or((0, 0));
+        group(&mut s, op::STATISTICS, &mut |s| {
+            record(s, op::STATISTICS, |b| {
+                b.u64(self.messages);
+                b.u16(self.schemas.len() as u16);
+                b.u32(self.channels.len() as u32);
+                b.u32(self.attachment_indexes.len() as u32);
+                b.u32(self.metadata_indexes.len() as u32);
+                b.u32(self.chunk_indexes.len() as u32);
+                b.u64(start_ns);
+                b.u64(end_ns);
+                b.id_map(self.counts.iter().map(|(&id, &n)| (id, n)));
+            });
+        });
+        group(&mut s, op::CHUNK_INDEX, &mut |s| {
+            for c in &self.chunk_indexes {
+                record(s, op::CHUNK_INDEX, |b| {
+                    b.u64(c.start_ns);
+                    b.u64(c.end_ns);
+                    b.u64(c.offset);
+                    b.u64(c.length);
+                    b.id_map(c.message_index_offsets.iter().copied());
+                    b.u64(c.message_index_length);
+                    b.str("zstd");
+                    b.u64(c.compressed);
+                    b.u64(c.uncompressed);
+                });
+            }
+        });
+        group(&mut s, op::ATTACHMENT_INDEX, &mut |s| {
+            for a in &self.attachment_indexes {
+                record(s, op::ATTACHMENT_INDEX, |b| {
+                    b.u64(a.offset);
+                    b.u64(a.length);
+                    b.u64(a.log_time);
+                    b.u64(a.create_time);
+                    b.u64(a.data_size);
+                    b.str(&a.name);
+                    b.str(&a.media_type);
+                });
+            }
+        });
+        group(&mut s, op::METADATA_INDEX, &mut |s| {
+            for (offset, length, name) in &self.metadata_indexes {
+                record(s, op::METADATA_INDEX, |b| {
+                    b.u64(*offset);
+                    b.u64(*length);
+                    b.str(name);
+                });
+            }
+        });
+        let summary_offset_start = summary_start + s.len() as u64;
+        for (opcode, start, length) in groups {
+            record(&mut s, op::SUMMARY_OFFSET, |b| {
+                b.u8(opcode);
+                b.u64(start);
+                b.u64(length);
+            });
+        }
+        // Footer: the summary CRC runs from the summary's start through the footer's
+        // `summary_offset_start` field.
+        s.u8(op::FOOTER);
+        s.u64(8 + 8 + 4);
+        s.u64(summary_start);
+        s.u64(summary_offset_start);
+        let crc = crc32fast::hash(&s);
+        s.u32(crc);
+        s.extend_from_slice(MAGIC);
+        self.out.write_all(&s)?;
+        self.pos += s.len() as u64;
+        self.out.flush()?;
+        let w = Written {
+            chunks: self.chunk_indexes.len() as u32,
+            messages: self.messages,
+            bytes: self.pos,
+        };
+        self.finished = Some(w);
+        Ok(w)
+    }
+
+    /// The writer underneath (after [`McapFile::finish`], the whole file).
+    pub fn get_mut(&mut self) -> &mut W {
+        &mut self.out
+    }
+}
+
+impl<W: Write> std::fmt::Debug for McapFile<W> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("McapFile")
+            .field("pos", &self.pos)
+            .field("chunks", &self.chunk_indexes.len())
+            .field("messages", &self.messages)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<W: Write> Drop for McapFile<W> {
+    /// A writer dropped unfinished (an error on the way) still ends the file with its
+    /// summary, as the crate's writer does.
+    fn drop(&mut self) {
+        if self.finished.is_none() {
+            let _ = self.finish();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// Two channels sharing a schema, a third with its own, three chunks, metadata and an
+    /// attachment: a small file written with 64-byte chunks.
+    fn sample() -> Vec<u8> {
+        let mut w = McapFile::new(Vec::new(), "", "m6p-twin test", 64, 1).unwrap();
+        let meta: BTreeMap<String, String> = [("seed".to_owned(), "7".to_owned())].into();
+        w.metadata("m6p-twin", &meta).unwrap();
+        w.attach(5, 6, "scenario.toml", "application/toml", b"name = 'x'")
+            .unwrap();
+        let s1 = w.add_schema("m6p.A", "protobuf", b"schema a");
+        let s1_again = w.add_schema("m6p.A", "protobuf", b"schema a");
+        assert_eq!(s1, s1_again, "identical schema content shares its record");
+        let s2 = w.add_schema("m6p.B", "protobuf", b"schema b");
+        let a = w.add_channel(s1, "/a", "protobuf", &BTreeMap::new());
+        let b = w.add_channel(s1, "/b", "protobuf", &meta);
+        let c = w.add_channel(s2, "/c", "protobuf", &BTreeMap::new());
+        for i in 0..10u32 {
+            let ch = [a, b, c][i as usize % 3];
+            let t = 1_000 + u64::from(i) * 10;
+            w.message(ch, i / 3, t, t, &[i as u8; 20]).unwrap();
+        }
+        let written = w.finish().unwrap();
+        assert_eq!(written.messages, 10);
+        assert!(written.chunks >= 3, "{written:?}");
+        let bytes = std::mem::take(w.get_mut());
+        assert_eq!(written.bytes, bytes.len() as u64);
+        bytes
+    }
+
+    /// The `mcap` crate's readers take the file: every message in order with its channel,
+    /// schema and sequence, the summary's statistics, schemas, channels and indexes, the
+    /// attachment and the metadata through their indexes, chunk CRCs checked.
+    #[test]
+    fn the_mcap_crate_reads_what_it_writes() {
+        let bytes = sample();
+        let msgs: Vec<_> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        assert_eq!(msgs.len(), 10);
+        for (i, m) in msgs.iter().enumerate() {
+            assert_eq!(m.channel.topic, ["/a", "/b", "/c"][i % 3]);
+            assert_eq!(m.log_time, 1_000 + i as u64 * 10);
+            assert_eq!(m.sequence, i as u32 / 3);
+            assert_eq!(&m.data[..], &[i as u8; 20]);
+            let schema = m.channel.schema.as_ref().unwrap();
+            assert_eq!(schema.name, if i % 3 == 2 { "m6p.B" } else { "m6p.A" });
+        }
+        assert_eq!(msgs[1].channel.metadata.get("seed").unwrap(), "7");
+
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let stats = summary.stats.clone().unwrap();
+        assert_eq!(stats.message_count, 10);
+        assert_eq!((stats.schema_count, stats.channel_count), (2, 3));
+        assert_eq!((stats.attachment_count, stats.metadata_count), (1, 1));
+        assert_eq!(stats.chunk_count as usize, summary.chunk_indexes.len());
+        assert_eq!(
+            (stats.message_start_time, stats.message_end_time),
+            (1_000, 1_090)
+        );
+        assert_eq!(stats.channel_message_counts.values().sum::<u64>(), 10);
+        assert_eq!(summary.schemas.len(), 2);
+        assert_eq!(summary.channels.len(), 3);
+        // Each chunk by its index, as a seeking reader (Foxglove) goes.
+        let mut by_index = 0;
+        for ci in &summary.chunk_indexes {
+            assert_eq!(ci.compression, "zstd");
+            assert!(!ci.message_index_offsets.is_empty());
+            for m in summary.stream_chunk(&bytes, ci).unwrap() {
+                let m = m.unwrap();
+                assert!(m.log_time >= ci.message_start_time && m.log_time <= ci.message_end_time);
+                by_index += 1;
+            }
+            let idx = summary.read_message_indexes(&bytes, ci).unwrap();
+            let entries: usize = idx.values().map(Vec::len).sum();
+            assert!(entries > 0);
+        }
+        assert_eq!(by_index, 10);
+        let att = mcap::read::attachment(&bytes, &summary.attachment_indexes[0]).unwrap();
+        assert_eq!(
+            (att.name.as_str(), &att.data[..]),
+            ("scenario.toml", &b"name = 'x'"[..])
+        );
+        assert_eq!((att.log_time, att.create_time), (5, 6));
+        let meta = mcap::read::metadata(&bytes, &summary.metadata_indexes[0]).unwrap();
+        assert_eq!(meta.metadata.get("seed").unwrap(), "7");
+    }
+
+    /// The same calls give the same bytes, and a writer dropped without `finish` still
+    /// ends the file with its summary.
+    #[test]
+    fn the_same_calls_give_the_same_bytes_and_a_drop_finishes_the_file() {
+        assert_eq!(sample(), sample());
+        let mut file = Vec::new();
+        {
+            let mut w = McapFile::new(&mut file, "", "t", 1 << 20, 1).unwrap();
+            let s = w.add_schema("m6p.A", "protobuf", b"a");
+            let a = w.add_channel(s, "/a", "protobuf", &BTreeMap::new());
+            w.message(a, 0, 1, 1, b"x").unwrap();
+        }
+        let summary = mcap::Summary::read(&file).unwrap().unwrap();
+        assert_eq!(summary.stats.unwrap().message_count, 1);
+        assert_eq!(&file[file.len() - 8..], MAGIC);
+    }
+}
