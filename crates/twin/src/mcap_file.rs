@@ -197,6 +197,8 @@ pub struct McapFile<W: Write> {
     attachment_indexes: Vec<AttachmentIndexRec>,
     metadata_indexes: Vec<(u64, u64, String)>,
     finished: Option<Written>,
+    /// `finish` was called (a drop after a failed finish does not write the end twice).
+    finishing: bool,
 }
 
 impl<W: Write> McapFile<W> {
@@ -230,6 +232,7 @@ impl<W: Write> McapFile<W> {
             attachment_indexes: Vec::new(),
             metadata_indexes: Vec::new(),
             finished: None,
+            finishing: false,
         };
         w.data(MAGIC)?;
         let mut rec = Vec::new();
@@ -465,8 +468,9 @@ impl<W: Write> McapFile<W> {
         if let Some(w) = self.finished {
             return Ok(w);
         }
-        // Registered but never used: written in a last chunk-less place is not possible,
-        // so they go into a chunk of their own (no messages, times 0).
+        self.finishing = true;
+        // Schemas and channels registered but never used go into a last chunk of their own
+        // (no messages, times 0), so the file names every channel, as the crate's did.
         if !self.schemas_due.is_empty() || !self.channels_due.is_empty() {
             for i in std::mem::take(&mut self.schemas_due) {
                 put_schema(&mut self.chunk, &self.schemas[i]);
@@ -606,7 +610,7 @@ impl<W: Write> Drop for McapFile<W> {
     /// A writer dropped unfinished (an error on the way) still ends the file with its
     /// summary, as the crate's writer does.
     fn drop(&mut self) {
-        if self.finished.is_none() {
+        if !self.finishing {
             let _ = self.finish();
         }
     }

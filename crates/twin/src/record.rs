@@ -103,8 +103,8 @@ pub const CHUNK_SIZE: u64 = 4 * 1024 * 1024;
 
 /// zstd level: 1, zstd's fastest. The compressor runs between the simulation's steps, whose
 /// working set evicts its tables, and level 1's hash table is 32 KiB where level 3's (the
-/// default) tables are 768 KiB: measured on the full day, level 1 halves the recording's CPU
-/// time for 4 % more bytes (docs/recording.md, "Compression").
+/// default) tables are 768 KiB. Level 3 would make the full day's file 6 % smaller
+/// (docs/recording.md, "Compression").
 pub const ZSTD_LEVEL: i32 = 1;
 
 /// Name of the metadata record that describes the run.
