@@ -190,11 +190,7 @@ pub fn record_failure(file: &str, row: &RunRow, path: &Path) -> anyhow::Result<(
     let mut compiled = exec::compile_seeded(&loaded, None);
     compiled.opts.clock = bus::ClockMode::Virtual;
     let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
-    let (outcome, _) = rt.block_on(exec::execute_recorded_without_files(
-        &loaded,
-        compiled,
-        Some(path),
-    ))?;
+    let (outcome, _) = rt.block_on(exec::execute_replay(&loaded, compiled, path))?;
     let summary = crate::recording::read_summary(path)?;
     if let Some(why) = summary.incomplete {
         bail!("{}: the recording is incomplete: {why}", path.display());

@@ -215,9 +215,10 @@ pub async fn execute_with(
     execute_inner(loaded, compiled, record, dir.as_deref(), live).await
 }
 
-/// [`execute_recorded`] of a replay: its downlink goes beside its own recording `record`
-/// (`x.mcap` -> `x.downlink/`), never into the scenario's `[pc] downlink_dir`, which holds
-/// the original run's.
+/// [`execute_recorded`] of a run that repeats another (a replay, a campaign's failure run):
+/// its downlink goes beside its own recording `record` (`x.mcap` -> `x.downlink/`), never
+/// into the scenario's `[pc] downlink_dir`, which holds the original run's. (The recording
+/// keeps only each downlinked frame's length and CRC: the bytes are in those files.)
 pub async fn execute_replay(
     loaded: &Loaded,
     compiled: Compiled,

@@ -1,7 +1,8 @@
 //! The recorder's MCAP writer: chunked, zstd-compressed, indexed, written as the run goes.
 //!
 //! It writes what the `mcap` crate's writer wrote for the recorder (the same records in the
-//! same places: [MCAP spec](https://mcap.dev/spec)), for less CPU. The crate's writer passes
+//! same places, but for the order of schemas and channels inside a chunk: [MCAP
+//! spec](https://mcap.dev/spec)), for less CPU. The crate's writer passes
 //! every record through a streaming compressor field by field: about seven zstd calls and
 //! seven CRC updates per message, and zstd's slower external-dictionary path as its input
 //! buffer wraps. Here a chunk's records are appended to one buffer and compressed at once
@@ -197,8 +198,12 @@ pub struct McapFile<W: Write> {
     attachment_indexes: Vec<AttachmentIndexRec>,
     metadata_indexes: Vec<(u64, u64, String)>,
     finished: Option<Written>,
-    /// `finish` was called (a drop after a failed finish does not write the end twice).
+    /// `finish` was called: nothing more is written (a drop after a failed finish does not
+    /// write the end twice).
     finishing: bool,
+    /// A write to `out` failed: what reached it is unknown, so nothing more is written (no
+    /// summary pointing at the wrong places); the complete chunks before it stay readable.
+    poisoned: bool,
 }
 
 impl<W: Write> McapFile<W> {
@@ -233,6 +238,7 @@ impl<W: Write> McapFile<W> {
             metadata_indexes: Vec::new(),
             finished: None,
             finishing: false,
+            poisoned: false,
         };
         w.data(MAGIC)?;
         let mut rec = Vec::new();
@@ -246,22 +252,42 @@ impl<W: Write> McapFile<W> {
 
     /// Write bytes of the data section.
     fn data(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.out.write_all(bytes)?;
+        self.writable()?;
+        if let Err(e) = self.out.write_all(bytes) {
+            self.poisoned = true;
+            return Err(e);
+        }
         self.data_crc.update(bytes);
         self.pos += bytes.len() as u64;
         Ok(())
     }
 
+    /// An error once a write has failed or the file is finished.
+    fn writable(&self) -> io::Result<()> {
+        if self.poisoned {
+            Err(io::Error::other("an earlier write to the recording failed"))
+        } else if self.finishing {
+            Err(io::Error::other("the recording is already finished"))
+        } else {
+            Ok(())
+        }
+    }
+
+    /// The next id after `n` registered (ids from 1), or an error past u16's range.
+    fn next_id(n: usize) -> io::Result<u16> {
+        u16::try_from(n + 1).map_err(|_| io::Error::other("more than 65535 schemas or channels"))
+    }
+
     /// Register a schema; identical content gets the id it already has.
-    pub fn add_schema(&mut self, name: &str, encoding: &str, data: &[u8]) -> u16 {
+    pub fn add_schema(&mut self, name: &str, encoding: &str, data: &[u8]) -> io::Result<u16> {
         if let Some(s) = self
             .schemas
             .iter()
             .find(|s| s.name == name && s.encoding == encoding && s.data == data)
         {
-            return s.id;
+            return Ok(s.id);
         }
-        let id = self.schemas.len() as u16 + 1;
+        let id = Self::next_id(self.schemas.len())?;
         self.schemas.push(SchemaRec {
             id,
             name: name.to_owned(),
@@ -269,7 +295,7 @@ impl<W: Write> McapFile<W> {
             data: data.to_owned(),
         });
         self.schemas_due.push(self.schemas.len() - 1);
-        id
+        Ok(id)
     }
 
     /// Register a channel (ids from 1, in order).
@@ -279,8 +305,8 @@ impl<W: Write> McapFile<W> {
         topic: &str,
         message_encoding: &str,
         metadata: &BTreeMap<String, String>,
-    ) -> u16 {
-        let id = self.channels.len() as u16 + 1;
+    ) -> io::Result<u16> {
+        let id = Self::next_id(self.channels.len())?;
         self.channels.push(ChannelRec {
             id,
             schema_id,
@@ -289,7 +315,7 @@ impl<W: Write> McapFile<W> {
             metadata: metadata.clone(),
         });
         self.channels_due.push(self.channels.len() - 1);
-        id
+        Ok(id)
     }
 
     /// Write one message on channel `channel` (an id [`McapFile::add_channel`] gave).
@@ -301,6 +327,7 @@ impl<W: Write> McapFile<W> {
         publish_time: u64,
         data: &[u8],
     ) -> io::Result<()> {
+        self.writable()?;
         // A channel's records go into the chunk before its first message (its schema's
         // before it), as the crate's writer does.
         if !self.schemas_due.is_empty() || !self.channels_due.is_empty() {
@@ -351,7 +378,10 @@ impl<W: Write> McapFile<W> {
         let mut z = std::mem::take(&mut self.scratch);
         z.clear();
         z.reserve(bound);
-        self.zstd.compress_to_buffer(&self.chunk, &mut z)?;
+        if let Err(e) = self.zstd.compress_to_buffer(&self.chunk, &mut z) {
+            self.poisoned = true;
+            return Err(e);
+        }
         let (start_ns, end_ns) = self.chunk_ns.unwrap_or((0, 0));
         let offset = self.pos;
         let mut head = Vec::with_capacity(64);
@@ -373,7 +403,7 @@ impl<W: Write> McapFile<W> {
         let mut rec = Vec::new();
         let mut offsets = Vec::new();
         let index_start = self.pos;
-        for (id, entries) in self.index.iter_mut().enumerate() {
+        for (id, entries) in self.index.iter().enumerate() {
             if entries.is_empty() {
                 continue;
             }
@@ -381,14 +411,16 @@ impl<W: Write> McapFile<W> {
             record(&mut rec, op::MESSAGE_INDEX, |b| {
                 b.u16(id as u16);
                 b.u32((entries.len() * 16) as u32);
-                for &(t, o) in entries.iter() {
+                for &(t, o) in entries {
                     b.u64(t);
                     b.u64(o);
                 }
             });
-            entries.clear();
         }
         self.data(&rec)?;
+        for entries in &mut self.index {
+            entries.clear();
+        }
         self.chunk_indexes.push(ChunkIndexRec {
             start_ns,
             end_ns,
@@ -407,7 +439,7 @@ impl<W: Write> McapFile<W> {
     /// Close the open chunk and flush the file.
     pub fn flush(&mut self) -> io::Result<()> {
         self.close_chunk()?;
-        self.out.flush()
+        self.out.flush().inspect_err(|_| self.poisoned = true)
     }
 
     /// A metadata record (outside chunks; the open chunk is closed first so records stay in
@@ -444,8 +476,8 @@ impl<W: Write> McapFile<W> {
             b.str(media_type);
             b.u64(data.len() as u64);
             b.extend_from_slice(data);
-            // The CRC covers the record's fields before it.
-            let crc = crc32fast::hash(&b[9..]);
+            // The CRC covers the record's fields before it (after opcode and length).
+            let crc = crc32fast::hash(b.get(9..).unwrap_or_default());
             b.u32(crc);
         });
         let offset = self.pos;
@@ -468,9 +500,10 @@ impl<W: Write> McapFile<W> {
         if let Some(w) = self.finished {
             return Ok(w);
         }
-        self.finishing = true;
-        // Schemas and channels registered but never used go into a last chunk of their own
-        // (no messages, times 0), so the file names every channel, as the crate's did.
+        self.writable()?;
+        // Schemas and channels registered but never used go into the last chunk (with no
+        // message at all, a chunk of times 0), so the file names every channel, as the
+        // crate's writer did.
         if !self.schemas_due.is_empty() || !self.channels_due.is_empty() {
             for i in std::mem::take(&mut self.schemas_due) {
                 put_schema(&mut self.chunk, &self.schemas[i]);
@@ -480,6 +513,7 @@ impl<W: Write> McapFile<W> {
             }
         }
         self.close_chunk()?;
+        self.finishing = true;
         let mut rec = Vec::new();
         let crc = self.data_crc.clone().finalize();
         record(&mut rec, op::DATA_END, |b| b.u32(crc));
@@ -610,7 +644,7 @@ impl<W: Write> Drop for McapFile<W> {
     /// A writer dropped unfinished (an error on the way) still ends the file with its
     /// summary, as the crate's writer does.
     fn drop(&mut self) {
-        if !self.finishing {
+        if !self.finishing && !self.poisoned {
             let _ = self.finish();
         }
     }
@@ -629,13 +663,17 @@ mod tests {
         w.metadata("m6p-twin", &meta).unwrap();
         w.attach(5, 6, "scenario.toml", "application/toml", b"name = 'x'")
             .unwrap();
-        let s1 = w.add_schema("m6p.A", "protobuf", b"schema a");
-        let s1_again = w.add_schema("m6p.A", "protobuf", b"schema a");
+        let s1 = w.add_schema("m6p.A", "protobuf", b"schema a").unwrap();
+        let s1_again = w.add_schema("m6p.A", "protobuf", b"schema a").unwrap();
         assert_eq!(s1, s1_again, "identical schema content shares its record");
-        let s2 = w.add_schema("m6p.B", "protobuf", b"schema b");
-        let a = w.add_channel(s1, "/a", "protobuf", &BTreeMap::new());
-        let b = w.add_channel(s1, "/b", "protobuf", &meta);
-        let c = w.add_channel(s2, "/c", "protobuf", &BTreeMap::new());
+        let s2 = w.add_schema("m6p.B", "protobuf", b"schema b").unwrap();
+        let a = w
+            .add_channel(s1, "/a", "protobuf", &BTreeMap::new())
+            .unwrap();
+        let b = w.add_channel(s1, "/b", "protobuf", &meta).unwrap();
+        let c = w
+            .add_channel(s2, "/c", "protobuf", &BTreeMap::new())
+            .unwrap();
         for i in 0..10u32 {
             let ch = [a, b, c][i as usize % 3];
             let t = 1_000 + u64::from(i) * 10;
@@ -716,12 +754,87 @@ mod tests {
         let mut file = Vec::new();
         {
             let mut w = McapFile::new(&mut file, "", "t", 1 << 20, 1).unwrap();
-            let s = w.add_schema("m6p.A", "protobuf", b"a");
-            let a = w.add_channel(s, "/a", "protobuf", &BTreeMap::new());
+            let s = w.add_schema("m6p.A", "protobuf", b"a").unwrap();
+            let a = w
+                .add_channel(s, "/a", "protobuf", &BTreeMap::new())
+                .unwrap();
             w.message(a, 0, 1, 1, b"x").unwrap();
         }
         let summary = mcap::Summary::read(&file).unwrap().unwrap();
         assert_eq!(summary.stats.unwrap().message_count, 1);
         assert_eq!(&file[file.len() - 8..], MAGIC);
+    }
+
+    /// A sink that takes `room` bytes, then fails every write.
+    struct Full<'a> {
+        bytes: &'a mut Vec<u8>,
+        room: usize,
+    }
+
+    impl Write for Full<'_> {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            if self.bytes.len() + buf.len() > self.room {
+                return Err(io::Error::other("disk full"));
+            }
+            self.bytes.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// After a failed write nothing more reaches the file: later messages, `finish` and the
+    /// drop all stop, so no summary points at chunks that are not there, and the complete
+    /// chunks before the failure stay readable. A finished file takes nothing more either.
+    #[test]
+    fn a_failed_write_stops_the_file_where_it_is() {
+        let whole = sample();
+        let mut bytes = Vec::new();
+        {
+            let sink = Full {
+                bytes: &mut bytes,
+                room: whole.len() / 2,
+            };
+            let mut w = McapFile::new(sink, "", "t", 64, 1).unwrap();
+            let s = w.add_schema("m6p.A", "protobuf", b"a").unwrap();
+            let a = w
+                .add_channel(s, "/a", "protobuf", &BTreeMap::new())
+                .unwrap();
+            let mut failed = None;
+            for i in 0..100u64 {
+                if let Err(e) = w.message(a, i as u32, i, i, &[7; 40]) {
+                    failed = Some(i);
+                    assert!(e.to_string().contains("disk full"), "{e}");
+                    break;
+                }
+            }
+            assert!(failed.is_some());
+            let e = w.message(a, 0, 200, 200, b"x").unwrap_err();
+            assert!(e.to_string().contains("earlier write"), "{e}");
+            assert!(w.finish().is_err());
+        }
+        let kept = bytes.len();
+        assert!(kept <= whole.len() / 2);
+        assert_eq!(&bytes[..8], MAGIC);
+        // Only whole chunks and their indexes: the crate's linear reader stops cleanly at
+        // the end of what was written, after some messages.
+        let read = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .take_while(Result::is_ok)
+            .count();
+        assert!(read > 0);
+
+        let mut w = McapFile::new(Vec::new(), "", "t", 64, 1).unwrap();
+        let s = w.add_schema("m6p.A", "protobuf", b"a").unwrap();
+        let a = w
+            .add_channel(s, "/a", "protobuf", &BTreeMap::new())
+            .unwrap();
+        w.finish().unwrap();
+        let n = w.get_mut().len();
+        assert!(w.message(a, 0, 1, 1, b"x").is_err());
+        assert!(w.metadata("x", &BTreeMap::new()).is_err());
+        assert_eq!(w.finish().unwrap().bytes, n as u64);
+        assert_eq!(w.get_mut().len(), n);
     }
 }

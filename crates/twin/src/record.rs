@@ -58,20 +58,22 @@
 //! - the header's `library` is `m6p-twin <twin_version>` (not the mcap crate's identifier);
 //! - messages come from structs (field order = declaration order, every field written),
 //!   schemas from the `foxglove` crate (its derive, and its well-known types);
-//! - zstd runs single-threaded at a fixed level, [`ZSTD_LEVEL`] (multithreaded zstd frames depend on
-//!   the worker count, which would tie the bytes to the machine's CPU count), and the mcap
-//!   writer orders its summary by id (checked in mcap 0.26's source: no clock, no RNG, no
-//!   `HashMap` iteration reaches the file).
+//! - zstd runs single-threaded at a fixed level, [`ZSTD_LEVEL`] (multithreaded zstd frames
+//!   depend on the worker count, which would tie the bytes to the machine's CPU count), and
+//!   the writer ([`crate::mcap_file`]) orders its summary by id: no clock, no RNG, no
+//!   `HashMap` iteration reaches the file.
 //!
 //! # Memory and streaming
 //!
-//! Messages are written into chunks of [`CHUNK_SIZE`] uncompressed bytes (4 MiB), each
-//! zstd-compressed as it is written straight to the file, then closed, with a message
-//! index per chunk. What stays in memory is bounded: the open chunk's compressor state,
-//! one chunk index entry (about 100 bytes) per closed chunk for the summary, one CFP
-//! reassembler per bus (bounded slots) and one small buffer. A killed run leaves a file
-//! whose complete chunks MCAP's recovery tools (`mcap recover`) and [`crate::recording`]
-//! read; dropping a [`Recorder`] without [`Recorder::finish`] still writes the summary.
+//! Messages are gathered into chunks of [`CHUNK_SIZE`] uncompressed bytes (4 MiB); a full
+//! chunk is zstd-compressed in one call and written to the file with a message index per
+//! channel. What stays in memory is bounded: the open chunk and its compressed copy (about
+//! 8.5 MiB together), one chunk index entry (about 100 bytes) per closed chunk for the
+//! summary, one CFP reassembler per bus (bounded slots) and one small buffer. A killed run
+//! leaves a file whose complete chunks MCAP's recovery tools (`mcap recover`) and
+//! [`crate::recording`] read; dropping a [`Recorder`] without [`Recorder::finish`] still
+//! writes the summary, unless a write to the file failed (then the file ends after its
+//! last complete chunk).
 
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -475,7 +477,8 @@ pub struct PcSessionMsg {
     pub bytes: Option<u64>,
 }
 
-/// `/pc/downlink`: payload bytes that reached the ground over S-band.
+/// `/pc/downlink`: an S-band frame's worth of payload bytes reached the ground (its length and
+/// CRC; the bytes go to the ground sink's files).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, foxglove::Encode)]
 pub struct DownlinkMsg {
     /// Simulated ns since the start of the run (the last bit of the S-band frame).
@@ -2147,18 +2150,18 @@ impl McapOut {
             None => {
                 // Two kinds with the same schema (the two transforms) share one record: the
                 // writer returns the id of identical content.
-                let id = self.writer.add_schema(
-                    kind.schema_name(),
-                    SCHEMA_ENCODING,
-                    &kind.schema_data()?,
-                );
+                let id = self
+                    .writer
+                    .add_schema(kind.schema_name(), SCHEMA_ENCODING, &kind.schema_data()?)
+                    .with_context(|| format!("writing recording {}", self.path.display()))?;
                 self.schema_ids[kind as usize] = Some(id);
                 id
             }
         };
         let id = self
             .writer
-            .add_channel(schema, &topic, MESSAGE_ENCODING, &kind.metadata(key));
+            .add_channel(schema, &topic, MESSAGE_ENCODING, &kind.metadata(key))
+            .with_context(|| format!("writing recording {}", self.path.display()))?;
         self.chans.push(Chan {
             id,
             topic,
