@@ -134,6 +134,11 @@ fn put_channel(out: &mut Vec<u8>, c: &ChannelRec) {
     });
 }
 
+/// Time bounds `(first, last)` widened to take `t`.
+fn widen(bounds: Option<(u64, u64)>, t: u64) -> (u64, u64) {
+    bounds.map_or((t, t), |(a, b)| (a.min(t), b.max(t)))
+}
+
 /// A chunk's place in the file, for the summary.
 #[derive(Debug, Clone)]
 struct ChunkIndexRec {
@@ -330,14 +335,7 @@ impl<W: Write> McapFile<W> {
         self.writable()?;
         // A channel's records go into the chunk before its first message (its schema's
         // before it), as the crate's writer does.
-        if !self.schemas_due.is_empty() || !self.channels_due.is_empty() {
-            for i in std::mem::take(&mut self.schemas_due) {
-                put_schema(&mut self.chunk, &self.schemas[i]);
-            }
-            for i in std::mem::take(&mut self.channels_due) {
-                put_channel(&mut self.chunk, &self.channels[i]);
-            }
-        }
+        self.put_due();
         let slot = usize::from(channel);
         if self.index.len() <= slot {
             self.index.resize_with(slot + 1, Vec::new);
@@ -351,20 +349,24 @@ impl<W: Write> McapFile<W> {
         c.u64(log_time);
         c.u64(publish_time);
         c.extend_from_slice(data);
-        self.chunk_ns = Some(match self.chunk_ns {
-            None => (log_time, log_time),
-            Some((a, b)) => (a.min(log_time), b.max(log_time)),
-        });
-        self.bounds_ns = Some(match self.bounds_ns {
-            None => (log_time, log_time),
-            Some((a, b)) => (a.min(log_time), b.max(log_time)),
-        });
+        self.chunk_ns = Some(widen(self.chunk_ns, log_time));
+        self.bounds_ns = Some(widen(self.bounds_ns, log_time));
         *self.counts.entry(channel).or_insert(0) += 1;
         self.messages += 1;
         if self.chunk.len() >= self.chunk_size {
             self.close_chunk()?;
         }
         Ok(())
+    }
+
+    /// Put the schemas and channels not yet written into the open chunk.
+    fn put_due(&mut self) {
+        for i in std::mem::take(&mut self.schemas_due) {
+            put_schema(&mut self.chunk, &self.schemas[i]);
+        }
+        for i in std::mem::take(&mut self.channels_due) {
+            put_channel(&mut self.chunk, &self.channels[i]);
+        }
     }
 
     /// Compress and write the open chunk and its message indexes (nothing if it is empty).
@@ -504,14 +506,7 @@ impl<W: Write> McapFile<W> {
         // Schemas and channels registered but never used go into the last chunk (with no
         // message at all, a chunk of times 0), so the file names every channel, as the
         // crate's writer did.
-        if !self.schemas_due.is_empty() || !self.channels_due.is_empty() {
-            for i in std::mem::take(&mut self.schemas_due) {
-                put_schema(&mut self.chunk, &self.schemas[i]);
-            }
-            for i in std::mem::take(&mut self.channels_due) {
-                put_channel(&mut self.chunk, &self.channels[i]);
-            }
-        }
+        self.put_due();
         self.close_chunk()?;
         self.finishing = true;
         let mut rec = Vec::new();
