@@ -528,6 +528,86 @@ pub mod nan_null {
     }
 }
 
+/// A nested message field, encoded without the derive's temporary buffer.
+///
+/// `#[derive(foxglove::Encode)]` writes a nested message into a fresh `Vec` to learn its
+/// length, then copies it out: an allocation, its growth and a copy for every nested message
+/// (every decoded field of `/csp/packets`, every quaternion of `/fc/truth/state` and
+/// `/fc/adcs`). This wrapper writes the length from `encoded_len` and the fields straight
+/// into the output. The schema and the bytes are the wrapped type's (tested below); in JSON
+/// it is the wrapped value. A message inside `T` must be `Nested` too.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(transparent)]
+pub struct Nested<T>(pub T);
+
+impl<T> std::ops::Deref for Nested<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.0
+    }
+}
+
+impl<T> std::ops::DerefMut for Nested<T> {
+    fn deref_mut(&mut self) -> &mut T {
+        &mut self.0
+    }
+}
+
+impl<T> From<T> for Nested<T> {
+    fn from(v: T) -> Self {
+        Nested(v)
+    }
+}
+
+impl<T: foxglove::Encode + foxglove::protobuf::ProtobufField> foxglove::protobuf::ProtobufField
+    for Nested<T>
+{
+    fn field_type() -> Type {
+        T::field_type()
+    }
+    fn wire_type() -> u32 {
+        <T as foxglove::protobuf::ProtobufField>::wire_type()
+    }
+    fn write(&self, buf: &mut impl bytes::BufMut) {
+        let len = foxglove::protobuf::ProtobufField::encoded_len(&self.0);
+        foxglove::protobuf::encode_varint(len as u64, buf);
+        let room = buf.remaining_mut();
+        // A derived message's `encode` fails only when `buf` has less room than the
+        // message, as `BufMut::put_slice` would panic for the derive's own `write`.
+        let _ = foxglove::Encode::encode(&self.0, buf);
+        debug_assert_eq!(
+            room - buf.remaining_mut(),
+            len,
+            "a Nested message holds a nested message that is not Nested"
+        );
+    }
+    fn type_name() -> Option<String> {
+        T::type_name()
+    }
+    fn enum_descriptor() -> Option<prost_types::EnumDescriptorProto> {
+        T::enum_descriptor()
+    }
+    fn message_descriptor() -> Option<DescriptorProto> {
+        T::message_descriptor()
+    }
+    fn file_descriptor() -> Option<prost_types::FileDescriptorProto> {
+        T::file_descriptor()
+    }
+    fn file_descriptors() -> Vec<prost_types::FileDescriptorProto> {
+        T::file_descriptors()
+    }
+    fn repeating() -> bool {
+        T::repeating()
+    }
+    /// The length prefix and the fields. (The derive's own `encoded_len` leaves the prefix
+    /// out, so the fields of `T` are counted right only when `T` holds no nested message
+    /// other than a `Nested` one; `write` checks that in debug builds.)
+    fn encoded_len(&self) -> usize {
+        let len = foxglove::protobuf::ProtobufField::encoded_len(&self.0);
+        foxglove::protobuf::encoded_len_varint(len as u64) + len
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -588,6 +668,70 @@ mod tests {
                 "big": 6_792_531.470_923_343,
             })
         );
+    }
+
+    #[derive(Debug, Clone, foxglove::Encode)]
+    struct Field {
+        name: String,
+        value: f64,
+        text: Option<String>,
+    }
+
+    #[derive(Debug, foxglove::Encode)]
+    struct Plain {
+        t_ns: u64,
+        one: Field,
+        maybe: Option<Field>,
+        many: Vec<Field>,
+    }
+
+    #[derive(Debug, foxglove::Encode)]
+    struct Wrapped {
+        t_ns: u64,
+        one: Nested<Field>,
+        maybe: Option<Nested<Field>>,
+        many: Vec<Nested<Field>>,
+    }
+
+    #[test]
+    fn a_nested_field_has_the_bytes_and_the_schema_of_the_derived_one() {
+        let f = |name: &str, value: f64, text: Option<&str>| Field {
+            name: name.repeat(40),
+            value,
+            text: text.map(str::to_owned),
+        };
+        let fields = vec![
+            f("current_mode", 3.0, Some("nadir")),
+            f("", f64::NAN, None),
+            f("panels_w[3]", -0.25, Some("")),
+        ];
+        for (maybe, many) in [
+            (None, Vec::new()),
+            (Some(f("x", 1.0, None)), fields.clone()),
+        ] {
+            let plain = Plain {
+                t_ns: 1_777_572_000_000_000_001,
+                one: f("a", 0.0, Some("b")),
+                maybe: maybe.clone(),
+                many: many.clone(),
+            };
+            let wrapped = Wrapped {
+                t_ns: plain.t_ns,
+                one: Nested(plain.one.clone()),
+                maybe: maybe.map(Nested),
+                many: many.into_iter().map(Nested).collect(),
+            };
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            plain.encode(&mut a).unwrap();
+            wrapped.encode(&mut b).unwrap();
+            assert_eq!(a, b);
+            assert_eq!(Encode::encoded_len(&wrapped), Some(b.len()));
+        }
+        let mut plain = FileDescriptorSet::decode(&*schema::<Plain>("X").unwrap()).unwrap();
+        let wrapped = FileDescriptorSet::decode(&*schema::<Wrapped>("X").unwrap()).unwrap();
+        assert_eq!(plain.file.len(), 1);
+        plain.file[0].name = wrapped.file[0].name.clone();
+        assert_eq!(plain, wrapped);
     }
 
     #[test]

@@ -82,6 +82,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::mcap_file::McapFile;
+use crate::protobuf::Nested;
 use anyhow::Context as _;
 use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CanFrame, CfpId, FrameType};
@@ -376,7 +377,7 @@ pub struct CspPacketMsg {
     pub icd_kind: Option<String>,
     /// The request's or reply's fixed fields, decoded (empty for a failure, a layout of
     /// varying length, or data that does not fit the layout).
-    pub fields: Vec<IcdFieldMsg>,
+    pub fields: Vec<Nested<IcdFieldMsg>>,
 }
 
 /// `/kiss/<link>`: one KISS frame on an outside link.
@@ -759,7 +760,7 @@ pub struct TruthStateMsg {
     /// Simulated ns since the start of the run.
     pub t_ns: u64,
     /// True attitude, body (BCF) to ECI J2000, active.
-    pub q_eci_from_body: QuatWxyz,
+    pub q_eci_from_body: Nested<QuatWxyz>,
     /// Position, ECI J2000, m.
     #[serde(with = "crate::protobuf::nan_null")]
     pub r_eci_m: [f64; 3],
@@ -815,7 +816,7 @@ pub struct AdcsMsg {
     /// 0 off, 1 detumbling, 2 acquiring, 3 tracking.
     pub state: u8,
     /// Estimated attitude (body to ECI), null until the estimator is initialised.
-    pub q_eci_from_body_est: Option<QuatWxyz>,
+    pub q_eci_from_body_est: Option<Nested<QuatWxyz>>,
     /// Estimated body rate, body frame, deg/s.
     #[serde(with = "crate::protobuf::nan_null")]
     pub w_body_deg_s_est: [f32; 3],
@@ -823,7 +824,7 @@ pub struct AdcsMsg {
     #[serde(with = "crate::protobuf::nan_null")]
     pub gyro_bias_deg_s_est: [f32; 3],
     /// Target attitude (body to ECI) of the mode in effect, null when it has none.
-    pub q_eci_from_body_target: Option<QuatWxyz>,
+    pub q_eci_from_body_target: Option<Nested<QuatWxyz>>,
     /// Rotation angle from the true to the target attitude, deg.
     pub pointing_error_deg: Option<f32>,
     /// Angle between the mode's pointing axis and its target direction, deg.
@@ -1221,13 +1222,13 @@ fn quat_xyzw([w, x, y, z]: [f64; 4]) -> Option<QuatMsg> {
 }
 
 /// A quaternion `[w, x, y, z]` in the project's JSON.
-fn quat_wxyz([w, x, y, z]: [f64; 4]) -> QuatWxyz {
-    QuatWxyz {
+fn quat_wxyz([w, x, y, z]: [f64; 4]) -> Nested<QuatWxyz> {
+    Nested(QuatWxyz {
         w: num32(w),
         x: num32(x),
         y: num32(y),
         z: num32(z),
-    }
+    })
 }
 
 /// The `eci` -> `child` transform with rotation `rotation` and no translation.
@@ -2092,7 +2093,7 @@ impl EventEncoder {
                 .to_owned()
             }),
             fields: decoded
-                .map(|d| d.fields.iter().map(icd_field).collect())
+                .map(|d| d.fields.iter().map(|f| Nested(icd_field(f))).collect())
                 .unwrap_or_default(),
         };
         let chan = (ChannelKind::Csp, "");
