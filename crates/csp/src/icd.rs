@@ -471,17 +471,32 @@ impl Data {
     /// Split `bytes` into the head's decoded fields and the tail; `None` when the length
     /// does not fit the layout.
     pub fn decode(&self, bytes: &[u8]) -> Option<(Vec<Decoded>, Option<Vec<u8>>)> {
+        let s = self.split(bytes)?;
+        Some((decode(s.fields, s.head).ok()?, s.tail.map(<[u8]>::to_vec)))
+    }
+    /// The fixed head's fields, the bytes they are read from, and the tail after them (a
+    /// layout with a tail), when `bytes` can hold this layout: `None` for a layout of
+    /// varying length, or a tail out of its bounds. (The head's own length is checked by
+    /// [`decode`] and [`decode_each`].)
+    pub fn split<'b>(&self, bytes: &'b [u8]) -> Option<Split<'b>> {
         let (fields, tail) = self.parts()?;
-        let head = fields_len(fields);
         match tail {
-            None => Some((decode(fields, bytes).ok()?, None)),
+            None => Some(Split {
+                fields,
+                head: bytes,
+                tail: None,
+            }),
             Some(t) => {
-                let n = bytes.len().checked_sub(head)?;
+                let n = bytes.len().checked_sub(fields_len(fields))?;
                 if n < t.min || n > t.max {
                     return None;
                 }
-                let (h, rest) = bytes.split_at(head);
-                Some((decode(fields, h).ok()?, Some(rest.to_vec())))
+                let (head, rest) = bytes.split_at(fields_len(fields));
+                Some(Split {
+                    fields,
+                    head,
+                    tail: Some(rest),
+                })
             }
         }
     }
@@ -493,6 +508,17 @@ impl Data {
             Data::Tail(..) | Data::Variable(..) => None,
         }
     }
+}
+
+/// Data split by its layout ([`Data::split`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Split<'b> {
+    /// The fixed head's fields.
+    pub fields: &'static [Field],
+    /// The bytes they are read from.
+    pub head: &'b [u8],
+    /// The bytes after them (a layout with a tail).
+    pub tail: Option<&'b [u8]>,
 }
 
 /// Who may send a command.
@@ -694,53 +720,80 @@ fn read_scalar(ty: Ty, r: &mut Reader<'_>) -> Result<Value, Error> {
     })
 }
 
-fn decode_into(
+/// Read `fields` from `r`, handing `each` every leaf's path (built in `path`), value and
+/// description, in wire order. The recursion follows the static layout's nesting, never the
+/// data.
+fn walk(
     fields: &'static [Field],
-    prefix: &str,
+    path: &mut String,
     r: &mut Reader<'_>,
-    out: &mut Vec<Decoded>,
+    each: &mut dyn FnMut(&str, Value, &'static Field),
 ) -> Result<(), Error> {
+    use std::fmt::Write as _;
     for f in fields {
-        let base = if prefix.is_empty() {
-            f.name.to_string()
-        } else {
-            format!("{prefix}.{}", f.name)
-        };
+        let start = path.len();
+        if start > 0 {
+            path.push('.');
+        }
+        path.push_str(f.name);
         if f.text {
             let b = r.take(f.len())?;
             let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
-            out.push(Decoded {
-                path: base,
-                value: Value::Text(String::from_utf8_lossy(&b[..end]).into_owned()),
-                field: f,
-            });
+            each(
+                path,
+                Value::Text(String::from_utf8_lossy(&b[..end]).into_owned()),
+                f,
+            );
+            path.truncate(start);
             continue;
         }
+        let base = path.len();
         for i in 0..f.count {
-            let path = if f.count == 1 {
-                base.clone()
-            } else {
-                format!("{base}[{i}]")
-            };
-            match f.ty {
-                Ty::Struct(_, inner) => decode_into(inner, &path, r, out)?,
-                ty => out.push(Decoded {
-                    path,
-                    value: read_scalar(ty, r)?,
-                    field: f,
-                }),
+            if f.count != 1 {
+                let _ = write!(path, "[{i}]");
             }
+            match f.ty {
+                Ty::Struct(_, inner) => walk(inner, path, r, each)?,
+                ty => each(path, read_scalar(ty, r)?, f),
+            }
+            path.truncate(base);
         }
+        path.truncate(start);
     }
     Ok(())
 }
 
+/// [`decode`] without a [`Decoded`] per leaf: `each` gets every leaf's path, value and
+/// description in wire order, the path built in `path` (whose contents are replaced), so
+/// that a caller that keeps `path` allocates nothing but text values. On an error, the
+/// leaves before it have been handed out.
+pub fn decode_each(
+    fields: &'static [Field],
+    bytes: &[u8],
+    path: &mut String,
+    each: &mut dyn FnMut(&str, Value, &'static Field),
+) -> Result<(), Error> {
+    path.clear();
+    let mut r = Reader::new(bytes);
+    walk(fields, path, &mut r, each)?;
+    r.finish()
+}
+
 /// Decode exactly `fields_len(fields)` bytes into leaf values, in wire order.
 pub fn decode(fields: &'static [Field], bytes: &[u8]) -> Result<Vec<Decoded>, Error> {
-    let mut r = Reader::new(bytes);
     let mut out = Vec::new();
-    decode_into(fields, "", &mut r, &mut out)?;
-    r.finish()?;
+    decode_each(
+        fields,
+        bytes,
+        &mut String::new(),
+        &mut |path, value, field| {
+            out.push(Decoded {
+                path: path.to_owned(),
+                value,
+                field,
+            });
+        },
+    )?;
     Ok(out)
 }
 
@@ -1045,6 +1098,34 @@ mod tests {
         let paths: Vec<String> = leaves(Outer::FIELDS).into_iter().map(|l| l.0).collect();
         assert_eq!(paths, d.iter().map(|x| x.path.clone()).collect::<Vec<_>>());
         assert!(decode(Outer::FIELDS, &b[1..]).is_err());
+    }
+
+    #[test]
+    fn decode_each_reuses_its_path_buffer_and_stops_at_the_error() {
+        let b = Outer::default().to_vec();
+        let mut path = String::from("left over");
+        let mut seen = Vec::new();
+        for _ in 0..2 {
+            seen.clear();
+            decode_each(Outer::FIELDS, &b, &mut path, &mut |p, v, f| {
+                seen.push((p.to_owned(), v, f.name));
+            })
+            .unwrap();
+        }
+        let d = decode(Outer::FIELDS, &b).unwrap();
+        let want: Vec<_> = d
+            .into_iter()
+            .map(|x| (x.path, x.value, x.field.name))
+            .collect();
+        assert_eq!(seen, want);
+        // Cut inside `pair[1]`: the leaves before it are handed out, then the error.
+        seen.clear();
+        let r = decode_each(Outer::FIELDS, &b[..9], &mut path, &mut |p, v, f| {
+            seen.push((p.to_owned(), v, f.name));
+        });
+        assert!(r.is_err());
+        let paths: Vec<&str> = seen.iter().map(|x| x.0.as_str()).collect();
+        assert_eq!(paths, ["v", "mode", "pair[0].a", "pair[0].b"]);
     }
 
     #[test]

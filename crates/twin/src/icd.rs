@@ -303,6 +303,28 @@ impl IcdMap {
     /// from an ICD port to an ephemeral port. `None` when neither end is an ICD port, or
     /// the command id is not in the port's table.
     pub fn decode(&self, header: &csp::Header, data: &[u8]) -> Option<DecodedPacket> {
+        let c = self.classify(header, data)?;
+        let mut out = DecodedPacket {
+            node: c.node,
+            command: c.command.name,
+            direction: c.direction,
+            result: c.result,
+            fields: Vec::new(),
+            tail: None,
+            fits: c.fits(),
+        };
+        if let Some(layout) = c.layout() {
+            if let Some((fields, tail)) = layout.decode(c.body) {
+                out.fields = fields;
+                out.tail = tail;
+            }
+        }
+        Some(out)
+    }
+
+    /// What [`IcdMap::decode`] finds before it reads the fields: the node, the command,
+    /// the direction, the result and the bytes of the layout. Allocates nothing.
+    pub fn classify<'d>(&self, header: &csp::Header, data: &'d [u8]) -> Option<Classified<'d>> {
         let reply = (header.dport >= csp::header::EPHEMERAL_PORT_MIN)
             .then(|| self.ports.get(&(header.src, header.sport)))
             .flatten();
@@ -313,36 +335,59 @@ impl IcdMap {
                 Direction::Request,
             ),
         };
-        let node = *node;
         let (&id, rest) = data.split_first()?;
         let command = port.command(id)?;
-        let (result, body, layout) = match direction {
-            Direction::Request => (None, rest, command.request),
+        let (result, body) = match direction {
+            Direction::Request => (None, rest),
             Direction::Reply => {
                 let (&r, body) = rest.split_first()?;
-                (Some(r), body, command.reply)
+                (Some(r), body)
             }
         };
-        let mut out = DecodedPacket {
+        Some(Classified {
             node,
-            command: command.name,
+            command,
             direction,
             result,
-            fields: Vec::new(),
-            tail: None,
-            fits: false,
-        };
-        if result.is_some_and(|r| r != RESULT_SUCCESS) {
-            out.fits = body.is_empty();
-            return Some(out);
+            body,
+        })
+    }
+}
+
+/// A packet of an ICD command, before its fields are read ([`IcdMap::classify`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Classified<'d> {
+    /// The node's name (`FC`).
+    pub node: &'static str,
+    /// The command.
+    pub command: &'static csp::icd::Command,
+    /// Request or reply.
+    pub direction: Direction,
+    /// The reply's result byte (replies only).
+    pub result: Option<u8>,
+    /// The data after the command byte (and the result byte of a reply).
+    pub body: &'d [u8],
+}
+
+impl Classified<'_> {
+    /// The layout the body has, `None` for a failure reply (which has no fields).
+    pub fn layout(&self) -> Option<csp::icd::Data> {
+        match (self.direction, self.result) {
+            (Direction::Request, _) => Some(self.command.request),
+            (Direction::Reply, Some(RESULT_SUCCESS)) => Some(self.command.reply),
+            (Direction::Reply, _) => None,
         }
-        let (lo, hi) = layout.bounds();
-        out.fits = (lo..=hi).contains(&body.len());
-        if let Some((fields, tail)) = layout.decode(body) {
-            out.fields = fields;
-            out.tail = tail;
+    }
+
+    /// The body's length fits the layout (a failure reply: the body is empty).
+    pub fn fits(&self) -> bool {
+        match self.layout() {
+            Some(layout) => {
+                let (lo, hi) = layout.bounds();
+                (lo..=hi).contains(&self.body.len())
+            }
+            None => self.body.is_empty(),
         }
-        Some(out)
     }
 }
 

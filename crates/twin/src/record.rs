@@ -331,7 +331,7 @@ pub struct NetPacketMsg {
 }
 
 /// One field of an ICD request or reply in `/csp/packets` (`crate::icd`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, foxglove::Encode)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, foxglove::Encode)]
 pub struct IcdFieldMsg {
     /// Path in the layout: `current_mode`, `panels_w[3]`, `general.uptime_s`.
     pub name: String,
@@ -343,7 +343,7 @@ pub struct IcdFieldMsg {
 }
 
 /// `/csp/packets`: one CSP packet a medium delivered, decoded.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, foxglove::Encode)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, foxglove::Encode)]
 pub struct CspPacketMsg {
     /// Simulated ns since the start of the run (its last frame).
     pub t_ns: u64,
@@ -1120,6 +1120,12 @@ pub struct EventEncoder {
     icd: crate::icd::IcdMap,
     buf: Vec<u8>,
     key: String,
+    /// The last `/csp/packets` message, reused for the next.
+    csp: CspPacketMsg,
+    /// Decoded fields the last packet did not need, reused for the next.
+    spare_fields: Vec<Nested<IcdFieldMsg>>,
+    /// The ICD field paths are built here.
+    path: String,
 }
 
 impl std::fmt::Debug for EventEncoder {
@@ -1578,6 +1584,9 @@ impl EventEncoder {
             icd: crate::icd::IcdMap::defaults(),
             buf: Vec::with_capacity(1024),
             key: String::new(),
+            csp: CspPacketMsg::default(),
+            spare_fields: Vec::new(),
+            path: String::new(),
         }
     }
 
@@ -2067,56 +2076,100 @@ impl EventEncoder {
         } else {
             &p.data[..]
         };
-        let decoded = self.icd.decode(h, body);
-        let msg = CspPacketMsg {
-            t_ns: m.t.as_ns(),
-            medium: m.medium.to_string(),
-            from: m.from.to_string(),
-            prio: h.prio as u8,
-            src: h.src,
-            dst: h.dst,
-            dport: h.dport,
-            sport: h.sport,
-            flags: h.flags,
-            data: bytes::Bytes::copy_from_slice(&p.data),
-            len: p.data.len() as u32,
-            service: packet_service(h).map(str::to_owned),
-            icd: decoded
-                .as_ref()
-                .map(|d| format!("{}.{}", d.node, d.command)),
-            icd_kind: decoded.as_ref().map(|d| {
-                match (d.direction, d.result) {
+        let c = self.icd.classify(h, body);
+        // The message of the last packet is reused, its strings and fields with it: a packet
+        // costs one allocation (its bytes), and one more for a text or a bit-mask field.
+        let msg = &mut self.csp;
+        msg.t_ns = m.t.as_ns();
+        set_str(&mut msg.medium, &m.medium);
+        set_str(&mut msg.from, &m.from);
+        msg.prio = h.prio as u8;
+        msg.src = h.src;
+        msg.dst = h.dst;
+        msg.dport = h.dport;
+        msg.sport = h.sport;
+        msg.flags = h.flags;
+        msg.data = bytes::Bytes::copy_from_slice(&p.data);
+        msg.len = p.data.len() as u32;
+        set_opt_str(&mut msg.service, packet_service(h).map(|s| [s]));
+        set_opt_str(
+            &mut msg.icd,
+            c.as_ref().map(|c| [c.node, ".", c.command.name]),
+        );
+        set_opt_str(
+            &mut msg.icd_kind,
+            c.as_ref().map(|c| {
+                [match (c.direction, c.result) {
                     (crate::icd::Direction::Request, _) => "request",
                     (_, Some(csp::reqrep::RESULT_SUCCESS)) => "reply",
                     _ => "failure",
-                }
-                .to_owned()
+                }]
             }),
-            fields: decoded
-                .map(|d| d.fields.iter().map(|f| Nested(icd_field(f))).collect())
-                .unwrap_or_default(),
-        };
+        );
+        let spare = &mut self.spare_fields;
+        spare.append(&mut msg.fields);
+        if let Some(split) = c
+            .as_ref()
+            .and_then(|c| c.layout().and_then(|l| l.split(c.body)))
+        {
+            let out = &mut msg.fields;
+            let read = csp::icd::decode_each(
+                split.fields,
+                split.head,
+                &mut self.path,
+                &mut |path, v, f| {
+                    let mut field = spare.pop().unwrap_or_default();
+                    icd_field(&mut field, path, v, f);
+                    out.push(field);
+                },
+            );
+            if read.is_err() {
+                // Data that does not fit the layout: no fields, as for `IcdMap::decode`.
+                spare.append(out);
+            }
+        }
         let chan = (ChannelKind::Csp, "");
-        emit_msg(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)
+        emit_msg(&mut self.buf, self.base_ns, chan, m.t, &self.csp, emit)
     }
 }
 
-/// A decoded ICD field as `/csp/packets` records it.
-fn icd_field(d: &csp::icd::Decoded) -> IcdFieldMsg {
+/// `s` becomes `v`, in the allocation it has.
+fn set_str(s: &mut String, v: &str) {
+    s.clear();
+    s.push_str(v);
+}
+
+/// `s` becomes the parts of `v` one after the other (or `None`), in the allocation it has.
+fn set_opt_str<const N: usize>(s: &mut Option<String>, v: Option<[&str; N]>) {
+    match v {
+        None => *s = None,
+        Some(parts) => {
+            let s = s.get_or_insert_with(String::new);
+            s.clear();
+            for p in parts {
+                s.push_str(p);
+            }
+        }
+    }
+}
+
+/// A decoded ICD field as `/csp/packets` records it, written over `out`.
+fn icd_field(
+    out: &mut IcdFieldMsg,
+    path: &str,
+    value: csp::icd::Value,
+    field: &'static csp::icd::Field,
+) {
     use csp::icd::Value;
-    let text = match &d.value {
-        Value::Text(s) => Some(s.clone()),
-        Value::Int(i) => d
-            .field
-            .value_name(*i)
-            .map(str::to_owned)
-            .or_else(|| Some(d.field.bit_names(*i)).filter(|t| !t.is_empty())),
-        Value::Float(_) => None,
-    };
-    IcdFieldMsg {
-        name: d.path.clone(),
-        value: d.value.as_f64().unwrap_or(f64::NAN),
-        text,
+    set_str(&mut out.name, path);
+    out.value = value.as_f64().unwrap_or(f64::NAN);
+    match value {
+        Value::Text(s) => out.text = Some(s),
+        Value::Int(i) => match field.value_name(i) {
+            Some(name) => set_opt_str(&mut out.text, Some([name])),
+            None => out.text = Some(field.bit_names(i)).filter(|t| !t.is_empty()),
+        },
+        Value::Float(_) => out.text = None,
     }
 }
 
@@ -2354,18 +2407,31 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
 
-    /// A mask's `text` names its set bits, and is null when none is set (it was "").
+    /// A mask's `text` names its set bits, and is null when none is set (it was ""). The
+    /// field is written over the one before it, which leaves nothing of its own behind.
     #[test]
     fn an_icd_mask_field_names_its_bits_or_nothing() {
+        use csp::icd::Value;
         const F: csp::icd::Field =
             csp::icd::Field::new("mask", (csp::icd::Ty::U8, 1), "").bits(&[(0, "A"), (1, "B")]);
-        let d = |v| csp::icd::Decoded {
-            path: "mask".into(),
-            value: csp::icd::Value::Int(v),
-            field: &F,
-        };
-        assert_eq!(icd_field(&d(3)).text.as_deref(), Some("A, B"));
-        assert_eq!(icd_field(&d(0)).text, None);
+        const E: csp::icd::Field =
+            csp::icd::Field::new("mode", (csp::icd::Ty::U8, 1), "").values(&[(2, "on")]);
+        let mut f = IcdFieldMsg::default();
+        icd_field(&mut f, "mask", Value::Int(3), &F);
+        assert_eq!((f.name.as_str(), f.value), ("mask", 3.0));
+        assert_eq!(f.text.as_deref(), Some("A, B"));
+        icd_field(&mut f, "mask", Value::Int(0), &F);
+        assert_eq!(f.text, None);
+        icd_field(&mut f, "mode", Value::Int(2), &E);
+        assert_eq!(f.text.as_deref(), Some("on"));
+        icd_field(&mut f, "v", Value::Float(0.5), &E);
+        assert_eq!(
+            (f.name.as_str(), f.value, f.text.as_deref()),
+            ("v", 0.5, None)
+        );
+        icd_field(&mut f, "name", Value::Text("ab".into()), &E);
+        assert!(f.value.is_nan());
+        assert_eq!(f.text.as_deref(), Some("ab"));
     }
 
     /// `v` rotated by `q` (`v + 2w (q x v) + 2 q x (q x v)`).
