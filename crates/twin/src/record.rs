@@ -38,9 +38,10 @@
 //!   with the satellite, so Foxglove's 3D panel shows the attitude (true and estimated
 //!   overlaid) at the origin without float32 jitter from a 7000 km offset; the position is in
 //!   `/fc/truth/state` and on the map. Rotation = `q_eci_from_body` as `{x, y, z, w}`.
-//! - `/fc/truth/location` rotates the ECI position to ECEF with
-//!   [`orbit::frames::a_ecef_from_eci`] at the truth's UTC (`unix_ns`, no EOP) and converts
-//!   it to WGS-84 latitude, longitude and height.
+//! - `/fc/truth/location` rotates the ECI position to ECEF as
+//!   [`orbit::frames::a_ecef_from_eci`] does at the truth's UTC (`unix_ns`, no EOP), with
+//!   precession and nutation taken once per UTC minute as the FC's environment does (within
+//!   5 mm), and converts it to WGS-84 latitude, longitude and height.
 //! - `/fc/scene` is one entity (`m6p`, replaced by each message) in frame `body`: the
 //!   0.2 x 0.1 x 0.3 m box (BCF X, Y, Z), the body axes (X red, Y green, Z blue), and the sun
 //!   (yellow, dimmed in eclipse) and nadir (magenta) directions in the body frame.
@@ -90,7 +91,8 @@ use csp::header::{HEADER_LEN, Header};
 use csp::{Packet, SimTime};
 use serde::{Deserialize, Serialize};
 
-use orbit::frames::{a_ecef_from_eci, eci_to_body};
+use nalgebra::Matrix3;
+use orbit::frames::{a_ecef_from_teme, a_j2000_from_teme, eci_to_body};
 use orbit::geodetic::ecef_m_to_geodetic;
 use orbit::time::UtcTime;
 use platform::truth::{AdcsSnapshot, TruthSnapshot};
@@ -1126,6 +1128,8 @@ pub struct EventEncoder {
     spare_fields: Vec<Nested<IcdFieldMsg>>,
     /// The ICD field paths are built here.
     path: String,
+    /// The truth's ECI -> ECEF rotation.
+    ecef: EcefFromEci,
 }
 
 impl std::fmt::Debug for EventEncoder {
@@ -1252,11 +1256,39 @@ fn frame_transform(timestamp: LogTime, child: &str, rotation: QuatMsg) -> FrameT
     }
 }
 
+/// A(ECEF <- ECI J2000) for the truth: the Earth's rotation (GMST) at the instant, and
+/// precession and nutation, A(J2000 <- TEME), of the UTC minute the instant falls in, as
+/// the FC's environment caches them (`nodes_fc::environment::SLOW_REFRESH_S`). They turn
+/// below 1e-11 rad/s, so a minute moves a 7000 km position by less than 5 mm; the IAU-80
+/// nutation series it saves is evaluated once a minute instead of once a second.
+#[derive(Debug, Default)]
+struct EcefFromEci {
+    /// The minute (`unix_ns` / 60 s, rounded down) and its A(J2000 <- TEME).
+    minute: Option<(i64, Matrix3<f64>)>,
+}
+
+impl EcefFromEci {
+    const MINUTE_NS: i64 = 60_000_000_000;
+
+    fn at(&mut self, unix_ns: i64) -> Matrix3<f64> {
+        let minute = unix_ns.div_euclid(Self::MINUTE_NS);
+        let a_j2000_from_teme = match self.minute {
+            Some((m, a)) if m == minute => a,
+            _ => {
+                let start = UtcTime::from_unix_ns(minute.saturating_mul(Self::MINUTE_NS));
+                let a = a_j2000_from_teme(start);
+                self.minute = Some((minute, a));
+                a
+            }
+        };
+        a_ecef_from_teme(UtcTime::from_unix_ns(unix_ns), None) * a_j2000_from_teme.transpose()
+    }
+}
+
 /// The `/fc/truth/state` message of `truth` at `t_ns`.
-fn truth_state(t_ns: u64, truth: &TruthSnapshot) -> TruthStateMsg {
+fn truth_state(t_ns: u64, truth: &TruthSnapshot, ecef: &mut EcefFromEci) -> TruthStateMsg {
     let q = &truth.q_eci_from_body;
-    let a_ecef_from_eci = a_ecef_from_eci(UtcTime::from_unix_ns(truth.unix_ns), None);
-    let r_ecef_m = a_ecef_from_eci * truth.r_eci_m;
+    let r_ecef_m = ecef.at(truth.unix_ns) * truth.r_eci_m;
     // Only a finite position has a place (the conversion maps a NaN x to longitude 0).
     let geo = xyz(&r_ecef_m)
         .iter()
@@ -1587,6 +1619,7 @@ impl EventEncoder {
             csp: CspPacketMsg::default(),
             spare_fields: Vec::new(),
             path: String::new(),
+            ecef: EcefFromEci::default(),
         }
     }
 
@@ -1990,7 +2023,7 @@ impl EventEncoder {
             let msg = fg_transform(frame_transform(stamp, FRAME_BODY_EST, rotation));
             emit_msg(buf, base_ns, (ChannelKind::EstimateTf, ""), t, &msg, emit)?;
         }
-        let state = truth_state(t.as_ns(), truth);
+        let state = truth_state(t.as_ns(), truth, &mut self.ecef);
         if let Some(msg) = location_fix(stamp, &state).map(fg_location) {
             emit_msg(
                 buf,
@@ -2664,11 +2697,34 @@ mod tests {
         );
     }
 
+    /// The truth's ECEF position with precession and nutation of the minute is within
+    /// 5 mm of the exact rotation, at every second of two hours and across minutes, days
+    /// and a year's end (and before 1970, where the minute rounds down).
+    #[test]
+    fn the_truth_rotates_to_ecef_within_5_mm_of_the_exact_rotation() {
+        let mut ecef = EcefFromEci::default();
+        let r_eci_m = nalgebra::Vector3::new(4_000_000.0, -5_000_000.0, 2_500_000.0);
+        let starts_ns = [
+            1_798_761_600_000_000_000i64 - 3_600_000_000_000,
+            -86_400_000_000_000,
+        ];
+        let mut worst_m: f64 = 0.0;
+        for start in starts_ns {
+            for k in 0..7200 {
+                let unix_ns = start + k * 1_000_000_000 + k % 7 * 123_456_789;
+                let exact = orbit::frames::a_ecef_from_eci(UtcTime::from_unix_ns(unix_ns), None);
+                worst_m = worst_m.max((ecef.at(unix_ns) * r_eci_m - exact * r_eci_m).norm());
+            }
+        }
+        assert!(worst_m < 0.005, "{worst_m} m");
+        assert!(worst_m > 0.0, "the minute's rotation is not the exact one");
+    }
+
     #[test]
     fn zero_or_non_finite_positions_have_no_location() {
         let stamp = foxglove_time(0, SimTime::ZERO);
         let truth = TruthSnapshot::default();
-        let state = truth_state(0, &truth);
+        let state = truth_state(0, &truth, &mut EcefFromEci::default());
         assert!(location_fix(stamp, &state).is_none(), "the Earth's centre");
         // The default snapshot has no sun and no position: the scene keeps the box and axes.
         let scene = scene_update(stamp, &truth);
