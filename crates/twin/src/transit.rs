@@ -45,10 +45,50 @@ struct Partial {
     first: SimTime,
     /// Header, data length, first data bytes and frame count, once the BEGIN is seen.
     begin: Option<(Header, usize, [u8; 2], usize)>,
-    /// Each frame's fate by its `remain` (`None`: it crossed).
-    fates: BTreeMap<u8, Option<&'static str>>,
+    /// Each frame's fate by its `remain`.
+    fates: Fates,
     /// Why its receiver dropped it, if it did.
     receiver: Option<&'static str>,
+}
+
+/// The fates of a packet's frames, by `remain` (0..=255): which were seen, and the first
+/// loss in sending order (the highest `remain` of a frame that did not cross). A packet's
+/// frames cost no allocation; a frame is seen once (a second sighting starts the packet
+/// over, in [`Transit::observe`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct Fates {
+    seen: [u64; 4],
+    count: usize,
+    first_lost: Option<(u8, &'static str)>,
+}
+
+impl Fates {
+    fn contains(&self, remain: u8) -> bool {
+        self.seen[usize::from(remain >> 6)] >> (remain & 63) & 1 == 1
+    }
+
+    /// Frame `remain` crossed (`fate` `None`) or was lost (`Some(why)`).
+    fn insert(&mut self, remain: u8, fate: Option<&'static str>) {
+        if self.contains(remain) {
+            return;
+        }
+        self.seen[usize::from(remain >> 6)] |= 1 << (remain & 63);
+        self.count += 1;
+        if let Some(why) = fate
+            && self.first_lost.is_none_or(|(r, _)| remain > r)
+        {
+            self.first_lost = Some((remain, why));
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.count
+    }
+
+    /// Why the first frame lost (in sending order) was lost.
+    fn first_lost(&self) -> Option<&'static str> {
+        self.first_lost.map(|(_, why)| why)
+    }
 }
 
 /// Packets remembered after their last frame, for a receiver's drop reported after it
@@ -109,7 +149,7 @@ impl Transit {
             ..Partial::default()
         });
         // A second BEGIN, or a frame seen twice: the ident came round again; start over.
-        if (begin.is_some() && p.begin.is_some()) || p.fates.contains_key(&cfp.remain) {
+        if (begin.is_some() && p.begin.is_some()) || p.fates.contains(cfp.remain) {
             *p = Partial {
                 first: ev.t,
                 ..Partial::default()
@@ -130,7 +170,7 @@ impl Transit {
         let (header, data_len, head, _) = p.begin?;
         // The first frame lost, in sending order (the highest `remain`), else the
         // receiver's drop.
-        let reason = p.fates.values().rev().find_map(|f| *f).or(p.receiver);
+        let reason = p.fates.first_lost().or(p.receiver);
         let packet = LostPacket {
             t: ev.t,
             bus: key.1.clone(),
@@ -298,6 +338,41 @@ mod tests {
             tr.receiver_dropped(f[0].id, SimTime::from_secs(2), timeout),
             None
         );
+    }
+
+    /// The bit set gives what a map from `remain` to fate gave: the count, what was seen,
+    /// and the loss of the highest `remain`, whatever the order and the fates.
+    #[test]
+    fn fates_agree_with_a_map_of_every_frame() {
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let whys = [
+            "dropped on the bus",
+            "sender bus-off",
+            "receiver off the bus",
+        ];
+        for _ in 0..2000 {
+            let mut fates = Fates::default();
+            let mut map: BTreeMap<u8, Option<&'static str>> = BTreeMap::new();
+            for _ in 0..(next() % 300) {
+                let remain = (next() % 256) as u8;
+                let fate = (next() % 5 == 0).then(|| whys[(next() % 3) as usize]);
+                assert_eq!(fates.contains(remain), map.contains_key(&remain));
+                fates.insert(remain, fate);
+                map.entry(remain).or_insert(fate);
+            }
+            assert_eq!(fates.len(), map.len());
+            assert_eq!(
+                fates.first_lost(),
+                map.values().rev().find_map(|f| *f),
+                "{map:?}"
+            );
+        }
     }
 
     #[test]
