@@ -83,7 +83,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::mcap_file::McapFile;
-use crate::protobuf::Nested;
+use crate::protobuf::{Nested, Packed};
 use anyhow::Context as _;
 use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CanFrame, CfpId, FrameType};
@@ -266,23 +266,23 @@ pub struct BeginFields {
 /// after the other (the fragments of a CSP packet, usually), each with its own time.
 /// Frame `i` is `can_id[i]`, `dlc[i]` bytes of `data` after those of the frames before it,
 /// and ended `end_ns[i]` after `t_ns`.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, foxglove::Encode)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize, foxglove::Encode)]
 pub struct CanFramesMsg {
     /// Simulated ns since the start of the run when the first frame's last bit arrived.
     pub t_ns: u64,
     /// Sending endpoint.
     pub from: String,
     /// 29-bit extended CAN ids (CFP: src, dst, BEGIN/MORE, remain, ident).
-    pub can_id: Vec<u32>,
+    pub can_id: Packed<u32>,
     /// Data lengths.
-    pub dlc: Vec<u8>,
+    pub dlc: Packed<u8>,
     /// When each frame ended, ns after `t_ns`.
-    pub end_ns: Vec<u32>,
+    pub end_ns: Packed<u32>,
     /// The frames' data bytes, one after the other.
     #[serde(with = "crate::protobuf::hex_bytes")]
     pub data: bytes::Bytes,
     /// Indices of the frames an impairment dropped (empty: none).
-    pub dropped: Vec<u32>,
+    pub dropped: Packed<u32>,
 }
 
 impl CanFramesMsg {
@@ -1130,6 +1130,8 @@ pub struct EventEncoder {
     path: String,
     /// The truth's ECI -> ECEF rotation.
     ecef: EcefFromEci,
+    /// Trains handed out, kept for their vectors.
+    spare_trains: Vec<Train>,
 }
 
 impl std::fmt::Debug for EventEncoder {
@@ -1147,7 +1149,7 @@ pub const TRAIN_MAX_FRAMES: usize = 64;
 pub const TRAIN_MAX_SPAN_NS: u64 = 100_000_000;
 
 /// A train of CAN frames being gathered: consecutive frames one endpoint sent on one bus.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 struct Train {
     t0: SimTime,
     msg: CanFramesMsg,
@@ -1620,6 +1622,7 @@ impl EventEncoder {
             spare_fields: Vec::new(),
             path: String::new(),
             ecef: EcefFromEci::default(),
+            spare_trains: Vec::new(),
         }
     }
 
@@ -1654,16 +1657,28 @@ impl EventEncoder {
         let Some(mut train) = train.take() else {
             return Ok(());
         };
-        train.msg.data = bytes::Bytes::from(train.data);
+        train.msg.data = bytes::Bytes::copy_from_slice(&train.data);
         let chan = (ChannelKind::Can, &**bus);
-        emit_msg(
+        let sent = emit_msg(
             &mut self.buf,
             self.base_ns,
             chan,
             train.t0,
             &train.msg,
             emit,
-        )
+        );
+        // Its vectors serve the next train (one spare per bus at most).
+        for v in [
+            &mut train.msg.can_id,
+            &mut train.msg.end_ns,
+            &mut train.msg.dropped,
+        ] {
+            v.clear();
+        }
+        train.msg.dlc.clear();
+        train.data.clear();
+        self.spare_trains.push(train);
+        sent
     }
 
     /// Add a frame to its bus's train: the same sender within [`TRAIN_MAX_FRAMES`] and
@@ -1688,19 +1703,11 @@ impl EventEncoder {
         });
         if !continues {
             self.flush_train(i, emit)?;
-            self.trains[i].1 = Some(Train {
-                t0: m.t,
-                msg: CanFramesMsg {
-                    t_ns: m.t.as_ns(),
-                    from: m.from.to_string(),
-                    can_id: Vec::new(),
-                    dlc: Vec::new(),
-                    end_ns: Vec::new(),
-                    data: bytes::Bytes::new(),
-                    dropped: Vec::new(),
-                },
-                data: Vec::new(),
-            });
+            let mut train = self.spare_trains.pop().unwrap_or_default();
+            train.t0 = m.t;
+            train.msg.t_ns = m.t.as_ns();
+            set_str(&mut train.msg.from, &m.from);
+            self.trains[i].1 = Some(train);
         }
         if let Some(tr) = self.trains[i].1.as_mut() {
             if m.dropped {
@@ -2598,7 +2605,7 @@ mod tests {
             .collect();
         assert_eq!(trains.len(), 2, "FC's two frames, then EPS's");
         assert_eq!(trains[0].from, "FC");
-        assert_eq!(trains[0].dropped, [1]);
+        assert_eq!(trains[0].dropped.0, [1]);
         let frames: Vec<_> = trains[0].frames().collect();
         assert_eq!(
             frames,
