@@ -573,8 +573,9 @@ impl<T: foxglove::Encode + foxglove::protobuf::ProtobufField> foxglove::protobuf
         foxglove::protobuf::encode_varint(len as u64, buf);
         let room = buf.remaining_mut();
         // A derived message's `encode` fails only when `buf` has less room than the
-        // message, as `BufMut::put_slice` would panic for the derive's own `write`.
-        let _ = foxglove::Encode::encode(&self.0, buf);
+        // message; the derive's own `write` panics there too (`BufMut::put_slice`). A
+        // length is never left without its message.
+        foxglove::Encode::encode(&self.0, buf).expect("a buffer with room for the message");
         debug_assert_eq!(
             room - buf.remaining_mut(),
             len,

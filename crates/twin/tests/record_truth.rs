@@ -327,23 +327,22 @@ fn location_is_the_geodetic_position_of_the_ecef_point() {
     assert_eq!(fix.frame_id, "earth");
     assert_eq!(fix.position_covariance_type, 0);
     assert_eq!(fix.position_covariance, [0.0; 9]);
-    // The recorder takes precession and nutation once per UTC minute: within 5 mm, which is
-    // 5e-8 deg of latitude or longitude here (the samples are built with the exact rotation).
-    assert!(close(fix.latitude, LAT_DEG, 5e-8), "{fix:?}");
-    assert!(close(fix.longitude, LON_DEG, 5e-8), "{fix:?}");
-    assert!(close(fix.altitude, ALT_M, 5e-3), "{fix:?}");
-    // The same in /fc/truth/state, with the ECEF position.
+    assert!(close(fix.latitude, LAT_DEG, 1e-9), "{fix:?}");
+    assert!(close(fix.longitude, LON_DEG, 1e-9), "{fix:?}");
+    assert!(close(fix.altitude, ALT_M, 1e-3), "{fix:?}");
+    // The same in /fc/truth/state, with the ECEF position (precession and nutation
+    // interpolated within the minute: within 1e-6 m).
     let states = on(f.path(), "/fc/truth/state");
     let s: TruthStateMsg = decode(&states[1]);
-    assert!(close(s.lat_deg.unwrap(), LAT_DEG, 5e-8));
-    assert!(close(s.lon_deg.unwrap(), LON_DEG, 5e-8));
-    assert!(close(s.alt_m.unwrap(), ALT_M, 5e-3));
+    assert!(close(s.lat_deg.unwrap(), LAT_DEG, 1e-9));
+    assert!(close(s.lon_deg.unwrap(), LON_DEG, 1e-9));
+    assert!(close(s.alt_m.unwrap(), ALT_M, 1e-3));
     let want = Geodetic::from_deg(LAT_DEG, LON_DEG, ALT_M).to_ecef_m();
     let off_m = (0..3)
         .map(|i| (s.r_ecef_m[i] - want[i]).powi(2))
         .sum::<f64>()
         .sqrt();
-    assert!(off_m < 0.005, "{off_m} m: {s:?}");
+    assert!(off_m < 2e-6, "{off_m} m: {s:?}");
     // Sample 1 (7000 km on J2000 +X) is near the equator (the equator of date has moved by
     // precession since J2000, about 0.15 deg in 2026) and 621.863 km up.
     let first: LocationFixMsg = decode(&fixes[0]);
