@@ -2621,6 +2621,10 @@ mod tests {
         );
         assert_eq!(trains[1].from, "EPS");
         assert_eq!(trains[1].t_ns, 3_000_200_000);
+        // The second train reuses the first one's vectors: nothing of the first is left.
+        assert!(trains[1].dropped.is_empty());
+        let frames: Vec<_> = trains[1].frames().collect();
+        assert_eq!(frames, [(3_000_200_000, 0x0100_0002, &[2u8; 8][..], false)]);
     }
 
     /// The frames of a train, one `/can/main/frames` message each, in the order handed out,
