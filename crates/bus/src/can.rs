@@ -326,6 +326,8 @@ impl BusStats {
 #[derive(Debug)]
 struct Port {
     stats: PortStats,
+    /// `stats.name`, shared: each traced frame names its sender without an allocation.
+    name: Arc<str>,
     addrs: BTreeSet<u8>,
     /// The addresses given at attach (never taken out by an alias).
     own: BTreeSet<u8>,
@@ -517,6 +519,7 @@ impl CanBus {
                 name: name.to_owned(),
                 ..Default::default()
             },
+            name: name.into(),
             addrs: addrs.iter().copied().collect(),
             own: addrs.iter().copied().collect(),
             promiscuous,
@@ -1214,8 +1217,7 @@ impl State {
                 let sender = self
                     .ports
                     .get(from)
-                    .map_or("?", |p| p.stats.name.as_str())
-                    .into();
+                    .map_or_else(|| "?".into(), |p| p.name.clone());
                 // Addressed to endpoints of which none can take it: lost at the receiver.
                 let addressed = self.ports.iter().enumerate().filter(|&(i, p)| {
                     i != from && p.addrs.contains(&dst) && claimed_by.is_none_or(|c| c == i)

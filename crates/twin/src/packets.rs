@@ -61,7 +61,11 @@ impl PacketTap {
     /// The reassembler of CAN bus `bus`, created on first use. It keys partial packets by
     /// src, dst and ident like libcsp and accepts whatever length CFP can carry.
     fn reassembler(&mut self, bus: &Arc<str>) -> &mut Reassembler {
-        let i = match self.reassemblers.iter().position(|(b, _)| b == bus) {
+        let i = match self
+            .reassemblers
+            .iter()
+            .position(|(b, _)| Arc::ptr_eq(b, bus) || b == bus)
+        {
             Some(i) => i,
             None => {
                 let cfg = ReassemblerConfig {

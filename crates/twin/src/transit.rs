@@ -95,10 +95,38 @@ impl Fates {
 /// (a partial packet times out 10 s after its last frame).
 const RECENT: usize = 1024;
 
+/// A bus's name as a key: ordered as the name, and equal at once when it is the same
+/// allocation (the bus hands out one `Arc` for all its frames), so that a frame's lookups
+/// do not compare the names' bytes.
+#[derive(Debug, Clone, Eq)]
+struct BusName(Arc<str>);
+
+impl PartialEq for BusName {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0) || self.0 == other.0
+    }
+}
+
+impl Ord for BusName {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        if Arc::ptr_eq(&self.0, &other.0) {
+            std::cmp::Ordering::Equal
+        } else {
+            self.0.cmp(&other.0)
+        }
+    }
+}
+
+impl PartialOrd for BusName {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
 /// The packets in progress on every CAN bus.
 #[derive(Debug, Clone, Default)]
 pub struct Transit {
-    partial: BTreeMap<(u32, Arc<str>), Partial>,
+    partial: BTreeMap<(u32, BusName), Partial>,
     /// The last packets completed: key, what they were, and whether already reported.
     recent: VecDeque<(u32, LostPacket, bool)>,
     /// Packets dropped by their receiver before their BEGIN's crossing was seen (by CFP
@@ -118,7 +146,7 @@ impl Transit {
             _ => return None,
         };
         let cfp = CfpId::from_can_id(frame.id);
-        let key = (frame.id & CFP_ID_CONN_MASK, ev.medium.clone());
+        let key = (frame.id & CFP_ID_CONN_MASK, BusName(ev.medium.clone()));
         let begin = match cfp.kind {
             FrameType::Begin => {
                 let (header, len) = csp::cfp::begin_fields(frame)?;
@@ -173,7 +201,7 @@ impl Transit {
         let reason = p.fates.first_lost().or(p.receiver);
         let packet = LostPacket {
             t: ev.t,
-            bus: key.1.clone(),
+            bus: key.1.0.clone(),
             header,
             data_len,
             head,
@@ -285,6 +313,37 @@ mod tests {
         for x in &f {
             assert_eq!(tr.observe(&ev(5, TraceFrame::Can(*x), false)), None);
         }
+        assert!(tr.partial.is_empty());
+    }
+
+    /// The same CFP key on two buses is two packets, whether a bus's frames share one name
+    /// allocation (as a bus's do) or each brings its own.
+    #[test]
+    fn the_same_key_on_two_buses_is_two_packets() {
+        let mut tr = Transit::default();
+        let (header, f) = frames(30, 7);
+        let main: Arc<str> = "main".into();
+        let on = |bus: &Arc<str>, x: &CanFrame, dropped: bool| TraceEvent {
+            medium: bus.clone(),
+            ..ev(1, TraceFrame::Can(*x), dropped)
+        };
+        let mut out = Vec::new();
+        for (i, x) in f.iter().enumerate() {
+            out.extend(tr.observe(&on(&main, x, false)));
+            // `ev` names the payload bus with a new allocation each time.
+            out.extend(tr.observe(&ev(1, TraceFrame::Can(*x), i == 2)));
+        }
+        assert_eq!(
+            out,
+            [LostPacket {
+                t: SimTime::from_secs(1),
+                bus: "payload".into(),
+                header,
+                data_len: 30,
+                head: [0, 1],
+                reason: "dropped on the bus",
+            }]
+        );
         assert!(tr.partial.is_empty());
     }
 
