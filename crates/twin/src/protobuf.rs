@@ -610,8 +610,19 @@ impl<T: foxglove::Encode + foxglove::protobuf::ProtobufField> foxglove::protobuf
 }
 
 /// A number the protobuf wire can pack: a varint or a fixed-width scalar.
-pub trait PackedScalar: foxglove::protobuf::ProtobufField {}
-impl PackedScalar for u8 {}
+pub trait PackedScalar: foxglove::protobuf::ProtobufField + Sized {
+    /// The elements' packed bytes as they are in memory, when that is what the wire holds
+    /// (bytes below 128 are one-byte varints of themselves): one copy, where the elements
+    /// one by one cost a call each.
+    fn as_wire(_elements: &[Self]) -> Option<&[u8]> {
+        None
+    }
+}
+impl PackedScalar for u8 {
+    fn as_wire(elements: &[u8]) -> Option<&[u8]> {
+        elements.iter().all(|&b| b < 0x80).then_some(elements)
+    }
+}
 impl PackedScalar for u16 {}
 impl PackedScalar for u32 {}
 impl PackedScalar for u64 {}
@@ -675,6 +686,10 @@ impl<T: PackedScalar> foxglove::protobuf::ProtobufField for Packed<T> {
     /// The length and the elements (without a tag).
     fn write(&self, buf: &mut impl bytes::BufMut) {
         foxglove::protobuf::encode_varint(self.body_len() as u64, buf);
+        if let Some(bytes) = T::as_wire(&self.0) {
+            buf.put_slice(bytes);
+            return;
+        }
         for v in &self.0 {
             v.write(buf);
         }
@@ -882,6 +897,23 @@ mod tests {
             } else {
                 assert!(eb.len() < ea.len(), "{} >= {}", eb.len(), ea.len());
             }
+        }
+    }
+
+    /// Packed bytes below 128 are copied as they are; a byte from 128 up takes two, as the
+    /// crate writes it.
+    #[test]
+    fn packed_bytes_are_their_varints() {
+        use foxglove::protobuf::ProtobufField;
+        for v in [vec![8u8, 0, 3, 127], vec![1, 200, 127, 128, 255], vec![]] {
+            let mut want = Vec::new();
+            for b in &v {
+                b.write(&mut want);
+            }
+            let mut got = Vec::new();
+            Packed(v.clone()).write(&mut got);
+            assert_eq!(got[0] as usize, want.len(), "{v:?}");
+            assert_eq!(&got[1..], &want[..], "{v:?}");
         }
     }
 

@@ -1154,6 +1154,9 @@ struct Train {
     t0: SimTime,
     msg: CanFramesMsg,
     data: Vec<u8>,
+    /// The sender's name as its frames carry it (`msg.from`'s text): a bus hands out one
+    /// allocation per sender, so a frame continues the train without comparing the bytes.
+    from: Option<Arc<str>>,
 }
 
 /// Where [`EventEncoder::encode`] hands its messages.
@@ -1677,7 +1680,11 @@ impl EventEncoder {
         f: &CanFrame,
         emit: &mut Emit<'_>,
     ) -> anyhow::Result<()> {
-        let i = match self.trains.iter().position(|(b, _)| *b == m.medium) {
+        let i = match self
+            .trains
+            .iter()
+            .position(|(b, _)| Arc::ptr_eq(b, &m.medium) || *b == m.medium)
+        {
             Some(i) => i,
             None => {
                 self.trains.push((m.medium.clone(), None));
@@ -1685,7 +1692,9 @@ impl EventEncoder {
             }
         };
         let continues = self.trains[i].1.as_ref().is_some_and(|tr| {
-            *tr.msg.from == *m.from
+            tr.from
+                .as_ref()
+                .is_some_and(|f| Arc::ptr_eq(f, &m.from) || *f == m.from)
                 && tr.msg.can_id.len() < TRAIN_MAX_FRAMES
                 && m.t.as_ns().saturating_sub(tr.t0.as_ns()) < TRAIN_MAX_SPAN_NS
         });
@@ -1695,6 +1704,7 @@ impl EventEncoder {
             train.t0 = m.t;
             train.msg.t_ns = m.t.as_ns();
             set_str(&mut train.msg.from, &m.from);
+            train.from = Some(m.from.clone());
             self.trains[i].1 = Some(train);
         }
         if let Some(tr) = self.trains[i].1.as_mut() {
