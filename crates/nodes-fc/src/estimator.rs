@@ -354,11 +354,12 @@ impl Mekf {
         let q12 = -su2 * dt_s * dt_s / 2.0;
         let q22 = su2 * dt_s;
         let qd = block_noise(q11, q12, q22);
-        let mut phi = Matrix6::identity();
-        phi.fixed_view_mut::<3, 3>(0, 0).copy_from(&phi11);
-        phi.fixed_view_mut::<3, 3>(0, 3).copy_from(&phi12);
         let q_new = q * UnitQuaternion::from_scaled_axis(w * dt_s);
-        if self.commit(q_new, self.bias_rad_s, phi * p * phi.transpose() + qd) {
+        if self.commit(
+            q_new,
+            self.bias_rad_s,
+            transition_cov(&phi11, &phi12, &p) + qd,
+        ) {
             // Exponential average; its steady noise variance is sv^2 a / (2 - a).
             let tau = self.cfg.gyro_rate_smoothing_s;
             let a = if tau > dt_s { dt_s / tau } else { 1.0 };
@@ -425,12 +426,9 @@ impl Mekf {
         let q12 = sa2 * dt_s * dt_s / 2.0;
         let q22 = sa2 * dt_s;
         let qd = block_noise(q11, q12, q22);
-        let mut phi = Matrix6::identity();
-        phi.fixed_view_mut::<3, 3>(0, 0).copy_from(&phi11);
-        phi.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-phi12));
         let q_new = q * UnitQuaternion::from_scaled_axis(w_mid * dt_s);
         let w_new = w0 + a * dt_s;
-        let p_new = phi * p * phi.transpose() + qd;
+        let p_new = transition_cov(&phi11, &(-phi12), &p) + qd;
         if self.commit_rate(q_new, w_new, p_new) {
             self.gyroless_s += dt_s;
         }
@@ -463,7 +461,7 @@ impl Mekf {
         let p_ht: SMatrix<f64, 6, 3> = self.p.fixed_view::<6, 3>(0, 0) * h.transpose();
         let s = h * p_ht.fixed_view::<3, 3>(0, 0) + Matrix3::from_diagonal_element(r_var);
         let s = (s + s.transpose()) * 0.5;
-        let Some(s_inv) = s.cholesky().map(|c| c.inverse()) else {
+        let Some(s_inv) = spd_inverse3(&s) else {
             return false;
         };
         let d2 = y.dot(&(s_inv * y));
@@ -477,11 +475,12 @@ impl Mekf {
         }
         let k: SMatrix<f64, 6, 3> = p_ht * s_inv;
         let dx = k * y;
-        let mut i_kh = Matrix6::identity();
+        // Joseph form (I - KH) P (I - KH)^T + K R K^T, with KH = [kh 0] (H's bias columns
+        // are zero): (I - KH) P = P - kh P[0..3, :], then A (I - KH)^T = A - A[:, 0..3] kh^T,
+        // a quarter of the multiplications of the two full 6x6 products.
         let kh: SMatrix<f64, 6, 3> = k * h;
-        let mut left = i_kh.fixed_view_mut::<6, 3>(0, 0);
-        left -= kh;
-        let p_new = i_kh * self.p * i_kh.transpose() + k * k.transpose() * r_var;
+        let a: Matrix6<f64> = self.p - kh * self.p.fixed_rows::<3>(0);
+        let p_new = a - a.fixed_columns::<3>(0) * kh.transpose() + k * k.transpose() * r_var;
         let dtheta = Vector3::new(dx[0], dx[1], dx[2]);
         let d2nd = Vector3::new(dx[3], dx[4], dx[5]);
         let q_new = q * UnitQuaternion::from_scaled_axis(dtheta);
@@ -615,6 +614,44 @@ impl Mekf {
     }
 }
 
+/// `Phi P Phi^T` for the transition `Phi = [[a, b], [0, I]]` (3x3 blocks), block by block:
+/// with `M = [a b] P`, the top row is `M1 = a P11 + b P21`, `M2 = a P12 + b P22`, and the
+/// result `[[M1 a^T + M2 b^T, M2], [P21 a^T + P22 b^T, P22]]`: half the multiplications of
+/// the two full 6x6 products.
+fn transition_cov(a: &Matrix3<f64>, b: &Matrix3<f64>, p: &Matrix6<f64>) -> Matrix6<f64> {
+    let p11 = p.fixed_view::<3, 3>(0, 0);
+    let p12 = p.fixed_view::<3, 3>(0, 3);
+    let p21 = p.fixed_view::<3, 3>(3, 0);
+    let p22 = p.fixed_view::<3, 3>(3, 3);
+    let m1: Matrix3<f64> = a * p11 + b * p21;
+    let m2: Matrix3<f64> = a * p12 + b * p22;
+    let mut out = Matrix6::zeros();
+    out.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&(m1 * a.transpose() + m2 * b.transpose()));
+    out.fixed_view_mut::<3, 3>(0, 3).copy_from(&m2);
+    out.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&(p21 * a.transpose() + p22 * b.transpose()));
+    out.fixed_view_mut::<3, 3>(3, 3).copy_from(&p22);
+    out
+}
+
+/// The inverse of a symmetric 3x3 matrix by its cofactors, `None` unless it is positive
+/// definite (Sylvester's criterion: the leading minors positive) with a finite inverse: what
+/// a Cholesky decomposition and its inverse give, without the decomposition.
+fn spd_inverse3(s: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let (a, b, c) = (s[(0, 0)], s[(0, 1)], s[(0, 2)]);
+    let (d, e, f) = (s[(1, 1)], s[(1, 2)], s[(2, 2)]);
+    let minor2 = a * d - b * b;
+    let (c00, c01, c02) = (d * f - e * e, c * e - b * f, b * e - c * d);
+    let det = a * c00 + b * c01 + c * c02;
+    if !(a > 0.0 && minor2 > 0.0 && det > 0.0) {
+        return None;
+    }
+    let (c11, c12) = (a * f - c * c, b * c - a * e);
+    let inv = Matrix3::new(c00, c01, c02, c01, c11, c12, c02, c12, minor2) / det;
+    inv.iter().all(|x| x.is_finite()).then_some(inv)
+}
+
 /// The 6x6 discrete process noise with the same 3x3 blocks on each axis: `q11 I` (attitude),
 /// `q12 I` (cross terms, both off-diagonal blocks) and `q22 I` (second state).
 fn block_noise(q11: f64, q12: f64, q22: f64) -> Matrix6<f64> {
@@ -719,6 +756,64 @@ pub fn triad(
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    /// Numbers uniform in [-0.5, 0.5) from `seed` (xorshift64).
+    fn uniform(mut x: u64) -> impl FnMut() -> f64 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
+    /// The block product is the full `Phi P Phi^T` (to 1e-13 relative), symmetric P or not.
+    #[test]
+    fn the_block_transition_is_the_full_product() {
+        let mut next = uniform(0x9E37_79B9_7F4A_7C15);
+        for _ in 0..500 {
+            let a = Matrix3::from_fn(|_, _| next());
+            let b = Matrix3::from_fn(|_, _| next());
+            let p = Matrix6::from_fn(|_, _| next());
+            let mut phi = Matrix6::identity();
+            phi.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
+            phi.fixed_view_mut::<3, 3>(0, 3).copy_from(&b);
+            let want = phi * p * phi.transpose();
+            let got = transition_cov(&a, &b, &p);
+            assert!((got - want).norm() <= 1e-13 * want.norm(), "{want} {got}");
+        }
+    }
+
+    /// The cofactor inverse agrees with Cholesky's for positive definite matrices (to 1e-12
+    /// relative) and refuses what Cholesky refuses: indefinite, semidefinite, non-finite.
+    #[test]
+    fn the_spd_inverse_is_choleskys_without_the_decomposition() {
+        let mut next = uniform(0x2545_F491_4F6C_DD1D);
+        for k in 0..2000 {
+            let m = Matrix3::from_fn(|_, _| next());
+            // Positive definite, with condition numbers up to about 1e6.
+            let scale = 10f64.powi(k % 7 - 3);
+            let s = (m * m.transpose() + Matrix3::identity() * 1e-6) * scale;
+            let want = s.cholesky().unwrap().inverse();
+            let got = spd_inverse3(&s).unwrap();
+            assert!((got - want).norm() <= 1e-9 * want.norm(), "{s}");
+        }
+        let refused = [
+            Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+            Matrix3::new(1.0, 1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+            Matrix3::from_diagonal_element(-1.0),
+            Matrix3::zeros(),
+            Matrix3::from_diagonal_element(f64::NAN),
+            Matrix3::new(1.0, 0.0, 0.0, 0.0, f64::INFINITY, 0.0, 0.0, 0.0, 1.0),
+        ];
+        for s in refused {
+            assert!(
+                s.cholesky().is_none() || !s.iter().all(|x| x.is_finite()),
+                "{s}"
+            );
+            assert_eq!(spd_inverse3(&s), None, "{s}");
+        }
+    }
 
     /// Phi from many tiny first-order steps, for comparison with the closed form.
     fn phi_numeric(w: &Vector3<f64>, dt: f64) -> Matrix6<f64> {
