@@ -587,10 +587,12 @@ impl Mekf {
     fn commit(&mut self, q: UnitQuaternion<f64>, b: Vector3<f64>, p: Matrix6<f64>) -> bool {
         let q = UnitQuaternion::new_normalize(q.into_inner());
         let p = (p + p.transpose()) * 0.5;
-        let sound = q.coords.iter().all(|x| x.is_finite())
-            && b.iter().all(|x| x.is_finite())
-            && p.iter().all(|x| x.is_finite())
-            && p.diagonal().iter().all(|&x| x >= 0.0);
+        // Over the storage as slices: nalgebra's matrix iterator was a tenth of the FC's
+        // estimation time here.
+        let sound = q.coords.as_slice().iter().all(|x| x.is_finite())
+            && b.as_slice().iter().all(|x| x.is_finite())
+            && p.as_slice().iter().all(|x| x.is_finite())
+            && (0..6).all(|i| p[(i, i)] >= 0.0);
         if sound {
             self.q_eci_from_body = Some(q);
             self.bias_rad_s = b;
@@ -649,7 +651,7 @@ fn spd_inverse3(s: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     }
     let (c11, c12) = (a * f - c * c, b * c - a * e);
     let inv = Matrix3::new(c00, c01, c02, c01, c11, c12, c02, c12, minor2) / det;
-    inv.iter().all(|x| x.is_finite()).then_some(inv)
+    inv.as_slice().iter().all(|x| x.is_finite()).then_some(inv)
 }
 
 /// The 6x6 discrete process noise with the same 3x3 blocks on each axis: `q11 I` (attitude),
