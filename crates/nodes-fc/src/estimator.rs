@@ -475,12 +475,7 @@ impl Mekf {
         }
         let k: SMatrix<f64, 6, 3> = p_ht * s_inv;
         let dx = k * y;
-        // Joseph form (I - KH) P (I - KH)^T + K R K^T, with KH = [kh 0] (H's bias columns
-        // are zero): (I - KH) P = P - kh P[0..3, :], then A (I - KH)^T = A - A[:, 0..3] kh^T,
-        // a quarter of the multiplications of the two full 6x6 products.
-        let kh: SMatrix<f64, 6, 3> = k * h;
-        let a: Matrix6<f64> = self.p - kh * self.p.fixed_rows::<3>(0);
-        let p_new = a - a.fixed_columns::<3>(0) * kh.transpose() + k * k.transpose() * r_var;
+        let p_new = joseph(&self.p, &k, &(k * h), r_var);
         let dtheta = Vector3::new(dx[0], dx[1], dx[2]);
         let d2nd = Vector3::new(dx[3], dx[4], dx[5]);
         let q_new = q * UnitQuaternion::from_scaled_axis(dtheta);
@@ -614,6 +609,20 @@ impl Mekf {
         }
         ok
     }
+}
+
+/// The Joseph form `(I - KH) P (I - KH)^T + K R K^T` of an update whose H has zero bias
+/// columns (`KH = [kh 0]`, `kh = K h`) and `R = r_var I`, block by block:
+/// `(I - KH) P = P - kh P[0..3, :]`, then `A (I - KH)^T = A - A[:, 0..3] kh^T`: half the
+/// multiplications of the two full 6x6 products.
+fn joseph(
+    p: &Matrix6<f64>,
+    k: &SMatrix<f64, 6, 3>,
+    kh: &SMatrix<f64, 6, 3>,
+    r_var: f64,
+) -> Matrix6<f64> {
+    let a: Matrix6<f64> = p - kh * p.fixed_rows::<3>(0);
+    a - a.fixed_columns::<3>(0) * kh.transpose() + k * k.transpose() * r_var
 }
 
 /// `Phi P Phi^T` for the transition `Phi = [[a, b], [0, I]]` (3x3 blocks), block by block:
@@ -786,8 +795,28 @@ mod tests {
         }
     }
 
-    /// The cofactor inverse agrees with Cholesky's for positive definite matrices (to 1e-12
-    /// relative) and refuses what Cholesky refuses: indefinite, semidefinite, non-finite.
+    /// The block Joseph form is the full one (to 1e-13 relative) for any gain, not only
+    /// the optimal one (for which most of its terms cancel).
+    #[test]
+    fn the_block_joseph_form_is_the_full_one() {
+        let mut next = uniform(0x5851_F42D_4C95_7F2D);
+        for _ in 0..500 {
+            let p = Matrix6::from_fn(|_, _| next());
+            let k = SMatrix::<f64, 6, 3>::from_fn(|_, _| next());
+            let h = Matrix3::from_fn(|_, _| next());
+            let r_var = next() + 1.0;
+            let mut h_full = SMatrix::<f64, 3, 6>::zeros();
+            h_full.fixed_view_mut::<3, 3>(0, 0).copy_from(&h);
+            let i_kh = Matrix6::identity() - k * h_full;
+            let want = i_kh * p * i_kh.transpose() + k * k.transpose() * r_var;
+            let got = joseph(&p, &k, &(k * h), r_var);
+            assert!((got - want).norm() <= 1e-13 * want.norm(), "{want} {got}");
+        }
+    }
+
+    /// The cofactor inverse agrees with Cholesky's for positive definite matrices (to 1e-9
+    /// relative) and refuses what Cholesky refuses: indefinite (with a positive determinant
+    /// too), semidefinite, non-finite.
     #[test]
     fn the_spd_inverse_is_choleskys_without_the_decomposition() {
         let mut next = uniform(0x2545_F491_4F6C_DD1D);
@@ -804,6 +833,9 @@ mod tests {
             Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0),
             Matrix3::new(1.0, 1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0),
             Matrix3::from_diagonal_element(-1.0),
+            // Indefinite with det > 0: the leading minors refuse them.
+            Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0)),
+            Matrix3::from_diagonal(&Vector3::new(-1.0, -1.0, 1.0)),
             Matrix3::zeros(),
             Matrix3::from_diagonal_element(f64::NAN),
             Matrix3::new(1.0, 0.0, 0.0, 0.0, f64::INFINITY, 0.0, 0.0, 0.0, 1.0),

@@ -307,7 +307,8 @@ pub fn a_j2000_from_teme_tt(jd_tt: JulianDate) -> Matrix3<f64> {
 /// A(J2000 <- TEME) for a stream of instants, interpolated linearly between its values at
 /// the two ends of the UTC minute each instant falls in. Precession and nutation turn it
 /// by about 1e-9 rad in a minute, smoothly (the shortest nutation periods are days), so
-/// the chord is within 1e-6 m of the exact rotation at 7000 km (a test), and the IAU-80
+/// the chord is within 1e-6 m of the exact rotation at 7000 km (a test; in the minute that
+/// ends at a leap second, whose end takes the new TT - UTC, about 5e-5 m), and the IAU-80
 /// nutation series runs once a minute (twice for a jump to another minute) instead of at
 /// every instant. For a once-a-second sampler; the FC's own environment steps its own
 /// window.

@@ -905,7 +905,12 @@ mod tests {
     #[test]
     fn packed_bytes_are_their_varints() {
         use foxglove::protobuf::ProtobufField;
-        for v in [vec![8u8, 0, 3, 127], vec![1, 200, 127, 128, 255], vec![]] {
+        for v in [
+            vec![8u8, 0, 3, 127],
+            vec![0, 128],
+            vec![1, 200, 127, 128, 255],
+            vec![],
+        ] {
             let mut want = Vec::new();
             for b in &v {
                 b.write(&mut want);
