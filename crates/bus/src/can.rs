@@ -849,6 +849,11 @@ impl State {
 
     /// Drop what bus-off controllers have queued up to `t`.
     fn purge_bus_off(&mut self, t: SimTime) {
+        // A port is bus-off exactly while it is in `bus_off_since` (`update_state` puts it
+        // there, `recessive` takes it out as it recovers).
+        if self.bus_off_since.is_empty() {
+            return;
+        }
         for p in self
             .ports
             .iter_mut()
@@ -885,7 +890,9 @@ impl State {
                     babble: None,
                 })
             });
-        let babblers = self.can_faults.iter().filter_map(|(&fid, f)| {
+        // No walk of an empty map (this runs for every frame).
+        let faults = (!self.can_faults.is_empty()).then(|| self.can_faults.iter());
+        let babblers = faults.into_iter().flatten().filter_map(|(&fid, f)| {
             let CanFault::Babble {
                 node,
                 can_id,
@@ -1003,24 +1010,27 @@ impl State {
             }
             // Bit errors: the chance that at least one of the frame's bits is wrong.
             let name = self.ports[winner].stats.name.as_str();
-            let survive: f64 = self
-                .can_faults
-                .values()
-                .map(|f| match f {
-                    CanFault::BitErrors {
-                        ber,
-                        node,
-                        from,
-                        until,
-                    } if start >= *from
-                        && until.is_none_or(|u| start < u)
-                        && node.as_deref().is_none_or(|n| n == name) =>
-                    {
-                        (1.0 - ber.clamp(0.0, 1.0)).powi(bits as i32)
-                    }
-                    _ => 1.0,
-                })
-                .product();
+            let survive: f64 = if self.can_faults.is_empty() {
+                1.0
+            } else {
+                self.can_faults
+                    .values()
+                    .map(|f| match f {
+                        CanFault::BitErrors {
+                            ber,
+                            node,
+                            from,
+                            until,
+                        } if start >= *from
+                            && until.is_none_or(|u| start < u)
+                            && node.as_deref().is_none_or(|n| n == name) =>
+                        {
+                            (1.0 - ber.clamp(0.0, 1.0)).powi(bits as i32)
+                        }
+                        _ => 1.0,
+                    })
+                    .product()
+            };
             if survive < 1.0
                 && let Fate::Corrupt { bit } = self.rng.fate(&Impairments {
                     corrupt_prob: 1.0 - survive,

@@ -156,7 +156,7 @@ impl Sband {
         }
         self.queued_bytes += bytes.len() as u64;
         match self.queue.back_mut() {
-            Some(seg) if seg.slot == slot => seg.bytes.extend(bytes.iter().copied()),
+            Some(seg) if seg.slot == slot => seg.bytes.extend(bytes),
             _ => self.queue.push_back(Segment {
                 slot,
                 bytes: bytes.iter().copied().collect(),
@@ -205,7 +205,12 @@ impl Sband {
                 break;
             }
             let n = (max - bytes.len()).min(seg.bytes.len());
-            bytes.extend(seg.bytes.drain(..n));
+            // By slices (a byte at a time through `drain` was 1.5 % of a full day).
+            let (a, b) = seg.bytes.as_slices();
+            let from_a = n.min(a.len());
+            bytes.extend_from_slice(&a[..from_a]);
+            bytes.extend_from_slice(&b[..n - from_a]);
+            seg.bytes.drain(..n);
             if seg.bytes.is_empty() {
                 self.queue.pop_front();
             }
@@ -322,6 +327,41 @@ mod tests {
         assert!(!s.start_frame(SimTime::from_ms(15)), "one frame at a time");
         assert_eq!(s.complete(SimTime::from_ms(30)).unwrap().bytes.len(), 10);
         assert_eq!(s.total_pending_bytes(), 15);
+    }
+
+    #[test]
+    fn frames_carry_the_fifo_in_order_across_its_ring_buffers_wrap() {
+        // Pushes of 13 between frames of 10, with a frame cut and requeued now and then: the
+        // FIFO's ring buffer wraps, so frames are taken from both of its slices.
+        let mut s = small();
+        let mut sent = Vec::new();
+        let mut got = Vec::new();
+        let mut next = 0u8;
+        let mut wrapped = false;
+        for round in 0..200u32 {
+            let chunk: Vec<u8> = (0..13).map(|i| next.wrapping_add(i)).collect();
+            next = next.wrapping_add(13);
+            s.push(0, &chunk);
+            sent.extend_from_slice(&chunk);
+            wrapped |= s
+                .queue
+                .front()
+                .is_some_and(|g| !g.bytes.as_slices().1.is_empty());
+            if s.start_frame(SimTime::ZERO) && round % 13 == 5 {
+                s.set_on(false);
+                s.set_on(true);
+                assert!(s.start_frame(SimTime::ZERO));
+            }
+            if let Some(f) = s.complete(SimTime::MAX) {
+                assert!(f.bytes.len() <= 10);
+                got.extend(f.bytes);
+            }
+        }
+        while s.start_frame(SimTime::ZERO) {
+            got.extend(s.complete(SimTime::MAX).unwrap().bytes);
+        }
+        assert!(wrapped, "the test never took a frame across the wrap");
+        assert_eq!(got, sent);
     }
 
     #[test]
