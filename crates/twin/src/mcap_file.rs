@@ -9,6 +9,12 @@
 //! when it is full (one zstd call per chunk, its tables warm, the CRC in one pass), which
 //! measured a third less recording CPU on the full day (docs/recording.md, "Compression").
 //!
+//! A full chunk is compressed on a thread of its own while the next one fills: the run's
+//! thread writes it (and its message indexes) when the next chunk closes, or at the next
+//! record outside chunks, flush or finish. One chunk at most is under compression, in
+//! order, with the one zstd context: the file is the same bytes as compressed inline, and
+//! zstd's tenth of a recorded run's CPU is off the run's thread.
+//!
 //! Layout: magic, Header, Metadata and Attachment records (outside chunks), chunks holding
 //! each Schema and Channel record before its first use and the Message records, each chunk
 //! followed by one MessageIndex per channel in it (channel id order); then DataEnd (CRC of
@@ -19,6 +25,7 @@
 
 use std::collections::BTreeMap;
 use std::io::{self, Write};
+use std::sync::mpsc;
 
 /// MCAP's magic, at both ends of the file.
 const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
@@ -182,15 +189,18 @@ pub struct McapFile<W: Write> {
     /// CRC of the data section so far (magic included, as the spec and `mcap` count it).
     data_crc: crc32fast::Hasher,
     chunk_size: usize,
-    zstd: zstd::bulk::Compressor<'static>,
+    /// The thread compressing closed chunks.
+    compressor: ChunkCompressor,
+    /// The chunk under compression, to be written next.
+    pending: Option<PendingChunk>,
     /// The open chunk's records, uncompressed.
     chunk: Vec<u8>,
     /// The open chunk's message times, if it holds a message.
     chunk_ns: Option<(u64, u64)>,
-    /// The open chunk's message index entries (log time, offset in the chunk), by channel id.
-    index: Vec<Vec<(u64, u64)>>,
-    /// Scratch: a record built outside a chunk, and the compressed chunk.
-    scratch: Vec<u8>,
+    /// The open chunk's message index entries.
+    index: ChunkIndexEntries,
+    /// Buffers back from a written chunk, for the next one: its records' and its index's.
+    spare: Option<(Vec<u8>, ChunkIndexEntries)>,
     schemas: Vec<SchemaRec>,
     /// Schemas and channels not yet written to a chunk.
     schemas_due: Vec<usize>,
@@ -226,11 +236,12 @@ impl<W: Write> McapFile<W> {
             pos: 0,
             data_crc: crc32fast::Hasher::new(),
             chunk_size,
-            zstd: zstd::bulk::Compressor::new(level)?,
+            compressor: ChunkCompressor::start(level)?,
+            pending: None,
             chunk: Vec::with_capacity(chunk_size + 64 * 1024),
             chunk_ns: None,
             index: Vec::new(),
-            scratch: Vec::new(),
+            spare: None,
             schemas: Vec::new(),
             schemas_due: Vec::new(),
             channels_due: Vec::new(),
@@ -369,29 +380,70 @@ impl<W: Write> McapFile<W> {
         }
     }
 
-    /// Compress and write the open chunk and its message indexes (nothing if it is empty).
+    /// Hand the open chunk to the compressor (nothing if it is empty), after writing the
+    /// one compressed meanwhile.
     fn close_chunk(&mut self) -> io::Result<()> {
         if self.chunk.is_empty() {
             return Ok(());
         }
-        let uncompressed = self.chunk.len() as u64;
-        let crc = crc32fast::hash(&self.chunk);
-        let bound = zstd::zstd_safe::compress_bound(self.chunk.len());
-        let mut z = std::mem::take(&mut self.scratch);
-        z.clear();
-        z.reserve(bound);
-        if let Err(e) = self.zstd.compress_to_buffer(&self.chunk, &mut z) {
+        self.write_pending()?;
+        let (start_ns, end_ns) = self.chunk_ns.take().unwrap_or((0, 0));
+        let (chunk, index) = self
+            .spare
+            .take()
+            .unwrap_or_else(|| (Vec::with_capacity(self.chunk_size + 64 * 1024), Vec::new()));
+        let chunk = std::mem::replace(&mut self.chunk, chunk);
+        let index = std::mem::replace(&mut self.index, index);
+        let uncompressed = chunk.len() as u64;
+        if let Err(e) = self.compressor.give(chunk) {
             self.poisoned = true;
             return Err(e);
         }
-        let (start_ns, end_ns) = self.chunk_ns.unwrap_or((0, 0));
+        self.pending = Some(PendingChunk {
+            start_ns,
+            end_ns,
+            uncompressed,
+            index,
+        });
+        Ok(())
+    }
+
+    /// Close the open chunk and write every chunk closed (before a record outside chunks,
+    /// a flush or the end).
+    fn write_chunks(&mut self) -> io::Result<()> {
+        self.close_chunk()?;
+        self.write_pending()
+    }
+
+    /// Write the chunk under compression, once compressed, and its message indexes.
+    fn write_pending(&mut self) -> io::Result<()> {
+        let Some(p) = self.pending.take() else {
+            return Ok(());
+        };
+        let done = match self.compressor.take() {
+            Ok(d) => d,
+            Err(e) => {
+                self.poisoned = true;
+                return Err(e);
+            }
+        };
+        let Compressed {
+            mut chunk,
+            z,
+            crc,
+            result,
+        } = done;
+        if let Err(e) = result {
+            self.poisoned = true;
+            return Err(e);
+        }
         let offset = self.pos;
         let mut head = Vec::with_capacity(64);
         head.u8(op::CHUNK);
         head.u64(8 + 8 + 8 + 4 + 4 + 4 + 8 + z.len() as u64);
-        head.u64(start_ns);
-        head.u64(end_ns);
-        head.u64(uncompressed);
+        head.u64(p.start_ns);
+        head.u64(p.end_ns);
+        head.u64(p.uncompressed);
         head.u32(crc);
         head.str("zstd");
         head.u64(z.len() as u64);
@@ -399,13 +451,14 @@ impl<W: Write> McapFile<W> {
         self.data(&z)?;
         let length = self.pos - offset;
         let compressed = z.len() as u64;
-        self.scratch = z;
+        self.compressor.recycle(z);
 
         // One message index per channel with messages in this chunk, by channel id.
         let mut rec = Vec::new();
         let mut offsets = Vec::new();
         let index_start = self.pos;
-        for (id, entries) in self.index.iter().enumerate() {
+        let mut index = p.index;
+        for (id, entries) in index.iter().enumerate() {
             if entries.is_empty() {
                 continue;
             }
@@ -420,34 +473,34 @@ impl<W: Write> McapFile<W> {
             });
         }
         self.data(&rec)?;
-        for entries in &mut self.index {
+        for entries in &mut index {
             entries.clear();
         }
+        chunk.clear();
+        self.spare = Some((chunk, index));
         self.chunk_indexes.push(ChunkIndexRec {
-            start_ns,
-            end_ns,
+            start_ns: p.start_ns,
+            end_ns: p.end_ns,
             offset,
             length,
             message_index_offsets: offsets,
             message_index_length: rec.len() as u64,
             compressed,
-            uncompressed,
+            uncompressed: p.uncompressed,
         });
-        self.chunk.clear();
-        self.chunk_ns = None;
         Ok(())
     }
 
     /// Close the open chunk and flush the file.
     pub fn flush(&mut self) -> io::Result<()> {
-        self.close_chunk()?;
+        self.write_chunks()?;
         self.out.flush().inspect_err(|_| self.poisoned = true)
     }
 
     /// A metadata record (outside chunks; the open chunk is closed first so records stay in
     /// file order).
     pub fn metadata(&mut self, name: &str, metadata: &BTreeMap<String, String>) -> io::Result<()> {
-        self.close_chunk()?;
+        self.write_chunks()?;
         let mut rec = Vec::new();
         record(&mut rec, op::METADATA, |b| {
             b.str(name);
@@ -469,7 +522,7 @@ impl<W: Write> McapFile<W> {
         media_type: &str,
         data: &[u8],
     ) -> io::Result<()> {
-        self.close_chunk()?;
+        self.write_chunks()?;
         let mut rec = Vec::new();
         record(&mut rec, op::ATTACHMENT, |b| {
             b.u64(log_time);
@@ -507,7 +560,7 @@ impl<W: Write> McapFile<W> {
         // message at all, a chunk of times 0), so the file names every channel, as the
         // crate's writer did.
         self.put_due();
-        self.close_chunk()?;
+        self.write_chunks()?;
         self.finishing = true;
         let mut rec = Vec::new();
         let crc = self.data_crc.clone().finalize();
@@ -625,6 +678,102 @@ impl<W: Write> McapFile<W> {
     }
 }
 
+/// A closed chunk's place, times and index, kept until its compressed bytes are written.
+struct PendingChunk {
+    start_ns: u64,
+    end_ns: u64,
+    uncompressed: u64,
+    index: ChunkIndexEntries,
+}
+
+/// A chunk's message index entries (log time, offset in the chunk), by channel id.
+type ChunkIndexEntries = Vec<Vec<(u64, u64)>>;
+
+/// What the compressor thread gives back for a chunk: its buffer (for reuse), the
+/// compressed bytes, the CRC of the uncompressed ones, and whether zstd succeeded.
+struct Compressed {
+    chunk: Vec<u8>,
+    z: Vec<u8>,
+    crc: u32,
+    result: io::Result<()>,
+}
+
+/// The thread that compresses chunks, one at a time, in the order given; it ends when
+/// its writer is dropped.
+struct ChunkCompressor {
+    jobs: Option<mpsc::SyncSender<(Vec<u8>, Vec<u8>)>>,
+    done: mpsc::Receiver<Compressed>,
+    /// A compressed buffer back from a written chunk, for the next one.
+    spare_z: Vec<u8>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl ChunkCompressor {
+    fn start(level: i32) -> io::Result<Self> {
+        let mut zstd = zstd::bulk::Compressor::new(level)?;
+        let (jobs, rx) = mpsc::sync_channel::<(Vec<u8>, Vec<u8>)>(1);
+        let (tx, done) = mpsc::sync_channel(1);
+        let thread = std::thread::Builder::new()
+            .name("mcap-zstd".into())
+            .spawn(move || {
+                while let Ok((chunk, mut z)) = rx.recv() {
+                    let crc = crc32fast::hash(&chunk);
+                    z.clear();
+                    z.reserve(zstd::zstd_safe::compress_bound(chunk.len()));
+                    let result = zstd.compress_to_buffer(&chunk, &mut z).map(|_| ());
+                    let out = Compressed {
+                        chunk,
+                        z,
+                        crc,
+                        result,
+                    };
+                    if tx.send(out).is_err() {
+                        return;
+                    }
+                }
+            })?;
+        Ok(ChunkCompressor {
+            jobs: Some(jobs),
+            done,
+            spare_z: Vec::new(),
+            thread: Some(thread),
+        })
+    }
+
+    fn gone() -> io::Error {
+        io::Error::other("the recording's compressor thread stopped")
+    }
+
+    /// Start compressing `chunk` (the previous one must have been taken).
+    fn give(&mut self, chunk: Vec<u8>) -> io::Result<()> {
+        let z = std::mem::take(&mut self.spare_z);
+        self.jobs
+            .as_ref()
+            .ok_or_else(Self::gone)?
+            .send((chunk, z))
+            .map_err(|_| Self::gone())
+    }
+
+    /// The chunk given last, compressed (waits for it).
+    fn take(&mut self) -> io::Result<Compressed> {
+        self.done.recv().map_err(|_| Self::gone())
+    }
+
+    fn recycle(&mut self, z: Vec<u8>) {
+        self.spare_z = z;
+    }
+}
+
+impl Drop for ChunkCompressor {
+    fn drop(&mut self) {
+        // The thread sees its queue closed once it has handed back what it holds.
+        self.jobs = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
 impl<W: Write> std::fmt::Debug for McapFile<W> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("McapFile")
@@ -739,6 +888,47 @@ mod tests {
         assert_eq!((att.log_time, att.create_time), (5, 6));
         let meta = mcap::read::metadata(&bytes, &summary.metadata_indexes[0]).unwrap();
         assert_eq!(meta.metadata.get("seed").unwrap(), "7");
+    }
+
+    /// A record outside chunks follows every chunk closed before it, though chunks are
+    /// compressed on another thread: chunks of messages before a metadata record (and an
+    /// attachment) lie before it in the file, those after it after.
+    #[test]
+    fn records_outside_chunks_follow_the_chunks_before_them() {
+        let mut w = McapFile::new(Vec::new(), "", "t", 64, 1).unwrap();
+        let s = w.add_schema("m6p.A", "protobuf", b"a").unwrap();
+        let a = w
+            .add_channel(s, "/a", "protobuf", &BTreeMap::new())
+            .unwrap();
+        for i in 0..30u64 {
+            w.message(a, i as u32, i, i, &[i as u8; 30]).unwrap();
+            if i == 14 {
+                w.metadata("mid", &BTreeMap::new()).unwrap();
+                w.attach(14, 14, "mid.txt", "text/plain", b"mid").unwrap();
+            }
+        }
+        w.finish().unwrap();
+        let bytes = std::mem::take(w.get_mut());
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let meta = summary.metadata_indexes[0].offset;
+        let att = summary.attachment_indexes[0].offset;
+        assert!(meta < att);
+        assert!(summary.chunk_indexes.len() >= 10);
+        for ci in &summary.chunk_indexes {
+            if ci.message_end_time <= 14 {
+                assert!(ci.chunk_start_offset + ci.chunk_length <= meta, "{ci:?}");
+            } else {
+                assert!(
+                    ci.message_start_time > 14 && ci.chunk_start_offset > att,
+                    "{ci:?}"
+                );
+            }
+        }
+        let read = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap().log_time)
+            .collect::<Vec<_>>();
+        assert_eq!(read, (0..30).collect::<Vec<u64>>());
     }
 
     /// The same calls give the same bytes, and a writer dropped without `finish` still

@@ -60,16 +60,18 @@
 //! - messages come from structs (field order = declaration order, every field written),
 //!   schemas from the `foxglove` crate (its derive, and its well-known types);
 //! - zstd runs single-threaded at a fixed level, [`ZSTD_LEVEL`] (multithreaded zstd frames
-//!   depend on the worker count, which would tie the bytes to the machine's CPU count), and
+//!   depend on the worker count, which would tie the bytes to the machine's CPU count; the
+//!   writer's compressor thread takes one chunk at a time, in order), and
 //!   the writer ([`crate::mcap_file`]) orders its summary by id: no clock, no RNG, no
 //!   `HashMap` iteration reaches the file.
 //!
 //! # Memory and streaming
 //!
 //! Messages are gathered into chunks of [`CHUNK_SIZE`] uncompressed bytes (4 MiB); a full
-//! chunk is zstd-compressed in one call and written to the file with a message index per
-//! channel. What stays in memory is bounded: the open chunk and its compressed copy (about
-//! 8.5 MiB together), one chunk index entry (about 100 bytes) per closed chunk for the
+//! chunk is zstd-compressed in one call (on the writer's compressor thread, while the next
+//! one fills) and written to the file with a message index per channel. What stays in
+//! memory is bounded: the open chunk, the one under compression and its compressed copy
+//! (about 13 MiB together), one chunk index entry (about 100 bytes) per closed chunk for the
 //! summary, one CFP reassembler per bus (bounded slots) and one small buffer. A killed run
 //! leaves a file whose complete chunks MCAP's recovery tools (`mcap recover`) and
 //! [`crate::recording`] read; dropping a [`Recorder`] without [`Recorder::finish`] still
