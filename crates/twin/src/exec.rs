@@ -271,33 +271,18 @@ async fn execute_inner(
             .map(|l| (l.label(), l.cfg.addrs.clone()))
             .collect(),
     };
-    let mut recorder = Some(crate::record::Recorder::create(path, meta)?);
-    if let Some(r) = recorder.as_mut() {
-        r.set_icd(crate::icd::IcdMap::for_run(&compiled.opts));
-    }
-    let mut failure: Option<anyhow::Error> = None;
+    let mut recorder = crate::record::Recorder::create(path, meta)?;
+    recorder.set_icd(crate::icd::IcdMap::for_run(&compiled.opts));
+    // The recorder runs on a thread of its own, fed copies of the events in order.
+    let mut recorder = crate::record::RecorderThread::start(recorder)?;
     let outcome = execute(compiled, &mut |ev| {
-        if let Some(r) = recorder.as_mut()
-            && let Err(e) = r.write(ev)
-        {
-            failure = Some(e);
-            recorder = None;
-        }
+        recorder.write(ev);
         live(ev);
     })
     .await?;
-    if let Some(e) = failure {
-        return Err(e.context(format!("recording to {} stopped", path.display())));
-    }
-    let stats = match recorder {
-        Some(r) => Some(
-            r.finish()
-                .with_context(|| format!("finishing {}", path.display()))?,
-        ),
-        None => None,
-    };
+    let stats = recorder.finish()?;
     downlink_written(files)?;
-    Ok((outcome, stats))
+    Ok((outcome, Some(stats)))
 }
 
 /// Where the S-band sink's files go: `[pc] downlink_dir`, else beside the recording

@@ -69,9 +69,12 @@
 //!
 //! Messages are gathered into chunks of [`CHUNK_SIZE`] uncompressed bytes (4 MiB); a full
 //! chunk is zstd-compressed in one call (on the writer's compressor thread, while the next
-//! one fills) and written to the file with a message index per channel. What stays in
-//! memory is bounded: the open chunk, the one under compression and its compressed copy
-//! (about 13 MiB together), one chunk index entry (about 100 bytes) per closed chunk for the
+//! one fills) and written to the file with a message index per channel. The recorder
+//! itself runs on a thread of its own in a run ([`RecorderThread`]), fed copies of the
+//! events in batches. What stays in memory is bounded: the queue of event batches
+//! ([`RECORDER_QUEUE_BATCHES`] of [`RECORDER_BATCH`], a run ahead of its recording waits),
+//! the open chunk, the one under compression and its compressed copy (about 13 MiB
+//! together), one chunk index entry (about 100 bytes) per closed chunk for the
 //! summary, one CFP reassembler per bus (bounded slots) and one small buffer. A killed run
 //! leaves a file whose complete chunks MCAP's recovery tools (`mcap recover`) and
 //! [`crate::recording`] read; dropping a [`Recorder`] without [`Recorder::finish`] still
@@ -2430,6 +2433,128 @@ impl Recorder {
             bytes,
             cfp_drops: enc.cfp_drops(),
         })
+    }
+}
+
+/// Events handed to a [`RecorderThread`] at once.
+const RECORDER_BATCH: usize = 512;
+
+/// Batches a [`RecorderThread`] holds queued before the run waits for it.
+const RECORDER_QUEUE_BATCHES: usize = 4;
+
+/// What the run sends its recorder's thread.
+enum ToRecorder {
+    Events(Vec<RunEvent>),
+    /// The run ended: finish the file.
+    Finish,
+}
+
+/// A [`Recorder`] on a thread of its own: the run hands it copies of its events in
+/// batches, in order, and goes on (the same calls of [`Recorder::write`] in the same order:
+/// the same bytes). The queue is bounded ([`RECORDER_QUEUE_BATCHES`] batches of
+/// [`RECORDER_BATCH`]): a run faster than its recording waits for it, and nothing is dropped.
+/// A write error stops the recording (the file ends after its last complete chunk) and is
+/// reported by [`RecorderThread::finish`]; dropping it unfinished (the run failed) drops the
+/// recorder there, which ends the file with its summary as [`Recorder`]'s drop does.
+#[derive(Debug)]
+pub struct RecorderThread {
+    tx: Option<std::sync::mpsc::SyncSender<ToRecorder>>,
+    batch: Vec<RunEvent>,
+    thread: Option<std::thread::JoinHandle<anyhow::Result<Option<RecordingStats>>>>,
+}
+
+impl RecorderThread {
+    /// Start `recorder`'s thread.
+    pub fn start(recorder: Recorder) -> anyhow::Result<RecorderThread> {
+        let path = recorder.out.path.clone();
+        let (tx, rx) = std::sync::mpsc::sync_channel::<ToRecorder>(RECORDER_QUEUE_BATCHES);
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || {
+                let mut recorder = Some(recorder);
+                let mut failure = None;
+                while let Ok(msg) = rx.recv() {
+                    match msg {
+                        ToRecorder::Events(batch) => {
+                            for ev in &batch {
+                                if let Some(r) = recorder.as_mut()
+                                    && let Err(e) = r.write(ev)
+                                {
+                                    failure = Some(e);
+                                    recorder = None;
+                                }
+                            }
+                        }
+                        ToRecorder::Finish => {
+                            if let Some(e) = failure {
+                                return Err(
+                                    e.context(format!("recording to {} stopped", path.display()))
+                                );
+                            }
+                            return recorder
+                                .map(|r| {
+                                    r.finish()
+                                        .with_context(|| format!("finishing {}", path.display()))
+                                })
+                                .transpose();
+                        }
+                    }
+                }
+                Ok(None)
+            })
+            .context("starting the recorder's thread")?;
+        Ok(RecorderThread {
+            tx: Some(tx),
+            batch: Vec::with_capacity(RECORDER_BATCH),
+            thread: Some(thread),
+        })
+    }
+
+    /// Record a copy of `ev` (sent with the next full batch).
+    pub fn write(&mut self, ev: &RunEvent) {
+        self.batch.push(ev.clone());
+        if self.batch.len() >= RECORDER_BATCH {
+            self.send_batch();
+        }
+    }
+
+    fn send_batch(&mut self) {
+        let batch = std::mem::replace(&mut self.batch, Vec::with_capacity(RECORDER_BATCH));
+        if let Some(tx) = &self.tx {
+            // A closed queue: the thread ended (it panicked); `finish` says so.
+            let _ = tx.send(ToRecorder::Events(batch));
+        }
+    }
+
+    /// Record what is left, finish the file and return its figures (or the first error).
+    pub fn finish(mut self) -> anyhow::Result<RecordingStats> {
+        self.send_batch();
+        if let Some(tx) = self.tx.take() {
+            let _ = tx.send(ToRecorder::Finish);
+        }
+        let thread = self
+            .thread
+            .take()
+            .context("the recorder's thread is gone")?;
+        match thread.join() {
+            Ok(Ok(Some(stats))) => Ok(stats),
+            Ok(Ok(None)) => anyhow::bail!("the recorder's thread ended early"),
+            Ok(Err(e)) => Err(e),
+            Err(_) => anyhow::bail!("the recorder's thread panicked"),
+        }
+    }
+}
+
+impl Drop for RecorderThread {
+    fn drop(&mut self) {
+        // Unfinished: what was sent is written, then the recorder is dropped there.
+        if let Some(tx) = self.tx.take() {
+            let batch = std::mem::take(&mut self.batch);
+            let _ = tx.send(ToRecorder::Events(batch));
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
     }
 }
 

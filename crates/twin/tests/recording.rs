@@ -14,7 +14,7 @@ use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CanFrame, fragment_with_ident};
 use csp::{Header, Packet, SimTime};
 use m6p_twin::events::{Direction, Level, RunEvent};
-use m6p_twin::record::{CspPacketMsg, Recorder, RecordingMeta, RecordingStats};
+use m6p_twin::record::{CspPacketMsg, Recorder, RecorderThread, RecordingMeta, RecordingStats};
 use m6p_twin::recording::{self, DiffResult, RecordedMessage};
 
 fn meta() -> RecordingMeta {
@@ -220,6 +220,61 @@ fn the_same_events_give_byte_identical_files() {
             messages: medium_count(&ev)
         }
     );
+}
+
+/// The recorder on its own thread (as a run records) writes the bytes of the recorder
+/// inline, over several chunks and batches; dropped unfinished (a failed run) it still
+/// ends the file with its summary, every event sent before included.
+#[test]
+fn the_recorders_thread_writes_the_same_bytes() {
+    let ev = many_events();
+    let (a, b, c) = (
+        TempFile::new("thread-a"),
+        TempFile::new("thread-b"),
+        TempFile::new("thread-c"),
+    );
+    let sa = record(a.path(), &ev);
+    let mut t = RecorderThread::start(Recorder::create(b.path(), meta()).unwrap()).unwrap();
+    for e in &ev {
+        t.write(e);
+    }
+    let sb = t.finish().unwrap();
+    assert_eq!(sa, sb);
+    assert!(sa.chunks > 1, "{sa:?}");
+    let bytes = std::fs::read(a.path()).unwrap();
+    assert!(bytes == std::fs::read(b.path()).unwrap());
+
+    let mut t = RecorderThread::start(Recorder::create(c.path(), meta()).unwrap()).unwrap();
+    for e in &ev {
+        t.write(e);
+    }
+    drop(t);
+    let s = recording::read_summary(c.path()).unwrap();
+    assert!(s.incomplete.is_none(), "{s}");
+    let frames = frames_on(c.path(), "/can/main/frames");
+    // All but the train still open (at most 64 frames), as a recorder dropped inline.
+    assert!(frames < ev.len() && frames + 64 >= ev.len(), "{frames}");
+    let d = TempFile::new("thread-d");
+    let mut r = Recorder::create(d.path(), meta()).unwrap();
+    for e in &ev {
+        r.write(e).unwrap();
+    }
+    drop(r);
+    assert!(std::fs::read(c.path()).unwrap() == std::fs::read(d.path()).unwrap());
+}
+
+/// A write error on the recorder's thread (a full disk: Linux's `/dev/full`) comes back
+/// from `finish`, naming the file; the run's side never blocks or panics on it.
+#[test]
+fn a_write_error_on_the_recorders_thread_is_reported_at_the_end() {
+    let path = Path::new("/dev/full");
+    let mut t = RecorderThread::start(Recorder::create(path, meta()).unwrap()).unwrap();
+    for e in &many_events() {
+        t.write(e);
+    }
+    let e = format!("{:#}", t.finish().unwrap_err());
+    assert!(e.contains("/dev/full"), "{e}");
+    assert!(e.contains("No space left"), "{e}");
 }
 
 #[test]

@@ -493,7 +493,8 @@ pub async fn run_with(
             ..
         } = ev
         {
-            // The chunk is recorded: its link may read another.
+            // The chunk is handed on (recorded, or queued for the recorder's thread, whose
+            // queue is bounded): its link may read another.
             kiss_budget.add_permits(1);
         }
     };
