@@ -822,12 +822,16 @@ mod tests {
             let train = &trains[k];
             let mut f = train[next[k] % train.len()];
             let fate = rand(10);
-            // 0: lost; 1: cut short; 2: doubled (the next one is the same frame again).
+            // 0: lost; 1: cut short or made longer; 2: doubled (the next one is the same
+            // frame again); 3: a BEGIN announcing more than the MTU.
             if fate != 2 {
                 next[k] += 1;
             }
             if fate == 1 {
                 f.dlc = rand(9) as u8;
+            }
+            if fate == 3 && CfpId::from_can_id(f.id).kind == FrameType::Begin {
+                f.data[4..6].copy_from_slice(&u16::MAX.to_be_bytes());
             }
             if fate != 0 && matches!(r.handle(&f, t), Some(Ok(_))) {
                 completed += 1;
@@ -849,6 +853,10 @@ mod tests {
         assert!(completed > 100 && purged > 10, "{completed} {purged}");
         assert!(
             s.no_buffer_free > 0 && s.restarted > 0 && s.remain_mismatch > 0,
+            "{s:?}"
+        );
+        assert!(
+            s.begin_too_short > 0 && s.length_exceeds_mtu > 0 && s.overflow > 0,
             "{s:?}"
         );
     }

@@ -77,7 +77,10 @@
 //! together), one chunk index entry (about 100 bytes) per closed chunk for the
 //! summary, one CFP reassembler per bus (bounded slots) and one small buffer. A killed run
 //! leaves a file whose complete chunks MCAP's recovery tools (`mcap recover`) and
-//! [`crate::recording`] read; dropping a [`Recorder`] without [`Recorder::finish`] still
+//! [`crate::recording`] read (a process killed outright, SIGKILL or out of memory, also
+//! loses what was queued for the recorder's thread, up to about 3 000 events, and the chunk
+//! under compression: up to two chunks' worth; Ctrl-C and errors end the file normally);
+//! dropping a [`Recorder`] without [`Recorder::finish`] still
 //! writes the summary, unless a write to the file failed (then the file ends after its
 //! last complete chunk).
 
@@ -2540,7 +2543,14 @@ impl RecorderThread {
             Ok(Ok(Some(stats))) => Ok(stats),
             Ok(Ok(None)) => anyhow::bail!("the recorder's thread ended early"),
             Ok(Err(e)) => Err(e),
-            Err(_) => anyhow::bail!("the recorder's thread panicked"),
+            Err(panic) => {
+                let why = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| (*s).to_owned())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                anyhow::bail!("the recorder's thread panicked: {why}")
+            }
         }
     }
 }
