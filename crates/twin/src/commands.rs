@@ -12,8 +12,9 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence};
-use crate::ground::{Outcome, PlannedRequest, RequestResult};
+use crate::events::RunEvent;
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, Watch, WatchCx};
+use crate::ground::{Outcome, PlannedRequest, Recurring};
 use crate::network::NetworkSpec;
 use crate::runtime::RunReport;
 use crate::scenario::{Dur, NodeRef, PathStep, Scenario};
@@ -308,8 +309,8 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
 }
 
 /// The ground stations' plans of a validated scenario's `[[commands]]`, by station address.
-pub fn compile(s: &Scenario, net: &NetworkSpec) -> BTreeMap<u8, Vec<PlannedRequest>> {
-    let mut plans: BTreeMap<u8, Vec<PlannedRequest>> = BTreeMap::new();
+pub fn compile(s: &Scenario, net: &NetworkSpec) -> BTreeMap<u8, Vec<Recurring>> {
+    let mut plans: BTreeMap<u8, Vec<Recurring>> = BTreeMap::new();
     let default_gs = net
         .nodes
         .iter()
@@ -367,18 +368,21 @@ pub fn compile(s: &Scenario, net: &NetworkSpec) -> BTreeMap<u8, Vec<PlannedReque
         };
         let timeout = c.timeout.map_or(Duration::from_secs(5), |d| d.0);
         let every = c.every.map_or(Duration::ZERO, |d| d.0);
-        let plan = plans.entry(from).or_default();
-        for k in 0..c.count.unwrap_or(1) {
-            plan.push(PlannedRequest {
-                at: SimTime::ZERO + c.at.0 + every * k,
+        // One entry however many times it repeats: the station makes each occurrence when
+        // it is due.
+        plans.entry(from).or_default().push(Recurring {
+            first: PlannedRequest {
+                at: SimTime::ZERO + c.at.0,
                 dst: to,
                 dport,
-                data: data.clone(),
+                data,
                 timeout,
-                label: name.clone(),
+                label: name,
                 after: c.after.clone(),
-            });
-        }
+            },
+            every,
+            count: c.count.unwrap_or(1),
+        });
     }
     plans
 }
@@ -529,12 +533,18 @@ impl ExpectKind for ReplyExpect {
     }
 
     fn check(&self, cx: &CheckCx<'_>) -> Judged {
-        judge(
-            cx.report,
+        judge(cx.report, &self.command, self.occurrence, |o, t| {
+            reply_problem(o, t, self)
+        })
+    }
+
+    fn watch(&self, _cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
+        let x = self.clone();
+        Some(Box::new(CommandWatch::new(
             &self.command,
-            self.occurrence.unwrap_or(Occurrence::Every),
-            |r| reply_problem(r, self),
-        )
+            self.occurrence,
+            move |o, t| reply_problem(o, t, &x),
+        )))
     }
 }
 
@@ -547,83 +557,201 @@ impl ExpectKind for NoReplyExpect {
     }
 
     fn check(&self, cx: &CheckCx<'_>) -> Judged {
-        judge(
-            cx.report,
+        judge(cx.report, &self.command, self.occurrence, no_reply_problem)
+    }
+
+    fn watch(&self, _cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
+        Some(Box::new(CommandWatch::new(
             &self.command,
-            self.occurrence.unwrap_or(Occurrence::Every),
-            |r| match &r.outcome {
-                Outcome::Reply { data, rtt } => Some(format!(
-                    "answered after {}: {}",
-                    secs(*rtt),
-                    hex::encode(data)
-                )),
-                Outcome::Unfinished => Some(unfinished(r)),
-                _ => None,
-            },
-        )
+            self.occurrence,
+            no_reply_problem,
+        )))
     }
 }
 
-/// Judge every occurrence of `command` with `problem` (`None`: it held).
+/// Why one occurrence fails a `no-reply` check, or `None` if it passes.
+fn no_reply_problem(outcome: &Outcome, timeout: Duration) -> Option<String> {
+    match outcome {
+        Outcome::Reply { data, rtt } => Some(format!(
+            "answered after {}: {}",
+            secs(*rtt),
+            hex::encode(data)
+        )),
+        Outcome::Unfinished => Some(unfinished(timeout)),
+        _ => None,
+    }
+}
+
+/// Why one occurrence of a command (its outcome, its timeout) fails a check (`None`: it
+/// held).
+type Problem = dyn Fn(&Outcome, Duration) -> Option<String> + Send;
+
+/// A command's occurrences judged one by one, in any order: each comes with when it was
+/// sent and a number that orders those sent at the same time (the order their outcomes
+/// came in).
+#[derive(Debug, Clone, Default)]
+struct OccurrenceTally {
+    n: usize,
+    problems: usize,
+    /// The first failing occurrence by (sent, order), and its problem.
+    first: Option<((SimTime, u64), String)>,
+    /// The last failing one.
+    last: Option<((SimTime, u64), String)>,
+}
+
+impl OccurrenceTally {
+    fn add(&mut self, sent: SimTime, order: u64, problem: Option<String>) {
+        self.n += 1;
+        let Some(p) = problem else {
+            return;
+        };
+        self.problems += 1;
+        let key = (sent, order);
+        if self.first.as_ref().is_none_or(|(k, _)| key < *k) {
+            self.first = Some((key, p.clone()));
+        }
+        if self.last.as_ref().is_none_or(|(k, _)| key > *k) {
+            self.last = Some((key, p));
+        }
+    }
+
+    /// Every (or any) occurrence of `command` held; `end` is the run's end.
+    fn verdict(&self, command: &str, occurrence: Option<Occurrence>, end: SimTime) -> Judged {
+        let n = self.n;
+        if n == 0 {
+            return (
+                false,
+                end,
+                format!("command `{command}` was never sent before the end of the run"),
+            );
+        }
+        match occurrence.unwrap_or(Occurrence::Every) {
+            Occurrence::Every => match &self.first {
+                Some(((t, _), p)) => (
+                    false,
+                    *t,
+                    format!(
+                        "{} of {n} occurrences failed; first, sent at {t}: {p}",
+                        self.problems
+                    ),
+                ),
+                None => (true, end, format!("{n} of {n} occurrences held")),
+            },
+            Occurrence::Any => match &self.last {
+                Some(((t, _), p)) if self.problems == n => (
+                    false,
+                    *t,
+                    format!("none of {n} occurrences held; last, sent at {t}: {p}"),
+                ),
+                _ => (
+                    true,
+                    end,
+                    format!("{} of {n} occurrences held", n - self.problems),
+                ),
+            },
+        }
+    }
+}
+
+/// Judge every occurrence of `command` in the report's results with `problem`.
 fn judge(
     report: &RunReport,
     command: &str,
-    occurrence: Occurrence,
-    problem: impl Fn(&RequestResult) -> Option<String>,
+    occurrence: Option<Occurrence>,
+    problem: impl Fn(&Outcome, Duration) -> Option<String>,
 ) -> Judged {
-    let mut runs: Vec<&RequestResult> = report
-        .results
-        .iter()
-        .filter(|r| r.request.label == command)
-        .collect();
-    runs.sort_by_key(|r| r.sent);
-    if runs.is_empty() {
-        return (
-            false,
-            report.sim_time,
-            format!("command `{command}` was never sent before the end of the run"),
-        );
-    }
-    let problems: Vec<(SimTime, String)> = runs
-        .iter()
-        .filter_map(|r| problem(r).map(|p| (r.sent, p)))
-        .collect();
-    let n = runs.len();
-    match occurrence {
-        Occurrence::Every => match problems.first() {
-            Some((t, p)) => (
-                false,
-                *t,
-                format!(
-                    "{} of {n} occurrences failed; first, sent at {t}: {p}",
-                    problems.len()
-                ),
-            ),
-            None => (
-                true,
-                report.sim_time,
-                format!("{n} of {n} occurrences held"),
-            ),
-        },
-        Occurrence::Any => {
-            if problems.len() < n {
-                (
-                    true,
-                    report.sim_time,
-                    format!("{} of {n} occurrences held", n - problems.len()),
-                )
-            } else {
-                let (t, p) = problems
-                    .last()
-                    .cloned()
-                    .unwrap_or((report.sim_time, String::new()));
-                (
-                    false,
-                    t,
-                    format!("none of {n} occurrences held; last, sent at {t}: {p}"),
-                )
-            }
+    let mut tally = OccurrenceTally::default();
+    for (i, r) in report.results.iter().enumerate() {
+        if r.request.label == command {
+            tally.add(r.sent, i as u64, problem(&r.outcome, r.request.timeout));
         }
+    }
+    tally.verdict(command, occurrence, report.sim_time)
+}
+
+/// A `reply` or `no-reply` expectation judged as the run goes, from the command's events:
+/// its outcomes are not kept. A request sent and without an outcome at the end is
+/// unfinished, as the station reports it.
+struct CommandWatch {
+    command: String,
+    occurrence: Option<Occurrence>,
+    problem: Box<Problem>,
+    tally: OccurrenceTally,
+    /// Sent and waiting for an outcome: (sent, send order) -> timeout.
+    waiting: BTreeMap<(SimTime, u64), Duration>,
+    sends: u64,
+    outcomes: u64,
+}
+
+impl CommandWatch {
+    fn new(
+        command: &str,
+        occurrence: Option<Occurrence>,
+        problem: impl Fn(&Outcome, Duration) -> Option<String> + Send + 'static,
+    ) -> CommandWatch {
+        CommandWatch {
+            command: command.to_owned(),
+            occurrence,
+            problem: Box::new(problem),
+            tally: OccurrenceTally::default(),
+            waiting: BTreeMap::new(),
+            sends: 0,
+            outcomes: 0,
+        }
+    }
+}
+
+impl Watch for CommandWatch {
+    fn observe(&mut self, ev: &RunEvent) {
+        match ev {
+            RunEvent::Command {
+                t, name, timeout, ..
+            } if *name == self.command => {
+                self.waiting.insert((*t, self.sends), *timeout);
+                self.sends += 1;
+            }
+            RunEvent::CommandResult {
+                name,
+                reply,
+                rtt_ns,
+                sent,
+                failed,
+                ..
+            } if *name == self.command => {
+                // The oldest request sent then: those sent at one time are alike.
+                let timeout = if failed.is_some() {
+                    None
+                } else {
+                    self.waiting
+                        .range((*sent, 0)..=(*sent, u64::MAX))
+                        .next()
+                        .map(|(k, _)| *k)
+                        .and_then(|k| self.waiting.remove(&k))
+                };
+                let outcome = match (reply, rtt_ns, failed) {
+                    (_, _, Some(e)) => Outcome::SendFailed(e.clone()),
+                    (Some(data), Some(rtt), None) => Outcome::Reply {
+                        data: data.clone(),
+                        rtt: Duration::from_nanos(*rtt),
+                    },
+                    _ => Outcome::Timeout,
+                };
+                let timeout = timeout.unwrap_or_default();
+                let p = (self.problem)(&outcome, timeout);
+                self.tally.add(*sent, self.outcomes, p);
+                self.outcomes += 1;
+            }
+            _ => {}
+        }
+    }
+
+    fn judge(&self, cx: &CheckCx<'_>) -> Judged {
+        let mut tally = self.tally.clone();
+        for (i, (&(sent, _), &timeout)) in self.waiting.iter().enumerate() {
+            let p = (self.problem)(&Outcome::Unfinished, timeout);
+            tally.add(sent, self.outcomes + i as u64, p);
+        }
+        tally.verdict(&self.command, self.occurrence, cx.report.sim_time)
     }
 }
 
@@ -631,19 +759,17 @@ fn secs(d: std::time::Duration) -> String {
     format!("{:.3} s", d.as_secs_f64())
 }
 
-/// Why one occurrence fails a reply check, or `None` if it passes.
-fn reply_problem(r: &RequestResult, x: &ReplyExpect) -> Option<String> {
+/// Why one occurrence (its outcome, its timeout) fails a reply check, or `None` if it
+/// passes.
+fn reply_problem(outcome: &Outcome, timeout: Duration, x: &ReplyExpect) -> Option<String> {
     let within = x.within.map(|d| d.0);
     let result = x.result;
     let data = x.data.as_deref().and_then(|d| ReplyPattern::parse(d).ok());
     let data_len = x.data_len;
-    match &r.outcome {
-        Outcome::Timeout => Some(format!(
-            "no reply within the {} timeout",
-            secs(r.request.timeout)
-        )),
+    match outcome {
+        Outcome::Timeout => Some(format!("no reply within the {} timeout", secs(timeout))),
         Outcome::SendFailed(e) => Some(format!("not sent: {e}")),
-        Outcome::Unfinished => Some(unfinished(r)),
+        Outcome::Unfinished => Some(unfinished(timeout)),
         Outcome::Reply { data: got, rtt } => {
             if let Some(w) = within
                 && *rtt > w
@@ -675,10 +801,10 @@ fn reply_problem(r: &RequestResult, x: &ReplyExpect) -> Option<String> {
 }
 
 /// Why a request the run ended on is no verdict either way.
-fn unfinished(r: &RequestResult) -> String {
+fn unfinished(timeout: Duration) -> String {
     format!(
         "sent, but the run ended before its reply or its {} timeout",
-        secs(r.request.timeout)
+        secs(timeout)
     )
 }
 

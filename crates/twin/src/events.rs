@@ -1,6 +1,8 @@
 //! Everything a run emits for recording, in the order it happens: the stream the MCAP
 //! recorder writes and `replay`/`diff` compare.
 
+use std::time::Duration;
+
 use bus::trace::TraceEvent;
 use csp::SimTime;
 
@@ -84,6 +86,8 @@ pub enum RunEvent {
         dport: u8,
         /// Request bytes.
         data: Vec<u8>,
+        /// How long it waits for its reply.
+        timeout: Duration,
     },
     /// The outcome of a scenario command.
     CommandResult {
@@ -95,6 +99,10 @@ pub enum RunEvent {
         reply: Option<Vec<u8>>,
         /// Round-trip time in nanoseconds, when answered.
         rtt_ns: Option<u64>,
+        /// When it was sent (or failed to be).
+        sent: SimTime,
+        /// Why it could not be sent, when it could not (`reply` and `rtt_ns` are `None`).
+        failed: Option<String>,
     },
     /// The FC's published truth and what its ADCS believes and does, at one instant.
     Truth {

@@ -107,7 +107,18 @@ impl Outcome {
 /// summaries of the samples and of the downlinked bytes, so that memory does not grow
 /// with the simulated time.
 pub async fn execute(
+    compiled: Compiled,
+    sink: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<Outcome> {
+    execute_keeping(compiled, false, sink).await
+}
+
+/// [`execute`], the report keeping every sample, downlinked byte and request outcome when
+/// `keep` (`RunOptions::keep_series`), for the tests and programs that read them; the
+/// verdicts are the same.
+pub async fn execute_keeping(
     mut compiled: Compiled,
+    keep: bool,
     sink: &mut (dyn FnMut(&RunEvent) + Send),
 ) -> anyhow::Result<Outcome> {
     let (tx, rx) = tokio::sync::oneshot::channel::<Vec<std::net::SocketAddr>>();
@@ -150,7 +161,7 @@ pub async fn execute(
         icd: Some(&icd),
     };
     let mut watches: Vec<_> = compiled.expectations.iter().map(|x| x.watch(&cx)).collect();
-    compiled.opts.keep_series = false;
+    compiled.opts.keep_series = keep;
     let mut watched = |ev: &RunEvent| {
         for w in watches.iter_mut().flatten() {
             w.observe(ev);

@@ -55,26 +55,59 @@ use std::time::Duration;
 
 use csp::SimTime;
 
-use crate::ground::PlannedRequest;
+use crate::ground::{PlannedRequest, Recurring};
 use crate::network::{NetworkSpec, Role};
 
-/// The default run's ground activity: station 16 pings every space node once a minute.
-pub fn default_plan(net: &NetworkSpec, duration: Duration) -> Vec<PlannedRequest> {
-    let mut plan = Vec::new();
-    let mut t = Duration::from_secs(5);
-    while t < duration {
-        for n in net.nodes.iter().filter(|n| n.role != Role::Ground) {
-            plan.push(PlannedRequest {
-                at: SimTime::ZERO + t,
+/// The default run's ground activity: station 16 pings every space node once a minute,
+/// from 5 s until `duration` (the last ping before it).
+pub fn default_plan(net: &NetworkSpec, duration: Duration) -> Vec<Recurring> {
+    let first = Duration::from_secs(5);
+    let every = Duration::from_secs(60);
+    let count = duration
+        .saturating_sub(first)
+        .as_nanos()
+        .div_ceil(every.as_nanos());
+    net.nodes
+        .iter()
+        .filter(|n| n.role != Role::Ground)
+        .map(|n| Recurring {
+            first: PlannedRequest {
+                at: SimTime::ZERO + first,
                 dst: n.addr,
                 dport: csp::service::PORT_PING,
                 data: ground::ping_payload(16),
                 timeout: Duration::from_secs(5),
                 label: format!("ping {}", n.name),
                 after: None,
-            });
+            },
+            every,
+            count: u32::try_from(count).unwrap_or(u32::MAX),
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_plan_pings_each_space_node_every_minute_before_the_end() {
+        let net = NetworkSpec::default_m6p();
+        let space = net.nodes.iter().filter(|n| n.role != Role::Ground).count();
+        for (duration_s, pings) in [(0, 0), (5, 0), (6, 1), (65, 1), (66, 2), (3600, 60)] {
+            let plan = default_plan(&net, Duration::from_secs(duration_s));
+            assert_eq!(plan.len(), space);
+            for r in &plan {
+                assert_eq!(r.count, pings, "{duration_s} s");
+                assert_eq!(r.first.at, SimTime::from_secs(5));
+                assert_eq!(r.every, Duration::from_secs(60));
+                // The last one is before the end.
+                if pings > 0 {
+                    let last = r.first.at + r.every * (pings - 1);
+                    assert!(last < SimTime::from_secs(duration_s));
+                    assert!(last + r.every >= SimTime::from_secs(duration_s));
+                }
+            }
         }
-        t += Duration::from_secs(60);
     }
-    plan
 }

@@ -1801,6 +1801,7 @@ impl EventEncoder {
                 dst,
                 dport,
                 data,
+                ..
             } => {
                 let msg = CommandMsg {
                     t_ns,
@@ -1820,6 +1821,7 @@ impl EventEncoder {
                 name,
                 reply,
                 rtt_ns,
+                ..
             } => {
                 let msg = CommandMsg {
                     t_ns,

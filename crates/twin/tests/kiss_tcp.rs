@@ -236,15 +236,18 @@ fn a_departed_outside_program_gives_its_address_back() {
     )];
     opts.ground_plan.insert(
         16,
-        vec![PlannedRequest {
-            at: csp::SimTime::from_secs(4),
-            dst: 3,
-            dport: 1,
-            data: ping_payload(8),
-            timeout: Duration::from_millis(900),
-            label: "after".into(),
-            after: None,
-        }],
+        vec![
+            PlannedRequest {
+                at: csp::SimTime::from_secs(4),
+                dst: 3,
+                dport: 1,
+                data: ping_payload(8),
+                timeout: Duration::from_millis(900),
+                label: "after".into(),
+                after: None,
+            }
+            .into(),
+        ],
     );
     let rt = build_runtime(opts.clock).unwrap();
     let report = rt.block_on(async move {

@@ -25,7 +25,8 @@ fn run_plan(plan: Vec<PlannedRequest>, duration_s: u64, seed: u64, trace: bool) 
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(duration_s));
     opts.seed = seed;
     opts.trace = trace;
-    opts.ground_plan.insert(16, plan);
+    opts.ground_plan
+        .insert(16, plan.into_iter().map(Into::into).collect());
     let rt = build_runtime(opts.clock).unwrap();
     rt.block_on(run(opts, None)).unwrap()
 }
@@ -221,8 +222,8 @@ fn a_setup_for_session_1_on_the_default_scenario_polls_payload_12() {
     let mut setup = vec![1, 1, 0, 0, 0, 0, 10, 0, 0, 0, 64];
     setup.extend_from_slice(b"Send telemetry");
     let plan = compiled.opts.ground_plan.entry(16).or_default();
-    plan.push(request(20, 6, 10, setup));
-    plan.push(request(25, 6, 10, vec![2, 1]));
+    plan.push(request(20, 6, 10, setup).into());
+    plan.push(request(25, 6, 10, vec![2, 1]).into());
     let rt = build_runtime(compiled.opts.clock).unwrap();
     let report = rt.block_on(run(compiled.opts, None)).unwrap();
     let reply = |label: &str| {
@@ -279,7 +280,7 @@ fn the_eps_charges_the_s_band_and_its_channel_switches_the_transmitter() {
         .ground_plan
         .entry(16)
         .or_default()
-        .push(request(20, 6, 10, setup));
+        .push(request(20, 6, 10, setup).into());
     let rt = build_runtime(compiled.opts.clock).unwrap();
     let report = rt.block_on(run(compiled.opts, None)).unwrap();
     let mean_load = |a: u64, b: u64| {
@@ -335,7 +336,7 @@ fn the_eps_charges_the_uhf_downlink_of_forwarded_replies() {
         if pings {
             // A 200-byte ping to the FC every second: a 204-byte reply, 170 ms on the air.
             let plan = compiled.opts.ground_plan.entry(16).or_default();
-            plan.extend((10..40).map(|s| request(s, 3, 1, ping_payload(200))));
+            plan.extend((10..40).map(|s| request(s, 3, 1, ping_payload(200)).into()));
         }
         let rt = build_runtime(compiled.opts.clock).unwrap();
         let report = rt.block_on(run(compiled.opts, None)).unwrap();
@@ -390,7 +391,7 @@ fn with_both_comms_down_nobody_carries_the_link_until_one_comes_back() {
     ];
     let plan = [5, 15, 25, 35, 45]
         .into_iter()
-        .map(|s| request(s, 3, 1, ping_payload(8)))
+        .map(|s| request(s, 3, 1, ping_payload(8)).into())
         .collect();
     opts.ground_plan.insert(16, plan);
     let rt = build_runtime(opts.clock).unwrap();

@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used)]
 
 use m6p_twin::events::RunEvent;
-use m6p_twin::exec::execute;
+use m6p_twin::exec::execute_keeping;
 use m6p_twin::ground::Outcome;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::build_runtime;
@@ -20,14 +20,17 @@ tle = [
 ]
 "#;
 
-/// Run a scenario text in virtual time: its outcome and every event.
+/// Run a scenario text in virtual time: its outcome (the report keeping every request's
+/// outcome) and every event.
 fn run(text: &str) -> (m6p_twin::exec::Outcome, Vec<RunEvent>) {
     let s = Scenario::parse("t.toml", text).unwrap();
     let compiled = compile(&s);
     let rt = build_runtime(compiled.opts.clock).unwrap();
     let mut events = Vec::new();
     let out = rt
-        .block_on(execute(compiled, &mut |ev| events.push(ev.clone())))
+        .block_on(execute_keeping(compiled, true, &mut |ev| {
+            events.push(ev.clone())
+        }))
         .unwrap();
     (out, events)
 }

@@ -70,6 +70,7 @@ fn events() -> Vec<RunEvent> {
         dst: 3,
         dport: 1,
         data: req.data.clone(),
+        timeout: std::time::Duration::from_secs(5),
     });
     t = t + step;
     ev.push(medium(
@@ -100,6 +101,8 @@ fn events() -> Vec<RunEvent> {
         name: "ping FC".into(),
         reply: Some(rep.data.clone()),
         rtt_ns: Some(t.as_ns() - 5_000_000_000),
+        sent: SimTime::from_secs(5),
+        failed: None,
     });
     ev.push(RunEvent::Log {
         t,

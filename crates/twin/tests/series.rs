@@ -1,5 +1,6 @@
 //! A run judged as it goes keeps no per-sample data: `exec::execute` leaves the report's
-//! attitude and power samples and the sessions' bytes empty, and its verdicts, campaign
+//! attitude and power samples, the sessions' bytes and the ground requests' outcomes
+//! empty, and its verdicts, campaign
 //! metrics and invariants are those of the same run judged on a report that kept them all
 //! (`RunOptions::keep_series`, as `runtime::run` does by default).
 #![allow(clippy::unwrap_used)]
@@ -72,12 +73,24 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
     assert!(r.power.is_empty(), "{} power samples", r.power.len());
     assert!(r.sessions.runs.iter().all(|x| x.bytes.is_empty()));
     assert!(r.sessions.session_bytes(1).is_empty());
+    assert!(r.results.is_empty(), "{} request outcomes", r.results.len());
 
     // The same run: what was kept is what was summed up.
     assert_eq!(kept.attitude.len(), 5400, "one sample a second");
     assert_eq!(r.attitude_summary, kept.attitude_summary);
     assert_eq!(r.attitude_summary.samples, kept.attitude.len() as u64);
     assert_eq!(r.attitude_summary.first, kept.attitude.first().copied());
+    assert_eq!(r.requests, kept.requests);
+    assert_eq!(kept.requests.requests, kept.results.len() as u64);
+    assert_eq!(
+        (
+            kept.requests.requests,
+            kept.requests.answered,
+            kept.requests.unfinished
+        ),
+        (24, 19, 1),
+        "replies, timeouts and one the run ended on"
+    );
     assert_eq!(r.power_summary, kept.power_summary);
     assert_eq!(r.power_summary.samples, kept.power.len() as u64);
     assert!(kept.power.len() > 5000);
@@ -102,7 +115,7 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
         );
     }
     // Both ways of passing and failing are covered.
-    assert_eq!(outcome.verdicts.iter().filter(|v| v.passed).count(), 9);
+    assert_eq!(outcome.verdicts.iter().filter(|v| v.passed).count(), 12);
     let m = metrics(r);
     assert_eq!(m, metrics(&kept));
     let old: Vec<(String, f64)> = metrics_from_samples(&kept)

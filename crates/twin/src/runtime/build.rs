@@ -17,7 +17,7 @@ use tokio::sync::mpsc;
 
 use super::{RunOptions, mix};
 use crate::events::RunEvent;
-use crate::ground::{GroundApp, PlannedRequest, Results};
+use crate::ground::{GroundApp, Recurring, Results};
 use crate::network::{Medium, NodeSpec, Role, node_config};
 
 /// The media of a run, with their tasks started and their trace going to `events`.
@@ -238,7 +238,7 @@ fn app_for(
     addr: u8,
     opts: &RunOptions,
     boards: &Boards,
-    plan: Vec<PlannedRequest>,
+    plan: Vec<Recurring>,
     results: &Results,
 ) -> NodeApp {
     match role {

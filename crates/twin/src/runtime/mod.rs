@@ -21,7 +21,6 @@ pub mod report;
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
@@ -36,7 +35,7 @@ pub use crate::adcs::AttitudeSample;
 pub use crate::eps::PowerSample;
 use crate::events::RunEvent;
 use crate::faults::{FaultAction, TimedFault};
-use crate::ground::{PlannedRequest, Results};
+use crate::ground::{Recurring, Results};
 use crate::network::NetworkSpec;
 pub(crate) use build::fc_config;
 pub use report::{NodeReport, Observed, Observer, RunReport};
@@ -67,7 +66,7 @@ pub struct RunOptions {
     /// (`replaces` on a link), by address.
     pub replaced: std::collections::BTreeSet<u8>,
     /// Requests each internal ground station sends, by station address.
-    pub ground_plan: BTreeMap<u8, Vec<PlannedRequest>>,
+    pub ground_plan: BTreeMap<u8, Vec<Recurring>>,
     /// Real CAN interfaces (`can0`, `vcan0`) to bridge to a bus of the twin; needs the
     /// `socketcan` cargo feature (Linux) when not empty.
     pub socketcan: Vec<(String, SocketCanBus)>,
@@ -77,12 +76,12 @@ pub struct RunOptions {
     pub tle: Option<(String, String)>,
     /// Keep the trace of every frame and packet in the report.
     pub trace: bool,
-    /// Keep every FC and EPS sample and every downlinked byte in the report (`attitude`,
-    /// `power`, each session run's `bytes`), for the programs and tests that read them.
-    /// Without, the report has their summaries only (`attitude_summary`,
-    /// `power_summary`, each run's `len` and `stream`), so that memory does not grow with
-    /// the simulated time; [`crate::exec::execute`] runs so, its expectations judging the
-    /// run as it goes.
+    /// Keep every FC and EPS sample, every downlinked byte and every ground request's
+    /// outcome in the report (`attitude`, `power`, each session run's `bytes`, `results`),
+    /// for the programs and tests that read them. Without, the report has their summaries
+    /// only (`attitude_summary`, `power_summary`, each run's `len` and `stream`,
+    /// `requests`), so that memory does not grow with the simulated time;
+    /// [`crate::exec::execute`] runs so, its expectations judging the run as it goes.
     pub keep_series: bool,
     /// Faults to apply, in time order.
     pub faults: Vec<TimedFault>,
@@ -439,7 +438,7 @@ pub async fn run_with(
     let gates = links::gates(&opts);
     let socketcan_stats =
         links::spawn_socketcan_bridges(&opts, &segs, clock, &gates, &mut background)?;
-    let results: Results = Arc::new(Mutex::new(Vec::new()));
+    let results = Results::new(opts.keep_series);
     let boards = Boards::default();
     let nodes = build::nodes(&mut opts, &segs, clock, &boards, &results, &ev_tx);
     let mut kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
@@ -586,11 +585,7 @@ pub async fn run_with(
     while let Ok(ev) = ev_rx.try_recv() {
         handle_event(ev, &mut observer);
     }
-    let results = std::mem::take(
-        &mut *results
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner),
-    );
+    let (results, requests) = results.take();
     let observed = observer.finish();
     Ok(RunReport {
         sim_time,
@@ -608,6 +603,7 @@ pub async fn run_with(
             .map(|(l, g)| (l.name.clone(), g.stats()))
             .collect(),
         results,
+        requests,
         trace: observed.trace,
         attitude: observed.attitude,
         attitude_summary: observed.attitude_summary,

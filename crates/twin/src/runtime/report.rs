@@ -50,8 +50,11 @@ pub struct RunReport {
     pub links: Vec<(String, bus::gate::GateStats)>,
     /// SocketCAN bridge counters, by interface and bus (`vcan0 (main bus)`).
     pub socketcan: Vec<(String, BridgeStats)>,
-    /// Outcomes of the ground stations' requests.
+    /// Outcomes of the ground stations' requests (empty unless the run kept them:
+    /// `RunOptions::keep_series`).
     pub results: Vec<RequestResult>,
+    /// What the ground stations' requests came to, counted.
+    pub requests: crate::ground::RequestSummary,
     /// Every frame and packet, when tracing was asked for.
     pub trace: Vec<TraceEvent>,
     /// The FC's published attitude samples, in time order (empty unless the run kept
@@ -340,25 +343,16 @@ impl RunReport {
                 g.delayed
             );
         }
-        if !self.results.is_empty() {
-            let ok = self
-                .results
-                .iter()
-                .filter(|r| matches!(r.outcome, crate::ground::Outcome::Reply { .. }))
-                .count();
-            let open = self
-                .results
-                .iter()
-                .filter(|r| matches!(r.outcome, crate::ground::Outcome::Unfinished))
-                .count();
+        let r = self.requests;
+        if r.requests > 0 {
             let _ = writeln!(
                 s,
                 "\nground requests: {} sent, {} answered, {} unanswered{}",
-                self.results.len(),
-                ok,
-                self.results.len() - ok - open,
-                if open > 0 {
-                    format!(", {open} still waiting at the end")
+                r.requests,
+                r.answered,
+                r.requests - r.answered - r.unfinished,
+                if r.unfinished > 0 {
+                    format!(", {} still waiting at the end", r.unfinished)
                 } else {
                     String::new()
                 }
