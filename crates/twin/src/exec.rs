@@ -104,8 +104,8 @@ impl Outcome {
 
 /// Run a compiled scenario, handing every event (expectation verdicts last) to `sink`.
 /// The expectations that can judge the run as it goes do, and the report keeps only the
-/// summaries of the samples and of the downlinked bytes, so that memory does not grow
-/// with the simulated time.
+/// summaries of the samples, of the downlinked bytes and of the ground requests' outcomes,
+/// so that memory does not grow with the simulated time.
 pub async fn execute(
     compiled: Compiled,
     sink: &mut (dyn FnMut(&RunEvent) + Send),

@@ -367,7 +367,8 @@ impl App for GroundApp {
         // At most a batch per call: a station that was hung or whose clock jumped sends
         // what it missed in batches, and the node's driver hands out the batch's events
         // (each send's `Command` or `CommandResult`) before it calls again at the same
-        // instant (its outbox holds a million; a backlog may be larger).
+        // instant: the node's outbox holds 2^20 events, and a backlog of several
+        // million-count commands would hold more.
         for _ in 0..SENDS_PER_CALL {
             let Some(req) = self.plan.pop_due(now) else {
                 break;

@@ -88,8 +88,8 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
             kept.requests.answered,
             kept.requests.unfinished
         ),
-        (24, 19, 1),
-        "replies, timeouts and one the run ended on"
+        (84, 19, 1),
+        "replies, timeouts, requests not sent and one the run ended on"
     );
     assert_eq!(r.power_summary, kept.power_summary);
     assert_eq!(r.power_summary.samples, kept.power.len() as u64);
@@ -115,7 +115,7 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
         );
     }
     // Both ways of passing and failing are covered.
-    assert_eq!(outcome.verdicts.iter().filter(|v| v.passed).count(), 12);
+    assert_eq!(outcome.verdicts.iter().filter(|v| v.passed).count(), 13);
     let m = metrics(r);
     assert_eq!(m, metrics(&kept));
     let old: Vec<(String, f64)> = metrics_from_samples(&kept)
