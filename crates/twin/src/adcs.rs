@@ -831,6 +831,10 @@ struct AttitudeWatch {
 }
 
 impl Watch for AttitudeWatch {
+    fn kinds(&self) -> crate::events::Kinds {
+        crate::events::Kinds::of(&[crate::events::EventKind::Truth])
+    }
+
     fn observe(&mut self, ev: &RunEvent) {
         if let Some(s) = self.sampler.sample(ev) {
             self.expect.tally(&mut self.tally, &s);

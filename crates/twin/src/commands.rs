@@ -12,7 +12,7 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::events::RunEvent;
+use crate::events::{EventKind, Kinds, RunEvent};
 use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, Watch, WatchCx};
 use crate::ground::{Outcome, PlannedRequest, Recurring};
 use crate::network::NetworkSpec;
@@ -702,6 +702,10 @@ impl CommandWatch {
 }
 
 impl Watch for CommandWatch {
+    fn kinds(&self) -> Kinds {
+        Kinds::of(&[EventKind::Command, EventKind::CommandResult])
+    }
+
     fn observe(&mut self, ev: &RunEvent) {
         match ev {
             RunEvent::Command {

@@ -351,6 +351,10 @@ struct PowerWatch {
 }
 
 impl Watch for PowerWatch {
+    fn kinds(&self) -> crate::events::Kinds {
+        crate::events::Kinds::of(&[crate::events::EventKind::Eps])
+    }
+
     fn observe(&mut self, ev: &RunEvent) {
         if let Some(s) = PowerSample::of(ev) {
             self.expect.tally(&mut self.tally, &s);

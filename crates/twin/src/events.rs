@@ -147,7 +147,83 @@ pub enum RunEvent {
     },
 }
 
+/// What kind of event a [`RunEvent`] is: its variant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EventKind {
+    /// [`RunEvent::Medium`].
+    Medium,
+    /// [`RunEvent::Kiss`].
+    Kiss,
+    /// [`RunEvent::Log`].
+    Log,
+    /// [`RunEvent::PacketDropped`].
+    PacketDropped,
+    /// [`RunEvent::Fault`].
+    Fault,
+    /// [`RunEvent::Command`].
+    Command,
+    /// [`RunEvent::CommandResult`].
+    CommandResult,
+    /// [`RunEvent::Truth`].
+    Truth,
+    /// [`RunEvent::Pc`].
+    Pc,
+    /// [`RunEvent::Beacon`].
+    Beacon,
+    /// [`RunEvent::Eps`].
+    Eps,
+    /// [`RunEvent::Payload`].
+    Payload,
+    /// [`RunEvent::Expectation`].
+    Expectation,
+}
+
+/// A set of [`EventKind`]s: what an observer of the run looks at, so that it is not handed
+/// the rest (a run has hundreds of thousands of events an hour, most of them frames).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Kinds(u16);
+
+impl Kinds {
+    /// Every kind.
+    pub const ALL: Kinds = Kinds(u16::MAX);
+
+    /// The kinds listed.
+    pub const fn of(kinds: &[EventKind]) -> Kinds {
+        let mut bits = 0;
+        let mut i = 0;
+        while i < kinds.len() {
+            bits |= 1 << kinds[i] as u16;
+            i += 1;
+        }
+        Kinds(bits)
+    }
+
+    /// Whether `kind` is one of them.
+    pub const fn has(self, kind: EventKind) -> bool {
+        self.0 & (1 << kind as u16) != 0
+    }
+}
+
 impl RunEvent {
+    /// Its kind.
+    pub fn kind(&self) -> EventKind {
+        match self {
+            RunEvent::Medium(_) => EventKind::Medium,
+            RunEvent::Kiss { .. } => EventKind::Kiss,
+            RunEvent::Log { .. } => EventKind::Log,
+            RunEvent::PacketDropped { .. } => EventKind::PacketDropped,
+            RunEvent::Fault { .. } => EventKind::Fault,
+            RunEvent::Command { .. } => EventKind::Command,
+            RunEvent::CommandResult { .. } => EventKind::CommandResult,
+            RunEvent::Truth { .. } => EventKind::Truth,
+            RunEvent::Pc(_) => EventKind::Pc,
+            RunEvent::Beacon { .. } => EventKind::Beacon,
+            RunEvent::Eps(_) => EventKind::Eps,
+            RunEvent::Payload { .. } => EventKind::Payload,
+            RunEvent::Expectation { .. } => EventKind::Expectation,
+        }
+    }
+
     /// The simulated time of the event.
     pub fn t(&self) -> SimTime {
         match self {
@@ -274,5 +350,66 @@ impl From<nodes_ecu::EcuOutput> for RunEvent {
             level: Level::Info,
             message,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const EVERY: [EventKind; 13] = [
+        EventKind::Medium,
+        EventKind::Kiss,
+        EventKind::Log,
+        EventKind::PacketDropped,
+        EventKind::Fault,
+        EventKind::Command,
+        EventKind::CommandResult,
+        EventKind::Truth,
+        EventKind::Pc,
+        EventKind::Beacon,
+        EventKind::Eps,
+        EventKind::Payload,
+        EventKind::Expectation,
+    ];
+
+    #[test]
+    fn a_set_of_kinds_holds_exactly_those_listed() {
+        for (i, &k) in EVERY.iter().enumerate() {
+            assert!(Kinds::ALL.has(k));
+            assert!(!Kinds::of(&[]).has(k));
+            let one = Kinds::of(&[k]);
+            let rest: Vec<EventKind> = EVERY
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, &k)| k)
+                .collect();
+            let others = Kinds::of(&rest);
+            for &m in &EVERY {
+                assert_eq!(one.has(m), m == k, "{k:?} {m:?}");
+                assert_eq!(others.has(m), m != k, "{k:?} {m:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn an_event_says_its_kind() {
+        let log = RunEvent::Log {
+            t: SimTime::ZERO,
+            source: "run".into(),
+            level: Level::Info,
+            message: String::new(),
+        };
+        assert_eq!(log.kind(), EventKind::Log);
+        let cmd = RunEvent::CommandResult {
+            t: SimTime::ZERO,
+            name: "x".into(),
+            reply: None,
+            rtt_ns: None,
+            sent: SimTime::ZERO,
+            failed: None,
+        };
+        assert_eq!(cmd.kind(), EventKind::CommandResult);
     }
 }

@@ -161,10 +161,24 @@ pub async fn execute_keeping(
         icd: Some(&icd),
     };
     let mut watches: Vec<_> = compiled.expectations.iter().map(|x| x.watch(&cx)).collect();
+    // Each watch is handed only the kinds of event it looks at (a virtual call per watch
+    // per frame otherwise).
+    let kinds: Vec<crate::events::Kinds> = watches
+        .iter()
+        .map(|w| {
+            w.as_ref()
+                .map_or(crate::events::Kinds::of(&[]), |w| w.kinds())
+        })
+        .collect();
     compiled.opts.keep_series = keep;
     let mut watched = |ev: &RunEvent| {
-        for w in watches.iter_mut().flatten() {
-            w.observe(ev);
+        let kind = ev.kind();
+        for (w, k) in watches.iter_mut().zip(&kinds) {
+            if k.has(kind)
+                && let Some(w) = w
+            {
+                w.observe(ev);
+            }
         }
         sink(ev);
     };

@@ -143,8 +143,13 @@ pub struct WatchCx<'a> {
 /// An expectation judged while the run goes, from its events, so that what it looks at
 /// (a sample every second, for days) need not be kept in the report.
 pub trait Watch: Send {
-    /// Take in one event of the run, in the order they happen.
+    /// Take in one event of the run, in the order they happen (only those of
+    /// [`Watch::kinds`]).
     fn observe(&mut self, ev: &RunEvent);
+    /// The kinds of event `observe` looks at; it is handed no other (default: every kind).
+    fn kinds(&self) -> crate::events::Kinds {
+        crate::events::Kinds::ALL
+    }
     /// The verdict, once the run has ended.
     fn judge(&self, cx: &CheckCx<'_>) -> Judged;
 }
