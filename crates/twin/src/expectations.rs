@@ -237,7 +237,7 @@ impl Expectation {
     }
 
     /// Its [`Watch`], when its kind judges a run as it goes: feed it every event of the
-    /// run, then [`check_watched`] takes its verdict.
+    /// run of its [`Watch::kinds`], then [`check_watched`] takes its verdict.
     pub fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
         self.kind.watch(cx)
     }
