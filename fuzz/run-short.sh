@@ -6,9 +6,10 @@
 # which builds in 6 min instead of 8 on a 2-core machine, with debug assertions and overflow
 # checks on, no sanitizer: the workspace denies unsafe code), then runs each for
 # the given time on a temporary copy of its committed corpus (fuzz/corpus/<target>/ is never
-# grown; minimise and commit new seeds by hand). Prints per target the executions done and
-# the rate; exits non-zero naming every target that crashed and its artifact
-# (fuzz/artifacts/<target>/). Without a nightly toolchain it says so and exits 0.
+# grown; minimise and commit new seeds by hand), one target per core at a time (FUZZ_JOBS
+# sets how many). Prints per target the executions done and the rate; exits non-zero naming
+# every target that crashed and its artifact (fuzz/artifacts/<target>/). Without a nightly
+# toolchain it says so and exits 0.
 set -uo pipefail
 
 build_only=0
@@ -53,19 +54,37 @@ fi
 
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-crashed=()
-printf '%-16s %12s %10s  %s\n' target executions exec/s result
-for t in $(cargo +nightly fuzz list); do
+
+# One target per core at a time (libFuzzer runs on one thread): on CI's two cores the pass
+# takes half the wall time, and each target still gets the whole of its seconds on a core.
+# Each writes its own log and exit code; the table is printed in the targets' order.
+jobs_max=${FUZZ_JOBS:-$(nproc 2>/dev/null || echo 1)}
+run_one() {
+    local t=$1
     mkdir -p "$work/corpus/$t" "$fuzz/artifacts/$t"
     if [ -d "corpus/$t" ]; then
         cp -R "corpus/$t/." "$work/corpus/$t/"
     fi
-    log=$work/$t.log
     # -timeout: one input running longer than 60 s is a hang, reported like a crash.
     timeout $((secs + 300)) nice -n 19 cargo +nightly fuzz run "${flags[@]}" "$t" "$work/corpus/$t" -- \
         -max_total_time="$secs" -print_final_stats=1 -timeout=60 \
-        -artifact_prefix="$fuzz/artifacts/$t/" >"$log" 2>&1
-    rc=$?
+        -artifact_prefix="$fuzz/artifacts/$t/" >"$work/$t.log" 2>&1
+    echo $? >"$work/$t.rc"
+}
+targets=$(cargo +nightly fuzz list)
+for t in $targets; do
+    while [ "$(jobs -rp | wc -l)" -ge "$jobs_max" ]; do
+        wait -n
+    done
+    run_one "$t" &
+done
+wait
+
+crashed=()
+printf '%-16s %12s %10s  %s\n' target executions exec/s result
+for t in $targets; do
+    log=$work/$t.log
+    rc=$(cat "$work/$t.rc" 2>/dev/null || echo 1)
     execs=$(sed -n 's/^stat::number_of_executed_units: *\([0-9]*\).*/\1/p' "$log" | tail -1)
     rate=$(sed -n 's/^stat::average_exec_per_sec: *\([0-9]*\).*/\1/p' "$log" | tail -1)
     if [ "$rc" -eq 0 ]; then

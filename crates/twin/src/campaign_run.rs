@@ -225,28 +225,43 @@ pub fn run_all(
     jobs: usize,
     done: &(dyn Fn(&RunRow) + Sync),
 ) -> Vec<RunRow> {
+    let mut rows = in_parallel(runs, jobs, &|&k| run_one(c, k), done);
+    rows.sort_by_key(|r| r.run);
+    rows
+}
+
+/// `f` of each of `items` on `jobs` threads (at least one, at most one per item), each
+/// thread taking the next item not yet taken; `done` sees each result as it is made, in
+/// whatever order they finish. The results come back in the order of `items`. A campaign's
+/// runs and `m6p-twin test`'s scenarios run this way.
+pub fn in_parallel<T: Sync, R: Send>(
+    items: &[T],
+    jobs: usize,
+    f: &(dyn Fn(&T) -> R + Sync),
+    done: &(dyn Fn(&R) + Sync),
+) -> Vec<R> {
     let next = AtomicUsize::new(0);
-    let rows = Mutex::new(Vec::with_capacity(runs.len()));
+    let made = Mutex::new(Vec::with_capacity(items.len()));
     std::thread::scope(|s| {
-        for _ in 0..jobs.clamp(1, runs.len().max(1)) {
+        for _ in 0..jobs.clamp(1, items.len().max(1)) {
             s.spawn(|| {
                 loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&k) = runs.get(i) else { break };
-                    let row = run_one(c, k);
-                    done(&row);
-                    rows.lock()
+                    let Some(item) = items.get(i) else { break };
+                    let r = f(item);
+                    done(&r);
+                    made.lock()
                         .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .push(row);
+                        .push((i, r));
                 }
             });
         }
     });
-    let mut rows = rows
+    let mut made = made
         .into_inner()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
-    rows.sort_by_key(|r| r.run);
-    rows
+    made.sort_by_key(|(i, _)| *i);
+    made.into_iter().map(|(_, r)| r).collect()
 }
 
 /// A CSV cell: quoted when it needs to be.

@@ -228,6 +228,10 @@ struct TestArgs {
     /// Seed, overriding every scenario's.
     #[arg(long)]
     seed: Option<u64>,
+    /// Scenarios run at once [default: the machine's cores]; those in real time or with
+    /// links to the outside run one at a time all the same.
+    #[arg(long)]
+    jobs: Option<usize>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -1181,6 +1185,104 @@ fn cmd_campaign_merge(dirs: &[PathBuf], out: &std::path::Path) -> anyhow::Result
     Ok(failed == 0)
 }
 
+/// One scenario of `m6p-twin test`: its table row (name, passed, failed, simulated s,
+/// wall s, whether it did not run), its JUnit test cases and what it has to say on stderr.
+struct ScenarioTested {
+    row: (String, usize, usize, f64, f64, bool),
+    cases: Vec<quick_junit::TestCase>,
+    errors: Vec<String>,
+    ok: bool,
+}
+
+/// Load, run and judge one scenario file. A run in real time or with links to the outside
+/// holds `one_at_a_time` while it runs: two may listen on the same port, and their pace is
+/// the wall clock's.
+fn test_one(
+    f: &std::path::Path,
+    seed: Option<u64>,
+    one_at_a_time: &std::sync::Mutex<()>,
+) -> ScenarioTested {
+    let started = std::time::Instant::now();
+    let error_case = |name: &str, classname: &str, e: String| {
+        let mut case = quick_junit::TestCase::new(
+            name.to_owned(),
+            quick_junit::TestCaseStatus::non_success(quick_junit::NonSuccessKind::Error),
+        );
+        case.set_classname(classname.to_owned());
+        case.set_system_err(e);
+        case
+    };
+    let loaded = match exec::load(f) {
+        Ok(l) => l,
+        Err(e) => {
+            let file = f.display().to_string();
+            return ScenarioTested {
+                cases: vec![error_case(&file, "scenario file", format!("{e:#}"))],
+                errors: vec![format!("{e:#}")],
+                row: (file, 0, 1, 0.0, started.elapsed().as_secs_f64(), true),
+                ok: false,
+            };
+        }
+    };
+    let name = loaded.name();
+    let compiled = exec::compile_seeded(&loaded, seed);
+    let alone = compiled.opts.clock != ClockMode::Virtual || compiled.opts.has_outside_links();
+    let _turn = alone.then(|| {
+        one_at_a_time
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    });
+    let ran = build_runtime_for(&compiled.opts)
+        .and_then(|rt| rt.block_on(exec::execute(compiled, &mut |_| {})));
+    let out = match ran {
+        Ok(out) => out,
+        Err(e) => {
+            return ScenarioTested {
+                cases: vec![error_case(&name, &name, format!("{e:#}"))],
+                errors: vec![format!("{name}: run failed: {e:#}")],
+                row: (name, 0, 1, 0.0, started.elapsed().as_secs_f64(), true),
+                ok: false,
+            };
+        }
+    };
+    let mut cases = Vec::with_capacity(out.verdicts.len());
+    let mut errors = Vec::new();
+    for v in &out.verdicts {
+        let status = if v.passed {
+            quick_junit::TestCaseStatus::success()
+        } else {
+            let mut st =
+                quick_junit::TestCaseStatus::non_success(quick_junit::NonSuccessKind::Failure);
+            st.set_message(format!("t = {}: {}", v.t, v.observed));
+            st
+        };
+        let mut case = quick_junit::TestCase::new(v.name.clone(), status);
+        case.set_classname(name.as_str());
+        case.set_system_out(format!("t = {}: {}", v.t, v.observed));
+        cases.push(case);
+        if !v.passed {
+            errors.push(format!(
+                "FAIL {name}: {} (t = {}): {}",
+                v.name, v.t, v.observed
+            ));
+        }
+    }
+    let failed = out.verdicts.iter().filter(|v| !v.passed).count();
+    ScenarioTested {
+        row: (
+            name,
+            out.verdicts.len() - failed,
+            failed,
+            out.report.sim_time.as_secs_f64(),
+            out.report.wall.as_secs_f64(),
+            false,
+        ),
+        cases,
+        errors,
+        ok: failed == 0,
+    }
+}
+
 fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
     use std::io::IsTerminal as _;
     let show_bar = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
@@ -1194,92 +1296,34 @@ fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let mut rows = Vec::new();
+    let jobs = a
+        .jobs
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
+        .max(1);
+    let one_at_a_time = std::sync::Mutex::new(());
+    // The scenarios run side by side; what each says on stderr comes as it ends, and the
+    // table and the JUnit report are in the files' order.
+    let tested = m6p_twin::campaign_run::in_parallel(
+        &a.files,
+        jobs,
+        &|f| test_one(f, a.seed, &one_at_a_time),
+        &|t| {
+            bar.suspend(|| {
+                for e in &t.errors {
+                    eprintln!("{e}");
+                }
+            });
+            bar.set_message(t.row.0.clone());
+            bar.inc(1);
+        },
+    );
     let mut suite = quick_junit::TestSuite::new("m6p-twin scenarios");
     let mut all_ok = true;
-    for f in &a.files {
-        bar.set_message(f.display().to_string());
-        let started = std::time::Instant::now();
-        let row = match exec::load(f) {
-            Err(e) => {
-                all_ok = false;
-                let mut case = quick_junit::TestCase::new(
-                    f.display().to_string(),
-                    quick_junit::TestCaseStatus::non_success(quick_junit::NonSuccessKind::Error),
-                );
-                case.set_classname("scenario file");
-                case.set_system_err(format!("{e:#}"));
-                suite.add_test_case(case);
-                bar.suspend(|| eprintln!("{e:#}"));
-                (
-                    f.display().to_string(),
-                    0,
-                    1,
-                    0.0,
-                    started.elapsed().as_secs_f64(),
-                    true,
-                )
-            }
-            Ok(loaded) => {
-                let name = loaded.name();
-                let compiled = exec::compile_seeded(&loaded, a.seed);
-                let rt = build_runtime_for(&compiled.opts)?;
-                match rt.block_on(exec::execute(compiled, &mut |_| {})) {
-                    Err(e) => {
-                        all_ok = false;
-                        let mut case = quick_junit::TestCase::new(
-                            name.clone(),
-                            quick_junit::TestCaseStatus::non_success(
-                                quick_junit::NonSuccessKind::Error,
-                            ),
-                        );
-                        case.set_classname(name.as_str());
-                        case.set_system_err(format!("{e:#}"));
-                        suite.add_test_case(case);
-                        bar.suspend(|| eprintln!("{name}: run failed: {e:#}"));
-                        (name, 0, 1, 0.0, started.elapsed().as_secs_f64(), true)
-                    }
-                    Ok(out) => {
-                        for v in &out.verdicts {
-                            let status = if v.passed {
-                                quick_junit::TestCaseStatus::success()
-                            } else {
-                                let mut st = quick_junit::TestCaseStatus::non_success(
-                                    quick_junit::NonSuccessKind::Failure,
-                                );
-                                st.set_message(format!("t = {}: {}", v.t, v.observed));
-                                st
-                            };
-                            let mut case = quick_junit::TestCase::new(v.name.clone(), status);
-                            case.set_classname(name.as_str());
-                            case.set_system_out(format!("t = {}: {}", v.t, v.observed));
-                            suite.add_test_case(case);
-                            if !v.passed {
-                                bar.suspend(|| {
-                                    eprintln!(
-                                        "FAIL {name}: {} (t = {}): {}",
-                                        v.name, v.t, v.observed
-                                    )
-                                });
-                            }
-                        }
-                        let failed = out.verdicts.iter().filter(|v| !v.passed).count();
-                        all_ok &= failed == 0;
-                        let wall = out.report.wall.as_secs_f64();
-                        (
-                            name,
-                            out.verdicts.len() - failed,
-                            failed,
-                            out.report.sim_time.as_secs_f64(),
-                            wall,
-                            false,
-                        )
-                    }
-                }
-            }
-        };
-        rows.push(row);
-        bar.inc(1);
+    let mut rows = Vec::with_capacity(tested.len());
+    for t in tested {
+        all_ok &= t.ok;
+        suite.add_test_cases(t.cases);
+        rows.push(t.row);
     }
     bar.finish_and_clear();
     println!(

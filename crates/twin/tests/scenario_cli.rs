@@ -159,6 +159,100 @@ fn a_failing_expectation_fails_the_run_and_is_named_with_time_and_value() {
     assert!(out.contains("FAIL FC always answers"), "{out}");
 }
 
+/// `m6p-twin test`'s table rows (no header) without their wall-time columns (wall s and
+/// real-time x).
+fn rows_without_wall(out: &str) -> Vec<String> {
+    out.lines()
+        .skip(1)
+        .map(|l| {
+            let (row, note) = match l.strip_suffix("  (did not run)") {
+                Some(row) => (row, " (did not run)"),
+                None => (l, ""),
+            };
+            let cells: Vec<&str> = row.split_whitespace().collect();
+            cells[..cells.len().saturating_sub(2)].join(" ") + note
+        })
+        .collect()
+}
+
+#[test]
+fn scenarios_tested_side_by_side_report_as_one_after_the_other() {
+    let passing = tmp("jobs-passing.toml");
+    std::fs::write(
+        &passing,
+        MINUTE_6U.replace("seed = 1", "seed = 1\nname = \"minute\""),
+    )
+    .unwrap();
+    let failing = tmp("jobs-failing.toml");
+    std::fs::write(&failing, FAILING).unwrap();
+    let broken = tmp("jobs-broken.toml");
+    std::fs::write(
+        &broken,
+        "duration = \"1m\"\n[[commands]]\nat = \"1s\"\nto = \"FCC\"\n",
+    )
+    .unwrap();
+    let again = tmp("jobs-again.toml");
+    std::fs::write(
+        &again,
+        MINUTE_6U.replace("seed = 1", "seed = 2\nname = \"again\""),
+    )
+    .unwrap();
+    let files = [&passing, &failing, &broken, &again].map(|p| p.to_str().unwrap().to_owned());
+    let tested = |jobs: &str| {
+        let junit = tmp(&format!("jobs-{jobs}.xml"));
+        let mut args = vec!["test", "--jobs", jobs, "--junit", junit.to_str().unwrap()];
+        args.extend(files.iter().map(String::as_str));
+        let (code, out, err) = twin(&args);
+        (code, out, err, std::fs::read_to_string(junit).unwrap())
+    };
+    let (code1, out1, err1, xml1) = tested("1");
+    let (code4, out4, err4, xml4) = tested("4");
+    assert_eq!((code1, code4), (1, 1), "{out1}\n{err1}\n{out4}\n{err4}");
+    // The table and the report are in the files' order, whichever run ended first.
+    let rows = rows_without_wall(&out4);
+    assert_eq!(rows_without_wall(&out1), rows);
+    let names: Vec<&str> = rows.iter().map(|r| r.split(' ').next().unwrap()).collect();
+    assert_eq!(
+        names,
+        ["minute", "failing", broken.to_str().unwrap(), "again"],
+        "{out4}"
+    );
+    assert!(rows[2].ends_with(" 0 1 0.0 (did not run)"), "{out4}");
+    assert_eq!(xml1, xml4);
+    for err in [&err1, &err4] {
+        assert!(
+            err.contains("FAIL failing: FC always answers (t = 30.000000000s)"),
+            "{err}"
+        );
+        assert!(err.contains("unknown node `FCC`"), "{err}");
+    }
+}
+
+#[test]
+fn scenarios_tested_side_by_side_take_turns_at_a_port() {
+    // Two scenarios listening on one port: each runs in real time, one at a time, so both
+    // bind it (side by side, the second would find it taken).
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let text = MINUTE_6U.replace("duration = \"60s\"", "duration = \"1s\"")
+        + &format!("[[links]]\nkind = \"kiss-listen\"\naddr = \"127.0.0.1:{port}\"\n");
+    let (a, b) = (tmp("port-a.toml"), tmp("port-b.toml"));
+    std::fs::write(&a, &text).unwrap();
+    std::fs::write(&b, &text).unwrap();
+    let (code, out, err) = twin(&[
+        "test",
+        "--jobs",
+        "2",
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(!out.contains("did not run"), "{out}\n{err}");
+}
+
 #[test]
 fn check_reports_file_line_and_field_and_schema_is_json() {
     let file = tmp("bad.toml");
