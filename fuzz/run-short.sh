@@ -24,6 +24,15 @@ case $secs in
     exit 2
     ;;
 esac
+# One target per core at a time (libFuzzer runs on one thread): on CI's two cores the pass
+# takes half the wall time (fuzz/README.md), and each target still gets its seconds on a core.
+jobs_max=${FUZZ_JOBS:-$(nproc 2>/dev/null || echo 1)}
+case $jobs_max in
+'' | *[!0-9]* | 0)
+    echo "FUZZ_JOBS must be a number of targets at a time, 1 or more (not '$jobs_max')" >&2
+    exit 2
+    ;;
+esac
 fuzz=$(cd "$(dirname "$0")" && pwd)
 cd "$fuzz" || exit 1
 
@@ -53,12 +62,12 @@ if [ "$build_only" = 1 ]; then
 fi
 
 work=$(mktemp -d)
-trap 'rm -rf "$work"' EXIT
+# Stopped or ended, the script leaves no fuzzer behind.
+trap 'kill $(jobs -p) 2>/dev/null; wait; rm -rf "$work"' EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
 
-# One target per core at a time (libFuzzer runs on one thread): on CI's two cores the pass
-# takes half the wall time, and each target still gets the whole of its seconds on a core.
-# Each writes its own log and exit code; the table is printed in the targets' order.
-jobs_max=${FUZZ_JOBS:-$(nproc 2>/dev/null || echo 1)}
+# Each target writes its own log and exit code; the table is printed in the targets' order.
 run_one() {
     local t=$1
     mkdir -p "$work/corpus/$t" "$fuzz/artifacts/$t"
@@ -68,10 +77,17 @@ run_one() {
     # -timeout: one input running longer than 60 s is a hang, reported like a crash.
     timeout $((secs + 300)) nice -n 19 cargo +nightly fuzz run "${flags[@]}" "$t" "$work/corpus/$t" -- \
         -max_total_time="$secs" -print_final_stats=1 -timeout=60 \
-        -artifact_prefix="$fuzz/artifacts/$t/" >"$work/$t.log" 2>&1
+        -artifact_prefix="$fuzz/artifacts/$t/" >"$work/$t.log" 2>&1 &
+    # Stopped, it stops its fuzzer (timeout passes the signal on).
+    local pid=$!
+    trap 'kill "$pid" 2>/dev/null' TERM
+    wait "$pid"
     echo $? >"$work/$t.rc"
 }
-targets=$(cargo +nightly fuzz list)
+if ! targets=$(cargo +nightly fuzz list) || [ -z "$targets" ]; then
+    echo "fuzz: cargo fuzz list named no target" >&2
+    exit 1
+fi
 for t in $targets; do
     while [ "$(jobs -rp | wc -l)" -ge "$jobs_max" ]; do
         wait -n

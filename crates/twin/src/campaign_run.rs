@@ -124,6 +124,21 @@ pub fn metrics(report: &crate::runtime::RunReport) -> BTreeMap<String, f64> {
     m
 }
 
+/// What a caught panic said.
+pub fn panic_text(p: &(dyn std::any::Any + Send)) -> &str {
+    p.downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| p.downcast_ref::<&str>().copied())
+        .unwrap_or("(no message)")
+}
+
+/// The threads to run on when none is asked for: one per core.
+pub fn default_jobs(asked: Option<usize>) -> usize {
+    asked
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
+        .max(1)
+}
+
 /// [`run_text`] with the run's [`metrics`] (none when it did not run to its end).
 pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>) {
     let outcome =
@@ -166,13 +181,7 @@ pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>)
                 .collect(),
         ),
         Ok(Err(e)) => RunVerdict::Error(format!("{e:#}")),
-        Err(p) => RunVerdict::Error(format!(
-            "panicked: {}",
-            p.downcast_ref::<String>()
-                .map(String::as_str)
-                .or_else(|| p.downcast_ref::<&str>().copied())
-                .unwrap_or("(no message)")
-        )),
+        Err(p) => RunVerdict::Error(format!("panicked: {}", panic_text(p.as_ref()))),
     };
     (verdict, figures)
 }

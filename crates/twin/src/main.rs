@@ -1028,10 +1028,7 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     let runs = a.runs.unwrap_or(c.spec.runs);
     // Every run's scenario is drawn and validated before anything runs.
     c.check(runs)?;
-    let jobs = a
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
-        .max(1);
+    let jobs = campaign_run::default_jobs(a.jobs);
     let shard = match &a.shard {
         Some(s) => Some(campaign_run::Shard::parse(s).map_err(anyhow::Error::msg)?),
         None => {
@@ -1194,13 +1191,14 @@ struct ScenarioTested {
     ok: bool,
 }
 
-/// Load, run and judge one scenario file. A run in real time or with links to the outside
-/// holds `one_at_a_time` while it runs: two may listen on the same port, and their pace is
-/// the wall clock's.
+/// Load, run and judge one scenario file; a panic in the run is its error. A self-contained
+/// run (virtual time, no outside link) shares `turns` with the others like it; one in real
+/// time or with links to the outside runs alone (two may listen on one port, and a run paced
+/// by the wall clock should not share the CPU).
 fn test_one(
     f: &std::path::Path,
     seed: Option<u64>,
-    one_at_a_time: &std::sync::Mutex<()>,
+    turns: &std::sync::RwLock<()>,
 ) -> ScenarioTested {
     let started = std::time::Instant::now();
     let error_case = |name: &str, classname: &str, e: String| {
@@ -1225,15 +1223,30 @@ fn test_one(
         }
     };
     let name = loaded.name();
+    // Its log lines name it: scenarios side by side write to one stderr.
+    let _span = tracing::info_span!("scenario", name = %name).entered();
     let compiled = exec::compile_seeded(&loaded, seed);
-    let alone = compiled.opts.clock != ClockMode::Virtual || compiled.opts.has_outside_links();
-    let _turn = alone.then(|| {
-        one_at_a_time
-            .lock()
+    let self_contained = compiled.opts.is_self_contained();
+    let _beside = self_contained.then(|| {
+        turns
+            .read()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
     });
-    let ran = build_runtime_for(&compiled.opts)
-        .and_then(|rt| rt.block_on(exec::execute(compiled, &mut |_| {})));
+    let _alone = (!self_contained).then(|| {
+        turns
+            .write()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    });
+    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        build_runtime_for(&compiled.opts)
+            .and_then(|rt| rt.block_on(exec::execute(compiled, &mut |_| {})))
+    }))
+    .unwrap_or_else(|p| {
+        Err(anyhow::anyhow!(
+            "panicked: {}",
+            m6p_twin::campaign_run::panic_text(p.as_ref())
+        ))
+    });
     let out = match ran {
         Ok(out) => out,
         Err(e) => {
@@ -1296,24 +1309,21 @@ fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let jobs = a
-        .jobs
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
-        .max(1);
-    let one_at_a_time = std::sync::Mutex::new(());
+    let jobs = m6p_twin::campaign_run::default_jobs(a.jobs);
+    let turns = std::sync::RwLock::new(());
     // The scenarios run side by side; what each says on stderr comes as it ends, and the
     // table and the JUnit report are in the files' order.
     let tested = m6p_twin::campaign_run::in_parallel(
         &a.files,
         jobs,
-        &|f| test_one(f, a.seed, &one_at_a_time),
+        &|f| test_one(f, a.seed, &turns),
         &|t| {
             bar.suspend(|| {
                 for e in &t.errors {
                     eprintln!("{e}");
                 }
             });
-            bar.set_message(t.row.0.clone());
+            bar.set_message(format!("done: {}", t.row.0));
             bar.inc(1);
         },
     );
