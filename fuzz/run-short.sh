@@ -28,7 +28,7 @@ esac
 # takes half the wall time (fuzz/README.md), and each target still gets its seconds on a core.
 jobs_max=${FUZZ_JOBS:-$(nproc 2>/dev/null || echo 1)}
 case $jobs_max in
-'' | *[!0-9]* | 0)
+'' | *[!0-9]* | 0*)
     echo "FUZZ_JOBS must be a number of targets at a time, 1 or more (not '$jobs_max')" >&2
     exit 2
     ;;
@@ -74,13 +74,15 @@ run_one() {
     if [ -d "corpus/$t" ]; then
         cp -R "corpus/$t/." "$work/corpus/$t/"
     fi
+    # Stopped (TERM from the script's exit, or a Ctrl-C, which `timeout` in its own process
+    # group does not see), it stops its fuzzer and waits for it: timeout passes the signal on.
+    local pid=
+    trap '[ -n "$pid" ] && kill "$pid" 2>/dev/null && wait "$pid"; exit 143' INT TERM
     # -timeout: one input running longer than 60 s is a hang, reported like a crash.
     timeout $((secs + 300)) nice -n 19 cargo +nightly fuzz run "${flags[@]}" "$t" "$work/corpus/$t" -- \
         -max_total_time="$secs" -print_final_stats=1 -timeout=60 \
         -artifact_prefix="$fuzz/artifacts/$t/" >"$work/$t.log" 2>&1 &
-    # Stopped, it stops its fuzzer (timeout passes the signal on).
-    local pid=$!
-    trap 'kill "$pid" 2>/dev/null' TERM
+    pid=$!
     wait "$pid"
     echo $? >"$work/$t.rc"
 }

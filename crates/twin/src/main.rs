@@ -1223,8 +1223,9 @@ fn test_one(
         }
     };
     let name = loaded.name();
-    // Its log lines name it: scenarios side by side write to one stderr.
-    let _span = tracing::info_span!("scenario", name = %name).entered();
+    // Its log lines name it: scenarios side by side write to one stderr. At error level so
+    // that no filter leaves a warning without it.
+    let _span = tracing::error_span!("scenario", name = %name).entered();
     let compiled = exec::compile_seeded(&loaded, seed);
     let self_contained = compiled.opts.is_self_contained();
     let _beside = self_contained.then(|| {

@@ -219,7 +219,7 @@ fn scenarios_tested_side_by_side_report_as_one_after_the_other() {
     );
     assert!(rows[2].ends_with(" 0 1 0.0 (did not run)"), "{out4}");
     assert_eq!(xml1, xml4);
-    // What they say on stderr is the same, in the order the runs ended.
+    // What they say on stderr is the same lines (printed in the order the runs ended).
     let said = |err: &str| {
         let mut lines: Vec<String> = err
             .lines()
