@@ -1200,6 +1200,19 @@ fn test_one(
     seed: Option<u64>,
     turns: &std::sync::RwLock<()>,
 ) -> ScenarioTested {
+    test_one_with(f, seed, turns, |compiled| {
+        build_runtime_for(&compiled.opts)
+            .and_then(|rt| rt.block_on(exec::execute(compiled, &mut |_| {})))
+    })
+}
+
+/// [`test_one`] with the run given: `run` takes the compiled scenario to its outcome.
+fn test_one_with(
+    f: &std::path::Path,
+    seed: Option<u64>,
+    turns: &std::sync::RwLock<()>,
+    run: impl FnOnce(m6p_twin::plan::Compiled) -> anyhow::Result<exec::Outcome>,
+) -> ScenarioTested {
     let started = std::time::Instant::now();
     let error_case = |name: &str, classname: &str, e: String| {
         let mut case = quick_junit::TestCase::new(
@@ -1238,16 +1251,13 @@ fn test_one(
             .write()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
     });
-    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        build_runtime_for(&compiled.opts)
-            .and_then(|rt| rt.block_on(exec::execute(compiled, &mut |_| {})))
-    }))
-    .unwrap_or_else(|p| {
-        Err(anyhow::anyhow!(
-            "panicked: {}",
-            m6p_twin::campaign_run::panic_text(p.as_ref())
-        ))
-    });
+    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(compiled)))
+        .unwrap_or_else(|p| {
+            Err(anyhow::anyhow!(
+                "panicked: {}",
+                m6p_twin::campaign_run::panic_text(p.as_ref())
+            ))
+        });
     let out = match ran {
         Ok(out) => out,
         Err(e) => {
@@ -1431,4 +1441,32 @@ fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
             }
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    /// A run that panics is its scenario's error row, and the scenarios beside it still run:
+    /// the lock it held is free and not poisoned.
+    #[test]
+    fn a_scenario_whose_run_panics_is_an_error_row() {
+        let file =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/default.toml");
+        let turns = std::sync::RwLock::new(());
+        let t = test_one_with(&file, None, &turns, |_| panic!("a bug in the run"));
+        assert!(!t.ok);
+        assert!(t.row.5, "did not run");
+        assert_eq!((t.row.1, t.row.2), (0, 1));
+        assert_eq!(t.errors.len(), 1);
+        assert!(
+            t.errors[0].ends_with("run failed: panicked: a bug in the run"),
+            "{:?}",
+            t.errors
+        );
+        assert_eq!(t.cases.len(), 1);
+        assert!(!turns.is_poisoned());
+        assert!(turns.try_write().is_ok(), "the lock is free");
+    }
 }
