@@ -1,24 +1,27 @@
 #!/usr/bin/env python3
 """The crates that only run at build time (proc macros, build scripts and what they use),
-from `cargo metadata`, against the `<name> = { opt-level = 0 }` lines of the
-`[profile.dev.package]` table in the workspace's Cargo.toml.
+from `cargo metadata`, against the `[profile.dev.package]` table of the workspace's
+Cargo.toml: `"*"` at opt-level 2 and each of those crates at opt-level 0.
 
-Why: Cargo.toml builds dependencies at opt-level 2 (`[profile.dev.package."*"]`) so that the
-tests run fast, and a `package."*"` override outranks `build-override`, so without the list
-the proc macros, syn and the build scripts' helpers were optimised too: about 370 s of CPU in a fresh
-build, for code that runs for seconds (docs/architecture.md, "Build profiles").
+Why: Cargo.toml builds dependencies at opt-level 2 (`"*"`) so that the tests run fast, and
+a `package."*"` override outranks `build-override`, so without the list the proc macros,
+syn and the build scripts' helpers were optimised too: about 420 s of cargo's unit time in
+a fresh test build, for code that runs for seconds (docs/architecture.md, "Build profiles").
 
-    tools/host-only-crates.py          check: exit 1 and name the difference
-    tools/host-only-crates.py --toml   print the list as lines of that table
+    tools/host-only-crates.py          check: exit 1, name the difference, print the table
+    tools/host-only-crates.py --toml   print the table's lines
 
-A crate used both at build time and in the twin (memchr, serde) is not on the list: it keeps
-opt-level 2. Run from the workspace root; needs only cargo and Python's standard library.
+A crate used both at build time and in the twin (anyhow, libc) is not on the list: it keeps
+opt-level 2, and so do the build scripts of the twin's own dependencies. `cargo metadata`'s
+resolve also holds optional crates that only a weak feature (`dep?/feature`) names and that
+are never built (borsh-derive, time-macros); they are listed, harmlessly. Run from the
+workspace root; needs cargo and Python 3.11 or later (`tomllib`).
 """
 
 import json
-import re
 import subprocess
 import sys
+import tomllib
 
 TRIPLE = "x86_64-unknown-linux-gnu"
 
@@ -54,17 +57,32 @@ def host_only(meta):
     return sorted(names)
 
 
-def listed(cargo_toml):
-    """The names given `{ opt-level = 0 }` in the `[profile.dev.package]` table."""
-    table = re.search(r"^\[profile\.dev\.package\]\n(.*?)(?=^\[|\Z)", cargo_toml, re.M | re.S)
-    if table is None:
-        return []
-    return sorted(re.findall(r"^([A-Za-z0-9_-]+) = \{ opt-level = 0 \}$", table.group(1), re.M))
+def table_problems(cargo_toml, want):
+    """What is wrong with the `[profile.dev.package]` table against `want`, as lines."""
+    table = tomllib.loads(cargo_toml).get("profile", {}).get("dev", {}).get("package", {})
+    problems = []
+    if table.get("*") != {"opt-level": 2}:
+        problems.append(f'"*" is {table.get("*")!r}, not {{ opt-level = 2 }}')
+    have = {name for name, v in table.items() if name != "*" and v == {"opt-level": 0}}
+    other = sorted(name for name, v in table.items() if name != "*" and v != {"opt-level": 0})
+    if other:
+        problems.append("set to something other than { opt-level = 0 }: " + " ".join(other))
+    missing = sorted(set(want) - have)
+    if missing:
+        problems.append("build-time crates not at opt-level 0: " + " ".join(missing))
+    extra = sorted(have - set(want))
+    if extra:
+        problems.append("at opt-level 0 but not build-time only: " + " ".join(extra))
+    return problems
+
+
+def lines(want):
+    return [f"{name} = {{ opt-level = 0 }}" for name in want]
 
 
 def main():
-    meta = json.loads(
-        subprocess.run(
+    try:
+        out = subprocess.run(
             [
                 "cargo",
                 "metadata",
@@ -75,25 +93,24 @@ def main():
                 TRIPLE,
             ],
             check=True,
-            capture_output=True,
+            stdout=subprocess.PIPE,
             text=True,
         ).stdout
-    )
-    want = host_only(meta)
+    except (OSError, subprocess.CalledProcessError) as e:
+        print(f"tools/host-only-crates.py: cargo metadata failed: {e}")
+        return 2
+    want = host_only(json.loads(out))
     if sys.argv[1:] == ["--toml"]:
-        for name in want:
-            print(f"{name} = {{ opt-level = 0 }}")
+        print("\n".join(lines(want)))
         return 0
-    with open("Cargo.toml", encoding="utf-8") as f:
-        have = listed(f.read())
-    missing = sorted(set(want) - set(have))
-    extra = sorted(set(have) - set(want))
-    if missing or extra:
-        if missing:
-            print("Cargo.toml: build-time crates built at opt-level 2:", " ".join(missing))
-        if extra:
-            print("Cargo.toml: listed at opt-level 0 but not build-time only:", " ".join(extra))
-        print("tools/host-only-crates.py --toml prints the list")
+    with open("Cargo.toml", "rb") as f:
+        text = f.read().decode("utf-8")
+    problems = table_problems(text, want)
+    if problems:
+        for p in problems:
+            print(f"Cargo.toml [profile.dev.package]: {p}")
+        print('The build-time crates\' lines (after `"*" = { opt-level = 2 }`):')
+        print("\n".join(lines(want)))
         return 1
     print(f"Cargo.toml: the {len(want)} build-time crates are at opt-level 0")
     return 0
