@@ -8,8 +8,8 @@ a `package."*"` override outranks `build-override`, so without the list the proc
 syn and the build scripts' helpers were optimised too: about 420 s of cargo's unit time in
 a fresh test build, for code that runs for seconds (docs/architecture.md, "Build profiles").
 
-    tools/host-only-crates.py          check: exit 1, name the difference, print the table
-    tools/host-only-crates.py --toml   print the table's lines
+    tools/host-only-crates.py          check: exit 1, name the difference, print the lines
+    tools/host-only-crates.py --toml   print the build-time crates' lines of the table
 
 A crate used both at build time and in the twin (anyhow, libc) is not on the list: it keeps
 opt-level 2, and so do the build scripts of the twin's own dependencies. `cargo metadata`'s
@@ -59,14 +59,24 @@ def host_only(meta):
 
 def table_problems(cargo_toml, want):
     """What is wrong with the `[profile.dev.package]` table against `want`, as lines."""
-    table = tomllib.loads(cargo_toml).get("profile", {}).get("dev", {}).get("package", {})
+    profiles = tomllib.loads(cargo_toml).get("profile", {})
+    table = profiles.get("dev", {}).get("package", {})
     problems = []
-    if table.get("*") != {"opt-level": 2}:
-        problems.append(f'"*" is {table.get("*")!r}, not {{ opt-level = 2 }}')
+    if "*" not in table:
+        problems.append('[profile.dev.package] has no "*" = { opt-level = 2 }')
+    elif table["*"] != {"opt-level": 2}:
+        problems.append(f'[profile.dev.package] "*" is {table["*"]!r}, not {{ opt-level = 2 }}')
+    # The test profile inherits the dev one; its own overrides would win over this table.
+    tests = profiles.get("test", {}).get("package", {})
+    overridden = sorted(name for name in tests if name == "*" or name in want)
+    if overridden:
+        problems.append(
+            "[profile.test.package] overrides the table for tests: " + " ".join(overridden)
+        )
     have = {name for name, v in table.items() if name != "*" and v == {"opt-level": 0}}
     other = sorted(name for name, v in table.items() if name != "*" and v != {"opt-level": 0})
     if other:
-        problems.append("set to something other than { opt-level = 0 }: " + " ".join(other))
+        problems.append("[profile.dev.package] not { opt-level = 0 }: " + " ".join(other))
     missing = sorted(set(want) - have)
     if missing:
         problems.append("build-time crates not at opt-level 0: " + " ".join(missing))
@@ -105,10 +115,15 @@ def main():
         return 0
     with open("Cargo.toml", "rb") as f:
         text = f.read().decode("utf-8")
-    problems = table_problems(text, want)
+    try:
+        problems = table_problems(text, want)
+    except tomllib.TOMLDecodeError as e:
+        # cargo reads TOML 1.1 (a trailing comma in an inline table), tomllib only 1.0.
+        print(f"Cargo.toml: Python's tomllib (TOML 1.0) cannot read it: {e}")
+        return 2
     if problems:
         for p in problems:
-            print(f"Cargo.toml [profile.dev.package]: {p}")
+            print(f"Cargo.toml: {p}")
         print('The build-time crates\' lines (after `"*" = { opt-level = 2 }`):')
         print("\n".join(lines(want)))
         return 1

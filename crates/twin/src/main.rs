@@ -1445,28 +1445,41 @@ fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
     use super::*;
 
-    /// A run that panics is its scenario's error row, and the scenarios beside it still run:
-    /// the lock it held is free and not poisoned.
+    /// A run that panics is its scenario's error row, and the scenarios after it still run:
+    /// the lock it held, shared (a self-contained run) or whole (one in real time), is free
+    /// again and not poisoned.
     #[test]
     fn a_scenario_whose_run_panics_is_an_error_row() {
-        let file =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/default.toml");
-        let turns = std::sync::RwLock::new(());
-        let t = test_one_with(&file, None, &turns, |_| panic!("a bug in the run"));
-        assert!(!t.ok);
-        assert!(t.row.5, "did not run");
-        assert_eq!((t.row.1, t.row.2), (0, 1));
-        assert_eq!(t.errors.len(), 1);
-        assert!(
-            t.errors[0].ends_with("run failed: panicked: a bug in the run"),
-            "{:?}",
-            t.errors
-        );
-        assert_eq!(t.cases.len(), 1);
-        assert!(!turns.is_poisoned());
-        assert!(turns.try_write().is_ok(), "the lock is free");
+        let manifest = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let default = manifest.join("../../scenarios/default.toml");
+        let realtime = std::env::temp_dir().join(format!(
+            "m6p-twin-panic-{}-realtime.toml",
+            std::process::id()
+        ));
+        let text = std::fs::read_to_string(&default).expect("default scenario");
+        std::fs::write(&realtime, format!("{text}\n[clock]\nmode = \"realtime\"\n"))
+            .expect("temp scenario");
+        for (file, alone) in [(&default, false), (&realtime, true)] {
+            let turns = std::sync::RwLock::new(());
+            let t = test_one_with(file, None, &turns, |c| {
+                assert_eq!(c.opts.is_self_contained(), !alone, "{}", file.display());
+                panic!("a bug in the run")
+            });
+            assert!(!t.ok);
+            assert!(t.row.5, "did not run");
+            assert_eq!((t.row.1, t.row.2), (0, 1));
+            assert_eq!(t.errors.len(), 1);
+            assert!(
+                t.errors[0].ends_with("run failed: panicked: a bug in the run"),
+                "{:?}",
+                t.errors
+            );
+            assert_eq!(t.cases.len(), 1);
+            assert!(!turns.is_poisoned());
+            assert!(turns.try_write().is_ok(), "the lock is free");
+        }
+        let _ = std::fs::remove_file(&realtime);
     }
 }
