@@ -429,6 +429,10 @@ pub async fn run(
     run_with(opts, ready, &mut |_| {}).await
 }
 
+/// Events the run's loop takes per wake-up (the first, then those already queued): the
+/// select, its Ctrl-C check and the channel's wake-up once per batch rather than per event.
+const EVENTS_PER_WAKE: usize = 1024;
+
 /// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder).
 pub async fn run_with(
     mut opts: RunOptions,
@@ -521,7 +525,12 @@ pub async fn run_with(
                 break;
             }
             ev = ev_rx.recv() => {
-                if let Some(ev) = ev {
+                // The event, then those already queued behind it (a bounded batch: one
+                // select per batch, not per event). The order is the select's own: with
+                // `biased`, a queued event always comes before the fault timer.
+                let mut next = ev;
+                let mut left = EVENTS_PER_WAKE;
+                while let Some(ev) = next {
                     // An EPS channel switch takes effect through the power rules, whose news
                     // comes first.
                     if let RunEvent::Eps(o) = &ev
@@ -532,6 +541,8 @@ pub async fn run_with(
                         }
                     }
                     handle_event(ev, &mut observer);
+                    left -= 1;
+                    next = if left > 0 { ev_rx.try_recv().ok() } else { None };
                 }
             }
             () = clock.sleep_until(next_fault), if next_fault < SimTime::MAX => {
