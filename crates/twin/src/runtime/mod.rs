@@ -430,7 +430,7 @@ pub async fn run(
 }
 
 /// Events the run's loop takes per wake-up (the first, then those already queued): the
-/// select, its Ctrl-C check and the channel's wake-up once per batch rather than per event.
+/// select, its Ctrl-C check and the next fault's timer once per batch rather than per event.
 const EVENTS_PER_WAKE: usize = 1024;
 
 /// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder).
@@ -526,8 +526,12 @@ pub async fn run_with(
             }
             ev = ev_rx.recv() => {
                 // The event, then those already queued behind it (a bounded batch: one
-                // select per batch, not per event). The order is the select's own: with
-                // `biased`, a queued event always comes before the fault timer.
+                // select per batch, not per event). The stream's order is the select's own:
+                // with `biased`, a queued event always came before the fault timer. What
+                // moved is the yield: tokio's budget (128 units a poll, a `recv` one) made
+                // the loop yield every 128 events, now every 128 batches, so with more than
+                // 128 waiting, other tasks of the same instant see this loop's effects (an
+                // EPS switch's power) sooner. Deterministic either way.
                 let mut next = ev;
                 let mut left = EVENTS_PER_WAKE;
                 while let Some(ev) = next {
