@@ -47,6 +47,7 @@ pub mod rules;
 pub mod runtime;
 pub mod scenario;
 pub mod sessions;
+pub mod sizes;
 pub mod tagged;
 pub mod timefmt;
 pub mod transit;

@@ -56,14 +56,18 @@ enum Command {
     /// Fault campaigns: a scenario run many times with drawn values, every run checked.
     #[command(subcommand)]
     Campaign(CampaignCmd),
-    /// Summarise a recording (channels, counts per node and port, expectations), or export
-    /// a channel to CSV.
+    /// Summarise a recording (channels, counts per node and port, expectations), export
+    /// a channel to CSV, or show where its bytes go.
     Inspect {
         /// The MCAP recording.
         file: PathBuf,
         /// Export this channel (for example /csp/packets) as CSV to standard output.
         #[arg(long, value_name = "CHANNEL")]
         csv: Option<String>,
+        /// Where the file's bytes go: each channel's messages, data, data compressed on its
+        /// own (zstd 1) and MCAP message index, largest first, and per simulated hour.
+        #[arg(long, conflicts_with = "csv")]
+        sizes: bool,
     },
     /// Compare two recordings; exit 0 only when their bus traffic is identical.
     Diff {
@@ -476,7 +480,7 @@ fn main() -> ExitCode {
             campaign,
             out,
         }) => cmd_campaign_shrink(&file, campaign.as_deref(), &out),
-        Command::Inspect { file, csv } => cmd_inspect(&file, csv.as_deref()),
+        Command::Inspect { file, csv, sizes } => cmd_inspect(&file, csv.as_deref(), sizes),
         Command::Diff { a, b } => cmd_diff(&a, &b),
         Command::Replay(a) => cmd_replay(a),
         Command::Bench {
@@ -884,7 +888,11 @@ fn cmd_bench_run(
     Ok(true)
 }
 
-fn cmd_inspect(file: &std::path::Path, csv: Option<&str>) -> anyhow::Result<bool> {
+fn cmd_inspect(file: &std::path::Path, csv: Option<&str>, sizes: bool) -> anyhow::Result<bool> {
+    if sizes {
+        print!("{}", m6p_twin::sizes::read_sizes(file)?);
+        return Ok(true);
+    }
     match csv {
         Some(channel) => {
             let stdout = std::io::stdout();

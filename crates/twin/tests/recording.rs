@@ -758,6 +758,79 @@ fn truncated_and_foreign_files_give_errors_not_panics() {
     assert!(s.messages < full.messages);
 }
 
+/// `inspect --sizes` (`sizes::read_sizes`): every channel with its messages and their data
+/// bytes as the messages themselves give them, 16 bytes of index a message, compressed data
+/// that zstd made smaller than the data where it repeats, largest share first; a cut file
+/// gives what it read and says why it stopped.
+#[test]
+fn sizes_account_for_every_message_of_every_channel() {
+    use m6p_twin::sizes::{BLOCK_BYTES, INDEX_BYTES_PER_MESSAGE, read_sizes};
+    for (name, ev) in [("sizes-kinds", events()), ("sizes-many", many_events())] {
+        let f = TempFile::new(name);
+        record(f.path(), &ev);
+        let s = read_sizes(f.path()).unwrap();
+        assert!(s.incomplete.is_none(), "{s}");
+        let mut want: std::collections::BTreeMap<String, (u64, u64)> = Default::default();
+        for m in recording::messages(f.path()).unwrap() {
+            let m = m.unwrap();
+            let e = want.entry(m.topic.to_string()).or_default();
+            e.0 += 1;
+            e.1 += m.data.len() as u64;
+        }
+        let got: std::collections::BTreeMap<String, (u64, u64)> = s
+            .channels
+            .iter()
+            .map(|c| (c.topic.clone(), (c.messages, c.data_bytes)))
+            .collect();
+        assert_eq!(got, want);
+        for c in &s.channels {
+            assert_eq!(c.index_bytes, INDEX_BYTES_PER_MESSAGE * c.messages, "{s}");
+            // zstd's frame adds a few bytes to data it cannot shrink, a frame per block.
+            let blocks = c.data_bytes / BLOCK_BYTES as u64 + 1;
+            assert!(
+                c.zstd_bytes > 0 && c.zstd_bytes <= c.data_bytes + 32 * blocks,
+                "{s}"
+            );
+        }
+        assert!(
+            s.channels
+                .windows(2)
+                .all(|w| w[0].share_bytes() >= w[1].share_bytes()),
+            "{s}"
+        );
+        assert_eq!(s.file_bytes, std::fs::metadata(f.path()).unwrap().len());
+        assert!(s.hours > 0.0, "{s}");
+        let text = s.to_string();
+        assert!(
+            text.contains("all channels") && text.contains("/can/main/frames"),
+            "{text}"
+        );
+        if name == "sizes-many" {
+            // Many similar packets: compressed well below their data, over several blocks.
+            let p = s
+                .channels
+                .iter()
+                .find(|c| c.topic == "/csp/packets")
+                .unwrap();
+            assert!(p.data_bytes > 2 * BLOCK_BYTES as u64, "{s}");
+            assert!(p.zstd_bytes * 2 < p.data_bytes, "{s}");
+            let bytes = std::fs::read(f.path()).unwrap();
+            let cut = TempFile::new("sizes-cut");
+            std::fs::write(cut.path(), &bytes[..bytes.len() / 2]).unwrap();
+            let c = read_sizes(cut.path()).unwrap();
+            let why = c.incomplete.as_deref().unwrap_or_default();
+            assert!(why.contains("truncated"), "{c}");
+            let read: u64 = c.channels.iter().map(|c| c.messages).sum();
+            let all: u64 = s.channels.iter().map(|c| c.messages).sum();
+            assert!(read > 0 && read < all, "{c}");
+            // Nothing readable: an error naming why.
+            std::fs::write(cut.path(), b"not a recording").unwrap();
+            let e = read_sizes(cut.path()).unwrap_err();
+            assert!(format!("{e:#}").contains("not an MCAP file"), "{e:#}");
+        }
+    }
+}
+
 /// Decode a recording with the `mcap` Python package (`tests/decode_mcap.py`): a generic
 /// reader with no code from this project must decode every channel, and the decoded ground
 /// packets must equal the packets on the ground network.
