@@ -1,13 +1,14 @@
 //! `m6p-twin inspect --sizes`: where a recording's bytes go, channel by channel.
 //!
-//! A chunk holds every channel's messages compressed together, so no channel's share of the
-//! file can be read off it. This estimates each share the way the recorder pays it:
-//! the channel's message data compressed on its own (zstd level 1, the recorder's level, a
-//! block per [`BLOCK_BYTES`] of that channel's data), plus MCAP's message index, which
-//! lies outside the chunks, uncompressed, at [`INDEX_BYTES_PER_MESSAGE`] bytes a message
-//! (Foxglove's reader needs it). The estimates do not see redundancy between channels (the
-//! same number on two channels) or the message records' own headers (31 bytes a message
-//! before compression), so their sum is near the file's size, not equal to it.
+//! A chunk holds every channel's messages compressed together (4 MiB chunks), so no
+//! channel's share of the file can be read off it. This estimates each share: the channel's
+//! message data compressed on its own (zstd level 1, the recorder's level, a block per
+//! [`BLOCK_BYTES`] of that channel's data), plus MCAP's message index, which lies outside
+//! the chunks, uncompressed, at [`INDEX_BYTES_PER_MESSAGE`] bytes a message (plus 15 bytes
+//! per channel per chunk, not counted; Foxglove's indexed reader, the one that seeks, needs
+//! the index). A channel compressed alone can come out smaller or larger than its part of
+//! the mixed chunks, and the estimates leave out the message records' own headers (31 bytes
+//! a message before compression), so their sum is near the file's size, not equal to it.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -58,8 +59,9 @@ pub struct Sizes {
     pub channels: Vec<ChannelSize>,
     /// The file's size.
     pub file_bytes: u64,
-    /// The simulated span the figures per hour divide by (the recorded duration, else the
-    /// span of the messages' times), in hours; 0 when unknown.
+    /// The simulated span the figures per hour divide by, in hours: from the run's start
+    /// (its metadata, else the first message) to the last message read, as `inspect`'s
+    /// duration; 0 without messages.
     pub hours: f64,
     /// Why the file could not be read to its end, if so (the figures are of what was read).
     pub incomplete: Option<String>,
@@ -76,9 +78,10 @@ struct Acc {
 impl Acc {
     fn compress_block(&mut self) -> anyhow::Result<()> {
         if !self.block.is_empty() {
-            let z = zstd::bulk::compress(&self.block, ZSTD_LEVEL).context("zstd")?;
+            // Taken, not cleared: a channel done with its block gives its memory back.
+            let block = std::mem::take(&mut self.block);
+            let z = zstd::bulk::compress(&block, ZSTD_LEVEL).context("zstd")?;
             self.zstd_bytes += z.len() as u64;
-            self.block.clear();
         }
         Ok(())
     }
@@ -86,14 +89,16 @@ impl Acc {
 
 /// Read the recording at `path` and estimate each channel's share (module docs). A
 /// truncated file gives the figures of what could be read, with [`Sizes::incomplete`]
-/// saying why it stopped; a file with no readable message is an error.
+/// saying why it stopped; a file that fails before its first message (not an MCAP file, or
+/// cut before its first chunk) is an error. A recording without messages has no channels.
 pub fn read_sizes(path: &Path) -> anyhow::Result<Sizes> {
     let file_bytes = std::fs::metadata(path)
         .with_context(|| format!("{}", path.display()))?
         .len();
-    let duration_ns = crate::recording::load_meta(path)
+    let start_ns = crate::recording::load_meta(path)
         .ok()
-        .and_then(|m| m.duration_ns);
+        .and_then(|m| crate::timefmt::parse_utc(&m.start_utc))
+        .and_then(|ns| u64::try_from(ns).ok());
     let mut accs: BTreeMap<Arc<str>, Acc> = BTreeMap::new();
     let mut held = 0usize;
     let (mut first, mut last) = (u64::MAX, 0u64);
@@ -142,7 +147,7 @@ pub fn read_sizes(path: &Path) -> anyhow::Result<Sizes> {
             .cmp(&a.share_bytes())
             .then_with(|| a.topic.cmp(&b.topic))
     });
-    let span_ns = duration_ns.unwrap_or(last.saturating_sub(first));
+    let span_ns = last.saturating_sub(start_ns.unwrap_or(first));
     Ok(Sizes {
         channels,
         file_bytes,
@@ -161,6 +166,14 @@ impl fmt::Display for Sizes {
             }
         };
         let mb = |bytes: u64| format!("{:>10.3}", bytes as f64 / 1e6);
+        // The topic column as wide as the longest topic (KISS topics can be long).
+        let w = self
+            .channels
+            .iter()
+            .map(|c| c.topic.chars().count())
+            .max()
+            .unwrap_or(0)
+            .max(32);
         writeln!(
             f,
             "where the bytes go, in MB: each channel's data compressed on its own \
@@ -169,7 +182,7 @@ impl fmt::Display for Sizes {
         )?;
         writeln!(
             f,
-            "  {:<32} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+            "  {:<w$} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
             "topic", "messages", "data", "zstd", "index", "share", "share/h"
         )?;
         let mut total = ChannelSize {
@@ -188,7 +201,7 @@ impl fmt::Display for Sizes {
         for c in self.channels.iter().chain(std::iter::once(&total)) {
             writeln!(
                 f,
-                "  {:<32} {:>10} {} {} {} {} {}",
+                "  {:<w$} {:>10} {} {} {} {} {}",
                 c.topic,
                 c.messages,
                 mb(c.data_bytes),

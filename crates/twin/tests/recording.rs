@@ -799,7 +799,24 @@ fn sizes_account_for_every_message_of_every_channel() {
             "{s}"
         );
         assert_eq!(s.file_bytes, std::fs::metadata(f.path()).unwrap().len());
-        assert!(s.hours > 0.0, "{s}");
+        // The index as the writer wrote it: 16 bytes a message, plus a record header
+        // (opcode, length, channel id, array length: 15 bytes) per channel per chunk.
+        let bytes = std::fs::read(f.path()).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let index_in_file: u64 = summary
+            .chunk_indexes
+            .iter()
+            .map(|c| c.message_index_length - 15 * c.message_index_offsets.len() as u64)
+            .sum();
+        let index_estimated: u64 = s.channels.iter().map(|c| c.index_bytes).sum();
+        assert_eq!(index_estimated, index_in_file, "{s}");
+        // Per hour from the run's start (the metadata's) to the last message.
+        let last = recording::messages(f.path())
+            .unwrap()
+            .map(|m| m.unwrap().log_time)
+            .max()
+            .unwrap();
+        assert_eq!(s.hours, (last - START_NS) as f64 / 3.6e12, "{s}");
         let text = s.to_string();
         assert!(
             text.contains("all channels") && text.contains("/can/main/frames"),
@@ -814,7 +831,6 @@ fn sizes_account_for_every_message_of_every_channel() {
                 .unwrap();
             assert!(p.data_bytes > 2 * BLOCK_BYTES as u64, "{s}");
             assert!(p.zstd_bytes * 2 < p.data_bytes, "{s}");
-            let bytes = std::fs::read(f.path()).unwrap();
             let cut = TempFile::new("sizes-cut");
             std::fs::write(cut.path(), &bytes[..bytes.len() / 2]).unwrap();
             let c = read_sizes(cut.path()).unwrap();
@@ -829,6 +845,15 @@ fn sizes_account_for_every_message_of_every_channel() {
             assert!(format!("{e:#}").contains("not an MCAP file"), "{e:#}");
         }
     }
+    // A recording without messages: no channels, no hours, no error.
+    let f = TempFile::new("sizes-empty");
+    record(f.path(), &[]);
+    let s = read_sizes(f.path()).unwrap();
+    assert!(
+        s.channels.is_empty() && s.hours == 0.0 && s.incomplete.is_none(),
+        "{s}"
+    );
+    assert!(s.to_string().contains("all channels"), "{s}");
 }
 
 /// Decode a recording with the `mcap` Python package (`tests/decode_mcap.py`): a generic
