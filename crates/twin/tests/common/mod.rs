@@ -4,6 +4,8 @@
 // Each test binary uses a part of these.
 #![allow(dead_code)]
 
+pub mod twin_process;
+
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
 
