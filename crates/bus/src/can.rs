@@ -513,26 +513,39 @@ impl CanBus {
         inbox: InboxTx,
         iface: usize,
     ) -> CanPort {
-        let mut st = self.lock();
-        st.ports.push(Port {
-            stats: PortStats {
-                name: name.to_owned(),
-                ..Default::default()
-            },
-            name: name.into(),
-            addrs: addrs.iter().copied().collect(),
-            own: addrs.iter().copied().collect(),
-            promiscuous,
-            enabled: true,
-            queue: VecDeque::new(),
-            inbox,
-            arrivals: Vec::new(),
-            iface,
-        });
+        let idx = self
+            .lock()
+            .push_port(name, addrs, promiscuous, inbox, iface);
         CanPort {
             bus: self.clone(),
-            idx: st.ports.len() - 1,
+            idx,
         }
+    }
+
+    /// Attach an outside endpoint holding `addr` alone, unless another endpoint holds it (a
+    /// node of the twin attached with it, or another claim): refused with the holder's name,
+    /// and then nothing is attached. Checked and attached under one lock, so that a refusal
+    /// leaves nothing on the bus that outlives it.
+    pub fn attach_claimed(
+        &self,
+        name: &str,
+        addr: u8,
+        inbox: InboxTx,
+        iface: usize,
+    ) -> Result<CanPort, String> {
+        let mut st = self.lock();
+        if let Some(holder) = st.holder(addr) {
+            return Err(st.ports[holder].stats.name.clone());
+        }
+        let port = st.push_port(name, &[], false, inbox, iface);
+        st.claims.insert(addr, port);
+        if let Some(p) = st.ports.get_mut(port) {
+            p.addrs.insert(addr);
+        }
+        Ok(CanPort {
+            bus: self.clone(),
+            idx: port,
+        })
     }
 
     /// Take or release an endpoint's place on the bus (power on/off). A disabled endpoint
@@ -716,6 +729,33 @@ impl State {
                 why,
             );
         }
+    }
+
+    /// Add an endpoint; its index.
+    fn push_port(
+        &mut self,
+        name: &str,
+        addrs: &[u8],
+        promiscuous: bool,
+        inbox: InboxTx,
+        iface: usize,
+    ) -> usize {
+        self.ports.push(Port {
+            stats: PortStats {
+                name: name.to_owned(),
+                ..Default::default()
+            },
+            name: name.into(),
+            addrs: addrs.iter().copied().collect(),
+            own: addrs.iter().copied().collect(),
+            promiscuous,
+            enabled: true,
+            queue: VecDeque::new(),
+            inbox,
+            arrivals: Vec::new(),
+            iface,
+        });
+        self.ports.len() - 1
     }
 
     /// The endpoint holding `addr`: its claimant, or a node attached with it.

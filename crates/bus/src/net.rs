@@ -222,20 +222,7 @@ impl PacketNet {
         iface: usize,
     ) -> NetPort {
         let mut st = self.lock();
-        st.eps.push(Endpoint {
-            name: name.to_owned(),
-            addrs: addrs.iter().copied().collect(),
-            own: addrs.iter().copied().collect(),
-            air_queue: std::collections::VecDeque::new(),
-            air_queued: 0,
-            radio,
-            enabled: true,
-            inbox,
-            iface,
-            tx: 0,
-            rx: 0,
-        });
-        let idx = st.eps.len() - 1;
+        let idx = st.push_endpoint(name, addrs, radio, inbox, iface);
         if default {
             st.default_ep = Some(idx);
         }
@@ -257,17 +244,38 @@ impl PacketNet {
         self.lock().default_ep = Some(port.idx);
     }
 
+    /// Attach an outside endpoint that is the only receiver of `addr` until released,
+    /// unless another endpoint holds it (a node of the twin attached with it, or another
+    /// claim): refused with the holder's name, and then nothing is attached. Checked and
+    /// attached under one lock, so that a refusal leaves nothing that outlives it.
+    pub fn attach_claimed(
+        &self,
+        name: &str,
+        addr: u8,
+        inbox: InboxTx,
+        iface: usize,
+    ) -> Result<NetPort, String> {
+        let mut st = self.lock();
+        if let Some(h) = st.holder(addr) {
+            return Err(st.eps[h].name.clone());
+        }
+        let idx = st.push_endpoint(name, &[], false, inbox, iface);
+        st.claims.insert(addr, idx);
+        if let Some(e) = st.eps.get_mut(idx) {
+            e.addrs.insert(addr);
+        }
+        Ok(NetPort {
+            net: self.clone(),
+            idx,
+        })
+    }
+
     /// Make `port` the only receiver of `addr` until released, unless another endpoint
     /// holds it (a node of the twin attached with it, or another claim): refused with the
     /// holder's name.
     pub fn claim(&self, port: &NetPort, addr: u8) -> Result<(), String> {
         let mut st = self.lock();
-        let holder = st
-            .claims
-            .get(&addr)
-            .copied()
-            .or_else(|| st.eps.iter().position(|e| e.own.contains(&addr)));
-        if let Some(h) = holder.filter(|&h| h != port.idx) {
+        if let Some(h) = st.holder(addr).filter(|&h| h != port.idx) {
             return Err(st.eps[h].name.clone());
         }
         st.claims.insert(addr, port.idx);
@@ -346,6 +354,39 @@ impl PacketNet {
 }
 
 impl State {
+    /// Add an endpoint; its index.
+    fn push_endpoint(
+        &mut self,
+        name: &str,
+        addrs: &[u8],
+        radio: bool,
+        inbox: InboxTx,
+        iface: usize,
+    ) -> usize {
+        self.eps.push(Endpoint {
+            name: name.to_owned(),
+            addrs: addrs.iter().copied().collect(),
+            own: addrs.iter().copied().collect(),
+            air_queue: std::collections::VecDeque::new(),
+            air_queued: 0,
+            radio,
+            enabled: true,
+            inbox,
+            iface,
+            tx: 0,
+            rx: 0,
+        });
+        self.eps.len() - 1
+    }
+
+    /// The endpoint holding `addr`: its claimant, or a node attached with it.
+    fn holder(&self, addr: u8) -> Option<usize> {
+        self.claims
+            .get(&addr)
+            .copied()
+            .or_else(|| self.eps.iter().position(|e| e.own.contains(&addr)))
+    }
+
     fn owner(&self, dst: u8) -> Option<usize> {
         if let Some(&i) = self.claims.get(&dst) {
             return Some(i);

@@ -137,11 +137,9 @@ impl OutsideEndpoint {
                 } else {
                     &segs.payload
                 };
-                let port = bus.attach(name, &[], false, inbox, iface_of(kind));
-                if let Err(holder) = bus.claim(&port, addr) {
-                    bus.release(&port);
-                    return Err(OutsideError::Held { addr, holder });
-                }
+                let port = bus
+                    .attach_claimed(name, addr, inbox, iface_of(kind))
+                    .map_err(|holder| OutsideError::Held { addr, holder })?;
                 Port::Can {
                     port,
                     frag: Fragmenter::new(seed_ident % 1024, csp::cfp::CSP_CAN_MTU),
@@ -151,11 +149,8 @@ impl OutsideEndpoint {
             SegmentKind::Ground => {
                 let port = segs
                     .ground
-                    .attach(name, &[], false, false, inbox, iface_of(kind));
-                if let Err(holder) = segs.ground.claim(&port, addr) {
-                    segs.ground.release(&port);
-                    return Err(OutsideError::Held { addr, holder });
-                }
+                    .attach_claimed(name, addr, inbox, iface_of(kind))
+                    .map_err(|holder| OutsideError::Held { addr, holder })?;
                 Port::Net(port)
             }
         };
@@ -247,5 +242,56 @@ impl OutsideEndpoint {
             Port::Can { port, .. } => port.bus().release(port),
             Port::Net(p) => p.net().release(p),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::can::CanBusConfig;
+    use crate::inbox::inbox;
+    use crate::net::PacketNetConfig;
+
+    fn segments() -> Segments {
+        Segments {
+            main: CanBus::new(CanBusConfig::new("main"), 1),
+            payload: CanBus::new(CanBusConfig::new("payload"), 1),
+            ground: PacketNet::new(PacketNetConfig::ground(), 1),
+        }
+    }
+
+    /// A refused claim leaves nothing behind on any segment: ten thousand outside attempts
+    /// at addresses nodes of the twin hold add no endpoint. Each used to add a disabled one
+    /// for the rest of the run (a flood of impostor packets, one attempt each, grew the
+    /// twin by gigabytes in seconds and slowed every arbitration).
+    #[test]
+    fn a_refused_claim_leaves_no_endpoint_behind() {
+        let segs = segments();
+        let (tx, _rx) = inbox();
+        let _fc = segs.main.attach("FC", &[3], false, tx.clone(), 0);
+        let _pl = segs.payload.attach("PL12", &[12], false, tx.clone(), 0);
+        let _gs = segs
+            .ground
+            .attach("GS16", &[16], false, false, tx.clone(), 0);
+        for n in 0..10_000u16 {
+            for (addr, holder) in [(3, "FC"), (12, "PL12"), (16, "GS16")] {
+                let e = OutsideEndpoint::attach(&segs, "impostor", addr, tx.clone(), n);
+                assert_eq!(
+                    e.err(),
+                    Some(OutsideError::Held {
+                        addr,
+                        holder: holder.to_owned()
+                    })
+                );
+            }
+        }
+        assert_eq!(segs.main.stats().ports.len(), 1);
+        assert_eq!(segs.payload.stats().ports.len(), 1);
+        assert_eq!(segs.ground.stats().endpoints.len(), 1);
+        // A free address is still taken, and given back.
+        let ep = OutsideEndpoint::attach(&segs, "honest", 7, tx, 1).unwrap();
+        assert_eq!(segs.main.stats().ports.len(), 2);
+        ep.release();
     }
 }
