@@ -200,6 +200,21 @@ pub struct KissLinkStats {
     pub connections_refused: u64,
 }
 
+/// What a link takes in from its socket, each stamped with the instant it was taken in.
+///
+/// The end of the input is its own variant, never an empty chunk: a message socket (the
+/// ZMQ hub) can deliver an empty message, and that is a malformed message, not a close.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LinkInput {
+    /// Bytes read: a piece of a stream, or one whole message.
+    Bytes(Vec<u8>),
+    /// The input ended: the peer closed, a read failed, or a recording's close.
+    End,
+}
+
+/// A link's input channel: what it takes in, in order.
+pub type InputRx = tokio::sync::mpsc::Receiver<(SimTime, LinkInput)>;
+
 /// Shared counters of a link.
 pub type SharedStats = Arc<Mutex<KissLinkStats>>;
 
@@ -351,13 +366,14 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
         loop {
             match rd.read(&mut buf).await {
                 Ok(0) => {
-                    // The close, stamped when it was seen: an empty chunk.
-                    let _ = in_tx.send((clock.now(), Vec::new())).await;
+                    // The close, stamped when it was seen.
+                    let _ = in_tx.send((clock.now(), LinkInput::End)).await;
                     return "peer closed".to_owned();
                 }
                 Ok(k) => {
+                    let bytes = buf.get(..k).unwrap_or_default().to_vec();
                     if in_tx
-                        .send((clock.now(), buf.get(..k).unwrap_or_default().to_vec()))
+                        .send((clock.now(), LinkInput::Bytes(bytes)))
                         .await
                         .is_err()
                     {
@@ -365,7 +381,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
                     }
                 }
                 Err(e) => {
-                    let _ = in_tx.send((clock.now(), Vec::new())).await;
+                    let _ = in_tx.send((clock.now(), LinkInput::End)).await;
                     return format!("read error: {e}");
                 }
             }
@@ -396,11 +412,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
 /// recorded) when it crosses. Frames towards the outside wait in a queue of
 /// `cfg.limits.output_frames` for the socket: when the program does not read, they are
 /// dropped and counted, and the twin goes on.
-pub async fn serve_link<W: FrameSink>(
-    input: tokio::sync::mpsc::Receiver<(SimTime, Vec<u8>)>,
-    stream: &mut W,
-    k: Connection<'_>,
-) -> String {
+pub async fn serve_link<W: FrameSink>(input: InputRx, stream: &mut W, k: Connection<'_>) -> String {
     let (name, cfg, stats) = (k.name, k.cfg, k.stats);
     let (out_tx, mut out_rx) =
         tokio::sync::mpsc::channel::<(SimTime, Vec<u8>)>(cfg.limits.output_frames.max(1));
@@ -461,7 +473,7 @@ struct Conn<'a> {
 }
 
 async fn link_core(
-    mut input: tokio::sync::mpsc::Receiver<(SimTime, Vec<u8>)>,
+    mut input: InputRx,
     out: tokio::sync::mpsc::Sender<(SimTime, Vec<u8>)>,
     k: Connection<'_>,
 ) -> String {
@@ -518,12 +530,11 @@ async fn link_core(
                 }
             }
             r = input.recv() => {
-                // The input's end (an empty chunk, at the time the close was seen, or the
-                // channel's end) is recorded as an empty chunk (the second, after the open's):
-                // a replay closes the connection at that time, giving its addresses back as
-                // the original did.
+                // The input's end (at the time the close was seen, or the channel's end) is
+                // recorded as an empty chunk (the second, after the open's): a replay closes
+                // the connection at that time, giving its addresses back as the original did.
                 let (t, chunk) = match r {
-                    Some((t, chunk)) if !chunk.is_empty() => (t, chunk),
+                    Some((t, LinkInput::Bytes(chunk))) => (t, chunk),
                     r => {
                         if let Some(tap) = &cfg.tap {
                             tap.admit().await;
@@ -533,6 +544,14 @@ async fn link_core(
                         break "peer closed".to_owned();
                     }
                 };
+                if chunk.is_empty() {
+                    // Only a message socket gives nothing but a message (a stream's empty
+                    // read is its end): a malformed hub message, dropped and counted. Not
+                    // tapped: a recording's empty chunk is the connection's open or close.
+                    bump(stats, |s| s.short += 1);
+                    tracing::debug!("{name}: dropped an empty message");
+                    continue;
+                }
                 let chunk = chunk.as_slice();
                 if let Some(tap) = &cfg.tap {
                     tap.admit().await;

@@ -26,7 +26,9 @@ use std::net::IpAddr;
 use zeromq::{Socket, SocketRecv, SocketSend};
 
 use crate::clock::Clock;
-use crate::kiss_tcp::{Connection, FrameSink, KissLinkConfig, SharedStats, bump, serve_link};
+use crate::kiss_tcp::{
+    Connection, FrameSink, KissLinkConfig, LinkInput, SharedStats, bump, serve_link,
+};
 use crate::outside::Segments;
 
 /// Where the twin binds its hub: the host, the port the programs publish to and the port
@@ -193,8 +195,14 @@ pub async fn serve(
                 Ok(m) => {
                     // libcsp sends one part per message; a multi-part message is taken
                     // whole, as libzmq's `zmq_msg_recv` would give its first part only.
-                    let Some(first) = m.get(0) else { continue };
-                    if in_tx.send((clock.now(), first.to_vec())).await.is_err() {
+                    // Only the socket's end ends the hub: an empty message is a malformed one,
+                    // which the link drops and counts.
+                    let bytes = m.get(0).map(|b| b.to_vec()).unwrap_or_default();
+                    if in_tx
+                        .send((clock.now(), LinkInput::Bytes(bytes)))
+                        .await
+                        .is_err()
+                    {
                         return;
                     }
                 }

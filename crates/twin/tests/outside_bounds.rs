@@ -1,5 +1,6 @@
 //! What a program outside the twin can and cannot do to it: floods of packets the twin must
-//! refuse, on every kind of outside link, cost nothing that outlives them. The twin runs as the `m6p-twin` binary in real time (see
+//! refuse, on every kind of outside link, cost nothing that outlives them; a malformed
+//! message does not end a link. The twin runs as the `m6p-twin` binary in real time (see
 //! `common::twin_process`); a test that breaks the platform stops its attack as soon as it
 //! sees the damage, so an older build fails it without eating the machine.
 #![allow(clippy::unwrap_used)]
@@ -219,6 +220,23 @@ fn twin_with_hub(name: &str, hub: &str, secs: u64) -> Twin {
     // wait for, the twin may not have read it yet.
     let scenario = bare(name, secs);
     Twin::start(&[scenario.to_str().unwrap(), "--zmq-hub", hub], 0)
+}
+
+/// One empty message on the hub is dropped and counted: the hub stays open and a program
+/// on it pings the FC as before. The link used to take the empty message for its close,
+/// cutting every program on the hub off for the rest of the run.
+#[test]
+fn an_empty_hub_message_does_not_close_the_hub() {
+    let twin = twin_with_hub("hub-empty", "127.0.0.91:6491:7491", 30);
+    let mut client = HubClient::join("127.0.0.91", 6491, 7491, 17);
+    client.first_ping(17, 3);
+    client.send_raw(Vec::new());
+    let answered = client.ping(17, 3, 1, Duration::from_secs(3));
+    let (_, out, err) = twin.finish_now();
+    assert!(
+        answered.is_some(),
+        "the FC did not answer after an empty message\n{out}{err}"
+    );
 }
 
 /// A million hub messages of pings from 12 (PL12's address, a node of the twin) to 3: every

@@ -216,7 +216,12 @@ pub(super) async fn kiss(
                 clock.sleep_until(t).await;
                 // An empty chunk is the recorded close: the link ends there.
                 let close = bytes.is_empty();
-                if in_tx.send((t, bytes)).await.is_err() || close {
+                let input = if close {
+                    kiss_tcp::LinkInput::End
+                } else {
+                    kiss_tcp::LinkInput::Bytes(bytes)
+                };
+                if in_tx.send((t, input)).await.is_err() || close {
                     return;
                 }
             }
