@@ -166,8 +166,11 @@ def main():
     got = [(h, d) for h, d in p.frames(2.0) if h["dport"] == 20]
     gens = [d for h, d in got if d[:2] == b"\x01\x01" and len(d) == 2 + TMGEN.size]
     atps = [d for h, d in got if d[:2] == b"\x02\x01" and len(d) == 2 + TMATP.size]
-    check("periodic TMGEN and TMATP arrive from the FC's port 10, about 8 each in 2 s",
-          all(h["src"] == a.fc and h["sport"] == PORT_TM for h, _ in got)
+    # Unsolicited, so from an ephemeral port of the FC's (never its telemetry port 10, where
+    # an answer would be served as a request), the same one for all.
+    check("periodic TMGEN and TMATP arrive from one ephemeral port of the FC's, about 8 each in 2 s",
+          all(h["src"] == a.fc and h["sport"] >= 32 for h, _ in got)
+          and len({h["sport"] for h, _ in got}) == 1
           and 5 <= len(gens) <= 10 and 5 <= len(atps) <= 10 and len(got) == len(gens) + len(atps),
           f"{len(gens)} TMGEN, {len(atps)} TMATP of {len(got)}")
     ups = [TMGEN.unpack(g[2:])[1] for g in gens]

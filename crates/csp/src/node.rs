@@ -14,7 +14,11 @@
 //!   the interface it came from;
 //! - the CRC32 is appended only by the originating node when the CRC flag is set, and
 //!   verified and stripped on local delivery; a mismatch is a counted drop;
-//! - ports 0-6 are answered by the service handler; packets to unbound ports are dropped;
+//! - ports 0-6 are answered by the service handler (on a platform node, 1-6, a payload's
+//!   request gets ping and uptime only, ICD 4.1: the rest is dropped and counted); packets
+//!   to unbound ports are dropped;
+//! - what the node sends on its own leaves from its own ephemeral port
+//!   ([`NodeConfig::own_port`]), and what arrives there is dropped, never served;
 //! - built as the M6P's libcsp (ICD 1.6: CRC32 but no XTEA, HMAC or RDP), a local packet
 //!   flagged XTEA, HMAC or RDP is discarded and counted (`xtea`, `hmac`, `rdp`), checked in
 //!   libcsp's order: XTEA, CRC32, HMAC, RDP, after the port lookup. Forwarded packets are
@@ -95,12 +99,32 @@ pub struct NodeConfig {
     pub reassembly: ReassemblerConfig,
     /// UTC unix seconds at simulated time zero (for the CMP clock).
     pub epoch_unix_s: u64,
-    /// Whether payloads (12-15) may use the platform port ([`crate::params`]): ICD 4.1 stars
-    /// none of its commands, so by default they are refused.
+    /// Whether payloads (12-15) may use the platform port ([`crate::params`]) and, on a
+    /// platform node, the service handler beyond ping and uptime: ICD 4.1 stars none of
+    /// these, so by default they are refused.
     pub payload_access: platform::addr::PayloadAccess,
 }
 
+/// The own port of a node whose allocator starts at `first_ephemeral_port`
+/// ([`NodeConfig::own_port`]): the ephemeral port before it in the cycle.
+pub fn own_port(first_ephemeral_port: u8) -> u8 {
+    match first_ephemeral_port.clamp(EPHEMERAL_PORT_MIN, MAX_PORT) {
+        EPHEMERAL_PORT_MIN => MAX_PORT,
+        p => p - 1,
+    }
+}
+
 impl NodeConfig {
+    /// The port the node's own packets leave from: those nobody asked for (periodic
+    /// telemetry, a beacon, a payload's push). It is the ephemeral port just before
+    /// `first_ephemeral_port` in the allocator's cycle (a libcsp program's are ephemeral
+    /// too: `csp_connect` takes one), so it is never a port anybody serves, and an answer
+    /// to such a packet can never be taken for a request. Bound from boot: the allocator
+    /// never hands it out, and what arrives at it is dropped and counted (`own port`).
+    pub fn own_port(&self) -> u8 {
+        own_port(self.first_ephemeral_port)
+    }
+
     /// A node with services on, default CFP settings and no interfaces yet.
     pub fn new(name: &str, addr: u8) -> Self {
         NodeConfig {
@@ -464,6 +488,7 @@ impl Node {
             looping: false,
             cfg,
         };
+        node.bind(node.cfg.own_port());
         node.reset_links();
         node
     }
@@ -488,6 +513,15 @@ impl Node {
         }
     }
 
+    /// The header of a packet this node sends on its own to `dst`:`dport` (nobody asked
+    /// for it): from its own port ([`NodeConfig::own_port`]).
+    pub fn own_header(&self, dst: u8, dport: u8) -> Header {
+        Header::new(self.cfg.addr, dst, dport, self.cfg.own_port())
+    }
+    /// The port this node's own packets leave from ([`NodeConfig::own_port`]).
+    pub fn own_port(&self) -> u8 {
+        self.cfg.own_port()
+    }
     /// The node's CSP address.
     pub fn addr(&self) -> u8 {
         self.cfg.addr
@@ -626,6 +660,11 @@ impl Node {
 
     fn deliver_local(&mut self, mut packet: Packet, now: SimTime) {
         let dport = packet.header.dport;
+        if dport == self.cfg.own_port() {
+            // An answer to a packet this node sent on its own: nobody waits for one.
+            self.note_drop(now, "own port", packet.header.to_string());
+            return;
+        }
         let service = self.cfg.services && dport <= service::MAX_SERVICE_PORT;
         if service || self.is_bound(dport) {
             // csp_route_work: a socket is found first, then csp_route_security_check (XTEA,
@@ -655,6 +694,14 @@ impl Node {
                         reason.to_uppercase()
                     ),
                 );
+            } else if service
+                && platform::addr::PLATFORM.contains(&self.cfg.addr)
+                && self
+                    .cfg
+                    .payload_access
+                    .refuses(packet.header.src, service::open_to_payloads(dport))
+            {
+                self.refuse_payload_service(&packet, now);
             } else if service {
                 self.serve(packet, now);
             } else {
@@ -673,6 +720,24 @@ impl Node {
                     cfp: None,
                 }),
             });
+        }
+    }
+
+    /// A payload's request for a service ICD 4.1 does not open to it (everything but ping
+    /// and uptime): dropped unanswered, counted by service, and logged as a warning the 1st,
+    /// 2nd, 4th, 8th, ... time, so that a flood logs a few lines.
+    fn refuse_payload_service(&mut self, packet: &Packet, now: SimTime) {
+        let reason = service::payload_refusal(packet.header.dport);
+        self.note_drop(now, reason, packet.header.to_string());
+        let n = self.counters.drops.get(reason).copied().unwrap_or(0);
+        if n.is_power_of_two() {
+            self.warn(
+                now,
+                format!(
+                    "service port {}: node {} refused, {n} so far (ICD 4.1: payloads get ping and uptime only)",
+                    packet.header.dport, packet.header.src
+                ),
+            );
         }
     }
 
@@ -897,6 +962,7 @@ impl Node {
         self.tx.clear();
         self.rx.clear();
         self.bound = [false; 64];
+        self.bind(self.cfg.own_port());
         self.clock_offset_ns = 0;
         self.counters.reboots += 1;
         self.reset_links();
@@ -1650,13 +1716,100 @@ mod tests {
     #[test]
     fn ephemeral_ports_cycle_through_32_to_63_and_run_out() {
         let mut n = router_node();
-        let ports: Vec<u8> = (0..32).map(|_| n.alloc_port().unwrap()).collect();
+        // 63 is the node's own port (the one before the first tried, 32): never handed out.
+        assert_eq!(n.own_port(), 63);
+        let ports: Vec<u8> = (0..31).map(|_| n.alloc_port().unwrap()).collect();
         let mut sorted = ports.clone();
         sorted.sort();
-        assert_eq!(sorted, (32..=63).collect::<Vec<_>>());
+        assert_eq!(sorted, (32..=62).collect::<Vec<_>>());
         assert_eq!(n.alloc_port(), None);
         n.unbind(40);
         assert_eq!(n.alloc_port(), Some(40));
+    }
+
+    /// ICD 4.1 gives payloads the service handler's ping and uptime: a platform node (the
+    /// PC here, on both buses) drops a payload's reboot, CMP clock set, ident, ps, memfree
+    /// and buf_free unanswered, counted by service; a ground station's are served, and
+    /// `payload_access = open` (a lab bench) serves a payload's too. A payload could reboot
+    /// the FC or the PC and move the PC's clock.
+    #[test]
+    fn a_payload_gets_ping_and_uptime_of_a_platform_nodes_service_handler_only() {
+        use platform::addr::PayloadAccess;
+        let to_pc = |src: u8, dport: u8, data: &[u8]| {
+            Packet::new(Header::new(src, 6, dport, 40), data.to_vec())
+        };
+        let reboot = service::REBOOT_MAGIC.to_be_bytes();
+        let clock_set = [0, 6, 0x70, 0, 0, 0, 0, 0, 0, 0];
+        let mut pc = router_node();
+        let t = SimTime::from_secs(100);
+        for (dport, data) in [
+            (4, &reboot[..]),
+            (0, &clock_set[..]),
+            (0, &[0, 1][..]),
+            (2, &[][..]),
+            (3, &[][..]),
+            (5, &[][..]),
+        ] {
+            pc.handle_packet(1, to_pc(15, dport, data), t);
+        }
+        assert!(drain(&mut pc).is_empty(), "nothing answered");
+        assert!(!pc.reboot_requested());
+        assert_eq!(pc.clock_sets(), 0);
+        let drops = &pc.counters().drops;
+        for (reason, n) in [
+            ("payload reboot", 1),
+            ("payload cmp", 2),
+            ("payload ps", 1),
+            ("payload memfree", 1),
+            ("payload buf_free", 1),
+        ] {
+            assert_eq!(drops.get(reason), Some(&n), "{reason}: {drops:?}");
+        }
+        // Ping and uptime answer the payload.
+        pc.handle_packet(1, to_pc(15, 1, &[9, 9]), t);
+        pc.handle_packet(1, to_pc(15, 6, &[]), t);
+        assert!(!drain(&mut pc).is_empty());
+        assert_eq!(pc.counters().service_replies, 2);
+        // The ground is served; so is a payload on a lab bench.
+        pc.handle_packet(0, to_pc(16, 0, &clock_set), t);
+        assert_eq!(pc.clock_sets(), 1);
+        pc.handle_packet(0, to_pc(16, 4, &reboot), t);
+        assert!(pc.reboot_requested());
+        let mut open = router_node();
+        open.cfg.payload_access = PayloadAccess::Open;
+        open.handle_packet(1, to_pc(15, 4, &reboot), t);
+        assert!(open.reboot_requested());
+    }
+
+    /// What a node sends on its own leaves from its own port, which the allocator never
+    /// hands out, before or after a reboot; what arrives there is dropped and counted,
+    /// never served (a service port's request, a bound port's packet).
+    #[test]
+    fn a_packet_to_the_own_port_is_dropped_and_the_port_is_never_allocated() {
+        let mut cfg = NodeConfig::new("PC", 6);
+        cfg.ifaces = vec![IfaceConfig::packet("p")];
+        cfg.routes.set_default(Route::direct(0));
+        cfg.first_ephemeral_port = 50;
+        let mut n = Node::new(cfg, SimTime::ZERO);
+        assert_eq!(n.own_port(), 49);
+        assert_eq!(n.own_header(16, 10), Header::new(6, 16, 10, 49));
+        for round in 0..2 {
+            let ports: Vec<u8> = (0..31).map(|_| n.alloc_port().unwrap()).collect();
+            assert_eq!(ports.first(), Some(&50));
+            assert!(!ports.contains(&49), "{ports:?}");
+            assert_eq!(n.alloc_port(), None);
+            if round == 0 {
+                n.reboot(SimTime::from_secs(1));
+            }
+        }
+        n.handle_packet(
+            0,
+            Packet::new(Header::new(16, 6, 49, 10), vec![1, 1]),
+            SimTime::from_secs(2),
+        );
+        assert!(n.poll_transmit().is_none());
+        assert_eq!(n.poll_delivery(), None);
+        assert_eq!(n.counters().drops.get("own port"), Some(&1));
     }
 
     #[test]

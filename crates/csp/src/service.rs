@@ -32,6 +32,25 @@ pub const PORT_UPTIME: u8 = 6;
 /// Highest service port.
 pub const MAX_SERVICE_PORT: u8 = 6;
 
+/// Whether a payload may use service `port` of a platform node: ICD 4.1 stars the service
+/// handler's ping and uptime only.
+pub fn open_to_payloads(port: u8) -> bool {
+    matches!(port, PORT_PING | PORT_UPTIME)
+}
+
+/// The reason a platform node drops a payload's request for service `port` (the node's
+/// drop counter, by service).
+pub fn payload_refusal(port: u8) -> &'static str {
+    match port {
+        PORT_CMP => "payload cmp",
+        PORT_PS => "payload ps",
+        PORT_MEMFREE => "payload memfree",
+        PORT_REBOOT => "payload reboot",
+        PORT_BUF_FREE => "payload buf_free",
+        _ => "payload service",
+    }
+}
+
 /// CMP message type of a request.
 pub const CMP_REQUEST: u8 = 0x00;
 /// CMP message type of a reply.

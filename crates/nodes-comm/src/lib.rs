@@ -52,7 +52,7 @@ use std::time::Duration;
 
 use csp::node::{App, Node};
 use csp::reqrep::serve;
-use csp::{Header, Packet, SimTime};
+use csp::{Packet, SimTime};
 use orbit::geodetic::ecef_km_to_geodetic;
 use orbit::passes::GroundSite;
 use platform::board::TruthBoard;
@@ -418,12 +418,7 @@ impl CommApp {
             self.cfg.air_rate_bps,
             self.cfg.air_overhead_bytes,
         );
-        let header = Header::new(
-            node.addr(),
-            self.cfg.ground_addr,
-            self.cfg.ground_port,
-            self.cfg.port,
-        );
+        let header = node.own_header(self.cfg.ground_addr, self.cfg.ground_port);
         match node.send(Packet::new(header, data), now) {
             Ok(()) => {
                 self.seq = seq;

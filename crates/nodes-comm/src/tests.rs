@@ -3,6 +3,7 @@
 #![allow(clippy::unwrap_used)]
 
 use super::*;
+use csp::Header;
 use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
 use csp::router::Route;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -122,7 +123,8 @@ fn beacons_every_period_to_ground_station_16_port_10() {
     for (k, (t, p)) in beacons.iter().enumerate() {
         let k = k as u32 + 1;
         assert_eq!(*t, SimTime::from_secs(60 * u64::from(k)));
-        assert_eq!(p.header, Header::new(1, 16, 10, 10));
+        // Unsolicited: from COMM's own port, so an answer is never taken for a request.
+        assert_eq!(p.header, Header::new(1, 16, 10, h.node.own_port()));
         assert_eq!(p.data.len(), 173);
         assert_eq!(&p.data[..2], &[4, 1], "an unsolicited BEACON 4 reply");
         let b = &p.data[2..];
@@ -202,7 +204,7 @@ fn secondary_sends_no_beacon_until_set_active() {
     let b = drive(&mut h, SimTime::from_secs(780));
     let times: Vec<_> = b.iter().map(|(t, _)| t.as_secs()).collect();
     assert_eq!(times, vec![660, 720, 780]);
-    assert_eq!(b[0].1.header, Header::new(2, 16, 10, 10));
+    assert_eq!(b[0].1.header, Header::new(2, 16, 10, h.node.own_port()));
     assert_eq!(b[0].1.data[2 + 12], wire::BEACON_SECONDARY);
     assert_eq!(tmcomm(&mut h, SimTime::from_secs(781)).radio_active, 1);
     h.app.set_active(false);

@@ -41,7 +41,7 @@ pub mod wire;
 
 use csp::node::{App, Node, NodeEvent, Outbox};
 use csp::reqrep::{self, CommandSet, RESULT_FAILURE, RESULT_SUCCESS, Request, serve};
-use csp::{Header, Packet, SimTime};
+use csp::{Packet, SimTime};
 use nalgebra::{UnitQuaternion, Vector3};
 use orbit::propagate::Sgp4Propagator;
 use orbit::tle::{ChecksumMode, Tle};
@@ -1131,7 +1131,7 @@ impl FcApp {
     }
 
     /// The periodic telemetry due by `now`: each of its commands as the bytes a request
-    /// would get, from the telemetry port. Periods missed (the FC was off or hung) are not
+    /// would get, from the FC's own port. Periods missed (the FC was off or hung) are not
     /// made up.
     fn send_periodic(&mut self, node: &mut Node, now: SimTime) {
         let Some(due) = self.periodic_next.filter(|&t| t <= now) else {
@@ -1155,7 +1155,9 @@ impl FcApp {
                 },
                 None => reqrep::failure(c),
             };
-            let header = Header::new(node.addr(), p.dst, p.dport, self.cfg.ports.telemetry);
+            // From the FC's own port: nobody asked, so whatever answers it (a node reading
+            // the telemetry as a request at `dport`) is dropped there, never served.
+            let header = node.own_header(p.dst, p.dport);
             // A send failure is counted by the node.
             let _ = node.send(Packet::new(header, data), now);
         }
@@ -1949,10 +1951,12 @@ mod tests {
             }
         };
         run_to(&mut h, SimTime::from_ms(2_100), &mut sent);
+        let own = h.node.own_port();
+        assert!(own >= csp::header::EPHEMERAL_PORT_MIN, "{own}");
         let got: Vec<(u64, u8, usize)> = sent
             .iter()
             .map(|(t, p)| {
-                assert_eq!(p.header, Header::new(3, 16, 20, 10));
+                assert_eq!(p.header, Header::new(3, 16, 20, own));
                 assert_eq!(p.data[1], 1);
                 (t.as_ms(), p.data[0], p.data.len())
             })
@@ -1981,6 +1985,44 @@ mod tests {
             ask(&mut h, 10, &[8], SimTime::from_secs(7)),
             vec![8, 1, 0, 0, 0, 0, 0, 0, 0]
         );
+    }
+
+    /// Periodic telemetry to a port where a node serves requests (the PC's control port 10,
+    /// which reads TMGEN's `01 01 ...` as a SETUP) is answered there; that answer reaches
+    /// the FC's own port, where it is dropped and counted, never served. From the
+    /// telemetry port it used to be read as a TMGEN request and answered, and the two nodes
+    /// answered each other for ever (a reply storm on the main bus).
+    #[test]
+    fn an_answer_to_periodic_telemetry_is_dropped_not_served() {
+        let mut h = host(Some((L1, L2)));
+        let mut set = vec![wire::cmd::TMPERSET];
+        wire::Periodic {
+            dst: 6,
+            dport: 10,
+            period_ms: 500,
+            mask: 0x01,
+        }
+        .emit(&mut set);
+        assert_eq!(ask(&mut h, 10, &set, SimTime::ZERO), vec![7, 1]);
+        let t = SimTime::from_ms(500);
+        h.handle_timeout(t);
+        let mut sent = Vec::new();
+        while let Some(tx) = h.node.poll_transmit() {
+            if let Transmit::Packet { packet, .. } = tx {
+                sent.push(packet);
+            }
+        }
+        let tm = sent.iter().find(|p| p.header.dst == 6).unwrap();
+        assert_eq!(tm.data[..2], [1, 1], "TMGEN, success");
+        // The PC's answer, from its control port to where the telemetry came from.
+        let answer = Packet::new(tm.header.reply(6), vec![1, 1]);
+        h.handle_packet(0, answer, SimTime::from_ms(510));
+        let mut out = Vec::new();
+        while let Some(tx) = h.node.poll_transmit() {
+            out.push(tx);
+        }
+        assert!(out.is_empty(), "the FC answered the answer: {out:?}");
+        assert_eq!(h.node.counters().drops.get("own port"), Some(&1));
     }
 
     #[test]

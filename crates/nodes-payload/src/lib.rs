@@ -619,7 +619,7 @@ impl PayloadApp {
             return;
         }
         let n = data.len();
-        let header = Header::new(self.addr, push.pc_addr, push.pc_port, self.cfg.port);
+        let header = node.own_header(push.pc_addr, push.pc_port);
         match node.send(Packet::new(header, data), now) {
             Ok(()) => {
                 self.counters.pushed_packets += 1;

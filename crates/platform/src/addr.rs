@@ -27,6 +27,8 @@ pub const EPS: u8 = 4;
 pub const ECU: u8 = 5;
 /// Address of the payload controller.
 pub const PC: u8 = 6;
+/// The platform's nodes: COMM1, COMM2, FC, EPS, ECU, PC.
+pub const PLATFORM: RangeInclusive<u8> = COMM1..=PC;
 /// Reserved addresses (nothing answers).
 pub const RESERVED: RangeInclusive<u8> = 7..=11;
 /// Payload addresses (the payload CAN bus).
@@ -80,7 +82,9 @@ impl Segment {
 /// ICD 4.1 stars the FC commands available to a payload (TMGEN, TMATP, TMACD, TMSENS,
 /// RTCSTMGET, the service handler's ping and uptime), and ICD 3.1.1 keeps session
 /// configuration (the PC's SETUP and ABORT) on the mission side. Under [`Icd`](Self::Icd)
-/// anything else from a payload gets the failure reply, counted and logged; a lab bench may
+/// any other command from a payload gets the failure reply, counted and logged, and any
+/// other service of a platform node's service handler (reboot, CMP, ps, memfree, buf_free)
+/// is dropped, counted and logged, as libcsp drops what it does not serve; a lab bench may
 /// open everything ([`Open`](Self::Open)).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PayloadAccess {

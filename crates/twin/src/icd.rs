@@ -241,6 +241,13 @@ impl IcdMap {
         };
         let f = &opts.fc.ports;
         put(platform::addr::FC, f.telemetry, fc::ICD_TELEMETRY);
+        // The FC's periodic telemetry (TMPERSET) leaves from its own port with the bytes a
+        // request would get: read as the telemetry port's replies.
+        let fc_own = csp::node::own_port(crate::runtime::first_ephemeral_port(
+            opts.seed,
+            platform::addr::FC,
+        ));
+        put(platform::addr::FC, fc_own, fc::ICD_TELEMETRY);
         put(platform::addr::FC, f.rtc, fc::ICD_RTC);
         put(platform::addr::FC, f.attitude, fc::ICD_ATTITUDE);
         put(platform::addr::FC, f.scripts, fc::ICD_SCRIPTS);

@@ -16,14 +16,108 @@
 //! - `silent-while-off`: no node hands its controller a frame while it is off the bus
 //!   (unpowered);
 //! - `icd-reply-length`: every reply of a platform node has the length the ICD's table
-//!   gives its command ([`crate::icd_lengths`]; with [`Invariants::for_run`]).
+//!   gives its command ([`crate::icd_lengths`]; with [`Invariants::for_run`]);
+//! - `no-reply-storm`: no two addresses exchange more than a bounded number of packets a
+//!   second on one medium, both ways together, counted over fixed windows (default 200 a
+//!   second over 10 s; the scenario's `[invariants.no_reply_storm]`). Two nodes that take
+//!   each other's answers for requests answer each other for ever, at whatever rate the
+//!   bus allows: the loop fails the run by name, whatever made it.
+//!
+//! ```toml
+//! [invariants.no_reply_storm]
+//! packets_per_s = 200   # the most packets a second between two addresses on one medium
+//! window = "10s"        # counted over consecutive windows of this length
+//! ```
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Duration;
 
 use csp::SimTime;
+use schemars::JsonSchema;
+use serde::Deserialize;
 
 use crate::events::RunEvent;
 use crate::runtime::RunReport;
+use crate::scenario::{Dur, PathStep, Scenario};
+
+/// The scenario's `[invariants]` table: the settings of the invariants that have some.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct InvariantsSpec {
+    /// `no-reply-storm`'s bound.
+    #[serde(default)]
+    pub no_reply_storm: Option<ReplyStormSpec>,
+}
+
+/// `[invariants.no_reply_storm]`.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ReplyStormSpec {
+    /// The most packets a second two addresses may exchange on one medium (default 200).
+    #[serde(default)]
+    pub packets_per_s: Option<u32>,
+    /// The windows they are counted over (default 10 s; 1 s to 1 h).
+    #[serde(default)]
+    pub window: Option<Dur>,
+}
+
+/// The invariants' settings for a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct InvariantSettings {
+    /// `no-reply-storm`: at most this many packets between two addresses on one medium...
+    pub storm_packets_per_s: u32,
+    /// ... a second, counted over consecutive windows of this length.
+    pub storm_window: Duration,
+}
+
+impl Default for InvariantSettings {
+    /// The bound is well above anything a shipped scenario does (its busiest pair, a
+    /// payload pushing to the PC, is near 20 packets a second) and well below a loop between
+    /// two nodes (thousands a second on the main bus).
+    fn default() -> Self {
+        InvariantSettings {
+            storm_packets_per_s: 200,
+            storm_window: Duration::from_secs(10),
+        }
+    }
+}
+
+/// Check `[invariants]`: a rate of at least 1 a second, a window of 1 s to 1 h.
+pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    let Some(storm) = &s.invariants.no_reply_storm else {
+        return;
+    };
+    let path = |key: &str| {
+        vec![
+            PathStep::Key("invariants".into()),
+            PathStep::Key("no_reply_storm".into()),
+            PathStep::Key(key.into()),
+        ]
+    };
+    if storm.packets_per_s == Some(0) {
+        err(path("packets_per_s"), "at least 1 packet a second".into());
+    }
+    if let Some(w) = storm.window
+        && !(Duration::from_secs(1)..=Duration::from_secs(3600)).contains(&w.0)
+    {
+        err(path("window"), "from 1s to 1h".into());
+    }
+}
+
+/// The run's settings from the scenario's `[invariants]`.
+pub fn compile(s: &Scenario) -> InvariantSettings {
+    let mut out = InvariantSettings::default();
+    if let Some(storm) = &s.invariants.no_reply_storm {
+        if let Some(n) = storm.packets_per_s {
+            out.storm_packets_per_s = n;
+        }
+        if let Some(w) = storm.window {
+            out.storm_window = w.0;
+        }
+    }
+    out
+}
 
 /// One invariant broken: the first instant it was seen.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,6 +137,10 @@ pub struct Invariants {
     icd: Option<crate::icd_lengths::IcdTable>,
     /// Platform replies checked against the ICD's table so far.
     pub replies_checked: u64,
+    settings: InvariantSettings,
+    /// Packets in the current window, by medium and pair of addresses (lower first): the
+    /// window's number and the count.
+    exchanged: BTreeMap<(Arc<str>, u8, u8), (u64, u64)>,
 }
 
 /// How far from 1 a unit quaternion's norm may be.
@@ -53,7 +151,47 @@ impl Invariants {
     pub fn for_run(opts: &crate::runtime::RunOptions) -> Self {
         Invariants {
             icd: Some(crate::icd_lengths::IcdTable::for_run(opts)),
+            settings: opts.invariants,
             ..Invariants::default()
+        }
+    }
+
+    /// A packet on a medium (a CAN BEGIN frame carries its header) counted between its two
+    /// addresses.
+    fn exchanged(&mut self, m: &bus::trace::TraceEvent) {
+        use bus::trace::TraceFrame;
+        let header = match &m.frame {
+            TraceFrame::Packet(bytes) => csp::Packet::parse(bytes).ok().map(|p| p.header),
+            frame => frame
+                .can_on_wire()
+                .and_then(csp::cfp::begin_fields)
+                .map(|(h, _)| h),
+        };
+        // Between two addresses: a babbling controller's frames (eight zero bytes, read as
+        // from 0 to 0) are a fault of the medium, not an exchange.
+        let Some(h) = header.filter(|h| h.src != h.dst) else {
+            return;
+        };
+        let window_ns = (self.settings.storm_window.as_nanos() as u64).max(1);
+        let window = m.t.0 / window_ns;
+        let limit = u64::from(self.settings.storm_packets_per_s)
+            .saturating_mul(self.settings.storm_window.as_secs().max(1));
+        let key = (m.medium.clone(), h.src.min(h.dst), h.src.max(h.dst));
+        let entry = self.exchanged.entry(key).or_insert((window, 0));
+        if entry.0 != window {
+            *entry = (window, 0);
+        }
+        entry.1 += 1;
+        if entry.1 == limit + 1 {
+            let (a, b) = (h.src.min(h.dst), h.src.max(h.dst));
+            let from = SimTime(window * window_ns);
+            let settings = self.settings;
+            self.broken("no-reply-storm", m.t, || {
+                format!(
+                    "{} bus: more than {limit} packets between {a} and {b} in the {:?} from {from} (at most {} a second)",
+                    m.medium, settings.storm_window, settings.storm_packets_per_s
+                )
+            });
         }
     }
 
@@ -104,8 +242,11 @@ impl Invariants {
 
     /// Look at one event of the run.
     pub fn observe(&mut self, ev: &RunEvent) {
-        if let RunEvent::Medium(m) = ev {
+        if let RunEvent::Medium(m) = ev
+            && !m.dropped
+        {
             self.reply_length(m);
+            self.exchanged(m);
         }
         // As the samples come: a run's report need not keep them.
         if let Some(p) = crate::eps::PowerSample::of(ev)
@@ -289,5 +430,60 @@ mod tests {
         report.sessions.pc_balanced = Some(true);
         report.buses[0].ports[1] = port("PL12", 9, 9, None);
         assert_eq!(Invariants::default().finish(&report), vec![]);
+    }
+
+    /// Two nodes that take each other's answers for requests (the FC's periodic telemetry
+    /// from its telemetry port, read by the PC as a SETUP and answered, that answer read by
+    /// the FC as a TMGEN request and answered, ...) answer each other as fast as the bus
+    /// allows: `no-reply-storm`, by name, between the two. The same exchange at 20 a second
+    /// (a session's polls) and a babbling controller's frames break nothing.
+    #[test]
+    fn a_loop_between_two_nodes_fails_no_reply_storm() {
+        use bus::trace::{TraceEvent, TraceFrame};
+        use csp::{Header, Packet};
+        let on_main = |t: u64, frame: TraceFrame| {
+            RunEvent::Medium(TraceEvent {
+                t: SimTime(t),
+                medium: "main".into(),
+                from: "x".into(),
+                frame,
+                dropped: false,
+            })
+        };
+        let tm = Packet::new(Header::new(3, 6, 10, 10), vec![1, 1, 0, 0, 0, 0]);
+        let answer = Packet::new(Header::new(6, 3, 10, 10), vec![1, 0]);
+        let exchange = |inv: &mut Invariants, from_ns: u64, every_ns: u64, n: u64| {
+            for k in 0..n {
+                let p = if k % 2 == 0 { &tm } else { &answer };
+                let mut frames = Vec::new();
+                csp::cfp::fragment_with_ident(p, p.header.dst, (k % 1024) as u16, &mut frames)
+                    .unwrap();
+                for f in frames {
+                    inv.observe(&on_main(from_ns + k * every_ns, TraceFrame::Can(f)));
+                }
+            }
+        };
+        let mut calm = Invariants::default();
+        exchange(&mut calm, 0, 50_000_000, 1200);
+        for k in 0..100_000u64 {
+            let babble = csp::cfp::CanFrame::new(0, &[0; 8]).unwrap();
+            calm.observe(&on_main(k * 10_000, TraceFrame::Can(babble)));
+        }
+        assert_eq!(calm.finish(&RunReport::default()), vec![]);
+        // The loop: 1 800 packets a second from 60 s.
+        let mut storm = Invariants::default();
+        exchange(&mut storm, 60_000_000_000, 555_555, 3_600);
+        let v = storm.finish(&RunReport::default());
+        assert_eq!(
+            v.iter().map(|v| v.name).collect::<Vec<_>>(),
+            ["no-reply-storm"]
+        );
+        assert!(
+            v[0].detail
+                .starts_with("main bus: more than 2000 packets between 3 and 6 in the 10s from 60"),
+            "{}",
+            v[0].detail
+        );
+        assert!(v[0].t > SimTime(60_000_000_000) && v[0].t < SimTime(62_000_000_000));
     }
 }

@@ -53,6 +53,7 @@ pub fn compile(s: &Scenario) -> Compiled {
     opts.pc = crate::sessions::compile_pc(s);
     opts.payloads = crate::sessions::compile_payloads(s);
     crate::rules::compile(s, &net, &mut opts);
+    opts.invariants = crate::invariants::compile(s);
     let mut faults = crate::faults::compile(s, &net, &mut opts);
     faults.extend(fc_faults);
     faults.extend(crate::comm::compile_passes(s, opts.epoch_unix_s));

@@ -9,9 +9,10 @@
 //! ```
 //!
 //! Under `icd` a payload gets the FC commands ICD 4.1 stars (TMGEN, TMATP, TMACD, TMSENS,
-//! RTCSTMGET; the service handler answers everyone, as libcsp's does) and the PC's STATUS,
-//! not SETUP or ABORT (ICD 3.1.1); anything else gets the failure reply, counted in the
-//! node's `denied` and logged as a warning. Under `open` a payload may use every command.
+//! RTCSTMGET) and the PC's STATUS, not SETUP or ABORT (ICD 3.1.1); anything else gets the
+//! failure reply, counted in the node's `denied` and logged as a warning. Of a platform
+//! node's service handler it gets ping and uptime; the other services are dropped, counted
+//! and logged (`csp::node`). Under `open` a payload may use every command and service.
 //!
 //! The FC sends its RTC as libcsp's CMP CLOCK set to each node of `time_sync_to`
 //! (`nodes_fc::timesync`): at boot, right after an RTCSTMSET, and every `time_sync_period`.

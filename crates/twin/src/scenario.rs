@@ -110,6 +110,9 @@ pub struct Scenario {
     /// What payloads may ask of the platform (`crate::rules`).
     #[serde(default)]
     pub rules: crate::rules::RulesSpec,
+    /// The invariants' settings (`crate::invariants`).
+    #[serde(default)]
+    pub invariants: crate::invariants::InvariantsSpec,
     /// Links to programs outside the twin.
     #[serde(default)]
     pub links: Vec<LinkSpec>,
@@ -714,6 +717,7 @@ impl Scenario {
         crate::comm::validate(self, &mut err);
         crate::clock::validate(self, &mut err);
         crate::rules::validate(self, &net, &mut err);
+        crate::invariants::validate(self, &mut err);
         crate::params::validate(self, &net, &mut err);
         crate::expectations::validate(self, &net, &mut err);
         if errs.is_empty() {

@@ -728,15 +728,20 @@ impl SessionsReport {
     /// as dropped, with where and why.
     fn lost_in_transit(&mut self, lost: &crate::transit::LostPacket) {
         let h = &lost.header;
-        if h.sport != nodes_payload::wire::PORT || !self.produced.contains_key(&h.src) {
+        if !self.produced.contains_key(&h.src) {
             return;
         }
-        // A reply to the PC's request (an ephemeral port) carries the command and result
-        // before its stream bytes; a push is all stream bytes.
-        let data = if h.dport >= csp::header::EPHEMERAL_PORT_MIN {
+        // A reply to the PC's request (from the payload's ICD port to the request's
+        // ephemeral port) carries the command and result before its stream bytes; a push
+        // (from the payload's own port to a port the PC serves: a simulated payload sends
+        // it nothing else there) is all stream bytes.
+        let server_port = h.dport < csp::header::EPHEMERAL_PORT_MIN;
+        let data = if h.sport == nodes_payload::wire::PORT && !server_port {
             lost.data_len.saturating_sub(REPLY_HEAD_BYTES)
-        } else {
+        } else if h.dst == platform::addr::PC && server_port {
             lost.data_len
+        } else {
+            return;
         };
         let reason = format!("lost on the {} bus ({})", lost.bus, lost.reason);
         *self.dropped.entry((h.src, reason)).or_default() += data as u64;

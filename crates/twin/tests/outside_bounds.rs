@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use csp::Packet;
 
 mod common;
-use common::twin_process::{Client, Twin, bare, is_reply, ping};
+use common::twin_process::{Client, Twin, bare, is_reply, ping, write_scenario};
 
 /// Growth of the twin's memory an attack may cost, MiB.
 const RSS_BUDGET_MIB: f64 = 20.0;
@@ -269,4 +269,116 @@ fn a_million_impostor_packets_over_the_hub_cost_nothing_that_outlives_them() {
     rss.judge(&twin, "impostor hub messages", sent, answered);
     let (_, _, err) = twin.finish_now();
     assert!(err.contains("address 12 is held by PL12"), "{err}");
+}
+
+/// A request from `src` to `dst`:`dport` from an ephemeral port; the reply within 3 s.
+fn ask(c: &mut Client, src: u8, dst: u8, dport: u8, data: &[u8], sport: u8) -> Option<Packet> {
+    c.send(&Packet::new(
+        csp::Header::new(src, dst, dport, sport),
+        data.to_vec(),
+    ));
+    c.wait(Duration::from_secs(3), |p| {
+        p.header.src == dst && p.header.dport == sport && p.header.sport == dport
+    })
+}
+
+/// The CSP uptime (libcsp's u32 big-endian seconds) of `dst`, asked by ground client 17.
+fn uptime_s(gs: &mut Client, dst: u8, sport: u8) -> u32 {
+    let p = ask(gs, 17, dst, 6, &[], sport).expect("uptime answered");
+    u32::from_be_bytes(p.data[..4].try_into().unwrap())
+}
+
+/// The CSP clock (CMP CLOCK read: tv_sec 0) of `dst`, seconds, asked by ground client 17.
+fn clock_s(gs: &mut Client, dst: u8, sport: u8) -> u32 {
+    let p = ask(gs, 17, dst, 0, &[0, 6, 0, 0, 0, 0, 0, 0, 0, 0], sport).expect("clock read");
+    u32::from_be_bytes(p.data[2..6].try_into().unwrap())
+}
+
+/// ICD 4.1 gives a payload the service handler's ping and uptime of the platform and nothing
+/// else: a program at 15 asking the FC and the PC to reboot and setting the PC's CMP clock
+/// a day ahead changes nothing (the FC's uptime keeps counting, the PC's clock is unmoved,
+/// payload 12's session runs to DONE), and its ping and uptime are answered. They used to
+/// reboot the FC or the PC (and the PC's ACTIVE session with it) and move the PC's clock.
+#[test]
+fn a_payload_cannot_reboot_the_platform_or_set_its_clock() {
+    let scenario = write_scenario(
+        "payload-services",
+        r#"
+name = "payload-services"
+duration = "16s"
+
+[network]
+payloads = [12]
+
+[[links]]
+kind = "kiss-listen"
+addr = "127.0.0.1:0"
+addrs = [15]
+
+[[links]]
+kind = "kiss-listen"
+addr = "127.0.0.1:0"
+
+[[commands]]
+name = "setup"
+at = "1s"
+to = "PC"
+command = "PC.SETUP"
+args = { session_id = 1, timestamp = "now", duration_s = 8, max_packets = "no limit", poll_frame_size = 100, sync_message = "go" }
+
+[[expectations]]
+kind = "session"
+session = 1
+session_result = "done"
+"#,
+    );
+    let twin = Twin::start(&[scenario.to_str().unwrap()], 2);
+    let mut payload = Client::connect(twin.addrs[0]);
+    let mut gs = Client::connect(twin.addrs[1]);
+    std::thread::sleep(Duration::from_secs(3));
+    let fc_up = uptime_s(&mut gs, 3, 40);
+    let pc_clock = clock_s(&mut gs, 6, 41);
+    let reboot = 0x8007_8007u32.to_be_bytes();
+    let mut clock_set = vec![0, 6];
+    clock_set.extend_from_slice(&(pc_clock + 86_400).to_be_bytes());
+    clock_set.extend_from_slice(&[0; 4]);
+    for (dst, dport, data) in [
+        (3, 4, &reboot[..]),
+        (6, 4, &reboot[..]),
+        (6, 0, &clock_set[..]),
+    ] {
+        payload.send(&Packet::new(
+            csp::Header::new(15, dst, dport, 50),
+            data.to_vec(),
+        ));
+    }
+    let late = payload.drain(Duration::from_secs(2));
+    assert!(late.is_empty(), "answered: {late:?}");
+    for dst in [3, 6] {
+        assert!(
+            payload.ping(15, dst, 7, Duration::from_secs(3)).is_some(),
+            "the payload's ping to {dst}"
+        );
+        assert!(
+            ask(&mut payload, 15, dst, 6, &[], 51).is_some(),
+            "the payload's uptime of {dst}"
+        );
+    }
+    let fc_up_after = uptime_s(&mut gs, 3, 42);
+    let pc_clock_after = clock_s(&mut gs, 6, 43);
+    let (ok, out, err) = twin.finish();
+    std::fs::remove_file(scenario).ok();
+    assert!(
+        fc_up_after > fc_up,
+        "the FC's uptime went from {fc_up} s to {fc_up_after} s"
+    );
+    assert!(
+        pc_clock_after.abs_diff(pc_clock) < 60,
+        "the PC's clock went from {pc_clock} to {pc_clock_after}"
+    );
+    assert!(ok, "the session did not run undisturbed:\n{out}{err}");
+    assert!(
+        err.contains("service port 4: node 15 refused") && err.contains("service port 0"),
+        "{err}"
+    );
 }

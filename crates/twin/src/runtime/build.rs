@@ -154,7 +154,7 @@ pub(super) fn nodes(
         let (mut cfg, media) = node_config(spec);
         let salt = u64::from(spec.addr);
         cfg.cfp_first_ident = (mix(opts.seed, salt) % 1024) as u16;
-        cfg.first_ephemeral_port = 32 + (mix(opts.seed, salt + 0x40) % 32) as u8;
+        cfg.first_ephemeral_port = super::first_ephemeral_port(opts.seed, spec.addr);
         cfg.epoch_unix_s = opts.epoch_unix_s;
         cfg.payload_access = opts.payload_access;
         let (inbox_tx, inbox_rx) = inbox();

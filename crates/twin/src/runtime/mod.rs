@@ -59,6 +59,8 @@ pub struct RunOptions {
     /// What payloads may ask of every node's platform port (`[rules] payload_access`; the
     /// FC and the PC have their own copy for their ICD ports).
     pub payload_access: platform::addr::PayloadAccess,
+    /// The invariants' settings (`[invariants]`; a campaign checks them on every run).
+    pub invariants: crate::invariants::InvariantSettings,
     /// Factory values of nodes' platform parameters (`[nodes.NAME] params`), by address:
     /// (parameter id, value), set before the node's first boot.
     pub params: BTreeMap<u8, Vec<(u8, f64)>>,
@@ -204,6 +206,7 @@ impl RunOptions {
             kiss_links: Vec::new(),
             uart: Vec::new(),
             payload_access: platform::addr::PayloadAccess::default(),
+            invariants: crate::invariants::InvariantSettings::default(),
             params: BTreeMap::new(),
             replaced: std::collections::BTreeSet::new(),
             ground_plan: BTreeMap::new(),
@@ -411,6 +414,12 @@ fn watch_interrupt() -> Option<impl std::future::Future<Output = bool>> {
     {
         Some(async { tokio::signal::ctrl_c().await.is_ok() })
     }
+}
+
+/// The first ephemeral port node `addr`'s allocator tries in a run of `seed` (libcsp 1.4
+/// starts at `rand()`): 32 to 63.
+pub fn first_ephemeral_port(seed: u64, addr: u8) -> u8 {
+    32 + (mix(seed, u64::from(addr) + 0x40) % 32) as u8
 }
 
 /// A well-mixed 64-bit value from the run seed and a salt (splitmix64).
