@@ -336,6 +336,8 @@ struct Port {
     queue: VecDeque<(SimTime, CanFrame)>,
     inbox: InboxTx,
     iface: usize,
+    /// The outside link it belongs to (its reserved addresses are its own).
+    link: Option<crate::reserve::LinkId>,
     /// Delivered, not yet handed to the inbox: each arrival, and whether it is quiet.
     arrivals: Vec<(Inbound, bool)>,
 }
@@ -366,6 +368,7 @@ struct State {
     name: Arc<str>,
     ports: Vec<Port>,
     claims: BTreeMap<u8, usize>,
+    reserved: crate::reserve::Reservations,
     busy_until: SimTime,
     /// Sequences of 11 recessive bits the bus has shown (for bus-off recovery), counted up
     /// to `busy_until`.
@@ -471,6 +474,7 @@ impl CanBus {
                 name,
                 ports: Vec::new(),
                 claims: BTreeMap::new(),
+                reserved: Default::default(),
                 busy_until: SimTime::ZERO,
                 recessive_seqs: 0,
                 bus_off_since: BTreeMap::new(),
@@ -522,22 +526,27 @@ impl CanBus {
         }
     }
 
-    /// Attach an outside endpoint holding `addr` alone, unless another endpoint holds it (a
-    /// node of the twin attached with it, or another claim): refused with the holder's name,
-    /// and then nothing is attached. Checked and attached under one lock, so that a refusal
-    /// leaves nothing on the bus that outlives it.
+    /// Attach an endpoint of outside link `link` holding `addr` alone, unless another
+    /// endpoint holds it (a node of the twin attached with it, or another claim) or another
+    /// link reserved it ([`CanBus::reserve`]): refused with the holder's name, and then
+    /// nothing is attached. Checked and attached under one lock, so that a refusal leaves
+    /// nothing on the bus that outlives it.
     pub fn attach_claimed(
         &self,
         name: &str,
+        link: crate::reserve::LinkId,
         addr: u8,
         inbox: InboxTx,
         iface: usize,
     ) -> Result<CanPort, String> {
         let mut st = self.lock();
-        if let Some(holder) = st.holder(addr) {
-            return Err(st.ports[holder].stats.name.clone());
+        if let Some(why) = st.refusal(addr, None, Some(link)) {
+            return Err(why);
         }
         let port = st.push_port(name, &[], false, inbox, iface);
+        if let Some(p) = st.ports.get_mut(port) {
+            p.link = Some(link);
+        }
         st.claims.insert(addr, port);
         if let Some(p) = st.ports.get_mut(port) {
             p.addrs.insert(addr);
@@ -579,14 +588,31 @@ impl CanBus {
     /// with the holder's name.
     pub fn claim(&self, port: &CanPort, addr: u8) -> Result<(), String> {
         let mut st = self.lock();
-        if let Some(holder) = st.holder(addr).filter(|&i| i != port.idx) {
-            return Err(st.ports[holder].stats.name.clone());
+        let link = st.ports.get(port.idx).and_then(|p| p.link);
+        if let Some(why) = st.refusal(addr, Some(port.idx), link) {
+            return Err(why);
         }
         st.claims.insert(addr, port.idx);
         if let Some(p) = st.ports.get_mut(port.idx) {
             p.addrs.insert(addr);
         }
         Ok(())
+    }
+
+    /// Reserve `addr` for outside link `link` for the whole run: only that link's endpoints
+    /// may claim it, its program connected or not. Refused with the holder's name when a
+    /// node of the twin or another link has it.
+    pub fn reserve(
+        &self,
+        addr: u8,
+        link: crate::reserve::LinkId,
+        label: &str,
+    ) -> Result<(), String> {
+        let mut st = self.lock();
+        if let Some(h) = st.holder(addr) {
+            return Err(st.ports[h].stats.name.clone());
+        }
+        st.reserved.reserve(addr, link, label)
     }
 
     /// Give back every claim of an endpoint and disable it (an outside link went away).
@@ -754,8 +780,23 @@ impl State {
             inbox,
             arrivals: Vec::new(),
             iface,
+            link: None,
         });
         self.ports.len() - 1
+    }
+
+    /// Why endpoint `me` of outside link `link` may not claim `addr`: another endpoint
+    /// holds it (named), or another link reserved it.
+    fn refusal(
+        &self,
+        addr: u8,
+        me: Option<usize>,
+        link: Option<crate::reserve::LinkId>,
+    ) -> Option<String> {
+        if let Some(h) = self.holder(addr).filter(|&h| Some(h) != me) {
+            return Some(self.ports[h].stats.name.clone());
+        }
+        self.reserved.refusal(addr, link)
     }
 
     /// The endpoint holding `addr`: its claimant, or a node attached with it.

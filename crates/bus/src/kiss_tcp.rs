@@ -92,6 +92,9 @@ pub struct KissLinkConfig {
     pub gate: Option<LinkGate>,
     /// How packets are framed on it: KISS, or libcsp 1.4's ZMQ hub messages.
     pub framing: Framing,
+    /// Which of the run's links it is: its configured addresses are reserved for it
+    /// ([`crate::outside::Segments::reserve`]).
+    pub link: crate::outside::LinkId,
 }
 
 /// How a link frames packets.
@@ -754,6 +757,7 @@ impl Conn<'_> {
                 let ep = OutsideEndpoint::attach(
                     self.k.segs,
                     self.k.name,
+                    self.k.cfg.link,
                     addr,
                     self.inbox.clone(),
                     (self.k.n as u16).wrapping_mul(97),

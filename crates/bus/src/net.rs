@@ -126,6 +126,8 @@ struct Endpoint {
     iface: usize,
     tx: u64,
     rx: u64,
+    /// The outside link it belongs to (its reserved addresses are its own).
+    link: Option<crate::reserve::LinkId>,
 }
 
 #[derive(Debug)]
@@ -135,6 +137,7 @@ struct State {
     eps: Vec<Endpoint>,
     default_ep: Option<usize>,
     claims: BTreeMap<u8, usize>,
+    reserved: crate::reserve::Reservations,
     air_busy_until: SimTime,
     in_flight: BTreeMap<(SimTime, u64), (usize, usize, Packet, Fate)>,
     seq: u64,
@@ -191,6 +194,7 @@ impl PacketNet {
                 eps: Vec::new(),
                 default_ep: None,
                 claims: BTreeMap::new(),
+                reserved: Default::default(),
                 air_busy_until: SimTime::ZERO,
                 in_flight: BTreeMap::new(),
                 seq: 0,
@@ -244,22 +248,27 @@ impl PacketNet {
         self.lock().default_ep = Some(port.idx);
     }
 
-    /// Attach an outside endpoint that is the only receiver of `addr` until released,
-    /// unless another endpoint holds it (a node of the twin attached with it, or another
-    /// claim): refused with the holder's name, and then nothing is attached. Checked and
-    /// attached under one lock, so that a refusal leaves nothing that outlives it.
+    /// Attach an endpoint of outside link `link` that is the only receiver of `addr` until
+    /// released, unless another endpoint holds it (a node of the twin attached with it, or
+    /// another claim) or another link reserved it ([`PacketNet::reserve`]): refused with the
+    /// holder's name, and then nothing is attached. Checked and attached under one lock, so
+    /// that a refusal leaves nothing that outlives it.
     pub fn attach_claimed(
         &self,
         name: &str,
+        link: crate::reserve::LinkId,
         addr: u8,
         inbox: InboxTx,
         iface: usize,
     ) -> Result<NetPort, String> {
         let mut st = self.lock();
-        if let Some(h) = st.holder(addr) {
-            return Err(st.eps[h].name.clone());
+        if let Some(why) = st.refusal(addr, None, Some(link)) {
+            return Err(why);
         }
         let idx = st.push_endpoint(name, &[], false, inbox, iface);
+        if let Some(e) = st.eps.get_mut(idx) {
+            e.link = Some(link);
+        }
         st.claims.insert(addr, idx);
         if let Some(e) = st.eps.get_mut(idx) {
             e.addrs.insert(addr);
@@ -275,14 +284,31 @@ impl PacketNet {
     /// holder's name.
     pub fn claim(&self, port: &NetPort, addr: u8) -> Result<(), String> {
         let mut st = self.lock();
-        if let Some(h) = st.holder(addr).filter(|&h| h != port.idx) {
-            return Err(st.eps[h].name.clone());
+        let link = st.eps.get(port.idx).and_then(|e| e.link);
+        if let Some(why) = st.refusal(addr, Some(port.idx), link) {
+            return Err(why);
         }
         st.claims.insert(addr, port.idx);
         if let Some(e) = st.eps.get_mut(port.idx) {
             e.addrs.insert(addr);
         }
         Ok(())
+    }
+
+    /// Reserve `addr` for outside link `link` for the whole run: only that link's endpoints
+    /// may claim it, its program connected or not. Refused with the holder's name when a
+    /// node of the twin or another link has it.
+    pub fn reserve(
+        &self,
+        addr: u8,
+        link: crate::reserve::LinkId,
+        label: &str,
+    ) -> Result<(), String> {
+        let mut st = self.lock();
+        if let Some(h) = st.holder(addr) {
+            return Err(st.eps[h].name.clone());
+        }
+        st.reserved.reserve(addr, link, label)
     }
 
     /// Give back an endpoint's claims and disable it.
@@ -375,8 +401,23 @@ impl State {
             iface,
             tx: 0,
             rx: 0,
+            link: None,
         });
         self.eps.len() - 1
+    }
+
+    /// Why endpoint `me` of outside link `link` may not claim `addr`: another endpoint
+    /// holds it (named), or another link reserved it.
+    fn refusal(
+        &self,
+        addr: u8,
+        me: Option<usize>,
+        link: Option<crate::reserve::LinkId>,
+    ) -> Option<String> {
+        if let Some(h) = self.holder(addr).filter(|&h| Some(h) != me) {
+            return Some(self.eps[h].name.clone());
+        }
+        self.reserved.refusal(addr, link)
     }
 
     /// The endpoint holding `addr`: its claimant, or a node attached with it.

@@ -26,6 +26,21 @@ pub struct Segments {
     pub ground: PacketNet,
 }
 
+pub use crate::reserve::LinkId;
+
+impl Segments {
+    /// Reserve `addr` on its segment for outside link `link` (labelled `label`) for the
+    /// whole run (an address the link is configured with): only that link's connections
+    /// may claim it, its program connected or not. Refused with the holder's name.
+    pub fn reserve(&self, addr: u8, link: LinkId, label: &str) -> Result<(), String> {
+        match SegmentKind::of(addr) {
+            SegmentKind::Main => self.main.reserve(addr, link, label),
+            SegmentKind::Payload => self.payload.reserve(addr, link, label),
+            SegmentKind::Ground => self.ground.reserve(addr, link, label),
+        }
+    }
+}
+
 /// Counters of a bridge between a CAN segment and a real CAN interface
 /// (`socketcan::bridge`, cargo feature `socketcan`). Defined here, outside the feature, so
 /// that run reports can carry them whatever the build.
@@ -118,10 +133,12 @@ fn iface_of(kind: SegmentKind) -> usize {
 }
 
 impl OutsideEndpoint {
-    /// Attach a link named `name` for `addr` on its segment, delivering to `inbox`.
+    /// Attach connection `name` of outside link `link` for `addr` on its segment,
+    /// delivering to `inbox`.
     pub fn attach(
         segs: &Segments,
         name: &str,
+        link: LinkId,
         addr: u8,
         inbox: InboxTx,
         seed_ident: u16,
@@ -138,7 +155,7 @@ impl OutsideEndpoint {
                     &segs.payload
                 };
                 let port = bus
-                    .attach_claimed(name, addr, inbox, iface_of(kind))
+                    .attach_claimed(name, link, addr, inbox, iface_of(kind))
                     .map_err(|holder| OutsideError::Held { addr, holder })?;
                 Port::Can {
                     port,
@@ -149,7 +166,7 @@ impl OutsideEndpoint {
             SegmentKind::Ground => {
                 let port = segs
                     .ground
-                    .attach_claimed(name, addr, inbox, iface_of(kind))
+                    .attach_claimed(name, link, addr, inbox, iface_of(kind))
                     .map_err(|holder| OutsideError::Held { addr, holder })?;
                 Port::Net(port)
             }
@@ -276,7 +293,7 @@ mod tests {
             .attach("GS16", &[16], false, false, tx.clone(), 0);
         for n in 0..10_000u16 {
             for (addr, holder) in [(3, "FC"), (12, "PL12"), (16, "GS16")] {
-                let e = OutsideEndpoint::attach(&segs, "impostor", addr, tx.clone(), n);
+                let e = OutsideEndpoint::attach(&segs, "impostor", LinkId(0), addr, tx.clone(), n);
                 assert_eq!(
                     e.err(),
                     Some(OutsideError::Held {
@@ -290,7 +307,7 @@ mod tests {
         assert_eq!(segs.payload.stats().ports.len(), 1);
         assert_eq!(segs.ground.stats().endpoints.len(), 1);
         // A free address is still taken, and given back.
-        let ep = OutsideEndpoint::attach(&segs, "honest", 7, tx, 1).unwrap();
+        let ep = OutsideEndpoint::attach(&segs, "honest", LinkId(0), 7, tx, 1).unwrap();
         assert_eq!(segs.main.stats().ports.len(), 2);
         ep.release();
     }

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use csp::{Header, Packet};
 
 mod common;
-use common::twin_process::{Client, Twin, bare, ping, write_scenario};
+use common::twin_process::{Client, Twin, answer_pings, bare, ping, write_scenario};
 
 /// The ground client that took an address first keeps it: a second one claiming it is
 /// refused and logged, and gets nothing meant for the first.
@@ -114,23 +114,7 @@ addr = "127.0.0.1:0"
     let twin = Twin::start(&[scenario.to_str().unwrap()], 2);
     let stop = Arc::new(AtomicBool::new(false));
     // The payload program: answers pings to 14, never sends first.
-    let payload = {
-        let addr = twin.addrs[0];
-        let stop = stop.clone();
-        std::thread::spawn(move || {
-            let mut c = Client::connect(addr);
-            let mut answered = 0;
-            while !stop.load(Ordering::Relaxed) {
-                if let Some(p) = c.wait(Duration::from_millis(200), |p| p.header.dport == 1) {
-                    let mut h = p.header.reply(14);
-                    h.flags = 0;
-                    c.send(&Packet::new(h, p.data.clone()));
-                    answered += 1;
-                }
-            }
-            answered
-        })
-    };
+    let payload = answer_pings(twin.addrs[0], 14, stop.clone());
     std::thread::sleep(Duration::from_millis(300));
     let mut console = Client::connect(twin.addrs[1]);
     for tag in 0..3 {

@@ -7,12 +7,14 @@
 
 use std::io::Write;
 use std::net::TcpStream;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use csp::Packet;
 
 mod common;
-use common::twin_process::{Client, Twin, bare, is_reply, ping, write_scenario};
+use common::twin_process::{Client, Twin, answer_pings, bare, is_reply, ping, write_scenario};
 
 /// Growth of the twin's memory an attack may cost, MiB.
 const RSS_BUDGET_MIB: f64 = 20.0;
@@ -381,4 +383,54 @@ session_result = "done"
         err.contains("service port 4: node 15 refused") && err.contains("service port 0"),
         "{err}"
     );
+}
+
+/// An address a link is configured with is that link's, its program connected or not: a
+/// client of another link (which learns its addresses) sending as 15 while the first link's
+/// program is offline is refused, and that program, connecting later, gets 15 and what the
+/// twin sends it. The learning link used to take 15, the twin's traffic for 15 went to it,
+/// and the real payload was refused when it connected.
+#[test]
+fn a_configured_address_is_its_links_while_its_program_is_offline() {
+    let scenario = write_scenario(
+        "reserved",
+        r#"
+name = "reserved"
+duration = "14s"
+
+[network]
+payloads = [12]
+
+[[links]]
+kind = "kiss-listen"
+addr = "127.0.0.1:0"
+addrs = [15]
+
+[[links]]
+kind = "kiss-listen"
+addr = "127.0.0.1:0"
+"#,
+    );
+    let twin = Twin::start(&[scenario.to_str().unwrap()], 2);
+    let mut intruder = Client::connect(twin.addrs[1]);
+    let taken = intruder.ping(15, 6, 1, Duration::from_secs(2));
+    // The payload's program connects now, and answers pings to 15.
+    let stop = Arc::new(AtomicBool::new(false));
+    let payload = answer_pings(twin.addrs[0], 15, stop.clone());
+    std::thread::sleep(Duration::from_millis(300));
+    let mut gs = Client::connect(twin.addrs[1]);
+    let reached = gs.ping(17, 15, 2, Duration::from_secs(3));
+    stop.store(true, Ordering::Relaxed);
+    let answered = payload.join().unwrap();
+    let (_, _, err) = twin.finish_now();
+    std::fs::remove_file(scenario).ok();
+    assert!(
+        taken.is_none(),
+        "a client of another link took 15 and was answered"
+    );
+    assert!(
+        reached.is_some() && answered >= 1,
+        "the payload's program at 15 was not reached ({answered} pings answered)\n{err}"
+    );
+    assert!(err.contains("configured there"), "{err}");
 }

@@ -10,7 +10,7 @@ use anyhow::Context as _;
 use bus::Clock;
 use bus::gate::LinkGate;
 use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissLog, KissTap};
-use bus::outside::{BridgeStats, Segments};
+use bus::outside::{BridgeStats, LinkId, Segments};
 use csp::SimTime;
 use tokio::sync::mpsc;
 
@@ -95,11 +95,54 @@ pub(super) async fn kiss(
         gate: gate_of(opts, gates, label),
         ..cfg.clone()
     };
+    // Before any link starts: an address a link is configured with is that link's, its
+    // program connected or not (another link learning addresses cannot take it). Each
+    // link is one id (labels may repeat: two servers on 127.0.0.1:0); a replayed link's
+    // connections share theirs.
+    let mut replayed: Vec<&str> = Vec::new();
+    let replay_ids: Vec<LinkId> = opts
+        .kiss_replay
+        .iter()
+        .map(|i| {
+            let link = link_of(&i.link);
+            let k = replayed.iter().position(|l| *l == link).unwrap_or_else(|| {
+                replayed.push(link);
+                replayed.len() - 1
+            });
+            LinkId((opts.kiss_links.len() + k) as u32)
+        })
+        .collect();
+    let configured = opts
+        .kiss_links
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (LinkId(i as u32), l.label(), &l.cfg.addrs))
+        .chain(
+            opts.kiss_replay
+                .iter()
+                .zip(&replay_ids)
+                .map(|(i, &id)| (id, link_of(&i.link).to_owned(), &i.cfg.addrs)),
+        );
+    for (id, label, addrs) in configured {
+        for &a in addrs {
+            if let Err(holder) = segs.reserve(a, id, &label) {
+                let message = format!("address {a} cannot be reserved: {holder} has it");
+                tracing::warn!("{label}: {message}");
+                let _ = events.send(RunEvent::Log {
+                    t: clock.now(),
+                    source: label.clone(),
+                    level: Level::Warning,
+                    message,
+                });
+            }
+        }
+    }
     let mut kiss_stats = Vec::new();
     let mut bound = Vec::new();
-    for link in &opts.kiss_links {
+    for (i, link) in opts.kiss_links.iter().enumerate() {
         let label = link.label();
         let mut cfg = wire(&link.cfg, &label);
+        cfg.link = LinkId(i as u32);
         // The hub's messages; KISS on every other link.
         cfg.framing = match link.mode {
             KissMode::ZmqHub(_) => bus::kiss_tcp::Framing::ZmqHub,
@@ -172,14 +215,15 @@ pub(super) async fn kiss(
             }
         }
     }
-    for (n, input) in opts.kiss_replay.iter().enumerate() {
+    for ((n, input), &id) in opts.kiss_replay.iter().enumerate().zip(&replay_ids) {
         // Recorded outside input, fed through an in-memory pipe at its recorded times;
         // what the twin answers is recorded again and compared by `replay`.
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         kiss_stats.push((format!("replayed {}", input.link), stats.clone()));
         // Never full: the recorded input is fed at its times, not as fast as it can.
         let (in_tx, in_rx) = mpsc::channel(input.chunks.len().max(1));
-        let cfg2 = wire(&input.cfg, &input.link);
+        let mut cfg2 = wire(&input.cfg, &input.link);
+        cfg2.link = id;
         let (segs2, label) = (segs.clone(), input.link.clone());
         // A recording's first empty chunk of a connection is its open (older recordings
         // have none: the connection is open from the start); a later one is its close.
@@ -234,6 +278,14 @@ pub(super) async fn kiss(
         bound,
         budget,
     })
+}
+
+/// The link of a recorded connection's name (`listen 127.0.0.1:52001#2`: its link is
+/// `listen 127.0.0.1:52001`).
+fn link_of(connection: &str) -> &str {
+    connection
+        .rsplit_once('#')
+        .map_or(connection, |(link, _)| link)
 }
 
 /// Warn that a link's server listens beyond this machine.

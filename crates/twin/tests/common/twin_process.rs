@@ -184,6 +184,28 @@ impl Client {
     }
 }
 
+/// A program at `me` connected to `addr` that answers pings (and never sends first) until
+/// `stop`: how many it answered.
+pub fn answer_pings(
+    addr: SocketAddr,
+    me: u8,
+    stop: Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<usize> {
+    std::thread::spawn(move || {
+        let mut c = Client::connect(addr);
+        let mut answered = 0;
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            if let Some(p) = c.wait(Duration::from_millis(200), |p| p.header.dport == 1) {
+                let mut h = p.header.reply(me);
+                h.flags = 0;
+                c.send(&Packet::new(h, p.data.clone()));
+                answered += 1;
+            }
+        }
+        answered
+    })
+}
+
 pub fn ping(src: u8, dst: u8, tag: u32) -> Packet {
     Packet::new(Header::new(src, dst, 1, 40), tag.to_le_bytes().to_vec())
 }
