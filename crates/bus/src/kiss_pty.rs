@@ -218,7 +218,7 @@ pub async fn serve(
         n = n.wrapping_add(1);
         tracing::info!("{label}: a program opened {}", pty.path().display());
         bump(&stats, |s| s.connections += 1);
-        let why = run_numbered(pty.stream(), &label, n, &segs, &cfg, &stats, clock).await;
+        let why = run_numbered(pty.stream(), &label, n, &segs, &cfg, &stats, clock, None).await;
         tracing::info!("{label}: connection closed: {why}");
         bump(&stats, |s| s.disconnects += 1);
         // The program may still hold it for a moment after its last byte: wait for the

@@ -43,6 +43,12 @@ pub struct KissLimits {
     /// that finds it full is dropped and counted (`out_dropped`); the twin never waits for
     /// a program that does not read.
     pub output_frames: usize,
+    /// How long a listener's connection that holds no address (it has sent nothing the
+    /// twin took, on a link that learns its addresses) may go without a byte either way
+    /// before it is closed, on the wall clock; `None`: never. A connection with an address
+    /// is a node of the network and stays however quiet it is (a payload waiting for its
+    /// next session); a full listener closes its longest-idle connection instead.
+    pub idle_timeout: Option<Duration>,
 }
 
 impl Default for KissLimits {
@@ -51,6 +57,7 @@ impl Default for KissLimits {
             max_connections: 16,
             input_chunks: 16,
             output_frames: 256,
+            idle_timeout: Some(Duration::from_secs(60)),
         }
     }
 }
@@ -199,8 +206,143 @@ pub struct KissLinkStats {
     pub queue_full: u64,
     /// Frames to the outside program dropped because it did not read them in time.
     pub out_dropped: u64,
-    /// Connections refused because the listener already served `max_connections`.
-    pub connections_refused: u64,
+    /// Connections closed for holding no address and moving no byte for `idle_timeout`.
+    pub idle_closed: u64,
+    /// Connections closed to make room in a full listener (the longest idle).
+    pub evicted: u64,
+}
+
+/// A listener's connection as its listener sees it: when it last moved a byte (either
+/// way, on the wall clock: idleness is the program's and the network's, not simulated
+/// time's), whether it holds an address, and how to close it.
+#[derive(Debug)]
+pub struct Liveness {
+    base: std::time::Instant,
+    last_ns: std::sync::atomic::AtomicU64,
+    named: std::sync::atomic::AtomicBool,
+    close: tokio::sync::Notify,
+    closing: Mutex<Option<Closing>>,
+}
+
+/// Why a listener closed one of its connections.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Closing {
+    /// It held no address and moved no byte for this long.
+    Idle(Duration),
+    /// The listener was full, and it had been idle longest (this long): closed for a new
+    /// connection from this peer.
+    MadeRoom {
+        /// How long it had been idle.
+        idle: Duration,
+        /// Who connected.
+        for_peer: SocketAddr,
+    },
+}
+
+impl std::fmt::Display for Closing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Closing::Idle(d) => write!(
+                f,
+                "closed: no address and no byte for {:.1} s",
+                d.as_secs_f64()
+            ),
+            Closing::MadeRoom { idle, for_peer } => write!(
+                f,
+                "closed to make room for {for_peer}: the listener was full and this connection the longest idle ({:.1} s)",
+                idle.as_secs_f64()
+            ),
+        }
+    }
+}
+
+impl Default for Liveness {
+    fn default() -> Self {
+        Liveness {
+            base: std::time::Instant::now(),
+            last_ns: Default::default(),
+            named: Default::default(),
+            close: tokio::sync::Notify::new(),
+            closing: Mutex::new(None),
+        }
+    }
+}
+
+impl Liveness {
+    /// A byte moved now.
+    fn touch(&self) {
+        let ns = u64::try_from(self.base.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.last_ns.store(ns, std::sync::atomic::Ordering::Relaxed);
+    }
+    /// Time since the last byte (or the connection's start).
+    fn idle(&self) -> Duration {
+        let last = Duration::from_nanos(self.last_ns.load(std::sync::atomic::Ordering::Relaxed));
+        self.base.elapsed().saturating_sub(last)
+    }
+    /// Whether it holds an address.
+    fn named(&self) -> bool {
+        self.named.load(std::sync::atomic::Ordering::Relaxed)
+    }
+    /// Close it, for `why` (the first reason given stands).
+    fn close(&self, why: Closing) {
+        let mut c = self
+            .closing
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if c.is_none() {
+            *c = Some(why);
+            self.close.notify_one();
+        }
+    }
+    fn closing(&self) -> Option<Closing> {
+        *self
+            .closing
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+/// A listener's live connections by number.
+type Registry = Mutex<std::collections::BTreeMap<u64, Arc<Liveness>>>;
+
+/// Close every connection of `registry` that holds no address and has been idle for
+/// `limit`, looking every quarter second (or `limit`, if shorter) on a thread of its own:
+/// wall-clock sleeps, which a run on tokio's paused clock never sees. Ends with the
+/// listener.
+fn sweep_idle(registry: std::sync::Weak<Registry>, limit: Duration) {
+    let every = limit.min(Duration::from_millis(250));
+    let _ = std::thread::Builder::new()
+        .name("kiss-idle".into())
+        .spawn(move || {
+            loop {
+                std::thread::sleep(every);
+                let Some(reg) = registry.upgrade() else {
+                    return;
+                };
+                let conns = reg
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                for l in conns.values() {
+                    let idle = l.idle();
+                    if !l.named() && idle >= limit {
+                        l.close(Closing::Idle(idle));
+                    }
+                }
+            }
+        });
+}
+
+/// Takes a connection out of its listener's registry when it ends.
+struct Registered(Arc<Registry>, u64);
+
+impl Drop for Registered {
+    fn drop(&mut self) {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .remove(&self.1);
+    }
 }
 
 /// What a link takes in from its socket, each stamped with the instant it was taken in.
@@ -227,8 +369,10 @@ pub(crate) fn bump(stats: &SharedStats, f: impl FnOnce(&mut KissLinkStats)) {
         .unwrap_or_else(std::sync::PoisonError::into_inner));
 }
 
-/// Accept outside nodes on `listener` forever, at most `cfg.limits.max_connections` at a
-/// time.
+/// Accept outside nodes on `listener` forever, `cfg.limits.max_connections` at a time: a
+/// new connection to a full listener closes the longest-idle one (logged), and a
+/// connection that holds no address is closed after `cfg.limits.idle_timeout` without a
+/// byte, so idle connections never lock others out.
 pub async fn serve(
     listener: TcpListener,
     label: String,
@@ -238,21 +382,31 @@ pub async fn serve(
     clock: Clock,
 ) {
     let mut n = 0u64;
-    let active = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let registry: Arc<Registry> = Arc::default();
+    if let Some(limit) = cfg.limits.idle_timeout {
+        sweep_idle(Arc::downgrade(&registry), limit);
+    }
     loop {
         match listener.accept().await {
             Ok((stream, peer)) => {
                 let limit = cfg.limits.max_connections;
-                if active.load(std::sync::atomic::Ordering::Relaxed) >= limit {
-                    bump(&stats, |s| s.connections_refused += 1);
-                    warn(
-                        &cfg,
-                        clock.now(),
-                        &label,
-                        format!("connection from {peer} refused: {limit} connections already"),
-                    );
-                    drop(stream);
-                    continue;
+                let longest_idle = {
+                    let conns = registry
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
+                    (conns.len() >= limit)
+                        .then(|| conns.iter().max_by_key(|(_, l)| l.idle()))
+                        .flatten()
+                        .map(|(&k, l)| (k, l.clone()))
+                };
+                if let Some((k, l)) = longest_idle {
+                    let why = Closing::MadeRoom {
+                        idle: l.idle(),
+                        for_peer: peer,
+                    };
+                    l.close(why);
+                    bump(&stats, |s| s.evicted += 1);
+                    warn(&cfg, clock.now(), &format!("{label}#{k}"), why.to_string());
                 }
                 n = n.wrapping_add(1);
                 tracing::info!(%peer, "KISS/TCP: outside node connected");
@@ -260,10 +414,17 @@ pub async fn serve(
                 let (segs, cfg, stats, label) =
                     (segs.clone(), cfg.clone(), stats.clone(), label.clone());
                 let _ = stream.set_nodelay(true);
-                let guard = ActiveGuard::new(active.clone());
+                let live = Arc::new(Liveness::default());
+                registry
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .insert(n, live.clone());
+                let registered = Registered(registry.clone(), n);
                 tokio::spawn(async move {
-                    let _guard = guard;
-                    let why = run_numbered(stream, &label, n, &segs, &cfg, &stats, clock).await;
+                    let _registered = registered;
+                    let why =
+                        run_numbered(stream, &label, n, &segs, &cfg, &stats, clock, Some(&live))
+                            .await;
                     tracing::info!(%peer, "KISS/TCP: connection closed: {why}");
                     bump(&stats, |s| s.disconnects += 1);
                 });
@@ -273,22 +434,6 @@ pub async fn serve(
                 tokio::time::sleep(Duration::from_millis(100)).await;
             }
         }
-    }
-}
-
-/// Counts a connection as active while it lives.
-struct ActiveGuard(Arc<std::sync::atomic::AtomicUsize>);
-
-impl ActiveGuard {
-    fn new(n: Arc<std::sync::atomic::AtomicUsize>) -> Self {
-        n.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        ActiveGuard(n)
-    }
-}
-
-impl Drop for ActiveGuard {
-    fn drop(&mut self) {
-        self.0.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
     }
 }
 
@@ -319,7 +464,7 @@ pub async fn connect(
                 tracing::info!(%addr, "KISS/TCP: connected to outside server");
                 bump(&stats, |s| s.connections += 1);
                 let _ = stream.set_nodelay(true);
-                let why = run_numbered(stream, &label, n, &segs, &cfg, &stats, clock).await;
+                let why = run_numbered(stream, &label, n, &segs, &cfg, &stats, clock, None).await;
                 tracing::info!(%addr, "KISS/TCP: connection closed: {why}");
                 bump(&stats, |s| s.disconnects += 1);
             }
@@ -330,7 +475,9 @@ pub async fn connect(
     }
 }
 
-/// Serve connection `n` of link `label` (named `label#n`), opened now, until it closes.
+/// Serve connection `n` of link `label` (named `label#n`), opened now, until it closes (or
+/// its listener closes it through `live`).
+#[allow(clippy::too_many_arguments)]
 pub(crate) async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
     stream: S,
     label: &str,
@@ -339,6 +486,7 @@ pub(crate) async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
     cfg: &KissLinkConfig,
     stats: &SharedStats,
     clock: Clock,
+    live: Option<&Liveness>,
 ) -> String {
     let name = format!("{label}#{n}");
     let k = Connection {
@@ -349,6 +497,7 @@ pub(crate) async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
         n,
         clock,
         opened: clock.now(),
+        live,
     };
     run_connection(stream, k).await
 }
@@ -359,7 +508,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
     stream: S,
     k: Connection<'_>,
 ) -> String {
-    let (cfg, clock) = (k.cfg, k.clock);
+    let (cfg, clock, live, name, stats) = (k.cfg, k.clock, k.live, k.name, k.stats);
     let (mut rd, wr) = tokio::io::split(stream);
     // Bounded: when the twin has not taken `input_chunks` chunks yet, the reader waits and
     // TCP holds the sender back.
@@ -367,7 +516,30 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
     let reader = async move {
         let mut buf = vec![0u8; 4096];
         loop {
-            match rd.read(&mut buf).await {
+            let read = match live {
+                Some(l) => tokio::select! {
+                    biased;
+                    () = l.close.notified() => None,
+                    r = rd.read(&mut buf) => Some(r),
+                },
+                None => Some(rd.read(&mut buf).await),
+            };
+            let Some(read) = read else {
+                // Closed by its listener: logged, and ended as a close is.
+                let why = live.and_then(Liveness::closing);
+                if matches!(why, Some(Closing::Idle(_))) {
+                    bump(stats, |s| s.idle_closed += 1);
+                }
+                let why =
+                    why.map_or_else(|| "closed by its listener".to_owned(), |w| w.to_string());
+                warn(cfg, clock.now(), name, why.clone());
+                let _ = in_tx.send((clock.now(), LinkInput::End)).await;
+                return why;
+            };
+            if let Some(l) = live {
+                l.touch();
+            }
+            match read {
                 Ok(0) => {
                     // The close, stamped when it was seen.
                     let _ = in_tx.send((clock.now(), LinkInput::End)).await;
@@ -424,6 +596,9 @@ pub async fn serve_link<W: FrameSink>(input: InputRx, stream: &mut W, k: Connect
             if let Err(e) = write_out(stream, name, cfg, stats, t, &frame).await {
                 return e;
             }
+            if let Some(l) = k.live {
+                l.touch();
+            }
         }
         "link closed".to_owned()
     };
@@ -461,6 +636,8 @@ pub struct Connection<'a> {
     pub clock: Clock,
     /// When the connection opened (a replay: when the recorded one did).
     pub opened: SimTime,
+    /// How its listener sees it (a listener's connections only).
+    pub live: Option<&'a Liveness>,
 }
 
 /// What a connection learned or refused so far.
@@ -767,6 +944,9 @@ impl Conn<'_> {
                     self.k.name,
                     ep.kind()
                 );
+                if let Some(l) = self.k.live {
+                    l.named.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
                 self.claims.0.push(ep);
                 self.claims.0.len() - 1
             }
@@ -904,6 +1084,7 @@ mod tests {
             n: 1,
             clock,
             opened: SimTime(5),
+            live: None,
         };
         let sent = async {
             tokio::time::sleep(Duration::from_millis(10)).await;

@@ -222,6 +222,7 @@ pub async fn serve(
         n: 1,
         clock,
         opened: clock.now(),
+        live: None,
     };
     let reader = tokio::spawn(reader);
     let why = serve_link(in_rx, &mut out, k).await;

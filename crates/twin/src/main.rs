@@ -176,9 +176,14 @@ struct RunArgs {
     /// node (a payload, the FC, a ground station) replaces that node: it is not started.
     #[arg(long = "kiss-addr", value_name = "ID")]
     kiss_addr: Vec<u8>,
-    /// Connections each --kiss-listen serves at once; more are refused and logged.
+    /// Connections each --kiss-listen serves at once; a new one closes the longest-idle
+    /// connection (logged).
     #[arg(long, value_name = "N", default_value_t = 16)]
     kiss_max_connections: usize,
+    /// How long a --kiss-listen connection holding no address may go without a byte before
+    /// it is closed (60s; "off": never).
+    #[arg(long, value_name = "DURATION|off", default_value = "60s")]
+    kiss_idle_timeout: m6p_twin::scenario::IdleLimit,
     /// Apply libcsp 1.4's KISS receive limit (at most 248 data bytes) to the twin's receiver.
     #[arg(long)]
     libcsp14_kiss_limit: bool,
@@ -573,6 +578,7 @@ fn cli_kiss_links(
         .map(|(_, mut l)| {
             l.cfg.decoder.libcsp14_rx_limit |= a.libcsp14_kiss_limit;
             l.cfg.limits.max_connections = a.kiss_max_connections.max(1);
+            l.cfg.limits.idle_timeout = a.kiss_idle_timeout.duration();
             l
         })
         .collect())

@@ -180,11 +180,18 @@ pub fn validate(
             }
         }
     } else {
-        for f in ["addrs", "max_connections", "input_chunks", "output_frames"] {
+        for f in [
+            "addrs",
+            "max_connections",
+            "input_chunks",
+            "output_frames",
+            "idle_timeout",
+        ] {
             let set = match f {
                 "addrs" => !l.addrs.is_empty(),
                 "max_connections" => l.max_connections.is_some(),
                 "input_chunks" => l.input_chunks.is_some(),
+                "idle_timeout" => l.idle_timeout.is_some(),
                 _ => l.output_frames.is_some(),
             };
             if set {
@@ -241,6 +248,7 @@ fn validate_uart(
         ("max_connections", l.max_connections.is_some()),
         ("input_chunks", l.input_chunks.is_some()),
         ("output_frames", l.output_frames.is_some()),
+        ("idle_timeout", l.idle_timeout.is_some()),
     ] {
         if set {
             err(
@@ -312,6 +320,9 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
                     max_connections: l.max_connections.unwrap_or(defaults.max_connections),
                     input_chunks: l.input_chunks.unwrap_or(defaults.input_chunks),
                     output_frames: l.output_frames.unwrap_or(defaults.output_frames),
+                    idle_timeout: l
+                        .idle_timeout
+                        .map_or(defaults.idle_timeout, crate::scenario::IdleLimit::duration),
                 };
                 let mode = match l.kind {
                     LinkKind::KissListen => l.addr.parse().ok().map(KissMode::Listen),

@@ -322,6 +322,52 @@ pub struct LinkSpec {
     /// 256).
     #[serde(default)]
     pub output_frames: Option<usize>,
+    /// KISS listen: how long a connection holding no address may go without a byte
+    /// before it is closed (default 60 s; "off": never).
+    #[serde(default)]
+    pub idle_timeout: Option<IdleLimit>,
+}
+
+/// A wall-clock limit that may be turned off: a duration (`"60s"`) or `"off"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, JsonSchema)]
+#[schemars(with = "String", description = "a duration (60s, 5m) or \"off\"")]
+pub enum IdleLimit {
+    /// Never.
+    Off,
+    /// After this long.
+    After(Duration),
+}
+
+impl IdleLimit {
+    /// The limit, `None` when off.
+    pub fn duration(self) -> Option<Duration> {
+        match self {
+            IdleLimit::Off => None,
+            IdleLimit::After(d) => Some(d),
+        }
+    }
+}
+
+impl std::str::FromStr for IdleLimit {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.trim().eq_ignore_ascii_case("off") {
+            return Ok(IdleLimit::Off);
+        }
+        match parse_duration(s) {
+            Ok(d) if d >= Duration::from_millis(100) => Ok(IdleLimit::After(d)),
+            Ok(_) => Err(format!("`{s}`: at least 100ms, or \"off\"")),
+            Err(e) => Err(format!("{e}, or \"off\"")),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for IdleLimit {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        String::deserialize(d)?
+            .parse()
+            .map_err(serde::de::Error::custom)
+    }
 }
 
 /// Link kinds.

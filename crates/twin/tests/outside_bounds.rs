@@ -434,3 +434,70 @@ addr = "127.0.0.1:0"
     );
     assert!(err.contains("configured there"), "{err}");
 }
+
+/// Sixteen connections that say nothing fill a listener (its limit); `m6p-twin gs ping 3`
+/// still gets through: the longest-idle connection is closed to make room, and logged. The
+/// seventeenth connection used to be refused for as long as the sixteen stayed.
+#[test]
+fn sixteen_idle_connections_do_not_lock_out_a_console() {
+    let scenario = bare("idle-sixteen", 30);
+    let twin = Twin::start(
+        &[scenario.to_str().unwrap(), "--kiss-listen", "127.0.0.1:0"],
+        1,
+    );
+    let idle: Vec<TcpStream> = (0..16)
+        .map(|_| TcpStream::connect(twin.addrs[0]).unwrap())
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let out = std::process::Command::new(common::twin_process::twin_bin())
+        .args(["gs", "--connect", &twin.addrs[0].to_string(), "ping", "3"])
+        .output()
+        .unwrap();
+    let (_, _, err) = twin.finish_now();
+    drop(idle);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && stdout.contains("reply from 3"),
+        "gs ping 3: {stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(err.contains("closed to make room for"), "{err}");
+}
+
+/// A connection that holds no address and moves no byte for the idle limit (1 s here) is
+/// closed; one that holds an address (it sent a ping) stays however quiet, and is answered
+/// after the limit.
+#[test]
+fn a_connection_that_says_nothing_is_closed_after_the_idle_limit() {
+    let scenario = bare("idle-limit", 30);
+    let twin = Twin::start(
+        &[
+            scenario.to_str().unwrap(),
+            "--kiss-listen",
+            "127.0.0.1:0",
+            "--kiss-idle-timeout",
+            "1s",
+        ],
+        1,
+    );
+    let mut named = Client::connect(twin.addrs[0]);
+    assert!(named.ping(17, 3, 1, Duration::from_secs(3)).is_some());
+    let mut silent = TcpStream::connect(twin.addrs[0]).unwrap();
+    silent
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let t0 = Instant::now();
+    let mut buf = [0u8; 16];
+    let closed = matches!(std::io::Read::read(&mut silent, &mut buf), Ok(0) | Err(_));
+    let after = t0.elapsed();
+    std::thread::sleep(Duration::from_millis(1500));
+    let still = named.ping(17, 3, 2, Duration::from_secs(3));
+    let (_, _, err) = twin.finish_now();
+    println!("the silent connection closed {closed} after {after:?}");
+    assert!(
+        closed && after >= Duration::from_millis(900) && after < Duration::from_secs(4),
+        "the silent connection: closed {closed} after {after:?}"
+    );
+    assert!(still.is_some(), "the named connection was closed\n{err}");
+    assert!(err.contains("closed: no address and no byte for"), "{err}");
+}

@@ -252,6 +252,7 @@ pub(super) async fn kiss(
                 n: conn,
                 clock,
                 opened,
+                live: None,
             };
             kiss_tcp::serve_link(in_rx, &mut discard, k).await;
         }));

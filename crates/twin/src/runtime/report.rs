@@ -263,9 +263,10 @@ impl RunReport {
         for (name, k) in &self.kiss {
             let _ = writeln!(
                 s,
-                "\nlink {name}: {} connections ({} refused), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
+                "\nlink {name}: {} connections ({} closed idle, {} closed to make room), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
                 k.connections,
-                k.connections_refused,
+                k.idle_closed,
+                k.evicted,
                 k.packets_in,
                 k.packets_out,
                 k.garbage_bytes,
