@@ -261,6 +261,45 @@ pub struct PortStats {
     pub rx_overflow: u64,
     /// The most frames its transmit queue held.
     pub tx_queue_max: u64,
+    /// Frames its transmit budget ([`TxBudget`]) held back before they could contend for
+    /// the bus.
+    pub budget_held: u64,
+}
+
+/// A transmit budget of a port: at most `frames_per_s` frames a second, up to a tenth of a
+/// second's worth (at least one) back to back (a generic cell rate algorithm in simulated
+/// nanoseconds, exact and deterministic). A frame the budget holds back waits in the
+/// port's queue and contends for the bus when the budget allows it: a lab bench keeps a
+/// runaway program with a low CAN id from stalling everyone above it. Only frames sent
+/// count (a retransmission after an error frame is the same frame).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TxBudget {
+    period_ns: u64,
+    slack_ns: u64,
+    /// When the next frame conforms, plus `slack_ns` (the GCRA's theoretical arrival time).
+    tat: SimTime,
+}
+
+impl TxBudget {
+    /// At most `frames_per_s` frames a second (at least 1).
+    pub fn per_second(frames_per_s: u32) -> Self {
+        let rate = u64::from(frames_per_s.max(1));
+        let period_ns = 1_000_000_000 / rate;
+        let burst = (rate / 10).max(1);
+        TxBudget {
+            period_ns,
+            slack_ns: (burst - 1) * period_ns,
+            tat: SimTime::ZERO,
+        }
+    }
+    /// The earliest a frame may start.
+    fn allowed(&self) -> SimTime {
+        SimTime(self.tat.as_ns().saturating_sub(self.slack_ns))
+    }
+    /// A frame started at `t`.
+    fn spend(&mut self, t: SimTime) {
+        self.tat = SimTime(self.tat.max(t).as_ns() + self.period_ns);
+    }
 }
 
 impl PortStats {
@@ -338,6 +377,8 @@ struct Port {
     iface: usize,
     /// The outside link it belongs to (its reserved addresses are its own).
     link: Option<crate::reserve::LinkId>,
+    /// Its transmit budget, if it has one.
+    budget: Option<TxBudget>,
     /// Delivered, not yet handed to the inbox: each arrival, and whether it is quiet.
     arrivals: Vec<(Inbound, bool)>,
 }
@@ -555,6 +596,13 @@ impl CanBus {
             bus: self.clone(),
             idx: port,
         })
+    }
+
+    /// Give an endpoint a transmit budget, or take it away (`None`).
+    pub fn set_tx_budget(&self, port: &CanPort, budget: Option<TxBudget>) {
+        if let Some(p) = self.lock().ports.get_mut(port.idx) {
+            p.budget = budget;
+        }
     }
 
     /// Take or release an endpoint's place on the bus (power on/off). A disabled endpoint
@@ -781,6 +829,7 @@ impl State {
             arrivals: Vec::new(),
             iface,
             link: None,
+            budget: None,
         });
         self.ports.len() - 1
     }
@@ -965,7 +1014,8 @@ impl State {
             .filter(|(_, p)| p.stats.state != ErrorState::BusOff)
             .filter_map(|(i, p)| {
                 p.queue.front().map(|(t, f)| Candidate {
-                    ready: *t,
+                    // A budget holds the frame back until it allows it.
+                    ready: p.budget.map_or(*t, |b| (*t).max(b.allowed())),
                     id: f.id,
                     port: i,
                     babble: None,
@@ -1127,7 +1177,14 @@ impl State {
             self.stats.bytes += u64::from(frame.dlc);
             self.stats.bits += u64::from(bits);
             self.stats.busy += end - start;
-            let port = &mut self.ports[winner].stats;
+            let p = &mut self.ports[winner];
+            if requeue && let Some(b) = p.budget.as_mut() {
+                if b.allowed() > ready {
+                    p.stats.budget_held += 1;
+                }
+                b.spend(start);
+            }
+            let port = &mut p.stats;
             port.frames_tx += 1;
             port.babbled += u64::from(!requeue);
             port.bytes_tx += u64::from(frame.dlc);
@@ -2061,5 +2118,62 @@ mod tests {
         let s = bus.stats();
         // The babbler's frames (149 bits) fill the 10 ms but for A's 10 frames: 57.
         assert_eq!(s.ports[1].frames_tx, 57, "{:?}", s.ports[1]);
+    }
+
+    /// A sender with the lowest id and a full queue (a runaway program) holds everyone
+    /// above it off the bus until its queue drains; with a transmit budget of 1000 frames a
+    /// second it sends a tenth of a second's worth back to back, then one a millisecond,
+    /// and a higher id's frame waits for one of its frames at most.
+    #[tokio::test(start_paused = true)]
+    async fn a_transmit_budget_leaves_the_bus_to_higher_ids() {
+        for budget in [None, Some(TxBudget::per_second(1000))] {
+            let clock = Clock::new(ClockMode::Virtual);
+            let bus = CanBus::new(CanBusConfig::new("main"), 1);
+            let (tx_a, _ra) = inbox();
+            let (tx_b, _rb) = inbox();
+            let (tx_d, mut rx_d) = inbox();
+            let a = bus.attach("A", &[1], false, tx_a, 0);
+            let b = bus.attach("B", &[9], false, tx_b, 0);
+            let _d = bus.attach("D", &[20], false, tx_d, 0);
+            bus.set_tx_budget(&a, budget);
+            tokio::spawn(bus.clone().run(clock));
+            for k in 0..1000u32 {
+                a.send(SimTime::ZERO, cfp_frame(1, 20, k));
+            }
+            // A's queue takes ~150 ms unbudgeted.
+            tokio::time::sleep(Duration::from_millis(50)).await;
+            let sent_at = clock.now();
+            b.send(sent_at, cfp_frame(9, 20, 7));
+            tokio::time::sleep(Duration::from_secs(2)).await;
+            let mut b_late = None;
+            let mut a_last = SimTime::ZERO;
+            while let Ok(x) = rx_d.try_recv() {
+                if let Arrival::Can(f) = x.what {
+                    match CfpId::from_can_id(f.id).src {
+                        9 => b_late = Some(x.t - sent_at),
+                        _ => a_last = a_last.max(x.t),
+                    }
+                }
+            }
+            let b_late = b_late.unwrap();
+            let s = bus.stats();
+            assert_eq!(s.ports[0].frames_tx, 1000);
+            match budget {
+                // 1000 frames of ~130 us: B's frame waits for the rest of A's queue.
+                None => {
+                    assert_eq!(s.ports[0].budget_held, 0);
+                    assert!(b_late > Duration::from_millis(50), "B waited {b_late:?}");
+                }
+                // 100 at once, then one a millisecond: the last at 0.9 s.
+                Some(_) => {
+                    assert!(b_late < Duration::from_micros(300), "B waited {b_late:?}");
+                    assert_eq!(s.ports[0].budget_held, 900);
+                    assert!(
+                        a_last > SimTime::from_ms(899) && a_last < SimTime::from_ms(901),
+                        "A's last frame at {a_last}"
+                    );
+                }
+            }
+        }
     }
 }

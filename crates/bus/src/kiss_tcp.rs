@@ -25,6 +25,7 @@ use csp::kiss::{self, Decoder, DecoderConfig, KissDrop, KissEvent};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
+use crate::can::TxBudget;
 use crate::clock::Clock;
 use crate::gate::{DelayLine, LinkGate, Passage};
 use crate::inbox::inbox;
@@ -102,6 +103,9 @@ pub struct KissLinkConfig {
     /// Which of the run's links it is: its configured addresses are reserved for it
     /// ([`crate::outside::Segments::reserve`]).
     pub link: crate::outside::LinkId,
+    /// At most this many CAN frames a second from each of its connections on a CAN bus
+    /// ([`crate::can::TxBudget`]); `None`: as many as the bus takes.
+    pub tx_frames_per_s: Option<u32>,
 }
 
 /// How a link frames packets.
@@ -938,6 +942,7 @@ impl Conn<'_> {
                     addr,
                     self.inbox.clone(),
                     (self.k.n as u16).wrapping_mul(97),
+                    self.k.cfg.tx_frames_per_s.map(TxBudget::per_second),
                 )?;
                 tracing::info!(
                     "{}: outside node {addr} joined the {:?} segment",

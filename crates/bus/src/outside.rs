@@ -11,7 +11,7 @@
 use csp::cfp::{Fragmenter, Reassembler, ReassemblerConfig};
 use csp::{Packet, SimTime};
 
-use crate::can::{CanBus, CanPort};
+use crate::can::{CanBus, CanPort, TxBudget};
 use crate::inbox::{Arrival, Inbound, InboxTx};
 use crate::net::{NetPort, PacketNet};
 
@@ -134,7 +134,7 @@ fn iface_of(kind: SegmentKind) -> usize {
 
 impl OutsideEndpoint {
     /// Attach connection `name` of outside link `link` for `addr` on its segment,
-    /// delivering to `inbox`.
+    /// delivering to `inbox`; on a CAN bus with the transmit budget `budget`.
     pub fn attach(
         segs: &Segments,
         name: &str,
@@ -142,6 +142,7 @@ impl OutsideEndpoint {
         addr: u8,
         inbox: InboxTx,
         seed_ident: u16,
+        budget: Option<TxBudget>,
     ) -> Result<Self, OutsideError> {
         if addr >= csp::header::BROADCAST {
             return Err(OutsideError::BadSource(addr));
@@ -157,6 +158,7 @@ impl OutsideEndpoint {
                 let port = bus
                     .attach_claimed(name, link, addr, inbox, iface_of(kind))
                     .map_err(|holder| OutsideError::Held { addr, holder })?;
+                bus.set_tx_budget(&port, budget);
                 Port::Can {
                     port,
                     frag: Fragmenter::new(seed_ident % 1024, csp::cfp::CSP_CAN_MTU),
@@ -293,7 +295,15 @@ mod tests {
             .attach("GS16", &[16], false, false, tx.clone(), 0);
         for n in 0..10_000u16 {
             for (addr, holder) in [(3, "FC"), (12, "PL12"), (16, "GS16")] {
-                let e = OutsideEndpoint::attach(&segs, "impostor", LinkId(0), addr, tx.clone(), n);
+                let e = OutsideEndpoint::attach(
+                    &segs,
+                    "impostor",
+                    LinkId(0),
+                    addr,
+                    tx.clone(),
+                    n,
+                    None,
+                );
                 assert_eq!(
                     e.err(),
                     Some(OutsideError::Held {
@@ -307,7 +317,7 @@ mod tests {
         assert_eq!(segs.payload.stats().ports.len(), 1);
         assert_eq!(segs.ground.stats().endpoints.len(), 1);
         // A free address is still taken, and given back.
-        let ep = OutsideEndpoint::attach(&segs, "honest", LinkId(0), 7, tx, 1).unwrap();
+        let ep = OutsideEndpoint::attach(&segs, "honest", LinkId(0), 7, tx, 1, None).unwrap();
         assert_eq!(segs.main.stats().ports.len(), 2);
         ep.release();
     }

@@ -184,6 +184,10 @@ struct RunArgs {
     /// it is closed (60s; "off": never).
     #[arg(long, value_name = "DURATION|off", default_value = "60s")]
     kiss_idle_timeout: m6p_twin::scenario::IdleLimit,
+    /// At most N CAN frames a second from each connection of the command line's KISS links
+    /// on a CAN bus (a runaway program with a low address then leaves room to others).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    kiss_tx_budget: Option<u32>,
     /// Apply libcsp 1.4's KISS receive limit (at most 248 data bytes) to the twin's receiver.
     #[arg(long)]
     libcsp14_kiss_limit: bool,
@@ -579,6 +583,7 @@ fn cli_kiss_links(
             l.cfg.decoder.libcsp14_rx_limit |= a.libcsp14_kiss_limit;
             l.cfg.limits.max_connections = a.kiss_max_connections.max(1);
             l.cfg.limits.idle_timeout = a.kiss_idle_timeout.duration();
+            l.cfg.tx_frames_per_s = a.kiss_tx_budget;
             l
         })
         .collect())

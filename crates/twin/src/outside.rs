@@ -179,6 +179,14 @@ pub fn validate(
                 err(p(f), format!("{v} is out of range 1..=65536"));
             }
         }
+        if let Some(v) = l.tx_frames_per_s
+            && !(1..=100_000).contains(&v)
+        {
+            err(
+                p("tx_frames_per_s"),
+                format!("{v} is out of range 1..=100000"),
+            );
+        }
     } else {
         for f in [
             "addrs",
@@ -186,12 +194,14 @@ pub fn validate(
             "input_chunks",
             "output_frames",
             "idle_timeout",
+            "tx_frames_per_s",
         ] {
             let set = match f {
                 "addrs" => !l.addrs.is_empty(),
                 "max_connections" => l.max_connections.is_some(),
                 "input_chunks" => l.input_chunks.is_some(),
                 "idle_timeout" => l.idle_timeout.is_some(),
+                "tx_frames_per_s" => l.tx_frames_per_s.is_some(),
                 _ => l.output_frames.is_some(),
             };
             if set {
@@ -249,6 +259,7 @@ fn validate_uart(
         ("input_chunks", l.input_chunks.is_some()),
         ("output_frames", l.output_frames.is_some()),
         ("idle_timeout", l.idle_timeout.is_some()),
+        ("tx_frames_per_s", l.tx_frames_per_s.is_some()),
     ] {
         if set {
             err(
@@ -335,6 +346,7 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
                         let mut link = KissLink::new(mode);
                         link.cfg.addrs = addrs;
                         link.cfg.limits = limits;
+                        link.cfg.tx_frames_per_s = l.tx_frames_per_s;
                         link.cfg.decoder = csp::kiss::DecoderConfig {
                             libcsp14_rx_limit: l.libcsp14_rx_limit,
                         };

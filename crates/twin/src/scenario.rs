@@ -326,6 +326,10 @@ pub struct LinkSpec {
     /// before it is closed (default 60 s; "off": never).
     #[serde(default)]
     pub idle_timeout: Option<IdleLimit>,
+    /// KISS, pty, hub: at most this many CAN frames a second from each connection on a CAN
+    /// bus (1 to 100000; default: as many as the bus takes).
+    #[serde(default)]
+    pub tx_frames_per_s: Option<u32>,
 }
 
 /// A wall-clock limit that may be turned off: a duration (`"60s"`) or `"off"`.

@@ -288,6 +288,13 @@ impl RunReport {
                         b.name, p.name, p.tx_overflow, p.rx_overflow
                     ));
                 }
+                if p.budget_held > 0 {
+                    let _ = writeln!(
+                        s,
+                        "\n{} bus, {}: {} frames held back by its transmit budget",
+                        b.name, p.name, p.budget_held
+                    );
+                }
             }
         }
         if self.ground.air_overflow + self.ground.rx_overflow > 0 {
