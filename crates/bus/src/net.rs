@@ -10,6 +10,13 @@
 //! - endpoints marked `radio` share one half-duplex air channel: a packet to or from a
 //!   radio endpoint occupies the channel for `(len + overhead) * 8 / rate` and arrives
 //!   `air_delay` after it leaves; traffic between ground endpoints is instantaneous;
+//! - the air serves the ground endpoints in turn: each has one queue for what it sends up
+//!   and what the radio sends down to it, and when the air frees, the next endpoint (in
+//!   address order after the last one served) with a packet waiting sends one. So a ground
+//!   client flooding the air delays another by at most one packet each way; with one
+//!   station (or one at a time) the air is first come, first served, as it always was. The
+//!   next transmission is chosen [`DECIDE_AHEAD`] before the air frees, so that its air
+//!   time is charged ahead of its start (the [`AirTap`]);
 //! - impairments (drop, corrupt, delay, down) apply to the air channel, drawn from the
 //!   net's seeded generator;
 //! - the default endpoint can move to another radio ([`PacketNet::set_default`]: the
@@ -45,8 +52,15 @@ pub struct PacketNetConfig {
 }
 
 /// The default transmit buffer of a sender on the air: 4 KiB, about 3.4 s of a 9600 bit/s
-/// channel (the time a ground client waits behind another's flood at most).
+/// channel. A ground sender has one; the radio one per ground endpoint it sends to.
 pub const AIR_BUFFER_BYTES: u32 = 4096;
+
+/// How long before the air frees the next transmission is chosen: more than a tick of
+/// tokio's timer wheel (1 ms), so that the air time of a transmission reaches the [`AirTap`]
+/// (and the power board behind it) before the instant it starts, whenever the network task
+/// runs within its tick. A packet sent within the last 2 ms of another's transmission
+/// waits for the next turn.
+pub const DECIDE_AHEAD: Duration = Duration::from_millis(2);
 
 impl PacketNetConfig {
     /// The ground segment with a 9600 bit/s UHF channel.
@@ -62,8 +76,8 @@ impl PacketNetConfig {
 }
 
 /// Called with `(radio endpoint name, start, end)` of every transmission by a radio
-/// endpoint, when it is submitted (so the instants may lie in the future; they come in time
-/// order, the air channel being one).
+/// endpoint, when it is chosen (at or up to [`DECIDE_AHEAD`] before its start; they come in
+/// time order, the air channel being one).
 #[derive(Clone)]
 pub struct AirTap(Arc<AirFn>);
 
@@ -107,7 +121,8 @@ pub struct NetStats {
     pub air_overflow: u64,
     /// Packets lost because the receiver's inbox was full.
     pub rx_overflow: u64,
-    /// The most bytes any sender had waiting for the air.
+    /// The most bytes any sender had waiting for the air (the radio: for one ground
+    /// endpoint).
     pub air_backlog_max: u64,
 }
 
@@ -117,9 +132,6 @@ struct Endpoint {
     addrs: BTreeSet<u8>,
     /// The addresses given at attach (a node of the twin).
     own: BTreeSet<u8>,
-    /// Its packets waiting for the air: (when each starts, its bytes).
-    air_queue: std::collections::VecDeque<(SimTime, u64)>,
-    air_queued: u64,
     radio: bool,
     enabled: bool,
     inbox: InboxTx,
@@ -139,6 +151,14 @@ struct State {
     claims: BTreeMap<u8, usize>,
     reserved: crate::reserve::Reservations,
     air_busy_until: SimTime,
+    /// What waits for the air, by ground endpoint: its own packets up and the radio's down
+    /// to it, in the order sent.
+    air_waiting: BTreeMap<usize, std::collections::VecDeque<AirPacket>>,
+    /// The ground endpoint the air served last (the next turn goes to the one after it).
+    air_last: Option<usize>,
+    /// Each sender's transmit buffer, by (sender, ground endpoint): a ground sender has one
+    /// (its own), the radio one per ground endpoint it sends to.
+    air_buffers: BTreeMap<(usize, usize), AirBuffer>,
     in_flight: BTreeMap<(SimTime, u64), (usize, usize, Packet, Fate)>,
     seq: u64,
     stats: NetStats,
@@ -196,6 +216,9 @@ impl PacketNet {
                 claims: BTreeMap::new(),
                 reserved: Default::default(),
                 air_busy_until: SimTime::ZERO,
+                air_waiting: BTreeMap::new(),
+                air_last: None,
+                air_buffers: BTreeMap::new(),
                 in_flight: BTreeMap::new(),
                 seq: 0,
                 impair: Impairments::default(),
@@ -359,15 +382,19 @@ impl PacketNet {
         s
     }
 
-    /// The network task: deliver packets when they arrive.
+    /// The network task: put packets on the air in turn and deliver them when they arrive.
     pub async fn run(self, clock: Clock) {
         loop {
             let next = {
                 let mut st = self.lock();
-                st.deliver_due(clock.now());
-                st.in_flight
+                let now = clock.now();
+                st.take_turns(now);
+                st.deliver_due(now);
+                let delivery = st
+                    .in_flight
                     .first_key_value()
-                    .map_or(SimTime::MAX, |((t, _), _)| *t)
+                    .map_or(SimTime::MAX, |((t, _), _)| *t);
+                delivery.min(st.next_turn().unwrap_or(SimTime::MAX))
             };
             let notified = self.wake.notified();
             tokio::select! {
@@ -393,8 +420,6 @@ impl State {
             name: name.to_owned(),
             addrs: addrs.iter().copied().collect(),
             own: addrs.iter().copied().collect(),
-            air_queue: std::collections::VecDeque::new(),
-            air_queued: 0,
             radio,
             enabled: true,
             inbox,
@@ -457,8 +482,19 @@ impl State {
         self.stats.packets += 1;
         self.stats.bytes += len;
         let over_air = self.eps[from].radio || self.eps[to].radio;
-        if over_air && !self.air_buffer_takes(from, t, len) {
-            let (net, sender, size) = (&self.name, &self.eps[from].name, self.cfg.air_buffer_bytes);
+        if !over_air {
+            self.seq += 1;
+            self.in_flight
+                .insert((t, self.seq), (from, to, packet, Fate::Deliver));
+            return;
+        }
+        // The ground endpoint whose turn it is: the sender going up, the receiver coming
+        // down.
+        let ground = if self.eps[from].radio { to } else { from };
+        let limit = u64::from(self.cfg.air_buffer_bytes);
+        let buffer = self.air_buffers.entry((from, ground)).or_default();
+        let Some(backlog) = buffer.takes(t, len, limit) else {
+            let (net, sender, size) = (&self.name, &self.eps[from].name, limit);
             crate::count_loss(&mut self.stats.air_overflow, |n| {
                 format!(
                     "{net}: {sender}: transmit buffer full ({size} bytes): packet {} lost ({n} so far)",
@@ -466,22 +502,77 @@ impl State {
                 )
             });
             return;
-        }
-        let (at, fate) = if over_air {
-            let bits = (len + u64::from(self.cfg.air_overhead_bytes)) * 8;
+        };
+        self.stats.air_backlog_max = self.stats.air_backlog_max.max(backlog);
+        self.air_waiting
+            .entry(ground)
+            .or_default()
+            .push_back(AirPacket {
+                ready: t,
+                from,
+                to,
+                len,
+                packet,
+            });
+        self.take_turns(t);
+    }
+
+    /// When the air frees next and something waits for it: the instant the next turn is
+    /// chosen ([`DECIDE_AHEAD`] before the air frees, or as the first packet waiting was
+    /// sent, whichever is later).
+    fn next_turn(&self) -> Option<SimTime> {
+        let ready = self
+            .air_waiting
+            .values()
+            .filter_map(|q| q.front())
+            .map(|p| p.ready)
+            .min()?;
+        let start = ready.max(self.air_busy_until);
+        Some(ready.max(SimTime(
+            start.as_ns().saturating_sub(DECIDE_AHEAD.as_nanos() as u64),
+        )))
+    }
+
+    /// Put on the air every transmission whose turn is chosen by `now`: when the air frees
+    /// (or at once, when it is free), the first ground endpoint after the last one served,
+    /// in address order, with a packet sent by then sends its first packet.
+    fn take_turns(&mut self, now: SimTime) {
+        while let Some(decide) = self.next_turn().filter(|&d| d <= now) {
+            let start = decide.max(self.air_busy_until);
+            let after = self.air_last.map_or(0, |g| g + 1);
+            let turn = self
+                .air_waiting
+                .range(after..)
+                .chain(self.air_waiting.range(..after))
+                .find(|(_, q)| q.front().is_some_and(|p| p.ready <= start))
+                .map(|(&g, _)| g);
+            let Some(ground) = turn else {
+                return;
+            };
+            let Some(p) = self
+                .air_waiting
+                .get_mut(&ground)
+                .and_then(|q| q.pop_front())
+            else {
+                return;
+            };
+            if self.air_waiting.get(&ground).is_some_and(|q| q.is_empty()) {
+                self.air_waiting.remove(&ground);
+            }
+            self.air_last = Some(ground);
+            let bits = (p.len + u64::from(self.cfg.air_overhead_bytes)) * 8;
             let dur = Duration::from_nanos(
                 bits * 1_000_000_000 / u64::from(self.cfg.air_rate_bps.max(1)),
             );
-            let start = t.max(self.air_busy_until);
             self.air_busy_until = start + dur;
-            let ep = &mut self.eps[from];
-            ep.air_queue.push_back((start, len));
-            ep.air_queued += len;
+            if let Some(b) = self.air_buffers.get_mut(&(p.from, ground)) {
+                b.started(start, p.len);
+            }
             self.stats.air_busy += dur;
-            if self.eps[from].radio
+            if self.eps[p.from].radio
                 && let Some(tap) = &self.air_tap
             {
-                (tap.0)(&self.eps[from].name, start, self.air_busy_until);
+                (tap.0)(&self.eps[p.from].name, start, self.air_busy_until);
             }
             let fate = if self.contact {
                 self.rng.fate(&self.impair)
@@ -489,34 +580,11 @@ impl State {
                 self.stats.no_contact += 1;
                 Fate::Drop
             };
-            (
-                self.air_busy_until + self.cfg.air_delay + self.impair.delay,
-                fate,
-            )
-        } else {
-            (t, Fate::Deliver)
-        };
-        self.seq += 1;
-        self.in_flight
-            .insert((at, self.seq), (from, to, packet, fate));
-    }
-
-    /// Whether sender `from`'s transmit buffer has room at `t` for `len` more bytes (what
-    /// has started on the air by `t` has left it). Counts the fullest backlog seen.
-    fn air_buffer_takes(&mut self, from: usize, t: SimTime, len: u64) -> bool {
-        let ep = &mut self.eps[from];
-        while let Some(&(start, n)) = ep.air_queue.front() {
-            if start > t {
-                break;
-            }
-            ep.air_queue.pop_front();
-            ep.air_queued -= n;
+            let at = self.air_busy_until + self.cfg.air_delay + self.impair.delay;
+            self.seq += 1;
+            self.in_flight
+                .insert((at, self.seq), (p.from, p.to, p.packet, fate));
         }
-        if ep.air_queued + len > u64::from(self.cfg.air_buffer_bytes) {
-            return false;
-        }
-        self.stats.air_backlog_max = self.stats.air_backlog_max.max(ep.air_queued + len);
-        true
     }
 
     fn deliver_due(&mut self, now: SimTime) {
@@ -573,6 +641,53 @@ impl State {
     }
 }
 
+/// A packet waiting for its turn on the air.
+#[derive(Debug)]
+struct AirPacket {
+    /// When it was sent.
+    ready: SimTime,
+    from: usize,
+    to: usize,
+    /// Its bytes on the air (header and data).
+    len: u64,
+    packet: Packet,
+}
+
+/// A sender's transmit buffer: the bytes of its packets that have not started on the air.
+#[derive(Debug, Default)]
+struct AirBuffer {
+    /// Bytes waiting for their turn.
+    waiting: u64,
+    /// Packets whose turn is chosen, not yet started: (start, bytes).
+    chosen: std::collections::VecDeque<(SimTime, u64)>,
+    chosen_bytes: u64,
+}
+
+impl AirBuffer {
+    /// Take `len` more bytes at `t` if they fit in `limit` (what has started by `t` has left
+    /// the buffer): the backlog with them.
+    fn takes(&mut self, t: SimTime, len: u64, limit: u64) -> Option<u64> {
+        while let Some(&(start, n)) = self.chosen.front() {
+            if start > t {
+                break;
+            }
+            self.chosen.pop_front();
+            self.chosen_bytes -= n;
+        }
+        let backlog = self.waiting + self.chosen_bytes + len;
+        (backlog <= limit).then(|| {
+            self.waiting += len;
+            backlog
+        })
+    }
+    /// A packet of `len` bytes got its turn, starting at `start`.
+    fn started(&mut self, start: SimTime, len: u64) {
+        self.waiting -= len;
+        self.chosen.push_back((start, len));
+        self.chosen_bytes += len;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -580,6 +695,57 @@ mod tests {
     use crate::clock::ClockMode;
     use crate::inbox::inbox;
     use csp::Header;
+
+    /// A ground client with 4 KiB waiting for the air (16 packets of 256 bytes, 3.4 s of
+    /// air) and the radio with as much for it: another station's request goes up after at
+    /// most one of the flooder's packets, and the radio's answer comes down after at most
+    /// one of the radio's packets to the flooder. First come, first served, both waited
+    /// 3.4 s behind everything queued, and the answer's could be lost to the radio's full
+    /// buffer.
+    #[tokio::test(start_paused = true)]
+    async fn the_air_serves_ground_stations_in_turn() {
+        let clock = Clock::new(ClockMode::Virtual);
+        let net = PacketNet::new(PacketNetConfig::ground(), 1);
+        let (tx_16, mut rx_16) = inbox();
+        let (tx_17, _rx_17) = inbox();
+        let (tx_sat, mut rx_sat) = inbox();
+        let gs16 = net.attach("GS16", &[16], false, false, tx_16, 0);
+        let gs17 = net.attach("GS17", &[17], false, false, tx_17, 0);
+        let sat = net.attach("COMM1-uhf", &[], true, true, tx_sat, 1);
+        tokio::spawn(net.clone().run(clock));
+        // 256 bytes at 9600 bit/s: 213.3 ms on the air.
+        let big = |src: u8, dst: u8| Packet::new(Header::new(src, dst, 1, 40), vec![0; 252]);
+        let air = Duration::from_nanos(256 * 8 * 1_000_000_000 / 9600);
+        for _ in 0..16 {
+            gs17.send(SimTime::ZERO, big(17, 3));
+            sat.send(SimTime::ZERO, big(3, 17));
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        let sent = clock.now();
+        gs16.send(sent, Packet::new(Header::new(16, 3, 1, 41), vec![7; 8]));
+        let up = loop {
+            let a = rx_sat.recv().await.unwrap();
+            if matches!(&a.what, Arrival::Packet(p) if p.header.src == 16) {
+                break a.t;
+            }
+        };
+        // Behind the flooder's packet on the air when it came, and at most one more (the
+        // radio's to the flooder, chosen before it came).
+        assert!(
+            up - sent < 2 * air + Duration::from_millis(50),
+            "up after {:?}",
+            up - sent
+        );
+        sat.send(up, Packet::new(Header::new(3, 16, 41, 1), vec![7; 8]));
+        let down = rx_16.recv().await.unwrap().t;
+        assert!(
+            down - up < 2 * air + Duration::from_millis(50),
+            "down after {:?}",
+            down - up
+        );
+        let s = net.stats();
+        assert_eq!(s.air_overflow, 0, "{s:?}");
+    }
 
     #[tokio::test(start_paused = true)]
     async fn routes_by_owner_then_default_over_the_air() {

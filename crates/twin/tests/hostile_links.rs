@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use csp::{Header, Packet};
 
 mod common;
-use common::twin_process::{Client, Twin, answer_pings, bare, ping, write_scenario};
+use common::twin_process::{Client, Twin, answer_pings, bare, bare_text, ping, write_scenario};
 
 /// The ground client that took an address first keeps it: a second one claiming it is
 /// refused and logged, and gets nothing meant for the first.
@@ -202,108 +202,223 @@ fn a_passive_payload_serves_a_whole_session_beside_a_console_on_another_link() {
     );
 }
 
-/// Flood `dst` from `src` as fast as TCP takes it for 5 s, reading the replies (or not),
-/// while another client pings the FC (one ping at a time, 300 ms apart); then the flood
-/// stops and the other client pings five more times. The twin's memory grows by less than 50 MiB and the other
-/// client is answered during and after the flood.
-fn flood(src: u8, dst: u8, read_replies: bool) {
-    let scenario = bare(&format!("flood-{src}-{read_replies}"), 30);
-    let twin = Twin::start(
-        &[scenario.to_str().unwrap(), "--kiss-listen", "127.0.0.1:0"],
-        1,
+/// What a flood did to another client: its round trips before, during and after.
+struct Flooded {
+    /// Bytes the flooder wrote.
+    sent: u64,
+    /// The most the twin's memory grew, MiB.
+    grew_mib: f64,
+    /// The median of five round trips before the flood.
+    unloaded: Duration,
+    /// Each ping sent during the flood: its round trip if the reply came before the flood
+    /// ended.
+    during: Vec<Option<Duration>>,
+    /// Of five pings after the flood, how many were answered.
+    answered_after: usize,
+    /// The run's exit status and its output.
+    ok: bool,
+    out: String,
+}
+
+impl Flooded {
+    /// The median round trip during the flood, a ping not answered before the flood ended
+    /// counting as longer than all.
+    fn median_during(&self) -> Option<Duration> {
+        let mut v = self.during.clone();
+        v.sort_by_key(|d| d.unwrap_or(Duration::MAX));
+        v.get(v.len() / 2).copied().flatten()
+    }
+    fn answered_during(&self) -> usize {
+        self.during.iter().flatten().count()
+    }
+}
+
+/// Run `scenario` with a KISS listener (and `args`); flood `dst` from `src` as fast as TCP
+/// takes it for 5 s, reading the replies or not, while another client pings the FC (one
+/// ping at a time, 300 ms apart, each waiting at most until the flood ends: a reply after
+/// it does not count as answered during it); then five pings after the flood.
+fn flood(scenario: &str, src: u8, dst: u8, read_replies: bool, args: &[&str]) -> Flooded {
+    const FLOOD: Duration = Duration::from_secs(5);
+    let path = write_scenario(
+        &format!("flood-{src}-{read_replies}-{}", args.len()),
+        scenario,
     );
-    std::fs::remove_file(&scenario).ok();
+    let mut all = vec![path.to_str().unwrap(), "--kiss-listen", "127.0.0.1:0"];
+    all.extend_from_slice(args);
+    let twin = Twin::start(&all, 1);
+    std::fs::remove_file(&path).ok();
     let addr = twin.addrs[0];
     let mut other = Client::connect(addr);
-    assert!(other.ping(17, 3, 0, Duration::from_secs(3)).is_some());
+    let mut unloaded: Vec<Duration> = (0..5)
+        .map(|k| other.ping(17, 3, k, Duration::from_secs(3)).unwrap())
+        .collect();
+    unloaded.sort();
     std::thread::sleep(Duration::from_millis(300));
     let rss_before = twin.rss_kib();
-    let stop = Arc::new(AtomicBool::new(false));
-    let flooder = {
-        let stop = stop.clone();
-        std::thread::spawn(move || {
-            let s = TcpStream::connect(addr).unwrap();
-            if read_replies {
-                let mut r = s.try_clone().unwrap();
-                std::thread::spawn(move || {
-                    let mut buf = [0u8; 65536];
-                    while matches!(r.read(&mut buf), Ok(n) if n > 0) {}
-                });
-            }
-            let mut w = s;
-            w.set_write_timeout(Some(Duration::from_millis(200)))
-                .unwrap();
-            let mut burst = Vec::new();
-            for k in 0..512u32 {
-                csp::kiss::encode(&ping(src, dst, k), &mut burst);
-            }
-            let mut sent = 0u64;
-            let t0 = Instant::now();
-            while !stop.load(Ordering::Relaxed) && t0.elapsed() < Duration::from_secs(5) {
-                match w.write(&burst) {
-                    Ok(n) => sent += n as u64,
-                    Err(_) => std::thread::sleep(Duration::from_millis(1)),
-                }
-            }
-            sent
-        })
-    };
-    let t0 = Instant::now();
-    let mut rss_max = rss_before;
-    let mut answered_during = 0;
-    let mut tag = 1;
-    while t0.elapsed() < Duration::from_secs(5) {
-        // Behind at most a sender's transmit buffer each way (4 KiB, 3.4 s at 9600 bit/s).
-        if other.ping(17, 3, tag, Duration::from_secs(8)).is_some() {
-            answered_during += 1;
+    let flooder = std::thread::spawn(move || {
+        let s = TcpStream::connect(addr).unwrap();
+        if read_replies {
+            let mut r = s.try_clone().unwrap();
+            std::thread::spawn(move || {
+                let mut buf = [0u8; 65536];
+                while matches!(r.read(&mut buf), Ok(n) if n > 0) {}
+            });
         }
+        let mut w = s;
+        w.set_write_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+        let mut burst = Vec::new();
+        for k in 0..512u32 {
+            csp::kiss::encode(&ping(src, dst, k), &mut burst);
+        }
+        let mut sent = 0u64;
+        let t0 = Instant::now();
+        while t0.elapsed() < FLOOD {
+            match w.write(&burst) {
+                Ok(n) => sent += n as u64,
+                Err(_) => std::thread::sleep(Duration::from_millis(1)),
+            }
+        }
+        sent
+    });
+    let end = Instant::now() + FLOOD;
+    let mut rss_max = rss_before;
+    let mut during = Vec::new();
+    let mut tag = 100;
+    while let Some(left) = end
+        .checked_duration_since(Instant::now())
+        .filter(|l| *l > Duration::from_millis(50))
+    {
+        let sent_at = Instant::now();
+        let rtt = other.ping(17, 3, tag, left);
+        during.push(rtt.filter(|rtt| sent_at + *rtt <= end));
         tag += 1;
         rss_max = rss_max.max(twin.rss_kib());
         std::thread::sleep(Duration::from_millis(300));
     }
-    stop.store(true, Ordering::Relaxed);
     let sent = flooder.join().unwrap();
     rss_max = rss_max.max(twin.rss_kib());
-    let mut answered_after = 0;
-    for k in 0..5 {
-        if other
-            .ping(17, 3, 1000 + k, Duration::from_secs(8))
-            .is_some()
-        {
-            answered_after += 1;
-        }
-    }
-    let grew_mib = rss_max.saturating_sub(rss_before) as f64 / 1024.0;
+    // What was queued behind the flood drains first: the pings after it wait for that.
+    let answered_after = (0..5)
+        .filter(|k| {
+            other
+                .ping(17, 3, 1000 + k, Duration::from_secs(8))
+                .is_some()
+        })
+        .count();
+    let (ok, out, err) = twin.finish_now();
+    let f = Flooded {
+        sent,
+        grew_mib: rss_max.saturating_sub(rss_before) as f64 / 1024.0,
+        unloaded: unloaded[2],
+        during,
+        answered_after,
+        ok,
+        out: format!("{out}{err}"),
+    };
     println!(
-        "flood {src} -> {dst} (replies read: {read_replies}): {:.1} MiB written, RSS {} -> max {} KiB (+{grew_mib:.1} MiB), other client answered {answered_during} of {} during, {answered_after} of 5 after",
-        sent as f64 / 1048576.0,
-        rss_before,
-        rss_max,
-        tag - 1
+        "flood {src} -> {dst} (replies read: {read_replies}, {args:?}): {:.1} MiB written, RSS +{:.1} MiB; the other client's round trip: {:?} unloaded (median), {:?} median during ({} of {} answered during: {:?}), {} of 5 after",
+        f.sent as f64 / 1048576.0,
+        f.grew_mib,
+        f.unloaded,
+        f.median_during(),
+        f.answered_during(),
+        f.during.len(),
+        f.during,
+        f.answered_after
     );
-    drop(twin);
-    assert!(sent > 1 << 20, "the flood wrote only {sent} bytes");
-    assert!(grew_mib < 50.0, "RSS grew by {grew_mib:.1} MiB");
+    assert!(f.sent > 1 << 20, "the flood wrote only {} bytes", f.sent);
+    assert!(f.grew_mib < 50.0, "RSS grew by {:.1} MiB", f.grew_mib);
+    assert_eq!(f.answered_after, 5, "answered after the flood");
+    f
+}
+
+/// A ground scenario: GS16 pings the FC once a second through the flood (from 2 s of the
+/// run, while the other client measures the unloaded round trip, to 12 s), and expects
+/// every ping answered.
+const GS16_PINGS: &str = r#"
+name = "gs16-pings"
+duration = "30s"
+
+[[commands]]
+name = "gs16-ping"
+at = "2s"
+every = "1s"
+count = 10
+to = "FC"
+request = "ping"
+timeout = "5s"
+
+[[expectations]]
+kind = "reply"
+command = "gs16-ping"
+"#;
+
+/// The air serves the ground stations in turn: a client flooding the uplink at full speed
+/// (reading its replies, or not) delays another client's pings by at most one of its
+/// packets each way: the median round trip during the flood is at most twice the unloaded
+/// one plus one 256-byte packet's air time each way, and GS16 loses none of its pings.
+/// First come, first served, each ping waited behind a transmit buffer of the flood each
+/// way (10-13 s) and GS16 lost 7 of 8.
+fn a_ground_flood_delays_others_by_one_packet_each_way(read_replies: bool) {
+    let f = flood(GS16_PINGS, 18, 3, read_replies, &[]);
+    let air_256 = Duration::from_secs_f64(256.0 * 8.0 / 9600.0);
+    let bound = 2 * f.unloaded + 2 * air_256;
+    let median = f.median_during();
     assert!(
-        answered_during >= 1,
-        "nobody else answered during the flood"
+        median.is_some_and(|m| m <= bound),
+        "median round trip during the flood {median:?}, bound {bound:?}"
     );
-    assert_eq!(answered_after, 5, "answered after the flood");
+    assert!(f.ok, "GS16's pings: {}", f.out);
 }
 
 #[test]
-fn a_flood_on_the_ground_segment_is_bounded_and_others_are_answered() {
-    flood(18, 3, true);
+fn a_flood_on_the_ground_segment_delays_others_by_one_packet_each_way() {
+    a_ground_flood_delays_others_by_one_packet_each_way(true);
 }
 
 #[test]
 fn a_flood_on_the_ground_segment_by_a_client_that_never_reads() {
-    flood(18, 3, false);
+    a_ground_flood_delays_others_by_one_packet_each_way(false);
 }
 
+/// On the main bus the lowest CAN id wins every arbitration, as on a real bus: a client at
+/// 9 flooding the FC holds the ground's traffic (whose frames carry its address, 17, in
+/// their id) off the bus for as long as it floods; it is answered again after.
 #[test]
-fn a_flood_on_the_main_bus_is_bounded_and_others_are_answered() {
-    flood(9, 3, false);
+fn a_main_bus_flood_by_a_low_address_holds_higher_ones_off_until_it_stops() {
+    let f = flood(&bare_text("flood-main", 30), 9, 3, false, &[]);
+    assert_eq!(
+        f.answered_during(),
+        0,
+        "answered during the flood: {:?}",
+        f.during
+    );
+}
+
+/// With a transmit budget on its link (1000 frames a second, an eighth of the bus), the
+/// same flood leaves the bus to others: the other client's pings are answered during the
+/// flood, the median round trip within twice the unloaded one plus 100 ms.
+#[test]
+fn a_transmit_budget_keeps_a_main_bus_flood_from_stalling_others() {
+    let f = flood(
+        &bare_text("flood-main-budget", 30),
+        9,
+        3,
+        false,
+        &["--kiss-tx-budget", "1000"],
+    );
+    let bound = 2 * f.unloaded + Duration::from_millis(100);
+    let median = f.median_during();
+    assert!(
+        median.is_some_and(|m| m <= bound),
+        "median round trip during the flood {median:?}, bound {bound:?}"
+    );
+    assert!(
+        f.out.contains("frames held back by its transmit budget"),
+        "{}",
+        f.out
+    );
 }
 
 /// A ground client that sends bursts of pings to the FC and never reads its replies

@@ -217,10 +217,12 @@ pub fn is_reply(p: &Packet, from: u8, to: u8, tag: u32) -> bool {
 /// A scenario with the default network and nothing else for `secs` (the default scenario's
 /// expectations need its full duration).
 pub fn bare(name: &str, secs: u64) -> PathBuf {
-    write_scenario(
-        name,
-        &format!("name = \"{name}\"\nduration = \"{secs}s\"\n"),
-    )
+    write_scenario(name, &bare_text(name, secs))
+}
+
+/// The text of [`bare`]'s scenario.
+pub fn bare_text(name: &str, secs: u64) -> String {
+    format!("name = \"{name}\"\nduration = \"{secs}s\"\n")
 }
 
 pub fn write_scenario(name: &str, text: &str) -> PathBuf {
