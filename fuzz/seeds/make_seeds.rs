@@ -14,9 +14,11 @@
 //! | `tle-*` | the default scenario's TLE and `shared/reference/sgp4_vallado_tles.csv` (Vallado's verification set) |
 //! | `scenario-*` | `scenarios/*.toml` |
 //! | `rec-*` | small twin recordings (MCAP), whole and cut short |
+//! | `link-*` | one outside connection's bytes: KISS frames and hub messages of packets a program sends (claims, impostors, a reserved address, a configured link, a payload filling its CAN queue), an empty hub message; `link-vec-*`: `kiss_decode.json`'s streams on a link |
 //!
 //! Usage: `make_seeds --out DIR [--vectors DIR] [--reference DIR] [--scenarios DIR]
-//! [--can-main CSV]... [--can-payload CSV]... [--recording MCAP]...`
+//! [--can-main CSV]... [--can-payload CSV]... [--recording MCAP]... [--only TARGET]...`
+//! (`--only`: write those targets' corpora alone, leaving the others as they are).
 //!
 //! Every node-target seed is checked by decoding it back into the same operations.
 
@@ -47,6 +49,7 @@ struct Args {
     can_main: Vec<PathBuf>,
     can_payload: Vec<PathBuf>,
     recordings: Vec<PathBuf>,
+    only: Vec<String>,
 }
 
 fn args() -> Res<Args> {
@@ -59,6 +62,7 @@ fn args() -> Res<Args> {
         can_main: Vec::new(),
         can_payload: Vec::new(),
         recordings: Vec::new(),
+        only: Vec::new(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -71,6 +75,7 @@ fn args() -> Res<Args> {
             "--can-main" => a.can_main.push(v),
             "--can-payload" => a.can_payload.push(v),
             "--recording" => a.recordings.push(v),
+            "--only" => a.only.push(v.display().to_string()),
             _ => return Err(format!("unknown argument {k}")),
         }
     }
@@ -86,8 +91,11 @@ impl Corpus {
         self.0.entry(target).or_default().insert(name.into(), bytes);
     }
 
-    fn write(&self, out: &Path) -> Res<()> {
+    fn write(&self, out: &Path, only: &[String]) -> Res<()> {
         for (target, seeds) in &self.0 {
+            if !only.is_empty() && !only.iter().any(|o| o == target) {
+                continue;
+            }
             let dir = out.join(target);
             if dir.exists() {
                 std::fs::remove_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -1106,5 +1114,112 @@ fn run() -> Res<()> {
     tle_seeds(&mut c, &a.reference)?;
     scenario_seeds(&mut c, &a.scenarios)?;
     recording_seeds(&mut c, &a.recordings)?;
-    c.write(&a.out)
+    link_seeds(&mut c, &a.vectors)?;
+    c.write(&a.out, &a.only)
+}
+
+// ---------------------------------------------------------------------------------------
+// One outside connection's bytes
+// ---------------------------------------------------------------------------------------
+
+fn link_seeds(c: &mut Corpus, vectors: &Path) -> Res<()> {
+    use csp::Packet;
+    use m6p_twin_fuzz::link_input;
+    let p = |src: u8, dst: u8, dport: u8, n: usize| {
+        Packet::new(Header::new(src, dst, dport, 40), vec![0x5a; n])
+    };
+    let kiss = |packets: &[Packet]| {
+        let mut out = Vec::new();
+        for q in packets {
+            csp::kiss::encode(q, &mut out);
+        }
+        out
+    };
+    // Hub messages are one a chunk: each packet's message as a chunk of its own size.
+    let hub = |config: u8, packets: &[Packet]| {
+        let mut sizes = Vec::new();
+        let mut stream = Vec::new();
+        for q in packets {
+            let mut m = Vec::new();
+            csp::zmqhub::encode(q, q.header.dst, &mut m);
+            sizes.push(m.len() as u8);
+            stream.extend(m);
+        }
+        link_input::join(config | 1, &[], &sizes, &stream)
+    };
+    // KISS: a ground program learns 18 and pings the FC; then as the FC (refused), as 17
+    // (another link's connection holds it), as 15 (another link's reservation).
+    let learn = kiss(&[p(18, 3, 1, 4), p(18, 4, 6, 0)]);
+    c.add(
+        "outside_link",
+        "link-kiss-learn-18",
+        link_input::join(0, &[], &[64], &learn),
+    );
+    let impostor = kiss(&vec![p(3, 4, 1, 4); 8]);
+    c.add(
+        "outside_link",
+        "link-kiss-impostor-fc",
+        link_input::join(0, &[], &[5, 33], &impostor),
+    );
+    let held = kiss(&[p(17, 3, 1, 4), p(15, 6, 1, 4), p(18, 3, 1, 4)]);
+    c.add(
+        "outside_link",
+        "link-kiss-held-and-reserved",
+        link_input::join(0, &[], &[7], &held),
+    );
+    // A link configured with 14: its packets, and one from 13 (refused).
+    let configured = kiss(&[p(14, 6, 10, 2), p(13, 6, 1, 4), p(14, 3, 10, 1)]);
+    c.add(
+        "outside_link",
+        "link-kiss-configured-14",
+        link_input::join(0, &[14], &[64], &configured),
+    );
+    // A payload filling its CAN transmit queue with 256-byte packets, under a budget.
+    let filling = kiss(&vec![p(13, 6, 11, 256); 40]);
+    c.add(
+        "outside_link",
+        "link-kiss-payload-queue-budget",
+        link_input::join(0x10, &[], &[64], &filling),
+    );
+    c.add(
+        "outside_link",
+        "link-kiss-v14-limit",
+        link_input::join(0x02, &[], &[64], &kiss(&[p(18, 3, 1, 250)])),
+    );
+    // The hub: programs on several segments, one of them as PL12 (refused), one between
+    // two programs (straight across), a short message, an empty one first.
+    c.add(
+        "outside_link",
+        "link-hub-programs",
+        hub(
+            0,
+            &[
+                p(18, 3, 1, 4),
+                p(13, 6, 10, 2),
+                p(12, 3, 1, 4),
+                p(18, 19, 1, 4),
+            ],
+        ),
+    );
+    c.add(
+        "outside_link",
+        "link-hub-empty-first",
+        hub(0x20, &[p(18, 3, 1, 4)]),
+    );
+    c.add(
+        "outside_link",
+        "link-hub-short",
+        link_input::join(1, &[], &[2, 5], &[18, 0x12, 0, 0, 0, 0, 1]),
+    );
+    let kdec = read_json(&vectors.join("kiss_decode.json"))?;
+    for (i, case) in cases(&kdec).iter().enumerate() {
+        let name = slug(case["name"].as_str().unwrap_or_default());
+        let input = hex(case["input"].as_str().unwrap_or_default())?;
+        c.add(
+            "outside_link",
+            format!("link-vec-{i:02}-{name}"),
+            link_input::join(0, &[], &[5, 64], &input),
+        );
+    }
+    Ok(())
 }

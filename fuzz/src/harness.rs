@@ -10,8 +10,13 @@
 //!   off is `power_lost` and the queued transmissions are lost.
 //! - After every input everything the node queued is drained (`poll_transmit`, the app's
 //!   and the node's events).
-//! - Work per input is bounded: at most [`MAX_OPS`] operations and the node's simulated
-//!   time budget ([`NodeKind::TIME_BUDGET`]).
+//! - Work per input is bounded: at most [`MAX_OPS`] operations, the node's simulated time
+//!   budget ([`NodeKind::TIME_BUDGET`]) and its work budget ([`NodeKind::WORK_BUDGET`]:
+//!   entries into the node, each timer, frame and packet one, and each packet it routes in,
+//!   its own to itself included). The work budget keeps the
+//!   physics out of most of an input's time: an FC tick (orbit, environment, sensors,
+//!   estimator, control, dynamics) costs as much as hundreds of packets, so an input that
+//!   spends its budget on time passing ends there, and libFuzzer moves on to the next.
 //!
 //! Invariants checked (a violation panics, so libFuzzer reports it):
 //! - a CAN transmission goes to a CAN interface, a packet to a packet interface; frames
@@ -312,6 +317,9 @@ pub trait NodeKind {
     const ICD_PORTS: &'static [u8];
     /// Most simulated time one input may cover.
     const TIME_BUDGET: Duration;
+    /// Most entries into the node (timers run, frames and packets handed to it) one input
+    /// may make: when they are spent, the node takes nothing more and the input ends.
+    const WORK_BUDGET: usize;
     /// The application, as `m6p_twin::runtime::build::app_for` makes it.
     fn app(setup: &Self::Setup, boards: &Boards) -> Self::App;
     /// The destination port and data of a request.
@@ -333,6 +341,8 @@ pub struct Harness<K: NodeKind> {
     sent: VecDeque<Packet>,
     /// The instant of the last `handle_timeout` and how many calls it had.
     last_timeout: (SimTime, usize),
+    /// Entries into the node so far ([`NodeKind::WORK_BUDGET`]).
+    work: usize,
 }
 
 /// How many sent packets [`Op::Answer`] can pick from.
@@ -375,13 +385,24 @@ impl<K: NodeKind> Harness<K> {
             outside,
             sent: VecDeque::new(),
             last_timeout: (SimTime::ZERO, 0),
+            work: 0,
         };
         h.drain();
         h
     }
 
+    /// Whether the node takes input now: powered, not hung, and the input's work budget
+    /// not spent.
     fn live(&self) -> bool {
-        self.powered && !self.hung
+        self.powered && !self.hung && !self.spent()
+    }
+
+    /// Whether the input's work budget is spent (the input ends): the entries into the node
+    /// and the packets it routed in (a packet it sends itself, answered by itself, goes
+    /// round up to the node's loopback budget, 64 a entry: each round counts).
+    pub fn spent(&self) -> bool {
+        let routed = usize::try_from(self.host.node.counters().rx_packets).unwrap_or(usize::MAX);
+        self.work.saturating_add(routed) >= K::WORK_BUDGET
     }
 
     /// Pull everything the node queued and check it.
@@ -451,6 +472,7 @@ impl<K: NodeKind> Harness<K> {
                 self.last_timeout = (t, 1);
             }
             self.now = t;
+            self.work += 1;
             self.host.handle_timeout(t);
             self.drain();
         }
@@ -544,12 +566,14 @@ impl<K: NodeKind> Harness<K> {
                     if !self.live() {
                         break;
                     }
+                    self.work += 1;
                     self.host.handle_frame(idx, f, self.now);
                     self.drain();
                 }
             }
             Via::Cfp { iface, .. } | Via::Packet { iface } => {
                 let idx = usize::from(*iface) % n.max(1);
+                self.work += 1;
                 self.host.handle_packet(idx, packet, self.now);
                 self.drain();
             }
@@ -677,6 +701,7 @@ impl<K: NodeKind> Harness<K> {
                 let n = self.kinds.len().max(1);
                 let data = &data[..data.len().min(cfp::CAN_MAX_DLC)];
                 if let Some(frame) = CanFrame::new(id & CAN_EFF_MASK, data) {
+                    self.work += 1;
                     self.host
                         .handle_frame(usize::from(*iface) % n, &frame, self.now);
                     self.drain();
@@ -812,7 +837,7 @@ pub fn run<K: NodeKind>(data: &[u8]) {
     }
     let mut h = Harness::<K>::new(&setup);
     for _ in 0..MAX_OPS {
-        if u.is_empty() {
+        if u.is_empty() || h.spent() {
             break;
         }
         let Ok(op) = Op::<K::Cmd>::arbitrary(&mut u) else {

@@ -6,6 +6,7 @@
 //! - [`nodes`]: the six node cores, with their structured ICD request generators.
 //! - [`cfp_input`]: the CFP target's input.
 //! - [`kiss_input`]: the KISS target's input layout (chunk sizes, then the stream).
+//! - [`link_input`]: the outside link target's input (its configuration, then chunks).
 
 #[macro_use]
 pub mod macros;
@@ -13,4 +14,5 @@ pub mod cfp_input;
 pub mod enc;
 pub mod harness;
 pub mod kiss_input;
+pub mod link_input;
 pub mod nodes;

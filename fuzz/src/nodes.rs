@@ -230,6 +230,7 @@ impl NodeKind for Fc {
     const ADDR: u8 = platform::addr::FC;
     const ICD_PORTS: &'static [u8] = nodes_fc::PORTS;
     const TIME_BUDGET: Duration = Duration::from_secs(120);
+    const WORK_BUDGET: usize = 40;
 
     fn app(s: &FcSetup, boards: &Boards) -> nodes_fc::FcApp {
         let mode = nodes_fc::wire::TargetMode::try_from(s.mode % 10).unwrap_or_default();
@@ -338,6 +339,7 @@ impl NodeKind for Pc {
     const ADDR: u8 = platform::addr::PC;
     const ICD_PORTS: &'static [u8] = nodes_pc::PORTS;
     const TIME_BUDGET: Duration = Duration::from_secs(600);
+    const WORK_BUDGET: usize = 200;
 
     fn app(_: &(), boards: &Boards) -> nodes_pc::PcApp {
         nodes_pc::PcApp::new(nodes_pc::PcConfig::default()).with_activity(boards.activity.clone())
@@ -416,6 +418,7 @@ impl NodeKind for Eps {
     const ADDR: u8 = platform::addr::EPS;
     const ICD_PORTS: &'static [u8] = nodes_eps::PORTS;
     const TIME_BUDGET: Duration = Duration::from_secs(600);
+    const WORK_BUDGET: usize = 200;
 
     fn app(_: &(), boards: &Boards) -> nodes_eps::EpsApp {
         nodes_eps::EpsApp::new(nodes_eps::EpsConfig::default())
@@ -468,6 +471,7 @@ impl NodeKind for Ecu {
     const ADDR: u8 = platform::addr::ECU;
     const ICD_PORTS: &'static [u8] = nodes_ecu::PORTS;
     const TIME_BUDGET: Duration = Duration::from_secs(600);
+    const WORK_BUDGET: usize = 300;
 
     fn app(_: &(), boards: &Boards) -> nodes_ecu::EcuApp {
         nodes_ecu::EcuApp::new(nodes_ecu::EcuConfig::default())
@@ -526,6 +530,7 @@ impl NodeKind for Comm {
     const ADDR: u8 = platform::addr::COMM1;
     const ICD_PORTS: &'static [u8] = nodes_comm::PORTS;
     const TIME_BUDGET: Duration = Duration::from_secs(600);
+    const WORK_BUDGET: usize = 300;
 
     fn app(_: &(), boards: &Boards) -> nodes_comm::CommApp {
         nodes_comm::CommApp::new(nodes_comm::CommConfig::default()).with_truth(boards.truth.clone())
@@ -612,6 +617,7 @@ impl NodeKind for Payload {
     const ADDR: u8 = 12;
     const ICD_PORTS: &'static [u8] = nodes_payload::PORTS;
     const TIME_BUDGET: Duration = Duration::from_secs(600);
+    const WORK_BUDGET: usize = 200;
 
     fn app(s: &PayloadSetup, _: &Boards) -> nodes_payload::PayloadApp {
         let cfg = nodes_payload::PayloadConfig {
