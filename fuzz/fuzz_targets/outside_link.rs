@@ -2,7 +2,8 @@
 //! `bus::kiss_tcp`, which KISS/TCP, the KISS pty and the ZMQ hub share: framing, claims,
 //! refusals, the CAN transmit queue and budget) fed one connection's bytes in chunks (the
 //! hub: one message a chunk, empty ones included), with 0-2 configured addresses, libcsp
-//! 1.4's receive limit on or off, a transmit budget or none (`m6p_twin_fuzz::link_input`).
+//! 1.4's receive limit on or off, a transmit budget set or not (set on the endpoint only:
+//! no bus task runs here) (`m6p_twin_fuzz::link_input`).
 //! Around it: the twin's FC (3) and EPS (4) on the main bus, PL12 on the payload bus,
 //! GS16 on the ground, another link's connection holding 17 and another link's
 //! reservation of 15 (its program not connected).

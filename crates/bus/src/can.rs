@@ -379,6 +379,10 @@ struct Port {
     link: Option<crate::reserve::LinkId>,
     /// Its transmit budget, if it has one.
     budget: Option<TxBudget>,
+    /// Released (its outside connection went away): the next connection of its link
+    /// takes its place, counters and budget included, so that connections coming and going
+    /// leave nothing behind.
+    departed: bool,
     /// Delivered, not yet handed to the inbox: each arrival, and whether it is quiet.
     arrivals: Vec<(Inbound, bool)>,
 }
@@ -584,7 +588,26 @@ impl CanBus {
         if let Some(why) = st.refusal(addr, None, Some(link)) {
             return Err(why);
         }
-        let port = st.push_port(name, &[], false, inbox, iface);
+        // A departed connection's place of the same link, else a new one.
+        let port = match st
+            .ports
+            .iter()
+            .position(|p| p.departed && p.link == Some(link))
+        {
+            Some(i) => {
+                if let Some(p) = st.ports.get_mut(i) {
+                    p.stats.name = name.to_owned();
+                    p.name = name.into();
+                    p.enabled = true;
+                    p.departed = false;
+                    p.inbox = inbox;
+                    p.iface = iface;
+                    p.arrivals.clear();
+                }
+                i
+            }
+            None => st.push_port(name, &[], false, inbox, iface),
+        };
         if let Some(p) = st.ports.get_mut(port) {
             p.link = Some(link);
         }
@@ -598,10 +621,17 @@ impl CanBus {
         })
     }
 
-    /// Give an endpoint a transmit budget, or take it away (`None`).
+    /// Give an endpoint a transmit budget, or take it away (`None`). What its budget spent
+    /// already stays spent (a connection taking a departed one's place does not start
+    /// afresh).
     pub fn set_tx_budget(&self, port: &CanPort, budget: Option<TxBudget>) {
         if let Some(p) = self.lock().ports.get_mut(port.idx) {
-            p.budget = budget;
+            p.budget = budget.map(|mut b| {
+                if let Some(old) = p.budget {
+                    b.tat = old.tat;
+                }
+                b
+            });
         }
     }
 
@@ -670,6 +700,7 @@ impl CanBus {
         if let Some(p) = st.ports.get_mut(port.idx) {
             p.addrs.clear();
             p.enabled = false;
+            p.departed = p.link.is_some();
         }
         st.lose_queue(port.idx, None, FrameLoss::Off);
     }
@@ -830,6 +861,7 @@ impl State {
             iface,
             link: None,
             budget: None,
+            departed: false,
         });
         self.ports.len() - 1
     }

@@ -212,8 +212,11 @@ pub struct KissLinkStats {
     pub out_dropped: u64,
     /// Connections closed for holding no address and moving no byte for `idle_timeout`.
     pub idle_closed: u64,
-    /// Connections closed to make room in a full listener (the longest idle).
+    /// Connections closed to make room in a full listener (the longest idle of those that
+    /// hold no address).
     pub evicted: u64,
+    /// Connections refused by a full listener whose every connection holds an address.
+    pub connections_refused: u64,
 }
 
 /// A listener's connection as its listener sees it: when it last moved a byte (either
@@ -234,8 +237,8 @@ pub struct Liveness {
 pub enum Closing {
     /// It held no address and moved no byte for this long.
     Idle(Duration),
-    /// The listener was full, and it had been idle longest (this long): closed for a new
-    /// connection from this peer.
+    /// The listener was full, and of its connections holding no address it had been idle
+    /// longest (this long): closed for a new connection from this peer.
     MadeRoom {
         /// How long it had been idle.
         idle: Duration,
@@ -254,7 +257,7 @@ impl std::fmt::Display for Closing {
             ),
             Closing::MadeRoom { idle, for_peer } => write!(
                 f,
-                "closed to make room for {for_peer}: the listener was full and this connection the longest idle ({:.1} s)",
+                "closed to make room for {for_peer}: the listener was full and this connection, holding no address, the longest idle ({:.1} s)",
                 idle.as_secs_f64()
             ),
         }
@@ -315,7 +318,7 @@ type Registry = Mutex<std::collections::BTreeMap<u64, Arc<Liveness>>>;
 /// wall-clock sleeps, which a run on tokio's paused clock never sees. Ends with the
 /// listener.
 fn sweep_idle(registry: std::sync::Weak<Registry>, limit: Duration) {
-    let every = limit.min(Duration::from_millis(250));
+    let every = limit.clamp(Duration::from_millis(10), Duration::from_millis(250));
     let _ = std::thread::Builder::new()
         .name("kiss-idle".into())
         .spawn(move || {
@@ -374,9 +377,12 @@ pub(crate) fn bump(stats: &SharedStats, f: impl FnOnce(&mut KissLinkStats)) {
 }
 
 /// Accept outside nodes on `listener` forever, `cfg.limits.max_connections` at a time: a
-/// new connection to a full listener closes the longest-idle one (logged), and a
-/// connection that holds no address is closed after `cfg.limits.idle_timeout` without a
-/// byte, so idle connections never lock others out.
+/// new connection to a full listener closes the longest-idle connection that holds no
+/// address (logged), and a connection that holds no address is closed after
+/// `cfg.limits.idle_timeout` without a byte, so idle connections never lock others out. A
+/// connection holding an address (a payload waiting for its session) is never closed to
+/// make room: were it, another connection could take its address. When every connection
+/// holds one, the new connection is refused (logged).
 pub async fn serve(
     listener: TcpListener,
     label: String,
@@ -394,23 +400,44 @@ pub async fn serve(
         match listener.accept().await {
             Ok((stream, peer)) => {
                 let limit = cfg.limits.max_connections;
-                let longest_idle = {
+                // Those closing already are on their way out: they hold no place.
+                let (full, longest_idle) = {
                     let conns = registry
                         .lock()
                         .unwrap_or_else(std::sync::PoisonError::into_inner);
-                    (conns.len() >= limit)
-                        .then(|| conns.iter().max_by_key(|(_, l)| l.idle()))
-                        .flatten()
-                        .map(|(&k, l)| (k, l.clone()))
+                    let open = conns.values().filter(|l| l.closing().is_none());
+                    let full = open.count() >= limit;
+                    let idle = conns
+                        .iter()
+                        .filter(|(_, l)| l.closing().is_none() && !l.named())
+                        .max_by_key(|(_, l)| l.idle())
+                        .map(|(&k, l)| (k, l.clone()));
+                    (full, idle)
                 };
-                if let Some((k, l)) = longest_idle {
-                    let why = Closing::MadeRoom {
-                        idle: l.idle(),
-                        for_peer: peer,
-                    };
-                    l.close(why);
-                    bump(&stats, |s| s.evicted += 1);
-                    warn(&cfg, clock.now(), &format!("{label}#{k}"), why.to_string());
+                match (full, longest_idle) {
+                    (false, _) => {}
+                    (true, Some((k, l))) => {
+                        let why = Closing::MadeRoom {
+                            idle: l.idle(),
+                            for_peer: peer,
+                        };
+                        l.close(why);
+                        bump(&stats, |s| s.evicted += 1);
+                        warn(&cfg, clock.now(), &format!("{label}#{k}"), why.to_string());
+                    }
+                    (true, None) => {
+                        bump(&stats, |s| s.connections_refused += 1);
+                        warn(
+                            &cfg,
+                            clock.now(),
+                            &label,
+                            format!(
+                                "connection from {peer} refused: {limit} connections, each holding an address"
+                            ),
+                        );
+                        drop(stream);
+                        continue;
+                    }
                 }
                 n = n.wrapping_add(1);
                 tracing::info!(%peer, "KISS/TCP: outside node connected");
@@ -530,13 +557,15 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
             };
             let Some(read) = read else {
                 // Closed by its listener: logged, and ended as a close is.
+                // An idle close is logged here (the sweeper is a thread of its own, outside
+                // the run); one to make room, by the listener that decided it.
                 let why = live.and_then(Liveness::closing);
-                if matches!(why, Some(Closing::Idle(_))) {
+                if let Some(w @ Closing::Idle(_)) = why {
                     bump(stats, |s| s.idle_closed += 1);
+                    warn(cfg, clock.now(), name, w.to_string());
                 }
                 let why =
                     why.map_or_else(|| "closed by its listener".to_owned(), |w| w.to_string());
-                warn(cfg, clock.now(), name, why.clone());
                 let _ = in_tx.send((clock.now(), LinkInput::End)).await;
                 return why;
             };

@@ -11,12 +11,12 @@
 //!   radio endpoint occupies the channel for `(len + overhead) * 8 / rate` and arrives
 //!   `air_delay` after it leaves; traffic between ground endpoints is instantaneous;
 //! - the air serves the ground endpoints in turn: each has one queue for what it sends up
-//!   and what the radio sends down to it, and when the air frees, the next endpoint (in
-//!   address order after the last one served) with a packet waiting sends one. So a ground
-//!   client flooding the air delays another by at most one packet each way; with one
-//!   station (or one at a time) the air is first come, first served, as it always was. The
-//!   next transmission is chosen [`DECIDE_AHEAD`] before the air frees, so that its air
-//!   time is charged ahead of its start (the [`AirTap`]);
+//!   and what the radio sends down to it, and when the air frees, the next endpoint (in the
+//!   order they joined the network, after the last one served) with a packet waiting sends
+//!   one. So a ground client flooding the air delays another by at most one packet each
+//!   way; with one station (or one at a time) the air is first come, first served, as it
+//!   always was. The next transmission is chosen [`DECIDE_AHEAD`] before the air frees, so
+//!   that its air time is charged ahead of its start (the [`AirTap`]);
 //! - impairments (drop, corrupt, delay, down) apply to the air channel, drawn from the
 //!   net's seeded generator;
 //! - the default endpoint can move to another radio ([`PacketNet::set_default`]: the
@@ -140,6 +140,12 @@ struct Endpoint {
     rx: u64,
     /// The outside link it belongs to (its reserved addresses are its own).
     link: Option<crate::reserve::LinkId>,
+    /// Released (its outside connection went away): the next connection of its link takes
+    /// its place, so that connections coming and going leave nothing behind.
+    departed: bool,
+    /// How many connections have had this place: a packet on its way to an earlier one is
+    /// not delivered to a later one.
+    generation: u32,
 }
 
 #[derive(Debug)]
@@ -159,7 +165,8 @@ struct State {
     /// Each sender's transmit buffer, by (sender, ground endpoint): a ground sender has one
     /// (its own), the radio one per ground endpoint it sends to.
     air_buffers: BTreeMap<(usize, usize), AirBuffer>,
-    in_flight: BTreeMap<(SimTime, u64), (usize, usize, Packet, Fate)>,
+    /// On their way, by arrival time and order.
+    in_flight: BTreeMap<(SimTime, u64), InFlight>,
     seq: u64,
     stats: NetStats,
     impair: Impairments,
@@ -288,7 +295,25 @@ impl PacketNet {
         if let Some(why) = st.refusal(addr, None, Some(link)) {
             return Err(why);
         }
-        let idx = st.push_endpoint(name, &[], false, inbox, iface);
+        // A departed connection's place of the same link, else a new one.
+        let idx = match st
+            .eps
+            .iter()
+            .position(|e| e.departed && e.link == Some(link))
+        {
+            Some(i) => {
+                if let Some(e) = st.eps.get_mut(i) {
+                    e.name = name.to_owned();
+                    e.enabled = true;
+                    e.departed = false;
+                    e.generation = e.generation.wrapping_add(1);
+                    e.inbox = inbox;
+                    e.iface = iface;
+                }
+                i
+            }
+            None => st.push_endpoint(name, &[], false, inbox, iface),
+        };
         if let Some(e) = st.eps.get_mut(idx) {
             e.link = Some(link);
         }
@@ -341,6 +366,7 @@ impl PacketNet {
         if let Some(e) = st.eps.get_mut(port.idx) {
             e.addrs.clear();
             e.enabled = false;
+            e.departed = e.link.is_some();
         }
     }
 
@@ -427,6 +453,8 @@ impl State {
             tx: 0,
             rx: 0,
             link: None,
+            departed: false,
+            generation: 0,
         });
         self.eps.len() - 1
     }
@@ -482,10 +510,19 @@ impl State {
         self.stats.packets += 1;
         self.stats.bytes += len;
         let over_air = self.eps[from].radio || self.eps[to].radio;
+        let generation = self.eps[to].generation;
         if !over_air {
             self.seq += 1;
-            self.in_flight
-                .insert((t, self.seq), (from, to, packet, Fate::Deliver));
+            self.in_flight.insert(
+                (t, self.seq),
+                InFlight {
+                    from,
+                    to,
+                    generation,
+                    packet,
+                    fate: Fate::Deliver,
+                },
+            );
             return;
         }
         // The ground endpoint whose turn it is: the sender going up, the receiver coming
@@ -511,6 +548,7 @@ impl State {
                 ready: t,
                 from,
                 to,
+                generation,
                 len,
                 packet,
             });
@@ -535,7 +573,8 @@ impl State {
 
     /// Put on the air every transmission whose turn is chosen by `now`: when the air frees
     /// (or at once, when it is free), the first ground endpoint after the last one served,
-    /// in address order, with a packet sent by then sends its first packet.
+    /// in the order they joined the network, with a packet sent by then sends its first
+    /// packet.
     fn take_turns(&mut self, now: SimTime) {
         while let Some(decide) = self.next_turn().filter(|&d| d <= now) {
             let start = decide.max(self.air_busy_until);
@@ -582,8 +621,16 @@ impl State {
             };
             let at = self.air_busy_until + self.cfg.air_delay + self.impair.delay;
             self.seq += 1;
-            self.in_flight
-                .insert((at, self.seq), (p.from, p.to, p.packet, fate));
+            self.in_flight.insert(
+                (at, self.seq),
+                InFlight {
+                    from: p.from,
+                    to: p.to,
+                    generation: p.generation,
+                    packet: p.packet,
+                    fate,
+                },
+            );
         }
     }
 
@@ -592,7 +639,16 @@ impl State {
             if entry.key().0 > now {
                 return;
             }
-            let ((t, _), (from, to, mut packet, fate)) = entry.remove_entry();
+            let (
+                (t, _),
+                InFlight {
+                    from,
+                    to,
+                    generation,
+                    mut packet,
+                    fate,
+                },
+            ) = entry.remove_entry();
             let dropped = match fate {
                 Fate::Drop => {
                     self.stats.dropped += 1;
@@ -623,7 +679,7 @@ impl State {
                 continue;
             }
             let ep = &mut self.eps[to];
-            if ep.enabled {
+            if ep.enabled && ep.generation == generation {
                 ep.rx += 1;
                 let sent = ep.inbox.send(Inbound {
                     t,
@@ -641,6 +697,18 @@ impl State {
     }
 }
 
+/// A packet on its way to its receiver.
+#[derive(Debug)]
+struct InFlight {
+    from: usize,
+    to: usize,
+    /// The receiver's generation when it was sent (a later connection in its place does
+    /// not get it).
+    generation: u32,
+    packet: Packet,
+    fate: Fate,
+}
+
 /// A packet waiting for its turn on the air.
 #[derive(Debug)]
 struct AirPacket {
@@ -648,6 +716,8 @@ struct AirPacket {
     ready: SimTime,
     from: usize,
     to: usize,
+    /// The receiver's generation when it was sent.
+    generation: u32,
     /// Its bytes on the air (header and data).
     len: u64,
     packet: Packet,

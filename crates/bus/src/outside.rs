@@ -321,4 +321,32 @@ mod tests {
         assert_eq!(segs.main.stats().ports.len(), 2);
         ep.release();
     }
+
+    /// A link's connections coming and going leave nothing behind: a thousand connects and
+    /// disconnects on each segment end with one place of the link on each (a departed
+    /// connection's place is the next one's). Each used to leave a disabled endpoint.
+    #[test]
+    fn connections_coming_and_going_leave_one_place_each() {
+        let segs = segments();
+        let (tx, _rx) = inbox();
+        for n in 0..1000u16 {
+            for addr in [7, 13, 17] {
+                let ep = OutsideEndpoint::attach(&segs, "c", LinkId(0), addr, tx.clone(), n, None)
+                    .unwrap();
+                ep.release();
+            }
+        }
+        assert_eq!(segs.main.stats().ports.len(), 1);
+        assert_eq!(segs.payload.stats().ports.len(), 1);
+        assert_eq!(segs.ground.stats().endpoints.len(), 1);
+        // Another link's connection has a place of its own; two of the first link's at once
+        // have two.
+        let a = OutsideEndpoint::attach(&segs, "c#1", LinkId(0), 7, tx.clone(), 1, None).unwrap();
+        let b = OutsideEndpoint::attach(&segs, "c#2", LinkId(0), 8, tx.clone(), 2, None).unwrap();
+        let d = OutsideEndpoint::attach(&segs, "d#1", LinkId(1), 9, tx, 3, None).unwrap();
+        assert_eq!(segs.main.stats().ports.len(), 3);
+        for ep in [a, b, d] {
+            ep.release();
+        }
+    }
 }

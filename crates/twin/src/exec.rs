@@ -295,6 +295,12 @@ async fn execute_inner(
             .iter()
             .map(|l| (l.label(), l.cfg.addrs.clone()))
             .collect(),
+        link_tx_budgets: compiled
+            .opts
+            .kiss_links
+            .iter()
+            .filter_map(|l| Some((l.label(), l.cfg.tx_frames_per_s?)))
+            .collect(),
     };
     let mut recorder = crate::record::Recorder::create(path, meta)?;
     recorder.set_icd(crate::icd::IcdMap::for_run(&compiled.opts));

@@ -18,10 +18,11 @@
 //! - `icd-reply-length`: every reply of a platform node has the length the ICD's table
 //!   gives its command ([`crate::icd_lengths`]; with [`Invariants::for_run`]);
 //! - `no-reply-storm`: no two addresses exchange more than a bounded number of packets a
-//!   second on one medium, both ways together, counted over fixed windows (default 200 a
-//!   second over 10 s; the scenario's `[invariants.no_reply_storm]`). Two nodes that take
-//!   each other's answers for requests answer each other for ever, at whatever rate the
-//!   bus allows: the loop fails the run by name, whatever made it.
+//!   second each way on one medium, counted over fixed windows (default 200 a second over
+//!   10 s; the scenario's `[invariants.no_reply_storm]`). Two nodes that take each other's
+//!   answers for requests answer each other for ever, at whatever rate the bus allows: the
+//!   loop fails the run by name, whatever made it. A flow one way (a payload's push, a
+//!   beacon) is not an exchange, however fast.
 //!
 //! ```toml
 //! [invariants.no_reply_storm]
@@ -54,7 +55,8 @@ pub struct InvariantsSpec {
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ReplyStormSpec {
-    /// The most packets a second two addresses may exchange on one medium (default 200).
+    /// The most packets a second two addresses may send each other, each way, on one medium
+    /// (default 200).
     #[serde(default)]
     pub packets_per_s: Option<u32>,
     /// The windows they are counted over (default 10 s; 1 s to 1 h).
@@ -65,7 +67,8 @@ pub struct ReplyStormSpec {
 /// The invariants' settings for a run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct InvariantSettings {
-    /// `no-reply-storm`: at most this many packets between two addresses on one medium...
+    /// `no-reply-storm`: at most this many packets each way between two addresses on one
+    /// medium...
     pub storm_packets_per_s: u32,
     /// ... a second, counted over consecutive windows of this length.
     pub storm_window: Duration,
@@ -138,9 +141,19 @@ pub struct Invariants {
     /// Platform replies checked against the ICD's table so far.
     pub replies_checked: u64,
     settings: InvariantSettings,
-    /// Packets in the current window, by medium and pair of addresses (lower first): the
-    /// window's number and the count.
-    exchanged: BTreeMap<(Arc<str>, u8, u8), (u64, u64)>,
+    /// Packets in the current window, by medium and pair of addresses (lower first).
+    exchanged: BTreeMap<(Arc<str>, u8, u8), Exchange>,
+}
+
+/// The packets two addresses sent each other in one window of `no-reply-storm`.
+#[derive(Debug, Default, Clone, Copy)]
+struct Exchange {
+    /// The window's number (its start over its length).
+    window: u64,
+    /// From the lower address to the higher.
+    up: u64,
+    /// From the higher address to the lower.
+    down: u64,
 }
 
 /// How far from 1 a unit quaternion's norm may be.
@@ -172,23 +185,35 @@ impl Invariants {
         let Some(h) = header.filter(|h| h.src != h.dst) else {
             return;
         };
-        let window_ns = (self.settings.storm_window.as_nanos() as u64).max(1);
+        let window_ns = u64::try_from(self.settings.storm_window.as_nanos())
+            .unwrap_or(u64::MAX)
+            .max(1);
         let window = m.t.0 / window_ns;
-        let limit = u64::from(self.settings.storm_packets_per_s)
-            .saturating_mul(self.settings.storm_window.as_secs().max(1));
-        let key = (m.medium.clone(), h.src.min(h.dst), h.src.max(h.dst));
-        let entry = self.exchanged.entry(key).or_insert((window, 0));
-        if entry.0 != window {
-            *entry = (window, 0);
+        let limit =
+            u128::from(self.settings.storm_packets_per_s) * u128::from(window_ns) / 1_000_000_000;
+        let limit = u64::try_from(limit).unwrap_or(u64::MAX);
+        let (a, b) = (h.src.min(h.dst), h.src.max(h.dst));
+        let key = (m.medium.clone(), a, b);
+        let entry = self.exchanged.entry(key).or_default();
+        if entry.window != window {
+            *entry = Exchange {
+                window,
+                ..Exchange::default()
+            };
         }
-        entry.1 += 1;
-        if entry.1 == limit + 1 {
-            let (a, b) = (h.src.min(h.dst), h.src.max(h.dst));
+        // Each way on its own: a storm is an exchange (each answering the other), not a
+        // flow one way (a payload's push, a beacon), however fast.
+        if h.src == a {
+            entry.up += 1;
+        } else {
+            entry.down += 1;
+        }
+        if entry.up.min(entry.down) == limit + 1 {
             let from = SimTime(window * window_ns);
             let settings = self.settings;
             self.broken("no-reply-storm", m.t, || {
                 format!(
-                    "{} bus: more than {limit} packets between {a} and {b} in the {:?} from {from} (at most {} a second)",
+                    "{} bus: more than {limit} packets each way between {a} and {b} in the {:?} from {from} (at most {} a second)",
                     m.medium, settings.storm_window, settings.storm_packets_per_s
                 )
             });
@@ -465,25 +490,36 @@ mod tests {
         };
         let mut calm = Invariants::default();
         exchange(&mut calm, 0, 50_000_000, 1200);
+        // A payload pushing 1000 packets a second to the PC, one way: not an exchange.
+        let push = Packet::new(Header::new(13, 6, 11, 40), vec![7; 64]);
+        for k in 0..20_000u64 {
+            let mut frames = Vec::new();
+            csp::cfp::fragment_with_ident(&push, 6, (k % 1024) as u16, &mut frames).unwrap();
+            for f in frames {
+                calm.observe(&on_main(k * 1_000_000, TraceFrame::Can(f)));
+            }
+        }
         for k in 0..100_000u64 {
             let babble = csp::cfp::CanFrame::new(0, &[0; 8]).unwrap();
             calm.observe(&on_main(k * 10_000, TraceFrame::Can(babble)));
         }
         assert_eq!(calm.finish(&RunReport::default()), vec![]);
-        // The loop: 1 800 packets a second from 60 s.
+        // The loop: 1 800 packets a second from 60 s, 900 each way.
         let mut storm = Invariants::default();
-        exchange(&mut storm, 60_000_000_000, 555_555, 3_600);
+        exchange(&mut storm, 60_000_000_000, 555_555, 10_000);
         let v = storm.finish(&RunReport::default());
         assert_eq!(
             v.iter().map(|v| v.name).collect::<Vec<_>>(),
             ["no-reply-storm"]
         );
         assert!(
-            v[0].detail
-                .starts_with("main bus: more than 2000 packets between 3 and 6 in the 10s from 60"),
+            v[0].detail.starts_with(
+                "main bus: more than 2000 packets each way between 3 and 6 in the 10s from 60"
+            ),
             "{}",
             v[0].detail
         );
-        assert!(v[0].t > SimTime(60_000_000_000) && v[0].t < SimTime(62_000_000_000));
+        // The 2001st each way: the 4002nd packet, 2.2 s in.
+        assert!(v[0].t > SimTime(62_000_000_000) && v[0].t < SimTime(62_300_000_000));
     }
 }

@@ -959,11 +959,15 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
             if link.starts_with("zmq-hub ") {
                 r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
             }
-            // A command-line link's configured addresses, which the scenario lacks.
+            // A command-line link's configured addresses and transmit budget, which the
+            // scenario lacks.
             if r.cfg.addrs.is_empty()
                 && let Some(addrs) = meta.link_addrs.get(link)
             {
                 r.cfg.addrs.clone_from(addrs);
+            }
+            if let Some(&n) = meta.link_tx_budgets.get(link) {
+                r.cfg.tx_frames_per_s = Some(n);
             }
         }
         // The nodes the recorded run's outside programs replaced, the command line's

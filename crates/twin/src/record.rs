@@ -209,6 +209,11 @@ pub struct RecordingMeta {
     /// line's links are not in the scenario).
     #[serde(default)]
     pub link_addrs: BTreeMap<String, Vec<u8>>,
+    /// The transmit budget (CAN frames a second) of each link that had one, by label, so
+    /// that `replay` holds the same frames back (the command line's `--kiss-tx-budget` is
+    /// not in the scenario).
+    #[serde(default)]
+    pub link_tx_budgets: BTreeMap<String, u32>,
 }
 
 /// Messages written to one channel.
@@ -2352,6 +2357,10 @@ impl Recorder {
             (
                 "link_addrs",
                 crate::recording::format_link_addrs(&meta.link_addrs),
+            ),
+            (
+                "link_tx_budgets",
+                crate::recording::format_link_budgets(&meta.link_tx_budgets),
             ),
         ]
         .into_iter()

@@ -639,6 +639,25 @@ pub fn parse_link_addrs(text: &str) -> std::collections::BTreeMap<String, Vec<u8
         .collect()
 }
 
+/// The `link_tx_budgets` metadata: `LABEL=N;LABEL=N`.
+pub fn format_link_budgets(links: &std::collections::BTreeMap<String, u32>) -> String {
+    links
+        .iter()
+        .map(|(l, n)| format!("{l}={n}"))
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
+/// Read [`format_link_budgets`]' text; what does not parse is left out.
+pub fn parse_link_budgets(text: &str) -> std::collections::BTreeMap<String, u32> {
+    text.split(';')
+        .filter_map(|item| {
+            let (label, n) = item.rsplit_once('=')?;
+            Some((label.to_owned(), n.trim().parse().ok()?))
+        })
+        .collect()
+}
+
 /// Build the metadata from the `m6p-twin` record and the scenario attachment.
 fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Result<RecordingMeta> {
     let get = |k: &str| {
@@ -673,6 +692,11 @@ fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Resu
             .metadata
             .get("link_addrs")
             .map(|l| parse_link_addrs(l))
+            .unwrap_or_default(),
+        link_tx_budgets: m
+            .metadata
+            .get("link_tx_budgets")
+            .map(|l| parse_link_budgets(l))
             .unwrap_or_default(),
         // Older recordings have none: only a scenario's `replaces` replaced nodes then.
         replaced: m

@@ -501,3 +501,53 @@ fn a_connection_that_says_nothing_is_closed_after_the_idle_limit() {
     assert!(still.is_some(), "the named connection was closed\n{err}");
     assert!(err.contains("closed: no address and no byte for"), "{err}");
 }
+
+/// A connection holding an address (a payload waiting quietly for its session) is never
+/// closed to make room, however long it has been idle: connections that hold nothing are,
+/// and when every connection holds an address a new one is refused. Were it closed, a
+/// newcomer could take its address; the longest-idle connection, whatever it held, used to
+/// be the one closed.
+#[test]
+fn a_connection_holding_an_address_is_never_closed_to_make_room() {
+    let scenario = bare("idle-named", 30);
+    let twin = Twin::start(
+        &[
+            scenario.to_str().unwrap(),
+            "--kiss-listen",
+            "127.0.0.1:0",
+            "--kiss-max-connections",
+            "4",
+        ],
+        1,
+    );
+    let addr = twin.addrs[0];
+    let mut named = Client::connect(addr);
+    assert!(named.ping(17, 3, 1, Duration::from_secs(3)).is_some());
+    std::thread::sleep(Duration::from_millis(300));
+    // Twelve newcomers through a listener of four: each closes an older one that holds
+    // nothing, never the named one (the longest idle of all).
+    let newcomers: Vec<TcpStream> = (0..12)
+        .map(|_| {
+            let s = TcpStream::connect(addr).unwrap();
+            std::thread::sleep(Duration::from_millis(50));
+            s
+        })
+        .collect();
+    let answered = named.ping(17, 3, 2, Duration::from_secs(3));
+    // Three more named ones fill the listener: a fifth connection is refused.
+    let mut others: Vec<Client> = (0..3).map(|_| Client::connect(addr)).collect();
+    for (k, c) in others.iter_mut().enumerate() {
+        let a = 18 + k as u8;
+        assert!(c.ping(a, 3, 3, Duration::from_secs(3)).is_some(), "{a}");
+    }
+    let mut refused = Client::connect(addr);
+    let fifth = refused.ping(20, 3, 4, Duration::from_secs(2));
+    let (_, _, err) = twin.finish_now();
+    drop(newcomers);
+    assert!(answered.is_some(), "the named connection was closed\n{err}");
+    assert!(fifth.is_none(), "a fifth connection was served");
+    assert!(
+        err.contains("closed to make room") && err.contains("each holding an address"),
+        "{err}"
+    );
+}

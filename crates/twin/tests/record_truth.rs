@@ -37,6 +37,7 @@ fn meta() -> RecordingMeta {
         duration_ns: None,
         replaced: Vec::new(),
         link_addrs: Default::default(),
+        link_tx_budgets: Default::default(),
     }
 }
 

@@ -92,6 +92,7 @@ fn small_recording(path: &Path) {
         duration_ns: Some(1_000_000_000),
         replaced: Vec::new(),
         link_addrs: Default::default(),
+        link_tx_budgets: Default::default(),
     };
     let mut r = Recorder::create(path, meta).unwrap();
     let mut t = SimTime::ZERO;

@@ -263,10 +263,11 @@ impl RunReport {
         for (name, k) in &self.kiss {
             let _ = writeln!(
                 s,
-                "\nlink {name}: {} connections ({} closed idle, {} closed to make room), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
+                "\nlink {name}: {} connections ({} closed idle, {} closed to make room, {} refused), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
                 k.connections,
                 k.idle_closed,
                 k.evicted,
+                k.connections_refused,
                 k.packets_in,
                 k.packets_out,
                 k.garbage_bytes,
