@@ -1713,6 +1713,28 @@ mod tests {
         assert_eq!(n.send(bad, SimTime::ZERO), Err(SendError::BadHeader));
     }
 
+    /// An outbox holds its capacity of outputs; past it the oldest go first, counted. At
+    /// the default capacity (2^20), filled twice over: the newest 2^20 kept, 2^20 dropped.
+    #[test]
+    fn an_outbox_keeps_its_newest_outputs_and_counts_the_oldest_dropped() {
+        let mut small = Outbox::new(3);
+        for k in 0..5 {
+            small.push(k);
+        }
+        assert_eq!(small.dropped(), 2);
+        assert_eq!(
+            (small.pop(), small.pop(), small.pop(), small.pop()),
+            (Some(2), Some(3), Some(4), None)
+        );
+        let mut full = Outbox::<u32>::default();
+        let n = Outbox::<u32>::DEFAULT_CAPACITY as u32;
+        for k in 0..2 * n {
+            full.push(k);
+        }
+        assert_eq!(full.dropped(), u64::from(n));
+        assert_eq!(full.pop(), Some(n));
+    }
+
     #[test]
     fn ephemeral_ports_cycle_through_32_to_63_and_run_out() {
         let mut n = router_node();
