@@ -446,6 +446,18 @@ pub enum PcOutput {
         /// Packets counted.
         packets: u32,
     },
+    /// An ACTIVE session's run was lost with the PC's volatile memory (its session table):
+    /// it has no ICD result, and nothing follows it; a new SETUP starts a new run.
+    SessionLost {
+        /// When.
+        t: SimTime,
+        /// Which.
+        session_id: u8,
+        /// What took the PC's memory.
+        cause: LostCause,
+        /// Packets counted before.
+        packets: u32,
+    },
     /// Payload bytes reached the ground (the last bit of their S-band frame left).
     Downlinked {
         /// When.
@@ -1679,7 +1691,7 @@ impl App for PcApp {
     fn power_lost(&mut self, node: &mut Node, now: SimTime) {
         // The buffer file, the S-band queue and the session table are volatile: they are
         // lost at the instant power goes, and the transmitter stops with its data.
-        self.lose_volatile(now, "power lost");
+        self.lose_volatile(now, LostCause::PowerLoss);
         self.flush_log(node);
     }
 
@@ -1709,7 +1721,7 @@ impl App for PcApp {
     }
 
     fn reset(&mut self, now: SimTime) {
-        self.lose_volatile(now, "reboot");
+        self.lose_volatile(now, LostCause::Reboot);
         // The node unbinds every port at reboot.
         self.ports.clear();
         self.retired.clear();
@@ -1720,7 +1732,7 @@ impl App for PcApp {
 impl PcApp {
     /// What a reboot or a loss of power takes: the buffered data (counted as dropped for
     /// `PowerLoss`), the S-band queue, the sessions' state.
-    fn lose_volatile(&mut self, now: SimTime, why: &str) {
+    fn lose_volatile(&mut self, now: SimTime, why: LostCause) {
         if self.sband.is_transmitting() {
             self.tx_activity(now, false);
         }
@@ -1739,10 +1751,17 @@ impl PcApp {
         }
         if let Some(a) = self.table.active() {
             let id = self.session_id(a);
+            let packets = self.table.slot(a).map_or(0, |s| s.packets);
             self.log.push(NodeEvent::info(
                 now,
-                format!("pc: {why}: ACTIVE session {id} lost"),
+                format!("pc: {why}: ACTIVE session {id} lost after {packets} packets"),
             ));
+            self.emit(PcOutput::SessionLost {
+                t: now,
+                session_id: id,
+                cause: why,
+                packets,
+            });
         }
         self.table.reset();
         for r in &mut self.runs {
@@ -1750,6 +1769,34 @@ impl PcApp {
             r.tm_downlinked = 0;
             r.tm_dropped = 0;
         }
+    }
+}
+
+/// What took the PC's volatile memory (its session table, buffer file and S-band queue).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum LostCause {
+    /// Its power went (an EPS channel switched off, a `power-off` fault).
+    PowerLoss,
+    /// It rebooted (the CSP reboot service, a `reboot` fault).
+    Reboot,
+}
+
+impl LostCause {
+    /// Its name in recordings and reports: `power` or `reboot`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LostCause::PowerLoss => "power",
+            LostCause::Reboot => "reboot",
+        }
+    }
+}
+
+impl std::fmt::Display for LostCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LostCause::PowerLoss => "power lost",
+            LostCause::Reboot => "reboot",
+        })
     }
 }
 

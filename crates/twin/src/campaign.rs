@@ -52,10 +52,45 @@ pub struct CampaignSpec {
     /// Faults drawn into every run.
     #[serde(default)]
     pub faults: Option<FaultDraws>,
+    /// How long a run may be, in simulated and wall-clock time: a run over either is an
+    /// error row, never a hang.
+    #[serde(default)]
+    pub limits: RunLimits,
 }
 
 fn default_seed() -> u64 {
     1
+}
+
+/// `[limits]`: how long one run of the campaign may be.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RunLimits {
+    /// The longest simulated duration a run may draw (default 30 days): a longer one is an
+    /// error row, not run.
+    #[serde(default = "default_simulated")]
+    pub simulated: crate::scenario::Dur,
+    /// The most wall-clock time a run may take (default 10 minutes): it is stopped there,
+    /// an error row.
+    #[serde(default = "default_wall")]
+    pub wall: crate::scenario::Dur,
+}
+
+fn default_simulated() -> crate::scenario::Dur {
+    crate::scenario::Dur(std::time::Duration::from_secs(30 * 86_400))
+}
+
+fn default_wall() -> crate::scenario::Dur {
+    crate::scenario::Dur(std::time::Duration::from_secs(600))
+}
+
+impl Default for RunLimits {
+    fn default() -> Self {
+        RunLimits {
+            simulated: default_simulated(),
+            wall: default_wall(),
+        }
+    }
 }
 
 /// Where the base scenario comes from.
@@ -572,6 +607,17 @@ impl Campaign {
                 .unwrap_or("campaign")
         );
         table.insert("name".into(), toml::Value::String(name));
+        // A campaign checks every invariant (unless its base scenario names its own set):
+        // written into the run's scenario, so that its failure file, run by itself, checks
+        // the same.
+        if let Some(inv) = table
+            .entry("invariants")
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+            .as_table_mut()
+        {
+            inv.entry("check")
+                .or_insert_with(|| toml::Value::String("all".into()));
+        }
         for (key, (path, dist)) in &self.dists {
             let v = dist.sample(&mut stream(seed, k, key));
             // A string as itself (`normal`, `60000ms`), anything else as TOML.

@@ -11,6 +11,7 @@ use crate::campaign_run::{CampaignMeta, RunRow, RunVerdict};
 const PASS: &str = "#2e8b57";
 const FAIL: &str = "#d0453a";
 const ERROR: &str = "#8a2be2";
+const NOT_RUN: &str = "#9e9e9e";
 const WIDTH: f64 = 640.0;
 
 /// Text for HTML.
@@ -37,6 +38,7 @@ fn colour(v: &RunVerdict) -> &'static str {
         RunVerdict::Pass => PASS,
         RunVerdict::Fail(_) => FAIL,
         RunVerdict::Error(_) => ERROR,
+        RunVerdict::NotRun(_) => NOT_RUN,
     }
 }
 
@@ -174,6 +176,10 @@ fn histogram(out: &mut String, name: &str, values: &[(f64, &RunRow)]) {
 pub fn report_html(meta: &CampaignMeta, rows: &[RunRow]) -> String {
     let count = |w: &str| rows.iter().filter(|r| r.verdict.word() == w).count();
     let (pass, fail, error) = (count("pass"), count("fail"), count("error"));
+    let not_run = match count("not run") {
+        0 => String::new(),
+        k => format!(", <b class=\"not-run\">{k} not run</b> (the campaign was stopped)"),
+    };
     let mut out = String::new();
     let _ = write!(
         out,
@@ -184,10 +190,10 @@ body {{ font-family: system-ui, sans-serif; margin: 2em; max-width: 60em; color:
 svg {{ display: block; margin: 0.5em 0 1.5em; font-size: 12px; }}
 table {{ border-collapse: collapse; font-size: 13px; }}
 td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-align: top; }}
-.pass {{ color: {PASS}; }} .fail {{ color: {FAIL}; }} .error {{ color: {ERROR}; }}
+.pass {{ color: {PASS}; }} .fail {{ color: {FAIL}; }} .error {{ color: {ERROR}; }} .not-run {{ color: {NOT_RUN}; }}
 </style></head><body>
 <h1>Campaign {name}</h1>
-<p>{file}, seed {seed}: {n} runs, <b class="pass">{pass} passed</b>, <b class="fail">{fail} failed</b>, <b class="error">{error} errors</b>.</p>
+<p>{file}, seed {seed}: {n} runs, <b class="pass">{pass} passed</b>, <b class="fail">{fail} failed</b>, <b class="error">{error} errors</b>{not_run}.</p>
 "#,
         name = esc(&meta.name),
         file = esc(&meta.file),
@@ -296,6 +302,7 @@ td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-a
                     .collect::<Vec<_>>()
                     .join("<br>"),
                 RunVerdict::Error(e) => format!("<b>error</b>: {}", esc(e)),
+                RunVerdict::NotRun(e) => format!("<b>not run</b>: {}", esc(e)),
                 RunVerdict::Pass => String::new(),
             };
             let _ = writeln!(

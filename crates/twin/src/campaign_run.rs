@@ -17,7 +17,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::campaign::Campaign;
 use crate::exec;
-use crate::invariants::{Invariants, Violation};
 use crate::scenario::Scenario;
 
 /// How a run ended.
@@ -28,18 +27,27 @@ pub enum RunVerdict {
     Pass,
     /// Expectations failed: their names and what was observed.
     Fail(Vec<(String, String)>),
-    /// The run could not run or crashed: why.
+    /// The run could not run, crashed or went over a limit: why.
     Error(String),
+    /// The campaign was stopped (SIGINT, SIGTERM) before the run ended, or before it began:
+    /// no result. `campaign run --resume` runs it.
+    #[serde(rename = "not-run")]
+    NotRun(String),
 }
 
 impl RunVerdict {
-    /// `pass`, `fail` or `error`.
+    /// `pass`, `fail`, `error` or `not run`.
     pub fn word(&self) -> &'static str {
         match self {
             RunVerdict::Pass => "pass",
             RunVerdict::Fail(_) => "fail",
             RunVerdict::Error(_) => "error",
+            RunVerdict::NotRun(_) => "not run",
         }
+    }
+    /// Whether it is a result (pass, fail or error), not a run cut or never started.
+    pub fn is_result(&self) -> bool {
+        !matches!(self, RunVerdict::NotRun(_))
     }
 }
 
@@ -78,7 +86,7 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
             };
         }
     };
-    let (verdict, metrics) = run_judged(&format!("{} run {k}", c.file), &r.text);
+    let (verdict, metrics) = run_limited(&format!("{} run {k}", c.file), &r.text, c.spec.limits);
     RunRow {
         run: k,
         seed: r.seed,
@@ -139,47 +147,70 @@ pub fn default_jobs(asked: Option<usize>) -> usize {
         .max(1)
 }
 
-/// [`run_text`] with the run's [`metrics`] (none when it did not run to its end).
+/// [`run_text`] with the run's [`metrics`] (none when it did not run to its end), within
+/// the default [`RunLimits`](crate::campaign::RunLimits).
 pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>) {
-    let outcome =
-        std::panic::catch_unwind(|| -> anyhow::Result<(exec::Outcome, Vec<Violation>)> {
-            let scenario = Scenario::parse(file, text)?;
-            let loaded = exec::Loaded {
-                file: file.to_owned(),
-                text: text.to_owned(),
-                scenario,
-            };
-            let mut compiled = exec::compile_seeded(&loaded, None);
-            compiled.opts.clock = bus::ClockMode::Virtual;
-            let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
-            let mut inv = Invariants::for_run(&compiled.opts);
-            let o = rt.block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))?;
-            let broken = inv.finish(&o.report);
-            Ok((o, broken))
-        });
+    run_limited(file, text, crate::campaign::RunLimits::default())
+}
+
+/// [`run_judged`] within `limits`: a scenario longer than `limits.simulated` is an error
+/// row, not run; a run still going after `limits.wall` is stopped, an error row; a run a
+/// signal (SIGINT, SIGTERM) cut or kept from starting is not run. The invariants are the
+/// scenario's (`[invariants] check`: a campaign's resolved runs check all), judged with
+/// its expectations.
+pub fn run_limited(
+    file: &str,
+    text: &str,
+    limits: crate::campaign::RunLimits,
+) -> (RunVerdict, BTreeMap<String, f64>) {
+    use crate::runtime::StopCause;
+    let outcome = std::panic::catch_unwind(|| -> anyhow::Result<exec::Outcome> {
+        let scenario = Scenario::parse(file, text)?;
+        let loaded = exec::Loaded {
+            file: file.to_owned(),
+            text: text.to_owned(),
+            scenario,
+        };
+        let mut compiled = exec::compile_seeded(&loaded, None);
+        if let Some(d) = compiled.opts.duration.filter(|d| *d > limits.simulated.0) {
+            bail!(
+                "its duration, {}, is over the campaign's limit of {} ([limits] simulated)",
+                crate::duration::format_duration(d),
+                crate::duration::format_duration(limits.simulated.0)
+            );
+        }
+        compiled.opts.clock = bus::ClockMode::Virtual;
+        compiled.opts.wall_limit = Some(limits.wall.0);
+        let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
+        rt.block_on(exec::execute(compiled, &mut |_| {}))
+    });
+    if let Ok(Ok(o)) = &outcome
+        && let Some(i) = o.report.interrupted
+    {
+        let verdict = match i.cause {
+            StopCause::WallLimit(_) => RunVerdict::Error(format!("{i} ([limits] wall)")),
+            StopCause::Interrupt | StopCause::Terminate => RunVerdict::NotRun(i.to_string()),
+        };
+        return (verdict, BTreeMap::new());
+    }
     let figures = match &outcome {
-        Ok(Ok((o, _))) => metrics(&o.report),
+        Ok(Ok(o)) => metrics(&o.report),
         _ => BTreeMap::new(),
     };
     let verdict = match outcome {
-        Ok(Ok((o, broken))) if o.passed() && broken.is_empty() => RunVerdict::Pass,
-        Ok(Ok((o, broken))) => RunVerdict::Fail(
-            broken
-                .iter()
-                .map(|v| {
-                    (
-                        format!("invariant {}", v.name),
-                        format!("t = {}: {}", v.t, v.detail),
-                    )
-                })
-                .chain(
-                    o.verdicts
-                        .iter()
-                        .filter(|v| !v.passed)
-                        .map(|v| (v.name.clone(), format!("t = {}: {}", v.t, v.observed))),
-                )
-                .collect(),
-        ),
+        Ok(Ok(o)) if o.passed() => RunVerdict::Pass,
+        // The invariants first (as the verdicts of a campaign always listed them).
+        Ok(Ok(o)) => {
+            let mut failed: Vec<&crate::expectations::Verdict> =
+                o.verdicts.iter().filter(|v| !v.passed).collect();
+            failed.sort_by_key(|v| matches!(v.kind, crate::expectations::VerdictKind::Expectation));
+            RunVerdict::Fail(
+                failed
+                    .into_iter()
+                    .map(|v| (v.name.clone(), format!("t = {}: {}", v.t, v.observed)))
+                    .collect(),
+            )
+        }
         Ok(Err(e)) => RunVerdict::Error(format!("{e:#}")),
         Err(p) => RunVerdict::Error(format!("panicked: {}", panic_text(p.as_ref()))),
     };
@@ -211,11 +242,10 @@ pub fn record_failure(file: &str, row: &RunRow, path: &Path) -> anyhow::Result<(
         .map(|v| v.name.as_str())
         .collect();
     if let RunVerdict::Fail(f) = &row.verdict {
-        let before: Vec<&str> = f
-            .iter()
-            .map(|(n, _)| n.as_str())
-            .filter(|n| !n.starts_with("invariant "))
-            .collect();
+        let mut before: Vec<&str> = f.iter().map(|(n, _)| n.as_str()).collect();
+        let mut again = again;
+        before.sort_unstable();
+        again.sort_unstable();
         if before != again {
             bail!(
                 "run {} failed {before:?} in the campaign but {again:?} when recorded (not deterministic?)",
@@ -320,7 +350,7 @@ pub fn results_csv(rows: &[RunRow]) -> String {
                 .map(|(n, _)| n.as_str())
                 .collect::<Vec<_>>()
                 .join("; "),
-            RunVerdict::Error(e) => e.clone(),
+            RunVerdict::Error(e) | RunVerdict::NotRun(e) => e.clone(),
         };
         out.push_str(&format!(",{},{}\n", r.verdict.word(), cell(&failed)));
     }
@@ -347,6 +377,12 @@ pub fn junit(name: &str, rows: &[RunRow]) -> anyhow::Result<String> {
             RunVerdict::Error(e) => {
                 let mut st = TestCaseStatus::non_success(NonSuccessKind::Error);
                 st.set_message(e.clone());
+                st
+            }
+            // No result: an error case, never a pass or a failure.
+            RunVerdict::NotRun(e) => {
+                let mut st = TestCaseStatus::non_success(NonSuccessKind::Error);
+                st.set_message(format!("not run: {e}"));
                 st
             }
         };
@@ -480,24 +516,29 @@ pub fn write_outputs(meta: &CampaignMeta, rows: &[RunRow], dir: &Path) -> anyhow
     .with_context(|| ctx("report.html"))?;
     let failures = dir.join("failures");
     remove_stale_failures(&failures).with_context(|| ctx("failures/"))?;
-    for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
+    // A failure file for each result that failed: a run cut short or never started has none
+    // (it would not reproduce anything).
+    for r in rows
+        .iter()
+        .filter(|r| r.verdict != RunVerdict::Pass && r.verdict.is_result())
+    {
         if r.scenario.is_empty() {
             continue;
         }
         std::fs::create_dir_all(&failures).with_context(|| ctx("failures/"))?;
+        // The path as the user named the output folder: the line works from where they ran
+        // the campaign.
+        let file = failures.join(format!("run-{}.toml", r.run));
         let head = format!(
-            "# Run {} of campaign {} (seed {}), {}: every draw resolved.\n# Reproduce: m6p-twin test failures/run-{}.toml\n",
+            "# Run {} of campaign {} (seed {}), {}: every draw resolved.\n# Reproduce: m6p-twin test {}\n",
             r.run,
             meta.file,
             meta.seed,
             r.verdict.word(),
-            r.run
+            file.display()
         );
-        std::fs::write(
-            failures.join(format!("run-{}.toml", r.run)),
-            format!("{head}{}", r.scenario),
-        )
-        .with_context(|| ctx("a failure file"))?;
+        std::fs::write(&file, format!("{head}{}", r.scenario))
+            .with_context(|| ctx("a failure file"))?;
     }
     Ok(())
 }
@@ -520,6 +561,33 @@ fn remove_stale_failures(failures: &Path) -> std::io::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The results (pass, fail, error) already in `dir` of the campaign `meta` describes: what
+/// `campaign run --resume` keeps. Refused when `dir` holds another campaign's outputs.
+pub fn results_in(dir: &Path, meta: &CampaignMeta) -> anyhow::Result<Vec<RunRow>> {
+    let m: CampaignMeta = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("campaign.json"))
+            .with_context(|| format!("reading {}/campaign.json", dir.display()))?,
+    )
+    .with_context(|| format!("{}/campaign.json", dir.display()))?;
+    if m != *meta {
+        bail!(
+            "{} holds another campaign's results ({m:?}), not {meta:?}",
+            dir.display()
+        );
+    }
+    let text = std::fs::read_to_string(dir.join("rows.jsonl"))
+        .with_context(|| format!("reading {}/rows.jsonl", dir.display()))?;
+    let mut rows = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let r: RunRow = serde_json::from_str(line)
+            .with_context(|| format!("{}/rows.jsonl:{}", dir.display(), i + 1))?;
+        if r.verdict.is_result() {
+            rows.push(r);
+        }
+    }
+    Ok(rows)
 }
 
 /// Combine the outputs of shards (`dirs`) into `out`: the same files one unsharded run
@@ -708,6 +776,41 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("in two shards"), "{e}");
+        std::fs::remove_dir_all(&base).ok();
+    }
+
+    /// A metric that JSON's shortest form reads back one ulp off without serde_json's
+    /// `float_roundtrip` (3.7748095989378885 became 3.774809598937889): shards merged are
+    /// still the unsharded run, byte for byte.
+    #[test]
+    fn merged_shards_keep_every_float_to_the_bit() {
+        let meta = CampaignMeta::of(&campaign(), 2);
+        let row = |run: u64| RunRow {
+            run,
+            seed: run,
+            draws: BTreeMap::new(),
+            verdict: RunVerdict::Pass,
+            metrics: [("max_rate_deg_s".to_owned(), 3.774_809_598_937_888_5)].into(),
+            scenario: String::new(),
+        };
+        let base = std::env::temp_dir().join(format!("m6p-campaign-ulp-{}", std::process::id()));
+        write_outputs(&meta, &[row(0), row(1)], &base.join("whole")).unwrap();
+        let dirs: Vec<_> = (0..2)
+            .map(|k| {
+                let d = base.join(format!("shard-{k}"));
+                write_outputs(&meta, &[row(k)], &d).unwrap();
+                d
+            })
+            .collect();
+        let (_, merged) = merge(&dirs, &base.join("merged")).unwrap();
+        assert_eq!(merged, vec![row(0), row(1)]);
+        for f in ["results.csv", "rows.jsonl", "report.html"] {
+            assert_eq!(
+                std::fs::read(base.join("whole").join(f)).unwrap(),
+                std::fs::read(base.join("merged").join(f)).unwrap(),
+                "{f}"
+            );
+        }
         std::fs::remove_dir_all(&base).ok();
     }
 

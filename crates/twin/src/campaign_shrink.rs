@@ -39,6 +39,7 @@ fn failed_checks(v: &RunVerdict) -> Option<BTreeSet<String>> {
         RunVerdict::Pass => None,
         RunVerdict::Fail(f) => Some(f.iter().map(|(n, _)| n.clone()).collect()),
         RunVerdict::Error(_) => Some(BTreeSet::from(["error".to_owned()])),
+        RunVerdict::NotRun(_) => Some(BTreeSet::from(["not run".to_owned()])),
     }
 }
 
@@ -262,6 +263,7 @@ pub fn shrink(file: &str, text: &str, base: Option<&toml::Table>) -> anyhow::Res
     let failed = match run_text(file, &text) {
         RunVerdict::Fail(f) => f.into_iter().map(|(n, o)| format!("{n}: {o}")).collect(),
         RunVerdict::Error(e) => vec![format!("error: {e}")],
+        RunVerdict::NotRun(e) => bail!("{file}: the shrunk scenario did not run: {e}"),
         RunVerdict::Pass => {
             bail!("{file}: the shrunk scenario passes (a run that is not deterministic?)")
         }

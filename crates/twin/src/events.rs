@@ -240,6 +240,7 @@ impl RunEvent {
             RunEvent::Pc(o) => match **o {
                 nodes_pc::PcOutput::SessionStarted { t, .. }
                 | nodes_pc::PcOutput::SessionEnded { t, .. }
+                | nodes_pc::PcOutput::SessionLost { t, .. }
                 | nodes_pc::PcOutput::Downlinked { t, .. }
                 | nodes_pc::PcOutput::Dropped { t, .. }
                 | nodes_pc::PcOutput::Final { t, .. } => t,

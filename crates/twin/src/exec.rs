@@ -68,9 +68,10 @@ pub struct Outcome {
 }
 
 impl Outcome {
-    /// Whether every expectation held.
+    /// Whether the run went to its end and every expectation (and checked invariant)
+    /// held: an interrupted run passes nothing, whatever held so far.
     pub fn passed(&self) -> bool {
-        self.verdicts.iter().all(|v| v.passed)
+        self.report.interrupted.is_none() && self.verdicts.iter().all(|v| v.passed)
     }
 
     /// A table of the verdicts.
@@ -98,6 +99,9 @@ impl Outcome {
             self.verdicts.len() - failed,
             failed
         );
+        if let Some(i) = &self.report.interrupted {
+            let _ = writeln!(s, "  {i}: not a result");
+        }
         s
     }
 }
@@ -171,7 +175,13 @@ pub async fn execute_keeping(
         })
         .collect();
     compiled.opts.keep_series = keep;
+    // The invariants the scenario checks (`[invariants] check`; a campaign's runs: all).
+    let mut invariants = (!compiled.opts.invariants.check.is_empty())
+        .then(|| crate::invariants::Invariants::for_run(&compiled.opts));
     let mut watched = |ev: &RunEvent| {
+        if let Some(i) = invariants.as_mut() {
+            i.observe(ev);
+        }
         let kind = ev.kind();
         for (w, k) in watches.iter_mut().zip(&kinds) {
             if k.has(kind)
@@ -187,7 +197,10 @@ pub async fn execute_keeping(
         print_listen
     );
     let report = report?;
-    let verdicts = check_watched(&compiled.expectations, &watches, &report, &net);
+    let mut verdicts = check_watched(&compiled.expectations, &watches, &report, &net);
+    if let Some(i) = invariants {
+        verdicts.extend(i.verdicts(&report));
+    }
     for v in &verdicts {
         sink(&RunEvent::Expectation {
             t: v.t.min(report.sim_time),

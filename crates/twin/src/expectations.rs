@@ -19,10 +19,12 @@ use crate::runtime::RunReport;
 use crate::scenario::{Dur, PathStep, Scenario};
 use crate::tagged::Tagged;
 
-/// The verdict on one expectation.
+/// The verdict on one expectation of the scenario, or on one invariant it checks.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Verdict {
-    /// The expectation's name.
+    /// What was judged.
+    pub kind: VerdictKind,
+    /// The expectation's name, or `invariant <name>`.
     pub name: String,
     /// Whether it held.
     pub passed: bool,
@@ -30,6 +32,15 @@ pub struct Verdict {
     pub t: SimTime,
     /// What was observed, for example `reply after 1.204 s (limit 1.000 s)`.
     pub observed: String,
+}
+
+/// What a verdict judged.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VerdictKind {
+    /// One of the scenario's expectations.
+    Expectation,
+    /// An invariant the scenario checks (`[invariants] check`).
+    Invariant(crate::invariants::InvariantName),
 }
 
 /// What a check found: whether it held, when (the failing occurrence, or the end), and what
@@ -244,6 +255,7 @@ impl Expectation {
 
     fn verdict(&self, (passed, t, observed): Judged) -> Verdict {
         Verdict {
+            kind: VerdictKind::Expectation,
             name: self.name.clone(),
             passed,
             t,

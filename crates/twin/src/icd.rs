@@ -412,9 +412,9 @@ struct FieldJson {
     #[serde(skip_serializing_if = "String::is_empty")]
     doc: String,
     #[serde(skip_serializing_if = "Option::is_none")]
-    range: Option<[f64; 2]>,
+    range: Option<[serde_json::Value; 2]>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    except: Option<[f64; 2]>,
+    except: Option<[serde_json::Value; 2]>,
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     values: BTreeMap<String, &'static str>,
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
@@ -423,6 +423,15 @@ struct FieldJson {
     text: bool,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     fields: Vec<FieldJson>,
+}
+
+/// A bound of a field of type `ty` as JSON: an integer for an integer type (a consumer
+/// with integer types refuses `63.0`), a number for a float.
+fn number(ty: Ty, x: f64) -> serde_json::Value {
+    match ty {
+        Ty::F32 | Ty::F64 | Ty::Struct(..) => serde_json::json!(x),
+        _ => serde_json::json!(x as i64),
+    }
 }
 
 fn fields_json(fields: &'static [Field]) -> Vec<FieldJson> {
@@ -438,8 +447,8 @@ fn fields_json(fields: &'static [Field]) -> Vec<FieldJson> {
                 size: f.len(),
                 unit: f.unit,
                 doc: f.doc_line(),
-                range: f.range.map(|(a, b)| [a, b]),
-                except: f.except.map(|(a, b)| [a, b]),
+                range: f.range.map(|(a, b)| [number(f.ty, a), number(f.ty, b)]),
+                except: f.except.map(|(a, b)| [number(f.ty, a), number(f.ty, b)]),
                 values: f.values.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
                 bits: f.bits.iter().map(|(k, v)| (k.to_string(), *v)).collect(),
                 text: f.text,
@@ -1301,6 +1310,41 @@ mod tests {
                 .is_ok()
         });
         assert!(bad.is_empty(), "{bad:#?}");
+    }
+
+    /// Every range and gap of an integer field is written as integers (`[1, 63]`, not
+    /// `[1.0, 63.0]`, which consumers with integer types refuse), a float field's as
+    /// numbers.
+    #[test]
+    fn json_ranges_of_integer_fields_are_integers() {
+        fn walk(fields: &serde_json::Value, seen: &mut (usize, usize)) {
+            for f in fields.as_array().into_iter().flatten() {
+                let float = matches!(f["type"].as_str(), Some("f32" | "f64"));
+                for key in ["range", "except"] {
+                    for b in f[key].as_array().into_iter().flatten() {
+                        if float {
+                            seen.1 += 1;
+                        } else {
+                            assert!(b.is_i64() || b.is_u64(), "{}: {key} {b}", f["name"]);
+                            seen.0 += 1;
+                        }
+                    }
+                }
+                walk(&f["fields"], seen);
+            }
+        }
+        let j: serde_json::Value = serde_json::from_str(&to_json()).unwrap();
+        let mut seen = (0, 0);
+        for n in j["nodes"].as_array().unwrap() {
+            for p in n["ports"].as_array().unwrap() {
+                for c in p["commands"].as_array().unwrap() {
+                    walk(&c["request"]["fields"], &mut seen);
+                }
+            }
+        }
+        assert!(seen.0 > 20, "integer bounds seen: {seen:?}");
+        let setup = serde_json::to_string(&j).unwrap();
+        assert!(setup.contains(r#""range":[1,63]"#), "PC SETUP's session_id");
     }
 
     #[test]

@@ -42,10 +42,92 @@ use crate::events::RunEvent;
 use crate::runtime::RunReport;
 use crate::scenario::{Dur, PathStep, Scenario};
 
-/// The scenario's `[invariants]` table: the settings of the invariants that have some.
+/// An invariant, by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum InvariantName {
+    /// The true position, velocity and body rate are finite.
+    FiniteState,
+    /// Every CAN frame offered was sent, lost for a counted reason, or is queued.
+    FramesAccounted,
+    /// Every platform reply has the length the ICD's table gives.
+    IcdReplyLength,
+    /// No two addresses exchange more than a bounded number of packets a second.
+    NoReplyStorm,
+    /// At most one PC session is ACTIVE at any time.
+    OneActiveSession,
+    /// The PC's byte accounting balances.
+    PcBalanced,
+    /// No node hands its CAN controller a frame while it is off.
+    SilentWhileOff,
+    /// The battery's state of charge stays within [0, 1].
+    SocRange,
+    /// The true and estimated attitudes are unit quaternions.
+    UnitQuaternion,
+}
+
+impl InvariantName {
+    /// Every invariant, in name order.
+    pub const ALL: [InvariantName; 9] = [
+        InvariantName::FiniteState,
+        InvariantName::FramesAccounted,
+        InvariantName::IcdReplyLength,
+        InvariantName::NoReplyStorm,
+        InvariantName::OneActiveSession,
+        InvariantName::PcBalanced,
+        InvariantName::SilentWhileOff,
+        InvariantName::SocRange,
+        InvariantName::UnitQuaternion,
+    ];
+    /// Its name (`one-active-session`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            InvariantName::FiniteState => "finite-state",
+            InvariantName::FramesAccounted => "frames-accounted",
+            InvariantName::IcdReplyLength => "icd-reply-length",
+            InvariantName::NoReplyStorm => "no-reply-storm",
+            InvariantName::OneActiveSession => "one-active-session",
+            InvariantName::PcBalanced => "pc-balanced",
+            InvariantName::SilentWhileOff => "silent-while-off",
+            InvariantName::SocRange => "soc-range",
+            InvariantName::UnitQuaternion => "unit-quaternion",
+        }
+    }
+}
+
+impl std::fmt::Display for InvariantName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Which invariants a run checks: `"all"`, or a list of names.
+#[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(untagged)]
+pub enum InvariantCheck {
+    /// `"all"`.
+    All(AllWord),
+    /// These.
+    Names(Vec<InvariantName>),
+}
+
+/// The word `all`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum AllWord {
+    /// `all`.
+    All,
+}
+
+/// The scenario's `[invariants]` table: which invariants `run`, `test` and a campaign
+/// check, and the settings of those that have some.
 #[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct InvariantsSpec {
+    /// The invariants checked: `"all"` or names (default none; a campaign checks all, and
+    /// writes `check = "all"` into the scenario of each of its runs).
+    #[serde(default)]
+    pub check: Option<InvariantCheck>,
     /// `no-reply-storm`'s bound.
     #[serde(default)]
     pub no_reply_storm: Option<ReplyStormSpec>,
@@ -65,8 +147,10 @@ pub struct ReplyStormSpec {
 }
 
 /// The invariants' settings for a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct InvariantSettings {
+    /// The invariants the run checks (its verdicts include them).
+    pub check: Vec<InvariantName>,
     /// `no-reply-storm`: at most this many packets each way between two addresses on one
     /// medium...
     pub storm_packets_per_s: u32,
@@ -80,6 +164,7 @@ impl Default for InvariantSettings {
     /// two nodes (thousands a second on the main bus).
     fn default() -> Self {
         InvariantSettings {
+            check: Vec::new(),
             storm_packets_per_s: 200,
             storm_window: Duration::from_secs(10),
         }
@@ -110,7 +195,20 @@ pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
 
 /// The run's settings from the scenario's `[invariants]`.
 pub fn compile(s: &Scenario) -> InvariantSettings {
-    let mut out = InvariantSettings::default();
+    let check = match &s.invariants.check {
+        None => Vec::new(),
+        Some(InvariantCheck::All(_)) => InvariantName::ALL.to_vec(),
+        Some(InvariantCheck::Names(n)) => {
+            let mut n = n.clone();
+            n.sort();
+            n.dedup();
+            n
+        }
+    };
+    let mut out = InvariantSettings {
+        check,
+        ..InvariantSettings::default()
+    };
     if let Some(storm) = &s.invariants.no_reply_storm {
         if let Some(n) = storm.packets_per_s {
             out.storm_packets_per_s = n;
@@ -125,8 +223,8 @@ pub fn compile(s: &Scenario) -> InvariantSettings {
 /// One invariant broken: the first instant it was seen.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Violation {
-    /// The invariant's name.
-    pub name: &'static str,
+    /// The invariant.
+    pub name: InvariantName,
     /// When.
     pub t: SimTime,
     /// The values that break it.
@@ -136,7 +234,7 @@ pub struct Violation {
 /// The invariants' state over one run: the first violation of each.
 #[derive(Debug, Default)]
 pub struct Invariants {
-    first: BTreeMap<&'static str, Violation>,
+    first: BTreeMap<InvariantName, Violation>,
     icd: Option<crate::icd_lengths::IcdTable>,
     /// Platform replies checked against the ICD's table so far.
     pub replies_checked: u64,
@@ -164,7 +262,7 @@ impl Invariants {
     pub fn for_run(opts: &crate::runtime::RunOptions) -> Self {
         Invariants {
             icd: Some(crate::icd_lengths::IcdTable::for_run(opts)),
-            settings: opts.invariants,
+            settings: opts.invariants.clone(),
             ..Invariants::default()
         }
     }
@@ -210,11 +308,14 @@ impl Invariants {
         }
         if entry.up.min(entry.down) == limit + 1 {
             let from = SimTime(window * window_ns);
-            let settings = self.settings;
-            self.broken("no-reply-storm", m.t, || {
+            let (window, rate) = (
+                self.settings.storm_window,
+                self.settings.storm_packets_per_s,
+            );
+            self.broken(InvariantName::NoReplyStorm, m.t, || {
                 format!(
                     "{} bus: more than {limit} packets each way between {a} and {b} in the {:?} from {from} (at most {} a second)",
-                    m.medium, settings.storm_window, settings.storm_packets_per_s
+                    m.medium, window, rate
                 )
             });
         }
@@ -253,11 +354,13 @@ impl Invariants {
             Err(_) => self.replies_checked += 1,
         }
         if let Err(e) = checked {
-            self.broken("icd-reply-length", m.t, || format!("{} bus: {e}", m.medium));
+            self.broken(InvariantName::IcdReplyLength, m.t, || {
+                format!("{} bus: {e}", m.medium)
+            });
         }
     }
 
-    fn broken(&mut self, name: &'static str, t: SimTime, detail: impl FnOnce() -> String) {
+    fn broken(&mut self, name: InvariantName, t: SimTime, detail: impl FnOnce() -> String) {
         self.first.entry(name).or_insert_with(|| Violation {
             name,
             t,
@@ -277,19 +380,21 @@ impl Invariants {
         if let Some(p) = crate::eps::PowerSample::of(ev)
             && !(0.0..=1.0).contains(&p.soc)
         {
-            self.broken("soc-range", p.t, || format!("state of charge {}", p.soc));
+            self.broken(InvariantName::SocRange, p.t, || {
+                format!("state of charge {}", p.soc)
+            });
         }
         if let RunEvent::Truth { t, truth, adcs } = ev {
             let norm = truth.q_eci_from_body.quaternion().norm();
             if (norm - 1.0).abs() > UNIT_TOLERANCE || !norm.is_finite() {
-                self.broken("unit-quaternion", *t, || {
+                self.broken(InvariantName::UnitQuaternion, *t, || {
                     format!("true attitude |q| = {norm}")
                 });
             }
             if let Some(q) = &adcs.q_eci_from_body_est {
                 let norm = q.quaternion().norm();
                 if (norm - 1.0).abs() > UNIT_TOLERANCE || !norm.is_finite() {
-                    self.broken("unit-quaternion", *t, || {
+                    self.broken(InvariantName::UnitQuaternion, *t, || {
                         format!("estimated attitude |q| = {norm}")
                     });
                 }
@@ -298,7 +403,7 @@ impl Invariants {
                 && truth.v_eci_m_s.iter().all(|x| x.is_finite())
                 && truth.w_body_rad_s.iter().all(|x| x.is_finite());
             if !finite {
-                self.broken("finite-state", *t, || {
+                self.broken(InvariantName::FiniteState, *t, || {
                     format!(
                         "r = {:?} m, v = {:?} m/s, w = {:?} rad/s",
                         truth.r_eci_m.as_slice(),
@@ -310,26 +415,56 @@ impl Invariants {
         }
     }
 
+    /// The verdicts on the invariants `settings.check` names, in name order: each broken one
+    /// at its first violation, each kept at `end`.
+    pub fn verdicts(self, report: &RunReport) -> Vec<crate::expectations::Verdict> {
+        let check = self.settings.check.clone();
+        let broken = self.finish(report);
+        check
+            .into_iter()
+            .map(|name| {
+                let v = broken.iter().find(|v| v.name == name);
+                crate::expectations::Verdict {
+                    kind: crate::expectations::VerdictKind::Invariant(name),
+                    name: format!("invariant {name}"),
+                    passed: v.is_none(),
+                    t: v.map_or(report.sim_time, |v| v.t),
+                    observed: v.map_or_else(|| "held".to_owned(), |v| v.detail.clone()),
+                }
+            })
+            .collect()
+    }
+
     /// Check the run's report and give every violation, in name order.
     pub fn finish(mut self, report: &RunReport) -> Vec<Violation> {
         if let Some(p) = report.power.iter().find(|p| !(0.0..=1.0).contains(&p.soc)) {
-            self.broken("soc-range", p.t, || format!("state of charge {}", p.soc));
+            self.broken(InvariantName::SocRange, p.t, || {
+                format!("state of charge {}", p.soc)
+            });
         }
-        // ACTIVE intervals; one still running at the end lasts to the end.
-        let mut spans: Vec<(SimTime, SimTime, u8)> = report
+        // ACTIVE intervals (a run lost with the PC's memory ends there); one still running at
+        // the end lasts to the end. Each with its session and its run of that session.
+        let mut run_of = BTreeMap::<u8, usize>::new();
+        let mut spans: Vec<(SimTime, SimTime, u8, usize)> = report
             .sessions
             .runs
             .iter()
             .filter_map(|r| {
+                let k = run_of.entry(r.session).or_default();
+                *k += 1;
                 let start = r.started?;
-                Some((start, r.ended.map_or(SimTime::MAX, |e| e.0), r.session))
+                Some((start, r.ended.map_or(SimTime::MAX, |e| e.0), r.session, *k))
             })
             .collect();
         spans.sort();
         for w in spans.windows(2) {
             if w[1].0 < w[0].1 {
-                self.broken("one-active-session", w[1].0, || {
-                    format!("session {} ACTIVE while session {} is", w[1].2, w[0].2)
+                let (a, b) = (w[0], w[1]);
+                self.broken(InvariantName::OneActiveSession, b.0, || {
+                    format!(
+                        "session {} run {} became ACTIVE at {} while session {} run {}, ACTIVE since {}, had not ended",
+                        b.2, b.3, b.0, a.2, a.3, a.0
+                    )
                 });
             }
         }
@@ -337,7 +472,7 @@ impl Invariants {
             for p in &bus.ports {
                 let n = p.unaccounted();
                 if n != 0 {
-                    self.broken("frames-accounted", report.sim_time, || {
+                    self.broken(InvariantName::FramesAccounted, report.sim_time, || {
                         format!(
                             "{} bus, {}: {n} of {} frames offered neither sent ({} of {} by a babble), lost for a reason ({} queue full, {} bus-off, {} off) nor queued ({})",
                             bus.name,
@@ -353,7 +488,7 @@ impl Invariants {
                     });
                 }
                 if let Some(t) = p.first_sent_while_off {
-                    self.broken("silent-while-off", t, || {
+                    self.broken(InvariantName::SilentWhileOff, t, || {
                         format!(
                             "{} handed its {} bus controller {} frames while off",
                             p.name, bus.name, p.sent_while_off
@@ -363,7 +498,7 @@ impl Invariants {
             }
         }
         if report.sessions.pc_balanced == Some(false) {
-            self.broken("pc-balanced", report.sim_time, || {
+            self.broken(InvariantName::PcBalanced, report.sim_time, || {
                 format!(
                     "produced {:?}, downlinked {:?}, dropped {:?}, held {:?}",
                     report.sessions.produced,
@@ -399,7 +534,13 @@ mod tests {
         let run = |session: u8, from: u64, to: Option<u64>| SessionRun {
             session,
             started: Some(SimTime(from)),
-            ended: to.map(|t| (SimTime(t), 0, 0)),
+            ended: to.map(|t| {
+                (
+                    SimTime(t),
+                    crate::sessions::RunEnd::Result(nodes_pc::SessionResult::Done),
+                    0,
+                )
+            }),
             bytes: Vec::new(),
             len: 0,
             stream: Default::default(),
@@ -421,7 +562,7 @@ mod tests {
             ..Default::default()
         }];
         let v = Invariants::default().finish(&report);
-        let names: Vec<_> = v.iter().map(|v| v.name).collect();
+        let names: Vec<_> = v.iter().map(|v| v.name.as_str()).collect();
         assert_eq!(
             names,
             [
@@ -440,11 +581,17 @@ mod tests {
         assert_eq!(v[3].t, SimTime(40));
         let v: Vec<_> = v
             .into_iter()
-            .filter(|v| !matches!(v.name, "frames-accounted" | "silent-while-off"))
+            .filter(|v| {
+                !matches!(
+                    v.name,
+                    InvariantName::FramesAccounted | InvariantName::SilentWhileOff
+                )
+            })
             .collect();
         assert_eq!(v[0].t, SimTime(25));
         assert!(
-            v[0].detail.contains("session 3 ACTIVE while session 2"),
+            v[0].detail
+                == "session 3 run 1 became ACTIVE at 0.000000025s while session 2 run 1, ACTIVE since 0.000000020s, had not ended",
             "{}",
             v[0].detail
         );
@@ -509,7 +656,7 @@ mod tests {
         exchange(&mut storm, 60_000_000_000, 555_555, 10_000);
         let v = storm.finish(&RunReport::default());
         assert_eq!(
-            v.iter().map(|v| v.name).collect::<Vec<_>>(),
+            v.iter().map(|v| v.name.as_str()).collect::<Vec<_>>(),
             ["no-reply-storm"]
         );
         assert!(

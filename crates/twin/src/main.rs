@@ -306,6 +306,10 @@ struct CampaignRunArgs {
     /// Where the results go.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Finish a campaign that was stopped: keep the results already in --out (of this
+    /// campaign), run those not run.
+    #[arg(long)]
+    resume: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -1058,7 +1062,22 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
             campaign_run::Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?
         }
     };
-    let indices: Vec<u64> = shard.map_or_else(|| (0..runs).collect(), |s| s.runs(runs));
+    let mut indices: Vec<u64> = shard.map_or_else(|| (0..runs).collect(), |s| s.runs(runs));
+    let meta = campaign_run::CampaignMeta::of(&c, runs);
+    // What an earlier, stopped run of this campaign already has: its results are kept.
+    let kept: Vec<campaign_run::RunRow> = if a.resume {
+        let done = campaign_run::results_in(&a.out, &meta)?;
+        indices.retain(|k| !done.iter().any(|r| r.run == *k));
+        println!(
+            "resuming {}: {} results kept, {} runs to go",
+            a.out.display(),
+            done.len(),
+            indices.len()
+        );
+        done
+    } else {
+        Vec::new()
+    };
     let bar = if std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() {
         let b = indicatif::ProgressBar::new(indices.len() as u64);
         b.set_style(
@@ -1071,7 +1090,7 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     };
     let failed = std::sync::atomic::AtomicU64::new(0);
     let started = std::time::Instant::now();
-    let rows = campaign_run::run_all(&c, &indices, jobs, &|row| {
+    let ran = campaign_run::run_all(&c, &indices, jobs, &|row| {
         if row.verdict != RunVerdict::Pass {
             let n = failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             bar.set_message(format!("{n} failed"));
@@ -1080,7 +1099,10 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     });
     bar.finish_and_clear();
     let wall = started.elapsed().as_secs_f64();
-    campaign_run::write_outputs(&campaign_run::CampaignMeta::of(&c, runs), &rows, &a.out)?;
+    let mut rows = kept;
+    rows.extend(ran);
+    rows.sort_by_key(|r| r.run);
+    campaign_run::write_outputs(&meta, &rows, &a.out)?;
     let mut by_verdict = std::collections::BTreeMap::<&str, u64>::new();
     for r in &rows {
         *by_verdict.entry(r.verdict.word()).or_default() += 1;
@@ -1088,14 +1110,22 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     let shard_note =
         shard.map_or_else(String::new, |s| format!(" (shard {}/{})", s.index, s.count));
     println!(
-        "campaign {}{shard_note}: {} runs on {jobs} jobs in {wall:.1} s ({:.2} runs/s): {} pass, {} fail, {} error",
+        "campaign {}{shard_note}: {} runs on {jobs} jobs in {wall:.1} s ({:.2} runs/s): {} pass, {} fail, {} error, {} not run",
         c.name(),
         rows.len(),
         rows.len() as f64 / wall.max(1e-9),
         by_verdict.get("pass").unwrap_or(&0),
         by_verdict.get("fail").unwrap_or(&0),
         by_verdict.get("error").unwrap_or(&0),
+        by_verdict.get("not run").unwrap_or(&0),
     );
+    if by_verdict.contains_key("not run") {
+        println!(
+            "the campaign was stopped: `m6p-twin campaign run {} --out {} --resume` runs the runs not run",
+            a.file.display(),
+            a.out.display()
+        );
+    }
     for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
         let why = match &r.verdict {
             RunVerdict::Fail(f) => f
@@ -1103,17 +1133,16 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
                 .map(|(n, o)| format!("{n} ({o})"))
                 .collect::<Vec<_>>()
                 .join("; "),
-            RunVerdict::Error(e) => e.clone(),
+            RunVerdict::Error(e) | RunVerdict::NotRun(e) => e.clone(),
             RunVerdict::Pass => String::new(),
         };
         println!("  run {} {}: {why}", r.run, r.verdict.word());
     }
     let mut recording_ok = true;
     if a.record_failures {
-        for r in rows
-            .iter()
-            .filter(|r| r.verdict != RunVerdict::Pass && !r.scenario.is_empty())
-        {
+        for r in rows.iter().filter(|r| {
+            r.verdict != RunVerdict::Pass && r.verdict.is_result() && !r.scenario.is_empty()
+        }) {
             let path = a.out.join(format!("failures/run-{}.mcap", r.run));
             let file = format!("{} run {}", c.file, r.run);
             match campaign_run::record_failure(&file, r, &path) {
@@ -1126,7 +1155,10 @@ fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
         }
     }
     if a.shrink {
-        for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
+        for r in rows
+            .iter()
+            .filter(|r| r.verdict != RunVerdict::Pass && r.verdict.is_result())
+        {
             let out = a.out.join(format!("failures/run-{}.min.toml", r.run));
             let file = format!("{} run {}", c.file, r.run);
             match shrink_to(&file, &r.scenario, Some(&c.base), &out) {
@@ -1314,6 +1346,11 @@ fn test_one_with(
             ));
         }
     }
+    // A run cut short is no result: an error case, whatever held so far.
+    if let Some(i) = &out.report.interrupted {
+        cases.push(error_case(&name, &name, i.to_string()));
+        errors.push(format!("{name}: {i}"));
+    }
     let failed = out.verdicts.iter().filter(|v| !v.passed).count();
     ScenarioTested {
         row: (
@@ -1322,11 +1359,11 @@ fn test_one_with(
             failed,
             out.report.sim_time.as_secs_f64(),
             out.report.wall.as_secs_f64(),
-            false,
+            out.report.interrupted.is_some(),
         ),
         cases,
         errors,
-        ok: failed == 0,
+        ok: failed == 0 && out.report.interrupted.is_none(),
     }
 }
 

@@ -482,12 +482,14 @@ pub struct PcSessionMsg {
     pub session: Option<u8>,
     /// The payload's address.
     pub payload: Option<u8>,
-    /// `ended`: `done`, `aborted`, `no-ack` or `s-band-failure`.
+    /// `ended`: `done`, `aborted`, `no-ack` or `s-band-failure` (the PC's), or `lost` (the
+    /// run was lost with the PC's memory; `reason` says how).
     pub result: Option<String>,
     /// `ended`: packets counted.
     pub packets: Option<u32>,
     /// `dropped`: why (`buffer-full`, `oversize`, `late`, `session-ended`, `sband-failure`,
-    /// `unknown-source`, `power-loss`, `malformed`).
+    /// `unknown-source`, `power-loss`, `malformed`); `ended` with `lost`: `power` or
+    /// `reboot`.
     pub reason: Option<String>,
     /// `dropped`: how many bytes; `final`: bytes still held (buffer and S-band queue).
     pub bytes: Option<u64>,
@@ -1913,6 +1915,20 @@ impl EventEncoder {
                         event: "ended".into(),
                         session: Some(*session_id),
                         result: Some(crate::sessions::result_name(result.to_u8()).into()),
+                        packets: Some(*packets),
+                        ..none
+                    },
+                    // A run lost with the PC's memory: ended, with no ICD result.
+                    O::SessionLost {
+                        session_id,
+                        cause,
+                        packets,
+                        ..
+                    } => PcSessionMsg {
+                        event: "ended".into(),
+                        session: Some(*session_id),
+                        result: Some("lost".into()),
+                        reason: Some(cause.as_str().into()),
                         packets: Some(*packets),
                         ..none
                     },

@@ -181,7 +181,8 @@ pub struct PushSpec {
     pub stop: Option<Dur>,
 }
 
-/// Session results by name (ICD 3.1.6 table 3).
+/// Session results by name (ICD 3.1.6 table 3), and `lost`: a run the PC lost with its
+/// memory (power loss, reboot), which has no ICD result.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum SessionResultName {
@@ -193,12 +194,51 @@ pub enum SessionResultName {
     NoAck,
     /// 3: the S-band transmitter failed.
     SBandFailure,
+    /// Lost with the PC's memory.
+    Lost,
 }
 
 impl SessionResultName {
-    /// The wire value.
-    pub fn value(self) -> u8 {
-        self as u8
+    /// Whether a run that ended `end` ended this way.
+    pub fn matches(self, end: RunEnd) -> bool {
+        use nodes_pc::SessionResult as R;
+        matches!(
+            (self, end),
+            (Self::Done, RunEnd::Result(R::Done))
+                | (Self::Aborted, RunEnd::Result(R::Aborted))
+                | (Self::NoAck, RunEnd::Result(R::NoAck))
+                | (Self::SBandFailure, RunEnd::Result(R::SbandFailure))
+                | (Self::Lost, RunEnd::Lost(_))
+        )
+    }
+    /// Its name in scenarios (`done`, `no-ack`, `lost`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Done => "done",
+            Self::Aborted => "aborted",
+            Self::NoAck => "no-ack",
+            Self::SBandFailure => "s-band-failure",
+            Self::Lost => "lost",
+        }
+    }
+}
+
+/// How a session run ended: with the PC's result, or lost with its memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunEnd {
+    /// The PC ended it, with this ICD result.
+    Result(nodes_pc::SessionResult),
+    /// The PC lost it (power loss, reboot): no result, nothing after.
+    Lost(nodes_pc::LostCause),
+}
+
+impl std::fmt::Display for RunEnd {
+    /// `done`, `no-ack`, ..., `lost (power)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunEnd::Result(r) => f.write_str(result_name(r.to_u8())),
+            RunEnd::Lost(c) => write!(f, "lost ({})", c.as_str()),
+        }
     }
 }
 
@@ -553,8 +593,9 @@ pub struct SessionRun {
     /// When it became ACTIVE (`None`: it ended without starting, as an ABORT of a
     /// PENDING session may report).
     pub started: Option<SimTime>,
-    /// When it ended and how (`None`: still ACTIVE at the end of the run).
-    pub ended: Option<(SimTime, u8, u32)>,
+    /// When it ended, how, and the packets counted (`None`: still ACTIVE at the end of the
+    /// run).
+    pub ended: Option<(SimTime, RunEnd, u32)>,
     /// Bytes downlinked while it was the session's latest run, in order (none kept when
     /// the report forgets them: [`SessionsReport::forget_bytes`]).
     pub bytes: Vec<u8>,
@@ -611,20 +652,13 @@ impl SessionsReport {
                     session_id,
                     result,
                     packets,
-                } => {
-                    let end = Some((*t, result.to_u8(), *packets));
-                    match self.latest_open(*session_id) {
-                        Some(r) => r.ended = end,
-                        None => self.runs.push(SessionRun {
-                            session: *session_id,
-                            started: None,
-                            ended: end,
-                            bytes: Vec::new(),
-                            len: 0,
-                            stream: Default::default(),
-                        }),
-                    }
-                }
+                } => self.end_run(*session_id, (*t, RunEnd::Result(*result), *packets)),
+                O::SessionLost {
+                    t,
+                    session_id,
+                    cause,
+                    packets,
+                } => self.end_run(*session_id, (*t, RunEnd::Lost(*cause), *packets)),
                 O::Downlinked {
                     session_id,
                     payload_addr,
@@ -721,6 +755,22 @@ impl SessionsReport {
                     .or_default() += data;
             }
             _ => {}
+        }
+    }
+
+    /// Session `session`'s latest run ended `end` (a run of its own when none is open: the
+    /// PC may report an end without a start, as an ABORT of a PENDING session).
+    fn end_run(&mut self, session: u8, end: (SimTime, RunEnd, u32)) {
+        match self.latest_open(session) {
+            Some(r) => r.ended = Some(end),
+            None => self.runs.push(SessionRun {
+                session,
+                started: None,
+                ended: Some(end),
+                bytes: Vec::new(),
+                len: 0,
+                stream: Default::default(),
+            }),
         }
     }
 
@@ -847,8 +897,9 @@ impl DownlinkFiles {
         };
         match &**o {
             O::SessionStarted { session_id, .. } => self.start(*session_id),
-            // As the report: an end without an open run is a run of its own.
-            O::SessionEnded { session_id, .. } => {
+            // As the report: an end without an open run is a run of its own; a run lost
+            // with the PC's memory ends there.
+            O::SessionEnded { session_id, .. } | O::SessionLost { session_id, .. } => {
                 if !matches!(self.open.get(session_id), Some((_, _, false))) {
                     self.start(*session_id);
                 }
@@ -978,11 +1029,11 @@ impl ExpectKind for SessionExpect {
         let r = &report.sessions;
         let end = report.sim_time;
         let session = &self.session;
-        let result = &self.session_result.map(SessionResultName::value);
+        let result = &self.session_result;
         let occurrence = &self.occurrence.unwrap_or(Occurrence::Every);
         let (min, max) = (&self.min, &self.max);
 
-        let ended: Vec<(SimTime, u8, u32)> = r
+        let ended: Vec<(SimTime, RunEnd, u32)> = r
             .runs
             .iter()
             .filter(|x| x.session == *session)
@@ -1003,58 +1054,54 @@ impl ExpectKind for SessionExpect {
                 ),
             );
         }
-        let problem = |(_, res, packets): &(SimTime, u8, u32)| -> Option<String> {
+        let problem = |(_, end, packets): &(SimTime, RunEnd, u32)| -> Option<String> {
             if let Some(want) = result
-                && res != want
+                && !want.matches(*end)
             {
-                return Some(format!(
-                    "ended {} (expected {})",
-                    result_name(*res),
-                    result_name(*want)
-                ));
+                return Some(format!("{end}, expected {}", want.as_str()));
             }
             let p = u64::from(*packets);
             if min.is_some_and(|m| p < m) || max.is_some_and(|m| p > m) {
-                return Some(format!("{p} packets (expected {})", bounds(*min, *max)));
+                return Some(format!("{p} packets, expected {}", bounds(*min, *max)));
             }
             None
         };
-        let describe = |e: &(SimTime, u8, u32)| {
-            format!(
-                "ended {} at {} after {} packets",
-                result_name(e.1),
-                e.0,
-                e.2
-            )
-        };
-        let bad: Vec<_> = ended
+        // Every run, each with what it is compared with when it fails: "run 1 lost (power)
+        // at 30.000s after 14 packets: lost (power), expected done; run 2 done at ...".
+        let runs = ended
             .iter()
-            .filter_map(|e| problem(e).map(|p| (e.0, p)))
+            .enumerate()
+            .map(|(i, e)| {
+                let what = format!("run {} {} at {} after {} packets", i + 1, e.1, e.0, e.2);
+                match problem(e) {
+                    Some(p) => format!("{what} ({p})"),
+                    None => what,
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("; ");
+        let bad: Vec<SimTime> = ended
+            .iter()
+            .filter(|e| problem(e).is_some())
+            .map(|e| e.0)
             .collect();
         let n = ended.len();
+        let held = n - bad.len();
         match occurrence {
             Occurrence::Every => match bad.first() {
-                Some((t, p)) => (
-                    false,
-                    *t,
-                    format!("{} of {n} runs failed; first, at {t}: {p}", bad.len()),
-                ),
+                Some(t) => (false, *t, format!("{held} of {n} runs held: {runs}")),
                 None => (
                     true,
                     ended[n - 1].0,
-                    format!("{n} of {n} runs held; last {}", describe(&ended[n - 1])),
+                    format!("{n} of {n} runs held: {runs}"),
                 ),
             },
             Occurrence::Any => match ended.iter().find(|e| problem(e).is_none()) {
-                Some(e) => (
-                    true,
-                    e.0,
-                    format!("{} of {n} runs held; {}", n - bad.len(), describe(e)),
-                ),
+                Some(e) => (true, e.0, format!("{held} of {n} runs held: {runs}")),
                 None => (
                     false,
                     ended[n - 1].0,
-                    format!("none of {n} runs held; last: {}", bad[n - 1].1),
+                    format!("none of {n} runs held: {runs}"),
                 ),
             },
         }

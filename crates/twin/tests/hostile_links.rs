@@ -215,8 +215,7 @@ struct Flooded {
     during: Vec<Option<Duration>>,
     /// Of five pings after the flood, how many were answered.
     answered_after: usize,
-    /// The run's exit status and its output.
-    ok: bool,
+    /// What the run printed.
     out: String,
 }
 
@@ -306,14 +305,13 @@ fn flood(scenario: &str, src: u8, dst: u8, read_replies: bool, args: &[&str]) ->
                 .is_some()
         })
         .count();
-    let (ok, out, err) = twin.finish_now();
+    let (_, out, err) = twin.finish_now();
     let f = Flooded {
         sent,
         grew_mib: rss_max.saturating_sub(rss_before) as f64 / 1024.0,
         unloaded: unloaded[2],
         during,
         answered_after,
-        ok,
         out: format!("{out}{err}"),
     };
     println!(
@@ -369,7 +367,13 @@ fn a_ground_flood_delays_others_by_one_packet_each_way(read_replies: bool) {
         median.is_some_and(|m| m <= bound),
         "median round trip during the flood {median:?}, bound {bound:?}"
     );
-    assert!(f.ok, "GS16's pings: {}", f.out);
+    // The run is stopped after the flood (an interrupted run exits 1 whatever held): its
+    // verdict table says how GS16's pings did.
+    assert!(
+        f.out.lines().any(|l| l.starts_with("  PASS ")) && !f.out.contains("  FAIL "),
+        "GS16's pings: {}",
+        f.out
+    );
 }
 
 #[test]

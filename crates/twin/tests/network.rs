@@ -244,7 +244,11 @@ fn a_setup_for_session_1_on_the_default_scenario_polls_payload_12() {
     let runs = &report.sessions.runs;
     assert_eq!(runs.len(), 1, "{runs:?}");
     let (t_end, result, packets) = runs[0].ended.unwrap();
-    assert_eq!(result, 0, "DONE");
+    assert_eq!(
+        result,
+        m6p_twin::sessions::RunEnd::Result(nodes_pc::SessionResult::Done),
+        "DONE"
+    );
     assert!(
         (95..=100).contains(&packets),
         "{packets} polls in 10 s at 100 ms"
@@ -315,7 +319,12 @@ fn the_eps_charges_the_s_band_and_its_channel_switches_the_transmitter() {
     assert!(back > off + 0.8, "S-band off {off} W, back on {back} W");
     // Nothing was lost: the queue waited while the transmitter was unpowered.
     let run1 = &report.sessions.runs[0];
-    assert_eq!(run1.ended.map(|e| e.1), Some(0));
+    assert_eq!(
+        run1.ended.map(|e| e.1),
+        Some(m6p_twin::sessions::RunEnd::Result(
+            nodes_pc::SessionResult::Done
+        ))
+    );
     assert!(
         run1.bytes.len() > 250 * 254,
         "{:?} {} bytes {:?}",

@@ -440,6 +440,10 @@ fn a_real_recording_decodes_with_the_python_mcap_package() {
 /// fields), so a plot of TMGEN's `current_mode` from the recording shows a mode change, read
 /// with nothing but the Python `mcap` package and the schemas in the file.
 #[test]
+#[cfg_attr(
+    not(python_mcap),
+    ignore = "needs python3 with the `mcap` package (pip install mcap; .ci/run installs it)"
+)]
 fn a_recorded_tmgen_mode_change_shows_in_the_decoded_packets() {
     let scenario = tmp("mode-change.toml");
     std::fs::write(

@@ -38,7 +38,7 @@ use crate::faults::{FaultAction, TimedFault};
 use crate::ground::{Recurring, Results};
 use crate::network::NetworkSpec;
 pub(crate) use build::fc_config;
-pub use report::{NodeReport, Observed, Observer, RunReport};
+pub use report::{Interruption, NodeReport, Observed, Observer, RunReport, StopCause};
 
 /// Everything a run needs.
 #[derive(Debug, Clone)]
@@ -61,6 +61,9 @@ pub struct RunOptions {
     pub payload_access: platform::addr::PayloadAccess,
     /// The invariants' settings (`[invariants]`; a campaign checks them on every run).
     pub invariants: crate::invariants::InvariantSettings,
+    /// The most wall-clock time the run may take (a campaign's `[limits] wall`): past it
+    /// the run stops, as interrupted. `None`: no limit.
+    pub wall_limit: Option<Duration>,
     /// Factory values of nodes' platform parameters (`[nodes.NAME] params`), by address:
     /// (parameter id, value), set before the node's first boot.
     pub params: BTreeMap<u8, Vec<(u8, f64)>>,
@@ -207,6 +210,7 @@ impl RunOptions {
             uart: Vec::new(),
             payload_access: platform::addr::PayloadAccess::default(),
             invariants: crate::invariants::InvariantSettings::default(),
+            wall_limit: None,
             params: BTreeMap::new(),
             replaced: std::collections::BTreeSet::new(),
             ground_plan: BTreeMap::new(),
@@ -360,15 +364,15 @@ pub fn build_virtual_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
         .context("building the tokio runtime")
 }
 
-/// Whether Ctrl-C was pressed: one watcher thread for the process (its own small runtime
-/// with the signal driver), so that a run in virtual time needs no IO driver of its own.
-/// Once pressed it stays pressed: every run still going stops, and so does any later one
-/// (a campaign ends).
-fn ctrl_c() -> tokio::sync::watch::Receiver<bool> {
-    static SEEN: std::sync::OnceLock<tokio::sync::watch::Receiver<bool>> =
+/// Whether SIGINT (Ctrl-C) or SIGTERM came, and which: one watcher thread for the process
+/// (its own small runtime with the signal driver), so that a run in virtual time needs no
+/// IO driver of its own. Once it came it stays: every run still going stops, and so does
+/// any later one (a campaign ends).
+pub fn stop_signal() -> tokio::sync::watch::Receiver<Option<StopCause>> {
+    static SEEN: std::sync::OnceLock<tokio::sync::watch::Receiver<Option<StopCause>>> =
         std::sync::OnceLock::new();
     SEEN.get_or_init(|| {
-        let (tx, rx) = tokio::sync::watch::channel(false);
+        let (tx, rx) = tokio::sync::watch::channel(None);
         let (ready_tx, ready_rx) = std::sync::mpsc::channel();
         let spawned = std::thread::Builder::new()
             .name("ctrl-c".into())
@@ -379,12 +383,12 @@ fn ctrl_c() -> tokio::sync::watch::Receiver<bool> {
                 if let Ok(rt) = rt {
                     rt.block_on(async {
                         // The handler is in place before the first run starts.
-                        let sig = watch_interrupt();
+                        let sig = watch_signals();
                         let _ = ready_tx.send(());
                         if let Some(sig) = sig
-                            && sig.await
+                            && let Some(cause) = sig.await
                         {
-                            let _ = tx.send(true);
+                            let _ = tx.send(Some(cause));
                         }
                     });
                 }
@@ -402,17 +406,28 @@ fn ctrl_c() -> tokio::sync::watch::Receiver<bool> {
     .clone()
 }
 
-/// SIGINT's handler, installed now; its future says whether it was raised.
-fn watch_interrupt() -> Option<impl std::future::Future<Output = bool>> {
+/// SIGINT's and SIGTERM's handlers, installed now; their future says which came first.
+fn watch_signals() -> Option<impl std::future::Future<Output = Option<StopCause>>> {
     #[cfg(unix)]
     {
-        let mut sig =
-            tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt()).ok()?;
-        Some(async move { sig.recv().await.is_some() })
+        use tokio::signal::unix::{SignalKind, signal};
+        let mut int = signal(SignalKind::interrupt()).ok()?;
+        let mut term = signal(SignalKind::terminate()).ok()?;
+        Some(async move {
+            tokio::select! {
+                s = int.recv() => s.map(|()| StopCause::Interrupt),
+                s = term.recv() => s.map(|()| StopCause::Terminate),
+            }
+        })
     }
     #[cfg(not(unix))]
     {
-        Some(async { tokio::signal::ctrl_c().await.is_ok() })
+        Some(async {
+            tokio::signal::ctrl_c()
+                .await
+                .ok()
+                .map(|()| StopCause::Interrupt)
+        })
     }
 }
 
@@ -516,21 +531,24 @@ pub async fn run_with(
             kiss_budget.add_permits(1);
         }
     };
-    let mut ctrl_c_seen = ctrl_c();
-    let ctrl_c = async move {
-        if ctrl_c_seen.wait_for(|seen| *seen).await.is_err() {
-            std::future::pending::<()>().await;
+    let mut signal_seen = stop_signal();
+    let signalled = async move {
+        let seen = signal_seen.wait_for(Option::is_some).await.map(|c| *c);
+        match seen {
+            Ok(cause) => cause,
+            Err(_) => std::future::pending().await,
         }
     };
-    tokio::pin!(ctrl_c);
-    let mut interrupted = false;
+    tokio::pin!(signalled);
+    let mut interrupted: Option<StopCause> = None;
+    let wall_deadline = opts.wall_limit.map(|d| (d, wall_start + d));
     loop {
         let next_fault = faults.peek().map_or(SimTime::MAX, |f| f.at).min(end);
         tokio::select! {
             biased;
-            _ = &mut ctrl_c => {
-                tracing::info!("Ctrl-C: stopping");
-                interrupted = true;
+            cause = &mut signalled => {
+                tracing::info!("{cause:?}: stopping");
+                interrupted = cause;
                 break;
             }
             ev = ev_rx.recv() => {
@@ -556,6 +574,15 @@ pub async fn run_with(
                     handle_event(ev, &mut observer);
                     left -= 1;
                     next = if left > 0 { ev_rx.try_recv().ok() } else { None };
+                }
+                // The wall clock's limit, looked at once a batch (a run in virtual time
+                // sleeps on no wall-clock timer).
+                if let Some((d, at)) = wall_deadline
+                    && std::time::Instant::now() >= at
+                {
+                    tracing::warn!("the run's wall-clock limit ({d:?}) passed: stopping");
+                    interrupted = Some(StopCause::WallLimit(d));
+                    break;
                 }
             }
             () = clock.sleep_until(next_fault), if next_fault < SimTime::MAX => {
@@ -583,11 +610,16 @@ pub async fn run_with(
             }
         }
     }
-    // A virtual run ends exactly at its duration, unless Ctrl-C stopped it before.
+    // A virtual run ends exactly at its duration, unless it was stopped before.
     let sim_time = match opts.duration {
-        Some(d) if clock.is_virtual() && !interrupted => SimTime::ZERO + d,
+        Some(d) if clock.is_virtual() && interrupted.is_none() => SimTime::ZERO + d,
         _ => clock.now(),
     };
+    let interrupted = interrupted.map(|cause| Interruption {
+        cause,
+        at: sim_time,
+        of: opts.duration,
+    });
 
     for (_, ctl, _) in &nodes.tasks {
         let _ = ctl.send((SimTime::ZERO, NodeCtl::Stop));
@@ -619,6 +651,7 @@ pub async fn run_with(
     let observed = observer.finish();
     Ok(RunReport {
         sim_time,
+        interrupted,
         wall: wall_start.elapsed(),
         nodes: node_reports,
         buses: vec![segs.main.stats(), segs.payload.stats()],

@@ -33,6 +33,9 @@ pub struct NodeReport {
 pub struct RunReport {
     /// Simulated time reached.
     pub sim_time: SimTime,
+    /// Why the run stopped before its end, if it did: a signal (SIGINT, SIGTERM) or its
+    /// wall-clock limit. Its verdicts then judge only what ran.
+    pub interrupted: Option<Interruption>,
     /// Wall-clock time taken.
     pub wall: Duration,
     /// Per-node counters, in start order.
@@ -167,6 +170,9 @@ impl RunReport {
     pub fn table(&self) -> String {
         use std::fmt::Write as _;
         let mut s = String::new();
+        if let Some(i) = &self.interrupted {
+            let _ = writeln!(s, "{i}: the verdicts below judge only what ran\n");
+        }
         let elapsed = self.sim_time - SimTime::ZERO;
         let _ = writeln!(
             s,
@@ -404,5 +410,46 @@ mod tests {
             t.contains("link payload-sw: 5 lost at the link (2 dropped, 0 while down, 0 while hung, 3 while unpowered, 0 over the delay line), 1 delayed"),
             "{t}"
         );
+    }
+}
+
+/// Why a run stopped before its end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopCause {
+    /// SIGINT (Ctrl-C).
+    Interrupt,
+    /// SIGTERM (what Slurm, Kubernetes, systemd and docker send).
+    Terminate,
+    /// Its wall-clock limit (a campaign's `[limits] wall`).
+    WallLimit(Duration),
+}
+
+/// A run cut short: why, at which simulated instant, of which duration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Interruption {
+    /// Why.
+    pub cause: StopCause,
+    /// The simulated instant it stopped at.
+    pub at: SimTime,
+    /// The duration it was to run, if bounded.
+    pub of: Option<Duration>,
+}
+
+impl std::fmt::Display for Interruption {
+    /// `interrupted at 3.000000000s of 3h (SIGTERM)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted at {}", self.at)?;
+        if let Some(d) = self.of {
+            write!(f, " of {}", crate::duration::format_duration(d))?;
+        }
+        match self.cause {
+            StopCause::Interrupt => f.write_str(" (SIGINT)"),
+            StopCause::Terminate => f.write_str(" (SIGTERM)"),
+            StopCause::WallLimit(d) => write!(
+                f,
+                " (its wall-clock limit, {})",
+                crate::duration::format_duration(d)
+            ),
+        }
     }
 }

@@ -146,7 +146,10 @@ pub fn assert_one_session_done(report: &m6p_twin::runtime::RunReport, session: u
         .unwrap_or_else(|| panic!("session {session} ended within the run"));
     assert_eq!(
         (result, n),
-        (0, packets),
+        (
+            m6p_twin::sessions::RunEnd::Result(nodes_pc::SessionResult::Done),
+            packets
+        ),
         "expected DONE after {packets} packets"
     );
 }
