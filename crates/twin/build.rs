@@ -20,6 +20,12 @@
 //!   `libzmq3-dev`), to build the vendored libcsp 1.4 and `tests/libcsp/` for
 //!   `tests/libcsp.rs`. Under `CI` it is always set (`.ci/run` installs them);
 //!   `M6P_LIBCSP_PROBE=off` forces "not available" elsewhere.
+//! - `cfg(mount_tmpfs)`: running as root on Linux, so a test may mount a 64 KiB tmpfs to
+//!   see a recording run out of space (`tests/recording_safety.rs`). Under `CI` it is
+//!   always set (CI runs as root).
+//! - `cfg(valgrind)`: `valgrind` is on the PATH, to count a command's instructions with
+//!   cachegrind (`tests/input_bounds.rs`: checking is linear in the commands). Under `CI`
+//!   it is always set (`.ci/run` installs it).
 
 #[path = "../bus/build.rs"]
 mod uml_probe;
@@ -31,6 +37,36 @@ fn main() {
     pytest_probe();
     slurm_probe();
     libcsp_probe();
+    mount_probe();
+    valgrind_probe();
+}
+
+/// `cfg(valgrind)`: valgrind runs here (always under CI, which installs it).
+fn valgrind_probe() {
+    println!("cargo::rustc-check-cfg=cfg(valgrind)");
+    let runs = std::process::Command::new("valgrind")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if std::env::var_os("CI").is_some() || runs {
+        println!("cargo::rustc-cfg=valgrind");
+    }
+}
+
+/// `cfg(mount_tmpfs)`: the tests may mount a small tmpfs (Linux, as root) to see a
+/// recording run out of space. Under CI it is set (CI runs as root): a test that cannot
+/// mount there fails instead of being ignored.
+fn mount_probe() {
+    println!("cargo::rustc-check-cfg=cfg(mount_tmpfs)");
+    let root = std::fs::read_to_string("/proc/self/status").is_ok_and(|s| {
+        s.lines()
+            .find_map(|l| l.strip_prefix("Uid:"))
+            .and_then(|l| l.split_whitespace().nth(1))
+            == Some("0")
+    });
+    if std::env::var_os("CI").is_some() || (root && cfg!(target_os = "linux")) {
+        println!("cargo::rustc-cfg=mount_tmpfs");
+    }
 }
 
 fn libcsp_probe() {

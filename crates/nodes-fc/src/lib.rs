@@ -837,7 +837,9 @@ impl FcApp {
             }
         }
 
-        if self.publish_every > 0 && fsw && self.ticks % self.publish_every == 0 {
+        // Without an orbit (no TLE, or SGP4 failing at this instant) there is no true state
+        // to tell: publishing one would put the satellite at the Earth's centre.
+        if self.publish_every > 0 && fsw && env.is_some() && self.ticks % self.publish_every == 0 {
             self.publish(t, unix_ns);
         }
         // The other nodes' view of the truth: every tick, whether the FC software runs or not

@@ -151,11 +151,13 @@ fn default_scenario_10min(record: Option<&std::path::Path>) -> u64 {
     let mut compiled = compile_loaded(&loaded);
     with_duration(&mut compiled, Duration::from_secs(600));
     let rt = build_runtime_for(&compiled.opts).expect("runtime");
+    // Each iteration replaces the last one's file.
+    let record = record.map(m6p_twin::exec::RecordTo::replacing);
     let (outcome, stats) = rt
         .block_on(execute_recorded(&loaded, compiled, record))
         .expect("run");
     assert_eq!(outcome.report.sim_time, SimTime::from_secs(600));
-    stats.map_or(0, |s| s.bytes)
+    stats.map_or(0, |s| s.expect("recorded").bytes)
 }
 
 fn bench_default_scenario(c: &mut Criterion) {

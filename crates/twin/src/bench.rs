@@ -273,12 +273,14 @@ pub fn run_one(
             compiled.opts.duration = Some(duration);
             compiled.opts.clock = bus::ClockMode::Virtual;
             let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
-            let record = (variant == Variant::Recorded).then_some(record);
+            // Each round replaces the last round's file.
+            let record = (variant == Variant::Recorded).then(|| exec::RecordTo::replacing(record));
             stats = rt
                 .block_on(exec::execute_recorded_without_files(
                     loaded, compiled, record,
                 ))?
-                .1;
+                .1
+                .transpose()?;
         }
     }
     Ok(Sample {

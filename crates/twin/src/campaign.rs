@@ -508,7 +508,7 @@ impl Campaign {
                     .parent()
                     .map_or_else(|| PathBuf::from(p), |d| d.join(p));
                 let shown = path.display().to_string();
-                let base_text = std::fs::read_to_string(&path)
+                let base_text = crate::scenario::read_input(&path)
                     .map_err(|e| one("scenario", format!("cannot read {shown}: {e}")))?;
                 // The base must be a valid scenario on its own.
                 Scenario::parse(&shown, &base_text)?;
@@ -574,7 +574,7 @@ impl Campaign {
     /// Read and parse a campaign file.
     pub fn load(path: &Path) -> anyhow::Result<Campaign> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path)
+        let text = crate::scenario::read_input(path)
             .map_err(|e| anyhow::anyhow!("reading campaign {file}: {e}"))?;
         Ok(Campaign::parse(&file, &text)?)
     }

@@ -230,7 +230,12 @@ pub fn record_failure(file: &str, row: &RunRow, path: &Path) -> anyhow::Result<(
     let mut compiled = exec::compile_seeded(&loaded, None);
     compiled.opts.clock = bus::ClockMode::Virtual;
     let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
-    let (outcome, _) = rt.block_on(exec::execute_replay(&loaded, compiled, path))?;
+    let (outcome, recorded) = rt.block_on(exec::execute_replay(
+        &loaded,
+        compiled,
+        exec::RecordTo::replacing(path),
+    ))?;
+    recorded.transpose()?;
     let summary = crate::recording::read_summary(path)?;
     if let Some(why) = summary.incomplete {
         bail!("{}: the recording is incomplete: {why}", path.display());
@@ -694,7 +699,8 @@ mod tests {
         assert_eq!(csv.lines().count(), 7, "{csv}");
         assert!(
             csv.starts_with(
-                "run,seed,commands[0].at,downlinked_bytes,max_rate_deg_s,min_soc,verdict,failed\n"
+                // No `max_rate_deg_s`: the scenario has no orbit, so no truth is published.
+                "run,seed,commands[0].at,downlinked_bytes,min_soc,verdict,failed\n"
             ),
             "{csv}"
         );

@@ -39,7 +39,8 @@ impl Loaded {
 /// Read and validate a scenario file.
 pub fn load(path: &Path) -> anyhow::Result<Loaded> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading scenario {file}"))?;
+    let text =
+        crate::scenario::read_input(path).with_context(|| format!("reading scenario {file}"))?;
     let scenario = Scenario::parse(&file, &text)?;
     Ok(Loaded {
         file,
@@ -222,13 +223,44 @@ pub fn end_of(c: &Compiled) -> Option<SimTime> {
     c.opts.duration.map(|d| SimTime::ZERO + d)
 }
 
+/// Where a run records: the recording's name, and what it may do to a file already there.
+#[derive(Debug, Clone, Copy)]
+pub struct RecordTo<'a> {
+    /// The recording's name.
+    pub path: &'a Path,
+    /// A file already at it: refused, or replaced when the recording is complete.
+    pub existing: crate::record::Existing,
+}
+
+impl<'a> RecordTo<'a> {
+    /// `path`, refusing a file already there.
+    pub fn new(path: &'a Path) -> Self {
+        RecordTo {
+            path,
+            existing: crate::record::Existing::Refuse,
+        }
+    }
+    /// `path`, replacing a file already there (the twin's own: a benchmark's round, a
+    /// campaign's failure run).
+    pub fn replacing(path: &'a Path) -> Self {
+        RecordTo {
+            path,
+            existing: crate::record::Existing::Replace,
+        }
+    }
+}
+
+/// What a recording came to: its figures, or why it stopped (the run went on without it).
+pub type RecordingResult = Option<anyhow::Result<crate::record::RecordingStats>>;
+
 /// Run a compiled scenario, recording everything to `record` when given. A recorder
-/// error stops the recording (reported at the end) but never the run.
+/// error stops the recording (warned when it happens, returned with the outcome) but never
+/// the run.
 pub async fn execute_recorded(
     loaded: &Loaded,
     compiled: Compiled,
-    record: Option<&Path>,
-) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    record: Option<RecordTo<'_>>,
+) -> anyhow::Result<(Outcome, RecordingResult)> {
     execute_with(loaded, compiled, record, &mut |_| {}).await
 }
 
@@ -236,8 +268,8 @@ pub async fn execute_recorded(
 pub async fn execute_recorded_without_files(
     loaded: &Loaded,
     compiled: Compiled,
-    record: Option<&Path>,
-) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+    record: Option<RecordTo<'_>>,
+) -> anyhow::Result<(Outcome, RecordingResult)> {
     execute_inner(loaded, compiled, record, None, &mut |_| {}).await
 }
 
@@ -246,10 +278,10 @@ pub async fn execute_recorded_without_files(
 pub async fn execute_with(
     loaded: &Loaded,
     compiled: Compiled,
-    record: Option<&Path>,
+    record: Option<RecordTo<'_>>,
     live: &mut (dyn FnMut(&RunEvent) + Send),
-) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
-    let dir = downlink_dir(loaded, record);
+) -> anyhow::Result<(Outcome, RecordingResult)> {
+    let dir = downlink_dir(loaded, record.map(|r| r.path));
     execute_inner(loaded, compiled, record, dir.as_deref(), live).await
 }
 
@@ -260,19 +292,19 @@ pub async fn execute_with(
 pub async fn execute_replay(
     loaded: &Loaded,
     compiled: Compiled,
-    record: &Path,
-) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
-    let dir = record.with_extension("downlink");
+    record: RecordTo<'_>,
+) -> anyhow::Result<(Outcome, RecordingResult)> {
+    let dir = record.path.with_extension("downlink");
     execute_inner(loaded, compiled, Some(record), Some(&dir), &mut |_| {}).await
 }
 
 async fn execute_inner(
     loaded: &Loaded,
     compiled: Compiled,
-    record: Option<&Path>,
+    record: Option<RecordTo<'_>>,
     downlink: Option<&Path>,
     live: &mut (dyn FnMut(&RunEvent) + Send),
-) -> anyhow::Result<(Outcome, Option<crate::record::RecordingStats>)> {
+) -> anyhow::Result<(Outcome, RecordingResult)> {
     // The ground sink's files grow as the bytes arrive.
     let mut files = downlink.map(crate::sessions::DownlinkFiles::new);
     let mut live = |ev: &RunEvent| {
@@ -281,11 +313,22 @@ async fn execute_inner(
         }
         live(ev);
     };
-    let Some(path) = record else {
+    let Some(RecordTo { path, existing }) = record else {
         let outcome = execute(compiled, &mut live).await?;
         downlink_written(files)?;
         return Ok((outcome, None));
     };
+    // The scenario is never recorded over, whatever `--overwrite` says.
+    if let (Ok(a), Ok(b)) = (
+        std::fs::canonicalize(path),
+        std::fs::canonicalize(&loaded.file),
+    ) && a == b
+    {
+        anyhow::bail!(
+            "{} is the scenario itself: not recorded over",
+            path.display()
+        );
+    }
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
@@ -315,16 +358,19 @@ async fn execute_inner(
             .filter_map(|l| Some((l.label(), l.cfg.tx_frames_per_s?)))
             .collect(),
     };
-    let mut recorder = crate::record::Recorder::create(path, meta)?;
+    let mut recorder = crate::record::Recorder::create(path, meta, existing)?;
     recorder.set_icd(crate::icd::IcdMap::for_run(&compiled.opts));
-    // The recorder runs on a thread of its own, fed copies of the events in order.
-    let mut recorder = crate::record::RecorderThread::start(recorder)?;
+    // The recorder runs on a thread of its own, fed copies of the events in order; on the
+    // wall clock its file is flushed every second (a process killed loses at most that).
+    let every = (compiled.opts.clock != bus::ClockMode::Virtual)
+        .then_some(std::time::Duration::from_secs(1));
+    let mut recorder = crate::record::RecorderThread::start_flushing(recorder, every)?;
     let outcome = execute(compiled, &mut |ev| {
         recorder.write(ev);
         live(ev);
     })
     .await?;
-    let stats = recorder.finish()?;
+    let stats = recorder.finish();
     downlink_written(files)?;
     Ok((outcome, Some(stats)))
 }

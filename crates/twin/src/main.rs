@@ -138,9 +138,15 @@ struct RunArgs {
     /// Seed, overriding the scenario's.
     #[arg(long)]
     seed: Option<u64>,
-    /// Record the run to this MCAP file (overrides the scenario's `record.file`).
+    /// Record the run to this MCAP file (overrides the scenario's `record.file`). Written
+    /// beside it and put in place when complete; a file already there is refused unless
+    /// --overwrite.
     #[arg(long, value_name = "FILE")]
     record: Option<PathBuf>,
+    /// Replace a file already at the recording's name (once the new one is complete; never
+    /// the scenario itself).
+    #[arg(long)]
+    overwrite: bool,
     /// Follow the wall clock (needed by outside programs; implied by --kiss-* and --socketcan).
     #[arg(long)]
     realtime: bool,
@@ -710,12 +716,16 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
     };
     #[cfg(not(feature = "live"))]
     let mut tap = |_: &m6p_twin::events::RunEvent| {};
-    let (outcome, stats) = rt.block_on(exec::execute_with(
-        &loaded,
-        compiled,
-        record.as_deref(),
-        &mut tap,
-    ))?;
+    let record_to = record.as_deref().map(|path| exec::RecordTo {
+        path,
+        existing: if a.overwrite {
+            m6p_twin::record::Existing::Replace
+        } else {
+            m6p_twin::record::Existing::Refuse
+        },
+    });
+    let (outcome, stats) =
+        rt.block_on(exec::execute_with(&loaded, compiled, record_to, &mut tap))?;
     #[cfg(feature = "live")]
     if let Some(l) = live.take() {
         eprintln!("live view: {} messages published; stopping", l.messages());
@@ -723,16 +733,25 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
     }
     print!("{}", outcome.report.table());
     print!("{}", outcome.verdict_table());
-    if let (Some(path), Some(stats)) = (record, stats) {
-        println!(
-            "\nrecorded {} messages in {} chunks to {} ({} bytes)",
-            stats.messages,
-            stats.chunks,
-            path.display(),
-            stats.bytes
-        );
-    }
-    Ok(outcome.passed())
+    // The report first, whatever became of the recording: a failed recording fails the run.
+    let recorded = match (record, stats) {
+        (Some(path), Some(Ok(stats))) => {
+            println!(
+                "\nrecorded {} messages in {} chunks to {} ({} bytes)",
+                stats.messages,
+                stats.chunks,
+                path.display(),
+                stats.bytes
+            );
+            true
+        }
+        (_, Some(Err(e))) => {
+            eprintln!("error: the recording failed: {e:#}");
+            false
+        }
+        _ => true,
+    };
+    Ok(outcome.passed() && recorded)
 }
 
 /// Start the live view on `addr` for a run starting at `epoch_unix_s`.
@@ -999,20 +1018,27 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         }
         Some(k) => anyhow::bail!("unknown test knob `{k}`"),
     }
-    let (path, temporary) = match &a.record {
-        Some(p) => (p.clone(), false),
-        None => (
-            std::env::temp_dir().join(format!("m6p-twin-replay-{}.mcap", std::process::id())),
-            true,
-        ),
+    // Without --record, a directory of its own (created exclusively, removed with all it
+    // holds), never a predictable name another program could plant a link at.
+    let scratch = match &a.record {
+        Some(_) => None,
+        None => Some(tempfile::tempdir().context("creating a temporary directory")?),
+    };
+    let path = match (&a.record, &scratch) {
+        (Some(p), _) => p.clone(),
+        (None, Some(d)) => d.path().join("replay.mcap"),
+        (None, None) => anyhow::bail!("no recording path"),
     };
     let rt = build_runtime_for(&compiled.opts)?;
-    let result = rt.block_on(exec::execute_replay(&loaded, compiled, &path));
-    let d = result.and_then(|_| m6p_twin::recording::diff(&a.file, &path));
-    if temporary {
-        let _ = std::fs::remove_file(&path);
-        let _ = std::fs::remove_dir_all(path.with_extension("downlink"));
-    }
+    let result = rt.block_on(exec::execute_replay(
+        &loaded,
+        compiled,
+        exec::RecordTo::new(&path),
+    ));
+    let d = result
+        .and_then(|(_, recorded)| recorded.transpose())
+        .and_then(|_| m6p_twin::recording::diff(&a.file, &path));
+    drop(scratch);
     let d = d?;
     println!("{d}");
     Ok(d.is_identical())

@@ -493,6 +493,11 @@ impl<W: Write> McapFile<W> {
         Ok(())
     }
 
+    /// Bytes written to the file so far (the open chunk not included).
+    pub fn position(&self) -> u64 {
+        self.pos
+    }
+
     /// Close the open chunk and flush the file.
     pub fn flush(&mut self) -> io::Result<()> {
         self.write_chunks()?;

@@ -86,7 +86,9 @@ tle = [
 "#;
 
     fn fc_of(extra: &str) -> nodes_fc::FcConfig {
-        let text = format!("name = \"t\"\nduration = \"1m\"\n{TLE}\n{extra}");
+        let text = format!(
+            "name = \"t\"\nstart = \"2026-04-30T18:00:00Z\"\nduration = \"1m\"\n{TLE}\n{extra}"
+        );
         let s = Scenario::parse("t.toml", &text).unwrap();
         compile(&s).opts.fc
     }

@@ -92,7 +92,7 @@ use std::sync::Arc;
 
 use crate::mcap_file::McapFile;
 use crate::protobuf::{Nested, Packed};
-use anyhow::Context as _;
+use anyhow::{Context as _, bail};
 use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CanFrame, CfpId, FrameType};
 use csp::header::{HEADER_LEN, Header};
@@ -2255,6 +2255,114 @@ struct Chan {
 }
 
 /// The MCAP side of a [`Recorder`]: the writer and its channels.
+/// What a recording may do to a file already at its path.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Existing {
+    /// Refuse it: the recording is not made, the file untouched (`m6p-twin run`'s default).
+    Refuse,
+    /// Replace it, once the recording is complete (`--overwrite`; files of the twin's own).
+    Replace,
+}
+
+/// Where a recording goes: written to a temporary file beside its name (created
+/// exclusively, never a name another program can plant a link at) and put in place when
+/// complete, so that a file at the name is never half-written, mixed with another run's or
+/// replaced by accident. A run that fails or is killed leaves its temporary file, with
+/// what was recorded, and says where. A name that is a device or a FIFO (`/dev/full`, a
+/// pipe to a reader) holds no stored recording: it is written directly, never replaced.
+#[derive(Debug)]
+struct Target {
+    /// The temporary file (`.NAME.XXXXXX.partial`, beside the name), or none when the name
+    /// is written directly.
+    temp: Option<PathBuf>,
+    /// The recording's name.
+    path: PathBuf,
+    existing: Existing,
+}
+
+impl Target {
+    fn create(path: &Path, existing: Existing) -> anyhow::Result<(File, Target)> {
+        if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .open(path)
+                .with_context(|| format!("opening {}", path.display()))?;
+            return Ok((
+                file,
+                Target {
+                    temp: None,
+                    path: path.to_owned(),
+                    existing,
+                },
+            ));
+        }
+        if existing == Existing::Refuse && path.exists() {
+            bail!(
+                "{} exists: not replaced (--overwrite replaces it once the new recording is complete)",
+                path.display()
+            );
+        }
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let name = path
+            .file_name()
+            .map_or_else(|| "recording".into(), |n| n.to_string_lossy());
+        let temp = tempfile::Builder::new()
+            .prefix(&format!(".{name}."))
+            .suffix(".partial")
+            .tempfile_in(dir)
+            .with_context(|| format!("creating a temporary file in {}", dir.display()))?;
+        let (file, temp) = temp.into_parts();
+        // Never removed by a drop: a run that fails or is killed leaves what it recorded.
+        let temp = temp
+            .keep()
+            .with_context(|| format!("keeping a temporary file in {}", dir.display()))?;
+        Ok((
+            file,
+            Target {
+                temp: Some(temp),
+                path: path.to_owned(),
+                existing,
+            },
+        ))
+    }
+
+    /// The file being written.
+    fn written(&self) -> &Path {
+        self.temp.as_deref().unwrap_or(&self.path)
+    }
+
+    /// Put the complete recording at its name.
+    fn place(&self) -> anyhow::Result<()> {
+        let path = &self.path;
+        let Some(temp) = &self.temp else {
+            return Ok(());
+        };
+        let kept = || format!("this run's recording is in {}", temp.display());
+        match self.existing {
+            Existing::Replace => std::fs::rename(temp, path)
+                .with_context(|| format!("renaming it to {}; {}", path.display(), kept())),
+            // A link fails if the name exists (another run took it meanwhile): never
+            // replaced, never mixed.
+            Existing::Refuse => match std::fs::hard_link(temp, path) {
+                Ok(()) => std::fs::remove_file(temp)
+                    .with_context(|| format!("removing {}", temp.display())),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => bail!(
+                    "{} appeared while this run recorded (another run?): not replaced; {}",
+                    path.display(),
+                    kept()
+                ),
+                // A file system without hard links: the name checked, then renamed.
+                Err(_) if !path.exists() => std::fs::rename(temp, path)
+                    .with_context(|| format!("renaming it to {}; {}", path.display(), kept())),
+                Err(e) => Err(e).with_context(|| format!("placing {}; {}", path.display(), kept())),
+            },
+        }
+    }
+}
+
 struct McapOut {
     writer: McapFile<BufWriter<File>>,
     path: PathBuf,
@@ -2320,6 +2428,7 @@ impl McapOut {
 pub struct Recorder {
     out: McapOut,
     enc: EventEncoder,
+    target: Target,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -2333,12 +2442,17 @@ impl std::fmt::Debug for Recorder {
 }
 
 impl Recorder {
-    /// Create `path` (truncating it) and write the header, the run's metadata and the
-    /// scenario attachment, and register the fixed channels (with their schemas).
-    pub fn create(path: &Path, meta: RecordingMeta) -> anyhow::Result<Recorder> {
+    /// Start a recording for `path`: write the header, the run's metadata and the scenario
+    /// attachment to a temporary file beside it, and register the fixed channels (with
+    /// their schemas). A file already at `path` is refused or replaced (when the recording
+    /// is complete: [`Recorder::finish`]) as `existing` says.
+    pub fn create(
+        path: &Path,
+        meta: RecordingMeta,
+        existing: Existing,
+    ) -> anyhow::Result<Recorder> {
         let base_ns = start_ns(&meta.start_utc)?;
-        let file =
-            File::create(path).with_context(|| format!("creating recording {}", path.display()))?;
+        let (file, target) = Target::create(path, existing)?;
         let ctx = || format!("writing recording {}", path.display());
         let mut writer = McapFile::new(
             BufWriter::with_capacity(256 * 1024, file),
@@ -2407,7 +2521,19 @@ impl Recorder {
         Ok(Recorder {
             out,
             enc: EventEncoder::new(base_ns),
+            target,
         })
+    }
+
+    /// The temporary file the recording is written to until it is complete (the name
+    /// itself when that is a device or a FIFO).
+    pub fn partial_path(&self) -> &Path {
+        self.target.written()
+    }
+
+    /// Bytes written so far.
+    pub fn position(&self) -> u64 {
+        self.out.writer.position()
     }
 
     /// Decode `/csp/packets` with the ICD on the run's ports.
@@ -2445,9 +2571,12 @@ impl Recorder {
                     ..
                 },
             enc,
+            target,
         } = self;
         let ctx = || format!("finishing recording {}", path.display());
         let written = writer.finish().with_context(ctx)?;
+        drop(writer);
+        target.place()?;
         let (bytes, chunks) = (written.bytes, written.chunks);
         let channels: Vec<ChannelStats> = chans
             .into_iter()
@@ -2475,6 +2604,8 @@ const RECORDER_QUEUE_BATCHES: usize = 4;
 /// What the run sends its recorder's thread.
 enum ToRecorder {
     Events(Vec<RunEvent>),
+    /// Close the open chunk and flush the file (a run on the wall clock, once a second).
+    Flush,
     /// The run ended: finish the file.
     Finish,
 }
@@ -2491,12 +2622,27 @@ pub struct RecorderThread {
     tx: Option<std::sync::mpsc::SyncSender<ToRecorder>>,
     batch: Vec<RunEvent>,
     thread: Option<std::thread::JoinHandle<anyhow::Result<Option<RecordingStats>>>>,
+    /// How often the file is flushed (its open chunk closed), on the wall clock, and when
+    /// it last was.
+    flush: Option<(std::time::Duration, std::time::Instant)>,
 }
 
 impl RecorderThread {
     /// Start `recorder`'s thread.
     pub fn start(recorder: Recorder) -> anyhow::Result<RecorderThread> {
+        Self::start_flushing(recorder, None)
+    }
+
+    /// Start `recorder`'s thread, closing its open chunk and flushing the file at least
+    /// every `every` of wall-clock time (a run on the wall clock: a process killed loses at
+    /// most that much). A write error stops the recording at once, with a warning naming the
+    /// byte and the temporary file holding what was recorded; the run goes on.
+    pub fn start_flushing(
+        recorder: Recorder,
+        every: Option<std::time::Duration>,
+    ) -> anyhow::Result<RecorderThread> {
         let path = recorder.out.path.clone();
+        let partial = recorder.partial_path().to_owned();
         let (tx, rx) = std::sync::mpsc::sync_channel::<ToRecorder>(RECORDER_QUEUE_BATCHES);
         let thread = std::thread::Builder::new()
             .name("recorder".into())
@@ -2510,9 +2656,19 @@ impl RecorderThread {
                                 if let Some(r) = recorder.as_mut()
                                     && let Err(e) = r.write(ev)
                                 {
+                                    stopped(&path, &partial, r.position(), &e);
                                     failure = Some(e);
                                     recorder = None;
                                 }
+                            }
+                        }
+                        ToRecorder::Flush => {
+                            if let Some(r) = recorder.as_mut()
+                                && let Err(e) = r.flush()
+                            {
+                                stopped(&path, &partial, r.position(), &e);
+                                failure = Some(e);
+                                recorder = None;
                             }
                         }
                         ToRecorder::Finish => {
@@ -2523,8 +2679,10 @@ impl RecorderThread {
                             }
                             return recorder
                                 .map(|r| {
+                                    let at = r.position();
                                     r.finish()
                                         .with_context(|| format!("finishing {}", path.display()))
+                                        .inspect_err(|e| stopped(&path, &partial, at, e))
                                 })
                                 .transpose();
                         }
@@ -2537,14 +2695,24 @@ impl RecorderThread {
             tx: Some(tx),
             batch: Vec::with_capacity(RECORDER_BATCH),
             thread: Some(thread),
+            flush: every.map(|d| (d, std::time::Instant::now())),
         })
     }
 
-    /// Record a copy of `ev` (sent with the next full batch).
+    /// Record a copy of `ev` (sent with the next full batch, or with a flush when one is due).
     pub fn write(&mut self, ev: &RunEvent) {
         self.batch.push(ev.clone());
         if self.batch.len() >= RECORDER_BATCH {
             self.send_batch();
+        }
+        if let Some((every, last)) = &mut self.flush
+            && last.elapsed() >= *every
+        {
+            *last = std::time::Instant::now();
+            self.send_batch();
+            if let Some(tx) = &self.tx {
+                let _ = tx.send(ToRecorder::Flush);
+            }
         }
     }
 
@@ -2593,6 +2761,16 @@ impl Drop for RecorderThread {
             let _ = t.join();
         }
     }
+}
+
+/// Say, when it happens, that the recording to `path` stopped at byte `at`, and where what
+/// it recorded is.
+fn stopped(path: &Path, partial: &Path, at: u64, e: &anyhow::Error) {
+    tracing::warn!(
+        "recording to {} stopped at byte {at}: {e:#}; the run goes on without it (what was recorded is in {})",
+        path.display(),
+        partial.display()
+    );
 }
 
 /// A run's start time `start_utc` (`YYYY-MM-DDTHH:MM:SS[.fff]Z`) in ns since the Unix epoch.

@@ -780,8 +780,19 @@ pub struct Summary {
     pub truth_last: Option<TruthStateMsg>,
     /// The last `/fc/adcs` message.
     pub adcs_last: Option<AdcsMsg>,
+    /// Why a run of this twin recorded no FC truth, if it recorded none.
+    pub no_truth: Option<NoTruth>,
     /// Why the file could not be read to its end (truncated or malformed), if so.
     pub incomplete: Option<String>,
+}
+
+/// Why a recording holds no `/fc/truth/*` samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoTruth {
+    /// The FC had no orbit (no TLE, or SGP4 failing): it publishes no true state then.
+    NoOrbit,
+    /// The scenario's `[fc] publish_hz` is 0.
+    NotPublished,
 }
 
 impl Summary {
@@ -839,6 +850,18 @@ pub fn read_summary(path: &Path) -> anyhow::Result<Summary> {
     }
     if let Some(m) = &meta {
         s.meta = Some(meta_from(m, scenario.as_deref(), path)?);
+    }
+    if s.truth_last.is_none()
+        && let Some(m) = &s.meta
+    {
+        let publish_hz = crate::scenario::Scenario::parse("recorded scenario", &m.scenario_toml)
+            .ok()
+            .and_then(|sc| sc.fc.publish_hz);
+        s.no_truth = Some(if publish_hz == Some(0) {
+            NoTruth::NotPublished
+        } else {
+            NoTruth::NoOrbit
+        });
     }
     let start = s
         .meta
@@ -965,6 +988,11 @@ impl fmt::Display for Summary {
                 opt(x.rate_deg_s.map(f64::from), 4),
                 opt(x.sun_visible_fraction.map(f64::from), 2)
             )?;
+        }
+        match self.no_truth {
+            Some(NoTruth::NoOrbit) => writeln!(f, "FC truth: no orbit (none recorded)")?,
+            Some(NoTruth::NotPublished) => writeln!(f, "FC truth: not published (publish_hz = 0)")?,
+            None => {}
         }
         if let Some(a) = &self.adcs_last {
             writeln!(

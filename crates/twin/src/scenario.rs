@@ -15,6 +15,39 @@ use serde::{Deserialize, Deserializer};
 
 use crate::duration::parse_duration;
 
+/// The most bytes a scenario or campaign file may have: 32 MiB (a hundred thousand commands
+/// take about 7 MiB). A longer file, or a device that never ends (`/dev/zero`), is refused
+/// at once, never read beyond that.
+pub const INPUT_LIMIT_BYTES: u64 = 32 << 20;
+
+/// Why a scenario or campaign file could not be read.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReadError {
+    /// Longer than [`INPUT_LIMIT_BYTES`].
+    #[error("longer than {} MiB: refused (a scenario or campaign file is at most that)", INPUT_LIMIT_BYTES >> 20)]
+    TooLarge,
+    /// Not UTF-8 text.
+    #[error("not UTF-8 text")]
+    NotText,
+    /// The file system's error.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+/// Read a scenario or campaign file, at most [`INPUT_LIMIT_BYTES`] of it.
+pub fn read_input(path: &std::path::Path) -> Result<String, ReadError> {
+    use std::io::Read as _;
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)?
+        .take(INPUT_LIMIT_BYTES + 1)
+        .read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > INPUT_LIMIT_BYTES {
+        return Err(ReadError::TooLarge);
+    }
+    String::from_utf8(bytes).map_err(|_| ReadError::NotText)
+}
+
 /// A duration written as `90`, `90s`, `500ms`, `10m`, `2h` or `1d`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default, JsonSchema)]
 #[schemars(
@@ -596,11 +629,31 @@ impl Scenario {
             );
         } else if let [.., l1, l2] = tle.as_slice() {
             // Strict: checksums and layout are checked, as the FC's TLE upload would.
-            if let Err(e) = orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict) {
-                err(
+            match orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict) {
+                Err(e) => err(
                     vec![key("satellite"), key("tle")],
                     format!("the TLE does not parse: {e}"),
-                );
+                ),
+                // The FC refuses such a TLE over ATCTLESET (SGP4's error grows by kilometres
+                // a day); the twin would otherwise fly it silently, far from any real orbit.
+                Ok(t) => {
+                    if let Some(start_ns) = crate::timefmt::parse_utc(&self.start) {
+                        let age_s = (t.epoch.unix_ns() - start_ns).unsigned_abs() as f64 * 1e-9;
+                        if age_s > nodes_fc::TLE_MAX_AGE_S {
+                            err(
+                                vec![key("satellite"), key("tle")],
+                                format!(
+                                    "the TLE's epoch {} is {:.1} days from `start` {}; the FC \
+                                     flies a TLE at most {:.0} days from its time",
+                                    crate::timefmt::format_utc(t.epoch.unix_ns()),
+                                    age_s / 86_400.0,
+                                    self.start,
+                                    nodes_fc::TLE_MAX_AGE_S / 86_400.0
+                                ),
+                            );
+                        }
+                    }
+                }
             }
         }
         for (i, &p) in self.network.payloads.iter().enumerate() {

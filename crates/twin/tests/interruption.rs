@@ -13,17 +13,10 @@ use std::time::Duration;
 
 mod common;
 
-fn twin() -> Command {
-    let mut c = Command::new(common::twin_process::twin_bin());
-    c.env("RUST_LOG", "warn");
-    c
-}
+use common::twin_process::{output_text as text, twin};
 
 fn dir(name: &str) -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("interruption-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::twin_process::test_dir("interruption", name)
 }
 
 /// Start `cmd`, send it `signal` after `after`, and collect it.
@@ -39,10 +32,6 @@ fn signalled(mut cmd: Command, signal: &str, after: Duration) -> Output {
         .status()
         .unwrap();
     child.wait_with_output().unwrap()
-}
-
-fn text(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
 }
 
 /// A scenario in real time for 60 s (GS16 pings the FC every second), which holds so far

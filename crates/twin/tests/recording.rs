@@ -238,7 +238,10 @@ fn the_recorders_thread_writes_the_same_bytes() {
         TempFile::new("thread-c"),
     );
     let sa = record(a.path(), &ev);
-    let mut t = RecorderThread::start(Recorder::create(b.path(), meta()).unwrap()).unwrap();
+    let mut t = RecorderThread::start(
+        Recorder::create(b.path(), meta(), m6p_twin::record::Existing::Replace).unwrap(),
+    )
+    .unwrap();
     for e in &ev {
         t.write(e);
     }
@@ -248,23 +251,28 @@ fn the_recorders_thread_writes_the_same_bytes() {
     let bytes = std::fs::read(a.path()).unwrap();
     assert!(bytes == std::fs::read(b.path()).unwrap());
 
-    let mut t = RecorderThread::start(Recorder::create(c.path(), meta()).unwrap()).unwrap();
+    // Dropped unfinished: what was recorded stays in the temporary file, never at the name.
+    let rc = Recorder::create(c.path(), meta(), m6p_twin::record::Existing::Replace).unwrap();
+    let c_partial = TempFile(rc.partial_path().to_owned());
+    let mut t = RecorderThread::start(rc).unwrap();
     for e in &ev {
         t.write(e);
     }
     drop(t);
-    let s = recording::read_summary(c.path()).unwrap();
+    assert!(!c.path().exists());
+    let s = recording::read_summary(c_partial.path()).unwrap();
     assert!(s.incomplete.is_none(), "{s}");
-    let frames = frames_on(c.path(), "/can/main/frames");
+    let frames = frames_on(c_partial.path(), "/can/main/frames");
     // All but the train still open (at most 64 frames), as a recorder dropped inline.
     assert!(frames < ev.len() && frames + 64 >= ev.len(), "{frames}");
     let d = TempFile::new("thread-d");
-    let mut r = Recorder::create(d.path(), meta()).unwrap();
+    let mut r = Recorder::create(d.path(), meta(), m6p_twin::record::Existing::Replace).unwrap();
+    let d_partial = TempFile(r.partial_path().to_owned());
     for e in &ev {
         r.write(e).unwrap();
     }
     drop(r);
-    assert!(std::fs::read(c.path()).unwrap() == std::fs::read(d.path()).unwrap());
+    assert!(std::fs::read(c_partial.path()).unwrap() == std::fs::read(d_partial.path()).unwrap());
 }
 
 /// A write error on the recorder's thread (a full disk: Linux's `/dev/full`) comes back
@@ -272,13 +280,24 @@ fn the_recorders_thread_writes_the_same_bytes() {
 #[test]
 fn a_write_error_on_the_recorders_thread_is_reported_at_the_end() {
     let path = Path::new("/dev/full");
-    let mut t = RecorderThread::start(Recorder::create(path, meta()).unwrap()).unwrap();
+    let mut t = RecorderThread::start(
+        Recorder::create(path, meta(), m6p_twin::record::Existing::Replace).unwrap(),
+    )
+    .unwrap();
     for e in &many_events() {
         t.write(e);
     }
     let e = format!("{:#}", t.finish().unwrap_err());
     assert!(e.contains("/dev/full"), "{e}");
     assert!(e.contains("No space left"), "{e}");
+    // A device is written to, never replaced by a file.
+    use std::os::unix::fs::FileTypeExt as _;
+    assert!(
+        std::fs::metadata(path)
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
 }
 
 #[test]
@@ -884,7 +903,9 @@ fn a_killed_run_reads_up_to_the_last_complete_chunk() {
     let f = TempFile::new("killed");
     let ev = many_events();
     let (first, rest) = ev.split_at(ev.len() / 2);
-    let mut r = Recorder::create(f.path(), meta()).unwrap();
+    let mut r = Recorder::create(f.path(), meta(), m6p_twin::record::Existing::Replace).unwrap();
+    // A killed run leaves its recording in the temporary file it was written to.
+    let f = TempFile(r.partial_path().to_owned());
     for e in first {
         r.write(e).unwrap();
     }

@@ -94,7 +94,7 @@ fn small_recording(path: &Path) {
         link_addrs: Default::default(),
         link_tx_budgets: Default::default(),
     };
-    let mut r = Recorder::create(path, meta).unwrap();
+    let mut r = Recorder::create(path, meta, m6p_twin::record::Existing::Replace).unwrap();
     let mut t = SimTime::ZERO;
     for i in 0..20u8 {
         let p = Packet::new(Header::new(16, 3, 1, 40), vec![i; 20]);

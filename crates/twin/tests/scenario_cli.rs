@@ -794,6 +794,7 @@ fn a_beacon_verdict_prints_plain_bounds_and_no_contact_as_zero() {
     std::fs::write(
         &f,
         r#"duration = "1300s"
+start = "2026-04-30T18:00:00Z"
 [satellite]
 tle = [
   "1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996",

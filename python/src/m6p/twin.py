@@ -233,8 +233,10 @@ class Twin:
 
     def stop(self, timeout_s: float = 30.0) -> Optional[int]:
         """Stop the run as Ctrl-C does (the report and the recording are complete), close
-        the nodes made by :meth:`ground` and :meth:`payload`, and return the exit status
-        (0: every expectation of the scenario held)."""
+        the nodes made by :meth:`ground` and :meth:`payload`, and return the exit status: 1
+        when the run was stopped before its end (an interrupted run is no result, whatever
+        held so far; the report says ``interrupted at``), else 0 when every expectation of
+        the scenario held. A run with a ``duration`` ends by itself: :meth:`wait`."""
         for n in self._nodes:
             n.close()
         self._nodes.clear()

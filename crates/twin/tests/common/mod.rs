@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
 
 /// A unique path in the temp dir, removed when dropped.
-pub struct TempFile(PathBuf);
+pub struct TempFile(pub PathBuf);
 
 impl TempFile {
     /// `m6p-twin-<pid>-<name>-<n>.mcap` in the temp dir.
@@ -72,7 +72,8 @@ pub fn record(
     meta: m6p_twin::record::RecordingMeta,
     events: &[m6p_twin::events::RunEvent],
 ) -> m6p_twin::record::RecordingStats {
-    let mut r = m6p_twin::record::Recorder::create(path, meta).unwrap();
+    let mut r = m6p_twin::record::Recorder::create(path, meta, m6p_twin::record::Existing::Replace)
+        .unwrap();
     for e in events {
         r.write(e).unwrap();
     }

@@ -7,12 +7,32 @@ use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{SocketAddr, TcpStream};
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use csp::kiss::{Decoder, DecoderConfig, KissEvent};
 use csp::{Header, Packet};
+
+/// The twin binary as a command, logging warnings only.
+pub fn twin() -> Command {
+    let mut c = Command::new(twin_bin());
+    c.env("RUST_LOG", "warn");
+    c
+}
+
+/// A fresh folder `<test>-<pid>-<name>` in the target's temp dir.
+pub fn test_dir(test: &str, name: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("{test}-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).expect("creating a test folder");
+    d
+}
+
+/// A finished command's stdout then stderr, as text.
+pub fn output_text(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
+}
 
 pub fn twin_bin() -> PathBuf {
     std::env::var_os("M6P_TWIN_BIN")
