@@ -25,6 +25,7 @@ secs=$(( n * 4 / 1000 + 8 ))
 
 measure() { # name link-args client-iface-args
   local name=$1 link=$2 iface=$3 rec=$out/$1.mcap
+  rm -f "$rec" # this script's own output from a run before (the twin never replaces one)
   # shellcheck disable=SC2086
   $twin run --duration "${secs}s" $link --kiss-addr 10 --record "$rec" >"$out/$name.twin.log" 2>&1 &
   local pid=$!

@@ -1,7 +1,7 @@
-//! The run's clock: virtual time (tokio's paused clock, jumping to the next timer), real
-//! time (the wall clock, optionally sped up or slowed down), or virtual time until a
-//! moment and real time after it (outside programs needed only from then on: a CI run does
-//! not wait hours of simulated time for a pass).
+//! The run's clock: tokio's paused clock, which jumps to the next timer. In virtual time it
+//! runs as fast as the CPU allows; in real time (optionally sped up or slowed down, or from
+//! a moment on: outside programs needed only from then on) [`crate::pace`] holds each jump
+//! back until the wall clock reaches it, so that the run is the same machine either way.
 //!
 //! Events carry exact [`SimTime`] stamps in nanoseconds; the tokio timer wheel that wakes
 //! tasks has a 1 ms granularity, so a task may run up to 1 ms (of its clock) after the stamp
@@ -23,8 +23,8 @@ pub enum ClockMode {
         /// Simulated seconds per wall second.
         speed: f64,
     },
-    /// Virtual until `from`, then wall-clock pacing at `speed`: the runtime starts paused
-    /// and [`Clock::go_realtime`] resumes tokio's clock at `from`.
+    /// Virtual until `from`, then wall-clock pacing at `speed` (a CI run does not wait
+    /// hours of simulated time for a pass).
     VirtualThenRealtime {
         /// The simulated time at which the wall clock takes over.
         from: SimTime,
@@ -34,19 +34,28 @@ pub enum ClockMode {
 }
 
 impl ClockMode {
-    /// Whether the run starts on tokio's paused clock.
-    pub fn starts_paused(&self) -> bool {
-        matches!(
-            self,
-            ClockMode::Virtual | ClockMode::VirtualThenRealtime { .. }
-        )
+    /// Where the wall clock paces the run: from which simulated instant, at what speed
+    /// (`None` in virtual time).
+    pub fn paced(&self) -> Option<(SimTime, f64)> {
+        let ok = |speed: f64| {
+            if speed.is_finite() && speed > 0.0 {
+                speed
+            } else {
+                1.0
+            }
+        };
+        match *self {
+            ClockMode::Virtual => None,
+            ClockMode::Realtime { speed } => Some((SimTime::ZERO, ok(speed))),
+            ClockMode::VirtualThenRealtime { from, speed } => Some((from, ok(speed))),
+        }
     }
 }
 
-/// The granularity of tokio's timer wheel.
-const TIMER_TICK: Duration = Duration::from_millis(1);
-
-/// The run's clock, cheap to clone and share between tasks.
+/// The run's clock, cheap to clone and share between tasks: tokio's paused clock, whatever
+/// the mode. In real time the same virtual-time machine runs, its clock held back to the
+/// wall clock by [`crate::pace`], so a task never stamps anything with when it happened to
+/// run: only simulated instants exist.
 #[derive(Debug, Clone, Copy)]
 pub struct Clock {
     start: Instant,
@@ -54,17 +63,8 @@ pub struct Clock {
 }
 
 impl Clock {
-    /// A clock whose zero is now. In virtual mode the runtime must be built with
-    /// `start_paused(true)`.
+    /// A clock whose zero is now. The runtime must be built with `start_paused(true)`.
     pub fn new(mode: ClockMode) -> Self {
-        let ok = |speed: f64| speed.is_finite() && speed > 0.0;
-        let mode = match mode {
-            ClockMode::Realtime { speed } if !ok(speed) => ClockMode::Realtime { speed: 1.0 },
-            ClockMode::VirtualThenRealtime { from, speed } if !ok(speed) => {
-                ClockMode::VirtualThenRealtime { from, speed: 1.0 }
-            }
-            m => m,
-        };
         Clock {
             start: Instant::now(),
             mode,
@@ -83,84 +83,22 @@ impl Clock {
 
     /// Simulated time now.
     pub fn now(&self) -> SimTime {
-        let wall = self.start.elapsed();
-        let ns = u64::try_from(wall.as_nanos()).unwrap_or(u64::MAX);
-        match self.mode {
-            ClockMode::Virtual => SimTime(ns),
-            ClockMode::Realtime { speed } => SimTime((ns as f64 * speed) as u64),
-            // Until `from` the paused clock's elapsed time is simulated time; after it
-            // the wall clock's, scaled.
-            ClockMode::VirtualThenRealtime { from, speed } => match ns.checked_sub(from.as_ns()) {
-                None | Some(0) => SimTime(ns),
-                Some(after) => SimTime(from.as_ns().saturating_add((after as f64 * speed) as u64)),
-            },
-        }
+        SimTime(u64::try_from(self.start.elapsed().as_nanos()).unwrap_or(u64::MAX))
     }
 
     /// The tokio instant at which simulated time `t` is reached.
     pub fn instant_of(&self, t: SimTime) -> Instant {
-        let wall = match self.mode {
-            ClockMode::Virtual => Duration::from_nanos(t.as_ns()),
-            ClockMode::Realtime { speed } => {
-                Duration::from_nanos((t.as_ns() as f64 / speed) as u64)
-            }
-            ClockMode::VirtualThenRealtime { from, speed } => {
-                match t.as_ns().checked_sub(from.as_ns()) {
-                    None | Some(0) => Duration::from_nanos(t.as_ns()),
-                    Some(after) => Duration::from_nanos(
-                        from.as_ns().saturating_add((after as f64 / speed) as u64),
-                    ),
-                }
-            }
-        };
         self.start
-            .checked_add(wall)
+            .checked_add(Duration::from_nanos(t.as_ns()))
             .unwrap_or_else(|| self.start + Duration::from_secs(1 << 40))
     }
 
-    /// In [`ClockMode::VirtualThenRealtime`], wait for its `from` and let the wall clock
-    /// take over there (tokio's clock resumes); returns at once in any other mode. Call it
-    /// once, from a task of the run's (current-thread) runtime.
-    pub async fn go_realtime(&self) -> Option<SimTime> {
-        let ClockMode::VirtualThenRealtime { from, .. } = self.mode else {
-            return None;
-        };
-        self.sleep_until(from).await;
-        tokio::time::resume();
-        Some(from)
-    }
-
     /// Sleep until simulated time `t` (returns at once if it has passed).
-    ///
-    /// On the wall clock, tokio's timer wheel would wake the task at the first millisecond
-    /// tick after `t`: up to 1 ms late at every step of an exchange with an outside program
-    /// (a CAN frame's end, a node's reply). So the wheel wakes it up to 1 ms early and a
-    /// blocking thread's precise sleep waits the rest (microseconds on Linux).
     pub async fn sleep_until(&self, t: SimTime) {
         if t == SimTime::MAX {
             std::future::pending::<()>().await;
         }
-        let at = self.instant_of(t);
-        if !self.wall_clock_at(t) {
-            tokio::time::sleep_until(at).await;
-            return;
-        }
-        if let Some(early) = at.checked_sub(TIMER_TICK) {
-            tokio::time::sleep_until(early).await;
-        }
-        let rest = at.saturating_duration_since(Instant::now());
-        if !rest.is_zero() {
-            let _ = tokio::task::spawn_blocking(move || std::thread::sleep(rest)).await;
-        }
-    }
-
-    /// Whether simulated time `t` is paced by the wall clock.
-    fn wall_clock_at(&self, t: SimTime) -> bool {
-        match self.mode {
-            ClockMode::Virtual => false,
-            ClockMode::Realtime { .. } => true,
-            ClockMode::VirtualThenRealtime { from, .. } => t > from,
-        }
+        tokio::time::sleep_until(self.instant_of(t)).await;
     }
 }
 
@@ -187,7 +125,7 @@ impl Timer {
 
     /// [`Clock::sleep_until`], with this timer.
     pub async fn sleep_until(&mut self, t: SimTime) {
-        if t == SimTime::MAX || self.clock.wall_clock_at(t) {
+        if t == SimTime::MAX {
             self.disarm();
             return self.clock.sleep_until(t).await;
         }
@@ -213,39 +151,6 @@ impl Timer {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
-
-    /// Virtual until `from` (10 s pass at once), then the wall clock at twice real time.
-    #[test]
-    fn virtual_then_realtime_jumps_to_from_then_follows_the_wall_clock() {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .start_paused(true)
-            .build()
-            .unwrap();
-        rt.block_on(async {
-            let from = SimTime::from_ns(10_000_000_000);
-            let clock = Clock::new(ClockMode::VirtualThenRealtime { from, speed: 2.0 });
-            let wall = std::time::Instant::now();
-            clock.sleep_until(SimTime::from_ns(4_000_000_000)).await;
-            assert_eq!(clock.now(), SimTime::from_ns(4_000_000_000));
-            assert_eq!(clock.go_realtime().await, Some(from));
-            assert!(wall.elapsed() < Duration::from_millis(500), "virtual part");
-            assert!(clock.now() >= from);
-            // 12 s is 1 s of wall clock after `from` at speed 2.
-            assert_eq!(
-                clock.instant_of(SimTime::from_ns(12_000_000_000)) - clock.instant_of(from),
-                Duration::from_secs(1)
-            );
-            let w = std::time::Instant::now();
-            clock.sleep_until(from + Duration::from_millis(200)).await;
-            let took = w.elapsed();
-            assert!(
-                took >= Duration::from_millis(90) && took < Duration::from_secs(2),
-                "200 ms simulated at speed 2 took {took:?} of wall clock"
-            );
-            assert!(clock.now() >= from + Duration::from_millis(200));
-        });
-    }
 
     /// A kept timer fires at each instant it is set for: again at once for the instant it
     /// fired at, and at the earlier of two when set for a later one first.

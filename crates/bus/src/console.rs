@@ -120,11 +120,14 @@ pub async fn serve_tcp(listener: tokio::net::TcpListener, target: ConsoleTarget,
 /// Serve `target`'s console on `pty` for as long as the run lasts: a session each time a
 /// program opens it.
 #[cfg(unix)]
-pub async fn serve_pty(mut pty: crate::kiss_pty::Pty, target: ConsoleTarget, clock: Clock) {
+pub async fn serve_pty(pty: crate::kiss_pty::Pty, target: ConsoleTarget, clock: Clock) {
     loop {
         pty.wait_open().await;
         tracing::info!("console {}: {} opened", target.node, pty.path().display());
-        let why = session(pty.stream(), &target, clock, false).await;
+        let why = match pty.stream() {
+            Ok(stream) => session(stream, &target, clock, false).await,
+            Err(e) => format!("cannot serve it: {e}"),
+        };
         tracing::info!(
             "console {}: {} closed ({why})",
             target.node,

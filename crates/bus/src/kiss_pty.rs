@@ -14,7 +14,7 @@
 //! The rest (address claims, bounds, gate, tap) is the KISS link core of
 //! [`crate::kiss_tcp`].
 
-use std::os::fd::AsFd;
+use std::os::fd::{AsFd, OwnedFd};
 use std::path::{Path, PathBuf};
 use std::pin::Pin;
 use std::task::{Context, Poll, ready};
@@ -59,8 +59,9 @@ pub enum PtyError {
 /// A pty whose slave side is linked at a path; the link is removed when it is dropped.
 #[derive(Debug)]
 pub struct Pty {
-    rx: pipe::Receiver,
-    tx: pipe::Sender,
+    /// The master side, non-blocking; registered with tokio only while a program holds
+    /// the pty ([`Pty::stream`]).
+    master: OwnedFd,
     path: PathBuf,
     /// The slave device (`/dev/pts/N`).
     device: PathBuf,
@@ -98,14 +99,8 @@ impl Pty {
         })?;
         // The slave closes here: the pty then reads as hung up until a program opens it.
         drop(pair.slave);
-        // The master, non-blocking, read and written through tokio's pipe ends (they
-        // assume nothing of the descriptor but that).
-        let reader = pair.master.try_clone().map_err(PtyError::Setup)?;
-        let rx = pipe::Receiver::from_owned_fd_unchecked(reader).map_err(PtyError::Setup)?;
-        let tx = pipe::Sender::from_owned_fd_unchecked(pair.master).map_err(PtyError::Setup)?;
         Ok(Pty {
-            rx,
-            tx,
+            master: pair.master,
             path: path.to_owned(),
             device,
         })
@@ -123,7 +118,7 @@ impl Pty {
 
     /// Whether a program holds the slave side open.
     fn opened(&self) -> bool {
-        let mut fds = [PollFd::new(self.tx.as_fd(), PollFlags::POLLOUT)];
+        let mut fds = [PollFd::new(self.master.as_fd(), PollFlags::POLLOUT)];
         match poll(&mut fds, PollTimeout::ZERO) {
             Ok(_) => fds[0]
                 .revents()
@@ -146,12 +141,18 @@ impl Pty {
         }
     }
 
-    /// The pty as a stream for one connection.
-    pub fn stream(&mut self) -> PtyStream<'_> {
-        PtyStream {
-            rx: &mut self.rx,
-            tx: &mut self.tx,
-        }
+    /// The pty as a stream for one connection, once a program has opened it: the master
+    /// read and written through tokio's pipe ends (they assume nothing of the descriptor
+    /// but that it is non-blocking), on descriptors of their own for this connection.
+    ///
+    /// Registered afresh each time: tokio keeps a hang-up it has seen as readable for as
+    /// long as the registration lives, and a pty reads as hung up between openers, so a
+    /// registration from before the open would have each read that finds nothing try
+    /// again at once, holding the run's thread until the program closes.
+    pub fn stream(&self) -> std::io::Result<PtyStream> {
+        let rx = pipe::Receiver::from_owned_fd_unchecked(self.master.try_clone()?)?;
+        let tx = pipe::Sender::from_owned_fd_unchecked(self.master.try_clone()?)?;
+        Ok(PtyStream { rx, tx })
     }
 }
 
@@ -167,34 +168,34 @@ impl Drop for Pty {
 /// One connection's view of the pty: reading `EIO` (the program closed its side) is the
 /// end of the stream.
 #[derive(Debug)]
-pub struct PtyStream<'a> {
-    rx: &'a mut pipe::Receiver,
-    tx: &'a mut pipe::Sender,
+pub struct PtyStream {
+    rx: pipe::Receiver,
+    tx: pipe::Sender,
 }
 
-impl AsyncRead for PtyStream<'_> {
+impl AsyncRead for PtyStream {
     fn poll_read(
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<std::io::Result<()>> {
-        match ready!(Pin::new(&mut *self.rx).poll_read(cx, buf)) {
+        match ready!(Pin::new(&mut self.rx).poll_read(cx, buf)) {
             Err(e) if e.raw_os_error() == Some(Errno::EIO as i32) => Poll::Ready(Ok(())),
             r => Poll::Ready(r),
         }
     }
 }
 
-impl AsyncWrite for PtyStream<'_> {
+impl AsyncWrite for PtyStream {
     fn poll_write(
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,
         data: &[u8],
     ) -> Poll<std::io::Result<usize>> {
-        Pin::new(&mut *self.tx).poll_write(cx, data)
+        Pin::new(&mut self.tx).poll_write(cx, data)
     }
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut *self.tx).poll_flush(cx)
+        Pin::new(&mut self.tx).poll_flush(cx)
     }
     fn poll_shutdown(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<std::io::Result<()>> {
         // The pty outlives the connection: nothing to shut.
@@ -205,7 +206,7 @@ impl AsyncWrite for PtyStream<'_> {
 /// Serve the pty as a KISS link for as long as the run lasts: a connection each time a
 /// program opens it.
 pub async fn serve(
-    mut pty: Pty,
+    pty: Pty,
     label: String,
     segs: Segments,
     cfg: KissLinkConfig,
@@ -217,8 +218,16 @@ pub async fn serve(
         pty.wait_open().await;
         n = n.wrapping_add(1);
         tracing::info!("{label}: a program opened {}", pty.path().display());
+        let stream = match pty.stream() {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!("{label}: cannot serve the program that opened it: {e}");
+                pty.wait_closed().await;
+                continue;
+            }
+        };
         bump(&stats, |s| s.connections += 1);
-        let why = run_numbered(pty.stream(), &label, n, &segs, &cfg, &stats, clock, None).await;
+        let why = run_numbered(stream, &label, n, &segs, &cfg, &stats, clock, None).await;
         tracing::info!("{label}: connection closed: {why}");
         bump(&stats, |s| s.disconnects += 1);
         // The program may still hold it for a moment after its last byte: wait for the

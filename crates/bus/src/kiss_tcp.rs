@@ -161,14 +161,84 @@ impl KissTap {
     ) -> Self {
         KissTap(Arc::new(f), Some(budget))
     }
-    /// Wait for a permit to tap a chunk into the twin.
-    async fn admit(&self) {
-        if let Some(b) = &self.1
-            && let Ok(p) = b.acquire().await
-        {
-            p.forget();
+    /// Wait for a permit to tap a chunk into the twin (none without a budget).
+    async fn reserve(&self) -> Option<tokio::sync::OwnedSemaphorePermit> {
+        match &self.1 {
+            Some(b) => b.clone().acquire_owned().await.ok(),
+            None => None,
         }
     }
+}
+
+/// Where a chunk taken in is recorded, with its permit of the run's budget.
+struct TapIn(Option<(KissTap, Option<tokio::sync::OwnedSemaphorePermit>)>);
+
+impl TapIn {
+    /// The link's tap, once a permit is free.
+    async fn reserve(cfg: &KissLinkConfig) -> TapIn {
+        match &cfg.tap {
+            Some(tap) => TapIn(Some((tap.clone(), tap.reserve().await))),
+            None => TapIn(None),
+        }
+    }
+
+    /// Record `chunk` into the twin at `t`; the permit goes with it (its consumer gives
+    /// one back).
+    fn record(self, t: SimTime, name: &str, chunk: &[u8]) {
+        if let Some((tap, permit)) = self.0 {
+            (tap.0)(t, name, true, chunk);
+            if let Some(p) = permit {
+                p.forget();
+            }
+        }
+    }
+}
+
+/// A connection's open or end, taken in at the run's next idle point ([`crate::pace`]):
+/// recorded there as an empty chunk (a replay opens or closes the connection then, in the
+/// same order with the rest of the input); returns that instant.
+pub async fn edge(clock: Clock, cfg: &KissLinkConfig, name: &str) -> SimTime {
+    edge_queued(clock, cfg, name).await.await
+}
+
+/// [`edge`], in two steps: once a place in the run's budget is free it is queued, and the
+/// future returned resolves to the instant it is taken in.
+pub async fn edge_queued(
+    clock: Clock,
+    cfg: &KissLinkConfig,
+    name: &str,
+) -> impl std::future::Future<Output = SimTime> + Send + 'static {
+    let tap = TapIn::reserve(cfg).await;
+    let name = name.to_owned();
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    crate::pace::take_in(clock, move |t| {
+        tap.record(t, &name, &[]);
+        let _ = tx.send(t);
+    });
+    async move { rx.await.unwrap_or_else(|_| clock.now()) }
+}
+
+/// Take `input` into connection `name` at the run's next idle point ([`crate::pace`]),
+/// stamped with that instant: recorded then (an end as an empty chunk; an empty message is
+/// not recorded, since a recording's empty chunk is an open or a close) and handed to the
+/// connection's core on `slot`. Waits for a place in the run's budget first.
+pub async fn take_in(
+    clock: Clock,
+    cfg: &KissLinkConfig,
+    name: &str,
+    slot: tokio::sync::mpsc::OwnedPermit<(SimTime, LinkInput)>,
+    input: LinkInput,
+) {
+    let tap = TapIn::reserve(cfg).await;
+    let name = name.to_owned();
+    crate::pace::take_in(clock, move |t| {
+        match &input {
+            LinkInput::Bytes(b) if b.is_empty() => {}
+            LinkInput::Bytes(b) => tap.record(t, &name, b),
+            LinkInput::End => tap.record(t, &name, &[]),
+        }
+        slot.send((t, input));
+    });
 }
 
 impl std::fmt::Debug for KissTap {
@@ -520,6 +590,7 @@ pub(crate) async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
     live: Option<&Liveness>,
 ) -> String {
     let name = format!("{label}#{n}");
+    let opened = edge(clock, cfg, &name).await;
     let k = Connection {
         name: &name,
         segs,
@@ -527,14 +598,15 @@ pub(crate) async fn run_numbered<S: AsyncRead + AsyncWrite + Unpin>(
         stats,
         n,
         clock,
-        opened: clock.now(),
+        opened,
         live,
     };
     run_connection(stream, k).await
 }
 
-/// Serve one connection of link `name` until it closes; returns why it closed. Generic over
-/// the stream; the bytes read are stamped with the clock's time as they arrive.
+/// Serve one connection of link `name`, opened already ([`edge`]), until it closes; returns
+/// why it closed. Generic over the stream; what is read is taken in at the run's idle
+/// points ([`take_in`]).
 pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
     stream: S,
     k: Connection<'_>,
@@ -546,6 +618,20 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
     let (in_tx, in_rx) = tokio::sync::mpsc::channel(cfg.limits.input_chunks.max(1));
     let reader = async move {
         let mut buf = vec![0u8; 4096];
+        // Each piece is taken in at the run's next idle point, with its place in the link's
+        // channel held first (so that handing it over never waits).
+        let hand = |input: LinkInput| {
+            let tx = in_tx.clone();
+            async move {
+                match tx.reserve_owned().await {
+                    Ok(slot) => {
+                        take_in(clock, cfg, name, slot, input).await;
+                        true
+                    }
+                    Err(_) => false,
+                }
+            }
+        };
         loop {
             let read = match live {
                 Some(l) => tokio::select! {
@@ -566,7 +652,7 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
                 }
                 let why =
                     why.map_or_else(|| "closed by its listener".to_owned(), |w| w.to_string());
-                let _ = in_tx.send((clock.now(), LinkInput::End)).await;
+                hand(LinkInput::End).await;
                 return why;
             };
             if let Some(l) = live {
@@ -574,22 +660,17 @@ pub async fn run_connection<S: AsyncRead + AsyncWrite + Unpin>(
             }
             match read {
                 Ok(0) => {
-                    // The close, stamped when it was seen.
-                    let _ = in_tx.send((clock.now(), LinkInput::End)).await;
+                    hand(LinkInput::End).await;
                     return "peer closed".to_owned();
                 }
                 Ok(k) => {
                     let bytes = buf.get(..k).unwrap_or_default().to_vec();
-                    if in_tx
-                        .send((clock.now(), LinkInput::Bytes(bytes)))
-                        .await
-                        .is_err()
-                    {
+                    if !hand(LinkInput::Bytes(bytes)).await {
                         return "link closed".to_owned();
                     }
                 }
                 Err(e) => {
-                    let _ = in_tx.send((clock.now(), LinkInput::End)).await;
+                    hand(LinkInput::End).await;
                     return format!("read error: {e}");
                 }
             }
@@ -643,10 +724,7 @@ pub async fn serve_link<W: FrameSink>(input: InputRx, stream: &mut W, k: Connect
         why = writer => {
             // A failed write ends the connection: recorded as its close (an empty chunk)
             // before the core, and with it the connection's addresses, goes (on return).
-            if let Some(tap) = &cfg.tap {
-                tap.admit().await;
-                (tap.0)(k.clock.now(), name, true, &[]);
-            }
+            edge(k.clock, cfg, name).await;
             why
         }
     }
@@ -697,12 +775,6 @@ async fn link_core(
         clock,
         ..
     } = k;
-    // The open, recorded as an empty chunk (the first; the close is the second): a replay
-    // opens the connection, and claims its addresses, at that time.
-    if let Some(tap) = &cfg.tap {
-        tap.admit().await;
-        (tap.0)(k.opened, name, true, &[]);
-    }
     let (inbox_tx, mut inbox_rx) = inbox();
     let mut c = Conn {
         k,
@@ -748,11 +820,12 @@ async fn link_core(
                 // the connection at that time, giving its addresses back as the original did.
                 let (t, chunk) = match r {
                     Some((t, LinkInput::Bytes(chunk))) => (t, chunk),
-                    r => {
+                    // Recorded when it was taken in; a channel that ends without an end
+                    // (its reader gone) ends the link now.
+                    Some((_, LinkInput::End)) => break "peer closed".to_owned(),
+                    None => {
                         if let Some(tap) = &cfg.tap {
-                            tap.admit().await;
-                            let t = r.map_or_else(|| clock.now(), |(t, _)| t);
-                            (tap.0)(t, name, true, &[]);
+                            (tap.0)(clock.now(), name, true, &[]);
                         }
                         break "peer closed".to_owned();
                     }
@@ -765,11 +838,8 @@ async fn link_core(
                     tracing::debug!("{name}: dropped an empty message");
                     continue;
                 }
+                // Recorded when it was taken in (`take_in`).
                 let chunk = chunk.as_slice();
-                if let Some(tap) = &cfg.tap {
-                    tap.admit().await;
-                    (tap.0)(t, name, true, chunk);
-                }
                 match cfg.framing {
                     Framing::Kiss => {
                         let before = decoder.stats();
@@ -1085,7 +1155,7 @@ mod tests {
     }
 
     /// A connection that ends because a write failed records its close (an empty chunk
-    /// into the twin, after the open's) and gives its address back. It used to end with
+    /// into the twin, after what it wrote) and gives its address back. It used to end with
     /// nothing recorded, so its replay kept the address for the rest of the run.
     #[tokio::test(start_paused = true)]
     async fn a_failed_write_is_recorded_as_the_close_and_the_address_goes_back() {
@@ -1135,14 +1205,14 @@ mod tests {
         };
         assert!(why.contains("reset"), "{why}");
         let taps = taps.lock().unwrap().clone();
+        // The open is recorded by what accepted the connection, before serving it.
         assert_eq!(
-            taps.first(),
-            Some(&(SimTime(5), true, 0)),
-            "the open: {taps:?}"
-        );
-        assert!(
-            matches!(taps.last(), Some(&(t, true, 0)) if t > SimTime(5)),
-            "the close: {taps:?}"
+            taps,
+            [
+                (SimTime::from_ns(10_000_000), false, 13),
+                (SimTime::from_ns(10_000_000), true, 0)
+            ],
+            "the packet out, then the close"
         );
         // 17 is free again: another endpoint may claim it.
         let (tx, _rx) = inbox();

@@ -22,6 +22,7 @@ pub mod kiss_pty;
 pub mod kiss_tcp;
 pub mod net;
 pub mod outside;
+pub mod pace;
 mod reserve;
 #[cfg(all(feature = "socketcan", target_os = "linux"))]
 pub mod socketcan;

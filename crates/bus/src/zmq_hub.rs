@@ -27,7 +27,7 @@ use zeromq::{Socket, SocketRecv, SocketSend};
 
 use crate::clock::Clock;
 use crate::kiss_tcp::{
-    Connection, FrameSink, KissLinkConfig, LinkInput, SharedStats, bump, serve_link,
+    Connection, FrameSink, KissLinkConfig, LinkInput, SharedStats, bump, edge, serve_link, take_in,
 };
 use crate::outside::Segments;
 
@@ -189,6 +189,8 @@ pub async fn serve(
     // Bounded as a KISS connection's input: when the twin has not taken `input_chunks`
     // messages the reader waits, and ZMQ queues (then drops) on its side.
     let (in_tx, in_rx) = tokio::sync::mpsc::channel(cfg.limits.input_chunks.max(1));
+    let opened = edge(clock, &cfg, &name).await;
+    let (reader_cfg, reader_name) = (cfg.clone(), name.clone());
     let reader = async move {
         loop {
             match sub.recv().await {
@@ -198,13 +200,18 @@ pub async fn serve(
                     // Only the socket's end ends the hub: an empty message is a malformed one,
                     // which the link drops and counts.
                     let bytes = m.get(0).map(|b| b.to_vec()).unwrap_or_default();
-                    if in_tx
-                        .send((clock.now(), LinkInput::Bytes(bytes)))
-                        .await
-                        .is_err()
-                    {
+                    let Ok(slot) = in_tx.clone().reserve_owned().await else {
                         return;
-                    }
+                    };
+                    // Taken in at the run's next idle point.
+                    take_in(
+                        clock,
+                        &reader_cfg,
+                        &reader_name,
+                        slot,
+                        LinkInput::Bytes(bytes),
+                    )
+                    .await;
                 }
                 Err(e) => {
                     tracing::warn!("ZMQ hub: receive failed: {e}");
@@ -221,7 +228,7 @@ pub async fn serve(
         stats: &stats,
         n: 1,
         clock,
-        opened: clock.now(),
+        opened,
         live: None,
     };
     let reader = tokio::spawn(reader);

@@ -778,8 +778,9 @@ fn start_live(addr: SocketAddr, epoch_unix_s: u64) -> anyhow::Result<m6p_twin::l
 fn recorded_kiss_input(
     file: &std::path::Path,
 ) -> anyhow::Result<Vec<m6p_twin::runtime::KissReplay>> {
-    let mut links: std::collections::BTreeMap<String, Vec<(csp::SimTime, Vec<u8>)>> =
+    let mut links: std::collections::BTreeMap<String, Vec<m6p_twin::runtime::RecordedChunk>> =
         Default::default();
+    let mut seq = 0u64;
     for m in m6p_twin::recording::messages(file)? {
         let m = m?;
         if !m.topic.starts_with("/kiss/") {
@@ -789,10 +790,16 @@ fn recorded_kiss_input(
             .decode()
             .with_context(|| format!("decoding a {} message", m.topic))?;
         if k.dir == "in" {
+            // In the file's order: the order the run took them in.
+            seq += 1;
             links
                 .entry(k.link)
                 .or_default()
-                .push((csp::SimTime(k.t_ns), k.bytes.to_vec()));
+                .push(m6p_twin::runtime::RecordedChunk {
+                    t: csp::SimTime(k.t_ns),
+                    seq,
+                    bytes: k.bytes.to_vec(),
+                });
         }
     }
     Ok(links

@@ -19,7 +19,7 @@ fn detumble_failures(seeds: std::ops::RangeInclusive<u64>) -> Vec<String> {
     for seed in seeds {
         // The seed also draws the FC's initial attitude and tumble axis.
         let compiled = compile_seeded(&loaded, Some(seed));
-        let rt = build_runtime(compiled.opts.clock).unwrap();
+        let rt = build_runtime().unwrap();
         let outcome = rt.block_on(execute(compiled, &mut |_| {})).unwrap();
         for v in outcome.verdicts.iter().filter(|v| !v.passed) {
             failures.push(format!("seed {seed}: {}: {}", v.name, v.observed));

@@ -10,6 +10,9 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use bus::ClockMode;
+
+#[path = "common/outside.rs"]
+mod outside;
 use csp::kiss::{Decoder, DecoderConfig, KissEvent};
 use csp::{Header, Packet};
 use m6p_twin::network::NetworkSpec;
@@ -31,12 +34,12 @@ fn with_twin_at(
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(secs));
     opts.clock = ClockMode::Realtime { speed };
     opts.kiss_links = vec![KissLink::new(KissMode::Pty(path.to_owned())).with_addrs(&[10])];
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
         rx.await.unwrap();
-        let th = tokio::task::spawn_blocking(client);
+        let th = outside::on_thread(client);
         th.await.unwrap();
         twin.await.unwrap().unwrap()
     })
@@ -145,7 +148,7 @@ fn a_file_at_the_path_is_never_replaced() {
     std::fs::write(&path, b"mine").unwrap();
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(1));
     opts.kiss_links = vec![KissLink::new(KissMode::Pty(path.clone()))];
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let err = rt.block_on(run(opts, None)).unwrap_err();
     let text = format!("{err:#}");
     assert!(text.contains("exists and is not a symbolic link"), "{text}");

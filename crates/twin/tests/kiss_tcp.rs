@@ -9,6 +9,9 @@ use std::process::Command;
 use std::time::Duration;
 
 use bus::ClockMode;
+
+#[path = "common/outside.rs"]
+mod outside;
 use m6p_twin::network::NetworkSpec;
 use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
 
@@ -24,12 +27,12 @@ fn with_twin(secs: u64, client: impl FnOnce(SocketAddr) + Send + 'static) -> Run
     opts.kiss_links = vec![m6p_twin::runtime::KissLink::listen(
         "127.0.0.1:0".parse().unwrap(),
     )];
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
         let addr = rx.await.unwrap()[0];
-        let th = tokio::task::spawn_blocking(move || client(addr));
+        let th = outside::on_thread(move || client(addr));
         th.await.unwrap();
         twin.await.unwrap().unwrap()
     })
@@ -193,10 +196,10 @@ fn kiss_connect_reaches_the_payload_server_and_reconnects_after_a_drop() {
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(6));
     opts.clock = ClockMode::Realtime { speed: 1.0 };
     opts.kiss_links = vec![m6p_twin::runtime::KissLink::connect(server)];
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let report = rt.block_on(async move {
         let twin = tokio::spawn(run(opts, None));
-        let outside = tokio::task::spawn_blocking(move || {
+        let outside = outside::on_thread(move || {
             for round in 0..2u8 {
                 let (mut s, _) = listener.accept().unwrap();
                 s.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
@@ -254,12 +257,12 @@ fn a_departed_outside_program_gives_its_address_back() {
             .into(),
         ],
     );
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let report = rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
         let addr = rx.await.unwrap()[0];
-        let gs = tokio::task::spawn_blocking(move || {
+        let gs = outside::on_thread(move || {
             (0..2)
                 .map(|_| {
                     Command::new(env!("CARGO_BIN_EXE_m6p-twin"))

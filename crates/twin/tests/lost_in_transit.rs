@@ -15,8 +15,7 @@ fn run(file: &str) -> (exec::Outcome, BTreeSet<String>) {
         .join(file);
     let loaded = exec::load(&path).unwrap_or_else(|e| panic!("{e:#}"));
     let compiled = exec::compile_loaded(&loaded);
-    let rt =
-        m6p_twin::runtime::build_runtime(compiled.opts.clock).unwrap_or_else(|e| panic!("{e:#}"));
+    let rt = m6p_twin::runtime::build_runtime().unwrap_or_else(|e| panic!("{e:#}"));
     let o = rt
         .block_on(exec::execute(compiled, &mut |_| {}))
         .unwrap_or_else(|e| panic!("{e:#}"));
@@ -99,8 +98,7 @@ fn shipped_scenarios_keep_the_invariants_and_their_replies_are_checked() {
             exec::load(&root.join(format!("{name}.toml"))).unwrap_or_else(|e| panic!("{e:#}"));
         let compiled = exec::compile_loaded(&loaded);
         let mut inv = m6p_twin::invariants::Invariants::for_run(&compiled.opts);
-        let rt = m6p_twin::runtime::build_runtime(compiled.opts.clock)
-            .unwrap_or_else(|e| panic!("{e:#}"));
+        let rt = m6p_twin::runtime::build_runtime().unwrap_or_else(|e| panic!("{e:#}"));
         let o = rt
             .block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))
             .unwrap_or_else(|e| panic!("{e:#}"));

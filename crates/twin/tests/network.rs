@@ -27,7 +27,7 @@ fn run_plan(plan: Vec<PlannedRequest>, duration_s: u64, seed: u64, trace: bool) 
     opts.trace = trace;
     opts.ground_plan
         .insert(16, plan.into_iter().map(Into::into).collect());
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     rt.block_on(run(opts, None)).unwrap()
 }
 
@@ -224,7 +224,7 @@ fn a_setup_for_session_1_on_the_default_scenario_polls_payload_12() {
     let plan = compiled.opts.ground_plan.entry(16).or_default();
     plan.push(request(20, 6, 10, setup).into());
     plan.push(request(25, 6, 10, vec![2, 1]).into());
-    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let report = rt.block_on(run(compiled.opts, None)).unwrap();
     let reply = |label: &str| {
         report
@@ -285,7 +285,7 @@ fn the_eps_charges_the_s_band_and_its_channel_switches_the_transmitter() {
         .entry(16)
         .or_default()
         .push(request(20, 6, 10, setup).into());
-    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let report = rt.block_on(run(compiled.opts, None)).unwrap();
     let mean_load = |a: u64, b: u64| {
         let v: Vec<f64> = report
@@ -347,7 +347,7 @@ fn the_eps_charges_the_uhf_downlink_of_forwarded_replies() {
             let plan = compiled.opts.ground_plan.entry(16).or_default();
             plan.extend((10..40).map(|s| request(s, 3, 1, ping_payload(200)).into()));
         }
-        let rt = build_runtime(compiled.opts.clock).unwrap();
+        let rt = build_runtime().unwrap();
         let report = rt.block_on(run(compiled.opts, None)).unwrap();
         if pings {
             let answered = report
@@ -403,7 +403,7 @@ fn with_both_comms_down_nobody_carries_the_link_until_one_comes_back() {
         .map(|s| request(s, 3, 1, ping_payload(8)).into())
         .collect();
     opts.ground_plan.insert(16, plan);
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let mut radio = Vec::new();
     let report = rt
         .block_on(m6p_twin::runtime::run_with(opts, None, &mut |ev| {
@@ -445,7 +445,7 @@ fn in_real_time_the_nodes_boot_at_zero() {
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(11));
     opts.clock = bus::ClockMode::Realtime { speed: 2.0 };
     opts.comm.beacon_period = Duration::from_secs(10);
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let report = rt.block_on(run(opts, None)).unwrap();
     let first = report.beacons.first().expect("a beacon").0;
     // 10 s, then 177 bytes at 9600 bit/s (147.5 ms) and 3 ms.

@@ -17,7 +17,7 @@ use csp::{Header, Packet, SimTime};
 use m6p_twin::events::{Direction, RunEvent};
 use m6p_twin::exec::execute;
 use m6p_twin::plan::compile;
-use m6p_twin::runtime::{KissReplay, build_runtime};
+use m6p_twin::runtime::{KissReplay, RecordedChunk, build_runtime};
 use m6p_twin::scenario::Scenario;
 
 const LINK: &str = "listen 127.0.0.1:52999";
@@ -57,12 +57,16 @@ payloads = [12]
                 let p = Packet::new(Header::new(14, 4, 1, 40), (s as u32).to_le_bytes());
                 let mut bytes = Vec::new();
                 csp::kiss::encode(&p, &mut bytes);
-                (SimTime::from_secs(s), bytes)
+                RecordedChunk {
+                    t: SimTime::from_secs(s),
+                    seq: s,
+                    bytes,
+                }
             })
             .collect(),
         cfg: link_cfg,
     }];
-    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let mut events = Vec::new();
     let out = rt
         .block_on(execute(compiled, &mut |ev| events.push(ev.clone())))

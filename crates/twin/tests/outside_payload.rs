@@ -36,14 +36,14 @@ fn python_payload_over_kiss_serves_a_polling_session_and_its_bytes_reach_the_gro
     let sent_path = dir.join("sent.bin");
     let sent_arg = sent_path.clone();
 
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let (report, (status, output)): (RunReport, _) = rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
         let addr = rx.await.unwrap()[0];
         // The script stops 1.5 s after the last POLL. `--seconds` only bounds a failing
         // run: the twin's socket stays open until this runtime is dropped, after the script.
-        let payload = tokio::task::spawn_blocking(move || {
+        let payload = common::outside::on_thread(move || {
             let out = Command::new("python3")
                 .arg(repo_root().join("examples/outside_payload.py"))
                 .args(["--connect", &addr.to_string(), "--sent"])

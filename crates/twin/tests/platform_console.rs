@@ -43,13 +43,13 @@ fn a_console_on_a_pty_answers_lines_ended_by_cr() {
         node: "EPS".to_owned(),
         at: UartAt::Pty(path.clone()),
     }];
-    let rt = m6p_twin::runtime::build_runtime(opts.clock).unwrap();
+    let rt = m6p_twin::runtime::build_runtime().unwrap();
     let p = path.clone();
     let text = rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(m6p_twin::runtime::run(opts, Some(tx)));
         rx.await.unwrap();
-        let client = tokio::task::spawn_blocking(move || {
+        let client = decoder::outside::on_thread(move || {
             let mut tty = std::fs::OpenOptions::new()
                 .read(true)
                 .write(true)

@@ -25,7 +25,7 @@ tle = [
 fn run(text: &str) -> (m6p_twin::exec::Outcome, Vec<RunEvent>) {
     let s = Scenario::parse("t.toml", text).unwrap();
     let compiled = compile(&s);
-    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let mut events = Vec::new();
     let out = rt
         .block_on(execute_keeping(compiled, true, &mut |ev| {

@@ -40,7 +40,7 @@ fn periodic_telemetry_to_a_serving_port_never_starts_a_loop() {
     let s = Scenario::parse("t.toml", &scenario()).unwrap();
     let compiled = compile(&s);
     let mut invariants = Invariants::for_run(&compiled.opts);
-    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let mut main_frames = Vec::new();
     let out = rt
         .block_on(execute_keeping(compiled, true, &mut |ev| {

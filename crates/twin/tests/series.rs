@@ -44,7 +44,7 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
     );
 
     // Judged on the kept samples and bytes.
-    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let mut inv = Invariants::for_run(&compiled.opts);
     let kept = rt
         .block_on(run_with(compiled.opts.clone(), None, &mut |ev| {
@@ -55,7 +55,7 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
     let kept_verdicts = check_all(&compiled.expectations, &kept, &compiled.opts.network);
 
     // Judged as it goes.
-    let rt = build_runtime(compiled.opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let mut inv = Invariants::for_run(&compiled.opts);
     let expectations = compiled.expectations.clone();
     let outcome = rt

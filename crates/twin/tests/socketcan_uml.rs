@@ -177,7 +177,7 @@ fn guest_twin_over_vcan() {
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), TWIN_RUN);
     opts.clock = ClockMode::Realtime { speed: 1.0 };
     opts.socketcan = vec![(ifname.clone(), SocketCanBus::Main)];
-    let rt = build_runtime(opts.clock).expect("tokio runtime");
+    let rt = build_runtime().expect("tokio runtime");
 
     let (report, outside) = rt.block_on(async {
         let twin = tokio::spawn(run(opts, None));

@@ -215,70 +215,129 @@ pub(super) async fn kiss(
             }
         }
     }
+    // Recorded outside input, fed again at its recorded instants and in its recorded order
+    // (one feeder for every connection: the order input of one instant is taken in is part
+    // of the run); what the twin answers is recorded again and compared by `replay`.
+    let mut feed: Vec<Fed> = Vec::new();
+    let mut conns = Vec::new();
     for ((n, input), &id) in opts.kiss_replay.iter().enumerate().zip(&replay_ids) {
-        // Recorded outside input, fed through an in-memory pipe at its recorded times;
-        // what the twin answers is recorded again and compared by `replay`.
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         kiss_stats.push((format!("replayed {}", input.link), stats.clone()));
-        // Never full: the recorded input is fed at its times, not as fast as it can.
-        let (in_tx, in_rx) = mpsc::channel(input.chunks.len().max(1));
-        let mut cfg2 = wire(&input.cfg, &input.link);
-        cfg2.link = id;
-        let (segs2, label) = (segs.clone(), input.link.clone());
+        let mut cfg = wire(&input.cfg, &input.link);
+        cfg.link = id;
+        // The connection number seeds its CFP ident as in the recorded run.
+        let number = input
+            .link
+            .rsplit_once('#')
+            .and_then(|(_, k)| k.parse().ok())
+            .unwrap_or(n as u64 + 1);
         // A recording's first empty chunk of a connection is its open (older recordings
-        // have none: the connection is open from the start); a later one is its close.
-        let mut chunks = input.chunks.clone();
-        let opened = match chunks.first() {
-            Some((t, b)) if b.is_empty() => {
-                let t = *t;
-                chunks.remove(0);
-                t
-            }
-            _ => SimTime::ZERO,
-        };
-        background.push(tokio::spawn(async move {
-            clock.sleep_until(opened).await;
-            let mut discard = kiss_tcp::Stream(tokio::io::sink());
-            // The connection number seeds its CFP ident as in the recorded run.
-            let conn = label
-                .rsplit_once('#')
-                .and_then(|(_, k)| k.parse().ok())
-                .unwrap_or(n as u64 + 1);
-            let k = kiss_tcp::Connection {
-                name: &label,
-                segs: &segs2,
-                cfg: &cfg2,
-                stats: &stats,
-                n: conn,
-                clock,
-                opened,
-                live: None,
-            };
-            kiss_tcp::serve_link(in_rx, &mut discard, k).await;
+        // have none: the connection is open from the start, before any input).
+        if input.chunks.first().is_none_or(|c| !c.bytes.is_empty()) {
+            feed.push(Fed {
+                seq: None,
+                t: SimTime::ZERO,
+                conn: n,
+                bytes: Vec::new(),
+            });
+        }
+        feed.extend(input.chunks.iter().map(|c| Fed {
+            seq: Some(c.seq),
+            t: c.t,
+            conn: n,
+            bytes: c.bytes.clone(),
         }));
-        background.push(tokio::spawn(async move {
-            for (t, bytes) in chunks {
-                clock.sleep_until(t).await;
-                // An empty chunk is the recorded close: the link ends there.
-                let close = bytes.is_empty();
-                let input = if close {
-                    kiss_tcp::LinkInput::End
-                } else {
-                    kiss_tcp::LinkInput::Bytes(bytes)
-                };
-                if in_tx.send((t, input)).await.is_err() || close {
-                    return;
-                }
-            }
-            // Keep the link open until the end of the run, as the recorded program was.
-            std::future::pending::<()>().await;
-        }));
+        // Never full: the recorded input is fed at its instants.
+        let (tx, rx) = mpsc::channel(input.chunks.len().max(1));
+        conns.push(ReplayedConn {
+            label: input.link.clone(),
+            number,
+            cfg,
+            stats,
+            tx,
+            rx: Some(rx),
+        });
+    }
+    // The run's order (older recordings' opens first).
+    feed.sort_by_key(|f| f.seq);
+    if !feed.is_empty() {
+        background.push(tokio::spawn(replay_feed(feed, conns, segs.clone(), clock)));
     }
     Ok(KissLinks {
         stats: kiss_stats,
         bound,
         budget,
     })
+}
+
+/// A recorded connection, fed again.
+struct ReplayedConn {
+    label: String,
+    number: u64,
+    cfg: KissLinkConfig,
+    stats: Arc<Mutex<KissLinkStats>>,
+    tx: mpsc::Sender<(SimTime, kiss_tcp::LinkInput)>,
+    /// Until its open starts its core, which takes it.
+    rx: Option<mpsc::Receiver<(SimTime, kiss_tcp::LinkInput)>>,
+}
+
+/// One piece of recorded input to feed again.
+struct Fed {
+    /// Its place in the recorded run's order (`None`: an older recording's open, first).
+    seq: Option<u64>,
+    t: SimTime,
+    /// Index into the replayed connections.
+    conn: usize,
+    bytes: Vec<u8>,
+}
+
+/// Feed recorded input, in order, to the replayed connections: each piece queued at its
+/// instant, to be taken in at the run's idle point as the original took it
+/// ([`bus::pace`]). A connection's first piece is its open, which starts its core there;
+/// a later empty one is its close.
+async fn replay_feed(feed: Vec<Fed>, mut conns: Vec<ReplayedConn>, segs: Segments, clock: Clock) {
+    for f in feed {
+        clock.sleep_until(f.t).await;
+        let Some(c) = conns.get_mut(f.conn) else {
+            continue;
+        };
+        if let Some(rx) = c.rx.take() {
+            let opened = kiss_tcp::edge_queued(clock, &c.cfg, &c.label).await;
+            let (label, cfg, stats, segs, n) = (
+                c.label.clone(),
+                c.cfg.clone(),
+                c.stats.clone(),
+                segs.clone(),
+                c.number,
+            );
+            tokio::spawn(async move {
+                let opened = opened.await;
+                let mut discard = kiss_tcp::Stream(tokio::io::sink());
+                let k = kiss_tcp::Connection {
+                    name: &label,
+                    segs: &segs,
+                    cfg: &cfg,
+                    stats: &stats,
+                    n,
+                    clock,
+                    opened,
+                    live: None,
+                };
+                kiss_tcp::serve_link(rx, &mut discard, k).await;
+            });
+            continue;
+        }
+        let input = if f.bytes.is_empty() {
+            kiss_tcp::LinkInput::End
+        } else {
+            kiss_tcp::LinkInput::Bytes(f.bytes)
+        };
+        if let Ok(slot) = c.tx.clone().reserve_owned().await {
+            kiss_tcp::take_in(clock, &c.cfg, &c.label, slot, input).await;
+        }
+    }
+    // The links stay open until the end of the run, as the recorded programs were.
+    std::future::pending::<()>().await;
 }
 
 /// The link of a recorded connection's name (`listen 127.0.0.1:52001#2`: its link is

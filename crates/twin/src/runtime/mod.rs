@@ -135,10 +135,23 @@ impl OutsideLink {
 pub struct KissReplay {
     /// The link's name in the recording (for example `listen 127.0.0.1:52001#1`).
     pub link: String,
-    /// The bytes read from the socket, with the times they were read.
-    pub chunks: Vec<(SimTime, Vec<u8>)>,
+    /// What the run took in from the socket, in order: its open and its close as empty
+    /// chunks.
+    pub chunks: Vec<RecordedChunk>,
     /// The link's settings in the recorded run (its addresses, receiver, limits).
     pub cfg: KissLinkConfig,
+}
+
+/// One piece of recorded outside input.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordedChunk {
+    /// The simulated instant it was taken in at.
+    pub t: SimTime,
+    /// Its place among every connection's input of the run (the order the run took them
+    /// in, which a replay keeps: input of one instant is taken in that order).
+    pub seq: u64,
+    /// The bytes (empty: the connection's open, or later its close).
+    pub bytes: Vec<u8>,
 }
 
 /// Where a link to outside programs meets them.
@@ -334,14 +347,16 @@ impl SocketCanBus {
     }
 }
 
-/// A tokio runtime for `mode`: current-thread, with a paused clock in virtual time.
-pub fn build_runtime(mode: ClockMode) -> anyhow::Result<tokio::runtime::Runtime> {
-    let mut b = tokio::runtime::Builder::new_current_thread();
-    b.enable_all();
-    if mode.starts_paused() {
-        b.start_paused(true);
-    }
-    b.build().context("building the tokio runtime")
+/// A tokio runtime for a run in any mode: current-thread, on tokio's paused clock (real time
+/// is that clock held back to the wall clock), with the hook that takes outside input in
+/// and paces the run ([`bus::pace`]).
+pub fn build_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .on_thread_park(bus::pace::on_idle)
+        .build()
+        .context("building the tokio runtime")
 }
 
 /// The runtime for the run `opts`: [`build_runtime`], without the IO driver when the run is
@@ -349,7 +364,7 @@ pub fn build_runtime(mode: ClockMode) -> anyhow::Result<tokio::runtime::Runtime>
 /// and no eventfd write: the paused clock only needs the timer).
 pub fn build_runtime_for(opts: &RunOptions) -> anyhow::Result<tokio::runtime::Runtime> {
     if !opts.is_self_contained() {
-        return build_runtime(opts.clock);
+        return build_runtime();
     }
     build_virtual_runtime()
 }
@@ -360,6 +375,8 @@ pub fn build_virtual_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_current_thread()
         .enable_time()
         .start_paused(true)
+        // A replay's recorded input is taken in by the same hook.
+        .on_thread_park(bus::pace::on_idle)
         .build()
         .context("building the tokio runtime")
 }
@@ -465,6 +482,8 @@ pub async fn run_with(
 ) -> anyhow::Result<RunReport> {
     let wall_start = Instant::now();
     let clock = Clock::new(opts.clock);
+    // Outside input taken in at the run's idle points, and real time's hold (`bus::pace`).
+    let _pace = bus::pace::install(clock);
     // Every event of the run goes through one channel, in the order it happens.
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<RunEvent>();
     let (segs, mut background) = build::media(&opts, clock, &ev_tx);
@@ -479,20 +498,28 @@ pub async fn run_with(
     let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
     // The KISS servers' addresses, then the TCP consoles'.
     kiss.bound.extend(consoles);
-    if let ClockMode::VirtualThenRealtime { .. } = opts.clock {
-        // Virtual time until the scenario's `realtime_from`, the wall clock after it.
+    if let Some((from, speed)) = opts.clock.paced() {
+        // The wall clock paces the run from `from` on (0 in real time; the scenario's
+        // `realtime_from` after virtual time until then).
         let tx = ev_tx.clone();
-        background.push(tokio::spawn(async move {
-            if let Some(t) = clock.go_realtime().await {
-                tracing::info!("real time from {t} on");
-                let _ = tx.send(RunEvent::Log {
-                    t,
-                    source: "clock".to_owned(),
-                    level: crate::events::Level::Info,
-                    message: "virtual time ends: the wall clock paces the run from here".to_owned(),
-                });
-            }
-        }));
+        let from_later = from > SimTime::ZERO;
+        background.push(tokio::spawn(bus::pace::pacer(
+            clock,
+            from,
+            speed,
+            move |t| {
+                if from_later {
+                    tracing::info!("real time from {t} on");
+                    let _ = tx.send(RunEvent::Log {
+                        t,
+                        source: "clock".to_owned(),
+                        level: crate::events::Level::Info,
+                        message: "virtual time ends: the wall clock paces the run from here"
+                            .to_owned(),
+                    });
+                }
+            },
+        )));
     }
     if let Some(r) = ready {
         let _ = r.send(kiss.bound.clone());
@@ -703,7 +730,7 @@ mod tests {
     fn unusable_socketcan_interface_fails_the_run_naming_it() {
         let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(1));
         opts.socketcan = vec![("m6pnosuch0".to_owned(), SocketCanBus::Main)];
-        let rt = build_runtime(opts.clock).expect("runtime");
+        let rt = build_runtime().expect("runtime");
         let err = rt
             .block_on(run(opts, None))
             .expect_err("the interface does not exist");

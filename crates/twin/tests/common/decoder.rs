@@ -12,6 +12,9 @@ use m6p_twin::plan::compile;
 use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
 use m6p_twin::scenario::Scenario;
 
+#[path = "outside.rs"]
+pub mod outside;
+
 /// The repository root.
 pub fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -50,7 +53,7 @@ pub fn run_decoder(
 ) -> (String, RunReport) {
     let script = repo_root().join("tests").join(script);
     let args = args.to_vec();
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     let (out, report) = rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
@@ -61,7 +64,7 @@ pub fn run_decoder(
             .iter()
             .flat_map(|c| ["--console".to_owned(), c.to_string()])
             .collect();
-        let client = tokio::task::spawn_blocking(move || {
+        let client = outside::on_thread(move || {
             Command::new("python3")
                 .arg(script)
                 .args(["--connect", &addr.to_string(), "--as", "17"])

@@ -4,6 +4,7 @@
 // Each test binary uses a part of these.
 #![allow(dead_code)]
 
+pub mod outside;
 pub mod twin_process;
 
 use std::path::{Path, PathBuf};

@@ -196,7 +196,7 @@ pub fn with_twin<T: Send + 'static>(
     f: impl FnOnce() -> T + Send + 'static,
 ) -> (Option<RunReport>, T) {
     let bounded = opts.duration.is_some();
-    let rt = build_runtime(opts.clock).unwrap();
+    let rt = build_runtime().unwrap();
     rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let twin = tokio::spawn(run(opts, Some(tx)));
