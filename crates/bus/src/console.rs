@@ -12,14 +12,13 @@
 //! echoed: use the terminal program's local echo (`picocom --echo`, minicom's `E`).
 //! `exit` or `quit` ends a TCP connection.
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
-use tokio::sync::oneshot;
 
 use crate::clock::Clock;
-use crate::driver::{CtlTx, NodeCtl};
+use crate::driver::{ConsoleRequest, CtlTx, NodeCtl};
 
 /// Longest line a console takes (`csp::console::MAX_LINE`).
 pub const MAX_LINE: usize = csp::console::MAX_LINE;
@@ -28,58 +27,6 @@ pub const MAX_CONNECTIONS: usize = 4;
 /// How long a line waits for the node's answer before the console says so (a real-time
 /// run answers in microseconds; a node's task blocked this long is stuck).
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(10);
-
-/// One console line on its way to a node, with the way back for the answer.
-#[derive(Clone)]
-pub struct ConsoleRequest(Arc<Inner>);
-
-struct Inner {
-    line: String,
-    reply: Mutex<Option<oneshot::Sender<Option<String>>>>,
-}
-
-impl ConsoleRequest {
-    /// A request for `line` and the receiver of its answer (`None`: the node did not
-    /// answer, being off or hung).
-    pub fn new(line: String) -> (Self, oneshot::Receiver<Option<String>>) {
-        let (tx, rx) = oneshot::channel();
-        (
-            ConsoleRequest(Arc::new(Inner {
-                line,
-                reply: Mutex::new(Some(tx)),
-            })),
-            rx,
-        )
-    }
-    /// The line.
-    pub fn line(&self) -> &str {
-        &self.0.line
-    }
-    /// Answer it (once; later answers are ignored).
-    pub fn answer(&self, text: Option<String>) {
-        let tx = self
-            .0
-            .reply
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .take();
-        if let Some(tx) = tx {
-            let _ = tx.send(text);
-        }
-    }
-}
-
-impl std::fmt::Debug for ConsoleRequest {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_tuple("ConsoleRequest").field(&self.0.line).finish()
-    }
-}
-
-impl PartialEq for ConsoleRequest {
-    fn eq(&self, other: &Self) -> bool {
-        Arc::ptr_eq(&self.0, &other.0)
-    }
-}
 
 /// Where a console's lines go: the node's name and control channel.
 #[derive(Debug, Clone)]

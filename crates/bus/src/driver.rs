@@ -58,7 +58,7 @@ pub enum NodeCtl {
     Fault(u32, Option<csp::node::NodeFault>),
     /// A console line ([`crate::console`]): run at the command's instant when the node is
     /// powered and not hung, and answered; otherwise answered `None`.
-    Console(crate::console::ConsoleRequest),
+    Console(ConsoleRequest),
     /// Stop the task and hand the host back.
     Stop,
 }
@@ -334,6 +334,59 @@ fn flush<A: App>(
             NodeEvent::Log { .. } => tracing::warn!(t = %ev.t(), "{node}: {ev}"),
         }
         out.emit(Output::Node(ev));
+    }
+}
+
+/// One console line on its way to a node ([`crate::console`]), with the way back for the
+/// answer.
+#[derive(Clone)]
+pub struct ConsoleRequest(std::sync::Arc<ConsoleInner>);
+
+struct ConsoleInner {
+    line: String,
+    reply: std::sync::Mutex<Option<tokio::sync::oneshot::Sender<Option<String>>>>,
+}
+
+impl ConsoleRequest {
+    /// A request for `line` and the receiver of its answer (`None`: the node did not
+    /// answer, being off or hung).
+    pub fn new(line: String) -> (Self, tokio::sync::oneshot::Receiver<Option<String>>) {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        (
+            ConsoleRequest(std::sync::Arc::new(ConsoleInner {
+                line,
+                reply: std::sync::Mutex::new(Some(tx)),
+            })),
+            rx,
+        )
+    }
+    /// The line.
+    pub fn line(&self) -> &str {
+        &self.0.line
+    }
+    /// Answer it (once; later answers are ignored).
+    pub fn answer(&self, text: Option<String>) {
+        let tx = self
+            .0
+            .reply
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .take();
+        if let Some(tx) = tx {
+            let _ = tx.send(text);
+        }
+    }
+}
+
+impl std::fmt::Debug for ConsoleRequest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_tuple("ConsoleRequest").field(&self.0.line).finish()
+    }
+}
+
+impl PartialEq for ConsoleRequest {
+    fn eq(&self, other: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0)
     }
 }
 

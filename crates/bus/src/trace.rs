@@ -7,6 +7,89 @@ use csp::SimTime;
 use csp::cfp::CanFrame;
 use tokio::sync::mpsc;
 
+/// Why a frame was lost by its sender ([`TraceFrame::CanLost`]: it never went on the wire)
+/// or by every endpoint it was addressed to ([`TraceFrame::CanUnreceived`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum FrameLoss {
+    /// The sender's transmit queue was full ([`crate::can::PortStats::tx_overflow`]).
+    QueueFull = 0,
+    /// The controller was, or went, bus-off ([`crate::can::PortStats::bus_off_drops`] for a sender).
+    BusOff = 1,
+    /// The endpoint was off the bus: unpowered, or an outside link gone
+    /// ([`crate::can::PortStats::off_drops`] for a sender).
+    Off = 2,
+}
+
+impl FrameLoss {
+    /// Why a sender lost it, in words (`sender's transmit queue full`, `sender bus-off`,
+    /// `sender off the bus`).
+    pub fn sender(self) -> &'static str {
+        match self {
+            FrameLoss::QueueFull => "sender's transmit queue full",
+            FrameLoss::BusOff => "sender bus-off",
+            FrameLoss::Off => "sender off the bus",
+        }
+    }
+    /// Why its receiver did not take it, in words (`receiver bus-off`, `receiver off the
+    /// bus`).
+    pub fn receiver(self) -> &'static str {
+        match self {
+            FrameLoss::QueueFull => "receiver's inbox full",
+            FrameLoss::BusOff => "receiver bus-off",
+            FrameLoss::Off => "receiver off the bus",
+        }
+    }
+}
+
+/// A CAN controller's fault confinement state (ISO 11898-1).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, PartialOrd, Ord)]
+pub enum ErrorState {
+    /// TEC and REC at most 127: it signals errors with active (dominant) error flags.
+    #[default]
+    Active,
+    /// TEC or REC above 127.
+    Passive,
+    /// TEC above 255: off the bus until it has seen 128 x 11 recessive bits.
+    BusOff,
+}
+
+impl ErrorState {
+    /// A short name (`error-active`, `error-passive`, `bus-off`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorState::Active => "error-active",
+            ErrorState::Passive => "error-passive",
+            ErrorState::BusOff => "bus-off",
+        }
+    }
+}
+
+/// What happened to a controller, for the trace (`/can/<bus>/errors`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum CanErrorKind {
+    /// An error frame destroyed its transmission of frame `can_id` (it is retransmitted
+    /// unless the controller went bus-off).
+    ErrorFrame {
+        /// The destroyed frame's id.
+        can_id: u32,
+    },
+    /// Its state changed (to error-passive, bus-off, or back to error-active).
+    State(ErrorState),
+}
+
+/// An error frame or a change of a controller's state, with its counters after it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CanErrorEvent {
+    /// The controller (the endpoint's name).
+    pub node: Arc<str>,
+    /// What happened.
+    pub kind: CanErrorKind,
+    /// Its transmit error counter after it.
+    pub tec: u16,
+    /// Its receive error counter after it.
+    pub rec: u16,
+}
+
 /// What crossed the medium.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum TraceFrame {
@@ -15,13 +98,13 @@ pub enum TraceFrame {
     /// A CSP packet's wire bytes (`header | data`).
     Packet(Vec<u8>),
     /// An error frame or a change of a CAN controller's error state.
-    CanError(crate::can::CanErrorEvent),
+    CanError(CanErrorEvent),
     /// A CAN frame its sender queued that never went on the wire, and why (not recorded as
     /// a frame on the bus; the accounting of what was lost in transit uses it).
-    CanLost(CanFrame, crate::can::FrameLoss),
+    CanLost(CanFrame, FrameLoss),
     /// A CAN frame that crossed the bus (as [`TraceFrame::Can`]) but that none of the
     /// endpoints it was addressed to could take, and why (they were bus-off or off).
-    CanUnreceived(CanFrame, crate::can::FrameLoss),
+    CanUnreceived(CanFrame, FrameLoss),
 }
 
 impl TraceFrame {
@@ -67,8 +150,8 @@ impl TraceEvent {
             }
             TraceFrame::CanError(e) => {
                 let (what, id) = match &e.kind {
-                    crate::can::CanErrorKind::ErrorFrame { can_id } => (0u8, *can_id),
-                    crate::can::CanErrorKind::State(s) => (1 + *s as u8, 0),
+                    CanErrorKind::ErrorFrame { can_id } => (0u8, *can_id),
+                    CanErrorKind::State(s) => (1 + *s as u8, 0),
                 };
                 let mut v = vec![what];
                 v.extend_from_slice(&id.to_be_bytes());

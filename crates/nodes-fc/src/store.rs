@@ -32,8 +32,8 @@ pub const MASK_COMM: u8 = 0x80;
 /// Every bit the mask may have: TMGEN..TMRAWSENS (TMALL is their sum, so not offered), the
 /// EPS and the COMM.
 pub const MASK_ALL: u8 = 0x1f | MASK_EPS | MASK_COMM;
-/// Largest TMSTOREGET reply data.
-pub const CHUNK_BYTES: usize = 200;
+/// Largest TMSTOREGET reply data (a wire limit, declared with the command).
+pub use crate::wire::STORE_CHUNK_BYTES as CHUNK_BYTES;
 
 /// What the store collects and keeps.
 #[derive(Debug, Clone, PartialEq)]

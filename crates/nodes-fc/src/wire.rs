@@ -45,6 +45,8 @@ pub const PORT_RTC: u8 = 11;
 pub const PORT_ATTITUDE: u8 = 12;
 /// Default port of the mission-controller scripts (ICD 1.5; a later increment).
 pub const PORT_SCRIPTS: u8 = 13;
+/// Largest TMSTOREGET reply data.
+pub const STORE_CHUNK_BYTES: usize = 200;
 
 /// Command ids of the FC ports (ICD tables 4.2.1-4.2.3, INTERPRETATION.md section 4).
 pub mod cmd {
@@ -437,7 +439,7 @@ pub const ICD_TELEMETRY: Port = Port {
             .reply(Data::Variable(
                 "u32 matching, u8 count, count x (u32 rtc, u8 kind, u8 len, data[len]), at most 200 bytes",
                 5,
-                crate::store::CHUNK_BYTES,
+                STORE_CHUNK_BYTES,
             ))
             .examples(&[&[0, 0, 0, 0, 0xff, 0xff, 0xff, 0xff, 0, 0, 0, 0]])
             .no_payloads()

@@ -41,8 +41,18 @@ use std::f64::consts::TAU;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
-use crate::propagate::StateVector;
 use crate::time::{Eop, JulianDate, UtcTime, gmst82};
+
+/// A Cartesian position and velocity in a frame the caller names (the frame is its
+/// contract: [`crate::propagate::Propagator::state_j2000`] returns ECI J2000, the
+/// conversions here say theirs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StateVector {
+    /// Position, km.
+    pub r_km: Vector3<f64>,
+    /// Velocity, km/s.
+    pub v_km_s: Vector3<f64>,
+}
 
 /// Arcseconds to radians.
 pub const ARCSEC_TO_RAD: f64 = std::f64::consts::PI / (180.0 * 3600.0);

@@ -48,15 +48,7 @@ use crate::frames;
 use crate::time::UtcTime;
 use crate::tle::Tle;
 
-/// A Cartesian position and velocity in an inertial frame (the frame is the caller's
-/// contract: [`Propagator::state_j2000`] returns ECI J2000).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StateVector {
-    /// Position, km.
-    pub r_km: Vector3<f64>,
-    /// Velocity, km/s.
-    pub v_km_s: Vector3<f64>,
-}
+pub use crate::frames::StateVector;
 
 /// Why a state could not be produced.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

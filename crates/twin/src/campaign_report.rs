@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use crate::campaign_run::{CampaignMeta, RunRow, RunVerdict};
+use crate::campaign_rows::{CampaignMeta, RunRow, RunVerdict};
 
 const PASS: &str = "#2e8b57";
 const FAIL: &str = "#d0453a";

@@ -13,62 +13,11 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context as _, bail};
-use serde::{Deserialize, Serialize};
 
 use crate::campaign::Campaign;
+pub use crate::campaign_rows::{CampaignMeta, RunRow, RunVerdict};
 use crate::exec;
 use crate::scenario::Scenario;
-
-/// How a run ended.
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum RunVerdict {
-    /// Every expectation held.
-    Pass,
-    /// Expectations failed: their names and what was observed.
-    Fail(Vec<(String, String)>),
-    /// The run could not run, crashed or went over a limit: why.
-    Error(String),
-    /// The campaign was stopped (SIGINT, SIGTERM) before the run ended, or before it began:
-    /// no result. `campaign run --resume` runs it.
-    #[serde(rename = "not-run")]
-    NotRun(String),
-}
-
-impl RunVerdict {
-    /// `pass`, `fail`, `error` or `not run`.
-    pub fn word(&self) -> &'static str {
-        match self {
-            RunVerdict::Pass => "pass",
-            RunVerdict::Fail(_) => "fail",
-            RunVerdict::Error(_) => "error",
-            RunVerdict::NotRun(_) => "not run",
-        }
-    }
-    /// Whether it is a result (pass, fail or error), not a run cut or never started.
-    pub fn is_result(&self) -> bool {
-        !matches!(self, RunVerdict::NotRun(_))
-    }
-}
-
-/// One run's row.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunRow {
-    /// The run's index.
-    pub run: u64,
-    /// The run's scenario seed.
-    pub seed: u64,
-    /// What was drawn, by path.
-    pub draws: BTreeMap<String, String>,
-    /// How it ended.
-    pub verdict: RunVerdict,
-    /// Key figures of the run ([`metrics`]), by name; absent where they do not apply.
-    #[serde(default)]
-    pub metrics: BTreeMap<String, f64>,
-    /// The resolved scenario (written out for failures; `rows.jsonl` keeps it for them only).
-    #[serde(default, skip_serializing_if = "String::is_empty")]
-    pub scenario: String,
-}
 
 /// Run run `k` of `c`: resolve, compile, run in virtual time, check. A panic inside the
 /// run is caught and becomes the row's error.
@@ -405,32 +354,6 @@ pub fn junit(name: &str, rows: &[RunRow]) -> anyhow::Result<String> {
     let mut report = Report::new(name);
     report.add_test_suite(suite);
     report.to_string().context("writing the JUnit report")
-}
-
-/// What the output files say about their campaign (`campaign.json`): shards of one
-/// campaign agree on it, and `merge` checks that they do.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct CampaignMeta {
-    /// The campaign's name.
-    pub name: String,
-    /// Its file, as given.
-    pub file: String,
-    /// Its seed.
-    pub seed: u64,
-    /// Runs 0..runs were asked for (over all shards).
-    pub runs: u64,
-}
-
-impl CampaignMeta {
-    /// The meta of `c` asked for `runs` runs.
-    pub fn of(c: &Campaign, runs: u64) -> CampaignMeta {
-        CampaignMeta {
-            name: c.name(),
-            file: c.file.clone(),
-            seed: c.spec.seed,
-            runs,
-        }
-    }
 }
 
 /// Which runs a shard takes: those whose index modulo `count` is `index`.

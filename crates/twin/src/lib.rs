@@ -12,6 +12,7 @@ pub mod adcs;
 pub mod bench;
 pub mod campaign;
 pub mod campaign_report;
+pub mod campaign_rows;
 pub mod campaign_run;
 pub mod campaign_shrink;
 pub mod can;

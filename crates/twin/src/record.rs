@@ -2484,13 +2484,10 @@ impl Recorder {
                     .collect::<Vec<_>>()
                     .join(","),
             ),
-            (
-                "link_addrs",
-                crate::recording::format_link_addrs(&meta.link_addrs),
-            ),
+            ("link_addrs", format_link_addrs(&meta.link_addrs)),
             (
                 "link_tx_budgets",
-                crate::recording::format_link_budgets(&meta.link_tx_budgets),
+                format_link_budgets(&meta.link_tx_budgets),
             ),
         ]
         .into_iter()
@@ -2780,6 +2777,52 @@ pub fn start_ns(start_utc: &str) -> anyhow::Result<u64> {
     u64::try_from(ns).with_context(|| {
         format!("recording start time {start_utc} is before 1970 (MCAP times are unsigned)")
     })
+}
+
+/// The `link_addrs` metadata: `LABEL=ID,ID;LABEL=ID` (links without addresses left out).
+pub fn format_link_addrs(links: &std::collections::BTreeMap<String, Vec<u8>>) -> String {
+    links
+        .iter()
+        .filter(|(_, a)| !a.is_empty())
+        .map(|(l, a)| {
+            let ids: Vec<String> = a.iter().map(u8::to_string).collect();
+            format!("{l}={}", ids.join(","))
+        })
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
+/// Read [`format_link_addrs`]' text; what does not parse is left out.
+pub fn parse_link_addrs(text: &str) -> std::collections::BTreeMap<String, Vec<u8>> {
+    text.split(';')
+        .filter_map(|item| {
+            let (label, ids) = item.rsplit_once('=')?;
+            let ids: Vec<u8> = ids
+                .split(',')
+                .filter_map(|a| a.trim().parse().ok())
+                .collect();
+            Some((label.to_owned(), ids))
+        })
+        .collect()
+}
+
+/// The `link_tx_budgets` metadata: `LABEL=N;LABEL=N`.
+pub fn format_link_budgets(links: &std::collections::BTreeMap<String, u32>) -> String {
+    links
+        .iter()
+        .map(|(l, n)| format!("{l}={n}"))
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
+/// Read [`format_link_budgets`]' text; what does not parse is left out.
+pub fn parse_link_budgets(text: &str) -> std::collections::BTreeMap<String, u32> {
+    text.split(';')
+        .filter_map(|item| {
+            let (label, n) = item.rsplit_once('=')?;
+            Some((label.to_owned(), n.trim().parse().ok()?))
+        })
+        .collect()
 }
 
 #[cfg(test)]

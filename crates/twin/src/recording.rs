@@ -612,52 +612,6 @@ pub fn messages(path: &Path) -> anyhow::Result<Messages> {
     })
 }
 
-/// The `link_addrs` metadata: `LABEL=ID,ID;LABEL=ID` (links without addresses left out).
-pub fn format_link_addrs(links: &std::collections::BTreeMap<String, Vec<u8>>) -> String {
-    links
-        .iter()
-        .filter(|(_, a)| !a.is_empty())
-        .map(|(l, a)| {
-            let ids: Vec<String> = a.iter().map(u8::to_string).collect();
-            format!("{l}={}", ids.join(","))
-        })
-        .collect::<Vec<_>>()
-        .join(";")
-}
-
-/// Read [`format_link_addrs`]' text; what does not parse is left out.
-pub fn parse_link_addrs(text: &str) -> std::collections::BTreeMap<String, Vec<u8>> {
-    text.split(';')
-        .filter_map(|item| {
-            let (label, ids) = item.rsplit_once('=')?;
-            let ids: Vec<u8> = ids
-                .split(',')
-                .filter_map(|a| a.trim().parse().ok())
-                .collect();
-            Some((label.to_owned(), ids))
-        })
-        .collect()
-}
-
-/// The `link_tx_budgets` metadata: `LABEL=N;LABEL=N`.
-pub fn format_link_budgets(links: &std::collections::BTreeMap<String, u32>) -> String {
-    links
-        .iter()
-        .map(|(l, n)| format!("{l}={n}"))
-        .collect::<Vec<_>>()
-        .join(";")
-}
-
-/// Read [`format_link_budgets`]' text; what does not parse is left out.
-pub fn parse_link_budgets(text: &str) -> std::collections::BTreeMap<String, u32> {
-    text.split(';')
-        .filter_map(|item| {
-            let (label, n) = item.rsplit_once('=')?;
-            Some((label.to_owned(), n.trim().parse().ok()?))
-        })
-        .collect()
-}
-
 /// Build the metadata from the `m6p-twin` record and the scenario attachment.
 fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Result<RecordingMeta> {
     let get = |k: &str| {
@@ -691,12 +645,12 @@ fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Resu
         link_addrs: m
             .metadata
             .get("link_addrs")
-            .map(|l| parse_link_addrs(l))
+            .map(|l| crate::record::parse_link_addrs(l))
             .unwrap_or_default(),
         link_tx_budgets: m
             .metadata
             .get("link_tx_budgets")
-            .map(|l| parse_link_budgets(l))
+            .map(|l| crate::record::parse_link_budgets(l))
             .unwrap_or_default(),
         // Older recordings have none: only a scenario's `replaces` replaced nodes then.
         replaced: m
