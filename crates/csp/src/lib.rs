@@ -14,12 +14,14 @@
 //! - [`reqrep`]: the ICD's request-reply framing (command id, result code, little-endian).
 
 pub mod cfp;
+pub mod client;
 pub mod console;
 pub mod crc32;
 pub mod header;
 pub mod icd;
 pub mod kiss;
 pub mod node;
+pub mod node_console;
 pub mod packet;
 pub mod params;
 pub mod reqrep;

@@ -1499,6 +1499,38 @@ impl<A: App> App for Tap<A> {
     }
 }
 
+/// ICD 4.1 on a node's own port: when `packet` comes from a payload (12-15) that the node's
+/// payload access refuses ([`NodeConfig::payload_access`]) and its command is
+/// not in `open` (what payloads may use there), the failure reply, with a warning in the
+/// node's log; `None` to serve it.
+pub fn payload_refusal(
+    node: &mut Node,
+    packet: &Packet,
+    open: &[u8],
+    now: SimTime,
+) -> Option<Vec<u8>> {
+    let command = packet.data.first().copied();
+    let is_open = command.is_some_and(|c| open.contains(&c));
+    if !node
+        .config()
+        .payload_access
+        .refuses(packet.header.src, is_open)
+    {
+        return None;
+    }
+    let name = node.name().to_ascii_lowercase();
+    node.warn(
+        now,
+        format!(
+            "{name}: payload {} refused port {} command {}: not available to payloads (ICD 4.1)",
+            packet.header.src,
+            packet.header.dport,
+            command.map_or("(none)".to_owned(), |c| c.to_string())
+        ),
+    );
+    Some(crate::reqrep::failure(command.unwrap_or(0)))
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

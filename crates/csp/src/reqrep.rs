@@ -8,15 +8,10 @@
 //!
 //! [`Request`] and [`Reply`] are the `Repr`s of the framing; [`CommandSet`] is what a node's
 //! port implements to turn request bytes into a typed command (a later issue's TMGEN,
-//! SETUP, ...), and [`serve`] turns any request into exactly one reply. [`Client`] is the
-//! requesting side: it sends from an ephemeral port, matches the reply by that port and the
-//! peer, and reports timeouts. [`le`] has the little-endian cursor used by every layout.
+//! SETUP, ...), and [`serve`] turns any request into exactly one reply. [`crate::client::Client`] is the
+//! requesting side, on a node. [`le`] has the little-endian cursor used by every layout.
 
-use std::collections::BTreeMap;
-use std::time::Duration;
-
-use crate::node::{Node, SendError};
-use crate::{Error, Header, Packet, SimTime};
+use crate::Error;
 
 /// Result code of a failed command.
 pub const RESULT_FAILURE: u8 = 0;
@@ -115,38 +110,6 @@ pub fn success(command: u8, data: &[u8]) -> Vec<u8> {
     .to_vec()
 }
 
-/// ICD 4.1 on a node's own port: when `packet` comes from a payload (12-15) that the node's
-/// payload access refuses ([`crate::node::NodeConfig::payload_access`]) and its command is
-/// not in `open` (what payloads may use there), the failure reply, with a warning in the
-/// node's log; `None` to serve it.
-pub fn payload_refusal(
-    node: &mut Node,
-    packet: &Packet,
-    open: &[u8],
-    now: SimTime,
-) -> Option<Vec<u8>> {
-    let command = packet.data.first().copied();
-    let is_open = command.is_some_and(|c| open.contains(&c));
-    if !node
-        .config()
-        .payload_access
-        .refuses(packet.header.src, is_open)
-    {
-        return None;
-    }
-    let name = node.name().to_ascii_lowercase();
-    node.warn(
-        now,
-        format!(
-            "{name}: payload {} refused port {} command {}: not available to payloads (ICD 4.1)",
-            packet.header.src,
-            packet.header.dport,
-            command.map_or("(none)".to_owned(), |c| c.to_string())
-        ),
-    );
-    Some(failure(command.unwrap_or(0)))
-}
-
 /// Why a request was refused (every case becomes a failure reply).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
@@ -218,138 +181,6 @@ pub fn serve<C: CommandSet>(
             Err(code) => (vec![request.command, code], None),
         },
         Err(e) => (failure(request.command), Some(e)),
-    }
-}
-
-/// A request waiting for its reply.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Pending {
-    /// Caller's tag for this request.
-    pub tag: u64,
-    /// Destination node.
-    pub dst: u8,
-    /// Destination port.
-    pub dport: u8,
-    /// Our ephemeral source port.
-    pub sport: u8,
-    /// When it was sent.
-    pub sent: SimTime,
-    /// When it times out.
-    pub deadline: SimTime,
-}
-
-/// A reply matched to its request.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Completion {
-    /// The request.
-    pub request: Pending,
-    /// The reply packet (CRC32 already stripped).
-    pub reply: Packet,
-    /// Round-trip time.
-    pub rtt: Duration,
-}
-
-/// The requesting side of request-reply, for any port (service ports included).
-///
-/// Each request gets its own ephemeral source port, bound on the node until the reply
-/// arrives or the request times out; replies are matched by that port and the peer's
-/// address and port, as a libcsp connection matches them.
-#[derive(Debug, Default)]
-pub struct Client {
-    pending: BTreeMap<u8, Pending>,
-}
-
-impl Client {
-    /// A client with nothing pending.
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Send `data` to `dst:dport` and wait up to `timeout` for the reply.
-    #[allow(clippy::too_many_arguments)]
-    pub fn request(
-        &mut self,
-        node: &mut Node,
-        tag: u64,
-        header_template: Header,
-        dst: u8,
-        dport: u8,
-        data: Vec<u8>,
-        timeout: Duration,
-        now: SimTime,
-    ) -> Result<u8, SendError> {
-        let sport = node.alloc_port().ok_or(SendError::NoPort)?;
-        let header = Header {
-            src: node.addr(),
-            dst,
-            dport,
-            sport,
-            ..header_template
-        };
-        if let Err(e) = node.send(Packet::new(header, data), now) {
-            node.unbind(sport);
-            return Err(e);
-        }
-        self.pending.insert(
-            sport,
-            Pending {
-                tag,
-                dst,
-                dport,
-                sport,
-                sent: now,
-                deadline: now + timeout,
-            },
-        );
-        Ok(sport)
-    }
-
-    /// Match an incoming packet; `None` if it answers no pending request.
-    pub fn handle_reply(
-        &mut self,
-        node: &mut Node,
-        packet: &Packet,
-        now: SimTime,
-    ) -> Option<Completion> {
-        let h = packet.header;
-        let p = self.pending.get(&h.dport)?;
-        if p.dst != h.src || p.dport != h.sport {
-            return None;
-        }
-        let request = self.pending.remove(&h.dport)?;
-        node.unbind(request.sport);
-        Some(Completion {
-            rtt: now.saturating_since(request.sent),
-            request,
-            reply: packet.clone(),
-        })
-    }
-
-    /// Whether any request is waiting.
-    pub fn is_idle(&self) -> bool {
-        self.pending.is_empty()
-    }
-    /// The earliest deadline.
-    pub fn poll_timeout(&self) -> Option<SimTime> {
-        self.pending.values().map(|p| p.deadline).min()
-    }
-    /// Expire requests whose deadline has passed, releasing their ports.
-    pub fn handle_timeout(&mut self, node: &mut Node, now: SimTime) -> Vec<Pending> {
-        let expired: Vec<u8> = self
-            .pending
-            .iter()
-            .filter(|(_, p)| p.deadline <= now)
-            .map(|(k, _)| *k)
-            .collect();
-        expired
-            .into_iter()
-            .filter_map(|k| self.pending.remove(&k))
-            .inspect(|p| node.unbind(p.sport))
-            .collect()
-    }
-    /// Forget everything (reboot).
-    pub fn clear(&mut self) {
-        self.pending.clear();
     }
 }
 

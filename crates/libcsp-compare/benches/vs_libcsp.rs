@@ -12,7 +12,7 @@
 //! - ping: libcsp = `csp_ping` to its own address (timeout 1000 ms) through the loopback
 //!   interface, its router task and a server thread running `csp_service_handler`, so
 //!   thread wake-ups are most of it; ours = a `Node` pinging its own address with
-//!   `reqrep::Client` through its loopback queue and service handler, in one thread.
+//!   `client::Client` through its loopback queue and service handler, in one thread.
 //!
 //! Method: a calibration run per side and case (also the warm-up) picks the iteration count
 //! so that one measurement takes about 30 ms, and checks that both sides produced the same

@@ -6,8 +6,8 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use csp::cfp::{CSP_CAN_MTU, CanFrame, Fragmenter};
+use csp::client::Client;
 use csp::node::{Node, NodeConfig};
-use csp::reqrep::Client;
 use csp::{Header, Packet, SimTime, crc32, kiss};
 
 use crate::{Case, Error, NODE_ADDR, Op, Output, PING_TIMEOUT_MS, Sample, packet, ramp};

@@ -478,7 +478,7 @@ impl App for CommApp {
         }
         // A payload may read the COMM, not set its beacon (ICD 4.1).
         let open = [wire::cmd::TMCOMM, wire::cmd::BEACONGET];
-        let (reply, refused) = match csp::reqrep::payload_refusal(node, &packet, &open, now) {
+        let (reply, refused) = match csp::node::payload_refusal(node, &packet, &open, now) {
             Some(r) => {
                 self.refused_since_boot += 1;
                 self.counters.refused += 1;

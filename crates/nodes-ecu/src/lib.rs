@@ -500,7 +500,7 @@ impl App for EcuApp {
         }
         // A payload may read the ECU's telemetry, never arm or fire it (ICD 4.1).
         let open = [wire::cmd::TMECU];
-        let (reply, malformed) = match csp::reqrep::payload_refusal(node, &packet, &open, now) {
+        let (reply, malformed) = match csp::node::payload_refusal(node, &packet, &open, now) {
             Some(r) => (r, None),
             None => serve::<EcuCommand>(&packet.data, |c| self.command(c, now)),
         };

@@ -519,7 +519,7 @@ impl App for EpsApp {
         self.advance(now);
         // A payload may read the EPS, not switch it (ICD 4.1).
         let open = [wire::cmd::TMEPS, wire::cmd::CHGET, wire::cmd::THRGET];
-        let (reply, refused) = match csp::reqrep::payload_refusal(node, &packet, &open, now) {
+        let (reply, refused) = match csp::node::payload_refusal(node, &packet, &open, now) {
             Some(r) => (r, None),
             None => serve::<EpsCommand>(&packet.data, |c| self.command(c, now)),
         };

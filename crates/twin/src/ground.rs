@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use csp::client::Client;
 use csp::node::{App, Node, Outbox};
-use csp::reqrep::Client;
 use csp::{Header, Packet, SimTime};
 
 /// A request the station sends at a given time.
