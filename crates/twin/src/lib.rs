@@ -8,6 +8,9 @@
 //! - [`campaign`]: campaign files: a scenario run many times with drawn values.
 //! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
+// The vocabulary below the twin's layers (its own crate: docs/architecture.md).
+pub use twin_core::{duration, events, network, packets, tagged, timefmt, transit};
+
 pub mod adcs;
 pub mod bench;
 pub mod campaign;
@@ -20,9 +23,7 @@ pub mod clock;
 pub mod comm;
 pub mod commands;
 pub mod counters;
-pub mod duration;
 pub mod eps;
-pub mod events;
 pub mod exec;
 pub mod expectations;
 pub mod faults;
@@ -36,9 +37,7 @@ pub mod invariants;
 #[cfg(feature = "live")]
 pub mod live;
 pub mod mcap_file;
-pub mod network;
 pub mod outside;
-pub mod packets;
 pub mod params;
 pub mod plan;
 pub mod protobuf;
@@ -49,9 +48,6 @@ pub mod runtime;
 pub mod scenario;
 pub mod sessions;
 pub mod sizes;
-pub mod tagged;
-pub mod timefmt;
-pub mod transit;
 
 use std::time::Duration;
 

@@ -76,24 +76,7 @@ impl<'de> Deserialize<'de> for Dur {
     }
 }
 
-/// A node named by name (`FC`, `PL12`, `GS16`) or by CSP address.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
-#[serde(untagged)]
-pub enum NodeRef {
-    /// A CSP address, 0..=30.
-    Addr(u8),
-    /// A node name from the network table.
-    Name(String),
-}
-
-impl fmt::Display for NodeRef {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            NodeRef::Addr(a) => write!(f, "{a}"),
-            NodeRef::Name(n) => f.write_str(n),
-        }
-    }
-}
+pub use crate::network::NodeRef;
 
 /// A whole scenario.
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
@@ -920,27 +903,4 @@ fn table_header(line: &str) -> Option<(String, bool)> {
     }
     let inner = l.strip_prefix('[')?.strip_suffix(']')?;
     Some((inner.trim().to_owned(), false))
-}
-
-impl crate::network::NetworkSpec {
-    /// The address of a node reference, or an error naming the known nodes.
-    pub fn resolve(&self, r: &NodeRef) -> Result<u8, String> {
-        match r {
-            NodeRef::Addr(a) => self
-                .nodes
-                .iter()
-                .find(|n| n.addr == *a)
-                .map(|n| n.addr)
-                .ok_or_else(|| format!("no node has address {a}")),
-            NodeRef::Name(name) => self
-                .nodes
-                .iter()
-                .find(|n| n.name.eq_ignore_ascii_case(name))
-                .map(|n| n.addr)
-                .ok_or_else(|| {
-                    let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
-                    format!("unknown node `{name}` (nodes: {})", names.join(", "))
-                }),
-        }
-    }
 }

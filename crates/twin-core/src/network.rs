@@ -186,6 +186,48 @@ pub fn node_config(spec: &NodeSpec) -> (NodeConfig, Vec<Medium>) {
     (cfg, media)
 }
 
+/// A node named by name (`FC`, `PL12`, `GS16`) or by CSP address.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Deserialize, schemars::JsonSchema)]
+#[serde(untagged)]
+pub enum NodeRef {
+    /// A CSP address, 0..=30.
+    Addr(u8),
+    /// A node name from the network table.
+    Name(String),
+}
+
+impl std::fmt::Display for NodeRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NodeRef::Addr(a) => write!(f, "{a}"),
+            NodeRef::Name(n) => f.write_str(n),
+        }
+    }
+}
+
+impl NetworkSpec {
+    /// The address of a node reference, or an error naming the known nodes.
+    pub fn resolve(&self, r: &NodeRef) -> Result<u8, String> {
+        match r {
+            NodeRef::Addr(a) => self
+                .nodes
+                .iter()
+                .find(|n| n.addr == *a)
+                .map(|n| n.addr)
+                .ok_or_else(|| format!("no node has address {a}")),
+            NodeRef::Name(name) => self
+                .nodes
+                .iter()
+                .find(|n| n.name.eq_ignore_ascii_case(name))
+                .map(|n| n.addr)
+                .ok_or_else(|| {
+                    let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
+                    format!("unknown node `{name}` (nodes: {})", names.join(", "))
+                }),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
