@@ -46,7 +46,7 @@
 
 pub mod config;
 pub mod link;
-pub mod wire;
+pub use icd::comm as wire;
 
 use std::time::Duration;
 

@@ -50,7 +50,7 @@
 
 pub mod config;
 pub mod thruster;
-pub mod wire;
+pub use icd::ecu as wire;
 
 use std::time::Duration;
 

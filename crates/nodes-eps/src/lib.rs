@@ -47,7 +47,7 @@ pub mod eps;
 pub mod loads;
 pub mod protect;
 pub mod solar;
-pub mod wire;
+pub use icd::eps as wire;
 
 use std::time::Duration;
 

@@ -45,7 +45,7 @@ pub const BODY_PACKING_FACTOR: f64 = 0.85;
 /// Packing factor of a deployable wing panel (cells only).
 pub const WING_PACKING_FACTOR: f64 = 0.90;
 /// At most this many panels (the telemetry's fixed slots).
-pub const MAX_PANELS: usize = 8;
+pub use icd::eps::MAX_PANELS;
 
 /// One flat panel fixed in the body frame.
 #[derive(Debug, Clone, PartialEq)]

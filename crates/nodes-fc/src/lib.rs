@@ -37,7 +37,7 @@ pub mod sensors;
 pub mod store;
 pub mod timesync;
 pub mod truth;
-pub mod wire;
+pub use icd::fc as wire;
 
 use csp::node::{App, Node, NodeEvent, Outbox};
 use csp::reqrep::{self, CommandSet, RESULT_FAILURE, RESULT_SUCCESS, Request, serve};
@@ -1863,7 +1863,7 @@ mod tests {
         };
         let answer = |h: &mut Host<FcApp>, port: u8, soc: f32, t: SimTime| {
             let mut d = vec![1, 1];
-            nodes_eps::wire::TmEps {
+            icd::eps::TmEps {
                 soc,
                 ..Default::default()
             }

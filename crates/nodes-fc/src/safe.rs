@@ -47,7 +47,7 @@ impl Default for SafeConfig {
     fn default() -> Self {
         SafeConfig {
             eps_poll: Some(Duration::from_secs(30)),
-            eps: (platform::addr::EPS, nodes_eps::wire::PORT_EPS),
+            eps: (platform::addr::EPS, icd::eps::PORT_EPS),
             enter_soc: 0.15,
             exit_soc: 0.30,
         }
@@ -168,7 +168,7 @@ impl SafeMonitor {
         let header = Header::new(node.addr(), eps, eps_port, port);
         // A send failure is counted by the node.
         if node
-            .send(Packet::new(header, vec![nodes_eps::wire::cmd::TMEPS]), now)
+            .send(Packet::new(header, vec![icd::eps::cmd::TMEPS]), now)
             .is_ok()
         {
             self.polls += 1;
@@ -202,8 +202,8 @@ impl SafeMonitor {
             return false;
         }
         let d = &packet.data;
-        let tm = (d.get(..2) == Some(&[nodes_eps::wire::cmd::TMEPS, 1][..]))
-            .then(|| nodes_eps::wire::TmEps::parse(&d[2..]).ok())
+        let tm = (d.get(..2) == Some(&[icd::eps::cmd::TMEPS, 1][..]))
+            .then(|| icd::eps::TmEps::parse(&d[2..]).ok())
             .flatten()
             .filter(|t| t.soc.is_finite());
         match tm {
@@ -280,9 +280,9 @@ mod tests {
         let mut m = SafeMonitor::new(SafeConfig::default());
         m.port = Some(40);
         let tm = |soc: f32| {
-            let t = nodes_eps::wire::TmEps {
+            let t = icd::eps::TmEps {
                 soc,
-                ..nodes_eps::wire::TmEps::default()
+                ..icd::eps::TmEps::default()
             };
             let mut d = vec![1, 1];
             t.emit(&mut d);

@@ -59,8 +59,8 @@ impl Default for StoreConfig {
             period: Some(Duration::from_secs(60)),
             mask: MASK_TMGEN | MASK_TMACD,
             capacity_bytes: 256 * 1024,
-            eps: (platform::addr::EPS, nodes_eps::wire::PORT_EPS),
-            comm: (platform::addr::COMM1, nodes_comm::wire::PORT),
+            eps: (platform::addr::EPS, icd::eps::PORT_EPS),
+            comm: (platform::addr::COMM1, icd::comm::PORT),
         }
     }
 }
@@ -162,8 +162,8 @@ impl Store {
     pub fn ask_others(&mut self, node: &mut Node, now: SimTime) {
         let Some(port) = self.port else { return };
         for (bit, (dst, dport), cmd) in [
-            (MASK_EPS, self.cfg.eps, nodes_eps::wire::cmd::TMEPS),
-            (MASK_COMM, self.cfg.comm, nodes_comm::wire::cmd::TMCOMM),
+            (MASK_EPS, self.cfg.eps, icd::eps::cmd::TMEPS),
+            (MASK_COMM, self.cfg.comm, icd::comm::cmd::TMCOMM),
         ] {
             if self.cfg.mask & bit != 0 {
                 // A send failure is counted by the node.

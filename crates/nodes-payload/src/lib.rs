@@ -51,7 +51,7 @@
 
 pub mod config;
 pub mod stream;
-pub mod wire;
+pub use icd::payload as wire;
 
 use std::collections::VecDeque;
 use std::time::Duration;

@@ -66,7 +66,7 @@
 pub mod config;
 pub mod sband;
 pub mod session;
-pub mod wire;
+pub use icd::pc as wire;
 
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
@@ -92,7 +92,7 @@ pub const PORTS: &[u8] = &[
 ];
 
 /// Sessions the PC serves (one per payload, CSP 12-15).
-pub const MAX_SESSIONS: usize = 4;
+pub use icd::pc::MAX_SESSIONS;
 /// Default buffer file capacity (ICD 3.1.5: "the total available memory size is 256 MB").
 pub const DEFAULT_BUFFER_CAPACITY_BYTES: u64 = 256 * 1024 * 1024;
 /// POLL attempts per packet (ICD 3.1.4: "the request is repeated two more times").

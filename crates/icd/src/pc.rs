@@ -300,7 +300,7 @@ pub const ICD_FILES: Port = Port {
         .reply(Data::Variable(
             "count u8, then count x FileStat (18 bytes)",
             1,
-            1 + crate::MAX_SESSIONS * <FileStat as Repr>::LEN,
+            1 + MAX_SESSIONS * <FileStat as Repr>::LEN,
         ))
         .no_payloads()
         .twin(),
@@ -730,6 +730,9 @@ impl CommandSet for TelemetryCommand {
         }
     }
 }
+
+/// Sessions the PC serves (one per payload, CSP 12-15).
+pub const MAX_SESSIONS: usize = 4;
 
 #[cfg(test)]
 mod tests {

@@ -26,10 +26,6 @@
 use csp::icd::{Command, Data, Port};
 use csp::reqrep::{CommandSet, Request, RequestError, expect_len};
 
-use crate::loads::{CHANNELS, Channel};
-pub use crate::protect::Thresholds;
-use crate::solar::MAX_PANELS;
-
 /// Default port of the EPS's telemetry and control (INTERPRETATION.md section 4).
 pub const PORT_EPS: u8 = 10;
 
@@ -246,6 +242,192 @@ impl CommandSet for EpsCommand {
         }
     }
 }
+
+/// A switched power channel (the wire id is the value; the mask bit is `1 << id`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Channel {
+    /// COMM primary (CSP 1). Never shed by the protection.
+    Comm1 = 0,
+    /// COMM secondary (CSP 2). Never shed by the protection.
+    Comm2 = 1,
+    /// ECU, propulsion (CSP 5).
+    Ecu = 2,
+    /// Payload controller (CSP 6).
+    Pc = 3,
+    /// Payload 12.
+    Payload12 = 4,
+    /// Payload 13.
+    Payload13 = 5,
+    /// Payload 14.
+    Payload14 = 6,
+    /// Payload 15.
+    Payload15 = 7,
+    /// The S-band transmitter (the PC's downlink; not a CSP node).
+    Sband = 8,
+}
+
+/// Number of channels.
+pub const CHANNELS: usize = 9;
+/// Mask of every channel.
+pub const ALL_CHANNELS: u16 = (1 << CHANNELS) - 1;
+
+impl Channel {
+    /// Every channel, in id order.
+    pub const ALL: [Channel; CHANNELS] = [
+        Channel::Comm1,
+        Channel::Comm2,
+        Channel::Ecu,
+        Channel::Pc,
+        Channel::Payload12,
+        Channel::Payload13,
+        Channel::Payload14,
+        Channel::Payload15,
+        Channel::Sband,
+    ];
+    /// The wire id.
+    pub fn id(self) -> u8 {
+        self as u8
+    }
+    /// From the wire id.
+    pub fn from_id(id: u8) -> Option<Self> {
+        Self::ALL.get(usize::from(id)).copied()
+    }
+    /// The bit in a channel mask.
+    pub fn bit(self) -> u16 {
+        1 << (self as u16)
+    }
+    /// The CSP node this channel powers (`None` for the S-band transmitter).
+    pub fn node_addr(self) -> Option<u8> {
+        match self {
+            Channel::Comm1 => Some(1),
+            Channel::Comm2 => Some(2),
+            Channel::Ecu => Some(5),
+            Channel::Pc => Some(6),
+            Channel::Payload12 => Some(12),
+            Channel::Payload13 => Some(13),
+            Channel::Payload14 => Some(14),
+            Channel::Payload15 => Some(15),
+            Channel::Sband => None,
+        }
+    }
+    /// The channel of CSP node `addr`, if it has one.
+    pub fn of_node(addr: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|c| c.node_addr() == Some(addr))
+    }
+    /// A short name (`COMM1`, `PL12`, `SBAND`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Channel::Comm1 => "COMM1",
+            Channel::Comm2 => "COMM2",
+            Channel::Ecu => "ECU",
+            Channel::Pc => "PC",
+            Channel::Payload12 => "PL12",
+            Channel::Payload13 => "PL13",
+            Channel::Payload14 => "PL14",
+            Channel::Payload15 => "PL15",
+            Channel::Sband => "SBAND",
+        }
+    }
+    /// The channel of a name as [`Channel::name`] gives it (case-insensitive).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.name().eq_ignore_ascii_case(name))
+    }
+}
+
+/// A group of channels shed together.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Group {
+    /// Payloads 12-15 and the S-band.
+    Payload = 0,
+    /// The PC and the ECU.
+    Platform = 1,
+}
+
+impl Group {
+    /// Both groups.
+    pub const ALL: [Group; 2] = [Group::Payload, Group::Platform];
+    /// The channel mask of the group.
+    pub fn channels(self) -> u16 {
+        match self {
+            Group::Payload => {
+                Channel::Payload12.bit()
+                    | Channel::Payload13.bit()
+                    | Channel::Payload14.bit()
+                    | Channel::Payload15.bit()
+                    | Channel::Sband.bit()
+            }
+            Group::Platform => Channel::Pc.bit() | Channel::Ecu.bit(),
+        }
+    }
+    /// The group of a channel (`None` for COMM1 and COMM2).
+    pub fn of(c: Channel) -> Option<Group> {
+        Self::ALL.into_iter().find(|g| g.channels() & c.bit() != 0)
+    }
+    /// The bit in the telemetry's protection byte.
+    pub fn bit(self) -> u8 {
+        1 << (self as u8)
+    }
+}
+
+csp::wire_struct! {
+    /// Shed and restore thresholds, percent of state of charge (the wire layout of THRGET
+    /// and THRSET, 4 bytes). A group is shed below its shed threshold and restored at or
+    /// above its restore threshold; `shed < restore <= 100` for each group.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct Thresholds {
+        /// Shed the payload group below this.
+        pub payload_shed_pct: u8 { unit: "%", range: (0.0, 99.0) },
+        /// Restore it at or above this.
+        pub payload_restore_pct: u8 { unit: "%", range: (1.0, 100.0) },
+        /// Shed the platform group below this.
+        pub platform_shed_pct: u8 { unit: "%", range: (0.0, 99.0) },
+        /// Restore it at or above this.
+        pub platform_restore_pct: u8 { unit: "%", range: (1.0, 100.0) },
+    }
+}
+
+impl Default for Thresholds {
+    /// 30/40 % for the payload group, 20/30 % for the platform group.
+    fn default() -> Self {
+        Thresholds {
+            payload_shed_pct: 30,
+            payload_restore_pct: 40,
+            platform_shed_pct: 20,
+            platform_restore_pct: 30,
+        }
+    }
+}
+
+impl Thresholds {
+    /// Check `shed < restore <= 100` for each group; the error names the field.
+    pub fn validate(&self) -> Result<(), &'static str> {
+        if self.payload_restore_pct > 100 {
+            return Err("payload restore threshold");
+        }
+        if self.payload_shed_pct >= self.payload_restore_pct {
+            return Err("payload shed threshold");
+        }
+        if self.platform_restore_pct > 100 {
+            return Err("platform restore threshold");
+        }
+        if self.platform_shed_pct >= self.platform_restore_pct {
+            return Err("platform shed threshold");
+        }
+        Ok(())
+    }
+    /// A group's (shed, restore) thresholds, percent.
+    pub fn of(&self, g: Group) -> (u8, u8) {
+        match g {
+            Group::Payload => (self.payload_shed_pct, self.payload_restore_pct),
+            Group::Platform => (self.platform_shed_pct, self.platform_restore_pct),
+        }
+    }
+}
+
+/// At most this many solar panels (the telemetry's fixed slots).
+pub const MAX_PANELS: usize = 8;
 
 #[cfg(test)]
 mod tests {

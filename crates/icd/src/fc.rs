@@ -22,7 +22,7 @@
 //! | TMRAWSENS 5 | - | [`TmRawSens`] 53 (the twin's layout) |
 //! | TMALL 6 | - | [`TmAll`] 177 (the twin's layout) |
 //! | TMPERSET 7 / TMPERGET 8 (the twin's) | [`Periodic`] 7 / - | - / [`Periodic`] 7 |
-//! | TMSTOREINFO 9 / TMSTOREGET 10 / TMSTORECLEAR 11 (the twin's) | - / 12: `u32 from_rtc, u32 to_rtc, u32 skip` / - | [`crate::store`] |
+//! | TMSTOREINFO 9 / TMSTOREGET 10 / TMSTORECLEAR 11 (the twin's) | - / 12: `u32 from_rtc, u32 to_rtc, u32 skip` / - | `nodes_fc::store` |
 //! | RTCSTMSET 1 | [`RtcTimestamp`] 4 | - |
 //! | RTCSTMGET 2 | - | [`RtcTimestamp`] 4 |
 //! | ATCATGET 1 / ATCATSET 2 | - / [`TargetAttitude`] 32 | [`TargetAttitude`] 32 / - |
