@@ -2,13 +2,14 @@
 //! ([`events`]), the network's nodes, media and routes ([`network`]), CSP packets put back
 //! together from what crossed a medium ([`packets`], [`transit`]), durations as scenarios
 //! write them ([`duration`]), values that keep where they were written ([`tagged`]) and
-//! simulated UTC as text ([`timefmt`]). It knows nothing of scenarios, the runtime or
+//! simulated UTC as text ([`timefmt`]), and the seed's streams ([`seed`]). It knows nothing of scenarios, the runtime or
 //! recordings (tools/layers.toml).
 
 pub mod duration;
 pub mod events;
 pub mod network;
 pub mod packets;
+pub mod seed;
 pub mod tagged;
 pub mod timefmt;
 pub mod transit;

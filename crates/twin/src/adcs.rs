@@ -387,7 +387,7 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
 
 /// A unit vector drawn from `seed` (uniform on the sphere).
 fn random_unit(seed: u64, salt: u64) -> nalgebra::Vector3<f64> {
-    let u = |k: u64| (crate::runtime::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
+    let u = |k: u64| (crate::seed::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
     let z = 2.0 * u(0) - 1.0;
     let phi = std::f64::consts::TAU * u(1);
     let r = (1.0 - z * z).max(0.0).sqrt();
@@ -397,7 +397,7 @@ fn random_unit(seed: u64, salt: u64) -> nalgebra::Vector3<f64> {
 /// A rotation drawn uniformly from SO(3) (Shoemake, "Uniform random rotations", Graphics
 /// Gems III, 1992): three uniforms from the seed.
 fn random_rotation(seed: u64, salt: u64) -> nalgebra::UnitQuaternion<f64> {
-    let u = |k: u64| (crate::runtime::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
+    let u = |k: u64| (crate::seed::mix(seed, salt + k) >> 11) as f64 / (1u64 << 53) as f64;
     let (u1, u2, u3) = (u(0), u(1), u(2));
     let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
     let tau = std::f64::consts::TAU;

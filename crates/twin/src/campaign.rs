@@ -22,8 +22,8 @@ use rand_core::{Rng as _, SeedableRng as _};
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::runtime::mix;
 use crate::scenario::{PathStep, Scenario, ScenarioError, ScenarioErrors, path_string};
+use crate::seed::mix;
 
 /// A campaign file.
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]

@@ -153,7 +153,7 @@ pub async fn execute_keeping(
         }
     };
     let net = compiled.opts.network.clone();
-    let icd = crate::icd::IcdMap::for_run(&compiled.opts);
+    let icd = compiled.opts.icd_map();
     // The nodes that run: an outside program in a replaced node's place sends under its
     // link's name, not the node's.
     let mut running = net.clone();
@@ -359,7 +359,7 @@ async fn execute_inner(
             .collect(),
     };
     let mut recorder = crate::record::Recorder::create(path, meta, existing)?;
-    recorder.set_icd(crate::icd::IcdMap::for_run(&compiled.opts));
+    recorder.set_icd(compiled.opts.icd_map());
     // The recorder runs on a thread of its own, fed copies of the events in order; on the
     // wall clock its file is flushed every second (a process killed loses at most that).
     let every = (compiled.opts.clock != bus::ClockMode::Virtual)

@@ -5,7 +5,7 @@
 //! packets with it ([`IcdMap::decode`]); the `icd-reply-length` invariant takes its lengths
 //! from it (`icd_lengths`).
 //!
-//! Port numbers here are the defaults; [`IcdMap::for_run`] places the same tables on the
+//! Port numbers here are the defaults; [`IcdMap::for_nodes`] places the same tables on the
 //! ports a run configured.
 
 use std::collections::BTreeMap;
@@ -13,8 +13,6 @@ use std::collections::BTreeMap;
 use csp::icd::{Access, Command, Data, Decoded, Field, Port, Ty};
 use csp::reqrep::RESULT_SUCCESS;
 use serde::Serialize;
-
-use crate::runtime::RunOptions;
 
 /// Platform port 14 (`csp::params`) as data: the same on every twin node.
 pub const PLATFORM_PORT: Port = Port {
@@ -212,6 +210,24 @@ pub struct DecodedPacket {
     pub fits: bool,
 }
 
+/// The node configurations the ICD's ports come from, and the seed (the FC's own port is
+/// drawn from it).
+#[derive(Debug, Clone, Copy)]
+pub struct NodePorts<'a> {
+    /// The run's seed.
+    pub seed: u64,
+    /// The FC's configuration.
+    pub fc: &'a nodes_fc::FcConfig,
+    /// The PC's.
+    pub pc: &'a nodes_pc::PcConfig,
+    /// The EPS's.
+    pub eps: &'a nodes_eps::EpsConfig,
+    /// The ECU's.
+    pub ecu: &'a nodes_ecu::EcuConfig,
+    /// The COMMs'.
+    pub comm: &'a nodes_comm::CommConfig,
+}
+
 impl IcdMap {
     /// The ICD on the default ports.
     pub fn defaults() -> Self {
@@ -226,8 +242,9 @@ impl IcdMap {
         IcdMap { ports }
     }
 
-    /// The ICD on the ports `opts` configured.
-    pub fn for_run(opts: &RunOptions) -> Self {
+    /// The ICD on the ports the nodes' configurations give (a run's:
+    /// `RunOptions::icd_map`).
+    pub fn for_nodes(opts: &NodePorts<'_>) -> Self {
         use nodes_fc::wire as fc;
         use nodes_pc::wire as pc;
         let names: BTreeMap<u8, &'static str> = nodes()
@@ -243,7 +260,7 @@ impl IcdMap {
         put(platform::addr::FC, f.telemetry, fc::ICD_TELEMETRY);
         // The FC's periodic telemetry (TMPERSET) leaves from its own port with the bytes a
         // request would get: read as the telemetry port's replies.
-        let fc_own = csp::node::own_port(crate::runtime::first_ephemeral_port(
+        let fc_own = csp::node::own_port(crate::seed::first_ephemeral_port(
             opts.seed,
             platform::addr::FC,
         ));

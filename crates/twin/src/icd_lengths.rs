@@ -17,8 +17,6 @@ use std::collections::BTreeMap;
 use csp::header::{EPHEMERAL_PORT_MIN, Header};
 use csp::reqrep::RESULT_SUCCESS;
 
-use crate::runtime::RunOptions;
-
 /// A reply's whole data length (`command | result | data`) allowed on success.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Len {
@@ -64,12 +62,12 @@ pub struct IcdTable {
 }
 
 impl IcdTable {
-    /// The table for the nodes and ports of `opts`: the reply lengths of the ICD's
-    /// description (`crate::icd`) on the ports the run configured. A port with no command
+    /// The table for the platform nodes' ports of `icd` (a run's: `RunOptions::icd_map`):
+    /// the reply lengths of the ICD's description (`crate::icd`). A port with no command
     /// table (the FC's scripts, the PC's ingest) answers with no data.
-    pub fn for_run(opts: &RunOptions) -> Self {
+    pub fn of(icd: &crate::icd::IcdMap) -> Self {
         let mut ports = BTreeMap::new();
-        for (&(addr, port), table) in crate::icd::IcdMap::for_run(opts).iter() {
+        for (&(addr, port), table) in icd.iter() {
             if !(platform::addr::COMM1..=platform::addr::PC).contains(&addr) {
                 continue;
             }
@@ -135,12 +133,12 @@ mod tests {
 
     #[test]
     fn replies_are_checked_against_the_icd_and_the_configured_ports() {
-        let mut opts = RunOptions::new(
+        let mut opts = crate::runtime::RunOptions::new(
             crate::network::NetworkSpec::m6p(&[12], &[16]),
             std::time::Duration::from_secs(1),
         );
         opts.fc.ports.telemetry = 20;
-        let t = IcdTable::for_run(&opts);
+        let t = IcdTable::of(&opts.icd_map());
         let reply = |src, sport| Header::new(src, 16, 40, sport);
         // TMGEN: 2 + 16 bytes; a failure is 2; a refused unknown command is 2.
         assert_eq!(t.check(&reply(3, 20), 18, &[1, 1]), Ok(true));

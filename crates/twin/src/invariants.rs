@@ -261,7 +261,7 @@ impl Invariants {
     /// Every invariant, the ICD's reply lengths with the ports of `opts`.
     pub fn for_run(opts: &crate::runtime::RunOptions) -> Self {
         Invariants {
-            icd: Some(crate::icd_lengths::IcdTable::for_run(opts)),
+            icd: Some(crate::icd_lengths::IcdTable::of(&opts.icd_map())),
             settings: opts.invariants.clone(),
             ..Invariants::default()
         }

@@ -9,7 +9,7 @@
 //! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
 // The vocabulary below the twin's layers (its own crate: docs/architecture.md).
-pub use twin_core::{duration, events, network, packets, tagged, timefmt, transit};
+pub use twin_core::{duration, events, network, packets, seed, tagged, timefmt, transit};
 
 pub mod adcs;
 pub mod bench;

@@ -703,7 +703,7 @@ fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::R
     let mut live = match a.live {
         Some(addr) => {
             let mut l = start_live(addr, compiled.opts.epoch_unix_s)?;
-            l.set_icd(m6p_twin::icd::IcdMap::for_run(&compiled.opts));
+            l.set_icd(compiled.opts.icd_map());
             Some(l)
         }
         None => None,

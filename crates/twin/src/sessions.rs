@@ -531,7 +531,7 @@ pub fn compile_payloads(s: &Scenario) -> BTreeMap<u8, nodes_payload::PayloadConf
     let mut out = BTreeMap::new();
     for &addr in &s.network.payloads {
         let mut c = PayloadConfig {
-            seed: crate::runtime::mix(s.seed, 0x600 + u64::from(addr)),
+            seed: crate::seed::mix(s.seed, 0x600 + u64::from(addr)),
             ..PayloadConfig::default()
         };
         if let Some(p) = s.payload.iter().find(|p| p.addr == addr) {

@@ -448,19 +448,22 @@ fn watch_signals() -> Option<impl std::future::Future<Output = Option<StopCause>
     }
 }
 
-/// The first ephemeral port node `addr`'s allocator tries in a run of `seed` (libcsp 1.4
-/// starts at `rand()`): 32 to 63.
-pub fn first_ephemeral_port(seed: u64, addr: u8) -> u8 {
-    32 + (mix(seed, u64::from(addr) + 0x40) % 32) as u8
+pub use twin_core::seed::{first_ephemeral_port, mix};
+
+impl RunOptions {
+    /// The ICD on the ports this run configured.
+    pub fn icd_map(&self) -> crate::icd::IcdMap {
+        crate::icd::IcdMap::for_nodes(&crate::icd::NodePorts {
+            seed: self.seed,
+            fc: &self.fc,
+            pc: &self.pc,
+            eps: &self.eps,
+            ecu: &self.ecu,
+            comm: &self.comm,
+        })
+    }
 }
 
-/// A well-mixed 64-bit value from the run seed and a salt (splitmix64).
-pub fn mix(seed: u64, salt: u64) -> u64 {
-    let mut z = seed ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 /// Run the twin. `ready` receives the bound addresses of the KISS servers, then those of
 /// the TCP consoles (`opts.uart`), once they listen.
 pub async fn run(
