@@ -12,6 +12,11 @@ use csp::{Header, Packet};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
+/// The twin closed the ground station's connection: nothing more can be asked over it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("the twin closed the connection")]
+pub struct Closed;
+
 /// A ground node on a KISS/TCP connection.
 #[derive(Debug)]
 pub struct GsClient {
@@ -69,7 +74,7 @@ impl GsClient {
             }
             let n = match tokio::time::timeout_at(deadline, self.stream.read(&mut buf)).await {
                 Err(_) => return Ok(None),
-                Ok(Ok(0)) => bail!("the twin closed the connection"),
+                Ok(Ok(0)) => return Err(Closed.into()),
                 Ok(Ok(n)) => n,
                 Ok(Err(e)) => return Err(e).context("reading the reply"),
             };

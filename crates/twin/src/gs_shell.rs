@@ -365,6 +365,12 @@ async fn dispatch(
     Ok(true)
 }
 
+/// Whether `e` means the session cannot go on: the twin closed the connection (typed, so
+/// a context added on the way does not hide it).
+fn ends_session(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<crate::gs::Closed>().is_some()
+}
+
 /// The console on `server` as node `addr`: interactive on a terminal, else the lines of
 /// standard input. Returns whether every line was taken (none got an `error:` line).
 pub fn run(
@@ -382,7 +388,7 @@ pub fn run(
         match rt.block_on(dispatch(&mut client, line, port, timeout)) {
             Ok(go_on) => Ok(go_on),
             // The twin closed the connection: nothing more can be asked.
-            Err(e) if e.to_string().contains("closed the connection") => Err(e),
+            Err(e) if ends_session(&e) => Err(e),
             Err(e) => {
                 println!("error: {e:#}");
                 *all_ok = false;
@@ -442,6 +448,17 @@ pub fn run(
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn a_closed_connection_ends_the_session_through_any_context_and_nothing_else_does() {
+        use anyhow::Context as _;
+        let closed = Err::<(), _>(crate::gs::Closed)
+            .context("reading the reply")
+            .unwrap_err();
+        assert!(ends_session(&closed));
+        let other = anyhow::anyhow!("the twin closed the connection, said a node");
+        assert!(!ends_session(&other));
+    }
 
     fn names(line: &str) -> Vec<String> {
         complete(line).1
