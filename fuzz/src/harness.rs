@@ -618,7 +618,11 @@ impl<K: NodeKind> Harness<K> {
             }
             Ctl::Hang => self.hung = true,
             Ctl::Unhang => self.hung = false,
-            Ctl::Radio { on } => self.host.switch(nodes_comm::RADIO_SWITCH, on, now),
+            Ctl::Radio { on } => self.host.switch(
+                nodes_comm::RADIO_SWITCH,
+                csp::node::SwitchPosition::on_if(on),
+                now,
+            ),
             Ctl::ClockFault {
                 id,
                 jump_ns,

@@ -52,7 +52,7 @@ pub enum NodeCtl {
     Hang(bool),
     /// Flip an application's hardware switch ([`csp::node::App::switch`]); applied whether
     /// or not the node is powered (it is hardware state).
-    Switch(&'static str, bool),
+    Switch(csp::node::HwSwitch, csp::node::SwitchPosition),
     /// Fault `id` acts on the node's core (`Some`) or is lifted ([`Host::fault`]); applied
     /// whether or not the node is powered (its clock keeps its error).
     Fault(u32, Option<csp::node::NodeFault>),
@@ -218,7 +218,7 @@ async fn run<A: App, O: Outputs<A::Event>>(
                         }
                     }
                     NodeCtl::Hang(h) => hung = h,
-                    NodeCtl::Switch(name, on) => host.switch(name, on, t),
+                    NodeCtl::Switch(switch, to) => host.switch(switch, to, t),
                     NodeCtl::Fault(id, f) => host.fault(id, f, t),
                     NodeCtl::Console(req) => {
                         if listening {
@@ -475,8 +475,8 @@ mod tests {
 
     /// A node's events run in the order of their instants: a timer due before an
     /// arrival's stamp runs first and at its own instant, however the task found the two
-    /// (here the arrival is already waiting when the task starts; it used to be taken
-    /// first and the timer then ran at the arrival's later instant).
+    /// (here the arrival is already waiting when the task starts: taking it first would run
+    /// the timer at the arrival's later instant).
     #[tokio::test(start_paused = true)]
     async fn a_timer_due_before_an_arrival_runs_first_at_its_own_instant() {
         let due = SimTime::from_ns(5_200_000);

@@ -1155,8 +1155,8 @@ mod tests {
     }
 
     /// A connection that ends because a write failed records its close (an empty chunk
-    /// into the twin, after what it wrote) and gives its address back. It used to end with
-    /// nothing recorded, so its replay kept the address for the rest of the run.
+    /// into the twin, after what it wrote) and gives its address back. With nothing recorded,
+    /// its replay would keep the address for the rest of the run.
     #[tokio::test(start_paused = true)]
     async fn a_failed_write_is_recorded_as_the_close_and_the_address_goes_back() {
         let clock = Clock::new(ClockMode::Virtual);

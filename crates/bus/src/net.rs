@@ -82,14 +82,19 @@ impl PacketNetConfig {
 pub struct AirTap(Arc<AirFn>);
 
 /// The function behind an [`AirTap`].
-type AirFn = dyn Fn(&str, SimTime, SimTime) + Send + Sync;
+type AirFn = dyn Fn(EndpointId, &str, SimTime, SimTime) + Send + Sync;
 
 impl AirTap {
-    /// A tap calling `f(radio, start, end)`.
-    pub fn new(f: impl Fn(&str, SimTime, SimTime) + Send + Sync + 'static) -> Self {
+    /// A tap calling `f(radio, radio's name, start, end)`.
+    pub fn new(f: impl Fn(EndpointId, &str, SimTime, SimTime) + Send + Sync + 'static) -> Self {
         AirTap(Arc::new(f))
     }
 }
+
+/// An endpoint of a packet network, as [`NetPort::id`] names it (an [`AirTap`] hears a
+/// transmission by it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct EndpointId(usize);
 
 impl std::fmt::Debug for AirTap {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -194,6 +199,10 @@ pub struct NetPort {
 }
 
 impl NetPort {
+    /// Which endpoint of its network this is.
+    pub fn id(&self) -> EndpointId {
+        EndpointId(self.idx)
+    }
     /// Send `packet`, ready at `t`.
     pub fn send(&self, t: SimTime, packet: Packet) {
         self.net.lock().submit(self.idx, t, packet);
@@ -611,7 +620,12 @@ impl State {
             if self.eps[p.from].radio
                 && let Some(tap) = &self.air_tap
             {
-                (tap.0)(&self.eps[p.from].name, start, self.air_busy_until);
+                (tap.0)(
+                    EndpointId(p.from),
+                    &self.eps[p.from].name,
+                    start,
+                    self.air_busy_until,
+                );
             }
             let fate = if self.contact {
                 self.rng.fate(&self.impair)
@@ -856,8 +870,10 @@ mod tests {
         let heard = Arc::new(Mutex::new(Vec::new()));
         {
             let heard = heard.clone();
-            net.set_air_tap(AirTap::new(move |radio, a, b| {
-                heard.lock().unwrap().push((radio.to_owned(), a, b));
+            let r2 = r2.id();
+            net.set_air_tap(AirTap::new(move |radio, name, a, b| {
+                assert_eq!(radio, r2, "{name}");
+                heard.lock().unwrap().push((name.to_owned(), a, b));
             }));
         }
         tokio::spawn(net.clone().run(clock));

@@ -281,9 +281,9 @@ mod tests {
     }
 
     /// A refused claim leaves nothing behind on any segment: ten thousand outside attempts
-    /// at addresses nodes of the twin hold add no endpoint. Each used to add a disabled one
-    /// for the rest of the run (a flood of impostor packets, one attempt each, grew the
-    /// twin by gigabytes in seconds and slowed every arbitration).
+    /// at addresses nodes of the twin hold add no endpoint. A disabled one left per attempt
+    /// would stay for the rest of the run: a flood of impostor packets, one attempt each,
+    /// would grow the twin by gigabytes in seconds and slow every arbitration.
     #[test]
     fn a_refused_claim_leaves_no_endpoint_behind() {
         let segs = segments();
@@ -324,7 +324,7 @@ mod tests {
 
     /// A link's connections coming and going leave nothing behind: a thousand connects and
     /// disconnects on each segment end with one place of the link on each (a departed
-    /// connection's place is the next one's). Each used to leave a disabled endpoint.
+    /// connection's place is the next one's), not a disabled endpoint per connection.
     #[test]
     fn connections_coming_and_going_leave_one_place_each() {
         let segs = segments();

@@ -218,6 +218,38 @@ impl NodeCounters {
     }
 }
 
+/// A hardware switch of a node's application, flipped by the run ([`App::switch`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum HwSwitch {
+    /// A COMM's radio: on = active (it carries the link), off = standby.
+    Radio,
+}
+
+/// Where a hardware switch is set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SwitchPosition {
+    /// On.
+    On,
+    /// Off.
+    Off,
+}
+
+impl SwitchPosition {
+    /// On when `on`.
+    pub fn on_if(on: bool) -> Self {
+        if on {
+            SwitchPosition::On
+        } else {
+            SwitchPosition::Off
+        }
+    }
+    /// Whether it is on.
+    pub fn is_on(self) -> bool {
+        self == SwitchPosition::On
+    }
+}
+
 /// How much a node's log line matters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Severity {
@@ -1038,9 +1070,9 @@ pub trait App: Send + 'static {
     /// burn stops, heaters and transmitters go off, their activities end). Nothing can be
     /// sent any more; [`App::reset`] and [`App::start`] follow when power returns.
     fn power_lost(&mut self, _node: &mut Node, _now: SimTime) {}
-    /// The run flipped one of the node's hardware switches (`radio` on a COMM: active or
+    /// The run flipped one of the node's hardware switches (the radio on a COMM: active or
     /// standby). Applications ignore switches they do not have.
-    fn switch(&mut self, _node: &mut Node, _name: &str, _on: bool, _now: SimTime) {}
+    fn switch(&mut self, _node: &mut Node, _switch: HwSwitch, _to: SwitchPosition, _now: SimTime) {}
     /// The run ends at `now`: report final figures (accounting, counters) through the
     /// application's own outputs. Nothing is sent on the network any more.
     fn finish(&mut self, _node: &mut Node, _now: SimTime) {}
@@ -1166,9 +1198,9 @@ impl<A: App> Host<A> {
     pub fn poll_event(&mut self) -> Option<A::Event> {
         self.app.poll_event()
     }
-    /// Flip the application's hardware switch `name` (see [`App::switch`]).
-    pub fn switch(&mut self, name: &str, on: bool, now: SimTime) {
-        self.app.switch(&mut self.node, name, on, now);
+    /// Flip the application's hardware switch `switch` to `to` (see [`App::switch`]).
+    pub fn switch(&mut self, switch: HwSwitch, to: SwitchPosition, now: SimTime) {
+        self.app.switch(&mut self.node, switch, to, now);
         self.after_input(now);
     }
     /// The node loses power at `now` ([`App::power_lost`]); what it had queued to send is
@@ -1308,8 +1340,8 @@ impl<T: App + ?Sized> App for Box<T> {
     fn power_lost(&mut self, node: &mut Node, now: SimTime) {
         (**self).power_lost(node, now)
     }
-    fn switch(&mut self, node: &mut Node, name: &str, on: bool, now: SimTime) {
-        (**self).switch(node, name, on, now)
+    fn switch(&mut self, node: &mut Node, switch: HwSwitch, to: SwitchPosition, now: SimTime) {
+        (**self).switch(node, switch, to, now)
     }
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         (**self).finish(node, now)
@@ -1381,8 +1413,8 @@ where
     fn power_lost(&mut self, node: &mut Node, now: SimTime) {
         self.app.power_lost(node, now)
     }
-    fn switch(&mut self, node: &mut Node, name: &str, on: bool, now: SimTime) {
-        self.app.switch(node, name, on, now)
+    fn switch(&mut self, node: &mut Node, switch: HwSwitch, to: SwitchPosition, now: SimTime) {
+        self.app.switch(node, switch, to, now)
     }
     fn finish(&mut self, node: &mut Node, now: SimTime) {
         self.app.finish(node, now)
@@ -1471,8 +1503,8 @@ impl<A: App> App for Tap<A> {
         self.app.power_lost(node, now);
         self.pull();
     }
-    fn switch(&mut self, node: &mut Node, name: &str, on: bool, now: SimTime) {
-        self.app.switch(node, name, on, now);
+    fn switch(&mut self, node: &mut Node, switch: HwSwitch, to: SwitchPosition, now: SimTime) {
+        self.app.switch(node, switch, to, now);
         self.pull();
     }
     fn finish(&mut self, node: &mut Node, now: SimTime) {
@@ -1675,8 +1707,8 @@ mod tests {
     #[test]
     fn a_self_addressed_service_packet_ping_pongs_through_the_queue_not_the_stack() {
         // Source and destination the node's own address, service port to service port: each
-        // answer is a new request to itself. Found by fuzzing: it used to recurse
-        // (send -> route_in -> deliver_local -> serve -> send) until the stack overflowed.
+        // answer is a new request to itself. Found by fuzzing: served by recursion (send ->
+        // route_in -> deliver_local -> serve -> send) it would overflow the stack.
         for port in 0..=6u8 {
             let mut n = router_node();
             let mut h = Header::new(6, 6, port, port);

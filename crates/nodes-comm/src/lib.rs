@@ -210,8 +210,8 @@ pub struct CommCounters {
     pub refused: u64,
 }
 
-/// The name of the radio's hardware switch ([`App::switch`]): on = active, off = standby.
-pub const RADIO_SWITCH: &str = "radio";
+/// The radio's hardware switch ([`App::switch`]): on = active, off = standby.
+pub const RADIO_SWITCH: csp::node::HwSwitch = csp::node::HwSwitch::Radio;
 
 /// The COMM application (see the module doc).
 #[derive(Debug)]
@@ -525,10 +525,16 @@ impl App for CommApp {
         self.next_beacon = Some(next);
     }
 
-    fn switch(&mut self, _node: &mut Node, name: &str, on: bool, now: SimTime) {
-        if name == RADIO_SWITCH {
+    fn switch(
+        &mut self,
+        _node: &mut Node,
+        switch: csp::node::HwSwitch,
+        to: csp::node::SwitchPosition,
+        now: SimTime,
+    ) {
+        if switch == RADIO_SWITCH {
             self.last_now = self.last_now.max(now);
-            self.set_active(on);
+            self.set_active(to.is_on());
             if self.arm_pending {
                 self.arm_pending = false;
                 self.arm(now);

@@ -4,7 +4,7 @@
 
 use super::*;
 use csp::Header;
-use csp::node::{Host, IfaceConfig, NodeConfig, Transmit};
+use csp::node::{Host, IfaceConfig, NodeConfig, SwitchPosition, Transmit};
 use csp::router::Route;
 use nalgebra::{UnitQuaternion, Vector3};
 use orbit::frames::a_ecef_from_eci;
@@ -330,14 +330,13 @@ fn the_radio_switch_activates_the_secondary_at_its_instant() {
     let mut h = host_with(CommApp::new(cfg), 2);
     drive(&mut h, SimTime::from_secs(100));
     assert_eq!(h.app.counters().beacons_sent, 0);
-    h.switch("not-a-switch", true, SimTime::from_secs(100));
     assert!(!h.app.is_active());
-    h.switch(RADIO_SWITCH, true, SimTime::from_secs(105));
+    h.switch(RADIO_SWITCH, SwitchPosition::On, SimTime::from_secs(105));
     assert!(h.app.is_active());
     assert_eq!(h.app.next_beacon(), Some(SimTime::from_secs(165)));
     drive(&mut h, SimTime::from_secs(230));
     assert_eq!(h.app.counters().beacons_sent, 2);
-    h.switch(RADIO_SWITCH, false, SimTime::from_secs(230));
+    h.switch(RADIO_SWITCH, SwitchPosition::Off, SimTime::from_secs(230));
     assert_eq!(h.app.next_beacon(), None);
     drive(&mut h, SimTime::from_secs(400));
     assert_eq!(h.app.counters().beacons_sent, 2);
@@ -581,7 +580,7 @@ fn selftest_reports_radio_link_and_beacons() {
     assert_eq!(r[..4], [7, 1, 0, 3]);
     assert_eq!([r[4], r[9], r[14]], [3, 3, 3]);
     // Active without truth: no link budget (degraded).
-    h.switch(RADIO_SWITCH, true, SimTime::from_secs(2));
+    h.switch(RADIO_SWITCH, SwitchPosition::On, SimTime::from_secs(2));
     let r = platform(&mut h, &[7], SimTime::from_secs(3));
     assert_eq!([r[2], r[4], r[9], r[14]], [1, 0, 1, 0]);
 }

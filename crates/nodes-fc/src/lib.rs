@@ -1991,9 +1991,9 @@ mod tests {
 
     /// Periodic telemetry to a port where a node serves requests (the PC's control port 10,
     /// which reads TMGEN's `01 01 ...` as a SETUP) is answered there; that answer reaches
-    /// the FC's own port, where it is dropped and counted, never served. From the
-    /// telemetry port it used to be read as a TMGEN request and answered, and the two nodes
-    /// answered each other for ever (a reply storm on the main bus).
+    /// the FC's own port, where it is dropped and counted, never served. Sent from the
+    /// telemetry port, the answer would be read as a TMGEN request and answered, and the two
+    /// nodes would answer each other for ever (a reply storm on the main bus).
     #[test]
     fn an_answer_to_periodic_telemetry_is_dropped_not_served() {
         let mut h = host(Some((L1, L2)));

@@ -224,7 +224,7 @@ fn gyro_dead_run(seed: u64, start_s: f64, warmup_s: f64, secs: f64) -> (Stats, S
 }
 
 /// The first gyro-dead window of the reproduction: its eclipse begins about 12 minutes in
-/// (the old finite-difference determination lost the attitude in every seed there).
+/// (a finite-difference rate determination loses the attitude in every seed there).
 const GYRO_DEAD_START_S: f64 = 7800.0;
 
 #[test]

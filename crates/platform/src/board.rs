@@ -614,7 +614,8 @@ mod tests {
         a.set(Activity::Firing, s(2), true).unwrap();
         let before = a.duty(Activity::Firing, s(0), s(10));
         assert!((before - 0.8).abs() < 1e-12);
-        // The ECU's reset used to post the end of a burn at its power loss, long after.
+        // An end posted long after the activity's last change (as an ECU reset at its power
+        // loss would) is refused: it would rewrite what was already read.
         assert_eq!(
             a.set(Activity::Firing, s(5), false),
             Err(Refused {

@@ -1387,7 +1387,7 @@ mod tests {
     }
 
     /// The ground sink's files grow with each downlink, hold exactly the report's bytes per
-    /// run, and exist before the run ends (they used to be written only at its end).
+    /// run, and exist before the run ends (an operator follows them while it runs).
     #[test]
     fn downlink_files_grow_as_the_bytes_arrive_and_match_the_report() {
         let dir = std::env::temp_dir().join(format!("m6p-dl-files-{}", std::process::id()));

@@ -1,8 +1,8 @@
 //! A campaign's failure file reproduces its failure by itself: the invariants the campaign
 //! checks are written into it (`[invariants] check = "all"`), `m6p-twin test` checks them,
-//! and its "Reproduce:" line works from where the campaign was run. A failure file of a run
-//! that broke an invariant used to pass `m6p-twin test` (run and test checked no
-//! invariant), and its line named a path relative to the campaign's output folder.
+//! and its "Reproduce:" line works from where the campaign was run (not relative to the
+//! campaign's output folder). Were the invariants not in the file, `m6p-twin test` would
+//! pass a run that broke one.
 #![allow(clippy::unwrap_used)]
 
 use std::path::PathBuf;

@@ -1,8 +1,8 @@
 //! Inputs are bounded and honest: a scenario file over the documented size is refused at
-//! once by its size (`/dev/zero` used to be read until 12.9 GB), checking is linear in the
-//! commands (about 86 k took 9 s and a million over a minute: each command's name was
-//! searched among all before it), a TLE whose epoch is far from `start` is refused at
-//! `check` naming the field (one 69 years old flew the satellite at the Earth's centre),
+//! once by its size (`/dev/zero` would otherwise be read until memory runs out), checking
+//! is linear in the commands (a name searched among all before it makes a million
+//! commands take over a minute), a TLE whose epoch is far from `start` is refused at
+//! `check` naming the field (one 69 years old would fly the satellite at the Earth's centre),
 //! and a run without an orbit records no made-up truth and `inspect` says `no orbit`.
 #![allow(clippy::unwrap_used)]
 

@@ -3,8 +3,8 @@
 //! the case as an error, the recording is complete up to the stop. A campaign keeps its
 //! finished runs, marks the others `not run` (no failure file) and `--resume` completes it
 //! as an uninterrupted run would have. A run over its limit is an error row, never a hang.
-//! SIGTERM (what Slurm, Kubernetes, systemd and docker send) used to kill the process with
-//! nothing written, and a Ctrl-C'd real-time run whose checks held so far exited 0.
+//! SIGTERM is what Slurm, Kubernetes, systemd and docker send; an interrupted run whose
+//! checks held so far is not a pass.
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};

@@ -70,8 +70,8 @@ impl RssWatch {
 /// A million KISS frames of pings from 3 (the FC's address) to 4, from a connection that
 /// claimed nothing, as fast as the socket takes them: every one is refused, the twin's
 /// memory grows by less than 20 MiB, and an honest client's ping right after the flood is
-/// answered within a second. Each refusal used to leave a disabled endpoint on the bus
-/// (5 GB in seconds, and pings unanswered for 40 s after).
+/// answered within a second. A disabled endpoint left per refusal would grow the twin by
+/// gigabytes in seconds and leave pings unanswered long after.
 #[test]
 fn a_million_impostor_packets_over_kiss_tcp_cost_nothing_that_outlives_them() {
     let scenario = bare("impostor-flood", 120);
@@ -225,8 +225,8 @@ fn twin_with_hub(name: &str, hub: &str, secs: u64) -> Twin {
 }
 
 /// One empty message on the hub is dropped and counted: the hub stays open and a program
-/// on it pings the FC as before. The link used to take the empty message for its close,
-/// cutting every program on the hub off for the rest of the run.
+/// on it pings the FC as before. Taken for the link's close, it would cut every program on
+/// the hub off for the rest of the run.
 #[test]
 fn an_empty_hub_message_does_not_close_the_hub() {
     let twin = twin_with_hub("hub-empty", "127.0.0.91:6491:7491", 30);
@@ -299,8 +299,8 @@ fn clock_s(gs: &mut Client, dst: u8, sport: u8) -> u32 {
 /// ICD 4.1 gives a payload the service handler's ping and uptime of the platform and nothing
 /// else: a program at 15 asking the FC and the PC to reboot and setting the PC's CMP clock
 /// a day ahead changes nothing (the FC's uptime keeps counting, the PC's clock is unmoved,
-/// payload 12's session runs to DONE), and its ping and uptime are answered. They used to
-/// reboot the FC or the PC (and the PC's ACTIVE session with it) and move the PC's clock.
+/// payload 12's session runs to DONE), and its ping and uptime are answered. Served, they
+/// would reboot the FC or the PC (and the PC's ACTIVE session with it) and move its clock.
 #[test]
 fn a_payload_cannot_reboot_the_platform_or_set_its_clock() {
     let scenario = write_scenario(
@@ -388,8 +388,8 @@ session_result = "done"
 /// An address a link is configured with is that link's, its program connected or not: a
 /// client of another link (which learns its addresses) sending as 15 while the first link's
 /// program is offline is refused, and that program, connecting later, gets 15 and what the
-/// twin sends it. The learning link used to take 15, the twin's traffic for 15 went to it,
-/// and the real payload was refused when it connected.
+/// twin sends it. Were the learning link to take 15, the twin's traffic for 15 would go to
+/// it and the real payload would be refused when it connected.
 #[test]
 fn a_configured_address_is_its_links_while_its_program_is_offline() {
     let scenario = write_scenario(
@@ -436,8 +436,8 @@ addr = "127.0.0.1:0"
 }
 
 /// Sixteen connections that say nothing fill a listener (its limit); `m6p-twin gs ping 3`
-/// still gets through: the longest-idle connection is closed to make room, and logged. The
-/// seventeenth connection used to be refused for as long as the sixteen stayed.
+/// still gets through: the longest-idle connection is closed to make room, and logged, so
+/// that idle connections cannot lock everyone out.
 #[test]
 fn sixteen_idle_connections_do_not_lock_out_a_console() {
     let scenario = bare("idle-sixteen", 30);
@@ -505,8 +505,7 @@ fn a_connection_that_says_nothing_is_closed_after_the_idle_limit() {
 /// A connection holding an address (a payload waiting quietly for its session) is never
 /// closed to make room, however long it has been idle: connections that hold nothing are,
 /// and when every connection holds an address a new one is refused. Were it closed, a
-/// newcomer could take its address; the longest-idle connection, whatever it held, used to
-/// be the one closed.
+/// newcomer could take its address.
 #[test]
 fn a_connection_holding_an_address_is_never_closed_to_make_room() {
     let scenario = bare("idle-named", 30);

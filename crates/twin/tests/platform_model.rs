@@ -306,7 +306,8 @@ fn the_seed_on_the_command_line_draws_the_initial_attitude() {
 /// frame reaches a node (no CFP or CRC32 drop anywhere, every ping echo intact); the
 /// transmitters retransmit, the bus counts error frames. At 5 % per frame the error
 /// counters fall back faster than they rise (+8 per error, -1 per good frame): nobody goes
-/// bus-off and every ping is answered. (Before, the corrupted frames were delivered.)
+/// bus-off and every ping is answered. A corrupted frame delivered would be a wire CAN never
+/// produces.
 #[test]
 fn a_corrupted_can_frame_never_reaches_a_node() {
     let text = r#"

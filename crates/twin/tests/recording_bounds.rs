@@ -117,8 +117,8 @@ fn small_recording(path: &Path) {
 
 /// 4-byte windows of a small recording overwritten with huge lengths (all ones, 2 GiB,
 /// 256 MiB, 64 MiB, 16 MiB): each read ends in an error or a partial read, and no single
-/// allocation exceeds 8 MiB (the file is a few KB; a chunk is at most about 4 MiB). The
-/// reader used to trust a string's length prefix inside a record and ask for 4 GiB.
+/// allocation exceeds 8 MiB (the file is a few KB; a chunk is at most about 4 MiB): a
+/// reader trusting a string's length prefix inside a record would ask for 4 GiB.
 #[test]
 fn mutated_length_fields_give_errors_not_allocations() {
     let f = TempFile::new("bounds-src");

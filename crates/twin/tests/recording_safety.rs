@@ -2,10 +2,8 @@
 //! refused unless `--overwrite` (the scenario itself always), two runs onto one name leave
 //! one recording and an error, a write error is reported when it happens and the run still
 //! prints its report and fails, and a run on the wall clock killed with SIGKILL leaves what
-//! it recorded up to its last second. It used to replace an existing file (the scenario
-//! too) silently, mix two runs' bytes, report a full disk only at the end without the
-//! report, and a real-time recording reached the disk only when its first 4 MiB chunk
-//! closed (36 simulated minutes of the default scenario).
+//! it recorded up to its last second (a real-time recording written only as 4 MiB chunks
+//! close would reach the disk after 36 simulated minutes of the default scenario).
 #![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};

@@ -581,9 +581,9 @@ fn outside_run_and_replay(rec: &std::path::Path) -> (Result<(), String>, String)
 /// A real-time run with outside programs replays exactly, whatever the machine's load: in
 /// real time the twin is the virtual-time machine held to the wall clock, and outside input
 /// is taken in at the run's own idle points with their instants (`bus::pace`), so the
-/// recording's inputs determine the run. It used to stamp a frame when its task happened
-/// to run, and replays diverged (a frame at 0.700138 s instead of 0.699270738 s): the test
-/// needed three tries and still failed under load.
+/// recording's inputs determine the run. A frame stamped when its task happened to run
+/// would make replays diverge (a frame at 0.700138 s instead of 0.699270738 s), more
+/// often under load: one try, no retries.
 #[test]
 fn a_run_with_outside_programs_replays_identically_from_its_recorded_input() {
     let rec = tmp("outside.mcap");
@@ -600,9 +600,9 @@ fn a_run_with_outside_programs_replays_identically_from_its_recorded_input() {
 
 /// An outside payload on the payload CAN bus (the README's Python payload, answering the PC's
 /// polls within a millisecond of the bus's own traffic) in a real-time run replays exactly:
-/// its frames meet the PC's and the EPS's on the bus in the same order. Its real-time
-/// original used to pick frames for arbitration by when tasks happened to run, and a
-/// replay could report a divergence at the payload's frames.
+/// its frames meet the PC's and the EPS's on the bus in the same order. An original that
+/// picked frames for arbitration by when tasks happened to run could diverge from its
+/// replay at the payload's frames.
 #[test]
 fn a_real_time_session_with_an_outside_payload_replays_identically() {
     let rec = tmp("outside-payload.mcap");
@@ -900,9 +900,9 @@ fn the_scenario_docs_examples_check_and_the_fc_example_passes() {
 /// whose program first connects and drops the connection at once, then connects again and
 /// serves the session: the replay opens each recorded connection when the original opened
 /// (the open is recorded as the connection's first empty input chunk), so the second one
-/// holds 12 when the PC's SYNC comes, as it did in the original. Before, every replayed
-/// connection opened at time 0: the second's claim of 12 was refused (the first held it), the
-/// SYNC found no route, and the replay diverged.
+/// holds 12 when the PC's SYNC comes, as it did in the original. Were every replayed
+/// connection opened at time 0, the second's claim of 12 would be refused (the first held
+/// it), the SYNC would find no route, and the replay would diverge.
 #[test]
 fn a_replayed_connection_opens_when_the_recorded_one_did() {
     let dir = tmp("reconnect.downlink");
@@ -1051,8 +1051,8 @@ fn campaign_run_checks_every_draw_first_and_its_failures_reproduce() {
 }
 
 /// A replay writes its downlink beside its own recording: the files of the original run,
-/// in the scenario's `[pc] downlink_dir`, are left as they are. (It used to write into the
-/// scenario's directory, over the original's files.)
+/// in the scenario's `[pc] downlink_dir`, are left as they are: the replay never writes
+/// over the original's files.
 #[test]
 fn a_replay_writes_its_downlink_beside_its_recording_never_over_the_originals() {
     let orig = tmp("replay-downlink-orig");
@@ -1129,8 +1129,8 @@ fn ctrl_c_stops_a_virtual_run_and_finishes_its_recording() {
     let rec = tmp("interrupted-virtual.mcap");
     let out = interrupted_run(&["run", "--duration", "7d"], &rec, "running scenario", 500);
     assert_complete(&out, &rec);
-    // Stopped long before the week's end ("simulated X s in Y s wall"; it used to say the
-    // whole week).
+    // Stopped long before the week's end: "simulated X s in Y s wall" gives where, never
+    // the whole week.
     let all = format!(
         "{}{}",
         String::from_utf8_lossy(&out.stdout),

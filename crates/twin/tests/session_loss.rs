@@ -1,9 +1,8 @@
 //! A session run lost with the PC's memory (power loss, reboot) ends there: the invariants
 //! see one ACTIVE session at a time when the same session is set up again, and the session
-//! expectation counts the lost run and names it. The run used to stay ACTIVE for ever in the
-//! observer's books: `one-active-session` failed (`session 1 ACTIVE while session 1 is`) in
-//! 34 of 40 runs of such a campaign, and `session_result = "done"` said `1 of 1 runs held`
-//! with two runs.
+//! expectation counts the lost run and names it. A lost run left ACTIVE in the observer's
+//! books would fail `one-active-session` at the next SETUP of the same session, and
+//! `session_result = "done"` would not see the lost run at all.
 #![allow(clippy::unwrap_used)]
 
 use m6p_twin::campaign::Campaign;

@@ -116,33 +116,8 @@ pub(super) fn nodes(
 
     opts.fc = fc_config(opts);
     let mut comm_ports = Vec::new();
-    {
-        // Every radio transmission is charged to its COMM's transmitter, at its place on the
-        // air.
-        let activity = boards.activity.clone();
-        let log = ev_tx.clone();
-        segs.ground
-            .set_air_tap(bus::net::AirTap::new(move |radio, start, end| {
-                use platform::board::Activity;
-                // The radio endpoints are named `<node>-uhf` (see the attachments below).
-                let what = if radio == "COMM2-uhf" {
-                    Activity::UhfTxSecondary
-                } else {
-                    Activity::UhfTx
-                };
-                for (t, on) in [(start, true), (end, false)] {
-                    if let Err(e) = activity.set(what, t, on) {
-                        tracing::warn!(%t, "{radio}: air time not charged: {e}");
-                        let _ = log.send(RunEvent::Log {
-                            t,
-                            source: "run".to_owned(),
-                            level: crate::events::Level::Warning,
-                            message: format!("{radio}: air time: {e}"),
-                        });
-                    }
-                }
-            }));
-    }
+    // The secondary COMM's radio: its air time is its own transmitter's.
+    let mut secondary_radios = Vec::new();
     let mut nodes = Vec::new();
     for spec in &opts.network.nodes {
         if opts.replaced.contains(&spec.addr) {
@@ -216,12 +191,45 @@ pub(super) fn nodes(
         if matches!(spec.role, Role::CommPrimary | Role::CommSecondary) {
             comm_ports.push((spec.addr, ports.clone()));
         }
+        if spec.role == Role::CommSecondary {
+            secondary_radios.extend(ports.iter().filter_map(|p| match p {
+                Attachment::Net(n) => Some(n.id()),
+                Attachment::Can(_) => None,
+            }));
+        }
         let out = ev_tx.clone();
         let handle =
             tokio::spawn(
                 async move { run_node_with(host, ports, inbox_rx, ctl_rx, clock, out).await },
             );
         nodes.push((spec.clone(), ctl_tx, handle));
+    }
+
+    {
+        // Every radio transmission is charged to its COMM's transmitter, at its place on the
+        // air. Set once the radios are attached, before any node's task has run.
+        let activity = boards.activity.clone();
+        let log = ev_tx.clone();
+        segs.ground
+            .set_air_tap(bus::net::AirTap::new(move |id, radio, start, end| {
+                use platform::board::Activity;
+                let what = if secondary_radios.contains(&id) {
+                    Activity::UhfTxSecondary
+                } else {
+                    Activity::UhfTx
+                };
+                for (t, on) in [(start, true), (end, false)] {
+                    if let Err(e) = activity.set(what, t, on) {
+                        tracing::warn!(%t, "{radio}: air time not charged: {e}");
+                        let _ = log.send(RunEvent::Log {
+                            t,
+                            source: "run".to_owned(),
+                            level: crate::events::Level::Warning,
+                            message: format!("{radio}: air time: {e}"),
+                        });
+                    }
+                }
+            }));
     }
 
     Nodes {
@@ -303,8 +311,9 @@ mod tests {
 
     /// Every node type of the twin, as the run builds it, given packets whose source and
     /// destination are its own address, from each service port to each service port, on
-    /// each of its interfaces: answered or dropped, never a crash (it used to recurse until
-    /// the stack overflowed), and the node still answers a ping from another node after.
+    /// each of its interfaces: answered or dropped, never a crash (each answer is a new
+    /// request to itself: served through the queue, never by recursion), and the node still
+    /// answers a ping from another node after.
     #[test]
     fn every_node_type_survives_self_addressed_service_packets() {
         let net = NetworkSpec::m6p(&[12, 13, 14, 15], &[16, 17]);

@@ -546,7 +546,13 @@ pub async fn run_with(
     }
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
-    let mut observer = Observer::new(opts.trace, opts.keep_series, opts.tle.as_ref());
+    let mut observer = Observer::new(
+        report::Keep {
+            trace: opts.trace,
+            series: opts.keep_series,
+        },
+        opts.tle.as_ref(),
+    );
     let kiss_budget = kiss.budget.clone();
     let mut handle_event = |ev: RunEvent, observer: &mut Observer| {
         sink(&ev);

@@ -147,7 +147,10 @@ impl PowerShell {
                         self.ctl(
                             addr,
                             t,
-                            NodeCtl::Switch(nodes_comm::RADIO_SWITCH, addr == carrier),
+                            NodeCtl::Switch(
+                                nodes_comm::RADIO_SWITCH,
+                                csp::node::SwitchPosition::on_if(addr == carrier),
+                            ),
                         );
                     }
                 }

@@ -110,17 +110,26 @@ pub struct Observed {
     pub contact: Vec<(SimTime, bool)>,
 }
 
+/// What an [`Observer`] keeps beyond the run's summaries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Keep {
+    /// The trace of every frame.
+    pub trace: bool,
+    /// Every sample and downlinked byte.
+    pub series: bool,
+}
+
 impl Observer {
-    /// An observer keeping the trace of every frame when `keep_trace`, and every sample
-    /// and downlinked byte when `keep_series` (else their summaries); `tle` is the
-    /// scenario's orbit (for the truth's distance from it).
-    pub fn new(keep_trace: bool, keep_series: bool, tle: Option<&(String, String)>) -> Self {
+    /// An observer keeping what `keep` says beyond the summaries; `tle` is the scenario's
+    /// orbit (for the truth's distance from it).
+    pub fn new(keep: Keep, tle: Option<&(String, String)>) -> Self {
+        let keep_series = keep.series;
         let mut attitude = crate::adcs::AttitudeObserver::new(tle);
         attitude.forget_samples = !keep_series;
         let mut power = crate::eps::PowerObserver::default();
         power.forget_samples = !keep_series;
         Observer {
-            trace: keep_trace.then(Vec::new),
+            trace: keep.trace.then(Vec::new),
             attitude,
             power,
             link: crate::comm::LinkObserver::default(),
