@@ -4,7 +4,7 @@
     tools/layering.py            check; exit 1 naming every violation
     tools/layering.py --graph    also print each crate's module graph (edges between siblings)
 
-Two rules, read from the sources (nothing to build):
+Three rules, read from the sources (nothing to build):
 
 1. **Crates.** `tools/layers.toml` declares the layers, bottom first. A workspace crate may
    depend (normal or build dependency, from `cargo metadata`) only on workspace crates of a
@@ -15,8 +15,13 @@ Two rules, read from the sources (nothing to build):
    A module naming its own descendants or ancestors is not an edge (a parent declares its
    children). `#[cfg(test)]` modules are not production code and are left out.
 
+3. **Sizes.** A library crate holds at most 8,000 production lines, a binary's `main.rs`
+   at most 200, a function at most 120 (lines of the source with `#[cfg(test)]` modules
+   left out; a function from its `fn` to its closing brace).
+
 A violation still to be taken apart may be listed in `tools/layering-known.txt`, one per
-line: `crate: a b c` (a cycle, its modules sorted) or `crate -> crate` (a dependency). The
+line: `crate: a b c` (a cycle, its modules sorted), `crate -> crate` (a dependency) or
+`size: ...` (as the check names it). The
 check fails on one not listed and on a listed one that no longer exists, so the list only
 shrinks.
 """
@@ -37,12 +42,18 @@ KNOWN = ROOT / "tools" / "layering-known.txt"
 IDENT = r"[A-Za-z_][A-Za-z0-9_]*"
 
 
+RAW_STRING = re.compile(r'b?r(#*)"')
+CHAR = re.compile(r"'(\\.|\\u\{[0-9a-fA-F]+\}|[^\\'])'")
+
+
 def strip_code(text: str) -> str:
-    """The source without comments, string and char literals (kept as empty ones)."""
+    """The source without comments, string and char literals (kept as empty ones), line
+    for line: the newlines inside what is removed stay, so line numbers hold."""
     out: list[str] = []
     i, n = 0, len(text)
     while i < n:
         c = text[i]
+        start = i
         if text.startswith("//", i):
             j = text.find("\n", i)
             i = n if j < 0 else j
@@ -55,20 +66,21 @@ def strip_code(text: str) -> str:
                     depth, i = depth - 1, i + 2
                 else:
                     i += 1
-        elif m := re.match(r'b?r(#*)"', text[i:]):
+            out.append("\n" * text.count("\n", start, i))
+        elif (c == "r" or c == "b") and (m := RAW_STRING.match(text, i)):
             close = '"' + m.group(1)
-            j = text.find(close, i + len(m.group(0)))
-            out.append('""')
+            j = text.find(close, m.end())
             i = n if j < 0 else j + len(close)
+            out.append('""' + "\n" * text.count("\n", start, i))
         elif c == '"' or text.startswith('b"', i):
             i += 2 if c == "b" else 1
             while i < n and text[i] != '"':
                 i += 2 if text[i] == "\\" else 1
-            out.append('""')
             i += 1
-        elif c == "'" and (m := re.match(r"'(\\.|\\u\{[0-9a-fA-F]+\}|[^\\'])'", text[i:])):
+            out.append('""' + "\n" * text.count("\n", start, i))
+        elif c == "'" and (m := CHAR.match(text, i)):
             out.append("' '")
-            i += len(m.group(0))
+            i = m.end()
         else:
             out.append(c)
             i += 1
@@ -82,7 +94,7 @@ def drop_test_modules(code: str) -> str:
         while i < len(code) and depth:
             depth += {"{": 1, "}": -1}.get(code[i], 0)
             i += 1
-        code = code[: m.start()] + code[i:]
+        code = code[: m.start()] + "\n" * code.count("\n", m.start(), i) + code[i:]
     return code
 
 
@@ -283,6 +295,83 @@ def cycles(nodes: set[str], edges: set[tuple[str, str]]) -> list[list[str]]:
     return out
 
 
+CRATE_LINES = 8000
+MAIN_LINES = 200
+FN_LINES = 120
+FN = re.compile(r"\bfn\s+(" + IDENT + r")")
+
+
+def production(file: Path) -> str:
+    """A file's code without comments, literals' contents and test modules, line for line."""
+    return drop_test_modules(strip_code(file.read_text()))
+
+
+def long_functions(code: str) -> list[tuple[str, int, int]]:
+    """(name, first line, lines) of every function body in `code` over [`FN_LINES`]."""
+    out = []
+    for m in FN.finditer(code):
+        i, depth = m.end(), 0
+        # The body's brace: the first `{` outside the signature's parentheses, brackets
+        # and generics (a `;` first is a declaration without a body).
+        while i < len(code):
+            ch = code[i]
+            if ch in "([<":
+                depth += 1
+            elif ch in ")]>" and depth:
+                depth -= 1
+            elif ch == "-" and code.startswith("->", i):
+                i += 2
+                continue
+            elif depth == 0 and ch in "{;":
+                break
+            i += 1
+        if i >= len(code) or code[i] == ";":
+            continue
+        start, level = i, 0
+        while i < len(code):
+            level += {"{": 1, "}": -1}.get(code[i], 0)
+            if level == 0:
+                break
+            i += 1
+        first = code.count("\n", 0, m.start()) + 1
+        lines = code.count("\n", m.start(), i) + 1
+        if lines > FN_LINES:
+            out.append((m.group(1), first, lines))
+    return out
+
+
+def module_files(m: Module) -> set[Path]:
+    files = {m.file} if m.file else set()
+    for c in m.children.values():
+        files |= module_files(c)
+    return files
+
+
+def sizes(crate: str, kind: str, root: Module, src: Path) -> dict[str, str]:
+    """What breaks the size rules in one target: key -> message."""
+    out: dict[str, str] = {}
+    files = sorted(module_files(root))
+    total = 0
+    for f in files:
+        code = production(f)
+        total += code.count("\n")
+        rel = f.relative_to(ROOT)
+        seen: dict[str, int] = {}
+        for name, first, lines in long_functions(code):
+            seen[name] = seen.get(name, 0) + 1
+            key = f"size: fn {rel} {name}" + (f" ({seen[name]})" if seen[name] > 1 else "")
+            out[key] = f"{key}: {lines} lines from line {first} (at most {FN_LINES})"
+    if kind == "lib" and total > CRATE_LINES:
+        key = f"size: crate {crate}"
+        out[key] = f"{key}: {total} production lines (at most {CRATE_LINES})"
+    if kind == "bin" and src.name == "main.rs":
+        n = production(src).count("\n")
+        if n > MAIN_LINES:
+            key = f"size: {src.relative_to(ROOT)}"
+            out[key] = f"{key}: {n} production lines (at most {MAIN_LINES})"
+    return out
+
+
 def crate_roots(meta: dict) -> list[tuple[str, Path]]:
     roots = []
     for p in meta["packages"]:
@@ -333,6 +422,10 @@ def main() -> int:
         root = load_module((), src, True, errors)
         problems.extend(errors)
         crate = label.split(" ")[0]
+        kind = label.rsplit(", ", 1)[1].rstrip(")")
+        for key, message in sizes(crate, kind, root, src).items():
+            found.add(key)
+            why[key] = message
         for parent, edges in sorted(sibling_edges(root).items()):
             node = root
             for seg in parent:
