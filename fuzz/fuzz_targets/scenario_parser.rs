@@ -1,5 +1,5 @@
 //! `scenario_parser`: the scenario loader on arbitrary UTF-8 text:
-//! `m6p_twin::scenario::Scenario::parse(file, text)` (TOML, then the meaning of every field,
+//! `m6p_twin::scenario::parse(file, text)` (TOML, then the meaning of every field,
 //! with errors located at line and column), `Scenario::validate` again on what parsed, and
 //! `m6p_twin::plan::compile` of a valid scenario (network, faults, commands, expectations).
 //!
@@ -16,7 +16,7 @@ fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    match Scenario::parse(FILE, text) {
+    match m6p_twin::scenario::parse(FILE, text) {
         Err(e) => {
             let _ = e.to_string();
         }

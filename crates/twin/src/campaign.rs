@@ -22,8 +22,8 @@ use rand_core::{Rng as _, SeedableRng as _};
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::scenario::{PathStep, Scenario, ScenarioError, ScenarioErrors, path_string};
 use crate::seed::mix;
+use twin_scenario::scenario::{PathStep, ScenarioError, ScenarioErrors, path_string};
 
 /// A campaign file.
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
@@ -69,19 +69,19 @@ pub struct RunLimits {
     /// The longest simulated duration a run may draw (default 30 days): a longer one is an
     /// error row, not run.
     #[serde(default = "default_simulated")]
-    pub simulated: crate::scenario::Dur,
+    pub simulated: twin_scenario::scenario::Dur,
     /// The most wall-clock time a run may take (default 10 minutes): it is stopped there,
     /// an error row.
     #[serde(default = "default_wall")]
-    pub wall: crate::scenario::Dur,
+    pub wall: twin_scenario::scenario::Dur,
 }
 
-fn default_simulated() -> crate::scenario::Dur {
-    crate::scenario::Dur(std::time::Duration::from_secs(30 * 86_400))
+fn default_simulated() -> twin_scenario::scenario::Dur {
+    twin_scenario::scenario::Dur(std::time::Duration::from_secs(30 * 86_400))
 }
 
-fn default_wall() -> crate::scenario::Dur {
-    crate::scenario::Dur(std::time::Duration::from_secs(600))
+fn default_wall() -> twin_scenario::scenario::Dur {
+    twin_scenario::scenario::Dur(std::time::Duration::from_secs(600))
 }
 
 impl Default for RunLimits {
@@ -467,8 +467,8 @@ fn err_at(file: &str, text: &str, field: &str, message: String) -> ScenarioError
     } else {
         path
     };
-    let (line, column) = crate::scenario::locate(text, &steps)
-        .map(|s| crate::scenario::line_col(text, s.start))
+    let (line, column) = twin_scenario::scenario::locate(text, &steps)
+        .map(|s| twin_scenario::scenario::line_col(text, s.start))
         .map_or((None, None), |(l, c)| (Some(l), Some(c)));
     ScenarioError {
         file: file.to_owned(),
@@ -487,7 +487,7 @@ impl Campaign {
         let spec: CampaignSpec = toml::from_str(text).map_err(|e| {
             let (line, column) = e
                 .span()
-                .map(|s| crate::scenario::line_col(text, s.start))
+                .map(|s| twin_scenario::scenario::line_col(text, s.start))
                 .map_or((None, None), |(l, c)| (Some(l), Some(c)));
             ScenarioErrors(vec![ScenarioError {
                 file: file.to_owned(),
@@ -508,10 +508,10 @@ impl Campaign {
                     .parent()
                     .map_or_else(|| PathBuf::from(p), |d| d.join(p));
                 let shown = path.display().to_string();
-                let base_text = crate::scenario::read_input(&path)
+                let base_text = twin_scenario::scenario::read_input(&path)
                     .map_err(|e| one("scenario", format!("cannot read {shown}: {e}")))?;
                 // The base must be a valid scenario on its own.
-                Scenario::parse(&shown, &base_text)?;
+                crate::validate::parse(&shown, &base_text)?;
                 let t = base_text
                     .parse::<toml::Table>()
                     .map_err(|e| one("scenario", format!("{shown}: {e}")))?;
@@ -574,7 +574,7 @@ impl Campaign {
     /// Read and parse a campaign file.
     pub fn load(path: &Path) -> anyhow::Result<Campaign> {
         let file = path.display().to_string();
-        let text = crate::scenario::read_input(path)
+        let text = twin_scenario::scenario::read_input(path)
             .map_err(|e| anyhow::anyhow!("reading campaign {file}: {e}"))?;
         Ok(Campaign::parse(&file, &text)?)
     }
@@ -693,7 +693,7 @@ impl Campaign {
             )])
         })?;
         let shown = format!("{} run {k}", self.file);
-        Scenario::parse(&shown, &text).map_err(|e| {
+        crate::validate::parse(&shown, &text).map_err(|e| {
             // Point at the dispersion whose path the scenario's error names, if any.
             let errs =
                 e.0.into_iter()
@@ -808,7 +808,7 @@ jump_s = 60
             r5.draws["fc.initial_rate_deg_s"],
             b.resolve(5).unwrap().draws["fc.initial_rate_deg_s"]
         );
-        let s = Scenario::parse("r", &r5.text).unwrap();
+        let s = crate::validate::parse("r", &r5.text).unwrap();
         let rate = s.fc.initial_rate_deg_s.unwrap();
         assert!((1.0..=9.0).contains(&rate), "{rate}");
         assert_eq!(r5.draws["fc.initial_rate_deg_s"], rate.to_string());
@@ -907,7 +907,7 @@ jump_s = 5
         .unwrap();
         for k in 0..20 {
             let r = c.resolve(k).unwrap();
-            let s = Scenario::parse("r", &r.text).unwrap();
+            let s = crate::validate::parse("r", &r.text).unwrap();
             // The base's fault and two drawn ones.
             assert_eq!(s.faults.len(), 3, "{}", r.text);
             let kinds: Vec<&str> = r.draws["faults"].split(' ').collect();

@@ -17,7 +17,6 @@ use anyhow::{Context as _, bail};
 use crate::campaign::Campaign;
 pub use crate::campaign_rows::{CampaignMeta, RunRow, RunVerdict};
 use crate::exec;
-use crate::scenario::Scenario;
 
 /// Run run `k` of `c`: resolve, compile, run in virtual time, check. A panic inside the
 /// run is caught and becomes the row's error.
@@ -114,7 +113,7 @@ pub fn run_limited(
 ) -> (RunVerdict, BTreeMap<String, f64>) {
     use crate::runtime::StopCause;
     let outcome = std::panic::catch_unwind(|| -> anyhow::Result<exec::Outcome> {
-        let scenario = Scenario::parse(file, text)?;
+        let scenario = crate::validate::parse(file, text)?;
         let loaded = exec::Loaded {
             file: file.to_owned(),
             text: text.to_owned(),
@@ -170,7 +169,7 @@ pub fn run_limited(
 /// the recording must be complete and decodable, and the run must fail again the same way
 /// (a campaign's runs are deterministic). What the recorded run said, or why not.
 pub fn record_failure(file: &str, row: &RunRow, path: &Path) -> anyhow::Result<()> {
-    let scenario = Scenario::parse(file, &row.scenario)?;
+    let scenario = crate::validate::parse(file, &row.scenario)?;
     let loaded = exec::Loaded {
         file: file.to_owned(),
         text: row.scenario.clone(),
@@ -637,7 +636,7 @@ mod tests {
             let f = dir.join(format!("failures/run-{}.toml", r.run));
             let text = std::fs::read_to_string(&f).unwrap();
             // The failure file is a scenario that fails the same way on its own.
-            let s = Scenario::parse("f", &text).unwrap();
+            let s = crate::validate::parse("f", &text).unwrap();
             assert_eq!(s.seed, r.seed);
             let loaded = exec::Loaded {
                 file: "f".into(),

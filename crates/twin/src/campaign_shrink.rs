@@ -18,7 +18,7 @@ use anyhow::bail;
 
 use crate::campaign::get_path;
 use crate::campaign_run::{RunVerdict, run_text};
-use crate::scenario::{PathStep, path_string};
+use twin_scenario::scenario::{PathStep, path_string};
 
 /// What shrinking produced.
 #[derive(Debug, Clone, PartialEq)]
@@ -328,7 +328,7 @@ target = "EPS"
 panel = "wing+Y"
 "#;
         let r = shrink("shrink.toml", text, None).unwrap();
-        let s = crate::scenario::Scenario::parse("shrunk", &r.text).unwrap();
+        let s = crate::validate::parse("shrunk", &r.text).unwrap();
         assert_eq!(s.faults.len(), 1, "{}\n{:?}", r.text, r.steps);
         let t: toml::Table = r.text.parse().unwrap();
         let fault = &t["faults"][0];

@@ -6,7 +6,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, bounds};
-use crate::scenario::NodeRef;
+use twin_scenario::scenario::NodeRef;
 
 /// A controller's fault confinement state, by name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, JsonSchema)]

@@ -13,7 +13,7 @@
 use bus::ClockMode;
 use csp::SimTime;
 
-use crate::scenario::{PathStep, Scenario};
+use twin_scenario::scenario::{PathStep, Scenario};
 
 /// What `realtime_from` names.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -149,7 +149,7 @@ mod tests {
             "name = \"t\"\nstart = \"2026-04-30T18:00:00Z\"\nduration = \"4h\"\n\
              [satellite]\ntle = [\"{L1}\", \"{L2}\"]\n[clock]\n{clock}\n"
         );
-        Scenario::parse("t.toml", &text).map_err(|e| e.to_string())
+        crate::validate::parse("t.toml", &text).map_err(|e| e.to_string())
     }
 
     #[test]

@@ -5,7 +5,7 @@ use serde::Deserialize;
 
 use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, bounds};
 use crate::runtime::RunReport;
-use crate::scenario::NodeRef;
+use twin_scenario::scenario::NodeRef;
 
 /// Node counters an expectation can name.
 pub const NODE_COUNTERS: &[&str] = &[

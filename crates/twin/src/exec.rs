@@ -11,7 +11,7 @@ use crate::events::RunEvent;
 use crate::expectations::{Verdict, WatchCx, check_watched};
 use crate::plan::{Compiled, compile};
 use crate::runtime::{RunReport, run_with};
-use crate::scenario::Scenario;
+use twin_scenario::scenario::Scenario;
 
 /// The embedded default scenario (`scenarios/default.toml`).
 pub const DEFAULT_SCENARIO: &str = include_str!("../../../scenarios/default.toml");
@@ -39,9 +39,9 @@ impl Loaded {
 /// Read and validate a scenario file.
 pub fn load(path: &Path) -> anyhow::Result<Loaded> {
     let file = path.display().to_string();
-    let text =
-        crate::scenario::read_input(path).with_context(|| format!("reading scenario {file}"))?;
-    let scenario = Scenario::parse(&file, &text)?;
+    let text = twin_scenario::scenario::read_input(path)
+        .with_context(|| format!("reading scenario {file}"))?;
+    let scenario = crate::validate::parse(&file, &text)?;
     Ok(Loaded {
         file,
         text,
@@ -51,7 +51,7 @@ pub fn load(path: &Path) -> anyhow::Result<Loaded> {
 
 /// The embedded default scenario.
 pub fn load_default() -> anyhow::Result<Loaded> {
-    let scenario = Scenario::parse(DEFAULT_SCENARIO_FILE, DEFAULT_SCENARIO)?;
+    let scenario = crate::validate::parse(DEFAULT_SCENARIO_FILE, DEFAULT_SCENARIO)?;
     Ok(Loaded {
         file: DEFAULT_SCENARIO_FILE.to_owned(),
         text: DEFAULT_SCENARIO.to_owned(),

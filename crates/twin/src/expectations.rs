@@ -10,14 +10,14 @@
 
 use csp::SimTime;
 use schemars::JsonSchema;
+use serde::Deserialize;
 use serde::de::DeserializeOwned;
-use serde::{Deserialize, Deserializer};
 
 use crate::events::RunEvent;
 use crate::network::NetworkSpec;
 use crate::runtime::RunReport;
-use crate::scenario::{Dur, PathStep, Scenario};
 use crate::tagged::Tagged;
+use twin_scenario::scenario::{Dur, PathStep, Scenario};
 
 /// The verdict on one expectation of the scenario, or on one invariant it checks.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -215,15 +215,7 @@ pub struct Common {
 /// The names of [`Common`]'s fields.
 pub const COMMON: &[&str] = &["name"];
 
-/// One `[[expectations]]` entry as written (typed through the registry).
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct ExpectEntry(pub Tagged);
-
-impl<'de> Deserialize<'de> for ExpectEntry {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        Tagged::deserialize(d).map(ExpectEntry)
-    }
-}
+pub use twin_scenario::entries::ExpectEntry;
 
 /// A compiled expectation: its name and its kind's check.
 #[derive(Debug, Clone)]
@@ -299,20 +291,17 @@ macro_rules! registry {
             ))
         }
 
-        impl JsonSchema for ExpectEntry {
-            fn schema_name() -> std::borrow::Cow<'static, str> {
-                "Expectation".into()
-            }
-            fn json_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
-                let common = serde_json::to_value(schemars::schema_for!(Common))
-                    .unwrap_or_default();
-                let kinds = vec![$((
-                    <$kind as ExpectKind>::NAME,
-                    <$kind as ExpectKind>::ABOUT,
-                    serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
-                )),*];
-                crate::tagged::one_of(generator, common, kinds)
-            }
+        /// The JSON schema of an entry: one of the kinds, each with the common fields
+        /// (the scenario's schema takes it as its `Expectation` definition).
+        pub fn entry_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+            let common = serde_json::to_value(schemars::schema_for!(Common))
+                .unwrap_or_default();
+            let kinds = vec![$((
+                <$kind as ExpectKind>::NAME,
+                <$kind as ExpectKind>::ABOUT,
+                serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
+            )),*];
+            twin_core::tagged::one_of(generator, common, kinds)
         }
     };
 }

@@ -18,7 +18,7 @@ use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Watch, WatchCx}
 use crate::icd::{Direction, IcdMap};
 use crate::network::NetworkSpec;
 use crate::packets::PacketTap;
-use crate::scenario::Dur;
+use twin_scenario::scenario::Dur;
 
 /// A value to compare with: a number, or the name the ICD gives a value (`"idle"`).
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]

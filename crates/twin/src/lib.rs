@@ -9,7 +9,9 @@
 //! - `live` (cargo feature `live`): serve a run over the Foxglove WebSocket protocol.
 
 // The vocabulary below the twin's layers (its own crate: docs/architecture.md).
-pub use twin_core::{duration, events, network, packets, seed, tagged, timefmt, transit};
+pub use twin_core::{
+    duration, events, icd, icd_lengths, network, packets, seed, tagged, timefmt, transit,
+};
 
 pub mod adcs;
 pub mod bench;
@@ -31,8 +33,6 @@ pub mod fields;
 pub mod ground;
 pub mod gs;
 pub mod gs_shell;
-pub mod icd;
-pub mod icd_lengths;
 pub mod invariants;
 #[cfg(feature = "live")]
 pub mod live;
@@ -45,9 +45,16 @@ pub mod record;
 pub mod recording;
 pub mod rules;
 pub mod runtime;
-pub mod scenario;
 pub mod sessions;
 pub mod sizes;
+pub mod validate;
+
+/// The scenario: its data (m6p-twin-scenario), read and checked with every slice's check
+/// ([`validate::parse`]), and its JSON schema.
+pub mod scenario {
+    pub use crate::validate::{parse, schema};
+    pub use twin_scenario::scenario::*;
+}
 
 use std::time::Duration;
 

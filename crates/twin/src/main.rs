@@ -960,7 +960,7 @@ fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         a.file.display(),
         meta.scenario_name
     );
-    let scenario = m6p_twin::scenario::Scenario::parse(&file, &meta.scenario_toml)?;
+    let scenario = m6p_twin::scenario::parse(&file, &meta.scenario_toml)?;
     let loaded = exec::Loaded {
         file,
         text: meta.scenario_toml.clone(),
@@ -1075,7 +1075,7 @@ fn cmd_schema(campaign: bool) -> anyhow::Result<bool> {
     let schema = if campaign {
         schemars::schema_for!(m6p_twin::campaign::CampaignSpec)
     } else {
-        schemars::schema_for!(m6p_twin::scenario::Scenario)
+        m6p_twin::scenario::schema()
     };
     println!("{}", serde_json::to_string_pretty(&schema)?);
     Ok(true)

@@ -16,7 +16,7 @@ use platform::addr::Segment;
 
 use crate::network::{NetworkSpec, Role};
 use crate::runtime::{KissLink, KissMode, OutsideLink, RunOptions, SocketCanBus};
-use crate::scenario::{LinkKind, LinkSpec, PathStep, Scenario};
+use twin_scenario::scenario::{LinkKind, LinkSpec, PathStep, Scenario};
 
 fn key(k: &str) -> PathStep {
     PathStep::Key(k.to_owned())
@@ -331,9 +331,10 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
                     max_connections: l.max_connections.unwrap_or(defaults.max_connections),
                     input_chunks: l.input_chunks.unwrap_or(defaults.input_chunks),
                     output_frames: l.output_frames.unwrap_or(defaults.output_frames),
-                    idle_timeout: l
-                        .idle_timeout
-                        .map_or(defaults.idle_timeout, crate::scenario::IdleLimit::duration),
+                    idle_timeout: l.idle_timeout.map_or(
+                        defaults.idle_timeout,
+                        twin_scenario::scenario::IdleLimit::duration,
+                    ),
                 };
                 let mode = match l.kind {
                     LinkKind::KissListen => l.addr.parse().ok().map(KissMode::Listen),
@@ -401,7 +402,7 @@ mod tests {
     fn errors(links: &str) -> String {
         let text = format!("name = \"t\"\nduration = \"1m\"\n{links}");
         // Parsing validates.
-        match Scenario::parse("t.toml", &text) {
+        match crate::validate::parse("t.toml", &text) {
             Ok(_) => String::new(),
             Err(e) => e.to_string(),
         }
@@ -413,7 +414,7 @@ mod tests {
                   [[links]]\nkind = \"uart\"\nnode = \"EPS\"\npty = \"/tmp/eps-uart\"\n";
         assert_eq!(errors(ok), "");
         let text = format!("name = \"t\"\nduration = \"1m\"\n{ok}");
-        let s = Scenario::parse("t.toml", &text).unwrap();
+        let s = crate::validate::parse("t.toml", &text).unwrap();
         let mut opts = crate::plan::compile(&s).opts;
         assert_eq!(opts.uart.len(), 2);
         assert_eq!(opts.uart[0].label(), "uart fc 127.0.0.1:5010");
@@ -521,7 +522,7 @@ mod tests {
         let text = "name = \"t\"\nduration = \"1m\"\n[[links]]\nkind = \"kiss-listen\"\n\
                     addr = \"127.0.0.1:1\"\nreplaces = [\"FC\"]\nmax_connections = 2\n\
                     [[links]]\nkind = \"kiss-connect\"\naddr = \"127.0.0.1:2\"\naddrs = [14]\n";
-        let s = Scenario::parse("t.toml", text).unwrap();
+        let s = crate::validate::parse("t.toml", text).unwrap();
         let opts = crate::plan::compile(&s).opts;
         assert_eq!(opts.replaced.iter().copied().collect::<Vec<_>>(), vec![3]);
         assert_eq!(opts.kiss_links[0].cfg.addrs, vec![3]);

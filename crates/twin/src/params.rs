@@ -8,24 +8,12 @@
 use std::collections::BTreeMap;
 
 use csp::params::{ParamDef, ParamType};
-use schemars::JsonSchema;
-use serde::Deserialize;
 
 use crate::network::{NetworkSpec, Role};
 use crate::runtime::RunOptions;
-use crate::scenario::{PathStep, Scenario};
+use twin_scenario::scenario::{PathStep, Scenario};
 
-/// A parameter's value in a scenario: `true`/`false`, or a number.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize, JsonSchema)]
-#[serde(untagged)]
-pub enum ParamValue {
-    /// A bool parameter's value.
-    Bool(bool),
-    /// An integer.
-    Int(i64),
-    /// A number.
-    Float(f64),
-}
+pub use twin_scenario::params::*;
 
 /// The parameter table of a node of `role` (empty for the ground stations).
 pub fn defs_for(role: Role) -> &'static [ParamDef] {
@@ -119,11 +107,10 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
-    use super::*;
 
     fn errors(nodes: &str) -> String {
         let text = format!("name = \"t\"\nduration = \"1m\"\n{nodes}");
-        match Scenario::parse("t.toml", &text) {
+        match crate::validate::parse("t.toml", &text) {
             Ok(_) => String::new(),
             Err(e) => e.to_string(),
         }
@@ -135,7 +122,7 @@ mod tests {
                   [nodes.COMM1.params]\nbeacon_period = 30\n";
         assert_eq!(errors(ok), "");
         let text = format!("name = \"t\"\nduration = \"1m\"\n{ok}");
-        let opts = crate::plan::compile(&Scenario::parse("t.toml", &text).unwrap()).opts;
+        let opts = crate::plan::compile(&crate::validate::parse("t.toml", &text).unwrap()).opts;
         assert_eq!(opts.params[&3], vec![(1, 0.001), (14, 10.0), (16, 1.0)]);
         assert_eq!(opts.params[&1], vec![(1, 30.0)]);
         for (nodes, key, says) in [

@@ -5,7 +5,7 @@ use bus::ClockMode;
 
 use crate::expectations::Expectation;
 use crate::runtime::RunOptions;
-use crate::scenario::Scenario;
+use twin_scenario::scenario::Scenario;
 
 pub use crate::faults::{FaultAction, MediumId, TimedFault};
 
@@ -26,8 +26,8 @@ pub fn compile(s: &Scenario) -> Compiled {
     let mut opts = RunOptions::new(net.clone(), s.duration.0);
     opts.seed = s.seed;
     opts.clock = match s.clock.mode {
-        crate::scenario::ClockKind::Virtual => ClockMode::Virtual,
-        crate::scenario::ClockKind::Realtime => ClockMode::Realtime {
+        twin_scenario::scenario::ClockKind::Virtual => ClockMode::Virtual,
+        twin_scenario::scenario::ClockKind::Realtime => ClockMode::Realtime {
             speed: s.clock.speed,
         },
     };
@@ -89,7 +89,7 @@ tle = [
         let text = format!(
             "name = \"t\"\nstart = \"2026-04-30T18:00:00Z\"\nduration = \"1m\"\n{TLE}\n{extra}"
         );
-        let s = Scenario::parse("t.toml", &text).unwrap();
+        let s = crate::validate::parse("t.toml", &text).unwrap();
         compile(&s).opts.fc
     }
 

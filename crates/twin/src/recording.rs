@@ -808,9 +808,13 @@ pub fn read_summary(path: &Path) -> anyhow::Result<Summary> {
     if s.truth_last.is_none()
         && let Some(m) = &s.meta
     {
-        let publish_hz = crate::scenario::Scenario::parse("recorded scenario", &m.scenario_toml)
-            .ok()
-            .and_then(|sc| sc.fc.publish_hz);
+        let publish_hz = twin_scenario::scenario::Scenario::parse_with(
+            "recorded scenario",
+            &m.scenario_toml,
+            &[],
+        )
+        .ok()
+        .and_then(|sc| sc.fc.publish_hz);
         s.no_truth = Some(if publish_hz == Some(0) {
             NoTruth::NotPublished
         } else {

@@ -209,7 +209,7 @@ libcsp_test! {
         let progs = programs();
         let file = common::repo_root().join("examples/sil-pass.toml");
         let text = std::fs::read_to_string(&file).unwrap();
-        let scenario = m6p_twin::scenario::Scenario::parse("examples/sil-pass.toml", &text).unwrap();
+        let scenario = m6p_twin::scenario::parse("examples/sil-pass.toml", &text).unwrap();
         let compiled = m6p_twin::plan::compile(&scenario);
         let mut opts = compiled.opts;
         let host = "127.0.0.67";
@@ -266,6 +266,6 @@ libcsp_test! {
 /// The network of `examples/sil-pass.toml` (payload 13 only).
 fn opts_network() -> m6p_twin::network::NetworkSpec {
     let text = std::fs::read_to_string(common::repo_root().join("examples/sil-pass.toml")).unwrap();
-    let scenario = m6p_twin::scenario::Scenario::parse("examples/sil-pass.toml", &text).unwrap();
+    let scenario = m6p_twin::scenario::parse("examples/sil-pass.toml", &text).unwrap();
     m6p_twin::plan::compile(&scenario).opts.network
 }

@@ -18,7 +18,6 @@ use m6p_twin::events::{Direction, RunEvent};
 use m6p_twin::exec::execute;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::{KissReplay, RecordedChunk, build_runtime};
-use m6p_twin::scenario::Scenario;
 
 const LINK: &str = "listen 127.0.0.1:52999";
 
@@ -43,7 +42,7 @@ payloads = [12]
 {extra}
 "#
     );
-    let s = Scenario::parse("t.toml", &text).unwrap();
+    let s = m6p_twin::scenario::parse("t.toml", &text).unwrap();
     let mut compiled = compile(&s);
     // As `replay` does: the recorded input instead of a socket, in virtual time.
     let link_cfg = compiled.opts.kiss_links.remove(0).cfg;
@@ -234,7 +233,9 @@ fn link_faults_and_power_are_checked_with_the_scenario() {
          [[faults]]\nat = \"1s\"\nkind = \"bit-errors\"\ntarget = \"payload-sw\"\nber = 0.001\n\
          [[links]]\nkind = \"kiss-listen\"\naddr = \"127.0.0.1:52998\"\nname = \"FC\"\n"
     );
-    let errs = Scenario::parse("t.toml", &bad).unwrap_err().to_string();
+    let errs = m6p_twin::scenario::parse("t.toml", &bad)
+        .unwrap_err()
+        .to_string();
     for want in [
         "`links[0].powered_by`: `SBAND` is not an EPS channel that powers a node",
         "`faults[0].target`: `payload-sw` is an outside link: the twin does not corrupt",

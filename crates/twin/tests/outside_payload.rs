@@ -13,7 +13,6 @@ use std::process::Command;
 use m6p_twin::expectations::check_all;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::{RunReport, build_runtime, run};
-use m6p_twin::scenario::Scenario;
 
 mod common;
 
@@ -21,7 +20,7 @@ use common::{expected_stream, readme_scenario, repo_root, same_bytes};
 
 #[test]
 fn python_payload_over_kiss_serves_a_polling_session_and_its_bytes_reach_the_ground() {
-    let scenario = Scenario::parse("examples/README.md", &readme_scenario()).unwrap();
+    let scenario = m6p_twin::scenario::parse("examples/README.md", &readme_scenario()).unwrap();
     let compiled = compile(&scenario);
     let mut opts = compiled.opts;
     // The README's link claims CSP 12 before the payload has sent anything; here it listens

@@ -10,7 +10,6 @@ use m6p_twin::exec::execute_keeping;
 use m6p_twin::ground::Outcome;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::build_runtime;
-use m6p_twin::scenario::Scenario;
 
 const TLE: &str = r#"
 [satellite]
@@ -23,7 +22,7 @@ tle = [
 /// Run a scenario text in virtual time: its outcome (the report keeping every request's
 /// outcome) and every event.
 fn run(text: &str) -> (m6p_twin::exec::Outcome, Vec<RunEvent>) {
-    let s = Scenario::parse("t.toml", text).unwrap();
+    let s = m6p_twin::scenario::parse("t.toml", text).unwrap();
     let compiled = compile(&s);
     let rt = build_runtime().unwrap();
     let mut events = Vec::new();

@@ -12,7 +12,6 @@ use m6p_twin::exec::execute_keeping;
 use m6p_twin::invariants::Invariants;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::build_runtime;
-use m6p_twin::scenario::Scenario;
 
 /// The targets TMPERSET is pointed at in turn, each on for 5 s from `20 s * k + 5 s`:
 /// the PC's control port, the EPS's, COMM1's, the PC's telemetry port, payload 12's.
@@ -37,7 +36,7 @@ fn scenario() -> String {
 /// `no-reply-storm` holds over the whole run.
 #[test]
 fn periodic_telemetry_to_a_serving_port_never_starts_a_loop() {
-    let s = Scenario::parse("t.toml", &scenario()).unwrap();
+    let s = m6p_twin::scenario::parse("t.toml", &scenario()).unwrap();
     let compiled = compile(&s);
     let mut invariants = Invariants::for_run(&compiled.opts);
     let rt = build_runtime().unwrap();

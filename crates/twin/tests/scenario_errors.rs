@@ -1,11 +1,10 @@
 //! Bad scenario files get an error naming the file, the line and the field, never a panic.
 #![allow(clippy::unwrap_used)]
 
-use m6p_twin::scenario::Scenario;
-
 /// Parse `text` as `bad.toml` and return the first error's (line, field, message).
 fn first_error(text: &str) -> (Option<usize>, String, String) {
-    let errs = Scenario::parse("bad.toml", text).expect_err("the scenario must be rejected");
+    let errs =
+        m6p_twin::scenario::parse("bad.toml", text).expect_err("the scenario must be rejected");
     let e = errs.0[0].clone();
     let shown = errs.to_string();
     assert!(shown.starts_with("bad.toml:"), "{shown}");
@@ -231,7 +230,7 @@ fn toml_syntax_error() {
 #[test]
 fn several_problems_are_all_reported() {
     let text = "duration = \"1m\"\n[network]\npayloads = [11]\nground_stations = [21]\n";
-    let errs = Scenario::parse("bad.toml", text).unwrap_err();
+    let errs = m6p_twin::scenario::parse("bad.toml", text).unwrap_err();
     assert_eq!(errs.0.len(), 2, "{errs}");
 }
 
@@ -243,7 +242,7 @@ fn the_shipped_scenarios_are_valid() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
             let text = std::fs::read_to_string(&path).unwrap();
-            if let Err(e) = Scenario::parse(&path.display().to_string(), &text) {
+            if let Err(e) = m6p_twin::scenario::parse(&path.display().to_string(), &text) {
                 panic!("{e}");
             }
             n += 1;
@@ -255,7 +254,7 @@ fn the_shipped_scenarios_are_valid() {
 proptest::proptest! {
     #[test]
     fn arbitrary_text_never_panics(text in ".{0,400}") {
-        let _ = Scenario::parse("fuzz.toml", &text);
+        let _ = m6p_twin::scenario::parse("fuzz.toml", &text);
     }
 }
 
@@ -316,7 +315,7 @@ fn a_type_error_in_an_array_of_tables_names_the_entry() {
 #[test]
 fn after_across_gs16_named_and_gs16_by_default_is_accepted() {
     let text = "duration = \"1m\"\n[[commands]]\nname = \"a\"\nfrom = \"GS16\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[commands]]\nafter = \"a\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n";
-    Scenario::parse("ok.toml", text).unwrap();
+    m6p_twin::scenario::parse("ok.toml", text).unwrap();
     let other = "duration = \"1m\"\n[network]\nground_stations = [16, 17]\n[[commands]]\nname = \"a\"\nfrom = \"GS17\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n[[commands]]\nafter = \"a\"\nat = \"1s\"\nto = \"FC\"\nrequest = \"ping\"\n";
     assert_error(
         other,
@@ -387,7 +386,7 @@ fn fc_periodic_telemetry_and_safe_settings_are_checked_where_they_are_written() 
         "below the entry's",
     );
     // A good one parses.
-    Scenario::parse(
+    m6p_twin::scenario::parse(
         "ok.toml",
         &periodic("to = \"GS16\"\nport = 20\nevery = \"1s\"\ntelemetry = [\"tmgen\", \"TMATP\"]\n"),
     )
@@ -411,7 +410,7 @@ fn a_typed_setup_of_1000_s_is_refused_with_the_icd_range() {
     );
     // The same with the good duration passes; a wrong node, a missing field and an unknown
     // command are named.
-    Scenario::parse("ok.toml", &text.replace("1000", "\"10m\"")).unwrap();
+    m6p_twin::scenario::parse("ok.toml", &text.replace("1000", "\"10m\"")).unwrap();
     assert_error(
         &text.replace(
             "command = \"PC.SETUP\"",
@@ -442,7 +441,7 @@ fn a_field_expectation_is_checked_against_the_icd() {
     let text = "duration = \"1m\"\n\
                 [[expectations]]\nkind = \"field\"\nfield = \"FC.TMGEN.current_mode\"\n\
                 equals = \"nadir\"\n";
-    Scenario::parse("ok.toml", text).unwrap();
+    m6p_twin::scenario::parse("ok.toml", text).unwrap();
     assert_error(
         &text.replace("current_mode", "mode"),
         4,

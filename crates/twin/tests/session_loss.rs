@@ -11,7 +11,6 @@ use m6p_twin::exec::execute_keeping;
 use m6p_twin::invariants::Invariants;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::build_runtime;
-use m6p_twin::scenario::Scenario;
 
 const CAMPAIGN: &str = include_str!("data/campaign-pc-power-cycle.toml");
 
@@ -30,7 +29,7 @@ fn scenario() -> String {
 
 #[test]
 fn a_run_lost_to_a_pc_power_cycle_is_counted_named_and_ends_the_active_session() {
-    let s = Scenario::parse("pc-power-cycle.toml", &scenario()).unwrap();
+    let s = m6p_twin::scenario::parse("pc-power-cycle.toml", &scenario()).unwrap();
     let compiled = compile(&s);
     let mut invariants = Invariants::for_run(&compiled.opts);
     let rt = build_runtime().unwrap();

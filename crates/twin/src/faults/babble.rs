@@ -11,7 +11,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use super::{FaultAction, FaultCx, FaultKind, FaultPlan};
-use crate::scenario::{Dur, NodeRef};
+use twin_scenario::scenario::{Dur, NodeRef};
 
 /// `babble`: `target` is the bus (`main` or `payload`).
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]

@@ -9,7 +9,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use super::{FaultAction, FaultCx, FaultKind, FaultPlan};
-use crate::scenario::NodeRef;
+use twin_scenario::scenario::NodeRef;
 
 /// `bit-errors`: `target` is the bus (`main` or `payload`).
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]

@@ -12,7 +12,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use super::{FaultAction, FaultCx, FaultKind, FaultPlan};
-use crate::scenario::Dur;
+use twin_scenario::scenario::Dur;
 
 /// The target must be a medium or an outside link.
 fn medium_target(cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {

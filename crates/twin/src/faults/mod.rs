@@ -35,15 +35,15 @@ use bus::impair::Impairments;
 use bus::outside::Segments;
 use csp::SimTime;
 use schemars::JsonSchema;
+use serde::Deserialize;
 use serde::de::DeserializeOwned;
-use serde::{Deserialize, Deserializer};
 
 use crate::events::RunEvent;
 use crate::network::NetworkSpec;
 use crate::runtime::RunOptions;
 use crate::runtime::power::PowerShell;
-use crate::scenario::{Dur, NodeRef, PathStep, Scenario};
 use crate::tagged::Tagged;
+use twin_scenario::scenario::{Dur, NodeRef, PathStep, Scenario};
 
 /// A medium a fault applies to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -319,15 +319,7 @@ impl<K: FaultKind> AnyFault for K {
     }
 }
 
-/// One `[[faults]]` entry as written (typed through the registry).
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct FaultEntry(pub Tagged);
-
-impl<'de> Deserialize<'de> for FaultEntry {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        Tagged::deserialize(d).map(FaultEntry)
-    }
-}
+pub use twin_scenario::entries::FaultEntry;
 
 type Parsed = (Common, Box<dyn AnyFault>);
 
@@ -357,20 +349,17 @@ macro_rules! registry {
             ))
         }
 
-        impl JsonSchema for FaultEntry {
-            fn schema_name() -> std::borrow::Cow<'static, str> {
-                "Fault".into()
-            }
-            fn json_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
-                let common = serde_json::to_value(schemars::schema_for!(Common))
-                    .unwrap_or_default();
-                let kinds = vec![$((
-                    <$kind as FaultKind>::NAME,
-                    <$kind as FaultKind>::ABOUT,
-                    serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
-                )),*];
-                crate::tagged::one_of(generator, common, kinds)
-            }
+        /// The JSON schema of an entry: one of the kinds, each with the common fields
+        /// (the scenario's schema takes it as its `Fault` definition).
+        pub fn entry_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+            let common = serde_json::to_value(schemars::schema_for!(Common))
+                .unwrap_or_default();
+            let kinds = vec![$((
+                <$kind as FaultKind>::NAME,
+                <$kind as FaultKind>::ABOUT,
+                serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
+            )),*];
+            twin_core::tagged::one_of(generator, common, kinds)
         }
     };
 }

@@ -10,7 +10,6 @@ use bus::ClockMode;
 use m6p_twin::network::NetworkSpec;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
-use m6p_twin::scenario::Scenario;
 
 #[path = "outside.rs"]
 pub mod outside;
@@ -25,7 +24,7 @@ pub fn repo_root() -> PathBuf {
 pub fn default_scenario_options(seconds: u64) -> RunOptions {
     let file = repo_root().join("scenarios/default.toml");
     let text = std::fs::read_to_string(&file).unwrap();
-    let scenario = Scenario::parse("scenarios/default.toml", &text).unwrap();
+    let scenario = m6p_twin::scenario::parse("scenarios/default.toml", &text).unwrap();
     let compiled = compile(&scenario).opts;
     let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(seconds));
     opts.clock = ClockMode::Realtime { speed: 1.0 };

@@ -11,7 +11,6 @@ use std::time::Duration;
 use bus::ClockMode;
 use m6p_twin::plan::compile;
 use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
-use m6p_twin::scenario::Scenario;
 
 pub use crate::common::{expected_stream, readme_scenario, repo_root, same_bytes};
 
@@ -171,7 +170,7 @@ pub fn client_checks() -> Vec<String> {
 pub fn default_options() -> RunOptions {
     let file = repo_root().join("scenarios/default.toml");
     let text = std::fs::read_to_string(&file).unwrap();
-    let scenario = Scenario::parse("scenarios/default.toml", &text).unwrap();
+    let scenario = m6p_twin::scenario::parse("scenarios/default.toml", &text).unwrap();
     let mut opts = compile(&scenario).opts;
     opts.clock = ClockMode::Realtime { speed: 1.0 };
     opts.duration = None;
@@ -182,7 +181,7 @@ pub fn default_options() -> RunOptions {
 /// The scenario of `examples/README.md`: payload 12 outside, session 1 set up at 2 s, 25
 /// POLLs of 200 bytes; 8 s of real time.
 pub fn readme_options() -> RunOptions {
-    let scenario = Scenario::parse("examples/README.md", &readme_scenario()).unwrap();
+    let scenario = m6p_twin::scenario::parse("examples/README.md", &readme_scenario()).unwrap();
     let opts = compile(&scenario).opts;
     assert_eq!(opts.kiss_links.len(), 1);
     assert!(matches!(opts.clock, ClockMode::Realtime { .. }));

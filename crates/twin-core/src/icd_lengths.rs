@@ -133,12 +133,16 @@ mod tests {
 
     #[test]
     fn replies_are_checked_against_the_icd_and_the_configured_ports() {
-        let mut opts = crate::runtime::RunOptions::new(
-            crate::network::NetworkSpec::m6p(&[12], &[16]),
-            std::time::Duration::from_secs(1),
-        );
-        opts.fc.ports.telemetry = 20;
-        let t = IcdTable::of(&opts.icd_map());
+        let mut fc = nodes_fc::FcConfig::default();
+        fc.ports.telemetry = 20;
+        let t = IcdTable::of(&crate::icd::IcdMap::for_nodes(&crate::icd::NodePorts {
+            seed: 1,
+            fc: &fc,
+            pc: &nodes_pc::PcConfig::default(),
+            eps: &nodes_eps::EpsConfig::default(),
+            ecu: &nodes_ecu::EcuConfig::default(),
+            comm: &nodes_comm::CommConfig::default(),
+        }));
         let reply = |src, sport| Header::new(src, 16, 40, sport);
         // TMGEN: 2 + 16 bytes; a failure is 2; a refused unknown command is 2.
         assert_eq!(t.check(&reply(3, 20), 18, &[1, 1]), Ok(true));

@@ -13,7 +13,7 @@ use std::time::Duration;
 use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer};
 
-use crate::duration::parse_duration;
+use twin_core::duration::parse_duration;
 
 /// The most bytes a scenario or campaign file may have: 32 MiB (a hundred thousand commands
 /// take about 7 MiB). A longer file, or a device that never ends (`/dev/zero`), is refused
@@ -49,34 +49,13 @@ pub fn read_input(path: &std::path::Path) -> Result<String, ReadError> {
 }
 
 /// A duration written as `90`, `90s`, `500ms`, `10m`, `2h` or `1d`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default, JsonSchema)]
-#[schemars(
-    with = "String",
-    description = "a duration: 90, 90s, 500ms, 10m, 2h, 1d"
-)]
-pub struct Dur(pub Duration);
+pub use crate::dur::Dur;
+use twin_core::network::NetworkSpec;
+pub use twin_core::network::NodeRef;
 
-impl<'de> Deserialize<'de> for Dur {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        #[derive(Deserialize)]
-        #[serde(untagged)]
-        enum Raw {
-            Int(u64),
-            Float(f64),
-            Str(String),
-        }
-        let text = match Raw::deserialize(d)? {
-            Raw::Int(i) => i.to_string(),
-            Raw::Float(f) => f.to_string(),
-            Raw::Str(s) => s,
-        };
-        parse_duration(&text)
-            .map(Dur)
-            .map_err(serde::de::Error::custom)
-    }
-}
-
-pub use crate::network::NodeRef;
+/// A check of a part of the scenario beyond its fields' syntax: `err(path, message)` for each
+/// problem (see [`Scenario::validate_with`]).
+pub type Check = fn(&Scenario, &NetworkSpec, &mut dyn FnMut(Vec<PathStep>, String));
 
 /// A whole scenario.
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
@@ -104,10 +83,10 @@ pub struct Scenario {
     pub satellite: SatelliteSpec,
     /// The flight computer: initial state, models, ADCS, scripts and faults.
     #[serde(default)]
-    pub fc: crate::adcs::FcSpec,
+    pub fc: crate::fc::FcSpec,
     /// The payload controller: sessions, S-band, events.
     #[serde(default)]
-    pub pc: crate::sessions::PcSpec,
+    pub pc: crate::pc::PcSpec,
     /// The radio link to the ground: passes over the ground stations.
     #[serde(default)]
     pub comm: crate::comm::CommSpec,
@@ -116,7 +95,7 @@ pub struct Scenario {
     pub eps: crate::eps::EpsSpec,
     /// The simulated payloads' data and behaviour (`[[payload]]`, one per address).
     #[serde(default)]
-    pub payload: Vec<crate::sessions::PayloadSpec>,
+    pub payload: Vec<crate::pc::PayloadSpec>,
     /// The network.
     #[serde(default)]
     pub network: NetworkCfg,
@@ -140,10 +119,10 @@ pub struct Scenario {
     pub commands: Vec<crate::commands::CommandSpec>,
     /// Faults during the run (`crate::faults`: each kind's fields).
     #[serde(default)]
-    pub faults: Vec<crate::faults::FaultEntry>,
+    pub faults: Vec<crate::entries::FaultEntry>,
     /// What must happen (`crate::expectations`: each kind's fields).
     #[serde(default)]
-    pub expectations: Vec<crate::expectations::ExpectEntry>,
+    pub expectations: Vec<crate::entries::ExpectEntry>,
 }
 
 fn default_start() -> String {
@@ -470,7 +449,7 @@ impl fmt::Display for ScenarioErrors {
 impl std::error::Error for ScenarioErrors {}
 
 /// The 1-based line and column of byte `offset` of `text`.
-pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
+pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = text.get(..offset.min(text.len())).unwrap_or(text);
     let line = before.matches('\n').count() + 1;
     let col = before
@@ -490,7 +469,7 @@ pub enum PathStep {
 }
 
 /// `faults[0].at` of a path.
-pub(crate) fn path_string(path: &[PathStep]) -> String {
+pub fn path_string(path: &[PathStep]) -> String {
     let mut s = String::new();
     for step in path {
         match step {
@@ -507,7 +486,7 @@ pub(crate) fn path_string(path: &[PathStep]) -> String {
 }
 
 /// The byte span of the value at `path` in `text`, or of its nearest existing parent.
-pub(crate) fn locate(text: &str, path: &[PathStep]) -> Option<std::ops::Range<usize>> {
+pub fn locate(text: &str, path: &[PathStep]) -> Option<std::ops::Range<usize>> {
     let root = toml::de::DeTable::parse(text).ok()?;
     let mut span = None;
     let mut node: Option<&toml::de::DeValue<'_>> = None;
@@ -535,8 +514,13 @@ fn key(k: &str) -> PathStep {
 }
 
 impl Scenario {
-    /// Parse and validate a scenario; `file` names it in errors.
-    pub fn parse(file: &str, text: &str) -> Result<Scenario, ScenarioErrors> {
+    /// Parse a scenario and validate it with `checks` (the twin's `scenario::parse` passes
+    /// every slice's); `file` names it in errors.
+    pub fn parse_with(
+        file: &str,
+        text: &str,
+        checks: &[Check],
+    ) -> Result<Scenario, ScenarioErrors> {
         let scenario: Scenario = toml::from_str(text).map_err(|e| {
             let (line, column) = match e.span() {
                 Some(s) => {
@@ -554,7 +538,7 @@ impl Scenario {
                 message,
             }])
         })?;
-        scenario.validate(file, text)?;
+        scenario.validate_with(file, text, checks)?;
         Ok(scenario)
     }
 
@@ -567,8 +551,15 @@ impl Scenario {
         })
     }
 
-    /// Check the meaning of every field, reporting all problems with their location.
-    pub fn validate(&self, file: &str, text: &str) -> Result<(), ScenarioErrors> {
+    /// Check the meaning of every field, reporting all problems with their location: the
+    /// scenario's own fields here, then each of `checks` (the twin's slices, which know
+    /// what their tables mean).
+    pub fn validate_with(
+        &self,
+        file: &str,
+        text: &str,
+        checks: &[Check],
+    ) -> Result<(), ScenarioErrors> {
         let mut errs = Vec::new();
         let mut err = |path: Vec<PathStep>, message: String| {
             let (line, column) = match locate(text, &path) {
@@ -586,226 +577,10 @@ impl Scenario {
                 message,
             });
         };
-        if crate::timefmt::parse_utc(&self.start).is_none() {
-            err(
-                vec![key("start")],
-                format!(
-                    "`{}` is not a UTC time like 2026-03-20T12:00:00Z",
-                    self.start
-                ),
-            );
-        }
-        if self.duration.0.is_zero() {
-            err(vec![key("duration")], "must be longer than zero".into());
-        }
-        if !(self.clock.speed.is_finite() && self.clock.speed > 0.0 && self.clock.speed <= 1e6) {
-            err(
-                vec![key("clock"), key("speed")],
-                format!("{} is out of range (0, 1e6]", self.clock.speed),
-            );
-        }
-        let tle = &self.satellite.tle;
-        if !tle.is_empty() && !(2..=3).contains(&tle.len()) {
-            err(
-                vec![key("satellite"), key("tle")],
-                "give the two TLE lines (optionally after a title line)".into(),
-            );
-        } else if let [.., l1, l2] = tle.as_slice() {
-            // Strict: checksums and layout are checked, as the FC's TLE upload would.
-            match orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict) {
-                Err(e) => err(
-                    vec![key("satellite"), key("tle")],
-                    format!("the TLE does not parse: {e}"),
-                ),
-                // The FC refuses such a TLE over ATCTLESET (SGP4's error grows by kilometres
-                // a day); the twin would otherwise fly it silently, far from any real orbit.
-                Ok(t) => {
-                    if let Some(start_ns) = crate::timefmt::parse_utc(&self.start) {
-                        let age_s = (t.epoch.unix_ns() - start_ns).unsigned_abs() as f64 * 1e-9;
-                        if age_s > nodes_fc::TLE_MAX_AGE_S {
-                            err(
-                                vec![key("satellite"), key("tle")],
-                                format!(
-                                    "the TLE's epoch {} is {:.1} days from `start` {}; the FC \
-                                     flies a TLE at most {:.0} days from its time",
-                                    crate::timefmt::format_utc(t.epoch.unix_ns()),
-                                    age_s / 86_400.0,
-                                    self.start,
-                                    nodes_fc::TLE_MAX_AGE_S / 86_400.0
-                                ),
-                            );
-                        }
-                    }
-                }
-            }
-        }
-        for (i, &p) in self.network.payloads.iter().enumerate() {
-            if !(12..=15).contains(&p) {
-                err(
-                    vec![key("network"), key("payloads"), PathStep::Index(i)],
-                    format!("payload address {p} is not in 12-15"),
-                );
-            }
-        }
-        for (i, &g) in self.network.ground_stations.iter().enumerate() {
-            if !(16..=20).contains(&g) {
-                err(
-                    vec![key("network"), key("ground_stations"), PathStep::Index(i)],
-                    format!("ground station address {g} is not in 16-20"),
-                );
-            }
-        }
-        for (field, rate, max) in [
-            ("main_bitrate_bps", self.network.main_bitrate_bps, 1_000_000),
-            (
-                "payload_bitrate_bps",
-                self.network.payload_bitrate_bps,
-                1_000_000,
-            ),
-            ("uhf_rate_bps", self.network.uhf_rate_bps, 10_000_000),
-        ] {
-            if rate == 0 || rate > max {
-                err(
-                    vec![key("network"), key(field)],
-                    format!("{rate} is out of range 1..={max}"),
-                );
-            }
-        }
-        for (field, v, min, max) in [
-            (
-                "can_tx_queue_frames",
-                self.network.can_tx_queue_frames as u64,
-                33,
-                65_536,
-            ),
-            (
-                "uhf_tx_buffer_bytes",
-                u64::from(self.network.uhf_tx_buffer_bytes),
-                260,
-                1 << 20,
-            ),
-        ] {
-            // At least one whole packet (33 frames, 260 bytes); at most what is still a
-            // bound.
-            if !(min..=max).contains(&v) {
-                err(
-                    vec![key("network"), key(field)],
-                    format!(
-                        "{v} is out of range {min}..={max} (room for one whole packet at least)"
-                    ),
-                );
-            }
-        }
         let net = self.network_spec_unchecked();
-        let names: Vec<String> = net.nodes.iter().map(|n| n.name.clone()).collect();
-        for name in self.nodes.keys() {
-            if !names.contains(name) {
-                err(
-                    vec![key("nodes"), key(name)],
-                    format!("unknown node `{name}` (nodes: {})", names.join(", ")),
-                );
-            }
+        for check in OWN_CHECKS.iter().chain(checks) {
+            check(self, &net, &mut err);
         }
-        for (i, l) in self.links.iter().enumerate() {
-            let p = |f: &str| vec![key("links"), PathStep::Index(i), key(f)];
-            match l.kind {
-                LinkKind::KissListen | LinkKind::KissConnect => {
-                    if l.addr.parse::<std::net::SocketAddr>().is_err() {
-                        err(
-                            p("addr"),
-                            format!("`{}` is not an address like 127.0.0.1:52001", l.addr),
-                        );
-                    }
-                }
-                LinkKind::KissPty => {
-                    if l.addr.is_empty() {
-                        err(p("addr"), "the path to link the pty at is empty".to_owned());
-                    }
-                }
-                LinkKind::ZmqHub => {
-                    if let Err(e) = l.addr.parse::<bus::zmq_hub::HubAddr>() {
-                        err(p("addr"), e);
-                    }
-                }
-                LinkKind::Uart => match (&l.pty, l.addr.is_empty()) {
-                    (Some(_), false) => err(
-                        p("pty"),
-                        "a console is on a TCP `addr` or a `pty` path, not both".to_owned(),
-                    ),
-                    (Some(path), true) if path.is_empty() => {
-                        err(p("pty"), "the path to link the pty at is empty".to_owned())
-                    }
-                    (Some(_), true) => {}
-                    (None, _) => {
-                        if l.addr.parse::<std::net::SocketAddr>().is_err() {
-                            err(
-                                p("addr"),
-                                format!(
-                                    "`{}` is not an address like 127.0.0.1:5010 (or give `pty`)",
-                                    l.addr
-                                ),
-                            );
-                        }
-                    }
-                },
-                LinkKind::Socketcan => {
-                    let bus = l.addr.split_once(':').map(|(_, b)| b);
-                    if l.addr.is_empty() || !matches!(bus, None | Some("main") | Some("payload")) {
-                        err(
-                            p("addr"),
-                            format!(
-                                "`{}` is not an interface like vcan0 or vcan0:payload",
-                                l.addr
-                            ),
-                        );
-                    }
-                }
-            }
-            if let Some(name) = &l.name {
-                let taken = ["main", "payload", "uhf"]
-                    .iter()
-                    .any(|m| m.eq_ignore_ascii_case(name))
-                    || net.nodes.iter().any(|n| n.name.eq_ignore_ascii_case(name));
-                if name.is_empty() || taken {
-                    err(
-                        p("name"),
-                        format!(
-                            "`{name}` names a node or a medium: a link needs a name of its own"
-                        ),
-                    );
-                } else if self.links[..i].iter().any(|o| {
-                    o.name
-                        .as_deref()
-                        .is_some_and(|n| n.eq_ignore_ascii_case(name))
-                }) {
-                    err(p("name"), format!("another link is named `{name}`"));
-                }
-            }
-            if let Some(c) = &l.powered_by
-                && nodes_eps::Channel::from_name(c)
-                    .and_then(nodes_eps::Channel::node_addr)
-                    .is_none()
-            {
-                err(
-                    p("powered_by"),
-                    format!(
-                        "`{c}` is not an EPS channel that powers a node (COMM1, COMM2, ECU, PC, PL12, PL13, PL14, PL15)"
-                    ),
-                );
-            }
-            crate::outside::validate(self, &net, i, &mut err);
-        }
-        crate::commands::validate(self, &net, &mut err);
-        crate::faults::validate(self, &net, &mut err);
-        crate::adcs::validate(self, &net, &mut err);
-        crate::sessions::validate(self, &mut err);
-        crate::eps::validate(self, &mut err);
-        crate::comm::validate(self, &mut err);
-        crate::clock::validate(self, &mut err);
-        crate::rules::validate(self, &net, &mut err);
-        crate::invariants::validate(self, &mut err);
-        crate::params::validate(self, &net, &mut err);
-        crate::expectations::validate(self, &net, &mut err);
         if errs.is_empty() {
             Ok(())
         } else {
@@ -823,9 +598,11 @@ impl Scenario {
     }
 
     /// The network the scenario describes (call after validation).
-    pub fn network_spec_unchecked(&self) -> crate::network::NetworkSpec {
-        let mut net =
-            crate::network::NetworkSpec::m6p(&self.network.payloads, &self.network.ground_stations);
+    pub fn network_spec_unchecked(&self) -> twin_core::network::NetworkSpec {
+        let mut net = twin_core::network::NetworkSpec::m6p(
+            &self.network.payloads,
+            &self.network.ground_stations,
+        );
         net.main_bitrate_bps = self.network.main_bitrate_bps;
         net.payload_bitrate_bps = self.network.payload_bitrate_bps;
         net.uhf_rate_bps = self.network.uhf_rate_bps;
@@ -842,6 +619,236 @@ impl Scenario {
             }
         }
         net
+    }
+}
+
+/// The scenario's own checks, before the twin's (see [`Scenario::validate_with`]).
+const OWN_CHECKS: &[Check] = &[
+    check_time,
+    check_orbit,
+    check_network,
+    check_nodes,
+    check_links,
+];
+
+/// `start`, `duration`, `[clock] speed`.
+fn check_time(s: &Scenario, _: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    if twin_core::timefmt::parse_utc(&s.start).is_none() {
+        err(
+            vec![key("start")],
+            format!("`{}` is not a UTC time like 2026-03-20T12:00:00Z", s.start),
+        );
+    }
+    if s.duration.0.is_zero() {
+        err(vec![key("duration")], "must be longer than zero".into());
+    }
+    if !(s.clock.speed.is_finite() && s.clock.speed > 0.0 && s.clock.speed <= 1e6) {
+        err(
+            vec![key("clock"), key("speed")],
+            format!("{} is out of range (0, 1e6]", s.clock.speed),
+        );
+    }
+}
+
+/// `[satellite] tle`: two lines that parse, with an epoch the FC would fly.
+fn check_orbit(s: &Scenario, _: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    let tle = &s.satellite.tle;
+    if !tle.is_empty() && !(2..=3).contains(&tle.len()) {
+        err(
+            vec![key("satellite"), key("tle")],
+            "give the two TLE lines (optionally after a title line)".into(),
+        );
+    } else if let [.., l1, l2] = tle.as_slice() {
+        // Strict: checksums and layout are checked, as the FC's TLE upload would.
+        match orbit::tle::Tle::parse(l1, l2, orbit::tle::ChecksumMode::Strict) {
+            Err(e) => err(
+                vec![key("satellite"), key("tle")],
+                format!("the TLE does not parse: {e}"),
+            ),
+            // The FC refuses such a TLE over ATCTLESET (SGP4's error grows by kilometres
+            // a day); the twin would otherwise fly it silently, far from any real orbit.
+            Ok(t) => {
+                if let Some(start_ns) = twin_core::timefmt::parse_utc(&s.start) {
+                    let age_s = (t.epoch.unix_ns() - start_ns).unsigned_abs() as f64 * 1e-9;
+                    if age_s > nodes_fc::TLE_MAX_AGE_S {
+                        err(
+                            vec![key("satellite"), key("tle")],
+                            format!(
+                                "the TLE's epoch {} is {:.1} days from `start` {}; the FC \
+                                 flies a TLE at most {:.0} days from its time",
+                                twin_core::timefmt::format_utc(t.epoch.unix_ns()),
+                                age_s / 86_400.0,
+                                s.start,
+                                nodes_fc::TLE_MAX_AGE_S / 86_400.0
+                            ),
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `[network]`: addresses and rates.
+fn check_network(s: &Scenario, _: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    for (i, &p) in s.network.payloads.iter().enumerate() {
+        if !(12..=15).contains(&p) {
+            err(
+                vec![key("network"), key("payloads"), PathStep::Index(i)],
+                format!("payload address {p} is not in 12-15"),
+            );
+        }
+    }
+    for (i, &g) in s.network.ground_stations.iter().enumerate() {
+        if !(16..=20).contains(&g) {
+            err(
+                vec![key("network"), key("ground_stations"), PathStep::Index(i)],
+                format!("ground station address {g} is not in 16-20"),
+            );
+        }
+    }
+    for (field, rate, max) in [
+        ("main_bitrate_bps", s.network.main_bitrate_bps, 1_000_000),
+        (
+            "payload_bitrate_bps",
+            s.network.payload_bitrate_bps,
+            1_000_000,
+        ),
+        ("uhf_rate_bps", s.network.uhf_rate_bps, 10_000_000),
+    ] {
+        if rate == 0 || rate > max {
+            err(
+                vec![key("network"), key(field)],
+                format!("{rate} is out of range 1..={max}"),
+            );
+        }
+    }
+    for (field, v, min, max) in [
+        (
+            "can_tx_queue_frames",
+            s.network.can_tx_queue_frames as u64,
+            33,
+            65_536,
+        ),
+        (
+            "uhf_tx_buffer_bytes",
+            u64::from(s.network.uhf_tx_buffer_bytes),
+            260,
+            1 << 20,
+        ),
+    ] {
+        // At least one whole packet (33 frames, 260 bytes); at most what is still a
+        // bound.
+        if !(min..=max).contains(&v) {
+            err(
+                vec![key("network"), key(field)],
+                format!("{v} is out of range {min}..={max} (room for one whole packet at least)"),
+            );
+        }
+    }
+}
+
+/// `[nodes.NAME]`: names of the network's nodes.
+fn check_nodes(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    let names: Vec<String> = net.nodes.iter().map(|n| n.name.clone()).collect();
+    for name in s.nodes.keys() {
+        if !names.contains(name) {
+            err(
+                vec![key("nodes"), key(name)],
+                format!("unknown node `{name}` (nodes: {})", names.join(", ")),
+            );
+        }
+    }
+}
+
+/// `[[links]]`: addresses, names and power channels (what a link does with them is the
+/// twin's `outside` check).
+fn check_links(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, String)) {
+    for (i, l) in s.links.iter().enumerate() {
+        let p = |f: &str| vec![key("links"), PathStep::Index(i), key(f)];
+        match l.kind {
+            LinkKind::KissListen | LinkKind::KissConnect => {
+                if l.addr.parse::<std::net::SocketAddr>().is_err() {
+                    err(
+                        p("addr"),
+                        format!("`{}` is not an address like 127.0.0.1:52001", l.addr),
+                    );
+                }
+            }
+            LinkKind::KissPty => {
+                if l.addr.is_empty() {
+                    err(p("addr"), "the path to link the pty at is empty".to_owned());
+                }
+            }
+            LinkKind::ZmqHub => {
+                if let Err(e) = l.addr.parse::<bus::zmq_hub::HubAddr>() {
+                    err(p("addr"), e);
+                }
+            }
+            LinkKind::Uart => match (&l.pty, l.addr.is_empty()) {
+                (Some(_), false) => err(
+                    p("pty"),
+                    "a console is on a TCP `addr` or a `pty` path, not both".to_owned(),
+                ),
+                (Some(path), true) if path.is_empty() => {
+                    err(p("pty"), "the path to link the pty at is empty".to_owned())
+                }
+                (Some(_), true) => {}
+                (None, _) => {
+                    if l.addr.parse::<std::net::SocketAddr>().is_err() {
+                        err(
+                            p("addr"),
+                            format!(
+                                "`{}` is not an address like 127.0.0.1:5010 (or give `pty`)",
+                                l.addr
+                            ),
+                        );
+                    }
+                }
+            },
+            LinkKind::Socketcan => {
+                let bus = l.addr.split_once(':').map(|(_, b)| b);
+                if l.addr.is_empty() || !matches!(bus, None | Some("main") | Some("payload")) {
+                    err(
+                        p("addr"),
+                        format!(
+                            "`{}` is not an interface like vcan0 or vcan0:payload",
+                            l.addr
+                        ),
+                    );
+                }
+            }
+        }
+        if let Some(name) = &l.name {
+            let taken = ["main", "payload", "uhf"]
+                .iter()
+                .any(|m| m.eq_ignore_ascii_case(name))
+                || net.nodes.iter().any(|n| n.name.eq_ignore_ascii_case(name));
+            if name.is_empty() || taken {
+                err(
+                    p("name"),
+                    format!("`{name}` names a node or a medium: a link needs a name of its own"),
+                );
+            } else if s.links[..i].iter().any(|o| {
+                o.name
+                    .as_deref()
+                    .is_some_and(|n| n.eq_ignore_ascii_case(name))
+            }) {
+                err(p("name"), format!("another link is named `{name}`"));
+            }
+        }
+        if let Some(c) = &l.powered_by
+            && nodes_eps::Channel::from_name(c)
+                .and_then(nodes_eps::Channel::node_addr)
+                .is_none()
+        {
+            err(
+                p("powered_by"),
+                format!(
+                    "`{c}` is not an EPS channel that powers a node (COMM1, COMM2, ECU, PC, PL12, PL13, PL14, PL15)"
+                ),
+            );
+        }
     }
 }
 
