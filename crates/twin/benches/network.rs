@@ -16,7 +16,8 @@ use csp::node::{App, Host, IfaceConfig, NoApp, Node, NodeConfig};
 use csp::router::Route;
 use csp::{Header, Packet, SimTime};
 use m6p_twin::network::NetworkSpec;
-use m6p_twin::runtime::{RunOptions, build_runtime_for, build_virtual_runtime, run};
+use m6p_twin::report::run;
+use m6p_twin::runtime::{RunOptions, build_runtime_for, build_virtual_runtime};
 
 /// Pings node 3 back to back: each reply sends the next request.
 struct PingPong {

@@ -57,7 +57,7 @@ pub fn run_text(file: &str, text: &str) -> RunVerdict {
 /// `detumble_s` (when the body rate first fell below 0.5 deg/s, in a run that started
 /// tumbling),
 /// `max_rate_deg_s` (the highest body rate published).
-pub fn metrics(report: &crate::runtime::RunReport) -> BTreeMap<String, f64> {
+pub fn metrics(report: &crate::report::RunReport) -> BTreeMap<String, f64> {
     let mut m = BTreeMap::new();
     if let Some(min) = report.power_summary.min_soc {
         m.insert("min_soc".to_owned(), min);

@@ -11,10 +11,9 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::events::RunEvent;
 use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, bounds};
 use crate::faults::{FaultAction, TimedFault};
-use crate::runtime::RunReport;
+use crate::report::RunReport;
 use twin_scenario::scenario::{Dur, NodeRef, PathStep, Scenario};
 
 fn key(k: &str) -> PathStep {
@@ -225,38 +224,7 @@ pub fn compile_passes(s: &Scenario, epoch_unix_s: u64) -> Vec<TimedFault> {
     out
 }
 
-/// A beacon received on the ground: (time, sending COMM, sequence number).
-pub type BeaconSeen = (SimTime, u8, u32);
-
-/// The beacons and contact switches of a run, gathered from its events.
-#[derive(Debug, Default)]
-pub struct LinkObserver {
-    beacons: Vec<BeaconSeen>,
-    contact: Vec<(SimTime, bool)>,
-}
-
-impl LinkObserver {
-    /// Take in one event.
-    pub fn observe(&mut self, ev: &RunEvent) {
-        if let RunEvent::Beacon { t, from, data } = ev {
-            let seq = data
-                .get(2..6)
-                .and_then(|b| <[u8; 4]>::try_from(b).ok())
-                .map_or(0, u32::from_le_bytes);
-            self.beacons.push((*t, *from, seq));
-        }
-    }
-
-    /// The UHF link's contact with the ground switched at `t` (a pass began or ended).
-    pub fn contact(&mut self, t: SimTime, on: bool) {
-        self.contact.push((t, on));
-    }
-
-    /// Beacons (time, sending COMM, sequence number) and contact switches.
-    pub fn finish(self) -> (Vec<BeaconSeen>, Vec<(SimTime, bool)>) {
-        (self.beacons, self.contact)
-    }
-}
+pub use crate::observe::link::*;
 
 /// `beacon`: beacons reach the ground at least every `within` while in contact (and
 /// `min`..=`max` of them in all), from one COMM or either, in a window.

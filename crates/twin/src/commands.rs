@@ -16,7 +16,7 @@ use crate::events::{EventKind, Kinds, RunEvent};
 use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, Watch, WatchCx};
 use crate::ground::{Outcome, PlannedRequest, Recurring};
 use crate::network::NetworkSpec;
-use crate::runtime::RunReport;
+use crate::report::RunReport;
 use twin_scenario::scenario::{Dur, NodeRef, PathStep, Scenario};
 
 fn key(k: &str) -> PathStep {

@@ -4,7 +4,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, bounds};
-use crate::runtime::RunReport;
+use crate::report::RunReport;
 use twin_scenario::scenario::NodeRef;
 
 /// Node counters an expectation can name.

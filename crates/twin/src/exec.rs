@@ -10,7 +10,7 @@ use csp::SimTime;
 use crate::events::RunEvent;
 use crate::expectations::{Verdict, WatchCx, check_watched};
 use crate::plan::{Compiled, compile};
-use crate::runtime::{RunReport, run_with};
+use crate::report::{RunReport, run_with};
 use twin_scenario::scenario::Scenario;
 
 /// The embedded default scenario (`scenarios/default.toml`).
@@ -177,8 +177,8 @@ pub async fn execute_keeping(
         .collect();
     compiled.opts.keep_series = keep;
     // The invariants the scenario checks (`[invariants] check`; a campaign's runs: all).
-    let mut invariants = (!compiled.opts.invariants.check.is_empty())
-        .then(|| crate::invariants::Invariants::for_run(&compiled.opts));
+    let mut invariants = (!compiled.invariants.check.is_empty())
+        .then(|| crate::invariants::Invariants::for_run(&compiled.opts, &compiled.invariants));
     let mut watched = |ev: &RunEvent| {
         if let Some(i) = invariants.as_mut() {
             i.observe(ev);

@@ -37,7 +37,7 @@ use std::time::Duration;
 use csp::SimTime;
 
 use crate::events::RunEvent;
-use crate::runtime::RunReport;
+use crate::report::RunReport;
 use twin_scenario::scenario::{PathStep, Scenario};
 
 pub use twin_scenario::invariants::*;
@@ -154,11 +154,11 @@ struct Exchange {
 const UNIT_TOLERANCE: f64 = 1e-6;
 
 impl Invariants {
-    /// Every invariant, the ICD's reply lengths with the ports of `opts`.
-    pub fn for_run(opts: &crate::runtime::RunOptions) -> Self {
+    /// Every invariant with `settings`, the ICD's reply lengths with the ports of `opts`.
+    pub fn for_run(opts: &crate::runtime::RunOptions, settings: &InvariantSettings) -> Self {
         Invariants {
             icd: Some(crate::icd_lengths::IcdTable::of(&opts.icd_map())),
-            settings: opts.invariants.clone(),
+            settings: settings.clone(),
             ..Invariants::default()
         }
     }
@@ -273,7 +273,7 @@ impl Invariants {
             self.exchanged(m);
         }
         // As the samples come: a run's report need not keep them.
-        if let Some(p) = crate::eps::PowerSample::of(ev)
+        if let Some(p) = crate::observe::power::PowerSample::of(ev)
             && !(0.0..=1.0).contains(&p.soc)
         {
             self.broken(InvariantName::SocRange, p.t, || {

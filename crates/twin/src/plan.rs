@@ -18,6 +18,8 @@ pub struct Compiled {
     pub faults: Vec<TimedFault>,
     /// Expectations, in file order.
     pub expectations: Vec<Expectation>,
+    /// The invariants' settings (`[invariants]`; a campaign checks them on every run).
+    pub invariants: crate::invariants::InvariantSettings,
 }
 
 /// Compile a validated scenario.
@@ -53,7 +55,6 @@ pub fn compile(s: &Scenario) -> Compiled {
     opts.pc = crate::sessions::compile_pc(s);
     opts.payloads = crate::sessions::compile_payloads(s);
     crate::rules::compile(s, &net, &mut opts);
-    opts.invariants = crate::invariants::compile(s);
     let mut faults = crate::faults::compile(s, &net, &mut opts);
     faults.extend(fc_faults);
     faults.extend(crate::comm::compile_passes(s, opts.epoch_unix_s));
@@ -64,11 +65,12 @@ pub fn compile(s: &Scenario) -> Compiled {
     }
     faults.sort_by_key(|f| f.at);
     opts.faults = faults.clone();
-    let expectations = crate::expectations::compile(s);
+    let expectations = crate::expectation_kinds::compile(s);
     Compiled {
         opts,
         faults,
         expectations,
+        invariants: crate::invariants::compile(s),
     }
 }
 

@@ -24,7 +24,7 @@ pub const CHECKS: &[Check] = &[
     crate::rules::validate,
     |s, _, err| crate::invariants::validate(s, err),
     crate::params::validate,
-    crate::expectations::validate,
+    crate::expectation_kinds::validate,
 ];
 
 /// Parse and validate a scenario (its fields, then [`CHECKS`]); `file` names it in errors.
@@ -38,7 +38,7 @@ pub fn schema() -> schemars::Schema {
     let mut root = schemars::schema_for!(Scenario);
     let mut kinds = schemars::SchemaGenerator::default();
     let faults = crate::faults::entry_schema(&mut kinds);
-    let expectations = crate::expectations::entry_schema(&mut kinds);
+    let expectations = crate::expectation_kinds::entry_schema(&mut kinds);
     if let Some(defs) = root.get_mut("$defs").and_then(|d| d.as_object_mut()) {
         defs.insert(FAULT_SCHEMA_NAME.to_owned(), faults.to_value());
         defs.insert(EXPECT_SCHEMA_NAME.to_owned(), expectations.to_value());

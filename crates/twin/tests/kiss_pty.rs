@@ -16,7 +16,8 @@ mod outside;
 use csp::kiss::{Decoder, DecoderConfig, KissEvent};
 use csp::{Header, Packet};
 use m6p_twin::network::NetworkSpec;
-use m6p_twin::runtime::{KissLink, KissMode, RunOptions, RunReport, build_runtime, run};
+use m6p_twin::report::{RunReport, run};
+use m6p_twin::runtime::{KissLink, KissMode, RunOptions, build_runtime};
 
 /// Run the twin in real time for `secs` with a KISS pty for address 10 at `path`, and call
 /// `client` on a thread while it runs.

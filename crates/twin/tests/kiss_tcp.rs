@@ -13,7 +13,8 @@ use bus::ClockMode;
 #[path = "common/outside.rs"]
 mod outside;
 use m6p_twin::network::NetworkSpec;
-use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
+use m6p_twin::report::{RunReport, run};
+use m6p_twin::runtime::{RunOptions, build_runtime};
 
 fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")

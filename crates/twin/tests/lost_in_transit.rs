@@ -97,7 +97,8 @@ fn shipped_scenarios_keep_the_invariants_and_their_replies_are_checked() {
         let loaded =
             exec::load(&root.join(format!("{name}.toml"))).unwrap_or_else(|e| panic!("{e:#}"));
         let compiled = exec::compile_loaded(&loaded);
-        let mut inv = m6p_twin::invariants::Invariants::for_run(&compiled.opts);
+        let mut inv =
+            m6p_twin::invariants::Invariants::for_run(&compiled.opts, &compiled.invariants);
         let rt = m6p_twin::runtime::build_runtime().unwrap_or_else(|e| panic!("{e:#}"));
         let o = rt
             .block_on(exec::execute(compiled, &mut |ev| inv.observe(ev)))

@@ -7,7 +7,8 @@ use std::time::Duration;
 use csp::SimTime;
 use m6p_twin::ground::{Outcome, PlannedRequest, ping_payload};
 use m6p_twin::network::NetworkSpec;
-use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
+use m6p_twin::report::{RunReport, run};
+use m6p_twin::runtime::{RunOptions, build_runtime};
 
 fn request(at_s: u64, dst: u8, dport: u8, data: Vec<u8>) -> PlannedRequest {
     PlannedRequest {
@@ -406,7 +407,7 @@ fn with_both_comms_down_nobody_carries_the_link_until_one_comes_back() {
     let rt = build_runtime().unwrap();
     let mut radio = Vec::new();
     let report = rt
-        .block_on(m6p_twin::runtime::run_with(opts, None, &mut |ev| {
+        .block_on(m6p_twin::report::run_with(opts, None, &mut |ev| {
             if let RunEvent::Log {
                 t, source, message, ..
             } = ev

@@ -12,7 +12,8 @@ use std::process::Command;
 
 use m6p_twin::expectations::check_all;
 use m6p_twin::plan::compile;
-use m6p_twin::runtime::{RunReport, build_runtime, run};
+use m6p_twin::report::{RunReport, run};
+use m6p_twin::runtime::build_runtime;
 
 mod common;
 

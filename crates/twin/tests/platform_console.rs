@@ -47,7 +47,7 @@ fn a_console_on_a_pty_answers_lines_ended_by_cr() {
     let p = path.clone();
     let text = rt.block_on(async move {
         let (tx, rx) = tokio::sync::oneshot::channel();
-        let twin = tokio::spawn(m6p_twin::runtime::run(opts, Some(tx)));
+        let twin = tokio::spawn(m6p_twin::report::run(opts, Some(tx)));
         rx.await.unwrap();
         let client = decoder::outside::on_thread(move || {
             let mut tty = std::fs::OpenOptions::new()

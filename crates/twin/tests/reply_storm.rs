@@ -38,7 +38,7 @@ fn scenario() -> String {
 fn periodic_telemetry_to_a_serving_port_never_starts_a_loop() {
     let s = m6p_twin::scenario::parse("t.toml", &scenario()).unwrap();
     let compiled = compile(&s);
-    let mut invariants = Invariants::for_run(&compiled.opts);
+    let mut invariants = Invariants::for_run(&compiled.opts, &compiled.invariants);
     let rt = build_runtime().unwrap();
     let mut main_frames = Vec::new();
     let out = rt

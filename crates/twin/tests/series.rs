@@ -11,7 +11,8 @@ use m6p_twin::campaign_run::metrics;
 use m6p_twin::exec::{compile_seeded, execute, load};
 use m6p_twin::expectations::check_all;
 use m6p_twin::invariants::Invariants;
-use m6p_twin::runtime::{RunReport, build_runtime, run_with};
+use m6p_twin::report::{RunReport, run_with};
+use m6p_twin::runtime::build_runtime;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -45,7 +46,7 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
 
     // Judged on the kept samples and bytes.
     let rt = build_runtime().unwrap();
-    let mut inv = Invariants::for_run(&compiled.opts);
+    let mut inv = Invariants::for_run(&compiled.opts, &compiled.invariants);
     let kept = rt
         .block_on(run_with(compiled.opts.clone(), None, &mut |ev| {
             inv.observe(ev)
@@ -56,7 +57,7 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
 
     // Judged as it goes.
     let rt = build_runtime().unwrap();
-    let mut inv = Invariants::for_run(&compiled.opts);
+    let mut inv = Invariants::for_run(&compiled.opts, &compiled.invariants);
     let expectations = compiled.expectations.clone();
     let outcome = rt
         .block_on(execute(compiled, &mut |ev| inv.observe(ev)))

@@ -31,7 +31,7 @@ fn scenario() -> String {
 fn a_run_lost_to_a_pc_power_cycle_is_counted_named_and_ends_the_active_session() {
     let s = m6p_twin::scenario::parse("pc-power-cycle.toml", &scenario()).unwrap();
     let compiled = compile(&s);
-    let mut invariants = Invariants::for_run(&compiled.opts);
+    let mut invariants = Invariants::for_run(&compiled.opts, &compiled.invariants);
     let rt = build_runtime().unwrap();
     let out = rt
         .block_on(execute_keeping(compiled, true, &mut |ev| {

@@ -30,7 +30,8 @@ use bus::{CanBus, CanBusConfig, Clock, ClockMode};
 use csp::cfp::{CSP_CAN_MTU, CanFrame, CfpId, Fragmenter, Reassembler};
 use csp::{Header, Packet, SimTime};
 use m6p_twin::network::{FC, NetworkSpec, PC};
-use m6p_twin::runtime::{RunOptions, RunReport, SocketCanBus, build_runtime, run};
+use m6p_twin::report::{RunReport, run};
+use m6p_twin::runtime::{RunOptions, SocketCanBus, build_runtime};
 
 /// Set (to the interface name) only for the re-executed test binary inside the guest.
 const GUEST_ENV: &str = "M6P_TWIN_VCAN_GUEST_IFNAME";

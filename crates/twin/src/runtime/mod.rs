@@ -1,5 +1,5 @@
 //! Build the network of [`NetworkSpec`] on its media, run every node as its own tokio task
-//! on one current-thread runtime, and report what happened.
+//! on one current-thread runtime, and count what happened.
 //!
 //! In virtual time the runtime's clock is paused and jumps to the next timer, so a run is
 //! deterministic (same options and seed, same trace) and as fast as the CPU allows. In real
@@ -10,14 +10,16 @@
 //! - `links`: programs outside the twin (KISS/TCP, replayed input, SocketCAN).
 //! - [`power`]: the shell around the platform's power rules (EPS channels, power and hang
 //!   faults, the radio take-over).
-//! - [`report`]: the report and the observer that gathers it from the events.
-//! - this module: the options and the main loop, which hands every event to the sink and
-//!   the observer in the order it happens and applies the faults at their instants.
+//! - [`faults`]: what a fault does at its instant (the fault director).
+//! - [`counters`]: what the runtime counts, and the sink that observes a run.
+//! - this module: the options and the main loop, which hands every event to the sink in
+//!   the order it happens and applies the faults at their instants.
 
 mod build;
+pub mod counters;
+pub mod faults;
 mod links;
 pub mod power;
-pub mod report;
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -31,14 +33,12 @@ use csp::SimTime;
 use platform::board::Boards;
 use tokio::sync::{mpsc, oneshot};
 
-pub use crate::adcs::AttitudeSample;
-pub use crate::eps::PowerSample;
 use crate::events::RunEvent;
-use crate::faults::{FaultAction, TimedFault};
 use crate::ground::{Recurring, Results};
 use crate::network::NetworkSpec;
 pub(crate) use build::fc_config;
-pub use report::{Interruption, NodeReport, Observed, Observer, RunReport, StopCause};
+pub use counters::{Interruption, NodeReport, RunCounters, RunSink, StopCause};
+use faults::{FaultAction, TimedFault};
 
 /// Everything a run needs.
 #[derive(Debug, Clone)]
@@ -59,8 +59,6 @@ pub struct RunOptions {
     /// What payloads may ask of every node's platform port (`[rules] payload_access`; the
     /// FC and the PC have their own copy for their ICD ports).
     pub payload_access: platform::addr::PayloadAccess,
-    /// The invariants' settings (`[invariants]`; a campaign checks them on every run).
-    pub invariants: crate::invariants::InvariantSettings,
     /// The most wall-clock time the run may take (a campaign's `[limits] wall`): past it
     /// the run stops, as interrupted. `None`: no limit.
     pub wall_limit: Option<Duration>,
@@ -222,7 +220,6 @@ impl RunOptions {
             kiss_links: Vec::new(),
             uart: Vec::new(),
             payload_access: platform::addr::PayloadAccess::default(),
-            invariants: crate::invariants::InvariantSettings::default(),
             wall_limit: None,
             params: BTreeMap::new(),
             replaced: std::collections::BTreeSet::new(),
@@ -464,25 +461,18 @@ impl RunOptions {
     }
 }
 
-/// Run the twin. `ready` receives the bound addresses of the KISS servers, then those of
-/// the TCP consoles (`opts.uart`), once they listen.
-pub async fn run(
-    opts: RunOptions,
-    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
-) -> anyhow::Result<RunReport> {
-    run_with(opts, ready, &mut |_| {}).await
-}
-
 /// Events the run's loop takes per wake-up (the first, then those already queued): the
 /// select, its Ctrl-C check and the next fault's timer once per batch rather than per event.
 const EVENTS_PER_WAKE: usize = 1024;
 
-/// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder).
+/// Run the twin, handing every [`RunEvent`] to `sink` in the order they happen; what the
+/// runtime counted at the end. `ready` receives the bound addresses of the KISS servers,
+/// then those of the TCP consoles (`opts.uart`), once they listen.
 pub async fn run_with(
     mut opts: RunOptions,
     ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
-    sink: &mut (dyn FnMut(&RunEvent) + Send),
-) -> anyhow::Result<RunReport> {
+    sink: &mut dyn RunSink,
+) -> anyhow::Result<RunCounters> {
     let wall_start = Instant::now();
     let clock = Clock::new(opts.clock);
     // Outside input taken in at the run's idle points, and real time's hold (`bus::pace`).
@@ -546,17 +536,9 @@ pub async fn run_with(
     }
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
-    let mut observer = Observer::new(
-        report::Keep {
-            trace: opts.trace,
-            series: opts.keep_series,
-        },
-        opts.tle.as_ref(),
-    );
     let kiss_budget = kiss.budget.clone();
-    let mut handle_event = |ev: RunEvent, observer: &mut Observer| {
-        sink(&ev);
-        observer.observe(&ev);
+    let handle_event = |ev: RunEvent, sink: &mut dyn RunSink| {
+        sink.event(&ev);
         if let RunEvent::Kiss {
             dir: crate::events::Direction::In,
             ..
@@ -604,10 +586,10 @@ pub async fn run_with(
                         && let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = **o
                     {
                         for e in power_shell.eps_channel(t, channel, on) {
-                            handle_event(e, &mut observer);
+                            handle_event(e, sink);
                         }
                     }
-                    handle_event(ev, &mut observer);
+                    handle_event(ev, sink);
                     left -= 1;
                     next = if left > 0 { ev_rx.try_recv().ok() } else { None };
                 }
@@ -626,7 +608,7 @@ pub async fn run_with(
                     break;
                 }
                 while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
-                    let effects = crate::faults::Director {
+                    let effects = faults::Director {
                         segs: &segs,
                         ctls: &ctls,
                         power: &mut power_shell,
@@ -634,13 +616,13 @@ pub async fn run_with(
                     }
                     .apply(&f);
                     if let FaultAction::Contact(on) = f.action {
-                        observer.contact(f.at, on);
+                        sink.contact(f.at, on);
                     }
                     tracing::info!(t = %f.at, "fault: {}", f.what);
                     // The fault, then what it did.
-                    handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, &mut observer);
+                    handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, sink);
                     for e in effects {
-                        handle_event(e, &mut observer);
+                        handle_event(e, sink);
                     }
                 }
             }
@@ -681,11 +663,10 @@ pub async fn run_with(
     }
     drop(ev_tx);
     while let Ok(ev) = ev_rx.try_recv() {
-        handle_event(ev, &mut observer);
+        handle_event(ev, sink);
     }
     let (results, requests) = results.take();
-    let observed = observer.finish();
-    Ok(RunReport {
+    Ok(RunCounters {
         sim_time,
         interrupted,
         wall: wall_start.elapsed(),
@@ -703,14 +684,6 @@ pub async fn run_with(
             .collect(),
         results,
         requests,
-        trace: observed.trace,
-        attitude: observed.attitude,
-        attitude_summary: observed.attitude_summary,
-        sessions: observed.sessions,
-        power: observed.power,
-        power_summary: observed.power_summary,
-        beacons: observed.beacons,
-        contact: observed.contact,
     })
 }
 
@@ -741,7 +714,7 @@ mod tests {
         opts.socketcan = vec![("m6pnosuch0".to_owned(), SocketCanBus::Main)];
         let rt = build_runtime().expect("runtime");
         let err = rt
-            .block_on(run(opts, None))
+            .block_on(run_with(opts, None, &mut |_: &RunEvent| {}))
             .expect_err("the interface does not exist");
         let msg = format!("{err:#}");
         assert!(msg.contains("m6pnosuch0"), "{msg}");

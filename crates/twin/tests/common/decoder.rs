@@ -9,7 +9,8 @@ use std::time::Duration;
 use bus::ClockMode;
 use m6p_twin::network::NetworkSpec;
 use m6p_twin::plan::compile;
-use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
+use m6p_twin::report::{RunReport, run};
+use m6p_twin::runtime::{RunOptions, build_runtime};
 
 #[path = "outside.rs"]
 pub mod outside;

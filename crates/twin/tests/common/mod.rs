@@ -134,7 +134,7 @@ pub fn same_bytes(what_a: &str, a: &[u8], what_b: &str, b: &[u8]) {
 }
 
 /// Session `session` ran once in `report` and ended DONE after `packets` packets.
-pub fn assert_one_session_done(report: &m6p_twin::runtime::RunReport, session: u8, packets: u32) {
+pub fn assert_one_session_done(report: &m6p_twin::report::RunReport, session: u8, packets: u32) {
     let runs: Vec<_> = report
         .sessions
         .runs

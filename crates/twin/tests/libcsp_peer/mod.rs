@@ -10,7 +10,8 @@ use std::time::Duration;
 
 use bus::ClockMode;
 use m6p_twin::plan::compile;
-use m6p_twin::runtime::{RunOptions, RunReport, build_runtime, run};
+use m6p_twin::report::{RunReport, run};
+use m6p_twin::runtime::{RunOptions, build_runtime};
 
 pub use crate::common::{expected_stream, readme_scenario, repo_root, same_bytes};
 

@@ -10,23 +10,14 @@ use bus::net::NetStats;
 use bus::outside::BridgeStats;
 use bus::trace::TraceEvent;
 use csp::SimTime;
-use csp::node::NodeCounters;
 
-use crate::adcs::AttitudeSample;
-use crate::eps::PowerSample;
 use crate::events::RunEvent;
 use crate::ground::RequestResult;
-
-/// Counters of one node at the end of a run.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct NodeReport {
-    /// Node name.
-    pub name: String,
-    /// CSP address.
-    pub addr: u8,
-    /// Its counters.
-    pub counters: NodeCounters,
-}
+use crate::observe::attitude::AttitudeSample;
+use crate::observe::power::PowerSample;
+use crate::observe::{Keep, Observed, Observer};
+pub use crate::runtime::counters::{Interruption, NodeReport, RunCounters, StopCause};
+use crate::runtime::{RunOptions, RunSink};
 
 /// What a run did.
 #[derive(Debug, Clone, Default)]
@@ -64,114 +55,87 @@ pub struct RunReport {
     /// them: `RunOptions::keep_series`).
     pub attitude: Vec<AttitudeSample>,
     /// What every published attitude sample added up to.
-    pub attitude_summary: crate::adcs::AttitudeSummary,
+    pub attitude_summary: crate::observe::attitude::AttitudeSummary,
     /// The PC's sessions, downlinked and dropped bytes, and what the payloads produced.
-    pub sessions: crate::sessions::SessionsReport,
+    pub sessions: crate::observe::sessions::SessionsReport,
     /// The EPS's samples, in time order (empty unless the run kept them).
     pub power: Vec<PowerSample>,
     /// What every EPS sample added up to.
-    pub power_summary: crate::eps::PowerSummary,
+    pub power_summary: crate::observe::power::PowerSummary,
     /// Beacons received on the ground: (time, sending COMM, sequence number).
     pub beacons: Vec<(SimTime, u8, u32)>,
     /// UHF contact switches applied (pass modelling): (time, in contact).
     pub contact: Vec<(SimTime, bool)>,
 }
 
-/// Gathers the report's samples from the run's events, one event at a time in the order
-/// they happen (the main loop hands it every event after the sink): each domain slice
-/// observes what its expectations judge.
-#[derive(Debug)]
-pub struct Observer {
-    trace: Option<Vec<TraceEvent>>,
-    attitude: crate::adcs::AttitudeObserver,
-    power: crate::eps::PowerObserver,
-    link: crate::comm::LinkObserver,
-    sessions: crate::sessions::SessionsReport,
-}
-
-/// What an [`Observer`] gathered.
-#[derive(Debug, Clone, Default)]
-pub struct Observed {
-    /// Every frame and packet, when kept.
-    pub trace: Vec<TraceEvent>,
-    /// The FC's published attitude samples (if kept).
-    pub attitude: Vec<AttitudeSample>,
-    /// Their summary.
-    pub attitude_summary: crate::adcs::AttitudeSummary,
-    /// The PC's sessions and the payloads' bytes.
-    pub sessions: crate::sessions::SessionsReport,
-    /// The EPS's samples (if kept).
-    pub power: Vec<PowerSample>,
-    /// Their summary.
-    pub power_summary: crate::eps::PowerSummary,
-    /// Beacons received on the ground.
-    pub beacons: Vec<(SimTime, u8, u32)>,
-    /// UHF contact switches.
-    pub contact: Vec<(SimTime, bool)>,
-}
-
-/// What an [`Observer`] keeps beyond the run's summaries.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Keep {
-    /// The trace of every frame.
-    pub trace: bool,
-    /// Every sample and downlinked byte.
-    pub series: bool,
-}
-
-impl Observer {
-    /// An observer keeping what `keep` says beyond the summaries; `tle` is the scenario's
-    /// orbit (for the truth's distance from it).
-    pub fn new(keep: Keep, tle: Option<&(String, String)>) -> Self {
-        let keep_series = keep.series;
-        let mut attitude = crate::adcs::AttitudeObserver::new(tle);
-        attitude.forget_samples = !keep_series;
-        let mut power = crate::eps::PowerObserver::default();
-        power.forget_samples = !keep_series;
-        Observer {
-            trace: keep.trace.then(Vec::new),
-            attitude,
-            power,
-            link: crate::comm::LinkObserver::default(),
-            sessions: crate::sessions::SessionsReport {
-                forget_bytes: !keep_series,
-                ..Default::default()
-            },
+impl RunReport {
+    /// The report of a run: what the runtime counted and what the observers gathered.
+    pub fn of(c: RunCounters, o: Observed) -> Self {
+        RunReport {
+            sim_time: c.sim_time,
+            interrupted: c.interrupted,
+            wall: c.wall,
+            nodes: c.nodes,
+            buses: c.buses,
+            ground: c.ground,
+            kiss: c.kiss,
+            boards: c.boards,
+            links: c.links,
+            socketcan: c.socketcan,
+            results: c.results,
+            requests: c.requests,
+            trace: o.trace,
+            attitude: o.attitude,
+            attitude_summary: o.attitude_summary,
+            sessions: o.sessions,
+            power: o.power,
+            power_summary: o.power_summary,
+            beacons: o.beacons,
+            contact: o.contact,
         }
     }
+}
 
-    /// Take in one event.
-    pub fn observe(&mut self, ev: &RunEvent) {
-        if let (RunEvent::Medium(m), Some(trace)) = (ev, self.trace.as_mut()) {
-            trace.push(m.clone());
+/// Run the twin ([`crate::report::run_with`]) and report it. `ready` receives the bound
+/// addresses of the KISS servers, then those of the TCP consoles, once they listen.
+pub async fn run(
+    opts: RunOptions,
+    ready: Option<tokio::sync::oneshot::Sender<Vec<std::net::SocketAddr>>>,
+) -> anyhow::Result<RunReport> {
+    run_with(opts, ready, &mut |_: &RunEvent| {}).await
+}
+
+/// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder),
+/// then to the report's observers.
+pub async fn run_with(
+    opts: RunOptions,
+    ready: Option<tokio::sync::oneshot::Sender<Vec<std::net::SocketAddr>>>,
+    sink: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<RunReport> {
+    /// The sink first, then the observers.
+    struct Both<'a> {
+        sink: &'a mut (dyn FnMut(&RunEvent) + Send),
+        observer: Observer,
+    }
+    impl RunSink for Both<'_> {
+        fn event(&mut self, ev: &RunEvent) {
+            (self.sink)(ev);
+            self.observer.observe(ev);
         }
-        self.attitude.observe(ev);
-        self.power.observe(ev);
-        self.link.observe(ev);
-        self.sessions.observe(ev);
-    }
-
-    /// The UHF link's contact with the ground switched at `t` (a pass began or ended).
-    pub fn contact(&mut self, t: SimTime, on: bool) {
-        self.link.contact(t, on);
-    }
-
-    /// Everything gathered.
-    pub fn finish(self) -> Observed {
-        let (beacons, contact) = self.link.finish();
-        let (attitude, attitude_summary) = self.attitude.finish();
-        let (power, power_summary) = self.power.finish();
-        Observed {
-            trace: self.trace.unwrap_or_default(),
-            attitude,
-            attitude_summary,
-            sessions: self.sessions,
-            power,
-            power_summary,
-            beacons,
-            contact,
+        fn contact(&mut self, t: SimTime, on: bool) {
+            self.observer.contact(t, on);
         }
     }
+    let observer = Observer::new(
+        Keep {
+            trace: opts.trace,
+            series: opts.keep_series,
+        },
+        opts.tle.as_ref(),
+    );
+    let mut both = Both { sink, observer };
+    let counters = crate::runtime::run_with(opts, ready, &mut both).await?;
+    Ok(RunReport::of(counters, both.observer.finish()))
 }
 
 impl RunReport {
@@ -419,46 +383,5 @@ mod tests {
             t.contains("link payload-sw: 5 lost at the link (2 dropped, 0 while down, 0 while hung, 3 while unpowered, 0 over the delay line), 1 delayed"),
             "{t}"
         );
-    }
-}
-
-/// Why a run stopped before its end.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StopCause {
-    /// SIGINT (Ctrl-C).
-    Interrupt,
-    /// SIGTERM (what Slurm, Kubernetes, systemd and docker send).
-    Terminate,
-    /// Its wall-clock limit (a campaign's `[limits] wall`).
-    WallLimit(Duration),
-}
-
-/// A run cut short: why, at which simulated instant, of which duration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Interruption {
-    /// Why.
-    pub cause: StopCause,
-    /// The simulated instant it stopped at.
-    pub at: SimTime,
-    /// The duration it was to run, if bounded.
-    pub of: Option<Duration>,
-}
-
-impl std::fmt::Display for Interruption {
-    /// `interrupted at 3.000000000s of 3h (SIGTERM)`.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "interrupted at {}", self.at)?;
-        if let Some(d) = self.of {
-            write!(f, " of {}", crate::duration::format_duration(d))?;
-        }
-        match self.cause {
-            StopCause::Interrupt => f.write_str(" (SIGINT)"),
-            StopCause::Terminate => f.write_str(" (SIGTERM)"),
-            StopCause::WallLimit(d) => write!(
-                f,
-                " (its wall-clock limit, {})",
-                crate::duration::format_duration(d)
-            ),
-        }
     }
 }
