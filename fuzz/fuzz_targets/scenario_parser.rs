@@ -1,6 +1,6 @@
 //! `scenario_parser`: the scenario loader on arbitrary UTF-8 text:
 //! `m6p_twin::scenario::parse(file, text)` (TOML, then the meaning of every field,
-//! with errors located at line and column), `Scenario::validate` again on what parsed, and
+//! with errors located at line and column), `Scenario::validate_with` again on what parsed, and
 //! `m6p_twin::plan::compile` of a valid scenario (network, faults, commands, expectations).
 //!
 //! Asserts: nothing panics; every error renders; a scenario that parsed validates again
@@ -8,7 +8,6 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use m6p_twin::scenario::Scenario;
 
 const FILE: &str = "fuzz.toml";
 
@@ -21,7 +20,7 @@ fuzz_target!(|data: &[u8]| {
             let _ = e.to_string();
         }
         Ok(s) => {
-            if let Err(e) = s.validate(FILE, text) {
+            if let Err(e) = s.validate_with(FILE, text, m6p_twin::validate::CHECKS) {
                 panic!("parsed but does not validate again: {e}");
             }
             let _ = s.display_name(FILE);

@@ -1,10 +1,11 @@
 //! Scenario files: one TOML file describes a run (see `docs/scenarios.md`).
 //!
 //! Parsing is strict: unknown fields, wrong types, out-of-range values and unknown node
-//! names are errors that name the file, the line and the field. [`Scenario::parse`] checks
-//! the syntax and the types (serde with `deny_unknown_fields`), then [`Scenario::validate`]
-//! checks the meaning (node names, ranges, references between entries), locating every
-//! problem in the source through the spanned TOML tree.
+//! names are errors that name the file, the line and the field. [`Scenario::parse_with`]
+//! checks the syntax and the types (serde with `deny_unknown_fields`), then
+//! [`Scenario::validate_with`] checks the meaning: the scenario's own fields here, then the
+//! checks the twin passes (its slices': node names, ranges, references between entries),
+//! locating every problem in the source through the spanned TOML tree.
 
 use std::collections::BTreeMap;
 use std::fmt;

@@ -1,7 +1,9 @@
 //! m6p-twin: a digital twin of the NanoAvionics M6P smallsat network.
 //!
 //! - [`network`]: the nodes, media and routing tables of the M6P network.
-//! - [`runtime`]: build the network, run it in virtual or real time, report.
+//! - [`runtime`]: build the network, run it in virtual or real time, count.
+//! - [`report`]: the run's report and the observers that gather it.
+//! - [`scenario`], [`validate`], [`plan`]: read a scenario, check it, compile it.
 //! - [`ground`]: the twin's own ground stations.
 //! - [`gs`]: the outside ground-station client (`m6p-twin gs`).
 //! - [`record`] and [`recording`]: write a run to MCAP; read, summarize and compare recordings.
@@ -12,45 +14,30 @@
 pub use twin_core::{
     duration, events, icd, icd_lengths, network, packets, seed, tagged, timefmt, transit,
 };
+// The layers it is built on, by the names the twin's users know (docs/architecture.md).
+pub use twin_domains::{
+    adcs, can, clock, comm, commands, counters, eps, expectation_kinds, expectations, faults,
+    fields, invariants, outside, params, plan, rules, sessions, validate,
+};
+#[cfg(feature = "live")]
+pub use twin_record::live;
+pub use twin_record::{mcap_file, protobuf, record, recording, sizes};
+/// The run's report and the observers that gather it (m6p-twin-report).
+pub use twin_report as report;
+pub use twin_report::observe;
+/// The runtime: build the network, run it, count (m6p-twin-runtime).
+pub use twin_runtime as runtime;
+pub use twin_runtime::ground;
 
-pub mod adcs;
 pub mod bench;
 pub mod campaign;
 pub mod campaign_report;
 pub mod campaign_rows;
 pub mod campaign_run;
 pub mod campaign_shrink;
-pub mod can;
-pub mod clock;
-pub mod comm;
-pub mod commands;
-pub mod counters;
-pub mod eps;
 pub mod exec;
-pub mod expectation_kinds;
-pub mod expectations;
-pub mod faults;
-pub mod fields;
-pub mod ground;
 pub mod gs;
 pub mod gs_shell;
-pub mod invariants;
-#[cfg(feature = "live")]
-pub mod live;
-pub mod mcap_file;
-pub mod observe;
-pub mod outside;
-pub mod params;
-pub mod plan;
-pub mod protobuf;
-pub mod record;
-pub mod recording;
-pub mod report;
-pub mod rules;
-pub mod runtime;
-pub mod sessions;
-pub mod sizes;
-pub mod validate;
 
 /// The scenario: its data (m6p-twin-scenario), read and checked with every slice's check
 /// ([`validate::parse`]), and its JSON schema.

@@ -1,0 +1,389 @@
+//! What a run did: the report (counters of every node and medium, the ground stations'
+//! outcomes, the samples the expectations judge) and the [`Observer`] that gathers it from
+//! the run's events as they happen ([`observe`]), above the runtime (which only counts).
+
+pub mod observe;
+
+use std::time::Duration;
+
+use bus::can::BusStats;
+use bus::kiss_tcp::KissLinkStats;
+use bus::net::NetStats;
+use bus::outside::BridgeStats;
+use bus::trace::TraceEvent;
+use csp::SimTime;
+
+use crate::observe::attitude::AttitudeSample;
+use crate::observe::power::PowerSample;
+use crate::observe::{Keep, Observed, Observer};
+use twin_core::events::RunEvent;
+pub use twin_runtime::counters::{Interruption, NodeReport, RunCounters, StopCause};
+use twin_runtime::ground::RequestResult;
+use twin_runtime::{RunOptions, RunSink};
+
+/// What a run did.
+#[derive(Debug, Clone, Default)]
+pub struct RunReport {
+    /// Simulated time reached.
+    pub sim_time: SimTime,
+    /// Why the run stopped before its end, if it did: a signal (SIGINT, SIGTERM) or its
+    /// wall-clock limit. Its verdicts then judge only what ran.
+    pub interrupted: Option<Interruption>,
+    /// Wall-clock time taken.
+    pub wall: Duration,
+    /// Per-node counters, in start order.
+    pub nodes: Vec<NodeReport>,
+    /// Main and payload CAN bus counters.
+    pub buses: Vec<BusStats>,
+    /// Ground segment counters.
+    pub ground: NetStats,
+    /// KISS/TCP link counters, by link.
+    pub kiss: Vec<(String, KissLinkStats)>,
+    /// The boards' writes and refused writes (a write behind a reader's horizon), by board.
+    pub boards: [(&'static str, platform::board::BoardStats); 3],
+    /// What the gates of the scenario's outside links held back (their faults and power),
+    /// by link name.
+    pub links: Vec<(String, bus::gate::GateStats)>,
+    /// SocketCAN bridge counters, by interface and bus (`vcan0 (main bus)`).
+    pub socketcan: Vec<(String, BridgeStats)>,
+    /// Outcomes of the ground stations' requests (empty unless the run kept them:
+    /// `RunOptions::keep_series`).
+    pub results: Vec<RequestResult>,
+    /// What the ground stations' requests came to, counted.
+    pub requests: twin_runtime::ground::RequestSummary,
+    /// Every frame and packet, when tracing was asked for.
+    pub trace: Vec<TraceEvent>,
+    /// The FC's published attitude samples, in time order (empty unless the run kept
+    /// them: `RunOptions::keep_series`).
+    pub attitude: Vec<AttitudeSample>,
+    /// What every published attitude sample added up to.
+    pub attitude_summary: crate::observe::attitude::AttitudeSummary,
+    /// The PC's sessions, downlinked and dropped bytes, and what the payloads produced.
+    pub sessions: crate::observe::sessions::SessionsReport,
+    /// The EPS's samples, in time order (empty unless the run kept them).
+    pub power: Vec<PowerSample>,
+    /// What every EPS sample added up to.
+    pub power_summary: crate::observe::power::PowerSummary,
+    /// Beacons received on the ground: (time, sending COMM, sequence number).
+    pub beacons: Vec<(SimTime, u8, u32)>,
+    /// UHF contact switches applied (pass modelling): (time, in contact).
+    pub contact: Vec<(SimTime, bool)>,
+}
+
+impl RunReport {
+    /// The report of a run: what the runtime counted and what the observers gathered.
+    pub fn of(c: RunCounters, o: Observed) -> Self {
+        RunReport {
+            sim_time: c.sim_time,
+            interrupted: c.interrupted,
+            wall: c.wall,
+            nodes: c.nodes,
+            buses: c.buses,
+            ground: c.ground,
+            kiss: c.kiss,
+            boards: c.boards,
+            links: c.links,
+            socketcan: c.socketcan,
+            results: c.results,
+            requests: c.requests,
+            trace: o.trace,
+            attitude: o.attitude,
+            attitude_summary: o.attitude_summary,
+            sessions: o.sessions,
+            power: o.power,
+            power_summary: o.power_summary,
+            beacons: o.beacons,
+            contact: o.contact,
+        }
+    }
+}
+
+/// Run the twin ([`crate::run_with`]) and report it. `ready` receives the bound
+/// addresses of the KISS servers, then those of the TCP consoles, once they listen.
+pub async fn run(
+    opts: RunOptions,
+    ready: Option<tokio::sync::oneshot::Sender<Vec<std::net::SocketAddr>>>,
+) -> anyhow::Result<RunReport> {
+    run_with(opts, ready, &mut |_: &RunEvent| {}).await
+}
+
+/// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder),
+/// then to the report's observers.
+pub async fn run_with(
+    opts: RunOptions,
+    ready: Option<tokio::sync::oneshot::Sender<Vec<std::net::SocketAddr>>>,
+    sink: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<RunReport> {
+    /// The sink first, then the observers.
+    struct Both<'a> {
+        sink: &'a mut (dyn FnMut(&RunEvent) + Send),
+        observer: Observer,
+    }
+    impl RunSink for Both<'_> {
+        fn event(&mut self, ev: &RunEvent) {
+            (self.sink)(ev);
+            self.observer.observe(ev);
+        }
+        fn contact(&mut self, t: SimTime, on: bool) {
+            self.observer.contact(t, on);
+        }
+    }
+    let observer = Observer::new(
+        Keep {
+            trace: opts.trace,
+            series: opts.keep_series,
+        },
+        opts.tle.as_ref(),
+    );
+    let mut both = Both { sink, observer };
+    let counters = twin_runtime::run_with(opts, ready, &mut both).await?;
+    Ok(RunReport::of(counters, both.observer.finish()))
+}
+
+impl RunReport {
+    /// The end-of-run table: per node packets in/out, forwarded, drops; per bus load.
+    pub fn table(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        if let Some(i) = &self.interrupted {
+            let _ = writeln!(s, "{i}: the verdicts below judge only what ran\n");
+        }
+        let elapsed = self.sim_time - SimTime::ZERO;
+        let _ = writeln!(
+            s,
+            "simulated {:.3} s in {:.3} s wall ({:.0}x real time)",
+            self.sim_time.as_secs_f64(),
+            self.wall.as_secs_f64(),
+            self.sim_time.as_secs_f64() / self.wall.as_secs_f64().max(1e-9)
+        );
+        let _ = writeln!(
+            s,
+            "\n{:<7} {:>3} {:>9} {:>9} {:>9} {:>9} {:>7}  drops by reason",
+            "node", "id", "pkts in", "pkts out", "forwarded", "to app", "drops"
+        );
+        for n in &self.nodes {
+            let c = &n.counters;
+            let reasons: Vec<String> = c.drops.iter().map(|(k, v)| format!("{k}: {v}")).collect();
+            let _ = writeln!(
+                s,
+                "{:<7} {:>3} {:>9} {:>9} {:>9} {:>9} {:>7}  {}",
+                n.name,
+                n.addr,
+                c.rx_packets,
+                c.tx_packets,
+                c.forwarded,
+                c.delivered + c.service_replies,
+                c.total_drops(),
+                reasons.join(", ")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\n{:<8} {:>10} {:>11} {:>9} {:>8} {:>8}",
+            "bus", "frames", "data bytes", "load %", "dropped", "corrupt"
+        );
+        for b in &self.buses {
+            let _ = writeln!(
+                s,
+                "{:<8} {:>10} {:>11} {:>9.3} {:>8} {:>8}",
+                b.name,
+                b.frames,
+                b.bytes,
+                100.0 * b.load(elapsed),
+                b.dropped,
+                b.corrupted
+            );
+        }
+        let g = &self.ground;
+        let _ = writeln!(
+            s,
+            "{:<8} {:>10} {:>11} {:>9.3} {:>8} {:>8}  (packets; UHF air load)",
+            g.name,
+            g.packets,
+            g.bytes,
+            100.0 * g.air_busy.as_secs_f64() / elapsed.as_secs_f64().max(1e-9),
+            g.dropped,
+            "-"
+        );
+        for b in self.buses.iter().filter(|b| b.error_frames > 0) {
+            let troubled: Vec<String> = b
+                .ports
+                .iter()
+                .filter(|p| p.tx_errors > 0 || p.bus_off_count > 0 || p.passive_count > 0)
+                .map(|p| {
+                    format!(
+                        "{} {} errors, TEC up to {}{}{} (now {})",
+                        p.name,
+                        p.tx_errors,
+                        p.tec_max,
+                        if p.passive_count > 0 {
+                            format!(", error-passive {}x", p.passive_count)
+                        } else {
+                            String::new()
+                        },
+                        if p.bus_off_count > 0 {
+                            format!(
+                                ", bus-off {}x ({} frames lost, {} recoveries)",
+                                p.bus_off_count, p.bus_off_drops, p.recoveries
+                            )
+                        } else {
+                            String::new()
+                        },
+                        p.state.name()
+                    )
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                "{:<8} CAN errors: {} error frames; {}",
+                b.name,
+                b.error_frames,
+                troubled.join("; ")
+            );
+        }
+        for (name, k) in &self.kiss {
+            let _ = writeln!(
+                s,
+                "\nlink {name}: {} connections ({} closed idle, {} closed to make room, {} refused), {} packets in, {} out, {} garbage bytes, {} bad CRC, {} short, {} oversize, {} refused ({} claims, {} queue full), {} out dropped (not read)",
+                k.connections,
+                k.idle_closed,
+                k.evicted,
+                k.connections_refused,
+                k.packets_in,
+                k.packets_out,
+                k.garbage_bytes,
+                k.bad_crc,
+                k.short,
+                k.oversize,
+                k.refused,
+                k.claims_refused,
+                k.queue_full,
+                k.out_dropped
+            );
+        }
+        let mut lost = Vec::new();
+        for b in &self.buses {
+            for p in &b.ports {
+                if p.tx_overflow + p.rx_overflow > 0 {
+                    lost.push(format!(
+                        "{} {}: {} frames (transmit queue full), {} (inbox full)",
+                        b.name, p.name, p.tx_overflow, p.rx_overflow
+                    ));
+                }
+                if p.budget_held > 0 {
+                    let _ = writeln!(
+                        s,
+                        "\n{} bus, {}: {} frames held back by its transmit budget",
+                        b.name, p.name, p.budget_held
+                    );
+                }
+            }
+        }
+        if self.ground.air_overflow + self.ground.rx_overflow > 0 {
+            lost.push(format!(
+                "ground: {} packets (transmit buffer full), {} (inbox full)",
+                self.ground.air_overflow, self.ground.rx_overflow
+            ));
+        }
+        if !lost.is_empty() {
+            let _ = writeln!(s, "\nlost to full queues: {}", lost.join("; "));
+        }
+        for (name, b) in &self.socketcan {
+            let _ = writeln!(
+                s,
+                "\nSocketCAN {name}: {} frames in, {} out, {} skipped, {} receive errors, {} send errors{}",
+                b.frames_in,
+                b.frames_out,
+                b.skipped,
+                b.recv_errors,
+                b.send_errors,
+                b.ended
+                    .as_ref()
+                    .map(|why| format!("; stopped: {why}"))
+                    .unwrap_or_default()
+            );
+        }
+        let refused: Vec<String> = self
+            .boards
+            .iter()
+            .filter(|(_, b)| b.refused > 0)
+            .map(|(name, b)| format!("{name} {} of {} writes", b.refused, b.writes))
+            .collect();
+        if !refused.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nboards: refused behind a reader's horizon (applied there): {}",
+                refused.join(", ")
+            );
+        }
+        for (name, g) in self
+            .links
+            .iter()
+            .filter(|(_, g)| *g != bus::gate::GateStats::default())
+        {
+            let _ = writeln!(
+                s,
+                "\nlink {name}: {} lost at the link ({} dropped, {} while down, {} while hung, {} while unpowered, {} over the delay line), {} delayed",
+                g.lost(),
+                g.dropped,
+                g.down,
+                g.hung,
+                g.unpowered,
+                g.overflow,
+                g.delayed
+            );
+        }
+        let r = self.requests;
+        if r.requests > 0 {
+            let _ = writeln!(
+                s,
+                "\nground requests: {} sent, {} answered, {} unanswered{}",
+                r.requests,
+                r.answered,
+                r.requests - r.answered - r.unfinished,
+                if r.unfinished > 0 {
+                    format!(", {} still waiting at the end", r.unfinished)
+                } else {
+                    String::new()
+                }
+            );
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_table_says_what_the_boards_refused_and_the_links_held_back() {
+        let mut r = RunReport::default();
+        assert!(!r.table().contains("boards:"), "nothing refused, no line");
+        r.boards[2] = (
+            "activity",
+            platform::board::BoardStats {
+                writes: 8024,
+                refused: 2,
+            },
+        );
+        r.links = vec![(
+            "payload-sw".to_owned(),
+            bus::gate::GateStats {
+                dropped: 2,
+                unpowered: 3,
+                delayed: 1,
+                ..Default::default()
+            },
+        )];
+        let t = r.table();
+        assert!(
+            t.contains("boards: refused behind a reader's horizon (applied there): activity 2 of 8024 writes"),
+            "{t}"
+        );
+        assert!(
+            t.contains("link payload-sw: 5 lost at the link (2 dropped, 0 while down, 0 while hung, 3 while unpowered, 0 over the delay line), 1 delayed"),
+            "{t}"
+        );
+    }
+}

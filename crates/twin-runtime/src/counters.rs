@@ -1,0 +1,114 @@
+//! What the runtime itself counts in a run ([`RunCounters`]: every node's and medium's
+//! counters, the ground stations' outcomes, why it stopped early), and the hook that hands
+//! every event of the run to whoever observes it ([`RunSink`]).
+
+use std::time::Duration;
+
+use bus::can::BusStats;
+use bus::kiss_tcp::KissLinkStats;
+use bus::net::NetStats;
+use bus::outside::BridgeStats;
+use csp::SimTime;
+use csp::node::NodeCounters;
+
+use crate::ground::{RequestResult, RequestSummary};
+use twin_core::events::RunEvent;
+
+/// Whoever observes a run (the recorder, the report's observers, the invariants): handed
+/// every event in the order it happens, on the run's loop.
+pub trait RunSink: Send {
+    /// One event of the run.
+    fn event(&mut self, ev: &RunEvent);
+    /// The UHF link's contact with the ground switched at `t` (a pass began or ended),
+    /// told before the fault's event.
+    fn contact(&mut self, t: SimTime, on: bool) {
+        let _ = (t, on);
+    }
+}
+
+impl<F: FnMut(&RunEvent) + Send> RunSink for F {
+    fn event(&mut self, ev: &RunEvent) {
+        self(ev);
+    }
+}
+
+/// Counters of one node at the end of a run.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeReport {
+    /// Node name.
+    pub name: String,
+    /// CSP address.
+    pub addr: u8,
+    /// Its counters.
+    pub counters: NodeCounters,
+}
+
+/// What the runtime counted in a run.
+#[derive(Debug, Clone, Default)]
+pub struct RunCounters {
+    /// Simulated time reached.
+    pub sim_time: SimTime,
+    /// Why the run stopped before its end, if it did.
+    pub interrupted: Option<Interruption>,
+    /// Wall-clock time taken.
+    pub wall: Duration,
+    /// Per-node counters, in start order.
+    pub nodes: Vec<NodeReport>,
+    /// Main and payload CAN bus counters.
+    pub buses: Vec<BusStats>,
+    /// Ground segment counters.
+    pub ground: NetStats,
+    /// KISS/TCP link counters, by link.
+    pub kiss: Vec<(String, KissLinkStats)>,
+    /// The boards' writes and refused writes, by board.
+    pub boards: [(&'static str, platform::board::BoardStats); 3],
+    /// What the gates of the scenario's outside links held back, by link name.
+    pub links: Vec<(String, bus::gate::GateStats)>,
+    /// SocketCAN bridge counters, by interface and bus.
+    pub socketcan: Vec<(String, BridgeStats)>,
+    /// Outcomes of the ground stations' requests (if kept).
+    pub results: Vec<RequestResult>,
+    /// What the ground stations' requests came to, counted.
+    pub requests: RequestSummary,
+}
+
+/// Why a run stopped before its end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopCause {
+    /// SIGINT (Ctrl-C).
+    Interrupt,
+    /// SIGTERM (what Slurm, Kubernetes, systemd and docker send).
+    Terminate,
+    /// Its wall-clock limit (a campaign's `[limits] wall`).
+    WallLimit(Duration),
+}
+
+/// A run cut short: why, at which simulated instant, of which duration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Interruption {
+    /// Why.
+    pub cause: StopCause,
+    /// The simulated instant it stopped at.
+    pub at: SimTime,
+    /// The duration it was to run, if bounded.
+    pub of: Option<Duration>,
+}
+
+impl std::fmt::Display for Interruption {
+    /// `interrupted at 3.000000000s of 3h (SIGTERM)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted at {}", self.at)?;
+        if let Some(d) = self.of {
+            write!(f, " of {}", twin_core::duration::format_duration(d))?;
+        }
+        match self.cause {
+            StopCause::Interrupt => f.write_str(" (SIGINT)"),
+            StopCause::Terminate => f.write_str(" (SIGTERM)"),
+            StopCause::WallLimit(d) => write!(
+                f,
+                " (its wall-clock limit, {})",
+                twin_core::duration::format_duration(d)
+            ),
+        }
+    }
+}

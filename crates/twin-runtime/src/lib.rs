@@ -1,0 +1,727 @@
+//! Build the network of [`NetworkSpec`] on its media, run every node as its own tokio task
+//! on one current-thread runtime, and count what happened.
+//!
+//! In virtual time the runtime's clock is paused and jumps to the next timer, so a run is
+//! deterministic (same options and seed, same trace) and as fast as the CPU allows. In real
+//! time the same tasks follow the wall clock, which is what outside programs need; a run
+//! with outside links is always in real time.
+//!
+//! - `build`: the media, the boards and the nodes, each node its own task.
+//! - `links`: programs outside the twin (KISS/TCP, replayed input, SocketCAN).
+//! - [`power`]: the shell around the platform's power rules (EPS channels, power and hang
+//!   faults, the radio take-over).
+//! - [`ground`]: the twin's own ground stations (their plan of requests and outcomes).
+//! - [`faults`]: what a fault does at its instant (the fault director).
+//! - [`counters`]: what the runtime counts, and the sink that observes a run.
+//! - this module: the options and the main loop, which hands every event to the sink in
+//!   the order it happens and applies the faults at their instants.
+
+mod build;
+pub mod counters;
+pub mod faults;
+pub mod ground;
+mod links;
+pub mod power;
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use bus::driver::NodeCtl;
+use bus::kiss_tcp::KissLinkConfig;
+use bus::{Clock, ClockMode};
+use csp::SimTime;
+use platform::board::Boards;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::ground::{Recurring, Results};
+pub use build::fc_config;
+pub use counters::{Interruption, NodeReport, RunCounters, RunSink, StopCause};
+use faults::{FaultAction, TimedFault};
+use twin_core::events::RunEvent;
+use twin_core::network::NetworkSpec;
+
+/// Everything a run needs.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// The network.
+    pub network: NetworkSpec,
+    /// Simulated duration; `None` runs until Ctrl-C.
+    pub duration: Option<Duration>,
+    /// Virtual or real time.
+    pub clock: ClockMode,
+    /// Seed of every random choice (CFP idents, ephemeral ports, impairments).
+    pub seed: u64,
+    /// KISS/TCP links to programs outside the twin, each with its own addresses and
+    /// limits.
+    pub kiss_links: Vec<KissLink>,
+    /// Node consoles served to outside programs.
+    pub uart: Vec<UartLink>,
+    /// What payloads may ask of every node's platform port (`[rules] payload_access`; the
+    /// FC and the PC have their own copy for their ICD ports).
+    pub payload_access: platform::addr::PayloadAccess,
+    /// The most wall-clock time the run may take (a campaign's `[limits] wall`): past it
+    /// the run stops, as interrupted. `None`: no limit.
+    pub wall_limit: Option<Duration>,
+    /// Factory values of nodes' platform parameters (`[nodes.NAME] params`), by address:
+    /// (parameter id, value), set before the node's first boot.
+    pub params: BTreeMap<u8, Vec<(u8, f64)>>,
+    /// Nodes of the network not started because an outside program takes their place
+    /// (`replaces` on a link), by address.
+    pub replaced: std::collections::BTreeSet<u8>,
+    /// Requests each internal ground station sends, by station address.
+    pub ground_plan: BTreeMap<u8, Vec<Recurring>>,
+    /// Real CAN interfaces (`can0`, `vcan0`) to bridge to a bus of the twin; needs the
+    /// `socketcan` cargo feature (Linux) when not empty.
+    pub socketcan: Vec<(String, SocketCanBus)>,
+    /// UTC unix seconds at simulated time zero.
+    pub epoch_unix_s: u64,
+    /// The satellite's two TLE lines (the FC propagates them); `None`: no orbit.
+    pub tle: Option<(String, String)>,
+    /// Keep the trace of every frame and packet in the report.
+    pub trace: bool,
+    /// Keep every FC and EPS sample, every downlinked byte and every ground request's
+    /// outcome in the report (`attitude`, `power`, each session run's `bytes`, `results`),
+    /// for the programs and tests that read them. Without, the report has their summaries
+    /// only (`attitude_summary`, `power_summary`, each run's `len` and `stream`,
+    /// `requests`), so that memory does not grow with the simulated time;
+    /// the twin's `exec::execute` runs so, its expectations judging the run as it goes.
+    pub keep_series: bool,
+    /// Faults to apply, in time order.
+    pub faults: Vec<TimedFault>,
+    /// Recorded input of outside links to feed again (`replay`), one connection per link.
+    pub kiss_replay: Vec<KissReplay>,
+    /// The scenario's outside links, which faults and power act on (`MediumId::Link(i)`
+    /// is `outside[i]`).
+    pub outside: Vec<OutsideLink>,
+    /// The flight computer's models and timeline; its `epoch_unix_s`, `tle` and `seed` are
+    /// taken from this run's.
+    pub fc: nodes_fc::FcConfig,
+    /// The payload controller's sessions, S-band and events.
+    pub pc: nodes_pc::PcConfig,
+    /// The simulated payloads, by address (an address missing here gets the defaults).
+    pub payloads: BTreeMap<u8, nodes_payload::PayloadConfig>,
+    /// The EPS: arrays, battery, loads, channels, protection, events.
+    pub eps: nodes_eps::EpsConfig,
+    /// The ECU: thruster, tank, limits.
+    pub ecu: nodes_ecu::EcuConfig,
+    /// COMM1's configuration (COMM2 takes the same with the secondary role).
+    pub comm: nodes_comm::CommConfig,
+}
+
+/// A link of the scenario to a program outside the twin, which faults and power act on
+/// through its gate (`bus::gate`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OutsideLink {
+    /// Its name in the scenario (for the log).
+    pub name: String,
+    /// The runtime's name of the link: `listen 127.0.0.1:52001`, `connect 127.0.0.1:52002`
+    /// or `socketcan vcan0` (each KISS connection adds `#n` to it).
+    pub label: String,
+    /// The EPS channel that powers the program behind it.
+    pub powered_by: Option<nodes_eps::Channel>,
+}
+
+impl OutsideLink {
+    /// Whether the runtime's link or connection `label` is this one.
+    pub fn is(&self, label: &str) -> bool {
+        label.split_once('#').map_or(label, |(l, _)| l) == self.label
+    }
+}
+
+/// What an outside program sent on one KISS link during a recorded run.
+#[derive(Debug, Clone)]
+pub struct KissReplay {
+    /// The link's name in the recording (for example `listen 127.0.0.1:52001#1`).
+    pub link: String,
+    /// What the run took in from the socket, in order: its open and its close as empty
+    /// chunks.
+    pub chunks: Vec<RecordedChunk>,
+    /// The link's settings in the recorded run (its addresses, receiver, limits).
+    pub cfg: KissLinkConfig,
+}
+
+/// One piece of recorded outside input.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordedChunk {
+    /// The simulated instant it was taken in at.
+    pub t: SimTime,
+    /// Its place among every connection's input of the run (the order the run took them
+    /// in, which a replay keeps: input of one instant is taken in that order).
+    pub seq: u64,
+    /// The bytes (empty: the connection's open, or later its close).
+    pub bytes: Vec<u8>,
+}
+
+/// Where a link to outside programs meets them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum KissMode {
+    /// A KISS/TCP server for outside programs (`--kiss-listen`, `kind = "kiss-listen"`).
+    Listen(SocketAddr),
+    /// A KISS/TCP client of an outside server, as the platform in ICD 2.3 (`--kiss-connect`).
+    Connect(SocketAddr),
+    /// KISS on a pseudo-terminal linked at this path (`--kiss-pty`, `kind = "kiss-pty"`):
+    /// libcsp's `usart_init(PATH)` opens it.
+    Pty(std::path::PathBuf),
+    /// libcsp 1.4's ZMQ hub (`--zmq-hub`, `kind = "zmq-hub"`): the twin binds its two
+    /// sockets on this host, the nodes' PUB side and SUB side (`bus::zmq_hub`).
+    ZmqHub(bus::zmq_hub::HubAddr),
+}
+
+/// A link of the run to outside programs: KISS (TCP or a pty) or the ZMQ hub.
+#[derive(Debug, Clone)]
+pub struct KissLink {
+    /// Where it meets the programs.
+    pub mode: KissMode,
+    /// Its addresses, receiver and limits (the tap, log and gate are the run's).
+    pub cfg: KissLinkConfig,
+}
+
+impl KissLink {
+    /// A server on `addr`, learning its addresses.
+    pub fn listen(addr: SocketAddr) -> Self {
+        KissLink::new(KissMode::Listen(addr))
+    }
+    /// A client of `addr`, learning its addresses.
+    pub fn connect(addr: SocketAddr) -> Self {
+        KissLink::new(KissMode::Connect(addr))
+    }
+    /// A link meeting its programs at `mode`, learning its addresses.
+    pub fn new(mode: KissMode) -> Self {
+        KissLink {
+            mode,
+            cfg: KissLinkConfig::default(),
+        }
+    }
+    /// With these CSP addresses behind it.
+    pub fn with_addrs(mut self, addrs: &[u8]) -> Self {
+        self.cfg.addrs = addrs.to_vec();
+        self
+    }
+    /// The runtime's name of the link: `listen 127.0.0.1:52001`, `connect ...`, `pty
+    /// /tmp/m6p-tty` or `zmq-hub 127.0.0.2`.
+    pub fn label(&self) -> String {
+        match &self.mode {
+            KissMode::Listen(a) => format!("listen {a}"),
+            KissMode::Connect(a) => format!("connect {a}"),
+            KissMode::Pty(p) => format!("pty {}", p.display()),
+            KissMode::ZmqHub(h) => format!("zmq-hub {h}"),
+        }
+    }
+}
+
+impl RunOptions {
+    /// The default network for `duration` of virtual time with seed 1.
+    pub fn new(network: NetworkSpec, duration: Duration) -> Self {
+        RunOptions {
+            network,
+            duration: Some(duration),
+            clock: ClockMode::Virtual,
+            seed: 1,
+            kiss_links: Vec::new(),
+            uart: Vec::new(),
+            payload_access: platform::addr::PayloadAccess::default(),
+            wall_limit: None,
+            params: BTreeMap::new(),
+            replaced: std::collections::BTreeSet::new(),
+            ground_plan: BTreeMap::new(),
+            socketcan: Vec::new(),
+            epoch_unix_s: 1_577_836_800,
+            tle: None,
+            trace: false,
+            keep_series: true,
+            faults: Vec::new(),
+            kiss_replay: Vec::new(),
+            outside: Vec::new(),
+            fc: nodes_fc::FcConfig::default(),
+            pc: nodes_pc::PcConfig::default(),
+            payloads: BTreeMap::new(),
+            eps: nodes_eps::EpsConfig::default(),
+            ecu: nodes_ecu::EcuConfig::default(),
+            comm: nodes_comm::CommConfig::default(),
+        }
+    }
+
+    /// Whether the run has links to programs outside the twin.
+    pub fn has_outside_links(&self) -> bool {
+        !self.kiss_links.is_empty() || !self.socketcan.is_empty() || !self.uart.is_empty()
+    }
+
+    /// A run in virtual time with no link to the outside: nothing in it waits on the wall
+    /// clock or a socket, so it runs as fast as its CPU allows, beside any other such run.
+    pub fn is_self_contained(&self) -> bool {
+        self.clock == ClockMode::Virtual && !self.has_outside_links()
+    }
+}
+
+/// A node's text console for people and programs outside the twin (`[[links]] kind =
+/// "uart"`, `--uart NODE=ADDR|PATH`; `bus::console`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UartLink {
+    /// The node's name (`FC`).
+    pub node: String,
+    /// Where it is served.
+    pub at: UartAt,
+}
+
+/// Where a console is served.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum UartAt {
+    /// A TCP server (`nc`, `telnet`).
+    Tcp(SocketAddr),
+    /// A pseudo-terminal linked at the path (`screen`, `minicom`, `picocom`).
+    Pty(std::path::PathBuf),
+}
+
+impl UartLink {
+    /// Parse `--uart`'s `NODE=ADDR` (a TCP address) or `NODE=PATH` (a pty).
+    pub fn parse_arg(s: &str) -> Result<Self, String> {
+        let (node, at) = s
+            .split_once('=')
+            .ok_or_else(|| format!("`{s}`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)"))?;
+        if node.is_empty() || at.is_empty() {
+            return Err(format!(
+                "`{s}`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)"
+            ));
+        }
+        let at = match at.parse::<SocketAddr>() {
+            Ok(a) => UartAt::Tcp(a),
+            Err(_) if at.contains('/') => UartAt::Pty(at.into()),
+            Err(_) => {
+                return Err(format!(
+                    "`{at}` is neither a TCP address like 127.0.0.1:5010 nor a path like /tmp/fc-uart"
+                ));
+            }
+        };
+        Ok(UartLink {
+            node: node.to_owned(),
+            at,
+        })
+    }
+    /// The link's label in logs.
+    pub fn label(&self) -> String {
+        match &self.at {
+            UartAt::Tcp(a) => format!("uart {} {a}", self.node),
+            UartAt::Pty(p) => format!("uart {} {}", self.node, p.display()),
+        }
+    }
+}
+
+/// Which CAN bus of the twin a real CAN interface is bridged to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SocketCanBus {
+    /// The main CAN bus (COMM, FC, EPS, ECU, PC).
+    Main,
+    /// The payload CAN bus (PC, payloads).
+    Payload,
+}
+
+impl std::fmt::Display for SocketCanBus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SocketCanBus::Main => "main",
+            SocketCanBus::Payload => "payload",
+        })
+    }
+}
+
+impl SocketCanBus {
+    /// Parse the `--socketcan` argument `IFACE[:main|:payload]` (default: the main bus).
+    pub fn parse_arg(arg: &str) -> Result<(String, SocketCanBus), String> {
+        let (ifname, which) = match arg.rsplit_once(':') {
+            Some((i, "main")) => (i, SocketCanBus::Main),
+            Some((i, "payload")) => (i, SocketCanBus::Payload),
+            Some((_, other)) => {
+                return Err(format!(
+                    "unknown bus `{other}`: expected IFACE, IFACE:main or IFACE:payload"
+                ));
+            }
+            None => (arg, SocketCanBus::Main),
+        };
+        if ifname.is_empty() {
+            return Err("missing interface name: expected IFACE[:main|:payload]".to_owned());
+        }
+        Ok((ifname.to_owned(), which))
+    }
+}
+
+/// A tokio runtime for a run in any mode: current-thread, on tokio's paused clock (real time
+/// is that clock held back to the wall clock), with the hook that takes outside input in
+/// and paces the run ([`bus::pace`]).
+pub fn build_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .on_thread_park(bus::pace::on_idle)
+        .build()
+        .context("building the tokio runtime")
+}
+
+/// The runtime for the run `opts`: [`build_runtime`], without the IO driver when the run is
+/// in virtual time with no link to the outside (every wake-up then costs no `epoll_wait`
+/// and no eventfd write: the paused clock only needs the timer).
+pub fn build_runtime_for(opts: &RunOptions) -> anyhow::Result<tokio::runtime::Runtime> {
+    if !opts.is_self_contained() {
+        return build_runtime();
+    }
+    build_virtual_runtime()
+}
+
+/// The runtime of a run in virtual time with no link to the outside: tokio's paused clock
+/// and its timer, no IO driver.
+pub fn build_virtual_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .start_paused(true)
+        // A replay's recorded input is taken in by the same hook.
+        .on_thread_park(bus::pace::on_idle)
+        .build()
+        .context("building the tokio runtime")
+}
+
+/// Whether SIGINT (Ctrl-C) or SIGTERM came, and which: one watcher thread for the process
+/// (its own small runtime with the signal driver), so that a run in virtual time needs no
+/// IO driver of its own. Once it came it stays: every run still going stops, and so does
+/// any later one (a campaign ends).
+pub fn stop_signal() -> tokio::sync::watch::Receiver<Option<StopCause>> {
+    static SEEN: std::sync::OnceLock<tokio::sync::watch::Receiver<Option<StopCause>>> =
+        std::sync::OnceLock::new();
+    SEEN.get_or_init(|| {
+        let (tx, rx) = tokio::sync::watch::channel(None);
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let spawned = std::thread::Builder::new()
+            .name("ctrl-c".into())
+            .spawn(move || {
+                let rt = tokio::runtime::Builder::new_current_thread()
+                    .enable_all()
+                    .build();
+                if let Ok(rt) = rt {
+                    rt.block_on(async {
+                        // The handler is in place before the first run starts.
+                        let sig = watch_signals();
+                        let _ = ready_tx.send(());
+                        if let Some(sig) = sig
+                            && let Some(cause) = sig.await
+                        {
+                            let _ = tx.send(Some(cause));
+                        }
+                    });
+                }
+                // Keep the sender: without a handler the runs just never see Ctrl-C.
+                std::mem::forget(tx);
+            });
+        match spawned {
+            Ok(_) => {
+                let _ = ready_rx.recv_timeout(Duration::from_secs(1));
+            }
+            Err(e) => tracing::warn!("no Ctrl-C watcher: {e}"),
+        }
+        rx
+    })
+    .clone()
+}
+
+/// SIGINT's and SIGTERM's handlers, installed now; their future says which came first.
+fn watch_signals() -> Option<impl std::future::Future<Output = Option<StopCause>>> {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        let mut int = signal(SignalKind::interrupt()).ok()?;
+        let mut term = signal(SignalKind::terminate()).ok()?;
+        Some(async move {
+            tokio::select! {
+                s = int.recv() => s.map(|()| StopCause::Interrupt),
+                s = term.recv() => s.map(|()| StopCause::Terminate),
+            }
+        })
+    }
+    #[cfg(not(unix))]
+    {
+        Some(async {
+            tokio::signal::ctrl_c()
+                .await
+                .ok()
+                .map(|()| StopCause::Interrupt)
+        })
+    }
+}
+
+pub use twin_core::seed::{first_ephemeral_port, mix};
+
+impl RunOptions {
+    /// The ICD on the ports this run configured.
+    pub fn icd_map(&self) -> twin_core::icd::IcdMap {
+        twin_core::icd::IcdMap::for_nodes(&twin_core::icd::NodePorts {
+            seed: self.seed,
+            fc: &self.fc,
+            pc: &self.pc,
+            eps: &self.eps,
+            ecu: &self.ecu,
+            comm: &self.comm,
+        })
+    }
+}
+
+/// Events the run's loop takes per wake-up (the first, then those already queued): the
+/// select, its Ctrl-C check and the next fault's timer once per batch rather than per event.
+const EVENTS_PER_WAKE: usize = 1024;
+
+/// Run the twin, handing every [`RunEvent`] to `sink` in the order they happen; what the
+/// runtime counted at the end. `ready` receives the bound addresses of the KISS servers,
+/// then those of the TCP consoles (`opts.uart`), once they listen.
+pub async fn run_with(
+    mut opts: RunOptions,
+    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+    sink: &mut dyn RunSink,
+) -> anyhow::Result<RunCounters> {
+    let wall_start = Instant::now();
+    let clock = Clock::new(opts.clock);
+    // Outside input taken in at the run's idle points, and real time's hold (`bus::pace`).
+    let _pace = bus::pace::install(clock);
+    // Every event of the run goes through one channel, in the order it happens.
+    let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<RunEvent>();
+    let (segs, mut background) = build::media(&opts, clock, &ev_tx);
+    // The gates of the scenario's outside links: their faults and power.
+    let gates = links::gates(&opts);
+    let socketcan_stats =
+        links::spawn_socketcan_bridges(&opts, &segs, clock, &gates, &mut background)?;
+    let results = Results::new(opts.keep_series);
+    let boards = Boards::default();
+    let nodes = build::nodes(&mut opts, &segs, clock, &boards, &results, &ev_tx);
+    let mut kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
+    let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
+    // The KISS servers' addresses, then the TCP consoles'.
+    kiss.bound.extend(consoles);
+    if let Some((from, speed)) = opts.clock.paced() {
+        // The wall clock paces the run from `from` on (0 in real time; the scenario's
+        // `realtime_from` after virtual time until then).
+        let tx = ev_tx.clone();
+        let from_later = from > SimTime::ZERO;
+        background.push(tokio::spawn(bus::pace::pacer(
+            clock,
+            from,
+            speed,
+            move |t| {
+                if from_later {
+                    tracing::info!("real time from {t} on");
+                    let _ = tx.send(RunEvent::Log {
+                        t,
+                        source: "clock".to_owned(),
+                        level: twin_core::events::Level::Info,
+                        message: "virtual time ends: the wall clock paces the run from here"
+                            .to_owned(),
+                    });
+                }
+            },
+        )));
+    }
+    if let Some(r) = ready {
+        let _ = r.send(kiss.bound.clone());
+    }
+
+    // Faults are applied by the main loop at their times, so that their events sit in the
+    // stream exactly where they take effect.
+    let ctls = nodes.ctls();
+    // One truth for power: the EPS's switches and the power and hang faults go through
+    // the platform's rules.
+    let mut power_shell =
+        power::PowerShell::new(ctls.clone(), boards.activity.clone(), segs.clone());
+    for (addr, ports) in &nodes.comm_ports {
+        power_shell.register_comm(*addr, ports);
+    }
+    for (i, (link, gate)) in opts.outside.iter().zip(&gates).enumerate() {
+        if let Some(ch) = link.powered_by {
+            let on = opts.eps.channels_on & ch.bit() != 0;
+            power_shell.power_link(i, link.name.clone(), ch, gate.clone(), on);
+        }
+    }
+    let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
+    let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
+    let kiss_budget = kiss.budget.clone();
+    let handle_event = |ev: RunEvent, sink: &mut dyn RunSink| {
+        sink.event(&ev);
+        if let RunEvent::Kiss {
+            dir: twin_core::events::Direction::In,
+            ..
+        } = ev
+        {
+            // The chunk is handed on (recorded, or queued for the recorder's thread, whose
+            // queue is bounded): its link may read another.
+            kiss_budget.add_permits(1);
+        }
+    };
+    let mut signal_seen = stop_signal();
+    let signalled = async move {
+        let seen = signal_seen.wait_for(Option::is_some).await.map(|c| *c);
+        match seen {
+            Ok(cause) => cause,
+            Err(_) => std::future::pending().await,
+        }
+    };
+    tokio::pin!(signalled);
+    let mut interrupted: Option<StopCause> = None;
+    let wall_deadline = opts.wall_limit.map(|d| (d, wall_start + d));
+    loop {
+        let next_fault = faults.peek().map_or(SimTime::MAX, |f| f.at).min(end);
+        tokio::select! {
+            biased;
+            cause = &mut signalled => {
+                tracing::info!("{cause:?}: stopping");
+                interrupted = cause;
+                break;
+            }
+            ev = ev_rx.recv() => {
+                // The event, then those already queued behind it (a bounded batch: one
+                // select per batch, not per event). The stream's order is the select's own:
+                // with `biased`, a queued event always came before the fault timer. What
+                // moved is the yield: tokio's budget (128 units a poll, a `recv` one) made
+                // the loop yield every 128 events, now every 128 batches, so with more than
+                // 128 waiting, other tasks of the same instant see this loop's effects (an
+                // EPS switch's power) sooner. Deterministic either way.
+                let mut next = ev;
+                let mut left = EVENTS_PER_WAKE;
+                while let Some(ev) = next {
+                    // An EPS channel switch takes effect through the power rules, whose news
+                    // comes first.
+                    if let RunEvent::Eps(o) = &ev
+                        && let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = **o
+                    {
+                        for e in power_shell.eps_channel(t, channel, on) {
+                            handle_event(e, sink);
+                        }
+                    }
+                    handle_event(ev, sink);
+                    left -= 1;
+                    next = if left > 0 { ev_rx.try_recv().ok() } else { None };
+                }
+                // The wall clock's limit, looked at once a batch (a run in virtual time
+                // sleeps on no wall-clock timer).
+                if let Some((d, at)) = wall_deadline
+                    && std::time::Instant::now() >= at
+                {
+                    tracing::warn!("the run's wall-clock limit ({d:?}) passed: stopping");
+                    interrupted = Some(StopCause::WallLimit(d));
+                    break;
+                }
+            }
+            () = clock.sleep_until(next_fault), if next_fault < SimTime::MAX => {
+                if next_fault >= end && faults.peek().is_none_or(|f| f.at >= end) {
+                    break;
+                }
+                while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
+                    let effects = faults::Director {
+                        segs: &segs,
+                        ctls: &ctls,
+                        power: &mut power_shell,
+                        links: &gates,
+                    }
+                    .apply(&f);
+                    if let FaultAction::Contact(on) = f.action {
+                        sink.contact(f.at, on);
+                    }
+                    tracing::info!(t = %f.at, "fault: {}", f.what);
+                    // The fault, then what it did.
+                    handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, sink);
+                    for e in effects {
+                        handle_event(e, sink);
+                    }
+                }
+            }
+        }
+    }
+    // A virtual run ends exactly at its duration, unless it was stopped before.
+    let sim_time = match opts.duration {
+        Some(d) if clock.is_virtual() && interrupted.is_none() => SimTime::ZERO + d,
+        _ => clock.now(),
+    };
+    let interrupted = interrupted.map(|cause| Interruption {
+        cause,
+        at: sim_time,
+        of: opts.duration,
+    });
+
+    for (_, ctl, _) in &nodes.tasks {
+        let _ = ctl.send((SimTime::ZERO, NodeCtl::Stop));
+    }
+    let mut node_reports = Vec::new();
+    for (spec, _, handle) in nodes.tasks {
+        let mut host = handle
+            .await
+            .with_context(|| format!("node {} task failed", spec.name))?;
+        // In node order, so that the final reports sit in the event stream deterministically.
+        host.app.finish(&mut host.node, sim_time);
+        while let Some(e) = host.poll_event() {
+            let _ = ev_tx.send(e);
+        }
+        node_reports.push(NodeReport {
+            name: spec.name,
+            addr: spec.addr,
+            counters: host.node.counters().clone(),
+        });
+    }
+    for h in background {
+        h.abort();
+    }
+    drop(ev_tx);
+    while let Ok(ev) = ev_rx.try_recv() {
+        handle_event(ev, sink);
+    }
+    let (results, requests) = results.take();
+    Ok(RunCounters {
+        sim_time,
+        interrupted,
+        wall: wall_start.elapsed(),
+        nodes: node_reports,
+        buses: vec![segs.main.stats(), segs.payload.stats()],
+        ground: segs.ground.stats(),
+        kiss: links::snapshot(kiss.stats),
+        socketcan: links::snapshot(socketcan_stats),
+        boards: boards.stats(),
+        links: opts
+            .outside
+            .iter()
+            .zip(&gates)
+            .map(|(l, g)| (l.name.clone(), g.stats()))
+            .collect(),
+        results,
+        requests,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn socketcan_argument_names_interface_and_bus() {
+        let parse = SocketCanBus::parse_arg;
+        assert_eq!(parse("vcan0"), Ok(("vcan0".to_owned(), SocketCanBus::Main)));
+        assert_eq!(
+            parse("can0:main"),
+            Ok(("can0".to_owned(), SocketCanBus::Main))
+        );
+        assert_eq!(
+            parse("can1:payload"),
+            Ok(("can1".to_owned(), SocketCanBus::Payload))
+        );
+        assert!(parse("can0:ground").is_err_and(|e| e.contains("ground")));
+        assert!(parse(":main").is_err());
+        assert!(parse("").is_err());
+    }
+
+    #[test]
+    fn unusable_socketcan_interface_fails_the_run_naming_it() {
+        let mut opts = RunOptions::new(NetworkSpec::default_m6p(), Duration::from_secs(1));
+        opts.socketcan = vec![("m6pnosuch0".to_owned(), SocketCanBus::Main)];
+        let rt = build_runtime().expect("runtime");
+        let err = rt
+            .block_on(run_with(opts, None, &mut |_: &RunEvent| {}))
+            .expect_err("the interface does not exist");
+        let msg = format!("{err:#}");
+        assert!(msg.contains("m6pnosuch0"), "{msg}");
+        if cfg!(not(all(feature = "socketcan", target_os = "linux"))) {
+            assert!(msg.contains("rebuild with --features socketcan"), "{msg}");
+        }
+    }
+}
