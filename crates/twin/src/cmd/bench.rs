@@ -1,0 +1,102 @@
+//! `m6p-twin bench` and `bench-run`: a scenario's speed, memory and recording size.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use m6p_twin::duration::parse_duration;
+use m6p_twin::exec;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Scenario file [default: the embedded default scenario].
+    pub scenario: Option<PathBuf>,
+    /// Simulated duration of each run.
+    #[arg(long, default_value = "1h", value_parser = parse_duration)]
+    pub duration: Duration,
+    /// Runs per variant.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Print the figures as one JSON object (`cpu_s_plain`, `cpu_s_recorded`,
+    /// `cpu_s_adcs_floor`, `rtf_plain`, `rtf_recorded`, `mcap_bytes_per_hour`,
+    /// `messages_per_hour`, `peak_rss_mib`, the ratios and per-variant spreads).
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct RunOneArgs {
+    /// Scenario file [default: the embedded default scenario].
+    pub scenario: Option<PathBuf>,
+    /// `plain`, `recorded` or `adcs_floor`.
+    #[arg(long)]
+    pub variant: String,
+    /// Simulated duration, ns.
+    #[arg(long)]
+    pub duration_ns: u64,
+    /// Where a recorded run records.
+    #[arg(long)]
+    pub record: PathBuf,
+}
+
+pub fn cmd_bench(
+    scenario: Option<&std::path::Path>,
+    duration: Duration,
+    runs: usize,
+    json: bool,
+) -> anyhow::Result<bool> {
+    let loaded = match scenario {
+        Some(p) => exec::load(p)?,
+        None => exec::load_default()?,
+    };
+    let exe = std::env::current_exe().context("finding the m6p-twin executable")?;
+    let report = m6p_twin::bench::run(&loaded, duration, runs, |variant, record| {
+        let mut cmd = std::process::Command::new(&exe);
+        cmd.arg("bench-run")
+            .args(["--variant", variant.name()])
+            .args(["--duration-ns", &duration.as_nanos().to_string()])
+            .arg("--record")
+            .arg(record);
+        if let Some(p) = scenario {
+            cmd.arg(p);
+        }
+        let out = cmd
+            .stdin(std::process::Stdio::null())
+            .output()
+            .with_context(|| format!("running {}", exe.display()))?;
+        if !out.status.success() {
+            anyhow::bail!(
+                "the {} run failed ({}): {}",
+                variant.name(),
+                out.status,
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+        }
+        serde_json::from_slice(&out.stdout)
+            .with_context(|| format!("reading the {} run's figures", variant.name()))
+    })?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.text());
+    }
+    Ok(true)
+}
+
+pub fn cmd_bench_run(
+    scenario: Option<&std::path::Path>,
+    variant: &str,
+    duration_ns: u64,
+    record: &std::path::Path,
+) -> anyhow::Result<bool> {
+    let variant = m6p_twin::bench::Variant::from_name(variant)
+        .with_context(|| format!("no bench variant {variant:?}"))?;
+    let loaded = match scenario {
+        Some(p) => exec::load(p)?,
+        None => exec::load_default()?,
+    };
+    let sample =
+        m6p_twin::bench::run_one(&loaded, Duration::from_nanos(duration_ns), variant, record)?;
+    println!("{}", serde_json::to_string(&sample)?);
+    Ok(true)
+}

@@ -1,0 +1,183 @@
+//! `m6p-twin gs`: join a running twin over KISS/TCP as a ground node.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use clap::Subcommand;
+use m6p_twin::duration::parse_duration;
+use m6p_twin::gs;
+
+#[derive(Debug, clap::Args)]
+pub struct GsArgs {
+    /// The twin's KISS/TCP server.
+    #[arg(long, value_name = "ADDR")]
+    pub connect: SocketAddr,
+    /// This ground node's CSP address (0-30).
+    #[arg(long = "as", default_value_t = 17, value_name = "ID",
+          value_parser = clap::value_parser!(u8).range(0..=30))]
+    pub as_addr: u8,
+    /// For an ICD command: the port to send it to, where the scenario moved it.
+    #[arg(long, value_name = "PORT")]
+    pub port: Option<u8>,
+    /// How long to wait for each reply.
+    #[arg(long, default_value = "2s", value_parser = parse_duration)]
+    pub timeout: Duration,
+    /// The request; without one, the console: interactive on a terminal (history, Tab
+    /// completion), else the lines of standard input.
+    #[command(subcommand)]
+    pub request: Option<GsRequest>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum GsRequest {
+    /// CSP ping (port 1): the node echoes the payload.
+    Ping {
+        /// Node address.
+        node: u8,
+        /// Number of pings.
+        #[arg(long, default_value_t = 4)]
+        count: u32,
+        /// Payload size in bytes.
+        #[arg(long, default_value_t = 16)]
+        size: usize,
+        /// Time between pings.
+        #[arg(long, default_value = "1s", value_parser = parse_duration)]
+        interval: Duration,
+    },
+    /// CSP uptime (port 6).
+    Uptime {
+        /// Node address.
+        node: u8,
+        /// Read the reply as the ICD's u32 little-endian milliseconds.
+        #[arg(long)]
+        icd: bool,
+    },
+    /// CMP ident (port 0).
+    Ident {
+        /// Node address.
+        node: u8,
+    },
+    /// Any request: `raw NODE PORT HEX` (the reply is printed in hex).
+    Raw {
+        /// Node address.
+        node: u8,
+        /// Destination port.
+        port: u8,
+        /// Request bytes in hex (command id first).
+        data: String,
+    },
+    /// PC SETUP (ICD 3.1.8.1): configure a payload session.
+    Setup {
+        /// Session id (1 for payload 12 in the default scenario).
+        session: u8,
+        /// Start, UTC unix seconds of the M6P clock (0: now).
+        #[arg(long, default_value_t = 0)]
+        start: u32,
+        /// Duration: seconds, or with a unit (`10m`); the ICD allows 5 s to 15 min.
+        #[arg(long, default_value = "60")]
+        duration: String,
+        /// Packets after which the session ends (0: no limit).
+        #[arg(long, default_value_t = 0)]
+        max_packets: u32,
+        /// POLL frame size, bytes (1-254).
+        #[arg(long, default_value_t = 64)]
+        frame: u32,
+        /// Sync message (text, at most 128 bytes).
+        #[arg(long, default_value = "")]
+        sync: String,
+    },
+    /// Any ICD command by name: `gs --connect ADDR NODE COMMAND [NAME=VALUE ...]`, for
+    /// example `fc tmatp`, `eps chset channel=PC on=off`, `pc setup session_id=1
+    /// timestamp=now duration_s=10m max_packets=0 poll_frame_size=200 sync_message=go`
+    /// (`m6p-twin icd NODE` lists the commands and their fields). The reply is decoded.
+    #[command(external_subcommand)]
+    Icd(Vec<String>),
+    /// PC STATUS: a session's state, last result and configuration.
+    Status {
+        /// Session id.
+        session: u8,
+    },
+    /// PC ABORT of a PENDING or ACTIVE session.
+    Abort {
+        /// Session id.
+        session: u8,
+    },
+}
+
+pub fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
+    let Some(request) = a.request else {
+        return m6p_twin::gs_shell::run(a.connect, a.as_addr, a.port, a.timeout);
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(async {
+        let mut client = gs::GsClient::connect(a.connect, a.as_addr).await?;
+        match request {
+            GsRequest::Ping {
+                node,
+                count,
+                size,
+                interval,
+            } => gs::ping(&mut client, node, count, size, interval, a.timeout).await,
+            GsRequest::Uptime { node, icd } => gs::uptime(&mut client, node, a.timeout, icd).await,
+            GsRequest::Ident { node } => gs::ident(&mut client, node, a.timeout).await,
+            GsRequest::Icd(words) => gs::icd_command(&mut client, &words, a.port, a.timeout).await,
+            GsRequest::Raw { node, port, data } => {
+                let bytes = m6p_twin::commands::parse_hex(&data).map_err(anyhow::Error::msg)?;
+                gs::raw(&mut client, node, port, bytes, a.timeout).await
+            }
+            GsRequest::Setup {
+                session,
+                start,
+                duration,
+                max_packets,
+                frame,
+                sync,
+            } => {
+                let mut words = vec![
+                    format!("session_id={session}"),
+                    format!("timestamp={start}"),
+                    format!("duration_s={duration}"),
+                    format!("max_packets={max_packets}"),
+                    format!("poll_frame_size={frame}"),
+                ];
+                let (_, _, cmd) =
+                    m6p_twin::icd::find_command("PC.SETUP").map_err(anyhow::Error::msg)?;
+                let mut args = gs::parse_args(&words)?;
+                args.insert("sync_message".into(), sync.into());
+                words.clear();
+                let data = m6p_twin::icd::encode_args(cmd, &args).map_err(|(field, m)| {
+                    let flag = match field.as_str() {
+                        "duration_s" => "--duration",
+                        "poll_frame_size" => "--frame",
+                        "max_packets" => "--max-packets",
+                        "timestamp" => "--start",
+                        "sync_message" => "--sync",
+                        _ => "SESSION",
+                    };
+                    anyhow::anyhow!("SETUP {flag}: {m}")
+                })?;
+                let mut req = vec![nodes_pc::wire::cmd::SETUP];
+                req.extend(data);
+                gs::pc_request(&mut client, req, a.timeout).await
+            }
+            GsRequest::Status { session } => {
+                gs::pc_request(
+                    &mut client,
+                    vec![nodes_pc::wire::cmd::STATUS, session],
+                    a.timeout,
+                )
+                .await
+            }
+            GsRequest::Abort { session } => {
+                gs::pc_request(
+                    &mut client,
+                    vec![nodes_pc::wire::cmd::ABORT, session],
+                    a.timeout,
+                )
+                .await
+            }
+        }
+    })
+}

@@ -1,0 +1,157 @@
+//! `m6p-twin replay`: re-run a recording's scenario with its seed and outside input, and compare.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use m6p_twin::exec;
+use m6p_twin::runtime::build_runtime_for;
+
+#[derive(Debug, clap::Args)]
+pub struct ReplayArgs {
+    /// The MCAP recording to reproduce.
+    pub file: PathBuf,
+    /// Keep the new recording here (default: a temporary file, deleted afterwards).
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
+    /// Test-only: change a node's behaviour to prove that divergences are found
+    /// (`fc-uptime-icd`).
+    #[arg(long, hide = true)]
+    pub test_knob: Option<String>,
+}
+
+/// The bytes outside programs sent on each KISS link of a recording, with their times.
+pub fn recorded_kiss_input(
+    file: &std::path::Path,
+) -> anyhow::Result<Vec<m6p_twin::runtime::KissReplay>> {
+    let mut links: std::collections::BTreeMap<String, Vec<m6p_twin::runtime::RecordedChunk>> =
+        Default::default();
+    let mut seq = 0u64;
+    for m in m6p_twin::recording::messages(file)? {
+        let m = m?;
+        if !m.topic.starts_with("/kiss/") {
+            continue;
+        }
+        let k: m6p_twin::record::KissFrameMsg = m
+            .decode()
+            .with_context(|| format!("decoding a {} message", m.topic))?;
+        if k.dir == "in" {
+            // In the file's order: the order the run took them in.
+            seq += 1;
+            links
+                .entry(k.link)
+                .or_default()
+                .push(m6p_twin::runtime::RecordedChunk {
+                    t: csp::SimTime(k.t_ns),
+                    seq,
+                    bytes: k.bytes.to_vec(),
+                });
+        }
+    }
+    Ok(links
+        .into_iter()
+        .map(|(link, chunks)| m6p_twin::runtime::KissReplay {
+            link,
+            chunks,
+            cfg: Default::default(),
+        })
+        .collect())
+}
+
+pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
+    let meta = m6p_twin::recording::load_meta(&a.file)?;
+    let file = format!(
+        "{} (recorded scenario `{}`)",
+        a.file.display(),
+        meta.scenario_name
+    );
+    let scenario = m6p_twin::scenario::parse(&file, &meta.scenario_toml)?;
+    let loaded = exec::Loaded {
+        file,
+        text: meta.scenario_toml.clone(),
+        scenario,
+    };
+    let mut compiled = exec::compile_seeded(&loaded, Some(meta.seed));
+    if let Some(d) = meta.duration_ns {
+        compiled.opts.duration = Some(Duration::from_nanos(d));
+    }
+    if !compiled.opts.socketcan.is_empty() {
+        anyhow::bail!(
+            "this recording bridged a SocketCAN interface; replaying SocketCAN input is not supported yet"
+        );
+    }
+    // What outside programs sent (from the scenario's links or the command line's) is in
+    // the recording: feed it again in virtual time instead of opening sockets.
+    let mut input = recorded_kiss_input(&a.file)?;
+    if compiled.opts.has_outside_links() || !input.is_empty() {
+        // Each recorded connection with its link's settings (its addresses above all).
+        for r in &mut input {
+            let link = r.link.split_once('#').map_or(r.link.as_str(), |(l, _)| l);
+            // A hub's messages, even when the hub came from the command line.
+            if let Some(k) = compiled.opts.kiss_links.iter().find(|k| k.label() == link) {
+                r.cfg = k.cfg.clone();
+            }
+            if link.starts_with("zmq-hub ") {
+                r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
+            }
+            // A command-line link's configured addresses and transmit budget, which the
+            // scenario lacks.
+            if r.cfg.addrs.is_empty()
+                && let Some(addrs) = meta.link_addrs.get(link)
+            {
+                r.cfg.addrs.clone_from(addrs);
+            }
+            if let Some(&n) = meta.link_tx_budgets.get(link) {
+                r.cfg.tx_frames_per_s = Some(n);
+            }
+        }
+        // The nodes the recorded run's outside programs replaced, the command line's
+        // (`--kiss-addr`) included, which the scenario does not name.
+        compiled.opts.replaced.extend(meta.replaced.iter().copied());
+        compiled.opts.kiss_links.clear();
+        compiled.opts.clock = bus::ClockMode::Virtual;
+        compiled.opts.kiss_replay = input;
+        if compiled.opts.duration.is_none() {
+            anyhow::bail!("the recorded run had no fixed duration");
+        }
+    }
+    match a.test_knob.as_deref() {
+        None => {}
+        Some("fc-uptime-icd") => {
+            for n in compiled
+                .opts
+                .network
+                .nodes
+                .iter_mut()
+                .filter(|n| n.addr == 3)
+            {
+                n.uptime = csp::service::UptimeFormat::IcdMillisLe;
+            }
+        }
+        Some(k) => anyhow::bail!("unknown test knob `{k}`"),
+    }
+    // Without --record, a directory of its own (created exclusively, removed with all it
+    // holds), never a predictable name another program could plant a link at.
+    let scratch = match &a.record {
+        Some(_) => None,
+        None => Some(tempfile::tempdir().context("creating a temporary directory")?),
+    };
+    let path = match (&a.record, &scratch) {
+        (Some(p), _) => p.clone(),
+        (None, Some(d)) => d.path().join("replay.mcap"),
+        (None, None) => anyhow::bail!("no recording path"),
+    };
+    let rt = build_runtime_for(&compiled.opts)?;
+    let result = rt.block_on(exec::execute_replay(
+        &loaded,
+        compiled,
+        exec::RecordTo::new(&path),
+    ));
+    let d = result
+        .and_then(|(_, recorded)| recorded.transpose())
+        .and_then(|_| m6p_twin::recording::diff(&a.file, &path));
+    drop(scratch);
+    let d = d?;
+    println!("{d}");
+    Ok(d.is_identical())
+}

@@ -1,0 +1,383 @@
+//! `m6p-twin run`: run a scenario, with its outside links, recording and live view.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use bus::ClockMode;
+use m6p_twin::duration::parse_duration;
+use m6p_twin::exec;
+use m6p_twin::runtime::{SocketCanBus, build_runtime_for};
+
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// Scenario file (TOML) [default: the embedded scenarios/default.toml].
+    pub scenario: Option<PathBuf>,
+    /// Simulated duration, overriding the scenario's: 90, 90s, 10m, 2h.
+    #[arg(long, value_parser = parse_duration)]
+    pub duration: Option<Duration>,
+    /// Seed, overriding the scenario's.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Record the run to this MCAP file (overrides the scenario's `record.file`). Written
+    /// beside it and put in place when complete; a file already there is refused unless
+    /// --overwrite.
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
+    /// Replace a file already at the recording's name (once the new one is complete; never
+    /// the scenario itself).
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Follow the wall clock (needed by outside programs; implied by --kiss-* and --socketcan).
+    #[arg(long)]
+    pub realtime: bool,
+    /// With --realtime: simulated seconds per wall second.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Virtual time until WHEN, real time (at --speed) after it: a simulated time
+    /// ("13000s"), "first pass" or "first pass over STATION" (see `m6p-twin passes`).
+    /// Outside links are open from the start.
+    #[arg(long, value_name = "WHEN")]
+    pub realtime_from: Option<m6p_twin::clock::RealtimeFrom>,
+    /// With --realtime and no --duration: run until Ctrl-C instead of the scenario's duration.
+    #[arg(long)]
+    pub forever: bool,
+    /// Listen for outside CSP nodes speaking KISS over TCP (for example 127.0.0.1:52001).
+    #[arg(long = "kiss-listen", value_name = "ADDR")]
+    pub kiss_listen: Vec<SocketAddr>,
+    /// Connect to an outside KISS/TCP server, as the platform does in ICD 2.3.
+    #[arg(long = "kiss-connect", value_name = "ADDR")]
+    pub kiss_connect: Vec<SocketAddr>,
+    /// KISS on a pseudo-terminal linked at PATH, for a program using libcsp's usart driver
+    /// (`usart_init(PATH)`): no socat needed. The program may close and reopen it.
+    #[arg(long = "kiss-pty", value_name = "PATH")]
+    pub kiss_pty: Vec<PathBuf>,
+    /// Play libcsp 1.4's ZMQ hub on HOST (programs call csp_zmqhub_init(addr, "HOST")):
+    /// HOST or HOST:PUB_PORT:SUB_PORT [default ports: 6000 7000]. Any 127.0.0.x works.
+    #[arg(long = "zmq-hub", value_name = "HOST")]
+    pub zmq_hub: Vec<bus::zmq_hub::HubAddr>,
+    /// A CSP address behind the --kiss-listen, --kiss-connect, --kiss-pty or --zmq-hub
+    /// before it (repeat for more);
+    /// claimed when a program connects, and the only sources that link accepts. A link
+    /// without any learns them from the packets it receives. The address of a simulated
+    /// node (a payload, the FC, a ground station) replaces that node: it is not started.
+    #[arg(long = "kiss-addr", value_name = "ID")]
+    pub kiss_addr: Vec<u8>,
+    /// Connections each --kiss-listen serves at once; a new one closes the longest-idle
+    /// connection (logged).
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    pub kiss_max_connections: usize,
+    /// How long a --kiss-listen connection holding no address may go without a byte before
+    /// it is closed (60s; "off": never).
+    #[arg(long, value_name = "DURATION|off", default_value = "60s")]
+    pub kiss_idle_timeout: m6p_twin::scenario::IdleLimit,
+    /// At most N CAN frames a second from each connection of the command line's KISS links
+    /// on a CAN bus (a runaway program with a low address then leaves room to others).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub kiss_tx_budget: Option<u32>,
+    /// Apply libcsp 1.4's KISS receive limit (at most 248 data bytes) to the twin's receiver.
+    #[arg(long)]
+    pub libcsp14_kiss_limit: bool,
+    /// A node's text console (its UART, ICD 1.1): NODE=ADDR serves it over TCP (`nc 127.0.0.1
+    /// 5010`), NODE=PATH on a pseudo-terminal linked at PATH (`screen PATH`). Repeatable.
+    #[arg(long = "uart", value_name = "NODE=ADDR|PATH", value_parser = m6p_twin::runtime::UartLink::parse_arg)]
+    pub uart: Vec<m6p_twin::runtime::UartLink>,
+    /// Bridge a bus to a real SocketCAN interface: IFACE[:main|:payload] [default bus:
+    /// main]. Needs a build with --features socketcan (Linux).
+    #[arg(long = "socketcan", value_name = "IFACE[:main|:payload]", value_parser = SocketCanBus::parse_arg)]
+    pub socketcan: Vec<(String, SocketCanBus)>,
+    /// Serve the run live over the Foxglove WebSocket protocol on ADDR (IP:PORT or a port)
+    /// [default: 127.0.0.1:8765]; implies real time. Needs a build with --features live.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765", value_parser = parse_live_addr)]
+    pub live: Option<SocketAddr>,
+}
+
+/// `--live ADDR`: IP:PORT, or a port on 127.0.0.1.
+pub fn parse_live_addr(s: &str) -> Result<SocketAddr, String> {
+    if let Ok(port) = s.parse::<u16>() {
+        return Ok(SocketAddr::from(([127, 0, 0, 1], port)));
+    }
+    s.parse().map_err(|_| {
+        "expected IP:PORT or a port (a scenario file after a bare --live: write it first, \
+         or --live=127.0.0.1:8765)"
+            .to_owned()
+    })
+}
+
+/// The command line's KISS links, in order, each with the `--kiss-addr`s that follow it.
+pub fn cli_kiss_links(
+    m: &clap::ArgMatches,
+    a: &RunArgs,
+) -> anyhow::Result<Vec<m6p_twin::runtime::KissLink>> {
+    use m6p_twin::runtime::{KissLink, KissMode};
+    let at =
+        |id: &str| -> Vec<usize> { m.indices_of(id).map(Iterator::collect).unwrap_or_default() };
+    let mut links: Vec<(usize, KissLink)> = at("kiss_listen")
+        .into_iter()
+        .zip(&a.kiss_listen)
+        .map(|(i, &addr)| (i, KissLink::listen(addr)))
+        .chain(
+            at("kiss_connect")
+                .into_iter()
+                .zip(&a.kiss_connect)
+                .map(|(i, &addr)| (i, KissLink::connect(addr))),
+        )
+        .chain(
+            at("kiss_pty")
+                .into_iter()
+                .zip(&a.kiss_pty)
+                .map(|(i, p)| (i, KissLink::new(KissMode::Pty(p.clone())))),
+        )
+        .chain(
+            at("zmq_hub")
+                .into_iter()
+                .zip(&a.zmq_hub)
+                .map(|(i, &h)| (i, KissLink::new(KissMode::ZmqHub(h)))),
+        )
+        .collect();
+    links.sort_by_key(|(i, _)| *i);
+    for (i, &id) in at("kiss_addr").into_iter().zip(&a.kiss_addr) {
+        if id >= 31 {
+            anyhow::bail!("--kiss-addr {id}: not a unicast CSP address (0-30)");
+        }
+        let Some((_, link)) = links.iter_mut().rev().find(|(j, _)| *j < i) else {
+            anyhow::bail!(
+                "--kiss-addr {id} comes before any --kiss-listen, --kiss-connect, --kiss-pty or \
+                 --zmq-hub: it names an address of the link before it"
+            );
+        };
+        let first = link.cfg.addrs.first().copied();
+        // The hub's programs may sit on several segments.
+        if !matches!(link.mode, KissMode::ZmqHub(_))
+            && let Some(f) = first
+            && platform::addr::Segment::of(f) != platform::addr::Segment::of(id)
+        {
+            anyhow::bail!(
+                "--kiss-addr {f} and {id} for {}: a KISS link joins one segment (12-15 payload \
+                 bus, 16-20 ground, others main bus)",
+                link.label()
+            );
+        }
+        link.cfg.addrs.push(id);
+    }
+    Ok(links
+        .into_iter()
+        .map(|(_, mut l)| {
+            l.cfg.decoder.libcsp14_rx_limit |= a.libcsp14_kiss_limit;
+            l.cfg.limits.max_connections = a.kiss_max_connections.max(1);
+            l.cfg.limits.idle_timeout = a.kiss_idle_timeout.duration();
+            l.cfg.tx_frames_per_s = a.kiss_tx_budget;
+            l
+        })
+        .collect())
+}
+
+pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::Result<bool> {
+    let loaded = match &a.scenario {
+        Some(p) => exec::load(p)?,
+        None => exec::load_default()?,
+    };
+    let mut compiled = exec::compile_seeded(&loaded, a.seed);
+    let opts = &mut compiled.opts;
+    if let Some(d) = a.duration {
+        opts.duration = Some(d);
+    }
+    add_links(opts, cli_links, &a)?;
+    if cfg!(not(feature = "live")) && a.live.is_some() {
+        anyhow::bail!(
+            "--live needs the Foxglove WebSocket server, which this build leaves out: \
+             rebuild with --features live (cargo build -p m6p-twin --features live)"
+        );
+    }
+    choose_clock(opts, &a, &loaded.scenario)?;
+    let name = loaded.name();
+    eprintln!(
+        "running scenario `{name}` ({}), seed {}, {}",
+        loaded.file,
+        opts.seed,
+        match opts.duration {
+            Some(d) => format!("{} simulated", m6p_twin::duration::format_duration(d)),
+            None => "until Ctrl-C".into(),
+        }
+    );
+    let record = a
+        .record
+        .clone()
+        .or_else(|| loaded.scenario.record.file.as_ref().map(PathBuf::from));
+    let rt = build_runtime_for(opts)?;
+    #[cfg(feature = "live")]
+    let mut live = match a.live {
+        Some(addr) => {
+            let mut l = start_live(addr, compiled.opts.epoch_unix_s)?;
+            l.set_icd(compiled.opts.icd_map());
+            Some(l)
+        }
+        None => None,
+    };
+    #[cfg(feature = "live")]
+    let mut tap = |ev: &m6p_twin::events::RunEvent| {
+        if let Some(l) = live.as_mut() {
+            l.publish(ev);
+        }
+    };
+    #[cfg(not(feature = "live"))]
+    let mut tap = |_: &m6p_twin::events::RunEvent| {};
+    let record_to = record.as_deref().map(|path| exec::RecordTo {
+        path,
+        existing: if a.overwrite {
+            m6p_twin::record::Existing::Replace
+        } else {
+            m6p_twin::record::Existing::Refuse
+        },
+    });
+    let (outcome, stats) =
+        rt.block_on(exec::execute_with(&loaded, compiled, record_to, &mut tap))?;
+    #[cfg(feature = "live")]
+    if let Some(l) = live.take() {
+        eprintln!("live view: {} messages published; stopping", l.messages());
+        l.finish();
+    }
+    print!("{}", outcome.report.table());
+    print!("{}", outcome.verdict_table());
+    // The report first, whatever became of the recording: a failed recording fails the run.
+    let recorded = match (record, stats) {
+        (Some(path), Some(Ok(stats))) => {
+            println!(
+                "\nrecorded {} messages in {} chunks to {} ({} bytes)",
+                stats.messages,
+                stats.chunks,
+                path.display(),
+                stats.bytes
+            );
+            true
+        }
+        (_, Some(Err(e))) => {
+            eprintln!("error: the recording failed: {e:#}");
+            false
+        }
+        _ => true,
+    };
+    Ok(outcome.passed() && recorded)
+}
+
+/// The command line's outside links into `opts`: KISS links (and the nodes their
+/// addresses replace), SocketCAN bridges, node consoles.
+fn add_links(
+    opts: &mut m6p_twin::runtime::RunOptions,
+    cli_links: Vec<m6p_twin::runtime::KissLink>,
+    a: &RunArgs,
+) -> anyhow::Result<()> {
+    let replaced = m6p_twin::outside::cli_replaces(&opts.network, cli_links.iter().map(|l| &l.cfg))
+        .map_err(|e| anyhow::anyhow!(e))?;
+    for (addr, name) in replaced {
+        if opts.replaced.insert(addr) {
+            eprintln!(
+                "note: --kiss-addr {addr}: the link's program takes {name}'s place (not started)"
+            );
+        }
+    }
+    opts.kiss_links.extend(cli_links);
+    opts.socketcan.extend(a.socketcan.iter().cloned());
+    for u in &a.uart {
+        if !opts
+            .network
+            .nodes
+            .iter()
+            .any(|n| n.name.eq_ignore_ascii_case(&u.node))
+        {
+            let names: Vec<&str> = opts.network.nodes.iter().map(|n| n.name.as_str()).collect();
+            anyhow::bail!(
+                "--uart {}: no node {} (nodes: {})",
+                u.label(),
+                u.node,
+                names.join(", ")
+            );
+        }
+    }
+    opts.uart.extend(a.uart.iter().cloned());
+    Ok(())
+}
+
+/// The run's clock from the scenario's and the command line's: virtual, real time, or
+/// virtual then real time; and whether it runs until Ctrl-C.
+fn choose_clock(
+    opts: &mut m6p_twin::runtime::RunOptions,
+    a: &RunArgs,
+    scenario: &m6p_twin::scenario::Scenario,
+) -> anyhow::Result<()> {
+    if let Some(from) = &a.realtime_from {
+        let at = m6p_twin::clock::resolve(scenario, opts.epoch_unix_s, from)
+            .map_err(|e| anyhow::anyhow!("--realtime-from: {e}"))?;
+        let speed = match opts.clock {
+            ClockMode::Realtime { speed } | ClockMode::VirtualThenRealtime { speed, .. } => speed,
+            ClockMode::Virtual => a.speed,
+        };
+        opts.clock = ClockMode::VirtualThenRealtime { from: at, speed };
+    }
+    if let ClockMode::VirtualThenRealtime { from, speed } = &mut opts.clock {
+        if a.speed != 1.0 {
+            *speed = a.speed;
+        }
+        eprintln!(
+            "note: virtual time until {from}, then real time at {speed}x simulated per wall second"
+        );
+    } else if opts.has_outside_links() && !a.realtime && opts.clock == ClockMode::Virtual {
+        eprintln!("note: outside links need the wall clock: running in real time");
+    } else if a.live.is_some() && !a.realtime && opts.clock == ClockMode::Virtual {
+        eprintln!(
+            "note: the live view follows the wall clock: running in real time (--speed sets the pace)"
+        );
+    }
+    if matches!(opts.clock, ClockMode::VirtualThenRealtime { .. }) {
+        if a.forever && a.duration.is_none() {
+            opts.duration = None;
+        }
+    } else if a.realtime || opts.has_outside_links() || a.live.is_some() {
+        let speed = match opts.clock {
+            ClockMode::Realtime { speed } if !a.realtime => speed,
+            _ => a.speed,
+        };
+        opts.clock = ClockMode::Realtime { speed };
+        if a.forever && a.duration.is_none() {
+            opts.duration = None;
+        }
+    } else if a.forever {
+        eprintln!(
+            "note: --forever needs the wall clock (--realtime); running the scenario's duration"
+        );
+    }
+    Ok(())
+}
+
+/// Start the live view on `addr` for a run starting at `epoch_unix_s`.
+#[cfg(feature = "live")]
+pub fn start_live(
+    addr: SocketAddr,
+    epoch_unix_s: u64,
+) -> anyhow::Result<m6p_twin::live::LiveServer> {
+    if !addr.ip().is_loopback() {
+        eprintln!(
+            "warning: the live view on {addr} is reachable from other machines, without \
+             authentication or encryption"
+        );
+    }
+    use anyhow::Context as _;
+    let start_ns = epoch_unix_s
+        .checked_mul(1_000_000_000)
+        .context("the scenario's start epoch is out of range")?;
+    let live = m6p_twin::live::LiveServer::start(addr, start_ns)?;
+    eprintln!(
+        "live view: ws://{} (Foxglove: Open connection, Foxglove WebSocket)",
+        live.addr()
+    );
+    Ok(live)
+}
+
+/// `m6p-twin run` with the command line's KISS links in the order they were given.
+pub fn cmd_run_from(matches: &clap::ArgMatches, a: RunArgs) -> anyhow::Result<bool> {
+    let m = matches
+        .subcommand_matches("run")
+        .ok_or_else(|| anyhow::anyhow!("no run arguments"))?;
+    let links = cli_kiss_links(m, &a)?;
+    cmd_run(a, links)
+}
