@@ -1,9 +1,9 @@
 //! Probes for what some tests need outside Rust, so that a test whose prerequisite is
 //! missing is compiled as ignored with the reason instead of passing without checking:
 //!
-//! - the User-Mode Linux probe of `crates/bus/build.rs`, shared rather than copied: emits
+//! - the User-Mode Linux probe of `crates/links/build.rs`, shared rather than copied: emits
 //!   `cfg(uml_available)` for `tests/socketcan_uml.rs` under the same conditions as for the
-//!   bus crate's `tests/vcan_uml.rs` (see `tools/uml/README.md`);
+//!   links crate's `tests/vcan_uml.rs` (see `tools/uml/README.md`);
 //! - `cfg(python_mcap)`: `python3` can import the `mcap` and `mcap_protobuf` packages (the
 //!   generic reader and Google's protobuf decoder the recording tests decode with). Under
 //!   `CI` it is always set, so a missing package fails those tests there (`.ci/run`
@@ -27,11 +27,11 @@
 //!   cachegrind (`tests/input_bounds.rs`: checking is linear in the commands). Under `CI`
 //!   it is always set (`.ci/run` installs it).
 
-#[path = "../bus/build.rs"]
+#[path = "../links/build.rs"]
 mod uml_probe;
 
 fn main() {
-    println!("cargo::rerun-if-changed=../bus/build.rs");
+    println!("cargo::rerun-if-changed=../links/build.rs");
     uml_probe::main();
     python_probe();
     pytest_probe();

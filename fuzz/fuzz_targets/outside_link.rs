@@ -1,5 +1,5 @@
 //! `outside_link`: the receive path of a link to a program outside the twin (the core of
-//! `bus::kiss_tcp`, which KISS/TCP, the KISS pty and the ZMQ hub share: framing, claims,
+//! `links::kiss_tcp`, which KISS/TCP, the KISS pty and the ZMQ hub share: framing, claims,
 //! refusals, the CAN transmit queue and budget) fed one connection's bytes in chunks (the
 //! hub: one message a chunk, empty ones included), with 0-2 configured addresses, libcsp
 //! 1.4's receive limit on or off, a transmit budget set or not (set on the endpoint only:
@@ -24,15 +24,15 @@ use std::sync::{Arc, Mutex};
 use bus::can::{CanBus, CanBusConfig};
 use bus::clock::{Clock, ClockMode};
 use bus::inbox::inbox;
-use bus::kiss_tcp::{
-    Connection, FrameSink, Framing, KissLinkConfig, KissLog, LinkInput, SharedStats, serve_link,
-};
 use bus::net::{PacketNet, PacketNetConfig};
 use bus::outside::{LinkId, OutsideEndpoint, OutsideError, Segments};
 use csp::SimTime;
 use csp::kiss::{Decoder, DecoderConfig, KissDrop, KissEvent};
 use csp::zmqhub::HubDrop;
 use libfuzzer_sys::fuzz_target;
+use links::kiss_tcp::{
+    Connection, FrameSink, Framing, KissLinkConfig, KissLog, LinkInput, SharedStats, serve_link,
+};
 use m6p_twin_fuzz::link_input;
 
 /// Collects what the link writes towards the outside program.

@@ -1,50 +1,56 @@
 """CspNode over an in-memory link: requests, servers, pings, CRC, timeouts."""
+
+from __future__ import annotations
+
 import queue
+import threading
+import time
+from collections.abc import Iterator
 
 import pytest
 
-from m6p.csp import FLAG_CRC32, Packet
+from m6p.csp import FLAG_CRC32, Header, Packet
+from m6p.links import LinkClosed
 from m6p.node import CspNode, CspTimeout
 
+Pair = tuple[CspNode, CspNode]
 
-class Wire:
-    """Two ends of an in-memory link."""
 
-    def __init__(self):
-        self.a, self.b = queue.Queue(), queue.Queue()
+class End:
+    """One end of an in-memory link (an m6p.links.Link)."""
 
-    def end(self, inbox, outbox):
-        class End:
-            def send(self, p):
-                outbox.put(p)
+    def __init__(self, inbox: queue.Queue[Packet], outbox: queue.Queue[Packet]) -> None:
+        self.inbox, self.outbox = inbox, outbox
 
-            def recv(self, timeout_s):
-                try:
-                    return inbox.get(timeout=timeout_s)
-                except queue.Empty:
-                    return None
+    def send(self, p: Packet) -> None:
+        self.outbox.put(p)
 
-            def close(self):
-                pass
+    def recv(self, timeout_s: float) -> Packet | None:
+        try:
+            return self.inbox.get(timeout=timeout_s)
+        except queue.Empty:
+            return None
 
-        return End()
+    def close(self) -> None:
+        pass
 
 
 @pytest.fixture
-def pair():
-    w = Wire()
-    a = CspNode(w.end(w.a, w.b), 17, timeout_s=1.0)
-    b = CspNode(w.end(w.b, w.a), 12, timeout_s=1.0)
+def pair() -> Iterator[Pair]:
+    a_in: queue.Queue[Packet] = queue.Queue()
+    b_in: queue.Queue[Packet] = queue.Queue()
+    a = CspNode(End(a_in, b_in), 17, timeout_s=1.0)
+    b = CspNode(End(b_in, a_in), 12, timeout_s=1.0)
     yield a, b
     a.close()
     b.close()
 
 
-def test_a_request_gets_the_servers_reply_and_pings_are_echoed(pair):
+def test_a_request_gets_the_servers_reply_and_pings_are_echoed(pair: Pair) -> None:
     ground, payload = pair
-    seen = []
+    seen: list[Header] = []
 
-    def handler(p: Packet):
+    def handler(p: Packet) -> bytes:
         seen.append(p.header)
         return b"\x01\x01" + p.data[1:]
 
@@ -55,7 +61,7 @@ def test_a_request_gets_the_servers_reply_and_pings_are_echoed(pair):
     assert ground.ping(12, size=100) < 1.0
 
 
-def test_a_crc_request_gets_a_crc_reply_and_nobody_answers_an_unbound_port(pair):
+def test_a_crc_request_gets_a_crc_reply_and_nobody_answers_an_unbound_port(pair: Pair) -> None:
     ground, payload = pair
     payload.serve(10, lambda p: p.data)
     assert ground.request(12, 10, b"abc", flags=FLAG_CRC32) == b"abc"
@@ -64,11 +70,11 @@ def test_a_crc_request_gets_a_crc_reply_and_nobody_answers_an_unbound_port(pair)
     assert payload.unhandled == 1
 
 
-def test_a_handlers_exception_is_counted_and_the_node_goes_on(pair):
+def test_a_handlers_exception_is_counted_and_the_node_goes_on(pair: Pair) -> None:
     ground, payload = pair
-    calls = []
+    calls: list[Packet] = []
 
-    def handler(p):
+    def handler(p: Packet) -> bytes:
         calls.append(p)
         if len(calls) == 1:
             raise RuntimeError("a bug in the payload")
@@ -81,36 +87,42 @@ def test_a_handlers_exception_is_counted_and_the_node_goes_on(pair):
     assert payload.handler_errors == 1
 
 
-def test_icd_commands_by_name_between_two_python_nodes(pair):
+def test_icd_commands_by_name_between_two_python_nodes(pair: Pair) -> None:
     ground, fc = pair
     tmgen = fc.icd.command("FC.TMGEN")
-    fc.serve(10, lambda p: tmgen.reply_bytes(
-        rtc_timestamp=1, uptime_s=2, global_on_time_s=3, current_mode="nadir",
-        current_state=0, mcu_temp_c=-5, reset_cause=0))
+    fc.serve(
+        10,
+        lambda p: tmgen.reply_bytes(
+            rtc_timestamp=1,
+            uptime_s=2,
+            global_on_time_s=3,
+            current_mode="nadir",
+            current_state=0,
+            mcu_temp_c=-5,
+            reset_cause=0,
+        ),
+    )
     r = ground.command("FC.TMGEN", to=12)
     assert r.ok and r.name("current_mode") == "nadir" and r["mcu_temp_c"] == -5
 
 
-def test_a_reply_must_come_from_where_the_request_went_and_close_releases_waiters(pair):
+def test_a_reply_must_come_from_where_the_request_went_and_close_releases_waiters(
+    pair: Pair,
+) -> None:
     ground, payload = pair
-    import threading
-
-    from m6p.csp import Header
-    from m6p.links import LinkClosed
 
     # A packet to the request's port from another address is not its reply.
-    def impostor(p):
+    def impostor(p: Packet) -> None:
         payload.link.send(Packet(Header(2, 13, 17, p.header.sport, 10), b"not yours"))
-        return None
 
     payload.serve(10, impostor)
     with pytest.raises(CspTimeout):
         ground.request(12, 10, b"x", timeout_s=0.3)
     # A request waiting when the node closes ends at once.
     payload.serve(10, lambda p: None)
-    result = []
+    result: list[LinkClosed] = []
 
-    def ask():
+    def ask() -> None:
         try:
             ground.request(12, 10, b"y", timeout_s=10.0)
         except LinkClosed as e:
@@ -118,8 +130,6 @@ def test_a_reply_must_come_from_where_the_request_went_and_close_releases_waiter
 
     t = threading.Thread(target=ask)
     t.start()
-    import time
-
     time.sleep(0.2)
     ground.close()
     t.join(timeout=2.0)

@@ -1057,30 +1057,8 @@ impl State {
             if !self.bus_off_since.is_empty() {
                 self.idle_until(start);
             }
-            let (ready, frame) = match w.babble {
-                None => match self.ports[winner].queue.pop_front() {
-                    Some(x) => x,
-                    None => return,
-                },
-                Some(fid) => {
-                    let period = match self.can_faults.get(&fid) {
-                        Some(CanFault::Babble { period, .. }) => *period,
-                        _ => None,
-                    };
-                    let Some(frame) = CanFrame::new(w.id, &[0; 8]) else {
-                        return;
-                    };
-                    let next = match period {
-                        Some(p) => start + p,
-                        // Back to back: ready again as the bus frees.
-                        None => {
-                            let n = self.frame_bits(&frame);
-                            start + self.bits(u64::from(n))
-                        }
-                    };
-                    self.babble_next.insert(fid, next);
-                    (start, frame)
-                }
+            let Some((ready, frame)) = self.take_winner(w, start) else {
+                return;
             };
             let requeue = w.babble.is_none();
             let bits = self.frame_bits(&frame);
@@ -1091,28 +1069,7 @@ impl State {
                 continue;
             }
             // Bit errors: the chance that at least one of the frame's bits is wrong.
-            let name = self.ports[winner].stats.name.as_str();
-            let survive: f64 = if self.can_faults.is_empty() {
-                1.0
-            } else {
-                self.can_faults
-                    .values()
-                    .map(|f| match f {
-                        CanFault::BitErrors {
-                            ber,
-                            node,
-                            from,
-                            until,
-                        } if start >= *from
-                            && until.is_none_or(|u| start < u)
-                            && node.as_deref().is_none_or(|n| n == name) =>
-                        {
-                            (1.0 - ber.clamp(0.0, 1.0)).powi(bits as i32)
-                        }
-                        _ => 1.0,
-                    })
-                    .product()
-            };
+            let survive = self.bit_error_survival(winner, start, bits);
             if survive < 1.0
                 && let Fate::Corrupt { bit } = self.rng.fate(&Impairments {
                     corrupt_prob: 1.0 - survive,
@@ -1122,54 +1079,121 @@ impl State {
                 self.error_frame(winner, (ready, frame), start, bits, bit, requeue);
                 continue;
             }
-            let end = start + self.bits(u64::from(bits));
-            self.busy_until = end;
-            self.stats.frames += 1;
-            self.stats.bytes += u64::from(frame.dlc);
-            self.stats.bits += u64::from(bits);
-            self.stats.busy += end - start;
-            let p = &mut self.ports[winner];
-            if requeue && let Some(b) = p.budget.as_mut() {
-                if b.allowed() > ready {
-                    p.stats.budget_held += 1;
-                }
-                b.spend(start);
-            }
-            let port = &mut p.stats;
-            port.frames_tx += 1;
-            port.babbled += u64::from(!requeue);
-            port.bytes_tx += u64::from(frame.dlc);
-            if self.errors_seen {
-                // A good frame: one off the transmitter's TEC and every receiver's REC.
-                for (i, p) in self.ports.iter_mut().enumerate() {
-                    let c = &mut p.stats;
-                    if i == winner {
-                        c.tec = c.tec.saturating_sub(1);
-                    } else if c.state != ErrorState::BusOff {
-                        c.rec = if c.rec > 127 {
-                            120
-                        } else {
-                            c.rec.saturating_sub(1)
-                        };
+            self.transmit(winner, (ready, frame), start, bits, requeue, fate);
+        }
+    }
+
+    /// The winner's frame and when it was ready: its queue's head, or a babble (the next one due).
+    fn take_winner(&mut self, w: Candidate, start: SimTime) -> Option<(SimTime, CanFrame)> {
+        match w.babble {
+            None => self.ports[w.port].queue.pop_front(),
+            Some(fid) => {
+                let period = match self.can_faults.get(&fid) {
+                    Some(CanFault::Babble { period, .. }) => *period,
+                    _ => None,
+                };
+                let frame = CanFrame::new(w.id, &[0; 8])?;
+                let next = match period {
+                    Some(p) => start + p,
+                    // Back to back: ready again as the bus frees.
+                    None => {
+                        let n = self.frame_bits(&frame);
+                        start + self.bits(u64::from(n))
                     }
-                }
-                for i in 0..self.ports.len() {
-                    self.update_state(i, end);
-                }
+                };
+                self.babble_next.insert(fid, next);
+                Some((start, frame))
             }
-            let at = end + self.impair.delay;
-            self.seq += 1;
-            self.in_flight_insert(
-                (at, self.seq),
-                Delivery::Frame {
-                    from: winner,
-                    frame,
-                    fate,
-                },
-            );
-            if !self.bus_off_since.is_empty() {
-                self.recessive(1, end, None);
+        }
+    }
+
+    /// The chance that the bit-error faults active at `start` spare all `bits` of the frame.
+    fn bit_error_survival(&self, winner: usize, start: SimTime, bits: u32) -> f64 {
+        let name = self.ports[winner].stats.name.as_str();
+        if self.can_faults.is_empty() {
+            1.0
+        } else {
+            self.can_faults
+                .values()
+                .map(|f| match f {
+                    CanFault::BitErrors {
+                        ber,
+                        node,
+                        from,
+                        until,
+                    } if start >= *from
+                        && until.is_none_or(|u| start < u)
+                        && node.as_deref().is_none_or(|n| n == name) =>
+                    {
+                        (1.0 - ber.clamp(0.0, 1.0)).powi(bits as i32)
+                    }
+                    _ => 1.0,
+                })
+                .product()
+        }
+    }
+
+    /// The frame crosses the bus intact from `start`: counted, budget spent, sent on its way.
+    fn transmit(
+        &mut self,
+        winner: usize,
+        (ready, frame): (SimTime, CanFrame),
+        start: SimTime,
+        bits: u32,
+        requeue: bool,
+        fate: Fate,
+    ) {
+        let end = start + self.bits(u64::from(bits));
+        self.busy_until = end;
+        self.stats.frames += 1;
+        self.stats.bytes += u64::from(frame.dlc);
+        self.stats.bits += u64::from(bits);
+        self.stats.busy += end - start;
+        let p = &mut self.ports[winner];
+        if requeue && let Some(b) = p.budget.as_mut() {
+            if b.allowed() > ready {
+                p.stats.budget_held += 1;
             }
+            b.spend(start);
+        }
+        let port = &mut p.stats;
+        port.frames_tx += 1;
+        port.babbled += u64::from(!requeue);
+        port.bytes_tx += u64::from(frame.dlc);
+        if self.errors_seen {
+            self.good_frame_counters(winner, end);
+        }
+        let at = end + self.impair.delay;
+        self.seq += 1;
+        self.in_flight_insert(
+            (at, self.seq),
+            Delivery::Frame {
+                from: winner,
+                frame,
+                fate,
+            },
+        );
+        if !self.bus_off_since.is_empty() {
+            self.recessive(1, end, None);
+        }
+    }
+
+    /// A good frame: one off the transmitter's TEC and every receiver's REC, states updated.
+    fn good_frame_counters(&mut self, winner: usize, end: SimTime) {
+        for (i, p) in self.ports.iter_mut().enumerate() {
+            let c = &mut p.stats;
+            if i == winner {
+                c.tec = c.tec.saturating_sub(1);
+            } else if c.state != ErrorState::BusOff {
+                c.rec = if c.rec > 127 {
+                    120
+                } else {
+                    c.rec.saturating_sub(1)
+                };
+            }
+        }
+        for i in 0..self.ports.len() {
+            self.update_state(i, end);
         }
     }
 

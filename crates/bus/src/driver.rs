@@ -56,7 +56,7 @@ pub enum NodeCtl {
     /// Fault `id` acts on the node's core (`Some`) or is lifted ([`Host::fault`]); applied
     /// whether or not the node is powered (its clock keeps its error).
     Fault(u32, Option<csp::node::NodeFault>),
-    /// A console line ([`crate::console`]): run at the command's instant when the node is
+    /// A console line (`m6p_links::console`): run at the command's instant when the node is
     /// powered and not hung, and answered; otherwise answered `None`.
     Console(ConsoleRequest),
     /// Stop the task and hand the host back.
@@ -337,7 +337,7 @@ fn flush<A: App>(
     }
 }
 
-/// One console line on its way to a node ([`crate::console`]), with the way back for the
+/// One console line on its way to a node (`m6p_links::console`), with the way back for the
 /// answer.
 #[derive(Clone)]
 pub struct ConsoleRequest(std::sync::Arc<ConsoleInner>);

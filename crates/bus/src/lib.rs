@@ -4,30 +4,22 @@
 //! - [`can`]: an in-process CAN segment (bit timing, arbitration, acceptance, impairments).
 //! - [`net`]: a packet network (the ground segment and the UHF air channel).
 //! - [`driver`]: the task that runs one node.
-//! - [`outside`], [`kiss_tcp`], [`kiss_pty`]: programs outside the twin over KISS (TCP or a
-//!   pseudo-terminal).
-//! - [`zmq_hub`]: libcsp 1.4's ZMQ hub, played by the twin.
+//! - [`outside`]: what a link to a program outside the twin attaches to (segments,
+//!   endpoints, counters); the links themselves (KISS over TCP and ptys, the ZMQ hub,
+//!   SocketCAN, node consoles) are the `m6p-links` crate's.
 //! - [`gate`]: what the twin lets across an outside link (its faults and power).
-//! - `socketcan` (cargo feature `socketcan`, Linux): a bridge to a real CAN interface.
 
 pub mod can;
 pub mod clock;
-pub mod console;
 pub mod driver;
 pub mod gate;
 pub mod impair;
 pub mod inbox;
-#[cfg(unix)]
-pub mod kiss_pty;
-pub mod kiss_tcp;
 pub mod net;
 pub mod outside;
 pub mod pace;
 mod reserve;
-#[cfg(all(feature = "socketcan", target_os = "linux"))]
-pub mod socketcan;
 pub mod trace;
-pub mod zmq_hub;
 
 pub use can::{CanBus, CanBusConfig, CanPort};
 pub use clock::{Clock, ClockMode};

@@ -42,8 +42,8 @@ impl Segments {
 }
 
 /// Counters of a bridge between a CAN segment and a real CAN interface
-/// (`socketcan::bridge`, cargo feature `socketcan`). Defined here, outside the feature, so
-/// that run reports can carry them whatever the build.
+/// (`m6p_links::socketcan::bridge`, cargo feature `socketcan`). Defined here, outside the
+/// feature, so that run reports can carry them whatever the build.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct BridgeStats {
     /// Extended data frames read from the interface (put on the segment unless the link's

@@ -904,19 +904,7 @@ pub fn range_disagreements(port: &Port, accepts: impl Fn(u8, &[u8]) -> bool) -> 
             out.push(format!("{}: no example request", c.name));
             continue;
         }
-        let mut decoded = Vec::new();
-        for e in c.examples {
-            if !accepts(c.id, e) {
-                out.push(format!("{}: example {e:02x?} is refused", c.name));
-            }
-            match c.request.decode(e) {
-                Some((d, rest)) => decoded.push((
-                    d.into_iter().map(|x| x.value).collect::<Vec<_>>(),
-                    rest.unwrap_or_default(),
-                )),
-                None => out.push(format!("{}: example {e:02x?} has the wrong size", c.name)),
-            }
-        }
+        let decoded = decoded_examples(c, &accepts, &mut out);
         for (i, (path, f)) in leaves(fields).into_iter().enumerate() {
             let Some((lo, hi)) = f.range else {
                 continue;
@@ -986,34 +974,68 @@ pub fn range_disagreements(port: &Port, accepts: impl Fn(u8, &[u8]) -> bool) -> 
             let Some(base) = decoded.first() else {
                 continue;
             };
-            let mut head = encode(fields, &base.0).unwrap_or_default();
-            let at = head.len();
-            for (n, want) in [(t.min, true), (t.max, true), (t.max + 1, false)] {
-                head.truncate(at);
-                head.resize(at + n, b'x');
-                if accepts(c.id, &head) != want {
-                    out.push(format!(
-                        "{}.{}: {n} bytes {}",
-                        c.name,
-                        t.name,
-                        if want { "refused" } else { "accepted" }
-                    ));
-                }
-            }
-            if t.min > 0 {
-                head.truncate(at + t.min - 1);
-                if accepts(c.id, &head) {
-                    out.push(format!(
-                        "{}.{}: {} bytes accepted",
-                        c.name,
-                        t.name,
-                        t.min - 1
-                    ));
-                }
-            }
+            tail_disagreements(c, fields, t, base, &accepts, &mut out);
         }
     }
     out
+}
+
+/// The examples, each checked against the parser: the bases the range checks vary a field of.
+fn decoded_examples(
+    c: &Command,
+    accepts: &impl Fn(u8, &[u8]) -> bool,
+    out: &mut Vec<String>,
+) -> Vec<(Vec<Value>, Vec<u8>)> {
+    let mut decoded = Vec::new();
+    for e in c.examples {
+        if !accepts(c.id, e) {
+            out.push(format!("{}: example {e:02x?} is refused", c.name));
+        }
+        match c.request.decode(e) {
+            Some((d, rest)) => decoded.push((
+                d.into_iter().map(|x| x.value).collect::<Vec<_>>(),
+                rest.unwrap_or_default(),
+            )),
+            None => out.push(format!("{}: example {e:02x?} has the wrong size", c.name)),
+        }
+    }
+    decoded
+}
+
+/// A variable tail's length limits against the parser, on the first example's head.
+fn tail_disagreements(
+    c: &Command,
+    fields: &'static [Field],
+    t: Tail,
+    base: &(Vec<Value>, Vec<u8>),
+    accepts: &impl Fn(u8, &[u8]) -> bool,
+    out: &mut Vec<String>,
+) {
+    let mut head = encode(fields, &base.0).unwrap_or_default();
+    let at = head.len();
+    for (n, want) in [(t.min, true), (t.max, true), (t.max + 1, false)] {
+        head.truncate(at);
+        head.resize(at + n, b'x');
+        if accepts(c.id, &head) != want {
+            out.push(format!(
+                "{}.{}: {n} bytes {}",
+                c.name,
+                t.name,
+                if want { "refused" } else { "accepted" }
+            ));
+        }
+    }
+    if t.min > 0 {
+        head.truncate(at + t.min - 1);
+        if accepts(c.id, &head) {
+            out.push(format!(
+                "{}.{}: {} bytes accepted",
+                c.name,
+                t.name,
+                t.min - 1
+            ));
+        }
+    }
 }
 
 #[cfg(test)]

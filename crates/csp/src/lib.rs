@@ -17,6 +17,7 @@ pub mod cfp;
 pub mod client;
 pub mod console;
 pub mod crc32;
+pub mod drop;
 pub mod header;
 pub mod icd;
 pub mod kiss;

@@ -32,6 +32,7 @@ use std::fmt;
 use std::time::Duration;
 
 use crate::cfp::{self as cfp, CanFrame, CfpDrop, Fragmenter, Reassembler, ReassemblerConfig};
+pub use crate::drop::{DropCause, DropReason};
 use crate::header::{BROADCAST, EPHEMERAL_PORT_MIN, MAX_PORT, flags};
 use crate::router::{IfaceId, Route, RoutingTable};
 use crate::service::{self, ServiceAction, ServiceConfig};
@@ -205,7 +206,7 @@ pub struct NodeCounters {
     /// Platform-port requests refused (malformed, out of range, or not for this source).
     pub platform_refused: u64,
     /// Dropped packets and frames by reason.
-    pub drops: BTreeMap<&'static str, u64>,
+    pub drops: BTreeMap<DropReason, u64>,
 }
 
 impl NodeCounters {
@@ -213,7 +214,7 @@ impl NodeCounters {
     pub fn total_drops(&self) -> u64 {
         self.drops.values().sum()
     }
-    fn drop(&mut self, reason: &'static str) {
+    fn drop(&mut self, reason: DropReason) {
         *self.drops.entry(reason).or_default() += 1;
     }
 }
@@ -280,8 +281,9 @@ pub enum NodeEvent {
     Drop {
         /// When.
         t: SimTime,
-        /// The reason (`no route`, `crc32`, `cfp`, `pc buffer-full`, ...).
-        reason: std::borrow::Cow<'static, str>,
+        /// Why: the node's CSP layer (`no route`, `crc32`, `cfp`, ...) or its application
+        /// (`pc buffer-full`, ...).
+        reason: DropCause,
         /// What was dropped.
         detail: String,
         /// The packet, when a whole CSP packet was dropped by the node (for accounting).
@@ -316,11 +318,7 @@ impl NodeEvent {
         }
     }
     /// Something an application dropped at `t` (it counts it itself).
-    pub fn dropped(
-        t: SimTime,
-        reason: impl Into<std::borrow::Cow<'static, str>>,
-        detail: String,
-    ) -> Self {
+    pub fn dropped(t: SimTime, reason: impl Into<DropCause>, detail: String) -> Self {
         NodeEvent::Drop {
             t,
             reason: reason.into(),
@@ -632,7 +630,7 @@ impl Node {
     /// A CAN frame arrived on CAN interface `iface` (already accepted by its CFP dst).
     pub fn handle_frame(&mut self, iface: IfaceId, frame: &CanFrame, now: SimTime) {
         let Some(Some(reasm)) = self.reasm.get_mut(iface) else {
-            self.note_drop(now, "frame on non-CAN iface", String::new());
+            self.note_drop(now, DropReason::FrameOnNonCanIface, String::new());
             return;
         };
         match reasm.handle(frame, now) {
@@ -643,10 +641,10 @@ impl Node {
                 let refused = matches!(reason, CfpDrop::NoBufferFree | CfpDrop::LengthExceedsMtu);
                 match (refused, cfp::begin_fields(frame)) {
                     (true, Some((header, data_len))) => {
-                        self.counters.drop("cfp");
+                        self.counters.drop(DropReason::Cfp);
                         self.push_event(NodeEvent::Drop {
                             t: now,
-                            reason: "cfp".into(),
+                            reason: DropReason::Cfp.into(),
                             detail,
                             packet: Some(DroppedPacket {
                                 header,
@@ -655,7 +653,7 @@ impl Node {
                             }),
                         });
                     }
-                    _ => self.note_drop(now, "cfp", detail),
+                    _ => self.note_drop(now, DropReason::Cfp, detail),
                 }
             }
             None => {}
@@ -675,14 +673,18 @@ impl Node {
             return;
         }
         match self.cfg.routes.lookup(dst) {
-            None => self.note_drop(now, "no route", packet.header.to_string()),
+            None => self.note_drop(now, DropReason::NoRoute, packet.header.to_string()),
             Some(route) if route.iface == iface => {
                 // csp_route_work: never loop a packet back out of the interface it came in on.
-                self.note_drop(now, "same iface", packet.header.to_string())
+                self.note_drop(now, DropReason::SameIface, packet.header.to_string())
             }
             Some(route) => {
                 if let Err(e) = self.transmit(route, &packet) {
-                    self.note_drop(now, "forward failed", format!("{}: {e}", packet.header));
+                    self.note_drop(
+                        now,
+                        DropReason::ForwardFailed,
+                        format!("{}: {e}", packet.header),
+                    );
                 } else {
                     self.counters.forwarded += 1;
                 }
@@ -694,7 +696,7 @@ impl Node {
         let dport = packet.header.dport;
         if dport == self.cfg.own_port() {
             // An answer to a packet this node sent on its own: nobody waits for one.
-            self.note_drop(now, "own port", packet.header.to_string());
+            self.note_drop(now, DropReason::OwnPort, packet.header.to_string());
             return;
         }
         let service = self.cfg.services && dport <= service::MAX_SERVICE_PORT;
@@ -703,14 +705,14 @@ impl Node {
             // CRC32, HMAC in that order) and the transport (RDP or UDP).
             let flag = |f: u8| packet.header.flags & f != 0;
             let refused = if flag(flags::XTEA) {
-                Some(("xtea", "XTEA encrypted"))
+                Some((DropReason::Xtea, "XTEA encrypted"))
             } else if packet.header.has_crc() && !crc32::verify_and_strip(&mut packet.data) {
-                self.note_drop(now, "crc32", packet.header.to_string());
+                self.note_drop(now, DropReason::Crc32, packet.header.to_string());
                 return;
             } else if flag(flags::HMAC) {
-                Some(("hmac", "HMAC authenticated"))
+                Some((DropReason::Hmac, "HMAC authenticated"))
             } else if flag(flags::RDP) {
-                Some(("rdp", "RDP"))
+                Some((DropReason::Rdp, "RDP"))
             } else {
                 None
             };
@@ -723,7 +725,7 @@ impl Node {
                     format!(
                         "{}: received {what} packet, but CSP was compiled without {} support",
                         packet.header,
-                        reason.to_uppercase()
+                        reason.name().to_uppercase()
                     ),
                 );
             } else if service
@@ -741,10 +743,10 @@ impl Node {
                 self.rx.push_back(packet);
             }
         } else {
-            self.counters.drop("unbound port");
+            self.counters.drop(DropReason::UnboundPort);
             self.push_event(NodeEvent::Drop {
                 t: now,
-                reason: "unbound port".into(),
+                reason: DropReason::UnboundPort.into(),
                 detail: packet.header.to_string(),
                 packet: Some(DroppedPacket {
                     header: packet.header,
@@ -761,7 +763,7 @@ impl Node {
     fn refuse_payload_service(&mut self, packet: &Packet, now: SimTime) {
         let reason = service::payload_refusal(packet.header.dport);
         self.note_drop(now, reason, packet.header.to_string());
-        let n = self.counters.drops.get(reason).copied().unwrap_or(0);
+        let n = self.counters.drops.get(&reason).copied().unwrap_or(0);
         if n.is_power_of_two() {
             self.warn(
                 now,
@@ -815,7 +817,7 @@ impl Node {
         for data in replies {
             self.counters.service_replies += 1;
             if let Err(e) = self.send(Packet::new(reply_header, data), now) {
-                self.note_drop(now, "service reply", e.to_string());
+                self.note_drop(now, DropReason::ServiceReply, e.to_string());
             }
         }
     }
@@ -832,7 +834,7 @@ impl Node {
         if dst == self.cfg.addr {
             self.counters.tx_packets += 1;
             if self.loopback.len() >= LOOPBACK_QUEUE {
-                self.note_drop(now, "loopback full", packet.header.to_string());
+                self.note_drop(now, DropReason::LoopbackFull, packet.header.to_string());
                 return Ok(());
             }
             self.loopback.push_back(packet);
@@ -853,7 +855,7 @@ impl Node {
         let mut budget = LOOPBACK_PER_INPUT;
         while let Some(packet) = self.loopback.pop_front() {
             if budget == 0 {
-                self.note_drop(now, "loopback budget", packet.header.to_string());
+                self.note_drop(now, DropReason::LoopbackBudget, packet.header.to_string());
                 continue;
             }
             budget -= 1;
@@ -941,10 +943,10 @@ impl Node {
             });
         }
         for packet in purged {
-            self.counters.drop("cfp");
+            self.counters.drop(DropReason::Cfp);
             self.push_event(NodeEvent::Drop {
                 t: now,
-                reason: "cfp".into(),
+                reason: DropReason::Cfp.into(),
                 detail: "partial packet timed out".to_owned(),
                 packet: Some(packet),
             });
@@ -1016,12 +1018,7 @@ impl Node {
     }
 
     /// Something the application dropped (it counts it itself), for the run's log.
-    pub fn log_drop(
-        &mut self,
-        t: SimTime,
-        reason: impl Into<std::borrow::Cow<'static, str>>,
-        detail: String,
-    ) {
+    pub fn log_drop(&mut self, t: SimTime, reason: impl Into<DropCause>, detail: String) {
         self.push_event(NodeEvent::dropped(t, reason, detail));
     }
 
@@ -1036,7 +1033,7 @@ impl Node {
         }
     }
 
-    fn note_drop(&mut self, t: SimTime, reason: &'static str, detail: String) {
+    fn note_drop(&mut self, t: SimTime, reason: DropReason, detail: String) {
         self.counters.drop(reason);
         self.push_event(NodeEvent::dropped(t, reason, detail));
     }
@@ -1625,7 +1622,7 @@ mod tests {
             n.handle_frame(0, &f, SimTime::ZERO);
         }
         assert!(drain(&mut n).is_empty());
-        assert_eq!(n.counters().drops.get("same iface"), Some(&1));
+        assert_eq!(n.counters().drops.get(&DropReason::SameIface), Some(&1));
     }
 
     #[test]
@@ -1649,7 +1646,7 @@ mod tests {
         h.flags = flags::CRC32;
         n.handle_packet(0, Packet::new(h, vec![9, 0, 0, 0, 0]), SimTime::ZERO);
         assert!(drain(&mut n).is_empty());
-        assert_eq!(n.counters().drops.get("crc32"), Some(&1));
+        assert_eq!(n.counters().drops.get(&DropReason::Crc32), Some(&1));
     }
 
     #[test]
@@ -1665,17 +1662,32 @@ mod tests {
             v
         };
         let bad_crc = vec![9, 0, 0, 0, 0];
-        let cases: [(u8, Vec<u8>, u8, &str); 8] = [
-            (flags::XTEA, vec![1, 2], 1, "xtea"),
-            (flags::HMAC, vec![1, 2], 1, "hmac"),
-            (flags::RDP, vec![1, 2], 1, "rdp"),
+        let cases: [(u8, Vec<u8>, u8, DropReason); 8] = [
+            (flags::XTEA, vec![1, 2], 1, DropReason::Xtea),
+            (flags::HMAC, vec![1, 2], 1, DropReason::Hmac),
+            (flags::RDP, vec![1, 2], 1, DropReason::Rdp),
             // XTEA is checked before the CRC, the CRC before HMAC, HMAC before RDP.
-            (flags::XTEA | flags::CRC32, bad_crc.clone(), 1, "xtea"),
-            (flags::HMAC | flags::CRC32, bad_crc.clone(), 1, "crc32"),
-            (flags::HMAC | flags::RDP, vec![1], 1, "hmac"),
-            (flags::RDP | flags::CRC32, with_crc(&[1, 2]), 20, "rdp"),
+            (
+                flags::XTEA | flags::CRC32,
+                bad_crc.clone(),
+                1,
+                DropReason::Xtea,
+            ),
+            (
+                flags::HMAC | flags::CRC32,
+                bad_crc.clone(),
+                1,
+                DropReason::Crc32,
+            ),
+            (flags::HMAC | flags::RDP, vec![1], 1, DropReason::Hmac),
+            (
+                flags::RDP | flags::CRC32,
+                with_crc(&[1, 2]),
+                20,
+                DropReason::Rdp,
+            ),
             // No socket: dropped before any check, as libcsp does.
-            (flags::XTEA, vec![1], 21, "unbound port"),
+            (flags::XTEA, vec![1], 21, DropReason::UnboundPort),
         ];
         for (f, data, dport, reason) in cases {
             let mut n = router_node();
@@ -1683,7 +1695,7 @@ mod tests {
             n.handle_packet(0, ping(f, data, dport), SimTime::ZERO);
             assert!(drain(&mut n).is_empty(), "flags {f:#04x}: no reply");
             assert!(n.poll_delivery().is_none(), "flags {f:#04x}: not delivered");
-            assert_eq!(n.counters().drops.get(reason), Some(&1), "flags {f:#04x}");
+            assert_eq!(n.counters().drops.get(&reason), Some(&1), "flags {f:#04x}");
             assert_eq!(n.counters().total_drops(), 1, "flags {f:#04x}");
         }
         // The plain ping and the FRAG bit (unused in 1.4, never checked) are answered.
@@ -1721,8 +1733,12 @@ mod tests {
                 "port {port}: {c:?}"
             );
             if matches!(port, 1 | 2 | 3 | 5 | 6) {
-                let dropped = c.drops.get("loopback budget").copied().unwrap_or(0)
-                    + c.drops.get("loopback full").copied().unwrap_or(0);
+                let dropped = c
+                    .drops
+                    .get(&DropReason::LoopbackBudget)
+                    .copied()
+                    .unwrap_or(0)
+                    + c.drops.get(&DropReason::LoopbackFull).copied().unwrap_or(0);
                 assert!(dropped >= 1, "port {port}: {c:?}");
             }
             // Nothing went out on a bus, and the node still answers others.
@@ -1749,7 +1765,7 @@ mod tests {
             Packet::new(Header::new(3, 6, 20, 40), vec![1]),
             SimTime::ZERO,
         );
-        assert_eq!(n.counters().drops.get("unbound port"), Some(&1));
+        assert_eq!(n.counters().drops.get(&DropReason::UnboundPort), Some(&1));
         n.bind(20);
         n.handle_packet(
             0,
@@ -1843,13 +1859,13 @@ mod tests {
         assert_eq!(pc.clock_sets(), 0);
         let drops = &pc.counters().drops;
         for (reason, n) in [
-            ("payload reboot", 1),
-            ("payload cmp", 2),
-            ("payload ps", 1),
-            ("payload memfree", 1),
-            ("payload buf_free", 1),
+            (DropReason::PayloadReboot, 1),
+            (DropReason::PayloadCmp, 2),
+            (DropReason::PayloadPs, 1),
+            (DropReason::PayloadMemfree, 1),
+            (DropReason::PayloadBufFree, 1),
         ] {
-            assert_eq!(drops.get(reason), Some(&n), "{reason}: {drops:?}");
+            assert_eq!(drops.get(&reason), Some(&n), "{reason}: {drops:?}");
         }
         // Ping and uptime answer the payload.
         pc.handle_packet(1, to_pc(15, 1, &[9, 9]), t);
@@ -1895,7 +1911,7 @@ mod tests {
         );
         assert!(n.poll_transmit().is_none());
         assert_eq!(n.poll_delivery(), None);
-        assert_eq!(n.counters().drops.get("own port"), Some(&1));
+        assert_eq!(n.counters().drops.get(&DropReason::OwnPort), Some(&1));
     }
 
     #[test]

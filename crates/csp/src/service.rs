@@ -40,14 +40,15 @@ pub fn open_to_payloads(port: u8) -> bool {
 
 /// The reason a platform node drops a payload's request for service `port` (the node's
 /// drop counter, by service).
-pub fn payload_refusal(port: u8) -> &'static str {
+pub fn payload_refusal(port: u8) -> crate::drop::DropReason {
+    use crate::drop::DropReason;
     match port {
-        PORT_CMP => "payload cmp",
-        PORT_PS => "payload ps",
-        PORT_MEMFREE => "payload memfree",
-        PORT_REBOOT => "payload reboot",
-        PORT_BUF_FREE => "payload buf_free",
-        _ => "payload service",
+        PORT_CMP => DropReason::PayloadCmp,
+        PORT_PS => DropReason::PayloadPs,
+        PORT_MEMFREE => DropReason::PayloadMemfree,
+        PORT_REBOOT => DropReason::PayloadReboot,
+        PORT_BUF_FREE => DropReason::PayloadBufFree,
+        _ => DropReason::PayloadService,
     }
 }
 

@@ -428,7 +428,11 @@ impl CommApp {
             }
             Err(e) => {
                 self.counters.beacon_failures += 1;
-                node.log_drop(now, format!("beacon {seq}"), e.to_string());
+                node.log_drop(
+                    now,
+                    csp::drop::DropCause::app(format!("beacon {seq}")),
+                    e.to_string(),
+                );
             }
         }
     }
@@ -492,7 +496,7 @@ impl App for CommApp {
             node.log(now, format!("comm port {}: refused: {e}", self.cfg.port));
         }
         if let Err(e) = node.send(Packet::new(packet.header.reply(node.addr()), reply), now) {
-            node.log_drop(now, "comm reply", e.to_string());
+            node.log_drop(now, csp::drop::DropCause::app("comm reply"), e.to_string());
         }
     }
 

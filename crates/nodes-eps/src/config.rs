@@ -26,7 +26,7 @@
 //! The battery has no temperature model (a heated box near 20 C, [`crate::battery`]): the
 //! self-test reports none.
 
-use csp::params::{Check, Health, ParamDef, ParamType, Table, def};
+use csp::params::{Check, Health, ParamDef, ParamType, Table, check, def};
 use platform::board::Activity;
 
 use crate::loads::{CHANNELS, Channel};
@@ -155,46 +155,11 @@ impl EpsApp {
     /// The EPS's self-test at `now` (integrated up to `now` by the caller): battery,
     /// arrays, channels (the module doc gives the order).
     pub(crate) fn checks(&self, now: SimTime) -> Vec<Check> {
-        use csp::params::check;
         let mut v = Vec::with_capacity(3 + CHANNELS);
         let last = self.eps.last();
         let b = &last.battery;
-        let soc_pct = self.eps.soc() * 100.0;
-        let t = self.eps.thresholds();
         let prot = self.eps.protection();
-        let shed: Vec<&str> = Group::ALL
-            .into_iter()
-            .filter(|g| prot.is_shed(*g))
-            .map(|g| match g {
-                Group::Payload => "payload",
-                Group::Platform => "platform",
-            })
-            .collect();
-        let volts = format!("{:.2} V, {:+.2} A", b.voltage_v, b.current_a);
-        v.push(if b.unmet_w > 0.0 {
-            check(
-                "battery",
-                Health::Failed,
-                soc_pct,
-                "%",
-                format!("empty: {:.2} W of load unsupplied, {volts}", b.unmet_w),
-            )
-        } else if !shed.is_empty() || soc_pct < f64::from(t.payload_shed_pct) {
-            let groups = if shed.is_empty() {
-                "none yet".to_owned()
-            } else {
-                shed.join(", ")
-            };
-            check(
-                "battery",
-                Health::Degraded,
-                soc_pct,
-                "%",
-                format!("low: groups shed: {groups}; {volts}"),
-            )
-        } else {
-            check("battery", Health::Ok, soc_pct, "%", volts)
-        });
+        v.push(self.battery_check());
         let rated = self.cfg.battery.capacity_wh;
         let now_wh = self.eps.battery().config().capacity_wh;
         v.push(check(
@@ -208,42 +173,7 @@ impl EpsApp {
             "Wh",
             format!("{:.0} % of the rated {rated:.1} Wh", 100.0 * now_wh / rated),
         ));
-        let failed: Vec<&str> = self
-            .eps
-            .failed_panels()
-            .iter()
-            .zip(&self.cfg.panels.panels)
-            .filter(|(f, _)| **f)
-            .map(|(_, p)| p.name.as_str())
-            .collect();
-        let n = self.eps.failed_panels().len();
-        v.push(match failed.len() {
-            0 => check(
-                "solar_array",
-                Health::Ok,
-                last.solar_w,
-                "W",
-                if last.solar_w > 0.0 {
-                    format!("{n} panels")
-                } else {
-                    format!("{n} panels, no sun on them")
-                },
-            ),
-            k if k == n => check(
-                "solar_array",
-                Health::Failed,
-                last.solar_w,
-                "W",
-                "every panel failed".to_owned(),
-            ),
-            _ => check(
-                "solar_array",
-                Health::Degraded,
-                last.solar_w,
-                "W",
-                format!("failed: {}", failed.join(", ")),
-            ),
-        });
+        v.push(self.solar_array_check());
         let volts = b.voltage_v;
         for (c, name) in Channel::ALL.into_iter().zip(CHANNEL_CHECKS) {
             let w = last
@@ -278,5 +208,87 @@ impl EpsApp {
             });
         }
         v
+    }
+
+    /// The battery's check: empty fails; a shed group or a charge below payload shed degrades.
+    fn battery_check(&self) -> Check {
+        let b = &self.eps.last().battery;
+        let soc_pct = self.eps.soc() * 100.0;
+        let t = self.eps.thresholds();
+        let prot = self.eps.protection();
+        let shed: Vec<&str> = Group::ALL
+            .into_iter()
+            .filter(|g| prot.is_shed(*g))
+            .map(|g| match g {
+                Group::Payload => "payload",
+                Group::Platform => "platform",
+            })
+            .collect();
+        let volts = format!("{:.2} V, {:+.2} A", b.voltage_v, b.current_a);
+        if b.unmet_w > 0.0 {
+            check(
+                "battery",
+                Health::Failed,
+                soc_pct,
+                "%",
+                format!("empty: {:.2} W of load unsupplied, {volts}", b.unmet_w),
+            )
+        } else if !shed.is_empty() || soc_pct < f64::from(t.payload_shed_pct) {
+            let groups = if shed.is_empty() {
+                "none yet".to_owned()
+            } else {
+                shed.join(", ")
+            };
+            check(
+                "battery",
+                Health::Degraded,
+                soc_pct,
+                "%",
+                format!("low: groups shed: {groups}; {volts}"),
+            )
+        } else {
+            check("battery", Health::Ok, soc_pct, "%", volts)
+        }
+    }
+
+    /// The solar array's check: which panels failed, and whether the working ones see the Sun.
+    fn solar_array_check(&self) -> Check {
+        let last = self.eps.last();
+        let failed: Vec<&str> = self
+            .eps
+            .failed_panels()
+            .iter()
+            .zip(&self.cfg.panels.panels)
+            .filter(|(f, _)| **f)
+            .map(|(_, p)| p.name.as_str())
+            .collect();
+        let n = self.eps.failed_panels().len();
+        match failed.len() {
+            0 => check(
+                "solar_array",
+                Health::Ok,
+                last.solar_w,
+                "W",
+                if last.solar_w > 0.0 {
+                    format!("{n} panels")
+                } else {
+                    format!("{n} panels, no sun on them")
+                },
+            ),
+            k if k == n => check(
+                "solar_array",
+                Health::Failed,
+                last.solar_w,
+                "W",
+                "every panel failed".to_owned(),
+            ),
+            _ => check(
+                "solar_array",
+                Health::Degraded,
+                last.solar_w,
+                "W",
+                format!("failed: {}", failed.join(", ")),
+            ),
+        }
     }
 }

@@ -6,9 +6,10 @@ use std::fmt::Write as _;
 
 use csp::console::Command;
 use csp::node::Node;
-use csp::params::{Check, Health, ParamDef, ParamType, Table, def};
+use csp::params::{Check, Health, ParamDef, ParamType, Table, check, def};
 use csp::reqrep::le::Repr;
 
+use crate::sensors::SensorReadings;
 use crate::wire::{self, TelemetryCommand, TmAcd, TmAtp, TmGen, TmRawSens, TmSens};
 use crate::{FcApp, SimTime};
 
@@ -473,7 +474,6 @@ impl FcApp {
 
     /// The FC's self-test: sensors, wheels, magnetorquers, the estimator and the orbit.
     pub(crate) fn checks(&self, now: SimTime) -> Vec<Check> {
-        use csp::params::check;
         let mut v = Vec::new();
         let r = self.readings.as_ref();
         let used = self.cfg.adcs.use_sensors;
@@ -495,12 +495,66 @@ impl FcApp {
             used.mag,
             "nT",
         ));
+        v.push(self.sun_sensors_check(r, used.sun));
+        v.push(sensor(
+            "accelerometer",
+            r.and_then(|r| r.acc_body_m_s2).map(|a| a.norm()),
+            true,
+            "m/s2",
+        ));
+        v.push(self.horizon_check(r));
+        v.push(self.gps_check(now));
+        for (i, name) in ["wheel1", "wheel2", "wheel3", "wheel4"]
+            .into_iter()
+            .enumerate()
+        {
+            let rpm = self.att.wheel_speed_rad_s[i] * 60.0 / std::f64::consts::TAU;
+            v.push(match self.wheel_fault[i] {
+                Some(f) => check(
+                    name,
+                    Health::Failed,
+                    rpm,
+                    "rpm",
+                    format!("{f:?}").to_lowercase(),
+                ),
+                None => check(name, Health::Ok, rpm, "rpm", String::new()),
+            });
+        }
+        v.push(check(
+            "magnetorquers",
+            Health::Ok,
+            self.mtq_applied_am2.norm(),
+            "A m2",
+            String::new(),
+        ));
+        v.push(self.estimator_check());
+        v.push(match self.orbit_error() {
+            None => check("orbit", Health::Ok, 0.0, "", String::new()),
+            Some(e) => check("orbit", Health::Failed, 0.0, "", e.to_owned()),
+        });
+        let t = r.map_or(f64::NAN, |r| r.mcu_temp_c);
+        v.push(check(
+            "mcu_temp",
+            if (-40.0..=85.0).contains(&t) {
+                Health::Ok
+            } else {
+                Health::Failed
+            },
+            t,
+            "degC",
+            String::new(),
+        ));
+        v
+    }
+
+    /// The sun sensors' check: no sun vector is a fault only while the Sun is in view.
+    fn sun_sensors_check(&self, r: Option<&SensorReadings>, used: bool) -> Check {
         let sunlit = self
             .env
             .as_ref()
             .is_some_and(|e| e.sun_visible_fraction > 0.5);
         let css_total = r.map_or(0.0, |r| r.css_counts.iter().map(|&c| f64::from(c)).sum());
-        v.push(match (r.and_then(|r| r.sun_body_unit), sunlit, used.sun) {
+        match (r.and_then(|r| r.sun_body_unit), sunlit, used) {
             (_, _, false) => check(
                 "sun_sensors",
                 Health::Off,
@@ -529,16 +583,14 @@ impl FcApp {
                 "counts",
                 "sunlit but no sun vector".into(),
             ),
-        });
-        v.push(sensor(
-            "accelerometer",
-            r.and_then(|r| r.acc_body_m_s2).map(|a| a.norm()),
-            true,
-            "m/s2",
-        ));
+        }
+    }
+
+    /// The horizon sensor's check: how much of the limb it sees, or dead.
+    fn horizon_check(&self, r: Option<&SensorReadings>) -> Check {
         let limb = r.map_or(crate::sensors::HORIZON_NO_LIMB, |r| r.horizon_status);
         let fault = self.sensors.fault(crate::sensors::SensorId::Horizon);
-        v.push(match (fault, limb) {
+        match (fault, limb) {
             (Some(crate::sensors::SensorFault::Dead), _) => {
                 check("horizon", Health::Failed, 0.0, "", "no output".into())
             }
@@ -553,8 +605,12 @@ impl FcApp {
                 "part of the limb in view".into(),
             ),
             _ => check("horizon", Health::Ok, 0.0, "", "no limb in view".into()),
-        });
-        v.push(if !self.cfg.sensors.gps_enabled {
+        }
+    }
+
+    /// The GPS check: the last fix's age against what the ADCS still takes.
+    fn gps_check(&self, now: SimTime) -> Check {
+        if !self.cfg.sensors.gps_enabled {
             check("gps", Health::Off, 0.0, "s", "receiver off".into())
         } else {
             let age_s = self
@@ -568,32 +624,13 @@ impl FcApp {
                 Some(a) => check("gps", Health::Degraded, a, "s", "last fix too old".into()),
                 None => check("gps", Health::Degraded, 0.0, "s", "no fix".into()),
             }
-        });
-        for (i, name) in ["wheel1", "wheel2", "wheel3", "wheel4"]
-            .into_iter()
-            .enumerate()
-        {
-            let rpm = self.att.wheel_speed_rad_s[i] * 60.0 / std::f64::consts::TAU;
-            v.push(match self.wheel_fault[i] {
-                Some(f) => check(
-                    name,
-                    Health::Failed,
-                    rpm,
-                    "rpm",
-                    format!("{f:?}").to_lowercase(),
-                ),
-                None => check(name, Health::Ok, rpm, "rpm", String::new()),
-            });
         }
-        v.push(check(
-            "magnetorquers",
-            Health::Ok,
-            self.mtq_applied_am2.norm(),
-            "A m2",
-            String::new(),
-        ));
+    }
+
+    /// The estimator's check: why it last fell back to detumble, or whether it runs.
+    fn estimator_check(&self) -> Check {
         let adcs = &self.fsw.adcs;
-        v.push(match (adcs.estimate(), adcs.fallback_reason()) {
+        match (adcs.estimate(), adcs.fallback_reason()) {
             (_, Some(why)) => check(
                 "estimator",
                 Health::Degraded,
@@ -615,23 +652,6 @@ impl FcApp {
                 "restarts",
                 String::new(),
             ),
-        });
-        v.push(match self.orbit_error() {
-            None => check("orbit", Health::Ok, 0.0, "", String::new()),
-            Some(e) => check("orbit", Health::Failed, 0.0, "", e.to_owned()),
-        });
-        let t = r.map_or(f64::NAN, |r| r.mcu_temp_c);
-        v.push(check(
-            "mcu_temp",
-            if (-40.0..=85.0).contains(&t) {
-                Health::Ok
-            } else {
-                Health::Failed
-            },
-            t,
-            "degC",
-            String::new(),
-        ));
-        v
+        }
     }
 }

@@ -22,21 +22,18 @@
 //! power cycle and as last commanded after a hang.
 //!
 //! Byte layouts and decisions are in `docs/protocol.md` ("FC ports"); the models and the
-//! ADCS in `docs/adcs.md`.
+//! ADCS in `docs/adcs.md`. The ADCS modules (environment, sensors, the flight software, the
+//! truth) are the crate `m6p-adcs`'s, re-exported here under their old paths.
 
-pub mod adcs;
+// The ADCS (m6p-adcs) under the paths it had when it lived here: `nodes_fc::control`, ...
+pub use ::adcs::{adcs, control, environment, estimator, guidance, sensors, truth};
+
 pub mod burns;
 pub mod config;
-pub mod control;
-pub mod environment;
-pub mod estimator;
-pub mod guidance;
 pub mod safe;
 pub mod scripts;
-pub mod sensors;
 pub mod store;
 pub mod timesync;
-pub mod truth;
 pub use icd::fc as wire;
 
 use csp::node::{App, Node, NodeEvent, Outbox};
@@ -744,25 +741,7 @@ impl FcApp {
         let dt_s = self.dt_ns as f64 * 1e-9;
         let unix_ns = self.true_unix_ns_i64(t);
         // The ECU's burns up to now, before the orbit is evaluated at now (docs/adcs.md).
-        if let (Some(board), Ok(model)) = (&self.burns, self.truth_orbit.as_mut()) {
-            match burns::apply(
-                model,
-                board,
-                &self.att.q_eci_from_body,
-                t.as_ns(),
-                unix_ns,
-                &mut self.burns_applied_until_ns,
-            ) {
-                Ok(a) if a.switched => self.log.push(NodeEvent::info(
-                    t,
-                    "truth orbit: numerical (Cowell) from the first burn".to_owned(),
-                )),
-                Ok(_) => {}
-                Err(e) => self
-                    .log
-                    .push(NodeEvent::info(t, format!("burn not applied: {e}"))),
-            }
-        }
+        self.apply_burns(t, unix_ns);
         let env = self
             .truth_orbit
             .as_mut()
@@ -787,49 +766,7 @@ impl FcApp {
         let healthy: [bool; 4] = std::array::from_fn(|i| self.wheel_fault[i].is_none());
 
         if fsw {
-            let onboard = self.onboard_env(unix_ns);
-            let rtc_s = self.rtc_unix_s_f64(t);
-            self.fsw.scripts.expire(rtc_s);
-            let request = match self.fsw.scripts.active(rtc_s) {
-                // A low battery points the arrays at the sun whatever was asked (safe.rs).
-                _ if self.safe.low_battery() => self.request_for(TargetMode::SunMaxPower),
-                Some(s) => Self::script_request(s),
-                None => self.request_for(self.fsw.target.mode),
-            };
-            self.fsw.request_mode = Some(request.mode);
-            let before = self.fsw.output.map(|o| o.mode_in_effect);
-            let out = self.fsw.adcs.step(
-                &adcs::Inputs {
-                    readings: &readings,
-                    wheel_speed_rad_s: self.att.wheel_speed_rad_s,
-                    wheel_healthy: healthy,
-                    onboard: onboard.as_ref(),
-                    request,
-                },
-                dt_s,
-            );
-            if before != Some(out.mode_in_effect) {
-                let why = self
-                    .fsw
-                    .adcs
-                    .fallback_reason()
-                    .map_or(String::new(), |r| format!(" (safe fallback: {r})"));
-                self.log.push(NodeEvent::info(
-                    t,
-                    format!("ADCS mode in effect: {:?}{why}", out.mode_in_effect),
-                ));
-            }
-            self.fsw.output = Some(out);
-            if let Some((warn, line)) = self.safe.update(self.fsw.adcs.fallback_reason()) {
-                self.log.push(if warn {
-                    NodeEvent::warning(t, line)
-                } else {
-                    NodeEvent::info(t, line)
-                });
-            }
-            self.wheel_cmd_nm = out.wheel_torque_cmd_nm;
-            self.mtq_applied_am2 =
-                truth::mtq_dipole_applied_am2(&self.cfg.body, &out.mtq_dipole_cmd_am2);
+            self.run_fsw(t, unix_ns, &readings, healthy, dt_s);
         }
         for (i, f) in self.wheel_fault.iter().enumerate() {
             if f.is_some() {
@@ -851,7 +788,89 @@ impl FcApp {
                 .push(NodeEvent::warning(t, format!("truth not posted: {e}")));
         }
 
-        // Truth step over [t, t + dt].
+        self.step_truth(env, dt_s);
+        self.ticks += 1;
+    }
+
+    /// The ECU's burns up to `t` applied to the truth orbit before the tick evaluates it.
+    fn apply_burns(&mut self, t: SimTime, unix_ns: i64) {
+        if let (Some(board), Ok(model)) = (&self.burns, self.truth_orbit.as_mut()) {
+            match burns::apply(
+                model,
+                board,
+                &self.att.q_eci_from_body,
+                t.as_ns(),
+                unix_ns,
+                &mut self.burns_applied_until_ns,
+            ) {
+                Ok(a) if a.switched => self.log.push(NodeEvent::info(
+                    t,
+                    "truth orbit: numerical (Cowell) from the first burn".to_owned(),
+                )),
+                Ok(_) => {}
+                Err(e) => self
+                    .log
+                    .push(NodeEvent::info(t, format!("burn not applied: {e}"))),
+            }
+        }
+    }
+
+    /// The flight software's part of a tick, only while the FC runs: request, ADCS, SAFE.
+    fn run_fsw(
+        &mut self,
+        t: SimTime,
+        unix_ns: i64,
+        readings: &SensorReadings,
+        healthy: [bool; 4],
+        dt_s: f64,
+    ) {
+        let onboard = self.onboard_env(unix_ns);
+        let rtc_s = self.rtc_unix_s_f64(t);
+        self.fsw.scripts.expire(rtc_s);
+        let request = match self.fsw.scripts.active(rtc_s) {
+            // A low battery points the arrays at the sun whatever was asked (safe.rs).
+            _ if self.safe.low_battery() => self.request_for(TargetMode::SunMaxPower),
+            Some(s) => Self::script_request(s),
+            None => self.request_for(self.fsw.target.mode),
+        };
+        self.fsw.request_mode = Some(request.mode);
+        let before = self.fsw.output.map(|o| o.mode_in_effect);
+        let out = self.fsw.adcs.step(
+            &adcs::Inputs {
+                readings,
+                wheel_speed_rad_s: self.att.wheel_speed_rad_s,
+                wheel_healthy: healthy,
+                onboard: onboard.as_ref(),
+                request,
+            },
+            dt_s,
+        );
+        if before != Some(out.mode_in_effect) {
+            let why = self
+                .fsw
+                .adcs
+                .fallback_reason()
+                .map_or(String::new(), |r| format!(" (safe fallback: {r})"));
+            self.log.push(NodeEvent::info(
+                t,
+                format!("ADCS mode in effect: {:?}{why}", out.mode_in_effect),
+            ));
+        }
+        self.fsw.output = Some(out);
+        if let Some((warn, line)) = self.safe.update(self.fsw.adcs.fallback_reason()) {
+            self.log.push(if warn {
+                NodeEvent::warning(t, line)
+            } else {
+                NodeEvent::info(t, line)
+            });
+        }
+        self.wheel_cmd_nm = out.wheel_torque_cmd_nm;
+        self.mtq_applied_am2 =
+            truth::mtq_dipole_applied_am2(&self.cfg.body, &out.mtq_dipole_cmd_am2);
+    }
+
+    /// The truth step over [t, t + dt]: physics, run whether the FC software does or not.
+    fn step_truth(&mut self, env: Option<Environment>, dt_s: f64) {
         let b_body_t = env.map_or_else(Vector3::zeros, |e| {
             self.att
                 .q_eci_from_body
@@ -880,7 +899,6 @@ impl FcApp {
                 truth::lock_wheel(&mut self.att, &self.cfg.body, i);
             }
         }
-        self.ticks += 1;
     }
 
     /// The true state at the tick `t` (environment of the tick, attitude before the step).
@@ -2024,7 +2042,10 @@ mod tests {
             out.push(tx);
         }
         assert!(out.is_empty(), "the FC answered the answer: {out:?}");
-        assert_eq!(h.node.counters().drops.get("own port"), Some(&1));
+        assert_eq!(
+            h.node.counters().drops.get(&csp::drop::DropReason::OwnPort),
+            Some(&1)
+        );
     }
 
     #[test]

@@ -495,7 +495,11 @@ impl PayloadApp {
     fn enqueue(&mut self, node: &mut Node, header: Header, kind: ReplyKind, now: SimTime) {
         if self.queue.len() >= MAX_QUEUED_REPLIES {
             self.counters.queue_full += 1;
-            node.log_drop(now, "payload reply queue full", header.to_string());
+            node.log_drop(
+                now,
+                csp::drop::DropCause::app("payload reply queue full"),
+                header.to_string(),
+            );
             return;
         }
         let earliest = now + self.latency();
@@ -598,7 +602,11 @@ impl PayloadApp {
             Err(e) => {
                 self.stream.untake(cut);
                 self.counters.send_failures += 1;
-                node.log_drop(now, "payload reply", format!("{}: {e}", q.header));
+                node.log_drop(
+                    now,
+                    csp::drop::DropCause::app("payload reply"),
+                    format!("{}: {e}", q.header),
+                );
             }
         }
     }
@@ -629,7 +637,11 @@ impl PayloadApp {
             Err(e) => {
                 self.stream.untake(n);
                 self.counters.send_failures += 1;
-                node.log_drop(now, "payload push", format!("{header}: {e}"));
+                node.log_drop(
+                    now,
+                    csp::drop::DropCause::app("payload push"),
+                    format!("{header}: {e}"),
+                );
             }
         }
     }

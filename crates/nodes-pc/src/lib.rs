@@ -938,7 +938,7 @@ impl PcApp {
         let session_id = slot.map(|i| self.session_id(i));
         self.log.push(NodeEvent::dropped(
             t,
-            format!("pc {reason}"),
+            csp::drop::DropCause::app(format!("pc {reason}")),
             format!(
                 "{n} bytes from payload {payload_addr}{}",
                 session_id.map_or(String::new(), |id| format!(", session {id}"))

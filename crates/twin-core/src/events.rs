@@ -63,7 +63,7 @@ pub enum RunEvent {
         /// The dropping node's name.
         node: String,
         /// Why.
-        reason: String,
+        reason: csp::drop::DropReason,
         /// The packet.
         packet: csp::node::DroppedPacket,
     },
@@ -277,13 +277,13 @@ impl From<bus::driver::NodeLog> for RunEvent {
         };
         match l.event {
             NodeEvent::Drop {
-                reason,
+                reason: csp::drop::DropCause::Node(reason),
                 packet: Some(packet),
                 ..
             } => RunEvent::PacketDropped {
                 log: Box::new(log),
                 node: l.node.to_string(),
-                reason: reason.into_owned(),
+                reason,
                 packet,
             },
             _ => log,

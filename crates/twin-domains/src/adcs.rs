@@ -243,6 +243,14 @@ pub fn compile(
             event: FcEvent::Script(sc.line.clone()),
         });
     }
+    compile_faults(f, &mut c, faults);
+    c
+}
+
+/// `[[fc.faults]]`: each sensor or wheel fault on the FC's own timeline (set, and cleared
+/// at `until`), and recorded on the fault timeline.
+fn compile_faults(f: &FcSpec, c: &mut nodes_fc::FcConfig, faults: &mut Vec<TimedFault>) {
+    use nodes_fc::{FcEvent, TimedFcEvent};
     for (i, fault) in f.faults.iter().enumerate() {
         let (set, clear) = match (&fault.sensor, fault.wheel) {
             (Some(name), _) => {
@@ -293,7 +301,6 @@ pub fn compile(
             });
         }
     }
-    c
 }
 
 pub use twin_report::observe::attitude::*;

@@ -83,39 +83,7 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
                 format!("another command is already named `{name}`"),
             );
         }
-        match c.from.as_ref().map(|r| net.resolve(r)) {
-            None => {
-                if !net
-                    .nodes
-                    .iter()
-                    .any(|n| n.role == twin_core::network::Role::Ground)
-                {
-                    err(p("to"), "there is no ground station to send from (network.ground_stations is empty)".into());
-                }
-            }
-            Some(Err(e)) => err(p("from"), e),
-            Some(Ok(a)) if !(16..=20).contains(&a) => err(
-                p("from"),
-                format!("commands are sent from a ground station (16-20), not from {a}"),
-            ),
-            Some(Ok(_)) => {}
-        }
-        match &c.to {
-            Some(NodeRef::Addr(a)) if *a >= 31 => {
-                err(p("to"), format!("{a} is not a unicast CSP address"))
-            }
-            Some(NodeRef::Addr(_)) => {}
-            Some(r @ NodeRef::Name(_)) => {
-                if let Err(e) = net.resolve(r) {
-                    err(p("to"), e);
-                }
-            }
-            None if c.command.is_none() => err(
-                vec![key("commands"), PathStep::Index(i)],
-                "missing field `to` (the destination node)".into(),
-            ),
-            None => {}
-        }
+        check_endpoints(c, net, &p, err);
         match (&c.request, &c.command) {
             (Some(_), Some(_)) => err(
                 p("command"),
@@ -131,109 +99,179 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
             err(p("args"), "only a typed `command` takes `args`".into());
         }
         if let Some(name) = &c.command {
-            if c.data.is_some() || c.text.is_some() {
+            check_typed(c, name, net, &p, err);
+        }
+        check_request_fields(c, &p, err);
+    }
+}
+
+/// A command's sender (a ground station) and destination.
+fn check_endpoints(
+    c: &CommandSpec,
+    net: &NetworkSpec,
+    p: &dyn Fn(&str) -> Vec<PathStep>,
+    err: &mut dyn FnMut(Vec<PathStep>, String),
+) {
+    match c.from.as_ref().map(|r| net.resolve(r)) {
+        None => {
+            if !net
+                .nodes
+                .iter()
+                .any(|n| n.role == twin_core::network::Role::Ground)
+            {
                 err(
-                    p(if c.data.is_some() { "data" } else { "text" }),
-                    "a typed `command` takes `args`; raw bytes go with `request = \"raw\"`".into(),
+                    p("to"),
+                    "there is no ground station to send from (network.ground_stations is empty)"
+                        .into(),
                 );
             }
-            match twin_core::icd::find_command(name) {
-                Err(e) => err(p("command"), e),
-                Ok((node, _, cmd)) => {
-                    let to = c.to.as_ref().and_then(|r| match r {
-                        NodeRef::Addr(a) => Some(*a),
-                        r => net.resolve(r).ok(),
-                    });
-                    match to {
-                        Some(a) if !node.addrs.contains(&a) => err(
-                            p("to"),
-                            format!(
-                                "{name} goes to the {} ({}), not to {a}",
-                                node.name,
-                                node.addrs
-                                    .iter()
-                                    .map(u8::to_string)
-                                    .collect::<Vec<_>>()
-                                    .join(", ")
-                            ),
-                        ),
-                        None if c.to.is_none() && node.name == "payload" => err(
-                            p("to"),
-                            format!("missing: which payload {name} goes to (12-15)"),
-                        ),
-                        _ => {}
-                    }
-                    let args = c.args.clone().unwrap_or_default();
-                    if let Err((field, e)) = twin_core::icd::encode_args(cmd, &args) {
-                        let mut at = p("args");
-                        if !field.is_empty() && args.contains_key(&field) {
-                            at.push(key(&field));
-                        } else if c.args.is_none() {
-                            at = p("command");
-                        }
-                        err(at, e);
-                    }
-                }
+        }
+        Some(Err(e)) => err(p("from"), e),
+        Some(Ok(a)) if !(16..=20).contains(&a) => err(
+            p("from"),
+            format!("commands are sent from a ground station (16-20), not from {a}"),
+        ),
+        Some(Ok(_)) => {}
+    }
+    match &c.to {
+        Some(NodeRef::Addr(a)) if *a >= 31 => {
+            err(p("to"), format!("{a} is not a unicast CSP address"))
+        }
+        Some(NodeRef::Addr(_)) => {}
+        Some(r @ NodeRef::Name(_)) => {
+            if let Err(e) = net.resolve(r) {
+                err(p("to"), e);
             }
         }
-        if c.every.is_some() != c.count.is_some() {
-            err(
-                p(if c.every.is_some() { "every" } else { "count" }),
-                "`every` and `count` go together".into(),
-            );
+        None if c.command.is_none() => err(
+            {
+                // The command itself: its table, not one of its fields.
+                let mut whole = p("to");
+                whole.pop();
+                whole
+            },
+            "missing field `to` (the destination node)".into(),
+        ),
+        None => {}
+    }
+}
+
+/// A typed ICD command `name`: it exists, goes to its node, and its `args` encode.
+fn check_typed(
+    c: &CommandSpec,
+    name: &str,
+    net: &NetworkSpec,
+    p: &dyn Fn(&str) -> Vec<PathStep>,
+    err: &mut dyn FnMut(Vec<PathStep>, String),
+) {
+    if c.data.is_some() || c.text.is_some() {
+        err(
+            p(if c.data.is_some() { "data" } else { "text" }),
+            "a typed `command` takes `args`; raw bytes go with `request = \"raw\"`".into(),
+        );
+    }
+    match twin_core::icd::find_command(name) {
+        Err(e) => err(p("command"), e),
+        Ok((node, _, cmd)) => {
+            let to = c.to.as_ref().and_then(|r| match r {
+                NodeRef::Addr(a) => Some(*a),
+                r => net.resolve(r).ok(),
+            });
+            match to {
+                Some(a) if !node.addrs.contains(&a) => err(
+                    p("to"),
+                    format!(
+                        "{name} goes to the {} ({}), not to {a}",
+                        node.name,
+                        node.addrs
+                            .iter()
+                            .map(u8::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ),
+                None if c.to.is_none() && node.name == "payload" => err(
+                    p("to"),
+                    format!("missing: which payload {name} goes to (12-15)"),
+                ),
+                _ => {}
+            }
+            let args = c.args.clone().unwrap_or_default();
+            if let Err((field, e)) = twin_core::icd::encode_args(cmd, &args) {
+                let mut at = p("args");
+                if !field.is_empty() && args.contains_key(&field) {
+                    at.push(key(&field));
+                } else if c.args.is_none() {
+                    at = p("command");
+                }
+                err(at, e);
+            }
         }
-        if c.every.is_some_and(|e| e.0.is_zero()) {
-            err(p("every"), "must be longer than zero".into());
-        }
-        if c.count == Some(0) {
-            err(p("count"), "must be at least 1".into());
-        }
-        if c.count.unwrap_or(1) > 1_000_000 {
-            err(p("count"), "at most 1000000 repetitions".into());
-        }
-        let raw = c.request == Some(RequestKind::Raw);
-        if raw && c.port.is_none() {
-            err(p("request"), "a `raw` request needs `port`".into());
-        }
-        if !raw && c.command.is_none() && (c.port.is_some() || c.data.is_some() || c.text.is_some())
-        {
-            err(
-                p(if c.port.is_some() {
-                    "port"
-                } else if c.data.is_some() {
-                    "data"
-                } else {
-                    "text"
-                }),
-                "only a `raw` request takes `port`, `data` and `text`".into(),
-            );
-        }
-        if c.data.is_some() && c.text.is_some() {
-            err(p("text"), "give `data` or `text`, not both".into());
-        }
-        if c.text.as_ref().is_some_and(|t| t.len() > 256) {
-            err(p("text"), "more than the CSP MTU of 256 bytes".into());
-        }
-        if c.port.is_some_and(|port| port > 63) {
-            err(
-                p("port"),
-                format!("{} is not a CSP port (0-63)", c.port.unwrap_or(0)),
-            );
-        }
-        if let Some(d) = &c.data
-            && let Err(e) = parse_hex(d)
-        {
-            err(p("data"), e);
-        }
-        if c.size.is_some() && c.request != Some(RequestKind::Ping) {
-            err(p("size"), "only a `ping` takes `size`".into());
-        }
-        if c.size.is_some_and(|s| s > 256) {
-            err(
-                p("size"),
-                format!("{} bytes exceed the CSP MTU of 256", c.size.unwrap_or(0)),
-            );
-        }
+    }
+}
+
+/// A command's repetition and its request's fields (port, data, text, size).
+fn check_request_fields(
+    c: &CommandSpec,
+    p: &dyn Fn(&str) -> Vec<PathStep>,
+    err: &mut dyn FnMut(Vec<PathStep>, String),
+) {
+    if c.every.is_some() != c.count.is_some() {
+        err(
+            p(if c.every.is_some() { "every" } else { "count" }),
+            "`every` and `count` go together".into(),
+        );
+    }
+    if c.every.is_some_and(|e| e.0.is_zero()) {
+        err(p("every"), "must be longer than zero".into());
+    }
+    if c.count == Some(0) {
+        err(p("count"), "must be at least 1".into());
+    }
+    if c.count.unwrap_or(1) > 1_000_000 {
+        err(p("count"), "at most 1000000 repetitions".into());
+    }
+    let raw = c.request == Some(RequestKind::Raw);
+    if raw && c.port.is_none() {
+        err(p("request"), "a `raw` request needs `port`".into());
+    }
+    if !raw && c.command.is_none() && (c.port.is_some() || c.data.is_some() || c.text.is_some()) {
+        err(
+            p(if c.port.is_some() {
+                "port"
+            } else if c.data.is_some() {
+                "data"
+            } else {
+                "text"
+            }),
+            "only a `raw` request takes `port`, `data` and `text`".into(),
+        );
+    }
+    if c.data.is_some() && c.text.is_some() {
+        err(p("text"), "give `data` or `text`, not both".into());
+    }
+    if c.text.as_ref().is_some_and(|t| t.len() > 256) {
+        err(p("text"), "more than the CSP MTU of 256 bytes".into());
+    }
+    if c.port.is_some_and(|port| port > 63) {
+        err(
+            p("port"),
+            format!("{} is not a CSP port (0-63)", c.port.unwrap_or(0)),
+        );
+    }
+    if let Some(d) = &c.data
+        && let Err(e) = parse_hex(d)
+    {
+        err(p("data"), e);
+    }
+    if c.size.is_some() && c.request != Some(RequestKind::Ping) {
+        err(p("size"), "only a `ping` takes `size`".into());
+    }
+    if c.size.is_some_and(|s| s > 256) {
+        err(
+            p("size"),
+            format!("{} bytes exceed the CSP MTU of 256", c.size.unwrap_or(0)),
+        );
     }
 }
 

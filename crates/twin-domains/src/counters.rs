@@ -84,14 +84,29 @@ impl ExpectKind for CounterExpect {
             if let Err(e) = cx.net.resolve(&self.target) {
                 err("target", e);
             }
-            if !NODE_COUNTERS.contains(&c.as_str()) && !c.starts_with("drops.") {
-                err(
+            match c.strip_prefix("drops.") {
+                Some(reason) if csp::drop::DropReason::from_name(reason).is_none() => {
+                    let reasons: Vec<&str> = csp::drop::DropReason::ALL
+                        .iter()
+                        .map(|r| r.name())
+                        .collect();
+                    err(
+                        "counter",
+                        format!(
+                            "unknown drop reason `{reason}` (reasons: {})",
+                            reasons.join(", ")
+                        ),
+                    );
+                }
+                Some(_) => {}
+                None if !NODE_COUNTERS.contains(&c.as_str()) => err(
                     "counter",
                     format!(
                         "unknown node counter `{c}` ({}, drops.<reason>)",
                         NODE_COUNTERS.join(", ")
                     ),
-                );
+                ),
+                None => {}
             }
         }
         if self.min.is_none() && self.max.is_none() {
@@ -149,8 +164,8 @@ pub fn counter_value(report: &RunReport, target: &CounterTarget, counter: &str) 
                 "platform_refused" => c.platform_refused,
                 "drops" => c.total_drops(),
                 other => {
-                    let reason = other.strip_prefix("drops.")?;
-                    c.drops.get(reason).copied().unwrap_or(0)
+                    let reason = csp::drop::DropReason::from_name(other.strip_prefix("drops.")?)?;
+                    c.drops.get(&reason).copied().unwrap_or(0)
                 }
             })
         }

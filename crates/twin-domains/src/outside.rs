@@ -11,7 +11,7 @@
 //! - a node sitting on two media (the PC on both buses, a COMM with its radio) cannot be
 //!   replaced over KISS; the PC can be over two `socketcan` links, one per bus.
 
-use bus::kiss_tcp::{KissLimits, KissLinkConfig};
+use links::kiss_tcp::{KissLimits, KissLinkConfig};
 use platform::addr::Segment;
 
 use twin_core::network::{NetworkSpec, Role};
@@ -50,6 +50,25 @@ pub fn validate(
         }
     }
     let kiss = l.kind != LinkKind::Socketcan;
+    let replaced_addrs = check_replaces(s, net, i, kiss, err);
+    if kiss {
+        check_kiss_fields(l, net, i, &replaced_addrs, &p, err);
+    } else {
+        check_socketcan_fields(l, &p, err);
+    }
+}
+
+/// Link `i`'s `replaces`: nodes an outside program may take the place of; their addresses.
+fn check_replaces(
+    s: &Scenario,
+    net: &NetworkSpec,
+    i: usize,
+    kiss: bool,
+    err: &mut dyn FnMut(Vec<PathStep>, String),
+) -> Vec<u8> {
+    let Some(l) = s.links.get(i) else {
+        return Vec::new();
+    };
     let mut replaced_addrs = Vec::new();
     for (j, name) in l.replaces.iter().enumerate() {
         let at = || {
@@ -129,88 +148,105 @@ pub fn validate(
             }
         }
     }
-    if kiss {
-        let addrs: Vec<u8> = l.addrs.iter().chain(&replaced_addrs).copied().collect();
-        // The hub's programs may sit on several segments; a KISS link joins one.
-        if l.kind != LinkKind::ZmqHub
-            && let Some(&first) = addrs.first()
-            && let Some(&other) = addrs
-                .iter()
-                .find(|&&a| Segment::of(a) != Segment::of(first))
+    replaced_addrs
+}
+
+/// A KISS or hub link's addresses (one segment, no simulated node's unless replaced) and
+/// limits.
+fn check_kiss_fields(
+    l: &LinkSpec,
+    net: &NetworkSpec,
+    i: usize,
+    replaced_addrs: &[u8],
+    p: &dyn Fn(&str) -> Vec<PathStep>,
+    err: &mut dyn FnMut(Vec<PathStep>, String),
+) {
+    let addrs: Vec<u8> = l.addrs.iter().chain(replaced_addrs).copied().collect();
+    // The hub's programs may sit on several segments; a KISS link joins one.
+    if l.kind != LinkKind::ZmqHub
+        && let Some(&first) = addrs.first()
+        && let Some(&other) = addrs
+            .iter()
+            .find(|&&a| Segment::of(a) != Segment::of(first))
+    {
+        err(
+            p("addrs"),
+            format!(
+                "{first} and {other} are on different segments; a KISS link joins one (12-15 \
+                 payload bus, 16-20 ground, others main bus)"
+            ),
+        );
+    }
+    for (j, &a) in l.addrs.iter().enumerate() {
+        let at = vec![
+            key("links"),
+            PathStep::Index(i),
+            key("addrs"),
+            PathStep::Index(j),
+        ];
+        if a >= 31 {
+            err(at, format!("{a} is not a unicast CSP address"));
+        } else if let Some(node) = net.nodes.iter().find(|n| n.addr == a)
+            && !replaced_addrs.contains(&a)
         {
             err(
-                p("addrs"),
+                at,
                 format!(
-                    "{first} and {other} are on different segments; a KISS link joins one (12-15 \
-                     payload bus, 16-20 ground, others main bus)"
+                    "{a} is {}'s address: add replaces = [\"{}\"] to take its place, or \
+                     use a free address",
+                    node.name, node.name
                 ),
             );
         }
-        for (j, &a) in l.addrs.iter().enumerate() {
-            let at = vec![
-                key("links"),
-                PathStep::Index(i),
-                key("addrs"),
-                PathStep::Index(j),
-            ];
-            if a >= 31 {
-                err(at, format!("{a} is not a unicast CSP address"));
-            } else if let Some(node) = net.nodes.iter().find(|n| n.addr == a)
-                && !replaced_addrs.contains(&a)
-            {
-                err(
-                    at,
-                    format!(
-                        "{a} is {}'s address: add replaces = [\"{}\"] to take its place, or \
-                         use a free address",
-                        node.name, node.name
-                    ),
-                );
-            }
-        }
-        for (f, v) in [
-            ("max_connections", l.max_connections),
-            ("input_chunks", l.input_chunks),
-            ("output_frames", l.output_frames),
-        ] {
-            if let Some(v) = v
-                && !(1..=65_536).contains(&v)
-            {
-                err(p(f), format!("{v} is out of range 1..=65536"));
-            }
-        }
-        if let Some(v) = l.tx_frames_per_s
-            && !(1..=100_000).contains(&v)
+    }
+    for (f, v) in [
+        ("max_connections", l.max_connections),
+        ("input_chunks", l.input_chunks),
+        ("output_frames", l.output_frames),
+    ] {
+        if let Some(v) = v
+            && !(1..=65_536).contains(&v)
         {
-            err(
-                p("tx_frames_per_s"),
-                format!("{v} is out of range 1..=100000"),
-            );
+            err(p(f), format!("{v} is out of range 1..=65536"));
         }
-    } else {
-        for f in [
-            "addrs",
-            "max_connections",
-            "input_chunks",
-            "output_frames",
-            "idle_timeout",
-            "tx_frames_per_s",
-        ] {
-            let set = match f {
-                "addrs" => !l.addrs.is_empty(),
-                "max_connections" => l.max_connections.is_some(),
-                "input_chunks" => l.input_chunks.is_some(),
-                "idle_timeout" => l.idle_timeout.is_some(),
-                "tx_frames_per_s" => l.tx_frames_per_s.is_some(),
-                _ => l.output_frames.is_some(),
-            };
-            if set {
-                err(
-                    p(f),
-                    "a socketcan link is the bus itself: it has no addresses or KISS limits"
-                        .to_owned(),
-                );
-            }
+    }
+    if let Some(v) = l.tx_frames_per_s
+        && !(1..=100_000).contains(&v)
+    {
+        err(
+            p("tx_frames_per_s"),
+            format!("{v} is out of range 1..=100000"),
+        );
+    }
+}
+
+/// A socketcan link is the bus itself: none of a KISS link's fields.
+fn check_socketcan_fields(
+    l: &LinkSpec,
+    p: &dyn Fn(&str) -> Vec<PathStep>,
+    err: &mut dyn FnMut(Vec<PathStep>, String),
+) {
+    for f in [
+        "addrs",
+        "max_connections",
+        "input_chunks",
+        "output_frames",
+        "idle_timeout",
+        "tx_frames_per_s",
+    ] {
+        let set = match f {
+            "addrs" => !l.addrs.is_empty(),
+            "max_connections" => l.max_connections.is_some(),
+            "input_chunks" => l.input_chunks.is_some(),
+            "idle_timeout" => l.idle_timeout.is_some(),
+            "tx_frames_per_s" => l.tx_frames_per_s.is_some(),
+            _ => l.output_frames.is_some(),
+        };
+        if set {
+            err(
+                p(f),
+                "a socketcan link is the bus itself: it has no addresses or KISS limits".to_owned(),
+            );
         }
     }
 }

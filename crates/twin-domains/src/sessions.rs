@@ -167,7 +167,12 @@ pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
             );
         }
     }
+    validate_payloads(s, err);
+}
 
+/// The `[[payload]]` tables: addresses of simulated payloads, each once; files, behaviours,
+/// pushes.
+fn validate_payloads(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
     let mut seen = BTreeMap::new();
     for (i, p) in s.payload.iter().enumerate() {
         let q = |n: &str| vec![key("payload"), PathStep::Index(i), key(n)];
@@ -901,7 +906,7 @@ mod tests {
                 message: "drop (unbound port)".into(),
             }),
             node: "PC".into(),
-            reason: "unbound port".into(),
+            reason: csp::drop::DropReason::UnboundPort,
             packet: csp::node::DroppedPacket {
                 cfp: None,
                 header: csp::Header::new(src, 6, 40, sport),

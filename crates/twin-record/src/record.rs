@@ -1198,6 +1198,41 @@ fn emit_msg<T: foxglove::Encode>(
     })
 }
 
+/// A scenario command as sent: the `/commands` message with its request.
+fn command_sent_msg(t_ns: u64, name: &str, dst: u8, dport: u8, data: &[u8]) -> CommandMsg {
+    CommandMsg {
+        t_ns,
+        event: "sent".to_owned(),
+        name: name.to_owned(),
+        dst: Some(dst),
+        dport: Some(dport),
+        data: Some(bytes::Bytes::copy_from_slice(data)),
+        answered: None,
+        reply: None,
+        rtt_ns: None,
+    }
+}
+
+/// A scenario command's outcome: the `/commands` message with its reply, if any.
+fn command_result_msg(
+    t_ns: u64,
+    name: &str,
+    reply: Option<&[u8]>,
+    rtt_ns: Option<u64>,
+) -> CommandMsg {
+    CommandMsg {
+        t_ns,
+        event: "result".to_owned(),
+        name: name.to_owned(),
+        dst: None,
+        dport: None,
+        data: None,
+        answered: Some(reply.is_some()),
+        reply: reply.map(bytes::Bytes::copy_from_slice),
+        rtt_ns,
+    }
+}
+
 /// Foxglove's `time` of simulated time `t` in a run that started `base_ns` after the epoch.
 fn foxglove_time(base_ns: u64, t: SimTime) -> LogTime {
     let unix = base_ns.saturating_add(t.as_ns());
@@ -1761,24 +1796,7 @@ impl EventEncoder {
                 link,
                 dir,
                 bytes,
-            } => {
-                let d = match dir {
-                    Direction::In => "in",
-                    Direction::Out => "out",
-                };
-                self.key.clear();
-                self.key.push_str(link);
-                self.key.push('/');
-                self.key.push_str(d);
-                let msg = KissFrameMsg {
-                    t_ns,
-                    link: link.clone(),
-                    dir: d.to_owned(),
-                    bytes: bytes::Bytes::copy_from_slice(bytes),
-                    len: bytes.len() as u32,
-                };
-                emit_msg(buf, base_ns, (ChannelKind::Kiss, &self.key), *t, &msg, emit)
-            }
+            } => self.encode_kiss(*t, link, *dir, bytes, emit),
             RunEvent::Log {
                 t,
                 source,
@@ -1810,17 +1828,7 @@ impl EventEncoder {
                 data,
                 ..
             } => {
-                let msg = CommandMsg {
-                    t_ns,
-                    event: "sent".to_owned(),
-                    name: name.clone(),
-                    dst: Some(*dst),
-                    dport: Some(*dport),
-                    data: Some(bytes::Bytes::copy_from_slice(data)),
-                    answered: None,
-                    reply: None,
-                    rtt_ns: None,
-                };
+                let msg = command_sent_msg(t_ns, name, *dst, *dport, data);
                 emit_msg(buf, base_ns, (ChannelKind::Command, ""), *t, &msg, emit)
             }
             RunEvent::CommandResult {
@@ -1830,17 +1838,7 @@ impl EventEncoder {
                 rtt_ns,
                 ..
             } => {
-                let msg = CommandMsg {
-                    t_ns,
-                    event: "result".to_owned(),
-                    name: name.clone(),
-                    dst: None,
-                    dport: None,
-                    data: None,
-                    answered: Some(reply.is_some()),
-                    reply: reply.as_deref().map(bytes::Bytes::copy_from_slice),
-                    rtt_ns: *rtt_ns,
-                };
+                let msg = command_result_msg(t_ns, name, reply.as_deref(), *rtt_ns);
                 emit_msg(buf, base_ns, (ChannelKind::Command, ""), *t, &msg, emit)
             }
             RunEvent::Expectation {
@@ -1858,97 +1856,7 @@ impl EventEncoder {
                 emit_msg(buf, base_ns, (ChannelKind::Expectation, ""), *t, &msg, emit)
             }
             RunEvent::Truth { t, truth, adcs } => self.encode_truth(*t, truth, adcs, emit),
-            RunEvent::Pc(o) => {
-                use nodes_pc::PcOutput as O;
-                let t = ev.t();
-                let none = PcSessionMsg {
-                    t_ns,
-                    event: String::new(),
-                    session: None,
-                    payload: None,
-                    result: None,
-                    packets: None,
-                    reason: None,
-                    bytes: None,
-                };
-                let msg = match &**o {
-                    O::Downlinked {
-                        session_id,
-                        payload_addr,
-                        bytes,
-                        ..
-                    } => {
-                        let msg = DownlinkMsg {
-                            t_ns,
-                            session: *session_id,
-                            payload: *payload_addr,
-                            len: bytes.len() as u32,
-                            crc32c: csp::crc32::crc32c(bytes),
-                        };
-                        return emit_msg(buf, base_ns, (ChannelKind::Downlink, ""), t, &msg, emit);
-                    }
-                    O::Final { accounting, .. } => {
-                        // One message per session: bytes still held (buffer and queue).
-                        for x in &accounting.sessions {
-                            let msg = PcSessionMsg {
-                                event: "final".into(),
-                                session: Some(x.session_id),
-                                payload: Some(x.payload_addr),
-                                bytes: Some(x.bytes.buffered_now + x.bytes.queued_now),
-                                ..none.clone()
-                            };
-                            emit_msg(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)?;
-                        }
-                        return Ok(());
-                    }
-                    O::SessionStarted { session_id, .. } => PcSessionMsg {
-                        event: "started".into(),
-                        session: Some(*session_id),
-                        ..none
-                    },
-                    O::SessionEnded {
-                        session_id,
-                        result,
-                        packets,
-                        ..
-                    } => PcSessionMsg {
-                        event: "ended".into(),
-                        session: Some(*session_id),
-                        result: Some(twin_scenario::pc::result_name(result.to_u8()).into()),
-                        packets: Some(*packets),
-                        ..none
-                    },
-                    // A run lost with the PC's memory: ended, with no ICD result.
-                    O::SessionLost {
-                        session_id,
-                        cause,
-                        packets,
-                        ..
-                    } => PcSessionMsg {
-                        event: "ended".into(),
-                        session: Some(*session_id),
-                        result: Some("lost".into()),
-                        reason: Some(cause.as_str().into()),
-                        packets: Some(*packets),
-                        ..none
-                    },
-                    O::Dropped {
-                        session_id,
-                        payload_addr,
-                        reason,
-                        bytes,
-                        ..
-                    } => PcSessionMsg {
-                        event: "dropped".into(),
-                        session: *session_id,
-                        payload: Some(*payload_addr),
-                        reason: Some(reason.as_str().into()),
-                        bytes: Some(*bytes),
-                        ..none
-                    },
-                };
-                emit_msg(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)
-            }
+            RunEvent::Pc(o) => self.encode_pc(ev.t(), o, emit),
             RunEvent::Beacon { t, from, data } => {
                 let msg = BeaconMsg {
                     t_ns,
@@ -1961,80 +1869,244 @@ impl EventEncoder {
                 };
                 emit_msg(buf, base_ns, (ChannelKind::Beacon, ""), *t, &msg, emit)
             }
-            RunEvent::Eps(o) => match &**o {
-                nodes_eps::EpsOutput::Sample {
-                    t,
-                    soc,
-                    battery_v,
-                    battery_a,
-                    solar_w,
-                    load_w,
-                    panels_w,
-                    channels,
-                } => {
-                    let msg = EpsPowerMsg {
-                        t_ns,
-                        soc: *soc as f32,
-                        battery_v: *battery_v as f32,
-                        battery_a: *battery_a as f32,
-                        solar_w: *solar_w as f32,
-                        load_w: *load_w as f32,
-                        panels_w: panels_w.iter().map(|&w| w as f32).collect(),
-                        channels: *channels,
-                    };
-                    emit_msg(buf, base_ns, (ChannelKind::EpsPower, ""), *t, &msg, emit)
-                }
-                nodes_eps::EpsOutput::Channel {
-                    t,
-                    channel,
-                    on,
-                    cause,
-                } => {
-                    let cause = match cause {
-                        nodes_eps::SwitchCause::Initial => "initial",
-                        nodes_eps::SwitchCause::Command => "command",
-                        nodes_eps::SwitchCause::Timeline => "timeline",
-                        nodes_eps::SwitchCause::Shed(_) => "shed",
-                        nodes_eps::SwitchCause::Restore(_) => "restore",
-                    };
-                    let msg = EpsChannelMsg {
-                        t_ns,
-                        channel: channel.name().to_owned(),
-                        on: *on,
-                        cause: cause.to_owned(),
-                    };
-                    emit_msg(buf, base_ns, (ChannelKind::EpsChannel, ""), *t, &msg, emit)
-                }
-            },
-            RunEvent::Payload { addr, out } => {
-                use nodes_payload::PayloadOutput as O;
-                let msg = match out {
-                    O::Produced { bytes, how, .. } => PayloadMsg {
-                        t_ns,
-                        addr: *addr,
-                        event: "produced".into(),
-                        bytes: Some(*bytes),
-                        how: Some(
-                            match how {
-                                nodes_payload::How::PollReply => "poll-reply",
-                                nodes_payload::How::Push => "push",
-                            }
-                            .into(),
-                        ),
-                        msg: None,
-                    },
-                    O::SyncReceived { msg, .. } => PayloadMsg {
-                        t_ns,
-                        addr: *addr,
-                        event: "sync".into(),
-                        bytes: None,
-                        how: None,
-                        msg: Some(bytes::Bytes::copy_from_slice(msg)),
-                    },
+            RunEvent::Eps(o) => self.encode_eps(t_ns, o, emit),
+            RunEvent::Payload { addr, out } => self.encode_payload(ev.t(), *addr, out, emit),
+        }
+    }
+
+    /// One KISS frame on an outside link, on its link's and direction's own channel.
+    fn encode_kiss(
+        &mut self,
+        t: SimTime,
+        link: &str,
+        dir: Direction,
+        bytes: &[u8],
+        emit: &mut Emit<'_>,
+    ) -> anyhow::Result<()> {
+        let d = match dir {
+            Direction::In => "in",
+            Direction::Out => "out",
+        };
+        self.key.clear();
+        self.key.push_str(link);
+        self.key.push('/');
+        self.key.push_str(d);
+        let msg = KissFrameMsg {
+            t_ns: t.as_ns(),
+            link: link.to_owned(),
+            dir: d.to_owned(),
+            bytes: bytes::Bytes::copy_from_slice(bytes),
+            len: bytes.len() as u32,
+        };
+        emit_msg(
+            &mut self.buf,
+            self.base_ns,
+            (ChannelKind::Kiss, &self.key),
+            t,
+            &msg,
+            emit,
+        )
+    }
+
+    /// What the payload controller did at `t`: a downlink, the final accounting (one
+    /// message per session) or a session's event.
+    fn encode_pc(
+        &mut self,
+        t: SimTime,
+        o: &nodes_pc::PcOutput,
+        emit: &mut Emit<'_>,
+    ) -> anyhow::Result<()> {
+        use nodes_pc::PcOutput as O;
+        let t_ns = t.as_ns();
+        let base_ns = self.base_ns;
+        let buf = &mut self.buf;
+        let none = PcSessionMsg {
+            t_ns,
+            event: String::new(),
+            session: None,
+            payload: None,
+            result: None,
+            packets: None,
+            reason: None,
+            bytes: None,
+        };
+        let msg = match o {
+            O::Downlinked {
+                session_id,
+                payload_addr,
+                bytes,
+                ..
+            } => {
+                let msg = DownlinkMsg {
+                    t_ns,
+                    session: *session_id,
+                    payload: *payload_addr,
+                    len: bytes.len() as u32,
+                    crc32c: csp::crc32::crc32c(bytes),
                 };
-                emit_msg(buf, base_ns, (ChannelKind::Payload, ""), ev.t(), &msg, emit)
+                return emit_msg(buf, base_ns, (ChannelKind::Downlink, ""), t, &msg, emit);
+            }
+            O::Final { accounting, .. } => {
+                // One message per session: bytes still held (buffer and queue).
+                for x in &accounting.sessions {
+                    let msg = PcSessionMsg {
+                        event: "final".into(),
+                        session: Some(x.session_id),
+                        payload: Some(x.payload_addr),
+                        bytes: Some(x.bytes.buffered_now + x.bytes.queued_now),
+                        ..none.clone()
+                    };
+                    emit_msg(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)?;
+                }
+                return Ok(());
+            }
+            O::SessionStarted { session_id, .. } => PcSessionMsg {
+                event: "started".into(),
+                session: Some(*session_id),
+                ..none
+            },
+            O::SessionEnded {
+                session_id,
+                result,
+                packets,
+                ..
+            } => PcSessionMsg {
+                event: "ended".into(),
+                session: Some(*session_id),
+                result: Some(twin_scenario::pc::result_name(result.to_u8()).into()),
+                packets: Some(*packets),
+                ..none
+            },
+            // A run lost with the PC's memory: ended, with no ICD result.
+            O::SessionLost {
+                session_id,
+                cause,
+                packets,
+                ..
+            } => PcSessionMsg {
+                event: "ended".into(),
+                session: Some(*session_id),
+                result: Some("lost".into()),
+                reason: Some(cause.as_str().into()),
+                packets: Some(*packets),
+                ..none
+            },
+            O::Dropped {
+                session_id,
+                payload_addr,
+                reason,
+                bytes,
+                ..
+            } => PcSessionMsg {
+                event: "dropped".into(),
+                session: *session_id,
+                payload: Some(*payload_addr),
+                reason: Some(reason.as_str().into()),
+                bytes: Some(*bytes),
+                ..none
+            },
+        };
+        emit_msg(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)
+    }
+
+    /// What the EPS did: a power sample or a channel switched (`t_ns` the event's time).
+    fn encode_eps(
+        &mut self,
+        t_ns: u64,
+        o: &nodes_eps::EpsOutput,
+        emit: &mut Emit<'_>,
+    ) -> anyhow::Result<()> {
+        let base_ns = self.base_ns;
+        let buf = &mut self.buf;
+        match o {
+            nodes_eps::EpsOutput::Sample {
+                t,
+                soc,
+                battery_v,
+                battery_a,
+                solar_w,
+                load_w,
+                panels_w,
+                channels,
+            } => {
+                let msg = EpsPowerMsg {
+                    t_ns,
+                    soc: *soc as f32,
+                    battery_v: *battery_v as f32,
+                    battery_a: *battery_a as f32,
+                    solar_w: *solar_w as f32,
+                    load_w: *load_w as f32,
+                    panels_w: panels_w.iter().map(|&w| w as f32).collect(),
+                    channels: *channels,
+                };
+                emit_msg(buf, base_ns, (ChannelKind::EpsPower, ""), *t, &msg, emit)
+            }
+            nodes_eps::EpsOutput::Channel {
+                t,
+                channel,
+                on,
+                cause,
+            } => {
+                let cause = match cause {
+                    nodes_eps::SwitchCause::Initial => "initial",
+                    nodes_eps::SwitchCause::Command => "command",
+                    nodes_eps::SwitchCause::Timeline => "timeline",
+                    nodes_eps::SwitchCause::Shed(_) => "shed",
+                    nodes_eps::SwitchCause::Restore(_) => "restore",
+                };
+                let msg = EpsChannelMsg {
+                    t_ns,
+                    channel: channel.name().to_owned(),
+                    on: *on,
+                    cause: cause.to_owned(),
+                };
+                emit_msg(buf, base_ns, (ChannelKind::EpsChannel, ""), *t, &msg, emit)
             }
         }
+    }
+
+    /// What the simulated payload at `addr` did at `t`: bytes produced or a SYNC received.
+    fn encode_payload(
+        &mut self,
+        t: SimTime,
+        addr: u8,
+        out: &nodes_payload::PayloadOutput,
+        emit: &mut Emit<'_>,
+    ) -> anyhow::Result<()> {
+        use nodes_payload::PayloadOutput as O;
+        let t_ns = t.as_ns();
+        let msg = match out {
+            O::Produced { bytes, how, .. } => PayloadMsg {
+                t_ns,
+                addr,
+                event: "produced".into(),
+                bytes: Some(*bytes),
+                how: Some(
+                    match how {
+                        nodes_payload::How::PollReply => "poll-reply",
+                        nodes_payload::How::Push => "push",
+                    }
+                    .into(),
+                ),
+                msg: None,
+            },
+            O::SyncReceived { msg, .. } => PayloadMsg {
+                t_ns,
+                addr,
+                event: "sync".into(),
+                bytes: None,
+                how: None,
+                msg: Some(bytes::Bytes::copy_from_slice(msg)),
+            },
+        };
+        emit_msg(
+            &mut self.buf,
+            self.base_ns,
+            (ChannelKind::Payload, ""),
+            t,
+            &msg,
+            emit,
+        )
     }
 
     /// The `/fc/...` messages of one truth sample (see the module docs for what is left out

@@ -4,14 +4,15 @@
 
 pub mod observe;
 
+use std::fmt::Write as _;
 use std::time::Duration;
 
 use bus::can::BusStats;
-use bus::kiss_tcp::KissLinkStats;
 use bus::net::NetStats;
 use bus::outside::BridgeStats;
 use bus::trace::TraceEvent;
 use csp::SimTime;
+use links::kiss_tcp::KissLinkStats;
 
 use crate::observe::attitude::AttitudeSample;
 use crate::observe::power::PowerSample;
@@ -143,12 +144,26 @@ pub async fn run_with(
 impl RunReport {
     /// The end-of-run table: per node packets in/out, forwarded, drops; per bus load.
     pub fn table(&self) -> String {
-        use std::fmt::Write as _;
         let mut s = String::new();
+        let elapsed = self.sim_time - SimTime::ZERO;
+        self.table_time(&mut s);
+        self.table_nodes(&mut s);
+        self.table_media(&mut s, elapsed);
+        self.table_can_errors(&mut s);
+        self.table_kiss(&mut s);
+        self.table_queues(&mut s);
+        self.table_socketcan(&mut s);
+        self.table_boards(&mut s);
+        self.table_links(&mut s);
+        self.table_requests(&mut s);
+        s
+    }
+
+    /// The table's head: whether the run was cut short, and how fast it ran.
+    fn table_time(&self, s: &mut String) {
         if let Some(i) = &self.interrupted {
             let _ = writeln!(s, "{i}: the verdicts below judge only what ran\n");
         }
-        let elapsed = self.sim_time - SimTime::ZERO;
         let _ = writeln!(
             s,
             "simulated {:.3} s in {:.3} s wall ({:.0}x real time)",
@@ -156,6 +171,10 @@ impl RunReport {
             self.wall.as_secs_f64(),
             self.sim_time.as_secs_f64() / self.wall.as_secs_f64().max(1e-9)
         );
+    }
+
+    /// The per-node section: packets in, out, forwarded, to the app, and drops by reason.
+    fn table_nodes(&self, s: &mut String) {
         let _ = writeln!(
             s,
             "\n{:<7} {:>3} {:>9} {:>9} {:>9} {:>9} {:>7}  drops by reason",
@@ -177,6 +196,10 @@ impl RunReport {
                 reasons.join(", ")
             );
         }
+    }
+
+    /// The per-medium section: each bus's load over `elapsed`, then the ground network's.
+    fn table_media(&self, s: &mut String, elapsed: Duration) {
         let _ = writeln!(
             s,
             "\n{:<8} {:>10} {:>11} {:>9} {:>8} {:>8}",
@@ -205,6 +228,10 @@ impl RunReport {
             g.dropped,
             "-"
         );
+    }
+
+    /// One line per bus that saw error frames, naming the ports in trouble.
+    fn table_can_errors(&self, s: &mut String) {
         for b in self.buses.iter().filter(|b| b.error_frames > 0) {
             let troubled: Vec<String> = b
                 .ports
@@ -241,6 +268,10 @@ impl RunReport {
                 troubled.join("; ")
             );
         }
+    }
+
+    /// One paragraph per KISS link: its connections and what it let in and out.
+    fn table_kiss(&self, s: &mut String) {
         for (name, k) in &self.kiss {
             let _ = writeln!(
                 s,
@@ -261,6 +292,10 @@ impl RunReport {
                 k.out_dropped
             );
         }
+    }
+
+    /// What ports' transmit budgets held back, then what full queues lost, if anything.
+    fn table_queues(&self, s: &mut String) {
         let mut lost = Vec::new();
         for b in &self.buses {
             for p in &b.ports {
@@ -288,6 +323,10 @@ impl RunReport {
         if !lost.is_empty() {
             let _ = writeln!(s, "\nlost to full queues: {}", lost.join("; "));
         }
+    }
+
+    /// One paragraph per SocketCAN bridge: frames across it, errors, why it stopped.
+    fn table_socketcan(&self, s: &mut String) {
         for (name, b) in &self.socketcan {
             let _ = writeln!(
                 s,
@@ -303,6 +342,10 @@ impl RunReport {
                     .unwrap_or_default()
             );
         }
+    }
+
+    /// The boards' writes refused behind a reader's horizon, when there were any.
+    fn table_boards(&self, s: &mut String) {
         let refused: Vec<String> = self
             .boards
             .iter()
@@ -316,6 +359,10 @@ impl RunReport {
                 refused.join(", ")
             );
         }
+    }
+
+    /// One paragraph per gated link that lost or delayed anything.
+    fn table_links(&self, s: &mut String) {
         for (name, g) in self
             .links
             .iter()
@@ -333,6 +380,10 @@ impl RunReport {
                 g.delayed
             );
         }
+    }
+
+    /// The ground's requests and how many were answered, when it sent any.
+    fn table_requests(&self, s: &mut String) {
         let r = self.requests;
         if r.requests > 0 {
             let _ = writeln!(
@@ -348,7 +399,6 @@ impl RunReport {
                 }
             );
         }
-        s
     }
 }
 

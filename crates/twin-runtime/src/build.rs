@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 
 use bus::driver::{Attachment, CtlTx, run_node_with};
-use bus::inbox::inbox;
+use bus::inbox::{InboxTx, inbox};
 use bus::outside::Segments;
 use bus::trace::TraceTx;
 use bus::{CanBus, CanBusConfig, Clock, PacketNet, PacketNetConfig};
@@ -133,44 +133,7 @@ pub(super) fn nodes(
         cfg.epoch_unix_s = opts.epoch_unix_s;
         cfg.payload_access = opts.payload_access;
         let (inbox_tx, inbox_rx) = inbox();
-        let ports: Vec<Attachment> = media
-            .iter()
-            .enumerate()
-            .map(|(i, m)| match m {
-                Medium::MainCan => Attachment::Can(segs.main.attach(
-                    &spec.name,
-                    &[spec.addr],
-                    false,
-                    inbox_tx.clone(),
-                    i,
-                )),
-                Medium::PayloadCan => Attachment::Can(segs.payload.attach(
-                    &spec.name,
-                    &[spec.addr],
-                    false,
-                    inbox_tx.clone(),
-                    i,
-                )),
-                Medium::GroundRadio | Medium::GroundRadioStandby => {
-                    Attachment::Net(segs.ground.attach(
-                        &format!("{}-uhf", spec.name),
-                        &[],
-                        true,
-                        *m == Medium::GroundRadio,
-                        inbox_tx.clone(),
-                        i,
-                    ))
-                }
-                Medium::Ground => Attachment::Net(segs.ground.attach(
-                    &spec.name,
-                    &[spec.addr],
-                    false,
-                    false,
-                    inbox_tx.clone(),
-                    i,
-                )),
-            })
-            .collect();
+        let ports = attach(spec, &media, segs, &inbox_tx);
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
         let mut app = app_for(spec.role, spec.addr, opts, boards, plan, results);
@@ -205,37 +168,92 @@ pub(super) fn nodes(
         nodes.push((spec.clone(), ctl_tx, handle));
     }
 
-    {
-        // Every radio transmission is charged to its COMM's transmitter, at its place on the
-        // air. Set once the radios are attached, before any node's task has run.
-        let activity = boards.activity.clone();
-        let log = ev_tx.clone();
-        segs.ground
-            .set_air_tap(bus::net::AirTap::new(move |id, radio, start, end| {
-                use platform::board::Activity;
-                let what = if secondary_radios.contains(&id) {
-                    Activity::UhfTxSecondary
-                } else {
-                    Activity::UhfTx
-                };
-                for (t, on) in [(start, true), (end, false)] {
-                    if let Err(e) = activity.set(what, t, on) {
-                        tracing::warn!(%t, "{radio}: air time not charged: {e}");
-                        let _ = log.send(RunEvent::Log {
-                            t,
-                            source: "run".to_owned(),
-                            level: twin_core::events::Level::Warning,
-                            message: format!("{radio}: air time: {e}"),
-                        });
-                    }
-                }
-            }));
-    }
+    charge_air_time(segs, boards, secondary_radios, ev_tx);
 
     Nodes {
         tasks: nodes,
         comm_ports,
     }
+}
+
+/// A node's ports on its media, in the order of `media` (its CSP interfaces), delivering
+/// into its inbox.
+fn attach(
+    spec: &NodeSpec,
+    media: &[Medium],
+    segs: &Segments,
+    inbox_tx: &InboxTx,
+) -> Vec<Attachment> {
+    media
+        .iter()
+        .enumerate()
+        .map(|(i, m)| match m {
+            Medium::MainCan => Attachment::Can(segs.main.attach(
+                &spec.name,
+                &[spec.addr],
+                false,
+                inbox_tx.clone(),
+                i,
+            )),
+            Medium::PayloadCan => Attachment::Can(segs.payload.attach(
+                &spec.name,
+                &[spec.addr],
+                false,
+                inbox_tx.clone(),
+                i,
+            )),
+            Medium::GroundRadio | Medium::GroundRadioStandby => {
+                Attachment::Net(segs.ground.attach(
+                    &format!("{}-uhf", spec.name),
+                    &[],
+                    true,
+                    *m == Medium::GroundRadio,
+                    inbox_tx.clone(),
+                    i,
+                ))
+            }
+            Medium::Ground => Attachment::Net(segs.ground.attach(
+                &spec.name,
+                &[spec.addr],
+                false,
+                false,
+                inbox_tx.clone(),
+                i,
+            )),
+        })
+        .collect()
+}
+
+/// Charge every radio transmission to its COMM's transmitter, at its place on the air. Set
+/// once the radios are attached, before any node's task has run.
+fn charge_air_time(
+    segs: &Segments,
+    boards: &Boards,
+    secondary_radios: Vec<bus::net::EndpointId>,
+    ev_tx: &mpsc::UnboundedSender<RunEvent>,
+) {
+    let activity = boards.activity.clone();
+    let log = ev_tx.clone();
+    segs.ground
+        .set_air_tap(bus::net::AirTap::new(move |id, radio, start, end| {
+            use platform::board::Activity;
+            let what = if secondary_radios.contains(&id) {
+                Activity::UhfTxSecondary
+            } else {
+                Activity::UhfTx
+            };
+            for (t, on) in [(start, true), (end, false)] {
+                if let Err(e) = activity.set(what, t, on) {
+                    tracing::warn!(%t, "{radio}: air time not charged: {e}");
+                    let _ = log.send(RunEvent::Log {
+                        t,
+                        source: "run".to_owned(),
+                        level: twin_core::events::Level::Warning,
+                        message: format!("{radio}: air time: {e}"),
+                    });
+                }
+            }
+        }));
 }
 
 /// A node's application, its events turned into [`RunEvent`]s (`twin_core::events`).

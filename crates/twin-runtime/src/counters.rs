@@ -5,11 +5,11 @@
 use std::time::Duration;
 
 use bus::can::BusStats;
-use bus::kiss_tcp::KissLinkStats;
 use bus::net::NetStats;
 use bus::outside::BridgeStats;
 use csp::SimTime;
 use csp::node::NodeCounters;
+use links::kiss_tcp::KissLinkStats;
 
 use crate::ground::{RequestResult, RequestSummary};
 use twin_core::events::RunEvent;

@@ -27,9 +27,9 @@ use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
+use ::links::kiss_tcp::KissLinkConfig;
 use anyhow::Context as _;
 use bus::driver::NodeCtl;
-use bus::kiss_tcp::KissLinkConfig;
 use bus::{Clock, ClockMode};
 use csp::SimTime;
 use platform::board::Boards;
@@ -165,8 +165,8 @@ pub enum KissMode {
     /// libcsp's `usart_init(PATH)` opens it.
     Pty(std::path::PathBuf),
     /// libcsp 1.4's ZMQ hub (`--zmq-hub`, `kind = "zmq-hub"`): the twin binds its two
-    /// sockets on this host, the nodes' PUB side and SUB side (`bus::zmq_hub`).
-    ZmqHub(bus::zmq_hub::HubAddr),
+    /// sockets on this host, the nodes' PUB side and SUB side (`links::zmq_hub`).
+    ZmqHub(::links::zmq_hub::HubAddr),
 }
 
 /// A link of the run to outside programs: KISS (TCP or a pty) or the ZMQ hub.
@@ -256,7 +256,7 @@ impl RunOptions {
 }
 
 /// A node's text console for people and programs outside the twin (`[[links]] kind =
-/// "uart"`, `--uart NODE=ADDR|PATH`; `bus::console`).
+/// "uart"`, `--uart NODE=ADDR|PATH`; `links::console`).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct UartLink {
     /// The node's name (`FC`).
@@ -493,29 +493,7 @@ pub async fn run_with(
     let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
     // The KISS servers' addresses, then the TCP consoles'.
     kiss.bound.extend(consoles);
-    if let Some((from, speed)) = opts.clock.paced() {
-        // The wall clock paces the run from `from` on (0 in real time; the scenario's
-        // `realtime_from` after virtual time until then).
-        let tx = ev_tx.clone();
-        let from_later = from > SimTime::ZERO;
-        background.push(tokio::spawn(bus::pace::pacer(
-            clock,
-            from,
-            speed,
-            move |t| {
-                if from_later {
-                    tracing::info!("real time from {t} on");
-                    let _ = tx.send(RunEvent::Log {
-                        t,
-                        source: "clock".to_owned(),
-                        level: twin_core::events::Level::Info,
-                        message: "virtual time ends: the wall clock paces the run from here"
-                            .to_owned(),
-                    });
-                }
-            },
-        )));
-    }
+    spawn_pacer(&opts, clock, &ev_tx, &mut background);
     if let Some(r) = ready {
         let _ = r.send(kiss.bound.clone());
     }
@@ -525,40 +503,12 @@ pub async fn run_with(
     let ctls = nodes.ctls();
     // One truth for power: the EPS's switches and the power and hang faults go through
     // the platform's rules.
-    let mut power_shell =
-        power::PowerShell::new(ctls.clone(), boards.activity.clone(), segs.clone());
-    for (addr, ports) in &nodes.comm_ports {
-        power_shell.register_comm(*addr, ports);
-    }
-    for (i, (link, gate)) in opts.outside.iter().zip(&gates).enumerate() {
-        if let Some(ch) = link.powered_by {
-            let on = opts.eps.channels_on & ch.bit() != 0;
-            power_shell.power_link(i, link.name.clone(), ch, gate.clone(), on);
-        }
-    }
+    let mut power_shell = power_shell(&opts, &nodes, &boards, &segs, &gates);
     let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let kiss_budget = kiss.budget.clone();
-    let handle_event = |ev: RunEvent, sink: &mut dyn RunSink| {
-        sink.event(&ev);
-        if let RunEvent::Kiss {
-            dir: twin_core::events::Direction::In,
-            ..
-        } = ev
-        {
-            // The chunk is handed on (recorded, or queued for the recorder's thread, whose
-            // queue is bounded): its link may read another.
-            kiss_budget.add_permits(1);
-        }
-    };
-    let mut signal_seen = stop_signal();
-    let signalled = async move {
-        let seen = signal_seen.wait_for(Option::is_some).await.map(|c| *c);
-        match seen {
-            Ok(cause) => cause,
-            Err(_) => std::future::pending().await,
-        }
-    };
+    let handle_event = |ev: RunEvent, sink: &mut dyn RunSink| hand_on(ev, sink, &kiss_budget);
+    let signalled = signalled();
     tokio::pin!(signalled);
     let mut interrupted: Option<StopCause> = None;
     let wall_deadline = opts.wall_limit.map(|d| (d, wall_start + d));
@@ -572,29 +522,7 @@ pub async fn run_with(
                 break;
             }
             ev = ev_rx.recv() => {
-                // The event, then those already queued behind it (a bounded batch: one
-                // select per batch, not per event). The stream's order is the select's own:
-                // with `biased`, a queued event always came before the fault timer. What
-                // moved is the yield: tokio's budget (128 units a poll, a `recv` one) made
-                // the loop yield every 128 events, now every 128 batches, so with more than
-                // 128 waiting, other tasks of the same instant see this loop's effects (an
-                // EPS switch's power) sooner. Deterministic either way.
-                let mut next = ev;
-                let mut left = EVENTS_PER_WAKE;
-                while let Some(ev) = next {
-                    // An EPS channel switch takes effect through the power rules, whose news
-                    // comes first.
-                    if let RunEvent::Eps(o) = &ev
-                        && let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = **o
-                    {
-                        for e in power_shell.eps_channel(t, channel, on) {
-                            handle_event(e, sink);
-                        }
-                    }
-                    handle_event(ev, sink);
-                    left -= 1;
-                    next = if left > 0 { ev_rx.try_recv().ok() } else { None };
-                }
+                handle_batch(ev, &mut ev_rx, &mut power_shell, sink, &kiss_budget);
                 // The wall clock's limit, looked at once a batch (a run in virtual time
                 // sleeps on no wall-clock timer).
                 if let Some((d, at)) = wall_deadline
@@ -609,23 +537,14 @@ pub async fn run_with(
                 if next_fault >= end && faults.peek().is_none_or(|f| f.at >= end) {
                     break;
                 }
+                let mut director = faults::Director {
+                    segs: &segs,
+                    ctls: &ctls,
+                    power: &mut power_shell,
+                    links: &gates,
+                };
                 while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
-                    let effects = faults::Director {
-                        segs: &segs,
-                        ctls: &ctls,
-                        power: &mut power_shell,
-                        links: &gates,
-                    }
-                    .apply(&f);
-                    if let FaultAction::Contact(on) = f.action {
-                        sink.contact(f.at, on);
-                    }
-                    tracing::info!(t = %f.at, "fault: {}", f.what);
-                    // The fault, then what it did.
-                    handle_event(RunEvent::Fault { t: f.at, what: f.what.clone() }, sink);
-                    for e in effects {
-                        handle_event(e, sink);
-                    }
+                    apply_fault(&f, &mut director, sink, &kiss_budget);
                 }
             }
         }
@@ -641,25 +560,7 @@ pub async fn run_with(
         of: opts.duration,
     });
 
-    for (_, ctl, _) in &nodes.tasks {
-        let _ = ctl.send((SimTime::ZERO, NodeCtl::Stop));
-    }
-    let mut node_reports = Vec::new();
-    for (spec, _, handle) in nodes.tasks {
-        let mut host = handle
-            .await
-            .with_context(|| format!("node {} task failed", spec.name))?;
-        // In node order, so that the final reports sit in the event stream deterministically.
-        host.app.finish(&mut host.node, sim_time);
-        while let Some(e) = host.poll_event() {
-            let _ = ev_tx.send(e);
-        }
-        node_reports.push(NodeReport {
-            name: spec.name,
-            addr: spec.addr,
-            counters: host.node.counters().clone(),
-        });
-    }
+    let node_reports = stop_nodes(nodes.tasks, sim_time, &ev_tx).await?;
     for h in background {
         h.abort();
     }
@@ -687,6 +588,174 @@ pub async fn run_with(
         results,
         requests,
     })
+}
+
+/// The first stop signal (SIGINT, SIGTERM) of the process, once it comes; watched from
+/// the call on.
+fn signalled() -> impl std::future::Future<Output = Option<StopCause>> {
+    let mut signal_seen = stop_signal();
+    async move {
+        let seen = signal_seen.wait_for(Option::is_some).await.map(|c| *c);
+        match seen {
+            Ok(cause) => cause,
+            Err(_) => std::future::pending().await,
+        }
+    }
+}
+
+/// The wall clock paces the run from `from` on (0 in real time; the scenario's
+/// `realtime_from` after virtual time until then), when the run is paced at all.
+fn spawn_pacer(
+    opts: &RunOptions,
+    clock: Clock,
+    ev_tx: &mpsc::UnboundedSender<RunEvent>,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+) {
+    if let Some((from, speed)) = opts.clock.paced() {
+        let tx = ev_tx.clone();
+        let from_later = from > SimTime::ZERO;
+        background.push(tokio::spawn(bus::pace::pacer(
+            clock,
+            from,
+            speed,
+            move |t| {
+                if from_later {
+                    tracing::info!("real time from {t} on");
+                    let _ = tx.send(RunEvent::Log {
+                        t,
+                        source: "clock".to_owned(),
+                        level: twin_core::events::Level::Info,
+                        message: "virtual time ends: the wall clock paces the run from here"
+                            .to_owned(),
+                    });
+                }
+            },
+        )));
+    }
+}
+
+/// One truth for power: the EPS's switches and the power and hang faults go through the
+/// platform's rules, which switch the nodes, the radios and the outside links' power.
+fn power_shell(
+    opts: &RunOptions,
+    nodes: &build::Nodes,
+    boards: &Boards,
+    segs: &bus::outside::Segments,
+    gates: &[bus::gate::LinkGate],
+) -> power::PowerShell {
+    let mut power_shell =
+        power::PowerShell::new(nodes.ctls(), boards.activity.clone(), segs.clone());
+    for (addr, ports) in &nodes.comm_ports {
+        power_shell.register_comm(*addr, ports);
+    }
+    for (i, (link, gate)) in opts.outside.iter().zip(gates).enumerate() {
+        if let Some(ch) = link.powered_by {
+            let on = opts.eps.channels_on & ch.bit() != 0;
+            power_shell.power_link(i, link.name.clone(), ch, gate.clone(), on);
+        }
+    }
+    power_shell
+}
+
+/// Hand one event to the sink; a chunk read from outside, once handed on (recorded, or
+/// queued for the recorder's thread, whose queue is bounded), lets its link read another.
+fn hand_on(ev: RunEvent, sink: &mut dyn RunSink, kiss_budget: &tokio::sync::Semaphore) {
+    sink.event(&ev);
+    if let RunEvent::Kiss {
+        dir: twin_core::events::Direction::In,
+        ..
+    } = ev
+    {
+        kiss_budget.add_permits(1);
+    }
+}
+
+/// The event that woke the loop, then those already queued behind it: a bounded batch, one
+/// select per batch rather than per event. The stream's order is the select's own: with
+/// `biased`, a queued event always came before the fault timer. tokio's budget (128 units a
+/// poll, a `recv` one) makes the loop yield every 128 batches, so with more than 128
+/// waiting, other tasks of the same instant see this loop's effects (an EPS switch's power)
+/// before they run. Deterministic either way.
+fn handle_batch(
+    first: Option<RunEvent>,
+    ev_rx: &mut mpsc::UnboundedReceiver<RunEvent>,
+    power_shell: &mut power::PowerShell,
+    sink: &mut dyn RunSink,
+    kiss_budget: &tokio::sync::Semaphore,
+) {
+    let mut next = first;
+    let mut left = EVENTS_PER_WAKE;
+    while let Some(ev) = next {
+        // An EPS channel switch takes effect through the power rules, whose news comes
+        // first.
+        if let RunEvent::Eps(o) = &ev
+            && let nodes_eps::EpsOutput::Channel { t, channel, on, .. } = **o
+        {
+            for e in power_shell.eps_channel(t, channel, on) {
+                hand_on(e, sink, kiss_budget);
+            }
+        }
+        hand_on(ev, sink, kiss_budget);
+        left -= 1;
+        next = if left > 0 {
+            ev_rx.try_recv().ok()
+        } else {
+            None
+        };
+    }
+}
+
+/// Apply one fault at its instant: the fault's event, then what it did.
+fn apply_fault(
+    f: &TimedFault,
+    director: &mut faults::Director<'_>,
+    sink: &mut dyn RunSink,
+    kiss_budget: &tokio::sync::Semaphore,
+) {
+    let effects = director.apply(f);
+    if let FaultAction::Contact(on) = f.action {
+        sink.contact(f.at, on);
+    }
+    tracing::info!(t = %f.at, "fault: {}", f.what);
+    hand_on(
+        RunEvent::Fault {
+            t: f.at,
+            what: f.what.clone(),
+        },
+        sink,
+        kiss_budget,
+    );
+    for e in effects {
+        hand_on(e, sink, kiss_budget);
+    }
+}
+
+/// Stop every node at the end of the run and take its final report, in node order, so
+/// that the final reports sit in the event stream deterministically.
+async fn stop_nodes(
+    tasks: Vec<build::NodeTask>,
+    sim_time: SimTime,
+    ev_tx: &mpsc::UnboundedSender<RunEvent>,
+) -> anyhow::Result<Vec<NodeReport>> {
+    for (_, ctl, _) in &tasks {
+        let _ = ctl.send((SimTime::ZERO, NodeCtl::Stop));
+    }
+    let mut node_reports = Vec::new();
+    for (spec, _, handle) in tasks {
+        let mut host = handle
+            .await
+            .with_context(|| format!("node {} task failed", spec.name))?;
+        host.app.finish(&mut host.node, sim_time);
+        while let Some(e) = host.poll_event() {
+            let _ = ev_tx.send(e);
+        }
+        node_reports.push(NodeReport {
+            name: spec.name,
+            addr: spec.addr,
+            counters: host.node.counters().clone(),
+        });
+    }
+    Ok(node_reports)
 }
 
 #[cfg(test)]

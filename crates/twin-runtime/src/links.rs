@@ -1,4 +1,4 @@
-//! Links to programs outside the twin: the KISS/TCP servers and clients (`bus::kiss_tcp`),
+//! Links to programs outside the twin: the KISS/TCP servers and clients (`links::kiss_tcp`),
 //! the recorded input of a replayed run fed through the same link core, and the SocketCAN
 //! bridges (cargo feature `socketcan`). Each link is a background task; its counters are
 //! shared with the report.
@@ -9,9 +9,9 @@ use std::sync::{Arc, Mutex};
 use anyhow::Context as _;
 use bus::Clock;
 use bus::gate::LinkGate;
-use bus::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissLog, KissTap};
 use bus::outside::{BridgeStats, LinkId, Segments};
 use csp::SimTime;
+use links::kiss_tcp::{self, KissLinkConfig, KissLinkStats, KissLog, KissTap};
 use tokio::sync::mpsc;
 
 use super::{KissMode, RunOptions, mix};
@@ -58,6 +58,54 @@ pub(super) async fn kiss(
     events: &mpsc::UnboundedSender<RunEvent>,
     background: &mut Vec<tokio::task::JoinHandle<()>>,
 ) -> anyhow::Result<KissLinks> {
+    let (budget, tap, log) = tap_and_log(events);
+    // The run's tap, log and gate on a link's own settings.
+    let wire = |cfg: &KissLinkConfig, label: &str| KissLinkConfig {
+        tap: Some(tap.clone()),
+        log: Some(log.clone()),
+        gate: gate_of(opts, gates, label),
+        ..cfg.clone()
+    };
+    let replay_ids = reserve_configured(opts, segs, clock, events);
+    let mut kiss_stats = Vec::new();
+    let mut bound = Vec::new();
+    for (i, link) in opts.kiss_links.iter().enumerate() {
+        let label = link.label();
+        let mut cfg = wire(&link.cfg, &label);
+        cfg.link = LinkId(i as u32);
+        // The hub's messages; KISS on every other link.
+        cfg.framing = match link.mode {
+            KissMode::ZmqHub(_) => links::kiss_tcp::Framing::ZmqHub,
+            _ => links::kiss_tcp::Framing::Kiss,
+        };
+        kiss_stats.push(
+            start_link(
+                link, label, cfg, segs, clock, events, background, &mut bound,
+            )
+            .await?,
+        );
+    }
+    start_replay(
+        opts,
+        &replay_ids,
+        &wire,
+        segs,
+        clock,
+        background,
+        &mut kiss_stats,
+    );
+    Ok(KissLinks {
+        stats: kiss_stats,
+        bound,
+        budget,
+    })
+}
+
+/// The run's tap (the bytes that cross a link, as `RunEvent::Kiss`, within the budget of
+/// chunks the main loop has not handled yet) and log (a link's warnings).
+fn tap_and_log(
+    events: &mpsc::UnboundedSender<RunEvent>,
+) -> (Arc<tokio::sync::Semaphore>, KissTap, KissLog) {
     let budget = Arc::new(tokio::sync::Semaphore::new(KISS_EVENT_BUDGET));
     let tap = {
         let tx = events.clone();
@@ -88,13 +136,17 @@ pub(super) async fn kiss(
             });
         })
     };
-    // The run's tap, log and gate on a link's own settings.
-    let wire = |cfg: &KissLinkConfig, label: &str| KissLinkConfig {
-        tap: Some(tap.clone()),
-        log: Some(log.clone()),
-        gate: gate_of(opts, gates, label),
-        ..cfg.clone()
-    };
+    (budget, tap, log)
+}
+
+/// Reserve, before any link starts, the addresses each link is configured with; the ids of
+/// the replayed links (after the command line's and scenario's).
+fn reserve_configured(
+    opts: &RunOptions,
+    segs: &Segments,
+    clock: Clock,
+    events: &mpsc::UnboundedSender<RunEvent>,
+) -> Vec<LinkId> {
     // Before any link starts: an address a link is configured with is that link's, its
     // program connected or not (another link learning addresses cannot take it). Each
     // link is one id (labels may repeat: two servers on 127.0.0.1:0); a replayed link's
@@ -137,90 +189,110 @@ pub(super) async fn kiss(
             }
         }
     }
-    let mut kiss_stats = Vec::new();
-    let mut bound = Vec::new();
-    for (i, link) in opts.kiss_links.iter().enumerate() {
-        let label = link.label();
-        let mut cfg = wire(&link.cfg, &label);
-        cfg.link = LinkId(i as u32);
-        // The hub's messages; KISS on every other link.
-        cfg.framing = match link.mode {
-            KissMode::ZmqHub(_) => bus::kiss_tcp::Framing::ZmqHub,
-            _ => bus::kiss_tcp::Framing::Kiss,
-        };
-        let stats = Arc::new(Mutex::new(KissLinkStats::default()));
-        match &link.mode {
-            KissMode::Listen(addr) => {
-                let addr = *addr;
-                let listener = tokio::net::TcpListener::bind(addr)
-                    .await
-                    .with_context(|| format!("listening for KISS/TCP on {addr}"))?;
-                let local = listener.local_addr().context("reading the bound address")?;
-                if !local.ip().is_loopback() {
-                    not_loopback(events, clock, &label, format!("KISS/TCP server on {local}"));
-                }
-                bound.push(local);
-                kiss_stats.push((format!("listen {local}"), stats.clone()));
-                background.push(tokio::spawn(kiss_tcp::serve(
-                    listener,
-                    label,
-                    segs.clone(),
-                    cfg,
-                    stats,
-                    clock,
-                )));
+    replay_ids
+}
+
+/// Start one KISS link (listen, connect, pty or hub) as a background task; its counters by
+/// name. A listening server's bound address goes to `bound`.
+#[allow(clippy::too_many_arguments)]
+async fn start_link(
+    link: &super::KissLink,
+    label: String,
+    cfg: KissLinkConfig,
+    segs: &Segments,
+    clock: Clock,
+    events: &mpsc::UnboundedSender<RunEvent>,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+    bound: &mut Vec<SocketAddr>,
+) -> anyhow::Result<(String, Arc<Mutex<KissLinkStats>>)> {
+    let stats = Arc::new(Mutex::new(KissLinkStats::default()));
+    let named;
+    match &link.mode {
+        KissMode::Listen(addr) => {
+            let addr = *addr;
+            let listener = tokio::net::TcpListener::bind(addr)
+                .await
+                .with_context(|| format!("listening for KISS/TCP on {addr}"))?;
+            let local = listener.local_addr().context("reading the bound address")?;
+            if !local.ip().is_loopback() {
+                not_loopback(events, clock, &label, format!("KISS/TCP server on {local}"));
             }
-            KissMode::Connect(addr) => {
-                kiss_stats.push((label.clone(), stats.clone()));
-                background.push(tokio::spawn(kiss_tcp::connect(
-                    *addr,
-                    label,
-                    segs.clone(),
-                    cfg,
-                    stats,
-                    clock,
-                )));
+            bound.push(local);
+            named = (format!("listen {local}"), stats.clone());
+            background.push(tokio::spawn(kiss_tcp::serve(
+                listener,
+                label,
+                segs.clone(),
+                cfg,
+                stats,
+                clock,
+            )));
+        }
+        KissMode::Connect(addr) => {
+            named = (label.clone(), stats.clone());
+            background.push(tokio::spawn(kiss_tcp::connect(
+                *addr,
+                label,
+                segs.clone(),
+                cfg,
+                stats,
+                clock,
+            )));
+        }
+        KissMode::Pty(path) => {
+            let pty = open_pty(path)?;
+            tracing::info!(
+                "KISS on {} (pseudo-terminal {})",
+                path.display(),
+                pty.device().display()
+            );
+            named = (label.clone(), stats.clone());
+            background.push(tokio::spawn(links::kiss_pty::serve(
+                pty,
+                label,
+                segs.clone(),
+                cfg,
+                stats,
+                clock,
+            )));
+        }
+        KissMode::ZmqHub(addr) => {
+            let hub = links::zmq_hub::Hub::bind(*addr).await?;
+            if !addr.host.is_loopback() {
+                not_loopback(events, clock, &label, format!("ZMQ hub on {addr}"));
             }
-            KissMode::Pty(path) => {
-                let pty = open_pty(path)?;
-                tracing::info!(
-                    "KISS on {} (pseudo-terminal {})",
-                    path.display(),
-                    pty.device().display()
-                );
-                kiss_stats.push((label.clone(), stats.clone()));
-                background.push(tokio::spawn(bus::kiss_pty::serve(
-                    pty,
-                    label,
-                    segs.clone(),
-                    cfg,
-                    stats,
-                    clock,
-                )));
-            }
-            KissMode::ZmqHub(addr) => {
-                let hub = bus::zmq_hub::Hub::bind(*addr).await?;
-                if !addr.host.is_loopback() {
-                    not_loopback(events, clock, &label, format!("ZMQ hub on {addr}"));
-                }
-                kiss_stats.push((label.clone(), stats.clone()));
-                background.push(tokio::spawn(bus::zmq_hub::serve(
-                    hub,
-                    label,
-                    segs.clone(),
-                    cfg,
-                    stats,
-                    clock,
-                )));
-            }
+            named = (label.clone(), stats.clone());
+            background.push(tokio::spawn(links::zmq_hub::serve(
+                hub,
+                label,
+                segs.clone(),
+                cfg,
+                stats,
+                clock,
+            )));
         }
     }
+    Ok(named)
+}
+
+/// Feed recorded outside input again at its recorded instants and in its recorded order
+/// (one feeder for every connection: the order input of one instant is taken in is part
+/// of the run); what the twin answers is recorded again and compared by `replay`.
+fn start_replay(
+    opts: &RunOptions,
+    replay_ids: &[LinkId],
+    wire: &dyn Fn(&KissLinkConfig, &str) -> KissLinkConfig,
+    segs: &Segments,
+    clock: Clock,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+    kiss_stats: &mut Vec<(String, Arc<Mutex<KissLinkStats>>)>,
+) {
     // Recorded outside input, fed again at its recorded instants and in its recorded order
     // (one feeder for every connection: the order input of one instant is taken in is part
     // of the run); what the twin answers is recorded again and compared by `replay`.
     let mut feed: Vec<Fed> = Vec::new();
     let mut conns = Vec::new();
-    for ((n, input), &id) in opts.kiss_replay.iter().enumerate().zip(&replay_ids) {
+    for ((n, input), &id) in opts.kiss_replay.iter().enumerate().zip(replay_ids) {
         let stats = Arc::new(Mutex::new(KissLinkStats::default()));
         kiss_stats.push((format!("replayed {}", input.link), stats.clone()));
         let mut cfg = wire(&input.cfg, &input.link);
@@ -263,11 +335,6 @@ pub(super) async fn kiss(
     if !feed.is_empty() {
         background.push(tokio::spawn(replay_feed(feed, conns, segs.clone(), clock)));
     }
-    Ok(KissLinks {
-        stats: kiss_stats,
-        bound,
-        budget,
-    })
 }
 
 /// A recorded connection, fed again.
@@ -373,7 +440,7 @@ pub(super) async fn uart(
                 node.name
             )
         })?;
-        let target = bus::console::ConsoleTarget {
+        let target = links::console::ConsoleTarget {
             node: node.name.clone(),
             addr: node.addr,
             ctl: ctl.clone(),
@@ -394,7 +461,7 @@ pub(super) async fn uart(
                     local.port()
                 );
                 bound.push(local);
-                background.push(tokio::spawn(bus::console::serve_tcp(
+                background.push(tokio::spawn(links::console::serve_tcp(
                     listener, target, clock,
                 )));
             }
@@ -408,7 +475,7 @@ pub(super) async fn uart(
                     pty.device().display(),
                     path.display()
                 );
-                background.push(tokio::spawn(bus::console::serve_pty(pty, target, clock)));
+                background.push(tokio::spawn(links::console::serve_pty(pty, target, clock)));
             }
             #[cfg(not(unix))]
             super::UartAt::Pty(path) => {
@@ -438,8 +505,8 @@ fn not_loopback(events: &mpsc::UnboundedSender<RunEvent>, clock: Clock, label: &
 
 /// The pseudo-terminal of a `kiss-pty` link.
 #[cfg(unix)]
-fn open_pty(path: &std::path::Path) -> anyhow::Result<bus::kiss_pty::Pty> {
-    Ok(bus::kiss_pty::Pty::open(path)?)
+fn open_pty(path: &std::path::Path) -> anyhow::Result<links::kiss_pty::Pty> {
+    Ok(links::kiss_pty::Pty::open(path)?)
 }
 
 /// Shared counters of the SocketCAN bridges, by name.
@@ -459,7 +526,7 @@ pub(super) fn spawn_socketcan_bridges(
     for (ifname, which) in links {
         // The error names the interface and includes its OS cause (not chained: it would
         // print twice).
-        let link = bus::socketcan::SocketCanLink::open(ifname)
+        let link = links::socketcan::SocketCanLink::open(ifname)
             .map_err(|e| anyhow::anyhow!("cannot bridge to a SocketCAN interface: {e}"))?;
         opened.push((link, *which));
     }
@@ -472,7 +539,7 @@ pub(super) fn spawn_socketcan_bridges(
         let shared = Arc::new(Mutex::new(BridgeStats::default()));
         stats.push((format!("{} ({which} bus)", link.ifname()), shared.clone()));
         let gate = gate_of(opts, gates, &format!("socketcan {}", link.ifname()));
-        let task = bus::socketcan::bridge(can, link, clock, shared, gate);
+        let task = links::socketcan::bridge(can, link, clock, shared, gate);
         background.push(tokio::spawn(task));
     }
     Ok(stats)

@@ -782,7 +782,7 @@ fn check_links(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep
                 }
             }
             LinkKind::ZmqHub => {
-                if let Err(e) = l.addr.parse::<bus::zmq_hub::HubAddr>() {
+                if let Err(e) = l.addr.parse::<links::zmq_hub::HubAddr>() {
                     err(p("addr"), e);
                 }
             }

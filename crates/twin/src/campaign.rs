@@ -635,54 +635,8 @@ impl Campaign {
             })?;
         }
         if let Some(f) = &self.spec.faults {
-            let mut pick = stream(seed, k, "faults");
-            let mut left: Vec<usize> = (0..f.catalogue.len()).collect();
-            let mut chosen = Vec::new();
-            for _ in 0..f.draw {
-                let i = left.remove((pick.next_u64() % left.len() as u64) as usize);
-                chosen.push(i);
-            }
-            chosen.sort_unstable();
-            let mut kinds = Vec::new();
-            for i in chosen {
-                let at = |e: String| {
-                    ScenarioErrors(vec![err_at(
-                        &self.file,
-                        &self.text,
-                        &format!("faults.catalogue[{i}]"),
-                        e,
-                    )])
-                };
-                let mut rng = stream(seed, k, &format!("faults.catalogue[{i}]"));
-                let mut entry = draw_inside(&toml::Value::Table(f.catalogue[i].clone()), &mut rng)
-                    .map_err(at)?;
-                let into = match entry.as_table_mut().and_then(|t| t.remove("into")) {
-                    None => "faults".to_owned(),
-                    Some(toml::Value::String(p)) => p,
-                    Some(other) => {
-                        return Err(at(format!("`into` takes a list's path, found {other}")));
-                    }
-                };
-                let what = entry
-                    .get("kind")
-                    .or_else(|| entry.get("fault"))
-                    .and_then(toml::Value::as_str)
-                    .unwrap_or("?");
-                kinds.push(format!("{what}#{i}"));
-                let path = parse_path(&into).map_err(at)?;
-                let mut list = match get_path(&table, &path) {
-                    Some(toml::Value::Array(a)) => a.clone(),
-                    None => Vec::new(),
-                    Some(_) => {
-                        return Err(at(format!("`{into}` is not a list in the base scenario")));
-                    }
-                };
-                // Where the entry lands (`faults[3]`), to name it if the scenario refuses it.
-                appended.push((format!("{}[{}]", path_string(&path), list.len()), i));
-                list.push(entry);
-                set_path(&mut table, &path, toml::Value::Array(list)).map_err(at)?;
-            }
-            draws.insert("faults".into(), kinds.join(" "));
+            let kinds = self.draw_faults(f, k, &mut table, &mut appended)?;
+            draws.insert("faults".into(), kinds);
         }
         let text = toml::to_string(&table).map_err(|e| {
             ScenarioErrors(vec![err_at(
@@ -695,56 +649,11 @@ impl Campaign {
         let shown = format!("{} run {k}", self.file);
         crate::validate::parse(&shown, &text).map_err(|e| {
             // Point at the dispersion whose path the scenario's error names, if any.
-            let errs =
+            ScenarioErrors(
                 e.0.into_iter()
-                    .map(|se| {
-                        let key = self.dists.keys().find(|key| {
-                            se.field == **key || se.field.starts_with(&format!("{key}."))
-                        });
-                        let entry = appended.iter().find(|(at, _)| {
-                            se.field == *at || se.field.starts_with(&format!("{at}."))
-                        });
-                        if let (None, Some((at, i))) = (key, entry) {
-                            let field = se.field.strip_prefix(at.as_str()).unwrap_or("");
-                            return err_at(
-                                &self.file,
-                                &self.text,
-                                &format!("faults.catalogue[{i}]"),
-                                format!(
-                                    "run {k} drew this entry (as {}){}: {}",
-                                    at,
-                                    if field.is_empty() {
-                                        String::new()
-                                    } else {
-                                        format!(", its `{}`", field.trim_start_matches('.'))
-                                    },
-                                    se.message
-                                ),
-                            );
-                        }
-                        match key {
-                            Some(key) => err_at(
-                                &self.file,
-                                &self.text,
-                                &format!("dispersions.{key}"),
-                                format!("run {k} drew {}: {}", draws[key], se.message),
-                            ),
-                            None => ScenarioError {
-                                message: format!(
-                                    "run {k}: {} (draws: {})",
-                                    se.message,
-                                    draws
-                                        .iter()
-                                        .map(|(p, v)| format!("{p} = {v}"))
-                                        .collect::<Vec<_>>()
-                                        .join(", ")
-                                ),
-                                ..se
-                            },
-                        }
-                    })
-                    .collect();
-            ScenarioErrors(errs)
+                    .map(|se| self.blame(k, se, &draws, &appended))
+                    .collect(),
+            )
         })?;
         Ok(Resolved {
             run: k,
@@ -752,6 +661,123 @@ impl Campaign {
             draws,
             text,
         })
+    }
+
+    /// Run `k`'s draw from the fault catalogue, each entry appended to the list in `table`
+    /// it names (`appended`: where it landed, to blame it if the scenario refuses it); the
+    /// kinds drawn, as the run's draws show them.
+    fn draw_faults(
+        &self,
+        f: &FaultDraws,
+        k: u64,
+        table: &mut toml::Table,
+        appended: &mut Vec<(String, usize)>,
+    ) -> Result<String, ScenarioErrors> {
+        let seed = self.spec.seed;
+        let mut pick = stream(seed, k, "faults");
+        let mut left: Vec<usize> = (0..f.catalogue.len()).collect();
+        let mut chosen = Vec::new();
+        for _ in 0..f.draw {
+            let i = left.remove((pick.next_u64() % left.len() as u64) as usize);
+            chosen.push(i);
+        }
+        chosen.sort_unstable();
+        let mut kinds = Vec::new();
+        for i in chosen {
+            let at = |e: String| {
+                ScenarioErrors(vec![err_at(
+                    &self.file,
+                    &self.text,
+                    &format!("faults.catalogue[{i}]"),
+                    e,
+                )])
+            };
+            let mut rng = stream(seed, k, &format!("faults.catalogue[{i}]"));
+            let mut entry =
+                draw_inside(&toml::Value::Table(f.catalogue[i].clone()), &mut rng).map_err(at)?;
+            let into = match entry.as_table_mut().and_then(|t| t.remove("into")) {
+                None => "faults".to_owned(),
+                Some(toml::Value::String(p)) => p,
+                Some(other) => {
+                    return Err(at(format!("`into` takes a list's path, found {other}")));
+                }
+            };
+            let what = entry
+                .get("kind")
+                .or_else(|| entry.get("fault"))
+                .and_then(toml::Value::as_str)
+                .unwrap_or("?");
+            kinds.push(format!("{what}#{i}"));
+            let path = parse_path(&into).map_err(at)?;
+            let mut list = match get_path(table, &path) {
+                Some(toml::Value::Array(a)) => a.clone(),
+                None => Vec::new(),
+                Some(_) => {
+                    return Err(at(format!("`{into}` is not a list in the base scenario")));
+                }
+            };
+            // Where the entry lands (`faults[3]`), to name it if the scenario refuses it.
+            appended.push((format!("{}[{}]", path_string(&path), list.len()), i));
+            list.push(entry);
+            set_path(table, &path, toml::Value::Array(list)).map_err(at)?;
+        }
+        Ok(kinds.join(" "))
+    }
+
+    /// A run's scenario error told against the campaign: at the dispersion or the drawn
+    /// catalogue entry its field falls under, else with every draw of the run listed.
+    fn blame(
+        &self,
+        k: u64,
+        se: ScenarioError,
+        draws: &BTreeMap<String, String>,
+        appended: &[(String, usize)],
+    ) -> ScenarioError {
+        let key = self
+            .dists
+            .keys()
+            .find(|key| se.field == **key || se.field.starts_with(&format!("{key}.")));
+        let entry = appended
+            .iter()
+            .find(|(at, _)| se.field == *at || se.field.starts_with(&format!("{at}.")));
+        if let (None, Some((at, i))) = (key, entry) {
+            let field = se.field.strip_prefix(at.as_str()).unwrap_or("");
+            return err_at(
+                &self.file,
+                &self.text,
+                &format!("faults.catalogue[{i}]"),
+                format!(
+                    "run {k} drew this entry (as {}){}: {}",
+                    at,
+                    if field.is_empty() {
+                        String::new()
+                    } else {
+                        format!(", its `{}`", field.trim_start_matches('.'))
+                    },
+                    se.message
+                ),
+            );
+        }
+        match key {
+            Some(key) => err_at(
+                &self.file,
+                &self.text,
+                &format!("dispersions.{key}"),
+                format!("run {k} drew {}: {}", draws[key], se.message),
+            ),
+            None => ScenarioError {
+                message: format!(
+                    "run {k}: {} (draws: {})",
+                    se.message,
+                    draws
+                        .iter()
+                        .map(|(p, v)| format!("{p} = {v}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                ..se
+            },
+        }
     }
 
     /// Resolve runs `0..runs` (every problem before anything runs); the first errors found.

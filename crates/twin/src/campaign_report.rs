@@ -174,13 +174,24 @@ fn histogram(out: &mut String, name: &str, values: &[(f64, &RunRow)]) {
 
 /// The page.
 pub fn report_html(meta: &CampaignMeta, rows: &[RunRow]) -> String {
+    let mut out = String::new();
+    page_head(&mut out, meta, rows);
+    fault_kinds(&mut out, rows);
+    drawn_values(&mut out, rows);
+    metric_histograms(&mut out, rows);
+    failures(&mut out, rows);
+    out.push_str("</body></html>\n");
+    out
+}
+
+/// The page's head and style, and the verdicts' totals.
+fn page_head(out: &mut String, meta: &CampaignMeta, rows: &[RunRow]) {
     let count = |w: &str| rows.iter().filter(|r| r.verdict.word() == w).count();
     let (pass, fail, error) = (count("pass"), count("fail"), count("error"));
     let not_run = match count("not run") {
         0 => String::new(),
         k => format!(", <b class=\"not-run\">{k} not run</b> (the campaign was stopped)"),
     };
-    let mut out = String::new();
     let _ = write!(
         out,
         r#"<!DOCTYPE html>
@@ -200,7 +211,10 @@ td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-a
         seed = meta.seed,
         n = rows.len(),
     );
-    // Pass rate per fault kind.
+}
+
+/// Pass rate per fault kind: which kinds of fault the failures follow.
+fn fault_kinds(out: &mut String, rows: &[RunRow]) {
     let mut kinds: BTreeMap<String, (u64, u64)> = BTreeMap::new();
     for r in rows {
         if let Some(f) = r.draws.get("faults") {
@@ -222,9 +236,12 @@ td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-a
     if !kinds.is_empty() {
         out.push_str("<h2>Pass rate per fault kind</h2>\n<p>Runs that drew the kind (among others), and how many of them passed.</p>\n");
         let bars: Vec<_> = kinds.into_iter().map(|(k, (p, t))| (k, p, t)).collect();
-        rate_bars(&mut out, &bars);
+        rate_bars(out, &bars);
     }
-    // The drawn values against the verdicts.
+}
+
+/// The drawn values against the verdicts: which dispersions the failures follow.
+fn drawn_values(out: &mut String, rows: &[RunRow]) {
     let mut columns: Vec<&String> = rows
         .iter()
         .flat_map(|r| r.draws.keys())
@@ -246,7 +263,7 @@ td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-a
             .map(|(v, r)| number(v).map(|x| (x, *r)))
             .collect();
         match numbers {
-            Some(points) => strip(&mut out, col, &points),
+            Some(points) => strip(out, col, &points),
             None => {
                 let mut by: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
                 for (v, r) in &values {
@@ -260,11 +277,14 @@ td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-a
                     .into_iter()
                     .map(|(v, (p, t))| (v.to_owned(), p, t))
                     .collect();
-                rate_bars(&mut out, &bars);
+                rate_bars(out, &bars);
             }
         }
     }
-    // Metrics.
+}
+
+/// A histogram per metric the runs measured, passes apart from the others.
+fn metric_histograms(out: &mut String, rows: &[RunRow]) {
     let mut metrics: Vec<&String> = rows.iter().flat_map(|r| r.metrics.keys()).collect();
     metrics.sort();
     metrics.dedup();
@@ -277,9 +297,12 @@ td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-a
             .filter_map(|r| r.metrics.get(m).map(|v| (*v, r)))
             .collect();
         let _ = writeln!(out, "<h3>{} ({} runs)</h3>", esc(m), values.len());
-        histogram(&mut out, m, &values);
+        histogram(out, m, &values);
     }
-    // The failures.
+}
+
+/// The runs that did not pass, with what they drew and why, linked to their scenarios.
+fn failures(out: &mut String, rows: &[RunRow]) {
     let failed: Vec<&RunRow> = rows
         .iter()
         .filter(|r| r.verdict != RunVerdict::Pass)
@@ -314,8 +337,6 @@ td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; vertical-a
         }
         out.push_str("</table>\n");
     }
-    out.push_str("</body></html>\n");
-    out
 }
 
 #[cfg(test)]

@@ -80,7 +80,10 @@ fn python_peer_on_the_payload_bus_reaches_the_fc_through_the_pc() {
     // replies (the ident is dropped unanswered, as the PC drops its own).
     let pc = report.nodes.iter().find(|n| n.name == "PC").unwrap();
     assert!(pc.counters.forwarded >= 11, "{:?}", pc.counters);
-    assert_eq!(pc.counters.drops.get("payload cmp"), Some(&1));
+    assert_eq!(
+        pc.counters.drops.get(&csp::drop::DropReason::PayloadCmp),
+        Some(&1)
+    );
 }
 
 /// `m6p-twin gs --connect ADDR ping 3 ARGS...`: its standard output, after asserting it

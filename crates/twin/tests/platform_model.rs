@@ -340,9 +340,9 @@ probability = 0.05
         }
     }
     for n in &out.report.nodes {
-        for reason in ["cfp", "crc32"] {
+        for reason in [csp::drop::DropReason::Cfp, csp::drop::DropReason::Crc32] {
             assert_eq!(
-                n.counters.drops.get(reason).copied().unwrap_or(0),
+                n.counters.drops.get(&reason).copied().unwrap_or(0),
                 0,
                 "{}: {:?}",
                 n.name,
@@ -486,7 +486,11 @@ max = 0
     }
     for n in &out.report.nodes {
         assert_eq!(
-            n.counters.drops.get("crc32").copied().unwrap_or(0),
+            n.counters
+                .drops
+                .get(&csp::drop::DropReason::Crc32)
+                .copied()
+                .unwrap_or(0),
             0,
             "{}",
             n.name
@@ -819,7 +823,7 @@ jump_s = 60
 }
 
 /// The FC's state in TMGEN: SAFE while the ADCS's estimator monitor holds it in its
-/// fallback (a 1 deg/s gyro bias jump in sunlight trips it, as `nodes-fc/tests/health.rs`
+/// fallback (a 1 deg/s gyro bias jump in sunlight trips it, as `crates/adcs/tests/health.rs`
 /// shows), NOMINAL before and again once the restarted estimator has relearnt the bias;
 /// each change is a log line of the FC's.
 #[test]

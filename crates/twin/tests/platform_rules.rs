@@ -32,9 +32,10 @@ fn python_client_finds_flags_discarded_payloads_limited_and_sessions_on_platform
         ("PL13", 13),
     ] {
         let node = report.nodes.iter().find(|n| n.addr == addr).unwrap();
-        for reason in ["rdp", "xtea", "hmac"] {
+        use csp::drop::DropReason;
+        for reason in [DropReason::Rdp, DropReason::Xtea, DropReason::Hmac] {
             assert_eq!(
-                node.counters.drops.get(reason),
+                node.counters.drops.get(&reason),
                 Some(&1),
                 "{name}: {:?}",
                 node.counters

@@ -473,3 +473,17 @@ fn a_field_expectation_is_checked_against_the_icd() {
         "needs `equals`, `above` or `below`",
     );
 }
+
+/// A `drops.<reason>` counter names one of the node's drop reasons (`csp::drop::DropReason`):
+/// a misspelt reason is an error listing them, not a counter that always reads 0.
+#[test]
+fn a_drop_counter_names_a_known_reason() {
+    let text = "duration = \"1m\"\n[[expectations]]\nkind = \"counter\"\ntarget = \"PC\"\ncounter = \"drops.unbound-port\"\nmax = 0\n";
+    assert_error(
+        text,
+        5,
+        "expectations[0].counter",
+        "unknown drop reason `unbound-port` (reasons: frame on non-CAN iface, cfp, no route",
+    );
+    m6p_twin::scenario::parse("ok.toml", &text.replace("unbound-port", "unbound port")).unwrap();
+}

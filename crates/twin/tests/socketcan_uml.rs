@@ -10,7 +10,7 @@
 //! uptime, and checks both replies as they come back on `vcan0`. It then deletes `vcan0`
 //! under a fresh bridge and checks that the bridge stops.
 //!
-//! Gated like `crates/bus/tests/vcan_uml.rs`: without a UML kernel with the vcan module
+//! Gated like `crates/links/tests/vcan_uml.rs`: without a UML kernel with the vcan module
 //! (`build.rs`), `twin_over_vcan_in_uml` is compiled as ignored with the reason.
 #![cfg(all(feature = "socketcan", target_os = "linux"))]
 
@@ -25,10 +25,10 @@ use std::time::{Duration, Instant};
 use bus::gate::LinkGate;
 use bus::impair::Impairments;
 use bus::outside::BridgeStats;
-use bus::socketcan::{SocketCanLink, bridge};
 use bus::{CanBus, CanBusConfig, Clock, ClockMode};
 use csp::cfp::{CSP_CAN_MTU, CanFrame, CfpId, Fragmenter, Reassembler};
 use csp::{Header, Packet, SimTime};
+use links::socketcan::{SocketCanLink, bridge};
 use m6p_twin::network::{FC, NetworkSpec, PC};
 use m6p_twin::report::{RunReport, run};
 use m6p_twin::runtime::{RunOptions, SocketCanBus, build_runtime};

@@ -9,26 +9,25 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
-from typing import List, Optional
 
 __all__ = [
     "FLAG_CRC32",
+    "FLAG_FRAG",
+    "FLAG_HMAC",
     "FLAG_RDP",
     "FLAG_XTEA",
-    "FLAG_HMAC",
-    "FLAG_FRAG",
+    "PORT_PING",
     "PRIO_CRITICAL",
     "PRIO_HIGH",
-    "PRIO_NORM",
     "PRIO_LOW",
-    "PORT_PING",
-    "crc32c",
+    "PRIO_NORM",
     "Header",
-    "Packet",
-    "kiss_encode",
     "KissDecoder",
-    "zmq_encode",
+    "Packet",
+    "crc32c",
+    "kiss_encode",
     "zmq_decode",
+    "zmq_encode",
 ]
 
 # Header flags (libcsp 1.4 csp_types.h).
@@ -47,7 +46,7 @@ PORT_PING = 1
 # CRC-32C (Castagnoli), as libcsp 1.4 csp_crc32.c: reflected, init and xorout 0xFFFFFFFF.
 
 
-def _crc32c_table() -> List[int]:
+def _crc32c_table() -> list[int]:
     table = []
     for n in range(256):
         c = n
@@ -115,7 +114,7 @@ class Header:
         return struct.pack(">I", self.word)
 
     @classmethod
-    def from_word(cls, word: int) -> "Header":
+    def from_word(cls, word: int) -> Header:
         return cls(
             prio=word >> 30 & 0x3,
             src=word >> 25 & 0x1F,
@@ -126,13 +125,13 @@ class Header:
         )
 
     @classmethod
-    def unpack(cls, b: bytes) -> "Header":
+    def unpack(cls, b: bytes) -> Header:
         """The header in the first 4 bytes of ``b`` (network order)."""
         if len(b) < 4:
             raise ValueError(f"a CSP header is 4 bytes, got {len(b)}")
         return cls.from_word(struct.unpack(">I", bytes(b[:4]))[0])
 
-    def reply(self, flags: Optional[int] = None) -> "Header":
+    def reply(self, flags: int | None = None) -> Header:
         """The header of the reply to a request with this header: to its source address
         and port, from the port it came to, with its priority and (unless given) flags."""
         return Header(
@@ -157,15 +156,15 @@ class Packet:
         return self.header.pack() + bytes(self.data)
 
     @classmethod
-    def from_bytes(cls, b: bytes) -> "Packet":
+    def from_bytes(cls, b: bytes) -> Packet:
         return cls(Header.unpack(b), bytes(b[4:]))
 
-    def with_csp_crc(self) -> "Packet":
+    def with_csp_crc(self) -> Packet:
         """The packet as ``csp_send`` sends it with the CRC32 flag: the data followed by
         its CRC-32C, big-endian (libcsp 1.4 never covers the header)."""
         return Packet(self.header, bytes(self.data) + struct.pack(">I", crc32c(self.data)))
 
-    def strip_csp_crc(self) -> Optional["Packet"]:
+    def strip_csp_crc(self) -> Packet | None:
         """For a packet with the CRC32 flag: the data without its CRC, or None when the
         CRC is wrong or missing (libcsp drops such a packet). Without the flag: itself."""
         if not self.header.flags & FLAG_CRC32:
@@ -219,7 +218,7 @@ class KissDecoder:
     :data:`KISS_MTU_LIBCSP14` for libcsp 1.4's limit, None for :data:`KISS_MAX_FRAME`.
     """
 
-    def __init__(self, mtu: Optional[int] = None) -> None:
+    def __init__(self, mtu: int | None = None) -> None:
         self.mtu = KISS_MAX_FRAME if mtu is None else mtu
         self.rx_errors = 0
         self.discarded_bytes = 0
@@ -229,9 +228,9 @@ class KissDecoder:
         self._escaped = False
         self._overflow = False
 
-    def feed(self, chunk: bytes) -> List[Packet]:
+    def feed(self, chunk: bytes) -> list[Packet]:
         """Take bytes from the stream; return the packets they completed."""
-        packets: List[Packet] = []
+        packets: list[Packet] = []
         for b in chunk:
             if b == FEND:
                 if self._in_frame and (self._buf or self._overflow):
@@ -264,7 +263,7 @@ class KissDecoder:
             return
         self._buf.append(b)
 
-    def _finish(self) -> Optional[Packet]:
+    def _finish(self) -> Packet | None:
         body = bytes(self._buf)
         if self._overflow or len(body) < 4 + 4:
             self.rx_errors += 1
@@ -283,7 +282,7 @@ class KissDecoder:
 ZMQ_HUB_MTU = 256
 
 
-def zmq_encode(packet: Packet, via: Optional[int] = None) -> bytes:
+def zmq_encode(packet: Packet, via: int | None = None) -> bytes:
     """One hub message: ``via | header | data``. The header is the packet's memory as
     libcsp keeps it, the word little-endian on the hosts libcsp programs run on; ``via``
     (what subscribers filter on) is the destination unless given."""
@@ -291,7 +290,7 @@ def zmq_encode(packet: Packet, via: Optional[int] = None) -> bytes:
     return bytes([v]) + struct.pack("<I", packet.header.word) + bytes(packet.data)
 
 
-def zmq_decode(msg: bytes) -> Optional[Packet]:
+def zmq_decode(msg: bytes) -> Packet | None:
     """The packet of a hub message, or None when it is shorter than 5 bytes or carries
     more than :data:`ZMQ_HUB_MTU` data bytes."""
     if len(msg) < 5 or len(msg) - 5 > ZMQ_HUB_MTU:

@@ -18,22 +18,125 @@ import math
 import re
 import struct
 import subprocess
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
-from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import TypedDict, TypeVar, Union
 
 __all__ = [
-    "IcdError",
-    "Icd",
-    "Node",
     "Command",
-    "Reply",
+    "Fields",
+    "Icd",
+    "IcdError",
+    "IcdJson",
     "Leaf",
+    "Node",
+    "Reply",
+    "Value",
     "parse_duration_s",
 ]
 
 #: The format of ``m6p-twin icd --json`` this module reads.
 FORMAT = 1
+
+#: One decoded value of a request or a reply: an integer (the ICD's ``u8`` to ``u64``,
+#: ``i8`` to ``i32``), a float (``f32``, ``f64``), text (a text field), bytes (a tail, or
+#: data of a variable layout), an array of one of those (a field with a count above 1), a
+#: nested layout (:data:`Fields`) or an array of them.
+Value = Union[int, float, str, bytes, list[int], list[float], list["Fields"], "Fields"]
+#: A decoded layout: each field's value by the field's name, in the ICD's order.
+Fields = dict[str, Value]
+
+_Scalar = TypeVar("_Scalar", int, float, str, bytes)
+_Number = TypeVar("_Number", int, float)
+
+
+# ``m6p-twin icd --json``, format 1, as this module reads it.
+
+_FieldJsonKeywords = TypedDict("_FieldJsonKeywords", {"except": list[float]}, total=False)
+
+
+class _FieldJsonOptional(_FieldJsonKeywords, total=False):
+    doc: str
+    unit: str
+    range: list[float]
+    values: dict[str, str]
+    bits: dict[str, str]
+    text: bool
+    fields: list[FieldJson]
+
+
+class FieldJson(_FieldJsonOptional):
+    """One field of a layout (and its optional ``except``, a Python keyword, above)."""
+
+    name: str
+    type: str
+    count: int
+    offset: int
+    size: int
+
+
+class _TailJsonOptional(TypedDict, total=False):
+    doc: str
+
+
+class TailJson(_TailJsonOptional):
+    name: str
+    min_bytes: int
+    max_bytes: int
+
+
+class _DataJsonOptional(TypedDict, total=False):
+    layout: str
+    fields: list[FieldJson]
+    tail: TailJson
+    doc: str
+
+
+class DataJson(_DataJsonOptional):
+    """A request's or a reply's data."""
+
+    min_bytes: int
+    max_bytes: int
+
+
+class _CommandJsonOptional(TypedDict, total=False):
+    doc: str
+    access: str
+    origin: str
+    request: DataJson | None
+    reply: DataJson | None
+    example: str
+    refused_when: str
+
+
+class CommandJson(_CommandJsonOptional):
+    id: int
+    name: str
+
+
+class PortJson(TypedDict):
+    port: int
+    name: str
+    commands: list[CommandJson]
+
+
+class NodeJson(TypedDict):
+    name: str
+    addrs: list[int]
+    ports: list[PortJson]
+
+
+class _IcdJsonOptional(TypedDict, total=False):
+    framing: str
+
+
+class IcdJson(_IcdJsonOptional):
+    """The whole description (``m6p-twin icd --json``)."""
+
+    format: int
+    nodes: list[NodeJson]
+
 
 _STRUCT = {
     "u8": "B",
@@ -57,6 +160,8 @@ _LIMITS = {
     "f32": (-3.4028234663852886e38, 3.4028234663852886e38),
     "f64": (-math.inf, math.inf),
 }
+
+_FLOATS = ("f32", "f64")
 
 RESULT_OK = 1
 RESULT_FAIL = 0
@@ -119,16 +224,16 @@ class Field:
     offset: int
     size: int
     doc: str = ""
-    unit: Optional[str] = None
-    range: Optional[Tuple[float, float]] = None
-    except_: Optional[Tuple[float, float]] = None
+    unit: str | None = None
+    range: tuple[float, float] | None = None
+    except_: tuple[float, float] | None = None
     values: Mapping[int, str] = field(default_factory=dict)
     bits: Mapping[int, str] = field(default_factory=dict)
     text: bool = False
-    fields: Tuple["Field", ...] = ()
+    fields: tuple[Field, ...] = ()
 
     @classmethod
-    def from_json(cls, j: Mapping[str, Any]) -> "Field":
+    def from_json(cls, j: FieldJson) -> Field:
         return cls(
             name=j["name"],
             type=j["type"],
@@ -155,7 +260,7 @@ class Field:
         gap = self.except_ is not None and self.except_[0] <= x <= self.except_[1]
         return inside and not gap
 
-    def range_text(self) -> Optional[str]:
+    def range_text(self) -> str | None:
         """``5..=900``, ``0..=3600 except 1..=9``."""
         if self.range is None:
             return None
@@ -171,7 +276,7 @@ class Field:
             return f"{self.count} x {self.type}"
         return self.type
 
-    def number(self, v: Any) -> Union[int, float]:
+    def number(self, v: object) -> int | float:
         """A number for this field from an argument: a number, a bool, a value's name
         (``"nadir"``), a list of bit names for a bit field, or a duration for a field in
         s or ms (``"10m"``)."""
@@ -210,11 +315,12 @@ class Field:
         raise ValueError(f"{v!r} is not a number")
 
 
-def _by_name(names: Mapping[int, str], name: Any) -> Optional[int]:
+def _by_name(names: Mapping[int, str], name: object) -> int | None:
     """The value named ``name``: case aside, and with ``_`` or ``-`` for a space
     (``velocity_pointing``), as the twin takes them."""
     if not isinstance(name, str):
         return None
+
     def norm(s: str) -> str:
         return s.lower().replace("_", " ").replace("-", " ")
 
@@ -242,13 +348,13 @@ class Data:
 
     min_bytes: int
     max_bytes: int
-    layout: Optional[str] = None
-    fields: Tuple[Field, ...] = ()
-    tail: Optional[Tail] = None
-    doc: Optional[str] = None
+    layout: str | None = None
+    fields: tuple[Field, ...] = ()
+    tail: Tail | None = None
+    doc: str | None = None
 
     @classmethod
-    def from_json(cls, j: Optional[Mapping[str, Any]]) -> "Data":
+    def from_json(cls, j: DataJson | None) -> Data:
         if not j:
             return cls(0, 0)
         t = j.get("tail")
@@ -277,9 +383,9 @@ class Leaf:
     (a value's or the set bits', ``None`` otherwise) and its unit."""
 
     path: str
-    value: Union[int, float, str]
-    name: Optional[str]
-    unit: Optional[str]
+    value: int | float | str
+    name: str | None
+    unit: str | None
 
     def __str__(self) -> str:
         s = f"{self.path} {self.value}"
@@ -290,33 +396,37 @@ class Leaf:
         return s
 
 
-def _decode_fields(fields: Sequence[Field], b: bytes, base: int) -> Dict[str, Any]:
-    out: Dict[str, Any] = {}
+def _decode_fields(fields: Sequence[Field], b: bytes, base: int) -> Fields:
+    out: Fields = {}
     for f in fields:
         at = base + f.offset
         if f.text:
             out[f.name] = bytes(b[at : at + f.size]).split(b"\0", 1)[0].decode("ascii", "replace")
             continue
-        items: List[Any] = []
-        for i in range(f.count):
-            start = at + i * f.item_size
-            if f.fields:
-                items.append(_decode_fields(f.fields, b, start))
-            else:
-                items.append(struct.unpack_from("<" + _STRUCT[f.type], b, start)[0])
-        out[f.name] = items[0] if f.count == 1 else items
+        starts = [at + i * f.item_size for i in range(f.count)]
+        if f.fields:
+            records = [_decode_fields(f.fields, b, start) for start in starts]
+            out[f.name] = records[0] if f.count == 1 else records
+        elif f.type in _FLOATS:
+            reals = [float(struct.unpack_from("<" + _STRUCT[f.type], b, i)[0]) for i in starts]
+            out[f.name] = reals[0] if f.count == 1 else reals
+        else:
+            ints = [int(struct.unpack_from("<" + _STRUCT[f.type], b, i)[0]) for i in starts]
+            out[f.name] = ints[0] if f.count == 1 else ints
     return out
 
 
-def _leaves(fields: Sequence[Field], values: Mapping[str, Any], prefix: str) -> Iterator[Leaf]:
+def _leaves(fields: Sequence[Field], values: Mapping[str, Value], prefix: str) -> Iterator[Leaf]:
     for f in fields:
         v = values[f.name]
-        items = [v] if f.count == 1 or f.text else v
+        items: Sequence[Value] = v if isinstance(v, list) else [v]
         for i, item in enumerate(items):
-            path = prefix + f.name + (f"[{i}]" if f.count > 1 and not f.text else "")
-            if f.fields:
+            path = prefix + f.name + (f"[{i}]" if isinstance(v, list) else "")
+            if isinstance(item, dict):
                 yield from _leaves(f.fields, item, path + ".")
                 continue
+            if isinstance(item, (bytes, list)):
+                raise TypeError(f"{path}: {type(item).__name__} where the ICD has {f.type}")
             name = None
             if isinstance(item, int) and item in f.values:
                 name = f.values[item]
@@ -326,33 +436,74 @@ def _leaves(fields: Sequence[Field], values: Mapping[str, Any], prefix: str) -> 
             yield Leaf(path, item, name, f.unit)
 
 
+def _at(fields: Mapping[str, Value], path: str) -> Value:
+    """The value at ``path``: field names joined by ``.``, array items as ``[i]``
+    (``slots[0].state``)."""
+    v: Value | Mapping[str, Value] = fields
+    for part in re.findall(r"[^.\[\]]+", path):
+        if isinstance(v, Mapping):
+            v = v[part]
+        elif isinstance(v, list) and part.isdigit():
+            v = v[int(part)]
+        else:
+            raise KeyError(path)
+    if isinstance(v, dict) or not isinstance(v, Mapping):
+        return v
+    return dict(v)
+
+
+def _as(v: Value, kind: type[_Scalar], path: str) -> _Scalar:
+    if isinstance(v, kind):
+        return v
+    if kind is float and isinstance(v, int):
+        return kind(v)
+    raise TypeError(f"{path} is {type(v).__name__}, not {kind.__name__}")
+
+
 @dataclass(frozen=True)
 class Reply:
-    """A decoded reply: ``ok`` (result 1), its fields (nested dicts and lists, text as
+    """A decoded reply: ``ok`` (result 1), its fields (``fields``: each value by its
+    field's name, a :data:`Value`: nested layouts as dicts, arrays as lists, text as
     ``str``), its tail's bytes (``tail``), and the data after the result byte (``data``).
-    ``reply["current_mode"]`` reads a field; :meth:`name` gives the ICD's name for a
-    value; :meth:`leaves` lists every value with its path, name and unit."""
 
-    command: "Command"
+    ``reply["current_mode"]`` reads a field (``reply["slots[0].state"]`` one inside a
+    nested layout); :meth:`value` and :meth:`array` read one as a given type, for code
+    that type-checks; :meth:`name` gives the ICD's name for a value; :meth:`leaves`
+    lists every value with its path, name and unit."""
+
+    command: Command
     ok: bool
     data: bytes
-    fields: Mapping[str, Any]
+    fields: Mapping[str, Value]
     tail: bytes = b""
 
-    def __getitem__(self, path: str) -> Any:
-        v: Any = self.fields
-        for part in re.findall(r"[^.\[\]]+", path):
-            v = v[int(part)] if part.isdigit() else v[part]
-        return v
+    def __getitem__(self, path: str) -> Value:
+        return _at(self.fields, path)
 
-    def name(self, path: str) -> Optional[str]:
+    def value(self, path: str, kind: type[_Scalar]) -> _Scalar:
+        """The value at ``path`` as ``kind``: ``int``, ``float`` (an integer field's value
+        is converted), ``str`` (a text field) or ``bytes``; a ``TypeError`` when it is
+        something else. ``reply.value("mcu_temp_c", int)``."""
+        return _as(_at(self.fields, path), kind, path)
+
+    def array(self, path: str, kind: type[_Number]) -> list[_Number]:
+        """The array at ``path`` (a field with a count above 1) as a list of ``kind``,
+        ``int`` or ``float``: ``reply.array("panels_w", float)``; a ``TypeError`` when
+        it is something else."""
+        v = _at(self.fields, path)
+        if not isinstance(v, list):
+            raise TypeError(f"{path} is {type(v).__name__}, not an array")
+        items: Sequence[Value] = v
+        return [_as(x, kind, f"{path}[{i}]") for i, x in enumerate(items)]
+
+    def name(self, path: str) -> str | None:
         """The ICD's name for the value at ``path`` (``"detumble"``, ``"COMM1, PC"``)."""
         for leaf in self.leaves():
             if leaf.path == path:
                 return leaf.name
         raise KeyError(path)
 
-    def leaves(self) -> List[Leaf]:
+    def leaves(self) -> list[Leaf]:
         return list(_leaves(self.command.reply.fields, self.fields, ""))
 
     def __str__(self) -> str:
@@ -370,7 +521,7 @@ class Reply:
 class Command:
     """One command of a node's port."""
 
-    node: "Node" = field(repr=False, compare=False)
+    node: Node = field(repr=False, compare=False)
     port: int
     port_name: str
     id: int
@@ -380,7 +531,7 @@ class Command:
     origin: str
     request: Data
     reply: Data
-    example: Optional[bytes] = None
+    example: bytes | None = None
     #: When the node also refuses it (beyond a wrong length, a value out of range and the
     #: access rule), in words; empty when nothing more.
     refused_when: str = ""
@@ -391,14 +542,14 @@ class Command:
         return f"{self.node.name}.{self.name}"
 
     @property
-    def arguments(self) -> List[str]:
+    def arguments(self) -> list[str]:
         """The names :meth:`encode` takes, in order."""
         names = [f.name for f in self.request.fields]
         if self.request.tail is not None:
             names.append(self.request.tail.name)
         return names
 
-    def encode(self, **args: Any) -> bytes:
+    def encode(self, **args: object) -> bytes:
         """The request's bytes, ``command | data``, from one argument per field of its
         layout (an array field takes a list, a text field a ``str``) and the tail (bytes
         or text; omitted: empty). Every value is checked against its type and the ICD's
@@ -430,16 +581,7 @@ class Command:
             out += _encode_field(f, args[f.name])
         t = self.request.tail
         if t is not None:
-            v = args.get(t.name, b"")
-            if isinstance(v, str):
-                v = v.encode()
-            if not isinstance(v, (bytes, bytearray)):
-                raise IcdError(t.name, "bytes or text expected")
-            if not t.min_bytes <= len(v) <= t.max_bytes:
-                raise IcdError(
-                    t.name, f"{len(v)} bytes; the ICD allows {t.min_bytes}..={t.max_bytes}"
-                )
-            out += v
+            out += _tail_bytes(t, args.get(t.name, b""))
         return bytes(out)
 
     def encode_raw(self, data: bytes) -> bytes:
@@ -453,26 +595,27 @@ class Command:
             )
         return bytes([self.id]) + bytes(data)
 
-    def decode_request(self, packet_data: bytes) -> Dict[str, Any]:
+    def decode_request(self, packet_data: bytes) -> Fields:
         """The arguments of a request (``command | data``), as :meth:`encode` takes
-        them; ``ValueError`` when it is not this command or its length is wrong."""
-        return _decode_data(self, self.request, packet_data, request=True)
+        them (the tail as bytes; the data of a variable layout as ``data``, bytes);
+        ``ValueError`` when it is not this command or its length is wrong."""
+        values, tail = _decode_data(self, self.request, packet_data, request=True)
+        if self.request.tail is not None:
+            values[self.request.tail.name] = tail
+        return values
 
     def decode_reply(self, packet_data: bytes) -> Reply:
         """The reply (``command | result | data``): a failure is ``ok=False``; a success
         of the wrong length is a ``ValueError`` naming the ICD's length."""
         b = bytes(packet_data)
         if len(b) < 2 or b[0] != self.id:
-            raise ValueError(
-                f"{self.full_name}: not a reply to command {self.id}: {b[:8].hex()}"
-            )
+            raise ValueError(f"{self.full_name}: not a reply to command {self.id}: {b[:8].hex()}")
         if b[1] != RESULT_OK:
             return Reply(self, False, b[2:], {})
-        values = _decode_data(self, self.reply, b[1:], request=False)
-        tail = values.pop(self.reply.tail.name, b"") if self.reply.tail else b""
+        values, tail = _decode_data(self, self.reply, b[1:], request=False)
         return Reply(self, True, b[2:], values, tail)
 
-    def reply_bytes(self, ok: bool = True, **values: Any) -> bytes:
+    def reply_bytes(self, ok: bool = True, **values: object) -> bytes:
         """A reply's bytes (``command | result | data``), for a node written in Python:
         the reply's fields as :meth:`encode` takes a request's."""
         if not ok:
@@ -484,18 +627,24 @@ class Command:
             out += _encode_field(f, values[f.name], check_range=False)
         t = self.reply.tail
         if t is not None:
-            v = values.get(t.name, b"")
-            if isinstance(v, str):
-                v = v.encode()
-            if not t.min_bytes <= len(v) <= t.max_bytes:
-                raise IcdError(
-                    t.name, f"{len(v)} bytes; the ICD allows {t.min_bytes}..={t.max_bytes}"
-                )
-            out += bytes(v)
+            out += _tail_bytes(t, values.get(t.name, b""))
         return bytes(out)
 
 
-def _encode_field(f: Field, v: Any, check_range: bool = True) -> bytes:
+def _tail_bytes(t: Tail, v: object) -> bytes:
+    """A tail's bytes from bytes or text, checked against the ICD's length limits."""
+    if isinstance(v, str):
+        b = v.encode()
+    elif isinstance(v, (bytes, bytearray, memoryview)):
+        b = bytes(v)
+    else:
+        raise IcdError(t.name, "bytes or text expected")
+    if not t.min_bytes <= len(b) <= t.max_bytes:
+        raise IcdError(t.name, f"{len(b)} bytes; the ICD allows {t.min_bytes}..={t.max_bytes}")
+    return b
+
+
+def _encode_field(f: Field, v: object, check_range: bool = True) -> bytes:
     if f.text:
         if not isinstance(v, str):
             raise IcdError(f.name, "text expected")
@@ -507,6 +656,7 @@ def _encode_field(f: Field, v: Any, check_range: bool = True) -> bytes:
         if isinstance(v, (bytes, bytearray)) and len(v) == f.size:
             return bytes(v)
         raise IcdError(f.name, f"a nested layout: give its {f.size} bytes")
+    items: list[object]
     if f.count == 1:
         items = [v]
     elif isinstance(v, (list, tuple)) and len(v) == f.count:
@@ -525,14 +675,15 @@ def _encode_field(f: Field, v: Any, check_range: bool = True) -> bytes:
         integer = not f.type.startswith("f")
         if integer and not float(x).is_integer():
             raise IcdError(f.name, f"{_fmt(x)} is not a whole number ({f.type})")
-        if isinstance(x, float) and math.isnan(x) or not lo <= x <= hi:
+        if (isinstance(x, float) and math.isnan(x)) or not lo <= x <= hi:
             raise IcdError(f.name, f"{_fmt(x)} is outside {f.type} ({_fmt(lo)}..={_fmt(hi)})")
         out += struct.pack("<" + _STRUCT[f.type], int(x) if integer else float(x))
     return bytes(out)
 
 
-def _decode_data(c: Command, d: Data, b: bytes, request: bool) -> Dict[str, Any]:
-    """Decode ``x | data`` (x: the command byte of a request, the result of a reply)."""
+def _decode_data(c: Command, d: Data, b: bytes, request: bool) -> tuple[Fields, bytes]:
+    """Decode ``x | data`` (x: the command byte of a request, the result of a reply):
+    its fields and its tail (empty without one)."""
     what = "request" if request else "reply"
     b = bytes(b)
     if request and (not b or b[0] != c.id):
@@ -544,11 +695,9 @@ def _decode_data(c: Command, d: Data, b: bytes, request: bool) -> Dict[str, Any]
             + (f"{d.min_bytes}" if d.min_bytes == d.max_bytes else f"{d.min_bytes}..={d.max_bytes}")
         )
     if not d.described:
-        return {"data": data}
+        return {"data": data}, b""
     values = _decode_fields(d.fields, data, 0)
-    if d.tail is not None:
-        values[d.tail.name] = data[d.head_bytes :]
-    return values
+    return values, data[d.head_bytes :] if d.tail is not None else b""
 
 
 @dataclass(frozen=True)
@@ -556,8 +705,8 @@ class Node:
     """One node of the ICD: its name, CSP addresses and commands."""
 
     name: str
-    addrs: Tuple[int, ...]
-    commands: Tuple[Command, ...] = field(repr=False, compare=False)
+    addrs: tuple[int, ...]
+    commands: tuple[Command, ...] = field(repr=False, compare=False)
 
     def command(self, name: str) -> Command:
         for c in self.commands:
@@ -565,19 +714,18 @@ class Node:
                 return c
         raise IcdError(
             "",
-            f"the {self.name} has no command `{name}`: "
-            + ", ".join(c.name for c in self.commands),
+            f"the {self.name} has no command `{name}`: " + ", ".join(c.name for c in self.commands),
         )
 
     @property
-    def ports(self) -> Dict[int, str]:
+    def ports(self) -> dict[int, str]:
         return {c.port: c.port_name for c in self.commands}
 
 
 class Icd:
     """The ICD: nodes, ports and commands (``m6p-twin icd --json``)."""
 
-    def __init__(self, doc: Mapping[str, Any]) -> None:
+    def __init__(self, doc: IcdJson) -> None:
         if doc.get("format") != FORMAT:
             raise ValueError(
                 f"ICD description format {doc.get('format')!r}; this package reads format {FORMAT}"
@@ -586,7 +734,7 @@ class Icd:
         self.framing: str = doc.get("framing", "")
         nodes = []
         for n in doc["nodes"]:
-            commands: List[Command] = []
+            commands: list[Command] = []
             node = Node(n["name"], tuple(n["addrs"]), ())
             for p in n["ports"]:
                 for c in p["commands"]:
@@ -609,10 +757,10 @@ class Icd:
                     )
             object.__setattr__(node, "commands", tuple(commands))
             nodes.append(node)
-        self.nodes: Tuple[Node, ...] = tuple(nodes)
+        self.nodes: tuple[Node, ...] = tuple(nodes)
 
     @classmethod
-    def load(cls, path: Optional[str] = None) -> "Icd":
+    def load(cls, path: str | None = None) -> Icd:
         """From a file written by ``m6p-twin icd --json``; without a path, the copy this
         package carries."""
         if path is None:
@@ -623,7 +771,7 @@ class Icd:
         return cls(json.loads(text))
 
     @classmethod
-    def from_twin(cls, binary: Optional[str] = None) -> "Icd":
+    def from_twin(cls, binary: str | None = None) -> Icd:
         """From a twin binary's ``icd --json`` (default: :func:`m6p.twin.find_binary`)."""
         if binary is None:
             from .twin import find_binary
@@ -632,7 +780,7 @@ class Icd:
         out = subprocess.run([binary, "icd", "--json"], check=True, capture_output=True, text=True)
         return cls(json.loads(out.stdout))
 
-    def node(self, name_or_addr: Union[str, int]) -> Node:
+    def node(self, name_or_addr: str | int) -> Node:
         """A node by name (``"PC"``, case-insensitive) or CSP address."""
         for n in self.nodes:
             if isinstance(name_or_addr, int):
@@ -656,7 +804,7 @@ class Icd:
         for n in self.nodes:
             yield from n.commands
 
-    def on_port(self, addr: int, port: int, command_id: int) -> Optional[Command]:
+    def on_port(self, addr: int, port: int, command_id: int) -> Command | None:
         """The command ``command_id`` of the node at ``addr`` on ``port`` (the ICD's
         ports; a run that moves a port is not known here)."""
         for n in self.nodes:

@@ -8,14 +8,15 @@ addresses or ports (see :class:`m6p.node.CspNode`).
 
 from __future__ import annotations
 
+import contextlib
 import select
 import socket
 import time
-from typing import List, Optional, Protocol, Tuple, Union
+from typing import Protocol
 
 from .csp import KissDecoder, Packet, kiss_encode, zmq_decode, zmq_encode
 
-__all__ = ["Link", "LinkClosed", "KissTcp", "ZmqHub", "parse_hostport"]
+__all__ = ["KissTcp", "Link", "LinkClosed", "ZmqHub", "parse_hostport"]
 
 
 class LinkClosed(ConnectionError):
@@ -27,7 +28,7 @@ class Link(Protocol):
 
     def send(self, packet: Packet) -> None: ...
 
-    def recv(self, timeout_s: float) -> Optional[Packet]:
+    def recv(self, timeout_s: float) -> Packet | None:
         """The next packet, or None after ``timeout_s``; :class:`LinkClosed` when the
         link is gone."""
         ...
@@ -35,7 +36,7 @@ class Link(Protocol):
     def close(self) -> None: ...
 
 
-def parse_hostport(addr: Union[str, Tuple[str, int]]) -> Tuple[str, int]:
+def parse_hostport(addr: str | tuple[str, int]) -> tuple[str, int]:
     """``"127.0.0.1:52001"`` or ``("127.0.0.1", 52001)``."""
     if isinstance(addr, tuple):
         return addr
@@ -55,9 +56,9 @@ class KissTcp:
 
     def __init__(
         self,
-        addr: Union[str, Tuple[str, int]],
+        addr: str | tuple[str, int],
         connect_timeout_s: float = 10.0,
-        mtu: Optional[int] = None,
+        mtu: int | None = None,
     ) -> None:
         self.addr = parse_hostport(addr)
         deadline = time.monotonic() + connect_timeout_s
@@ -73,13 +74,13 @@ class KissTcp:
         # Blocking: `recv` waits with `select`, so a send never inherits a short timeout.
         self.sock.settimeout(None)
         self.decoder = KissDecoder(mtu)
-        self._ready: List[Packet] = []
+        self._ready: list[Packet] = []
         self._closed = False
 
     def send(self, packet: Packet) -> None:
         self.sock.sendall(kiss_encode(packet))
 
-    def recv(self, timeout_s: float) -> Optional[Packet]:
+    def recv(self, timeout_s: float) -> Packet | None:
         deadline = time.monotonic() + timeout_s
         while not self._ready:
             if self._closed:
@@ -103,10 +104,8 @@ class KissTcp:
 
     def close(self) -> None:
         self._closed = True
-        try:
+        with contextlib.suppress(OSError):
             self.sock.close()
-        except OSError:
-            pass
 
 
 class ZmqHub:
@@ -132,11 +131,9 @@ class ZmqHub:
         try:
             import zmq
         except ImportError as e:  # pragma: no cover - depends on the environment
-            raise ImportError(
-                "the ZMQ hub link needs pyzmq: pip install './python[zmq]'"
-            ) from e
+            raise ImportError("the ZMQ hub link needs pyzmq: pip install './python[zmq]'") from e
         self._zmq = zmq
-        self.ctx: "zmq.Context[zmq.Socket[bytes]]" = zmq.Context.instance()
+        self.ctx: zmq.Context[zmq.Socket[bytes]] = zmq.Context.instance()
         self.pub = self.ctx.socket(zmq.PUB)
         self.pub.setsockopt(zmq.LINGER, 0)
         self.pub.connect(f"tcp://{host}:{publish_port}")
@@ -151,7 +148,7 @@ class ZmqHub:
     def send(self, packet: Packet) -> None:
         self.pub.send(zmq_encode(packet))
 
-    def recv(self, timeout_s: float) -> Optional[Packet]:
+    def recv(self, timeout_s: float) -> Packet | None:
         deadline = time.monotonic() + timeout_s
         while True:
             left = deadline - time.monotonic()

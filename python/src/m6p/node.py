@@ -13,13 +13,18 @@ from __future__ import annotations
 import queue
 import threading
 import time
-from typing import Any, Callable, Dict, Optional, Tuple
+from typing import TYPE_CHECKING, Callable, Optional
 
 from .csp import FLAG_CRC32, PORT_PING, PRIO_NORM, Header, Packet
 from .icd import Command, Icd, Reply
 from .links import Link, LinkClosed
 
-__all__ = ["CspNode", "Handler", "CspTimeout"]
+if TYPE_CHECKING:
+    # Only for the checker (it comes with it): Python 3.11 has typing.Self, but this
+    # package runs from 3.9 on, without dependencies.
+    from typing_extensions import Self
+
+__all__ = ["CspNode", "CspTimeout", "Handler"]
 
 #: A server's handler: the request packet (its data without a CSP CRC) in, the reply's
 #: data (or None for no reply) out.
@@ -44,7 +49,7 @@ class CspNode:
         self,
         link: Link,
         addr: int,
-        icd: Optional[Icd] = None,
+        icd: Icd | None = None,
         timeout_s: float = 5.0,
         prio: int = PRIO_NORM,
     ) -> None:
@@ -55,14 +60,14 @@ class CspNode:
         self.icd = icd if icd is not None else Icd.load()
         self.timeout_s = timeout_s
         self.prio = prio
-        self.handlers: Dict[int, Handler] = {}
+        self.handlers: dict[int, Handler] = {}
         self.unhandled = 0
         self.handler_errors = 0
         self.closed = threading.Event()
         self._lock = threading.Lock()
         # Outstanding requests by their source port: (destination, its port, the queue the
         # reply goes to; None in it means the link closed).
-        self._waiting: Dict[int, Tuple[int, int, "queue.Queue[Optional[Packet]]"]] = {}
+        self._waiting: dict[int, tuple[int, int, queue.Queue[Packet | None]]] = {}
         self._send_lock = threading.Lock()
         self._next_port = 0
         self._thread = threading.Thread(target=self._read, name=f"csp-{addr}", daemon=True)
@@ -77,10 +82,13 @@ class CspNode:
         data: bytes,
         sport: int = 0,
         flags: int = 0,
-        prio: Optional[int] = None,
+        prio: int | None = None,
     ) -> None:
         """One packet, connection-less (``csp_sendto``)."""
-        p = Packet(Header(self.prio if prio is None else prio, self.addr, dst, dport, sport, flags), bytes(data))
+        p = Packet(
+            Header(self.prio if prio is None else prio, self.addr, dst, dport, sport, flags),
+            bytes(data),
+        )
         if flags & FLAG_CRC32:
             p = p.with_csp_crc()
         self._send(p)
@@ -98,13 +106,13 @@ class CspNode:
         dst: int,
         dport: int,
         data: bytes = b"",
-        timeout_s: Optional[float] = None,
+        timeout_s: float | None = None,
         flags: int = 0,
     ) -> bytes:
         """Send ``data`` to ``dst:dport`` from a free ephemeral port and return the data
         of the first packet back to that port (``csp_transaction``);
         :class:`CspTimeout` when none comes in time."""
-        q: "queue.Queue[Optional[Packet]]" = queue.Queue()
+        q: queue.Queue[Packet | None] = queue.Queue()
         sport = self._take_port(dst, dport, q)
         wait_s = self.timeout_s if timeout_s is None else timeout_s
         try:
@@ -120,7 +128,7 @@ class CspNode:
             with self._lock:
                 self._waiting.pop(sport, None)
 
-    def ping(self, dst: int, size: int = 8, timeout_s: Optional[float] = None) -> float:
+    def ping(self, dst: int, size: int = 8, timeout_s: float | None = None) -> float:
         """Round trip of a ping to ``dst`` (port 1) in seconds; the echo must be the
         same bytes."""
         data = bytes(i & 0xFF for i in range(size))
@@ -134,11 +142,11 @@ class CspNode:
         self,
         name: str,
         *,
-        to: Optional[int] = None,
-        port: Optional[int] = None,
-        timeout_s: Optional[float] = None,
-        raw: Optional[bytes] = None,
-        **args: Any,
+        to: int | None = None,
+        port: int | None = None,
+        timeout_s: float | None = None,
+        raw: bytes | None = None,
+        **args: object,
     ) -> Reply:
         """Send the ICD command ``name`` (``"PC.SETUP"``) with typed arguments and return
         its decoded reply: ``ground.command("FC.ATCMDSET", mode="nadir").ok``.
@@ -162,7 +170,7 @@ class CspNode:
 
     # -- the reader ----------------------------------------------------------------------
 
-    def _take_port(self, dst: int, dport: int, q: "queue.Queue[Optional[Packet]]") -> int:
+    def _take_port(self, dst: int, dport: int, q: queue.Queue[Packet | None]) -> int:
         with self._lock:
             for _ in _EPHEMERAL:
                 port = _EPHEMERAL[self._next_port % len(_EPHEMERAL)]
@@ -216,7 +224,7 @@ class CspNode:
             return
         try:
             reply = handler(p)
-        except Exception:  # a handler's bug must not stop the node
+        except Exception:  # noqa: BLE001 - a handler's bug must not stop the node
             self.handler_errors += 1
             import traceback
 
@@ -240,7 +248,7 @@ class CspNode:
         self._thread.join(timeout=1.0)
         self.link.close()
 
-    def __enter__(self) -> "CspNode":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -15,13 +15,14 @@ Options: ``--m6p-twin PATH`` (the binary; default :func:`m6p.twin.find_binary`) 
 
 from __future__ import annotations
 
-from typing import Any, Dict, Iterator
+from collections.abc import Iterator
+from typing import cast
 
 import pytest
 
 from .node import CspNode
 from .session import Payload
-from .twin import Twin
+from .twin import Twin, TwinOptions
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -41,16 +42,24 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 @pytest.fixture
-def twin_options(request: pytest.FixtureRequest) -> Dict[str, Any]:
+def twin_options(request: pytest.FixtureRequest) -> TwinOptions:
     """The `twin` fixture's :class:`~m6p.twin.Twin` arguments (from the ``twin``
     marker)."""
     marker = request.node.get_closest_marker("twin")
-    return dict(marker.kwargs) if marker else {}
+    if marker is None:
+        return {}
+    unknown = sorted(set(marker.kwargs) - TwinOptions.__optional_keys__)
+    if unknown:
+        raise pytest.UsageError(
+            f"@pytest.mark.twin: {', '.join(unknown)}: not an argument of m6p.Twin"
+        )
+    # The names are Twin's; their values Twin takes or refuses when it starts.
+    return cast(TwinOptions, dict(marker.kwargs))
 
 
 @pytest.fixture
-def twin(request: pytest.FixtureRequest, twin_options: Dict[str, Any]) -> Iterator[Twin]:
-    opts = dict(twin_options)
+def twin(request: pytest.FixtureRequest, twin_options: TwinOptions) -> Iterator[Twin]:
+    opts = twin_options.copy()
     binary = request.config.getoption("--m6p-twin")
     if binary and "binary" not in opts:
         opts["binary"] = binary

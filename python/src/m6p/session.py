@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable, List, Optional, Union
+from typing import Callable
 
 from .csp import Packet
 from .icd import Reply
 from .node import CspNode
 
-__all__ = ["Payload", "Session", "counter_frames", "FrameSource"]
+__all__ = ["FrameSource", "Payload", "Session", "counter_frames"]
 
 #: Where a payload's POLL replies come from: the frame size asked for in, the data (at
 #: most that many bytes) out.
@@ -66,18 +66,18 @@ class Payload:
         self,
         node: CspNode,
         port: int = 10,
-        source: Optional[FrameSource] = None,
-        on_sync: Optional[Callable[[bytes], bool]] = None,
+        source: FrameSource | None = None,
+        on_sync: Callable[[bytes], bool] | None = None,
     ) -> None:
         self.node = node
         self.port = port
         self.source = source if source is not None else counter_frames()
         self.on_sync = on_sync
         self.sent = bytearray()
-        self.syncs: List[bytes] = []
+        self.syncs: list[bytes] = []
         self.polls = 0
         self.refused = 0
-        self.last_poll: Optional[float] = None
+        self.last_poll: float | None = None
         self._changed = threading.Condition()
         icd = node.icd
         self._sync = icd.command("payload.SYNC")
@@ -90,6 +90,8 @@ class Payload:
         try:
             if cmd == self._sync.id:
                 message = self._sync.decode_request(data)["message"]
+                if not isinstance(message, bytes):
+                    raise ValueError("SYNC: the ICD's message is not a tail")
                 if self.on_sync is not None and not self.on_sync(message):
                     return self._sync.reply_bytes(ok=False)
                 with self._changed:
@@ -98,6 +100,8 @@ class Payload:
                 return self._sync.reply_bytes(message=message)
             if cmd == self._poll.id:
                 size = self._poll.decode_request(data)["frame_size"]
+                if not isinstance(size, int):
+                    raise ValueError("POLL: the ICD's frame_size is not an integer")
                 if size == 0:
                     raise ValueError("frameSize 0")
                 out = bytes(self.source(size))[:size]
@@ -112,7 +116,7 @@ class Payload:
         self.refused += 1
         return bytes([cmd, 0])
 
-    def wait(self, predicate: Callable[["Payload"], bool], timeout_s: float = 30.0) -> None:
+    def wait(self, predicate: Callable[[Payload], bool], timeout_s: float = 30.0) -> None:
         """Wait until ``predicate(self)`` holds; ``TimeoutError`` after ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
         with self._changed:
@@ -133,25 +137,33 @@ class Payload:
 class Session:
     """Session ``session_id`` of the PC, driven from a ground node (ICD 3.1.8.1)."""
 
-    def __init__(self, ground: CspNode, session_id: int, pc: Optional[int] = None) -> None:
+    def __init__(self, ground: CspNode, session_id: int, pc: int | None = None) -> None:
         self.ground = ground
         self.session_id = session_id
         self.pc = pc
 
     def setup(
         self,
-        duration_s: Union[int, str],
+        duration_s: int | str,
         poll_frame_size: int = 200,
         max_packets: int = 0,
-        timestamp: Union[int, str] = 0,
-        sync_message: Union[bytes, str] = b"",
-        **kw: Any,
+        timestamp: int | str = 0,
+        sync_message: bytes | str = b"",
+        *,
+        port: int | None = None,
+        timeout_s: float | None = None,
+        **kw: object,
     ) -> Reply:
         """SETUP (``timestamp`` 0: start now; ``max_packets`` 0: no limit). Raises
-        ``RuntimeError`` when the PC refuses it (the twin logs why)."""
+        ``RuntimeError`` when the PC refuses it (the twin logs why). ``port`` and
+        ``timeout_s`` as :meth:`m6p.node.CspNode.command` takes them; ``kw``: more of the
+        command's arguments."""
         r = self.ground.command(
             "PC.SETUP",
             to=self.pc,
+            port=port,
+            timeout_s=timeout_s,
+            raw=None,
             session_id=self.session_id,
             timestamp=timestamp,
             duration_s=duration_s,

@@ -27,14 +27,18 @@ import subprocess
 import tempfile
 import threading
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, List, Optional, Sequence, Union
+from typing import TYPE_CHECKING, TypedDict
 
 from .icd import Icd
 from .links import KissTcp, Link, ZmqHub
 from .node import CspNode
 
-__all__ = ["Twin", "TwinError", "find_binary"]
+if TYPE_CHECKING:
+    from typing_extensions import Self  # for the checker only, as in m6p.node
+
+__all__ = ["Twin", "TwinError", "TwinOptions", "find_binary"]
 
 # `KISS/TCP: listening on 127.0.0.1:40123 for CSP 12, 13 (try: ...)`: the twin names each
 # listening link's CSP addresses, so that ours are told apart from a scenario's own links.
@@ -58,7 +62,7 @@ def find_binary() -> str:
     on_path = shutil.which("m6p-twin")
     if on_path:
         return on_path
-    found: List[Path] = []
+    found: list[Path] = []
     here = Path.cwd()
     for d in [here, *here.parents]:
         for profile in ("release", "debug"):
@@ -75,6 +79,24 @@ def find_binary() -> str:
     return str(max(found, key=lambda p: p.stat().st_mtime))
 
 
+class TwinOptions(TypedDict, total=False):
+    """:class:`Twin`'s arguments as a dict (``Twin(**options)``): what the ``twin``
+    marker and fixture of :mod:`m6p.pytest_plugin` take."""
+
+    scenario: str | os.PathLike[str] | None
+    seed: int | None
+    duration: str | None
+    speed: float
+    payload_addrs: Sequence[int]
+    ground_addr: int
+    zmq: bool
+    record: bool
+    binary: str | None
+    workdir: str | os.PathLike[str] | None
+    args: Iterable[str]
+    start_timeout_s: float
+
+
 class Twin:
     """A twin process.
 
@@ -86,17 +108,17 @@ class Twin:
 
     def __init__(
         self,
-        scenario: Optional[Union[str, "os.PathLike[str]"]] = None,
+        scenario: str | os.PathLike[str] | None = None,
         *,
-        seed: Optional[int] = None,
-        duration: Optional[str] = None,
+        seed: int | None = None,
+        duration: str | None = None,
         speed: float = 1.0,
         payload_addrs: Sequence[int] = (12,),
         ground_addr: int = 17,
         zmq: bool = False,
         record: bool = True,
-        binary: Optional[str] = None,
-        workdir: Optional[Union[str, "os.PathLike[str]"]] = None,
+        binary: str | None = None,
+        workdir: str | os.PathLike[str] | None = None,
         args: Iterable[str] = (),
         start_timeout_s: float = 30.0,
     ) -> None:
@@ -112,28 +134,30 @@ class Twin:
         self.extra_args = list(args)
         self.start_timeout_s = start_timeout_s
         self._own_workdir = workdir is None
-        self.workdir = Path(workdir) if workdir is not None else Path(tempfile.mkdtemp(prefix="m6p-twin-"))
-        self.proc: Optional["subprocess.Popen[str]"] = None
-        self.ground_kiss: Optional[str] = None
-        self.payload_kiss: Optional[str] = None
-        self.zmq_host: Optional[str] = None
-        self.returncode: Optional[int] = None
-        self._stderr: List[str] = []
+        self.workdir = (
+            Path(workdir) if workdir is not None else Path(tempfile.mkdtemp(prefix="m6p-twin-"))
+        )
+        self.proc: subprocess.Popen[str] | None = None
+        self.ground_kiss: str | None = None
+        self.payload_kiss: str | None = None
+        self.zmq_host: str | None = None
+        self.returncode: int | None = None
+        self._stderr: list[str] = []
         self._stdout = ""
         self._ready = threading.Event()
-        self._icd: Optional[Icd] = None
-        self._nodes: List[CspNode] = []
-        self._readers: List[threading.Thread] = []
+        self._icd: Icd | None = None
+        self._nodes: list[CspNode] = []
+        self._readers: list[threading.Thread] = []
         self._unnamed_links = 0
 
     # -- the process ---------------------------------------------------------------------
 
     @property
-    def recording(self) -> Optional[Path]:
+    def recording(self) -> Path | None:
         """The run's MCAP recording (complete after :meth:`stop`)."""
         return self.workdir / "run.mcap" if self.record else None
 
-    def command_line(self) -> List[str]:
+    def command_line(self) -> list[str]:
         argv = [self.binary, "run"]
         if self.scenario is not None:
             s = str(self.scenario)
@@ -163,7 +187,7 @@ class Twin:
                 argv += ["--kiss-addr", str(a)]
         return argv + self.extra_args
 
-    def start(self) -> "Twin":
+    def start(self) -> Self:
         """Start the twin and wait until its links listen."""
         argv = self.command_line()
         self.proc = subprocess.Popen(
@@ -191,8 +215,7 @@ class Twin:
                         "this package? Rebuild it: cargo build --release -p m6p-twin)"
                     )
                 raise TwinError(
-                    f"{' '.join(argv)}: {why} (status {self.returncode}):\n"
-                    + self.output[-4000:]
+                    f"{' '.join(argv)}: {why} (status {self.returncode}):\n" + self.output[-4000:]
                 )
         return self
 
@@ -231,7 +254,7 @@ class Twin:
         """The run's report (the table and the expectations), after :meth:`stop`."""
         return self._stdout
 
-    def stop(self, timeout_s: float = 30.0) -> Optional[int]:
+    def stop(self, timeout_s: float = 30.0) -> int | None:
         """Stop the run as Ctrl-C does (the report and the recording are complete), close
         the nodes made by :meth:`ground` and :meth:`payload`, and return the exit status: 1
         when the run was stopped before its end (an interrupted run is no result, whatever
@@ -258,13 +281,13 @@ class Twin:
                 pipe.close()
         return self.returncode
 
-    def wait(self, timeout_s: Optional[float] = None) -> Optional[int]:
+    def wait(self, timeout_s: float | None = None) -> int | None:
         """Wait for a run with a ``duration`` to end by itself."""
         if self.proc is not None:
             self.proc.wait(timeout_s)
         return self.stop()
 
-    def __enter__(self) -> "Twin":
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -292,7 +315,7 @@ class Twin:
         self._nodes.append(node)
         return node
 
-    def payload(self, addr: Optional[int] = None, timeout_s: float = 5.0) -> CspNode:
+    def payload(self, addr: int | None = None, timeout_s: float = 5.0) -> CspNode:
         """A CSP node as payload ``addr`` (default: the first of ``payload_addrs``) on
         the payloads' link (KISS/TCP, or the ZMQ hub)."""
         a = self.payload_addrs[0] if addr is None else addr

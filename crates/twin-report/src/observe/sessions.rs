@@ -55,71 +55,9 @@ pub struct SessionsReport {
 impl SessionsReport {
     /// Take in one event of the run.
     pub fn observe(&mut self, ev: &twin_core::events::RunEvent) {
-        use nodes_pc::PcOutput as O;
         use twin_core::events::RunEvent;
         match ev {
-            RunEvent::Pc(o) => match &**o {
-                O::SessionStarted { t, session_id } => self.runs.push(SessionRun {
-                    session: *session_id,
-                    started: Some(*t),
-                    ended: None,
-                    bytes: Vec::new(),
-                    len: 0,
-                    stream: Default::default(),
-                }),
-                O::SessionEnded {
-                    t,
-                    session_id,
-                    result,
-                    packets,
-                } => self.end_run(*session_id, (*t, RunEnd::Result(*result), *packets)),
-                O::SessionLost {
-                    t,
-                    session_id,
-                    cause,
-                    packets,
-                } => self.end_run(*session_id, (*t, RunEnd::Lost(*cause), *packets)),
-                O::Downlinked {
-                    session_id,
-                    payload_addr,
-                    bytes,
-                    ..
-                } => {
-                    *self.downlinked.entry(*payload_addr).or_default() += bytes.len() as u64;
-                    let keep = !self.forget_bytes;
-                    if let Some(r) = self
-                        .runs
-                        .iter_mut()
-                        .rev()
-                        .find(|r| r.session == *session_id)
-                    {
-                        r.len += bytes.len() as u64;
-                        r.stream.push(bytes);
-                        if keep {
-                            r.bytes.extend_from_slice(bytes);
-                        }
-                    }
-                }
-                O::Dropped {
-                    payload_addr,
-                    reason,
-                    bytes,
-                    ..
-                } => {
-                    *self
-                        .dropped
-                        .entry((*payload_addr, reason.as_str().to_owned()))
-                        .or_default() += bytes;
-                }
-                O::Final { accounting, .. } => {
-                    let held = self.held.get_or_insert_with(BTreeMap::new);
-                    for x in &accounting.sessions {
-                        *held.entry(x.payload_addr).or_default() +=
-                            x.bytes.buffered_now + x.bytes.queued_now;
-                    }
-                    self.pc_balanced = Some(accounting.is_balanced());
-                }
-            },
+            RunEvent::Pc(o) => self.observe_pc(o),
             RunEvent::Payload { addr, out } => match out {
                 nodes_payload::PayloadOutput::Produced { bytes, .. } => {
                     *self.produced.entry(*addr).or_default() += bytes;
@@ -156,17 +94,14 @@ impl SessionsReport {
                 }
             }
             // A payload's POLL reply that reached the PC after the PC stopped listening for
-            // it (its request's ephemeral port was no longer bound): CSP dropped it. Its
+            // it (its request's ephemeral port was no longer bound): the PC's CSP dropped it
+            // (an unbound port is the destination's own drop). Its
             // data (after the reply's command and result bytes) was produced: dropped here.
-            RunEvent::PacketDropped {
-                node,
-                reason,
-                packet,
-                ..
-            } if node == "PC"
-                && reason == "unbound port"
-                && packet.header.sport == nodes_payload::wire::PORT
-                && self.produced.contains_key(&packet.header.src) =>
+            RunEvent::PacketDropped { reason, packet, .. }
+                if *reason == csp::drop::DropReason::UnboundPort
+                    && packet.header.dst == platform::addr::PC
+                    && packet.header.sport == nodes_payload::wire::PORT
+                    && self.produced.contains_key(&packet.header.src) =>
             {
                 let data = packet.data_len.saturating_sub(REPLY_HEAD_BYTES) as u64;
                 *self
@@ -175,6 +110,74 @@ impl SessionsReport {
                     .or_default() += data;
             }
             _ => {}
+        }
+    }
+
+    /// What the PC reported: a session's run starting or ending, bytes downlinked or
+    /// dropped, its final accounting.
+    fn observe_pc(&mut self, o: &nodes_pc::PcOutput) {
+        use nodes_pc::PcOutput as O;
+        match o {
+            O::SessionStarted { t, session_id } => self.runs.push(SessionRun {
+                session: *session_id,
+                started: Some(*t),
+                ended: None,
+                bytes: Vec::new(),
+                len: 0,
+                stream: Default::default(),
+            }),
+            O::SessionEnded {
+                t,
+                session_id,
+                result,
+                packets,
+            } => self.end_run(*session_id, (*t, RunEnd::Result(*result), *packets)),
+            O::SessionLost {
+                t,
+                session_id,
+                cause,
+                packets,
+            } => self.end_run(*session_id, (*t, RunEnd::Lost(*cause), *packets)),
+            O::Downlinked {
+                session_id,
+                payload_addr,
+                bytes,
+                ..
+            } => {
+                *self.downlinked.entry(*payload_addr).or_default() += bytes.len() as u64;
+                let keep = !self.forget_bytes;
+                if let Some(r) = self
+                    .runs
+                    .iter_mut()
+                    .rev()
+                    .find(|r| r.session == *session_id)
+                {
+                    r.len += bytes.len() as u64;
+                    r.stream.push(bytes);
+                    if keep {
+                        r.bytes.extend_from_slice(bytes);
+                    }
+                }
+            }
+            O::Dropped {
+                payload_addr,
+                reason,
+                bytes,
+                ..
+            } => {
+                *self
+                    .dropped
+                    .entry((*payload_addr, reason.as_str().to_owned()))
+                    .or_default() += bytes;
+            }
+            O::Final { accounting, .. } => {
+                let held = self.held.get_or_insert_with(BTreeMap::new);
+                for x in &accounting.sessions {
+                    *held.entry(x.payload_addr).or_default() +=
+                        x.bytes.buffered_now + x.bytes.queued_now;
+                }
+                self.pc_balanced = Some(accounting.is_balanced());
+            }
         }
     }
 

@@ -92,7 +92,7 @@ pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
                 r.cfg = k.cfg.clone();
             }
             if link.starts_with("zmq-hub ") {
-                r.cfg.framing = bus::kiss_tcp::Framing::ZmqHub;
+                r.cfg.framing = links::kiss_tcp::Framing::ZmqHub;
             }
             // A command-line link's configured addresses and transmit budget, which the
             // scenario lacks.

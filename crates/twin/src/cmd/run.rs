@@ -55,7 +55,7 @@ pub struct RunArgs {
     /// Play libcsp 1.4's ZMQ hub on HOST (programs call csp_zmqhub_init(addr, "HOST")):
     /// HOST or HOST:PUB_PORT:SUB_PORT [default ports: 6000 7000]. Any 127.0.0.x works.
     #[arg(long = "zmq-hub", value_name = "HOST")]
-    pub zmq_hub: Vec<bus::zmq_hub::HubAddr>,
+    pub zmq_hub: Vec<links::zmq_hub::HubAddr>,
     /// A CSP address behind the --kiss-listen, --kiss-connect, --kiss-pty or --zmq-hub
     /// before it (repeat for more);
     /// claimed when a program connects, and the only sources that link accepts. A link

@@ -1,4 +1,4 @@
-//! Attitude determination (`nodes_fc::estimator`): TRIAD exactness and rejection, and the
+//! Attitude determination (`adcs::estimator`): TRIAD exactness and rejection, and the
 //! MEKF against a simulated truth (a body turning at a constant rate, the field direction of
 //! a tilted dipole seen from a 97.5 deg, 5640 s circular orbit, a sun fixed in ECI, seeded
 //! gaussian sensor noise, a gyro with a constant 0.1 deg/s bias per axis), at the ADCS's
@@ -7,7 +7,7 @@
 
 use core::f64::consts::{PI, TAU};
 
-use m6p_nodes_fc::estimator::{Mekf, MekfConfig, triad};
+use m6p_adcs::estimator::{Mekf, MekfConfig, triad};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use rand_chacha::ChaCha8Rng;
 use rand_core::{Rng, SeedableRng};
@@ -611,7 +611,7 @@ fn runs_are_deterministic_and_seeds_matter() {
 }
 
 /// Release-mode cost of one 10 Hz cycle; run with
-/// `cargo test --release -p m6p-nodes-fc --test estimator -- --ignored --nocapture`.
+/// `cargo test --release -p m6p-adcs --test estimator -- --ignored --nocapture`.
 #[test]
 #[ignore = "timing figure, not a check"]
 fn cost_of_propagate_and_two_updates() {

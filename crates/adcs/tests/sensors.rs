@@ -1,13 +1,13 @@
-//! The FC's sensor models (`nodes_fc::sensors`): determinism, noise statistics, geometry of
+//! The FC's sensor models (`adcs::sensors`): determinism, noise statistics, geometry of
 //! each sensor, faults, text forms, telemetry and saturation.
 #![allow(clippy::unwrap_used)]
 
-use m6p_nodes_fc::sensors::{
+use icd::fc::{Repr, TmRawSens, TmSens};
+use m6p_adcs::sensors::{
     ACC_LSB_M_S2, CSS_FULL_SCALE_COUNTS, G0_M_S2, GYRO_LSB_RAD_S, MAG_LSB_NT, SensorConfig,
     SensorFault, SensorId, SensorInputs, SensorReadings, Sensors, TEMP_BATTERY, TEMP_IMU,
     TEMP_LSB_C, TEMP_PANEL_MX, TEMP_PANEL_PX, TEMP_RWA, sun_from_counts,
 };
-use m6p_nodes_fc::wire::{Repr, TmRawSens, TmSens};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand_chacha::ChaCha8Rng;
 use rand_core::{Rng, SeedableRng};
@@ -980,7 +980,7 @@ fn raw_values_saturate_at_their_limits() {
 /// of the limb) of the true one; dead, it gives nothing.
 #[test]
 fn the_horizon_sensor_sees_the_limb_and_gives_nadir_within_its_noise() {
-    use m6p_nodes_fc::sensors::{
+    use m6p_adcs::sensors::{
         HORIZON_FULL_LIMB, HORIZON_NO_LIMB, HORIZON_PARTIAL_LIMB, SensorFault, SensorId,
     };
     // The body's +Z turned `off_deg` from nadir (-X in ECI at r = +X).

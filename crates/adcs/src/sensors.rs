@@ -75,12 +75,11 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::str::FromStr;
 
+use icd::fc::{TmRawSens, TmSens};
 use nalgebra::{UnitQuaternion, Vector3};
 use rand_chacha::ChaCha8Rng;
 use rand_core::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
-
-use crate::wire::{TmRawSens, TmSens};
 
 /// Standard gravity, m/s^2 (CGPM 1901; the accelerometer's 1 mg LSB is g0 / 1000).
 pub const G0_M_S2: f64 = 9.806_65;
@@ -881,42 +880,8 @@ impl Sensors {
             ACC_LSB_M_S2,
         );
 
-        // GPS: position noise then velocity noise, drawn even when off.
-        let gps_fault = self.fault(SensorId::Gps);
-        let (extra, k) = fault_bias_and_noise(gps_fault);
-        let nr = self.gps_rng.gauss3();
-        let nv = self.gps_rng.gauss3();
-        let fresh = self.cfg.gps_enabled.then(|| {
-            (
-                inputs.r_eci_m + Vector3::repeat(extra) + nr * (self.cfg.gps_position_noise_m * k),
-                inputs.v_eci_m_s + nv * (self.cfg.gps_velocity_noise_m_s * k),
-            )
-        });
-        let gps = match gps_fault {
-            Some(SensorFault::Dead) => None,
-            Some(SensorFault::Stuck) => self.last_gps.unwrap_or(fresh),
-            _ => fresh,
-        };
-        self.last_gps = Some(gps);
-
-        // Temperatures: advance toward the equilibria, then read (six channels, then MCU).
-        for (t, ch) in self.temps_true_c.iter_mut().zip(&self.cfg.thermal) {
-            *t = ch.advance(*t, ch.equilibrium_c(visible, &sun_body_true), dt_s);
-        }
-        let mcu = &self.cfg.mcu_thermal;
-        self.mcu_true_c = mcu.advance(
-            self.mcu_true_c,
-            mcu.equilibrium_c(visible, &sun_body_true),
-            dt_s,
-        );
-        let sigma = self.cfg.temp_noise_c;
-        let temps_raw: [i16; 6] = core::array::from_fn(|i| {
-            quantise_i16(
-                self.temps_true_c[i] + self.temp_rng.gauss() * sigma,
-                TEMP_LSB_C,
-            )
-        });
-        let mcu_raw = quantise_i16(self.mcu_true_c + self.temp_rng.gauss() * sigma, TEMP_LSB_C);
+        let gps = self.sample_gps(inputs);
+        let (temps_raw, mcu_raw) = self.sample_temps(visible, &sun_body_true, dt_s);
 
         let (horizon_nadir_body, horizon_raw, horizon_status) = self.sample_horizon(inputs);
 
@@ -938,6 +903,54 @@ impl Sensors {
             horizon_raw,
             horizon_status,
         }
+    }
+
+    /// The GPS fix; its noise is drawn even when off, so the stream does not depend on the switch.
+    fn sample_gps(&mut self, inputs: &SensorInputs) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let gps_fault = self.fault(SensorId::Gps);
+        let (extra, k) = fault_bias_and_noise(gps_fault);
+        let nr = self.gps_rng.gauss3();
+        let nv = self.gps_rng.gauss3();
+        let fresh = self.cfg.gps_enabled.then(|| {
+            (
+                inputs.r_eci_m + Vector3::repeat(extra) + nr * (self.cfg.gps_position_noise_m * k),
+                inputs.v_eci_m_s + nv * (self.cfg.gps_velocity_noise_m_s * k),
+            )
+        });
+        let gps = match gps_fault {
+            Some(SensorFault::Dead) => None,
+            Some(SensorFault::Stuck) => self.last_gps.unwrap_or(fresh),
+            _ => fresh,
+        };
+        self.last_gps = Some(gps);
+        gps
+    }
+
+    /// The temperatures' counts (six channels, then MCU), the thermal state advanced first.
+    fn sample_temps(
+        &mut self,
+        visible: f64,
+        sun_body_true: &Vector3<f64>,
+        dt_s: f64,
+    ) -> ([i16; 6], i16) {
+        for (t, ch) in self.temps_true_c.iter_mut().zip(&self.cfg.thermal) {
+            *t = ch.advance(*t, ch.equilibrium_c(visible, sun_body_true), dt_s);
+        }
+        let mcu = &self.cfg.mcu_thermal;
+        self.mcu_true_c = mcu.advance(
+            self.mcu_true_c,
+            mcu.equilibrium_c(visible, sun_body_true),
+            dt_s,
+        );
+        let sigma = self.cfg.temp_noise_c;
+        let temps_raw: [i16; 6] = core::array::from_fn(|i| {
+            quantise_i16(
+                self.temps_true_c[i] + self.temp_rng.gauss() * sigma,
+                TEMP_LSB_C,
+            )
+        });
+        let mcu_raw = quantise_i16(self.mcu_true_c + self.temp_rng.gauss() * sigma, TEMP_LSB_C);
+        (temps_raw, mcu_raw)
     }
 
     /// The horizon sensor: the nadir direction from the limb it sees, with noise (three

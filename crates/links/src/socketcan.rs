@@ -2,7 +2,7 @@
 //! (`can0`, `vcan0`, ...).
 //!
 //! Only compiled with the `socketcan` cargo feature, on Linux:
-//! `cargo build -p m6p-bus --features socketcan`.
+//! `cargo build -p m6p-links --features socketcan`.
 //!
 //! [`SocketCanLink`] opens a raw CAN socket bound to one interface and moves
 //! [`CanFrame`]s (CFP frames: classic CAN 2.0B, 29-bit extended id) between the
@@ -34,11 +34,11 @@ use csp::SimTime;
 use csp::cfp::{CAN_EFF_MASK, CAN_MAX_DLC, CanFrame};
 use socketcan::{EmbeddedFrame, ExtendedId, Frame, Id};
 
-use crate::can::CanBus;
-use crate::clock::Clock;
-use crate::gate::{DelayLine, LinkGate, Passage};
-use crate::inbox::{Arrival, inbox};
-pub use crate::outside::BridgeStats;
+use bus::can::CanBus;
+use bus::clock::Clock;
+use bus::gate::{DelayLine, LinkGate, Passage};
+use bus::inbox::{Arrival, inbox};
+pub use bus::outside::BridgeStats;
 
 /// Errors of a [`SocketCanLink`]; every variant names the interface.
 #[derive(Debug, thiserror::Error)]
@@ -362,7 +362,7 @@ impl ErrorLog {
 /// [`BridgeStats::ended`], leaves the bus and returns.
 ///
 /// Every frame crossing, in either direction, passes `gate` (the link's faults and power,
-/// [`crate::gate`]): it crosses now, waits out a delay, or is lost (counted by the gate).
+/// [`bus::gate`]): it crosses now, waits out a delay, or is lost (counted by the gate).
 pub async fn bridge(
     bus: CanBus,
     mut link: SocketCanLink,
@@ -407,15 +407,7 @@ pub async fn bridge(
                 while let Some((t, frame)) = delayed_in.pop_due(now) {
                     port.send(t, frame);
                 }
-                while let Some((_, frame)) = delayed_out.pop_due(now) {
-                    match link.send(&frame).await {
-                        Ok(()) => bump(&stats, |s| s.frames_out += 1),
-                        Err(e) => {
-                            bump(&stats, |s| s.send_errors += 1);
-                            send_log.error(&name, &e);
-                        }
-                    }
-                }
+                send_delayed(&mut delayed_out, now, &link, &stats, &mut send_log, &name).await;
             }
             // From the interface first: frames are stamped with the time they are read.
             r = link.recv() => match r {
@@ -457,18 +449,8 @@ pub async fn bridge(
                     }
                     Passage::Lost(_) => continue,
                 }
-                match link.send(&frame).await {
-                    Ok(()) => {
-                        bump(&stats, |s| s.frames_out += 1);
-                        send_log.ok(&name);
-                    }
-                    Err(e) => {
-                        bump(&stats, |s| s.send_errors += 1);
-                        if e.interface_gone() {
-                            break e.to_string();
-                        }
-                        send_log.error(&name, &e);
-                    }
+                if let Some(why) = send_out(&link, &frame, &stats, &mut send_log, &name).await {
+                    break why;
                 }
             }
             _ = poll.tick() => {
@@ -489,6 +471,50 @@ pub async fn bridge(
         s.skipped = skipped;
         s.ended = Some(why);
     });
+}
+
+/// Write the frames whose delay fault is over by `now` to the interface (a failed write loses one).
+async fn send_delayed(
+    delayed: &mut DelayLine<CanFrame>,
+    now: SimTime,
+    link: &SocketCanLink,
+    stats: &SharedBridgeStats,
+    send_log: &mut ErrorLog,
+    name: &str,
+) {
+    while let Some((_, frame)) = delayed.pop_due(now) {
+        match link.send(&frame).await {
+            Ok(()) => bump(stats, |s| s.frames_out += 1),
+            Err(e) => {
+                bump(stats, |s| s.send_errors += 1);
+                send_log.error(name, &e);
+            }
+        }
+    }
+}
+
+/// Write a frame of the bus to the interface; the reason to stop when the interface is gone.
+async fn send_out(
+    link: &SocketCanLink,
+    frame: &CanFrame,
+    stats: &SharedBridgeStats,
+    send_log: &mut ErrorLog,
+    name: &str,
+) -> Option<String> {
+    match link.send(frame).await {
+        Ok(()) => {
+            bump(stats, |s| s.frames_out += 1);
+            send_log.ok(name);
+        }
+        Err(e) => {
+            bump(stats, |s| s.send_errors += 1);
+            if e.interface_gone() {
+                return Some(e.to_string());
+            }
+            send_log.error(name, &e);
+        }
+    }
+    None
 }
 
 /// The few Linux errno values `open` and [`bridge`] distinguish (x86-64/aarch64 generic values),

@@ -17,8 +17,8 @@ use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 
-use crate::clock::Clock;
-use crate::driver::{ConsoleRequest, CtlTx, NodeCtl};
+use bus::clock::Clock;
+use bus::driver::{ConsoleRequest, CtlTx, NodeCtl};
 
 /// Longest line a console takes (`csp::console::MAX_LINE`).
 pub const MAX_LINE: usize = csp::console::MAX_LINE;

@@ -45,6 +45,7 @@
 //! The magnetometer is read while the magnetorquers are on (no duty cycling): the twin's
 //! magnetometer does not see the magnetorquers' field (documented in docs/adcs.md).
 
+use icd::fc::TargetMode;
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::control::{self, ControlConfig};
@@ -53,7 +54,6 @@ use crate::estimator::{Mekf, MekfConfig, triad};
 use crate::guidance::{self, GuidanceInputs, GuidanceTarget, Pointing};
 use crate::sensors::SensorReadings;
 use crate::truth::BodyConfig;
-use crate::wire::TargetMode;
 
 /// TMACD `state`: the ADCS is off (idle).
 pub const STATE_OFF: u8 = 0;
@@ -543,44 +543,29 @@ impl Adcs {
         out
     }
 
-    fn step_inner(&mut self, inp: &Inputs<'_>, h_wheels: &Vector3<f64>, dt_s: f64) -> Output {
+    /// What the determination may use: deselected sensors dropped, the magnetometer calibrated.
+    fn calibrated(&self, readings: &SensorReadings) -> SensorReadings {
         let used = self.cfg.use_sensors;
-        let calibrated = SensorReadings {
-            mag_body_nt: inp
-                .readings
+        SensorReadings {
+            mag_body_nt: readings
                 .mag_body_nt
                 .filter(|_| used.mag)
                 .map(|b| b - self.cfg.mag_calibration_bias_nt),
-            gyro_body_rad_s: inp.readings.gyro_body_rad_s.filter(|_| used.gyro),
-            sun_body_unit: inp.readings.sun_body_unit.filter(|_| used.sun),
-            horizon_nadir_body: inp.readings.horizon_nadir_body.filter(|_| used.horizon),
-            ..*inp.readings
-        };
-        let r = &calibrated;
-        let tally = self.determine(r, inp.onboard, h_wheels, dt_s);
-        let restarted = self.monitor_health(tally, dt_s);
-        let w_est = self.rate_estimate(r);
-        let rate = w_est.map(|w| w.norm());
-
-        let mut out = Output {
-            wheel_torque_cmd_nm: [0.0; 4],
-            mtq_dipole_cmd_am2: Vector3::zeros(),
-            mode_in_effect: TargetMode::Detumble,
-            state: STATE_DETUMBLING,
-            target: None,
-            w_body_rad_s_est: w_est.unwrap_or_default(),
-        };
-        let mag = calibrated.mag_body_nt;
-        let prev_mag = std::mem::replace(&mut self.prev_mag_body_nt, mag);
-
-        if inp.request.mode == TargetMode::Idle {
-            out.mode_in_effect = TargetMode::Idle;
-            out.state = STATE_OFF;
-            return out;
+            gyro_body_rad_s: readings.gyro_body_rad_s.filter(|_| used.gyro),
+            sun_body_unit: readings.sun_body_unit.filter(|_| used.sun),
+            horizon_nadir_body: readings.horizon_nadir_body.filter(|_| used.horizon),
+            ..*readings
         }
+    }
 
-        // Mode logic: leave detumble once slow, orbit known and estimate initialised and
-        // healthy; fall back to it on a high rate or an unhealthy (restarted) estimator.
+    /// Detumble's exit (slow, orbit known, estimate healthy) and fallback (high rate, restart).
+    fn update_detumbling(
+        &mut self,
+        inp: &Inputs<'_>,
+        rate: Option<f64>,
+        restarted: Option<&'static str>,
+        dt_s: f64,
+    ) {
         if self.detumbling {
             match rate {
                 Some(w) if w < self.cfg.detumble_exit_rate_rad_s => self.below_exit_s += dt_s,
@@ -614,6 +599,34 @@ impl Adcs {
                 self.fallback_reason = why;
             }
         }
+    }
+
+    fn step_inner(&mut self, inp: &Inputs<'_>, h_wheels: &Vector3<f64>, dt_s: f64) -> Output {
+        let calibrated = self.calibrated(inp.readings);
+        let r = &calibrated;
+        let tally = self.determine(r, inp.onboard, h_wheels, dt_s);
+        let restarted = self.monitor_health(tally, dt_s);
+        let w_est = self.rate_estimate(r);
+        let rate = w_est.map(|w| w.norm());
+
+        let mut out = Output {
+            wheel_torque_cmd_nm: [0.0; 4],
+            mtq_dipole_cmd_am2: Vector3::zeros(),
+            mode_in_effect: TargetMode::Detumble,
+            state: STATE_DETUMBLING,
+            target: None,
+            w_body_rad_s_est: w_est.unwrap_or_default(),
+        };
+        let mag = calibrated.mag_body_nt;
+        let prev_mag = std::mem::replace(&mut self.prev_mag_body_nt, mag);
+
+        if inp.request.mode == TargetMode::Idle {
+            out.mode_in_effect = TargetMode::Idle;
+            out.state = STATE_OFF;
+            return out;
+        }
+
+        self.update_detumbling(inp, rate, restarted, dt_s);
 
         let max_dipole = self.body.mtq_max_dipole_am2;
         if self.detumbling {

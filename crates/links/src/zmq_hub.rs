@@ -25,11 +25,11 @@ use std::net::IpAddr;
 
 use zeromq::{Socket, SocketRecv, SocketSend};
 
-use crate::clock::Clock;
 use crate::kiss_tcp::{
     Connection, FrameSink, KissLinkConfig, LinkInput, SharedStats, bump, edge, serve_link, take_in,
 };
-use crate::outside::Segments;
+use bus::clock::Clock;
+use bus::outside::Segments;
 
 /// Where the twin binds its hub: the host, the port the programs publish to and the port
 /// they subscribe at.

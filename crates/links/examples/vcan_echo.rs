@@ -8,13 +8,13 @@
 //! frame and a remote frame, which both links must skip and count.
 //!
 //! ```text
-//! cargo build -p m6p-bus --features socketcan --example vcan_echo
+//! cargo build -p m6p-links --features socketcan --example vcan_echo
 //! tools/uml/run-in-uml.sh target/debug/examples/vcan_echo vcan0   # no SocketCAN on the host
 //! target/debug/examples/vcan_echo vcan0                            # host with vcan0 up
 //! ```
 //!
 //! Exit status 0 on success, 1 with a message otherwise. The integration test
-//! `crates/bus/tests/vcan_uml.rs` runs the same [`run`] inside a User-Mode Linux guest.
+//! `crates/links/tests/vcan_uml.rs` runs the same [`run`] inside a User-Mode Linux guest.
 
 use std::error::Error;
 use std::process::ExitCode;
@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use csp::cfp::{CanFrame, CfpId, Fragmenter, Reassembler};
 use csp::{Header, Packet, SimTime};
-use m6p_bus::socketcan::{SocketCanLink, SocketCanStats};
+use m6p_links::socketcan::{SocketCanLink, SocketCanStats};
 use socketcan::{EmbeddedFrame, ExtendedId, StandardId};
 
 /// CSP address of node A (the pinging client).

@@ -1,7 +1,7 @@
-//! The attitude truth (`nodes_fc::truth`): conservation laws, momentum exchange, limits and
+//! The attitude truth (`adcs::truth`): conservation laws, momentum exchange, limits and
 //! external torques, each with its tolerance in the test name.
 
-use m6p_nodes_fc::truth::{
+use m6p_adcs::truth::{
     AttitudeState, BodyConfig, MU_EARTH_M3_S2, Torques, WheelConfig, gravity_gradient_body_nm, step,
 };
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};

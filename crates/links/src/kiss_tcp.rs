@@ -7,7 +7,7 @@
 //! - The CSP addresses behind a connection are the link's configured ones, claimed when it
 //!   connects (so a program that only answers is reachable), or, on a link without any,
 //!   learned from the source of its packets; the segment follows the address range
-//!   ([`crate::outside`]). An address held by a node of the twin or by another connection
+//!   ([`bus::outside`]). An address held by a node of the twin or by another connection
 //!   cannot be claimed: the packet is refused, counted and logged (WARN, once per address
 //!   and connection), and on a link with configured addresses any other source is refused.
 //! - Everything is bounded ([`KissLimits`]): connections per listener, chunks read ahead of
@@ -25,11 +25,11 @@ use csp::kiss::{self, Decoder, DecoderConfig, KissDrop, KissEvent};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
-use crate::can::TxBudget;
-use crate::clock::Clock;
-use crate::gate::{DelayLine, LinkGate, Passage};
-use crate::inbox::inbox;
-use crate::outside::{OutsideEndpoint, OutsideError, SegmentKind, Segments};
+use bus::can::TxBudget;
+use bus::clock::Clock;
+use bus::gate::{DelayLine, LinkGate, Passage};
+use bus::inbox::{Inbound, inbox};
+use bus::outside::{OutsideEndpoint, OutsideError, SegmentKind, Segments};
 use csp::zmqhub::HubDrop;
 
 /// The bounds of a KISS/TCP link, each with the real-world thing it models.
@@ -96,15 +96,15 @@ pub struct KissLinkConfig {
     pub decoder: DecoderConfig,
     /// Where the raw bytes crossing the socket go (the recorder).
     pub tap: Option<KissTap>,
-    /// The link's faults and power ([`crate::gate`]); `None`: everything crosses.
+    /// The link's faults and power ([`bus::gate`]); `None`: everything crosses.
     pub gate: Option<LinkGate>,
     /// How packets are framed on it: KISS, or libcsp 1.4's ZMQ hub messages.
     pub framing: Framing,
     /// Which of the run's links it is: its configured addresses are reserved for it
-    /// ([`crate::outside::Segments::reserve`]).
-    pub link: crate::outside::LinkId,
+    /// ([`bus::outside::Segments::reserve`]).
+    pub link: bus::outside::LinkId,
     /// At most this many CAN frames a second from each of its connections on a CAN bus
-    /// ([`crate::can::TxBudget`]); `None`: as many as the bus takes.
+    /// ([`bus::can::TxBudget`]); `None`: as many as the bus takes.
     pub tx_frames_per_s: Option<u32>,
 }
 
@@ -194,7 +194,7 @@ impl TapIn {
     }
 }
 
-/// A connection's open or end, taken in at the run's next idle point ([`crate::pace`]):
+/// A connection's open or end, taken in at the run's next idle point ([`bus::pace`]):
 /// recorded there as an empty chunk (a replay opens or closes the connection then, in the
 /// same order with the rest of the input); returns that instant.
 pub async fn edge(clock: Clock, cfg: &KissLinkConfig, name: &str) -> SimTime {
@@ -211,14 +211,14 @@ pub async fn edge_queued(
     let tap = TapIn::reserve(cfg).await;
     let name = name.to_owned();
     let (tx, rx) = tokio::sync::oneshot::channel();
-    crate::pace::take_in(clock, move |t| {
+    bus::pace::take_in(clock, move |t| {
         tap.record(t, &name, &[]);
         let _ = tx.send(t);
     });
     async move { rx.await.unwrap_or_else(|_| clock.now()) }
 }
 
-/// Take `input` into connection `name` at the run's next idle point ([`crate::pace`]),
+/// Take `input` into connection `name` at the run's next idle point ([`bus::pace`]),
 /// stamped with that instant: recorded then (an end as an empty chunk; an empty message is
 /// not recorded, since a recording's empty chunk is an open or a close) and handed to the
 /// connection's core on `slot`. Waits for a place in the run's budget first.
@@ -231,7 +231,7 @@ pub async fn take_in(
 ) {
     let tap = TapIn::reserve(cfg).await;
     let name = name.to_owned();
-    crate::pace::take_in(clock, move |t| {
+    bus::pace::take_in(clock, move |t| {
         match &input {
             LinkInput::Bytes(b) if b.is_empty() => {}
             LinkInput::Bytes(b) => tap.record(t, &name, b),
@@ -754,7 +754,7 @@ pub struct Connection<'a> {
 /// What a connection learned or refused so far.
 struct Conn<'a> {
     k: Connection<'a>,
-    inbox: crate::inbox::InboxTx,
+    inbox: bus::inbox::InboxTx,
     /// Released however the link ends (the future dropped too): the addresses go back.
     claims: Claims,
     /// Addresses whose refusal was logged already (once per address and connection).
@@ -783,15 +783,7 @@ async fn link_core(
         warned: std::collections::BTreeSet::new(),
         out_full: false,
     };
-    for &a in &cfg.addrs {
-        if let Err(e) = c.claim(a) {
-            c.refused(
-                clock.now(),
-                a,
-                &format!("cannot claim configured address {a}: {e}"),
-            );
-        }
-    }
+    c.claim_configured();
     let mut decoder = Decoder::new(cfg.decoder);
     let mut events = Vec::new();
     let mut frame = Vec::new();
@@ -839,83 +831,45 @@ async fn link_core(
                     continue;
                 }
                 // Recorded when it was taken in (`take_in`).
-                let chunk = chunk.as_slice();
-                match cfg.framing {
-                    Framing::Kiss => {
-                        let before = decoder.stats();
-                        decoder.push(chunk, &mut events);
-                        let after = decoder.stats();
-                        bump(stats, |s| {
-                            s.bytes_in += chunk.len() as u64;
-                            s.garbage_bytes += after.discarded_bytes - before.discarded_bytes;
-                        });
-                    }
-                    Framing::ZmqHub => {
-                        bump(stats, |s| s.bytes_in += chunk.len() as u64);
-                        match csp::zmqhub::decode(chunk) {
-                            Ok((_via, p)) => events.push(KissEvent::Packet(p)),
-                            Err(d) => {
-                                tracing::debug!("{name}: dropped hub message: {d}");
-                                bump(stats, |s| match d {
-                                    HubDrop::Short => s.short += 1,
-                                    HubDrop::Oversize => s.oversize += 1,
-                                });
-                            }
-                        }
-                    }
-                }
-                for ev in events.drain(..) {
-                    match ev {
-                        KissEvent::Packet(p) => match gate(cfg) {
-                            Passage::Now => c.take_in(&out, t, &p),
-                            Passage::After(d) => {
-                                if delayed_in.push(t + d, p).is_err() {
-                                    overflow(cfg, name);
-                                }
-                            }
-                            Passage::Lost(why) => {
-                                tracing::debug!("{name}: packet {} from the outside lost at the link: {why:?}", p.header);
-                            }
-                        },
-                        KissEvent::Dropped(d) => {
-                            tracing::debug!("{name}: dropped KISS frame: {d}");
-                            bump(stats, |s| match d {
-                                KissDrop::BadCrc => s.bad_crc += 1,
-                                KissDrop::Short => s.short += 1,
-                                _ => s.oversize += 1,
-                            });
-                        }
-                    }
-                }
+                decode_chunk(k, &mut decoder, &chunk, &mut events);
+                c.pass_in(&out, t, &mut events, &mut delayed_in);
             }
             a = inbox_rx.recv() => {
                 let Some(a) = a else { break "inbox closed".to_owned() };
-                let a_t = a.t;
-                let Some(ep) = c.claims.0.iter_mut().find(|e| e.iface() == a.iface) else {
-                    continue;
-                };
-                match ep.receive(a) {
-                    Some(Ok(p)) => {
-                        frame.clear();
-                        if !encode(cfg.framing, &p, &mut frame) {
-                            bump(stats, |s| s.out_dropped += 1);
-                            tracing::debug!("{name}: packet {} too long for the hub", p.header);
-                            continue;
-                        }
-                        match gate(cfg) {
-                            Passage::Now => c.put_out(&out, a_t, frame.clone()),
-                            Passage::After(d) => {
-                                if delayed_out.push(a_t + d, frame.clone()).is_err() {
-                                    overflow(cfg, name);
-                                }
-                            }
-                            Passage::Lost(why) => {
-                                tracing::debug!("{name}: packet {} to the outside lost at the link: {why:?}", p.header);
-                            }
-                        }
-                    }
-                    Some(Err(e)) => tracing::debug!("{name}: CFP drop towards outside: {e}"),
-                    None => {}
+                c.pass_out(&out, a, &mut frame, &mut delayed_out);
+            }
+        }
+    }
+}
+
+/// Decode a chunk read into `events` (KISS frames or a hub message), counting bytes and drops.
+fn decode_chunk(
+    k: Connection<'_>,
+    decoder: &mut Decoder,
+    chunk: &[u8],
+    events: &mut Vec<KissEvent>,
+) {
+    let (name, cfg, stats) = (k.name, k.cfg, k.stats);
+    match cfg.framing {
+        Framing::Kiss => {
+            let before = decoder.stats();
+            decoder.push(chunk, events);
+            let after = decoder.stats();
+            bump(stats, |s| {
+                s.bytes_in += chunk.len() as u64;
+                s.garbage_bytes += after.discarded_bytes - before.discarded_bytes;
+            });
+        }
+        Framing::ZmqHub => {
+            bump(stats, |s| s.bytes_in += chunk.len() as u64);
+            match csp::zmqhub::decode(chunk) {
+                Ok((_via, p)) => events.push(KissEvent::Packet(p)),
+                Err(d) => {
+                    tracing::debug!("{name}: dropped hub message: {d}");
+                    bump(stats, |s| match d {
+                        HubDrop::Short => s.short += 1,
+                        HubDrop::Oversize => s.oversize += 1,
+                    });
                 }
             }
         }
@@ -923,6 +877,97 @@ async fn link_core(
 }
 
 impl Conn<'_> {
+    /// Claim the configured addresses on opening, so that a program that only answers is reachable.
+    fn claim_configured(&mut self) {
+        for &a in &self.k.cfg.addrs {
+            if let Err(e) = self.claim(a) {
+                self.refused(
+                    self.k.clock.now(),
+                    a,
+                    &format!("cannot claim configured address {a}: {e}"),
+                );
+            }
+        }
+    }
+
+    /// Pass a chunk's decoded `events` through the link's gate into the twin; drops counted.
+    fn pass_in(
+        &mut self,
+        out: &tokio::sync::mpsc::Sender<(SimTime, Vec<u8>)>,
+        t: SimTime,
+        events: &mut Vec<KissEvent>,
+        delayed_in: &mut DelayLine<csp::Packet>,
+    ) {
+        let (name, cfg, stats) = (self.k.name, self.k.cfg, self.k.stats);
+        for ev in events.drain(..) {
+            match ev {
+                KissEvent::Packet(p) => match gate(cfg) {
+                    Passage::Now => self.take_in(out, t, &p),
+                    Passage::After(d) => {
+                        if delayed_in.push(t + d, p).is_err() {
+                            overflow(cfg, name);
+                        }
+                    }
+                    Passage::Lost(why) => {
+                        tracing::debug!(
+                            "{name}: packet {} from the outside lost at the link: {why:?}",
+                            p.header
+                        );
+                    }
+                },
+                KissEvent::Dropped(d) => {
+                    tracing::debug!("{name}: dropped KISS frame: {d}");
+                    bump(stats, |s| match d {
+                        KissDrop::BadCrc => s.bad_crc += 1,
+                        KissDrop::Short => s.short += 1,
+                        _ => s.oversize += 1,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Pass what the twin delivers to a claimed address, framed, through the gate outwards.
+    fn pass_out(
+        &mut self,
+        out: &tokio::sync::mpsc::Sender<(SimTime, Vec<u8>)>,
+        a: Inbound,
+        frame: &mut Vec<u8>,
+        delayed_out: &mut DelayLine<Vec<u8>>,
+    ) {
+        let (name, cfg, stats) = (self.k.name, self.k.cfg, self.k.stats);
+        let a_t = a.t;
+        let Some(ep) = self.claims.0.iter_mut().find(|e| e.iface() == a.iface) else {
+            return;
+        };
+        match ep.receive(a) {
+            Some(Ok(p)) => {
+                frame.clear();
+                if !encode(cfg.framing, &p, frame) {
+                    bump(stats, |s| s.out_dropped += 1);
+                    tracing::debug!("{name}: packet {} too long for the hub", p.header);
+                    return;
+                }
+                match gate(cfg) {
+                    Passage::Now => self.put_out(out, a_t, frame.clone()),
+                    Passage::After(d) => {
+                        if delayed_out.push(a_t + d, frame.clone()).is_err() {
+                            overflow(cfg, name);
+                        }
+                    }
+                    Passage::Lost(why) => {
+                        tracing::debug!(
+                            "{name}: packet {} to the outside lost at the link: {why:?}",
+                            p.header
+                        );
+                    }
+                }
+            }
+            Some(Err(e)) => tracing::debug!("{name}: CFP drop towards outside: {e}"),
+            None => {}
+        }
+    }
+
     /// Take a packet from the outside into the twin at `t`: its source must be one of the
     /// link's configured addresses, or, on a link without any, an address it can claim.
     fn take_in(
@@ -1130,9 +1175,9 @@ mod tests {
     use std::task::{Context, Poll};
 
     use super::*;
-    use crate::can::{CanBus, CanBusConfig};
-    use crate::clock::ClockMode;
-    use crate::net::{PacketNet, PacketNetConfig};
+    use bus::can::{CanBus, CanBusConfig};
+    use bus::clock::ClockMode;
+    use bus::net::{PacketNet, PacketNetConfig};
     use csp::{Header, Packet};
 
     /// A socket whose every write fails, as after a peer's reset.

@@ -1,17 +1,17 @@
-//! Guidance and control (`nodes_fc::guidance`, `nodes_fc::control`) on the default
-//! scenario's orbit, closed loop against the attitude truth (`nodes_fc::truth::step`, RK4 at
+//! Guidance and control (`adcs::guidance`, `adcs::control`) on the default
+//! scenario's orbit, closed loop against the attitude truth (`adcs::truth::step`, RK4 at
 //! 0.1 s) with perfect knowledge. The environment (SGP4 orbit, IGRF-14 field, sun, Earth
 //! orientation) is sampled every second and interpolated linearly in between.
 #![allow(clippy::unwrap_used)]
 
-use m6p_nodes_fc::control::{
+use m6p_adcs::control::{
     self, ControlConfig, allocate_wheel_torques, attitude_torque_nm, bdot_dipole_am2,
     desat_dipole_am2, mtq_torque_body_nm, wheel_commands_nm,
 };
-use m6p_nodes_fc::guidance::{
+use m6p_adcs::guidance::{
     self, DEFAULT_PANEL_NORMAL_BODY, GuidanceInputs, GuidanceTarget, Pointing,
 };
-use m6p_nodes_fc::truth::{
+use m6p_adcs::truth::{
     AttitudeState, BodyConfig, Torques, WheelConfig, step, wheel_momentum_body_nms,
 };
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};

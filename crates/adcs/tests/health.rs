@@ -1,23 +1,24 @@
 //! The ADCS's gyro-less determination and its estimator health monitor
-//! (`nodes_fc::adcs`), closed loop: the default scenario's orbit (SGP4, IGRF-14, sun,
+//! (`adcs::adcs`), closed loop: the default scenario's orbit (SGP4, IGRF-14, sun,
 //! shadow), the FC's sensor models with seeded noise and injected faults, the flight
 //! software at 10 Hz, and the attitude truth (RK4 at 0.1 s) with the FC's disturbances
-//! (gravity gradient, a (2, 2, 5) mA m^2 residual dipole, drag), as `lib.rs` ties them.
+//! (gravity gradient, a (2, 2, 5) mA m^2 residual dipole, drag), as nodes-fc's `lib.rs`
+//! ties them.
 //!
 //! Each run starts in nadir, on the target at the orbit rate, with the ADCS freshly booted
 //! (it detumbles for the 60 s exit hold, initialises by TRIAD in sunlight and acquires).
 //! Figures are in the tests' names and asserts; `--nocapture` prints the measured ones.
 #![allow(clippy::unwrap_used)]
 
-use m6p_nodes_fc::adcs::{
+use icd::fc::TargetMode;
+use m6p_adcs::adcs::{
     Adcs, AdcsConfig, Inputs, Output, REASON_GATED, REASON_INNOVATION, REASON_RATE, Request,
     STATE_DETUMBLING, STATE_TRACKING,
 };
-use m6p_nodes_fc::environment::{self, DragConfig, EnvModel, Environment};
-use m6p_nodes_fc::guidance::{self, GuidanceInputs, Pointing};
-use m6p_nodes_fc::sensors::{SensorConfig, SensorFault, SensorId, SensorInputs, Sensors};
-use m6p_nodes_fc::truth::{self, AttitudeState, BodyConfig, Torques};
-use m6p_nodes_fc::wire::TargetMode;
+use m6p_adcs::environment::{self, DragConfig, EnvModel, Environment};
+use m6p_adcs::guidance::{self, GuidanceInputs, Pointing};
+use m6p_adcs::sensors::{SensorConfig, SensorFault, SensorId, SensorInputs, Sensors};
+use m6p_adcs::truth::{self, AttitudeState, BodyConfig, Torques};
 use nalgebra::Vector3;
 use orbit::propagate::Sgp4Propagator;
 use orbit::tle::{ChecksumMode, Tle};

@@ -25,7 +25,7 @@
 //! Cowell integrator ([`CowellPropagator`], J2 and optionally drag per the model's
 //! [`CowellConfig`]) started from SGP4's exact J2000 state at the instant of the switch
 //! ([`EnvModel::switch_to_numerical`]); every burn after that is an impulsive delta-v
-//! ([`EnvModel::apply_delta_v`], see `crate::burns` for how a finite burn becomes
+//! ([`EnvModel::apply_delta_v`], see nodes-fc's `burns` for how a finite burn becomes
 //! impulses). [`EnvModel::at`] and [`EnvModel::state_j2000`] work for both. Cowell
 //! integrates forward from its last burn (its anchor): a query between grid points takes
 //! one partial step, a query earlier than the last grid point re-integrates from the anchor

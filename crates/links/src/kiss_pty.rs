@@ -27,9 +27,9 @@ use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::unix::pipe;
 
-use crate::clock::Clock;
 use crate::kiss_tcp::{KissLinkConfig, SharedStats, bump, run_numbered};
-use crate::outside::Segments;
+use bus::clock::Clock;
+use bus::outside::Segments;
 
 /// How often the link looks whether a program has opened the pty.
 const OPEN_POLL: Duration = Duration::from_millis(10);
