@@ -39,7 +39,7 @@ use orbit::cowell::{CowellConfig, CowellPropagator};
 use orbit::eclipse;
 use orbit::frames;
 use orbit::igrf::GaussCoefficients;
-use orbit::propagate::{Propagator, Sgp4Propagator, StateVector};
+use orbit::propagate::{PropagationError, Propagator, Sgp4Propagator, StateVector};
 use orbit::sun;
 use orbit::time::UtcTime;
 
@@ -248,6 +248,19 @@ impl SlowModels {
     }
 }
 
+/// Why an impulsive delta-v was not applied to the orbit.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DeltaVError {
+    /// The orbit cannot be propagated to the impulse (decay, or a time before the last
+    /// burn).
+    #[error(transparent)]
+    Propagation(#[from] PropagationError),
+    /// The orbit stayed SGP4 after the switch to numerical propagation.
+    #[error("the orbit did not switch to numerical")]
+    NotNumerical,
+}
+
 impl EnvModel {
     /// Models for the orbit of `propagator`; after a burn, Cowell with the default force
     /// model (J2, no drag; see [`EnvModel::with_cowell_config`]).
@@ -277,16 +290,16 @@ impl EnvModel {
 
     /// The environment at `unix_ns`, or why the orbit cannot be propagated (decay, bad
     /// elements, a time before the last burn).
-    pub fn at(&mut self, unix_ns: i64) -> Result<Environment, String> {
+    pub fn at(&mut self, unix_ns: i64) -> Result<Environment, PropagationError> {
         let t = UtcTime::from_unix_ns(unix_ns);
         let (r_eci_m, v_eci_m_s) = match &mut self.orbit {
             OrbitModel::Sgp4(p) => {
-                let teme = p.state_teme_at(t).map_err(|e| e.to_string())?;
+                let teme = p.state_teme_at(t)?;
                 let a = SlowModels::get(&mut self.slow.cached, t).a_j2000_from_teme;
                 (a * teme.r_km * 1e3, a * teme.v_km_s * 1e3)
             }
             OrbitModel::Cowell(p) => {
-                let s = p.state_j2000(t).map_err(|e| e.to_string())?;
+                let s = p.state_j2000(t)?;
                 (s.r_km * 1e3, s.v_km_s * 1e3)
             }
         };
@@ -294,25 +307,23 @@ impl EnvModel {
     }
 
     /// The exact ECI J2000 state (no cache), as `orbit`'s propagator gives it.
-    pub fn state_j2000(&mut self, unix_ns: i64) -> Result<StateVector, String> {
+    pub fn state_j2000(&mut self, unix_ns: i64) -> Result<StateVector, PropagationError> {
         let t = UtcTime::from_unix_ns(unix_ns);
         match &mut self.orbit {
             OrbitModel::Sgp4(p) => p.as_mut().state_j2000(t),
             OrbitModel::Cowell(p) => p.state_j2000(t),
         }
-        .map_err(|e| e.to_string())
     }
 
     /// Switch to numerical propagation at `unix_ns`, from SGP4's J2000 state there; nothing
     /// happens if the orbit is numerical already.
-    pub fn switch_to_numerical(&mut self, unix_ns: i64) -> Result<(), String> {
+    pub fn switch_to_numerical(&mut self, unix_ns: i64) -> Result<(), PropagationError> {
         if let OrbitModel::Sgp4(p) = &mut self.orbit {
             let c = CowellPropagator::from_propagator(
                 p.as_mut(),
                 UtcTime::from_unix_ns(unix_ns),
                 self.cowell,
-            )
-            .map_err(|e| e.to_string())?;
+            )?;
             self.orbit = OrbitModel::Cowell(c);
         }
         Ok(())
@@ -325,13 +336,13 @@ impl EnvModel {
         &mut self,
         unix_ns: i64,
         dv_eci_m_s: Vector3<f64>,
-    ) -> Result<StateVector, String> {
+    ) -> Result<StateVector, DeltaVError> {
         self.switch_to_numerical(unix_ns)?;
         match &mut self.orbit {
-            OrbitModel::Cowell(p) => p
-                .apply_delta_v(UtcTime::from_unix_ns(unix_ns), dv_eci_m_s / 1e3)
-                .map_err(|e| e.to_string()),
-            OrbitModel::Sgp4(_) => Err("the orbit did not switch to numerical".to_owned()),
+            OrbitModel::Cowell(p) => {
+                Ok(p.apply_delta_v(UtcTime::from_unix_ns(unix_ns), dv_eci_m_s / 1e3)?)
+            }
+            OrbitModel::Sgp4(_) => Err(DeltaVError::NotNumerical),
         }
     }
 }
@@ -529,7 +540,7 @@ mod tests {
         // A second switch changes nothing; a query before the switch fails.
         m.switch_to_numerical(t0 + 1_000_000_000).unwrap();
         assert_eq!(m.state_j2000(t0).unwrap(), s0);
-        assert!(m.at(t0 - 1).is_err());
+        assert_eq!(m.at(t0 - 1).unwrap_err(), PropagationError::BeforeStart);
     }
 
     #[test]
@@ -542,7 +553,10 @@ mod tests {
         assert_eq!(after.r_km, before.r_km);
         assert!(((after.v_km_s - before.v_km_s) * 1e3 - dv).norm() < 1e-12);
         // Earlier than the burn: refused, never a silent answer from the old orbit.
-        assert!(m.apply_delta_v(t0 - 1_000, dv).is_err());
+        assert_eq!(
+            m.apply_delta_v(t0 - 1_000, dv).unwrap_err(),
+            DeltaVError::Propagation(PropagationError::BeforeStart)
+        );
         assert!(m.state_j2000(t0 - 1_000).is_err());
         // Later queries, forwards and back to the anchor, keep working.
         let later = m.state_j2000(t0 + 100_000_000_000).unwrap();

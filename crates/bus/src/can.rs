@@ -47,6 +47,7 @@ use csp::cfp::{CanFrame, CfpId};
 use crate::clock::Clock;
 use crate::impair::{Fate, ImpairRng, ImpairmentSet, Impairments};
 use crate::inbox::{Arrival, Inbound, InboxTx};
+use crate::reserve::ClaimError;
 use crate::trace::{TraceEvent, TraceFrame, TraceTx};
 
 /// How far ahead of the clock the bus may schedule frames (one tokio timer tick).
@@ -502,7 +503,7 @@ impl CanBus {
         addr: u8,
         inbox: InboxTx,
         iface: usize,
-    ) -> Result<CanPort, String> {
+    ) -> Result<CanPort, ClaimError> {
         let mut st = self.lock();
         if let Some(why) = st.refusal(addr, None, Some(link)) {
             return Err(why);
@@ -583,7 +584,7 @@ impl CanBus {
     /// Add `addr` to an endpoint's filter and make it its only receiver, unless another
     /// endpoint holds it: a node of the twin attached with it, or another claim. Refused
     /// with the holder's name.
-    pub fn claim(&self, port: &CanPort, addr: u8) -> Result<(), String> {
+    pub fn claim(&self, port: &CanPort, addr: u8) -> Result<(), ClaimError> {
         let mut st = self.lock();
         let link = st.ports.get(port.idx).and_then(|p| p.link);
         if let Some(why) = st.refusal(addr, Some(port.idx), link) {
@@ -604,10 +605,10 @@ impl CanBus {
         addr: u8,
         link: crate::reserve::LinkId,
         label: &str,
-    ) -> Result<(), String> {
+    ) -> Result<(), ClaimError> {
         let mut st = self.lock();
         if let Some(h) = st.holder(addr) {
-            return Err(st.ports[h].stats.name.clone());
+            return Err(ClaimError::Held(st.ports[h].stats.name.clone()));
         }
         st.reserved.reserve(addr, link, label)
     }
@@ -792,9 +793,9 @@ impl State {
         addr: u8,
         me: Option<usize>,
         link: Option<crate::reserve::LinkId>,
-    ) -> Option<String> {
+    ) -> Option<ClaimError> {
         if let Some(h) = self.holder(addr).filter(|&h| Some(h) != me) {
-            return Some(self.ports[h].stats.name.clone());
+            return Some(ClaimError::Held(self.ports[h].stats.name.clone()));
         }
         self.reserved.refusal(addr, link)
     }
@@ -1882,9 +1883,15 @@ mod tests {
         let outside2 = bus.attach("kiss#2", &[], false, tx_out2, 0);
         tokio::spawn(bus.clone().run(clock));
         // The twin's payload 12 keeps its address; 14 is free and becomes the link's only.
-        assert_eq!(bus.claim(&outside, 12), Err("payload12".to_owned()));
+        assert_eq!(
+            bus.claim(&outside, 12),
+            Err(ClaimError::Held("payload12".to_owned()))
+        );
         assert_eq!(bus.claim(&outside, 14), Ok(()));
-        assert_eq!(bus.claim(&outside2, 14), Err("kiss".to_owned()));
+        assert_eq!(
+            bus.claim(&outside2, 14),
+            Err(ClaimError::Held("kiss".to_owned()))
+        );
         a.send(SimTime::ZERO, cfp_frame(6, 12, 0));
         a.send(SimTime::ZERO, cfp_frame(6, 14, 1));
         tokio::time::sleep(Duration::from_millis(2)).await;

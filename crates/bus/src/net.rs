@@ -33,6 +33,7 @@ use tokio::sync::Notify;
 use crate::clock::Clock;
 use crate::impair::{Fate, ImpairRng, ImpairmentSet, Impairments};
 use crate::inbox::{Arrival, Inbound, InboxTx};
+use crate::reserve::ClaimError;
 use crate::trace::{TraceEvent, TraceFrame, TraceTx};
 
 /// Settings of a packet network.
@@ -299,7 +300,7 @@ impl PacketNet {
         addr: u8,
         inbox: InboxTx,
         iface: usize,
-    ) -> Result<NetPort, String> {
+    ) -> Result<NetPort, ClaimError> {
         let mut st = self.lock();
         if let Some(why) = st.refusal(addr, None, Some(link)) {
             return Err(why);
@@ -339,7 +340,7 @@ impl PacketNet {
     /// Make `port` the only receiver of `addr` until released, unless another endpoint
     /// holds it (a node of the twin attached with it, or another claim): refused with the
     /// holder's name.
-    pub fn claim(&self, port: &NetPort, addr: u8) -> Result<(), String> {
+    pub fn claim(&self, port: &NetPort, addr: u8) -> Result<(), ClaimError> {
         let mut st = self.lock();
         let link = st.eps.get(port.idx).and_then(|e| e.link);
         if let Some(why) = st.refusal(addr, Some(port.idx), link) {
@@ -360,10 +361,10 @@ impl PacketNet {
         addr: u8,
         link: crate::reserve::LinkId,
         label: &str,
-    ) -> Result<(), String> {
+    ) -> Result<(), ClaimError> {
         let mut st = self.lock();
         if let Some(h) = st.holder(addr) {
-            return Err(st.eps[h].name.clone());
+            return Err(ClaimError::Held(st.eps[h].name.clone()));
         }
         st.reserved.reserve(addr, link, label)
     }
@@ -475,9 +476,9 @@ impl State {
         addr: u8,
         me: Option<usize>,
         link: Option<crate::reserve::LinkId>,
-    ) -> Option<String> {
+    ) -> Option<ClaimError> {
         if let Some(h) = self.holder(addr).filter(|&h| Some(h) != me) {
-            return Some(self.eps[h].name.clone());
+            return Some(ClaimError::Held(self.eps[h].name.clone()));
         }
         self.reserved.refusal(addr, link)
     }

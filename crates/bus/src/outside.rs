@@ -8,7 +8,7 @@
 //! the scenario replaced it, so it was never attached) or another outside connection keeps
 //! its address, and the claim is refused ([`OutsideError::Held`]).
 
-use csp::cfp::{Fragmenter, Reassembler, ReassemblerConfig};
+use csp::cfp::{CfpDrop, Fragmenter, Reassembler, ReassemblerConfig};
 use csp::{Packet, SimTime};
 
 use crate::can::{CanBus, CanPort, TxBudget};
@@ -26,13 +26,13 @@ pub struct Segments {
     pub ground: PacketNet,
 }
 
-pub use crate::reserve::LinkId;
+pub use crate::reserve::{ClaimError, LinkId};
 
 impl Segments {
     /// Reserve `addr` on its segment for outside link `link` (labelled `label`) for the
     /// whole run (an address the link is configured with): only that link's connections
     /// may claim it, its program connected or not. Refused with the holder's name.
-    pub fn reserve(&self, addr: u8, link: LinkId, label: &str) -> Result<(), String> {
+    pub fn reserve(&self, addr: u8, link: LinkId, label: &str) -> Result<(), ClaimError> {
         match SegmentKind::of(addr) {
             SegmentKind::Main => self.main.reserve(addr, link, label),
             SegmentKind::Payload => self.payload.reserve(addr, link, label),
@@ -110,7 +110,7 @@ pub enum OutsideError {
         /// The address.
         addr: u8,
         /// Who holds it.
-        holder: String,
+        holder: ClaimError,
     },
     /// The link's CAN transmit queue cannot take the whole packet now: it is dropped rather
     /// than sent in part.
@@ -244,13 +244,12 @@ impl OutsideEndpoint {
         Ok(())
     }
 
-    /// Turn an arrival into a packet for the outside program (CAN frames are reassembled).
-    pub fn receive(&mut self, arrival: Inbound) -> Option<Result<Packet, String>> {
+    /// Turn an arrival into a packet for the outside program (CAN frames are reassembled;
+    /// an error is the reassembler's drop).
+    pub fn receive(&mut self, arrival: Inbound) -> Option<Result<Packet, CfpDrop>> {
         match (arrival.what, &mut self.port) {
             (Arrival::Packet(p), _) => Some(Ok(p)),
-            (Arrival::Can(f), Port::Can { reasm, .. }) => reasm
-                .handle(&f, arrival.t)
-                .map(|r| r.map_err(|e| e.to_string())),
+            (Arrival::Can(f), Port::Can { reasm, .. }) => reasm.handle(&f, arrival.t),
             (Arrival::Can(_), Port::Net(_)) => None,
         }
     }
@@ -308,7 +307,7 @@ mod tests {
                     e.err(),
                     Some(OutsideError::Held {
                         addr,
-                        holder: holder.to_owned()
+                        holder: ClaimError::Held(holder.to_owned())
                     })
                 );
             }

@@ -12,6 +12,23 @@ use std::sync::Arc;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
 pub struct LinkId(pub u32);
 
+/// Why an address could not be claimed or reserved: who has it.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ClaimError {
+    /// An endpoint holds it: a node of the twin attached with it, or another claim (the
+    /// endpoint's name).
+    #[error("{0}")]
+    Held(String),
+    /// Another outside link reserved it (the link's label).
+    #[error("link `{0}`")]
+    Reserved(Arc<str>),
+    /// Another outside link reserved it, and that link's program is not connected now (the
+    /// link's label).
+    #[error("link `{0}` (configured there; its program is not connected)")]
+    ReservedOffline(Arc<str>),
+}
+
 /// The addresses reserved on one medium, each with its link and the link's label.
 #[derive(Debug, Default)]
 pub(crate) struct Reservations(BTreeMap<u8, (LinkId, Arc<str>)>);
@@ -19,9 +36,14 @@ pub(crate) struct Reservations(BTreeMap<u8, (LinkId, Arc<str>)>);
 impl Reservations {
     /// Reserve `addr` for `link` (labelled `label`); refused with the label of the link
     /// holding it already.
-    pub(crate) fn reserve(&mut self, addr: u8, link: LinkId, label: &str) -> Result<(), String> {
+    pub(crate) fn reserve(
+        &mut self,
+        addr: u8,
+        link: LinkId,
+        label: &str,
+    ) -> Result<(), ClaimError> {
         match self.0.get(&addr) {
-            Some((l, name)) if *l != link => Err(format!("link `{name}`")),
+            Some((l, name)) if *l != link => Err(ClaimError::Reserved(name.clone())),
             Some(_) => Ok(()),
             None => {
                 self.0.insert(addr, (link, label.into()));
@@ -32,15 +54,15 @@ impl Reservations {
 
     /// Why an endpoint of `link` (`None`: not an outside link's) may not claim `addr`: it is
     /// reserved for another link, whose program is not connected now.
-    pub(crate) fn refusal(&self, addr: u8, link: Option<LinkId>) -> Option<String> {
+    pub(crate) fn refusal(&self, addr: u8, link: Option<LinkId>) -> Option<ClaimError> {
         let (l, name) = self.0.get(&addr)?;
-        (Some(*l) != link)
-            .then(|| format!("link `{name}` (configured there; its program is not connected)"))
+        (Some(*l) != link).then(|| ClaimError::ReservedOffline(name.clone()))
     }
 }
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]
@@ -49,12 +71,15 @@ mod tests {
         let mut r = Reservations::default();
         assert_eq!(r.reserve(15, a, "listen 127.0.0.1:0"), Ok(()));
         assert_eq!(r.reserve(15, a, "listen 127.0.0.1:0"), Ok(()));
-        assert_eq!(
-            r.reserve(15, b, "listen 127.0.0.1:0"),
-            Err("link `listen 127.0.0.1:0`".into())
-        );
+        let e = r.reserve(15, b, "listen 127.0.0.1:0").unwrap_err();
+        assert_eq!(e, ClaimError::Reserved("listen 127.0.0.1:0".into()));
+        assert_eq!(e.to_string(), "link `listen 127.0.0.1:0`");
         assert_eq!(r.refusal(15, Some(a)), None);
-        assert!(r.refusal(15, Some(b)).is_some());
+        let e = r.refusal(15, Some(b)).unwrap();
+        assert_eq!(
+            e.to_string(),
+            "link `listen 127.0.0.1:0` (configured there; its program is not connected)"
+        );
         assert!(r.refusal(15, None).is_some());
         assert_eq!(r.refusal(14, Some(b)), None);
     }

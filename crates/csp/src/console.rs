@@ -104,6 +104,81 @@ pub fn fields<T: std::fmt::Debug>(t: &T) -> String {
 /// Longest console line taken (longer ones are refused whole).
 pub const MAX_LINE: usize = 256;
 
+/// Why a console line was refused: the text after `error: COMMAND: `.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConsoleError {
+    /// The line is longer than [`MAX_LINE`].
+    #[error("line longer than {max} characters")]
+    LineTooLong {
+        /// The longest line taken.
+        max: usize,
+    },
+    /// Neither the node nor its application has the command.
+    #[error("unknown command (try help)")]
+    UnknownCommand,
+    /// The application lists the command but does not run it.
+    #[error("unknown command {name:?}")]
+    NotRun {
+        /// The command's name.
+        name: String,
+    },
+    /// The command's arguments are not what it takes.
+    #[error("usage: {0}")]
+    Usage(String),
+    /// `log`'s argument is not a count.
+    #[error("{0:?} is not a count")]
+    NotACount(String),
+    /// `param` on a node without a parameter table.
+    #[error("this node has no parameters")]
+    NoParams,
+    /// `param get`, `info` or `set` without a name.
+    #[error("name a parameter")]
+    NameAParameter,
+    /// No parameter by this name or id.
+    #[error("no parameter {0:?}")]
+    NoParameter(String),
+    /// The table has the definition but no running value.
+    #[error("no value")]
+    NoValue,
+    /// `param set` without a value.
+    #[error("give a value")]
+    GiveAValue,
+    /// `param set`'s value does not parse as the parameter's type.
+    #[error("{name}: {text:?} is not a value of its type")]
+    NotAValue {
+        /// The parameter's name.
+        name: &'static str,
+        /// The value as typed.
+        text: String,
+    },
+    /// `param`'s subcommand is not one of its own.
+    #[error("unknown subcommand {0:?}")]
+    UnknownSubcommand(String),
+    /// The parameter was not set.
+    #[error(transparent)]
+    Param(#[from] crate::params::ParamError),
+    /// `param defaults` restored the table but these values were refused.
+    #[error("{}", crate::params::join_errors(.0))]
+    Defaults(Vec<crate::params::ParamError>),
+    /// The command's CSP request was refused (the request's name).
+    #[error("{0} refused")]
+    Refused(&'static str),
+    /// The reply did not decode as its telemetry.
+    #[error(transparent)]
+    Wire(#[from] crate::Error),
+    /// An application's own error.
+    #[error(transparent)]
+    App(Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl ConsoleError {
+    /// An application's own error.
+    pub fn app(e: impl std::error::Error + Send + Sync + 'static) -> Self {
+        ConsoleError::App(Box::new(e))
+    }
+}
+
 /// The prompt after every answer (`fc> `).
 pub fn prompt(node_name: &str) -> String {
     format!("{}> ", node_name.to_ascii_lowercase())

@@ -828,26 +828,106 @@ pub fn leaves(fields: &'static [Field]) -> Vec<(String, &'static Field)> {
     out
 }
 
+/// Why leaf values did not encode into a layout; all but [`EncodeError::Count`] name the
+/// field by its leaf path, as [`leaves`] gives it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EncodeError {
+    /// Not one value per leaf field.
+    #[error("{values} values for {fields} fields")]
+    Count {
+        /// Values given.
+        values: usize,
+        /// Leaf fields of the layout.
+        fields: usize,
+    },
+    /// A text field was given a number.
+    #[error("{path}: text expected")]
+    TextExpected {
+        /// The field's leaf path.
+        path: String,
+    },
+    /// A text is longer than its field.
+    #[error("{path}: at most {max_chars} characters")]
+    TextTooLong {
+        /// The field's leaf path.
+        path: String,
+        /// The field's length.
+        max_chars: usize,
+    },
+    /// A number field was given a text.
+    #[error("{path}: a number expected")]
+    NumberExpected {
+        /// The field's leaf path.
+        path: String,
+    },
+    /// The field's type holds no number.
+    #[error("{path}: not a number")]
+    NotNumeric {
+        /// The field's leaf path.
+        path: String,
+    },
+    /// The value is beyond what the field's type holds.
+    #[error("{path}: {value} is outside {ty} ({lo}..={hi})")]
+    OutOfLimits {
+        /// The field's leaf path.
+        path: String,
+        /// The value given.
+        value: f64,
+        /// The type's name.
+        ty: &'static str,
+        /// The type's lowest value.
+        lo: f64,
+        /// The type's highest value.
+        hi: f64,
+    },
+    /// A fraction for an integer field.
+    #[error("{path}: {value} is not a whole number")]
+    NotWhole {
+        /// The field's leaf path.
+        path: String,
+        /// The value given.
+        value: f64,
+    },
+}
+
+impl EncodeError {
+    /// The leaf path of the field that failed, if the error is about one field.
+    pub fn path(&self) -> Option<&str> {
+        match self {
+            EncodeError::Count { .. } => None,
+            EncodeError::TextExpected { path }
+            | EncodeError::TextTooLong { path, .. }
+            | EncodeError::NumberExpected { path }
+            | EncodeError::NotNumeric { path }
+            | EncodeError::OutOfLimits { path, .. }
+            | EncodeError::NotWhole { path, .. } => Some(path),
+        }
+    }
+}
+
 /// Encode leaf values (in [`leaves`] order) into the layout's bytes. A value out of its
 /// type's limits, a fraction for an integer, or a value for a text field longer than it
 /// is an error naming the field.
-pub fn encode(fields: &'static [Field], values: &[Value]) -> Result<Vec<u8>, String> {
+pub fn encode(fields: &'static [Field], values: &[Value]) -> Result<Vec<u8>, EncodeError> {
     let leaves = leaves(fields);
     if leaves.len() != values.len() {
-        return Err(format!(
-            "{} values for {} fields",
-            values.len(),
-            leaves.len()
-        ));
+        return Err(EncodeError::Count {
+            values: values.len(),
+            fields: leaves.len(),
+        });
     }
     let mut w = Writer::new();
     for ((path, f), v) in leaves.iter().zip(values) {
         if f.text {
             let Value::Text(s) = v else {
-                return Err(format!("{path}: text expected"));
+                return Err(EncodeError::TextExpected { path: path.clone() });
             };
             if s.len() > f.len() {
-                return Err(format!("{path}: at most {} characters", f.len()));
+                return Err(EncodeError::TextTooLong {
+                    path: path.clone(),
+                    max_chars: f.len(),
+                });
             }
             let mut b = s.as_bytes().to_vec();
             b.resize(f.len(), 0);
@@ -855,19 +935,25 @@ pub fn encode(fields: &'static [Field], values: &[Value]) -> Result<Vec<u8>, Str
             continue;
         }
         let Some(x) = v.as_f64() else {
-            return Err(format!("{path}: a number expected"));
+            return Err(EncodeError::NumberExpected { path: path.clone() });
         };
         let (lo, hi) =
             f.ty.limits()
-                .ok_or_else(|| format!("{path}: not a number"))?;
+                .ok_or_else(|| EncodeError::NotNumeric { path: path.clone() })?;
         if x.is_nan() && f.ty.is_integer() || x < lo || x > hi {
-            return Err(format!(
-                "{path}: {x} is outside {} ({lo}..={hi})",
-                f.ty.name()
-            ));
+            return Err(EncodeError::OutOfLimits {
+                path: path.clone(),
+                value: x,
+                ty: f.ty.name(),
+                lo,
+                hi,
+            });
         }
         if f.ty.is_integer() && x.fract() != 0.0 {
-            return Err(format!("{path}: {x} is not a whole number"));
+            return Err(EncodeError::NotWhole {
+                path: path.clone(),
+                value: x,
+            });
         }
         match f.ty {
             Ty::U8 => w.u8(x as u8),
@@ -879,7 +965,7 @@ pub fn encode(fields: &'static [Field], values: &[Value]) -> Result<Vec<u8>, Str
             Ty::U64 => w.u64(x as u64),
             Ty::F32 => w.f32(x as f32),
             Ty::F64 => w.f64(x),
-            Ty::Struct(..) => return Err(format!("{path}: not a number")),
+            Ty::Struct(..) => return Err(EncodeError::NotNumeric { path: path.clone() }),
         };
     }
     Ok(w.buf)
@@ -1159,18 +1245,18 @@ mod tests {
             .collect();
         v[1] = Value::Int(300);
         assert_eq!(
-            encode(Outer::FIELDS, &v).unwrap_err(),
+            encode(Outer::FIELDS, &v).unwrap_err().to_string(),
             "mode: 300 is outside u8 (0..=255)"
         );
         v[1] = Value::Float(1.5);
         assert_eq!(
-            encode(Outer::FIELDS, &v).unwrap_err(),
+            encode(Outer::FIELDS, &v).unwrap_err().to_string(),
             "mode: 1.5 is not a whole number"
         );
         v[1] = Value::Int(1);
         v[6] = Value::Text("abcde".into());
         assert_eq!(
-            encode(Outer::FIELDS, &v).unwrap_err(),
+            encode(Outer::FIELDS, &v).unwrap_err().to_string(),
             "name: at most 4 characters"
         );
     }

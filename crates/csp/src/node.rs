@@ -1096,11 +1096,10 @@ pub trait App: Send + 'static {
         _node: &mut Node,
         words: &[&str],
         _now: SimTime,
-    ) -> Result<String, String> {
-        Err(format!(
-            "unknown command {:?}",
-            words.first().unwrap_or(&"")
-        ))
+    ) -> Result<String, crate::console::ConsoleError> {
+        Err(crate::console::ConsoleError::NotRun {
+            name: words.first().unwrap_or(&"").to_string(),
+        })
     }
 }
 
@@ -1355,7 +1354,12 @@ impl<T: App + ?Sized> App for Box<T> {
     fn console_commands(&self) -> &'static [crate::console::Command] {
         (**self).console_commands()
     }
-    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+    fn console(
+        &mut self,
+        node: &mut Node,
+        words: &[&str],
+        now: SimTime,
+    ) -> Result<String, crate::console::ConsoleError> {
         (**self).console(node, words, now)
     }
 }
@@ -1428,7 +1432,12 @@ where
     fn console_commands(&self) -> &'static [crate::console::Command] {
         self.app.console_commands()
     }
-    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+    fn console(
+        &mut self,
+        node: &mut Node,
+        words: &[&str],
+        now: SimTime,
+    ) -> Result<String, crate::console::ConsoleError> {
         self.app.console(node, words, now)
     }
 }
@@ -1521,7 +1530,12 @@ impl<A: App> App for Tap<A> {
     fn console_commands(&self) -> &'static [crate::console::Command] {
         self.app.console_commands()
     }
-    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+    fn console(
+        &mut self,
+        node: &mut Node,
+        words: &[&str],
+        now: SimTime,
+    ) -> Result<String, crate::console::ConsoleError> {
         let r = self.app.console(node, words, now);
         self.pull();
         r

@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 
 use crate::SimTime;
-use crate::console::{MAX_LINE, NODE_COMMANDS};
+use crate::console::{ConsoleError, MAX_LINE, NODE_COMMANDS};
 use crate::node::{App, Host};
 use crate::params::{self, ParamDef};
 
@@ -17,7 +17,7 @@ impl<A: App> Host<A> {
             return String::new();
         };
         let answer = if line.len() > MAX_LINE {
-            Err(format!("line longer than {MAX_LINE} characters"))
+            Err(ConsoleError::LineTooLong { max: MAX_LINE })
         } else {
             self.console_words(&words, now)
         };
@@ -32,7 +32,7 @@ impl<A: App> Host<A> {
         }
     }
 
-    fn console_words(&mut self, words: &[&str], now: SimTime) -> Result<String, String> {
+    fn console_words(&mut self, words: &[&str], now: SimTime) -> Result<String, ConsoleError> {
         let mut out = String::new();
         match words[0] {
             "help" => {
@@ -84,7 +84,7 @@ impl<A: App> Host<A> {
                     None => 20,
                     Some(w) => w
                         .parse::<usize>()
-                        .map_err(|_| format!("{w:?} is not a count"))?,
+                        .map_err(|_| ConsoleError::NotACount((*w).to_owned()))?,
                 };
                 let recent: Vec<_> = self.node.recent_events().collect();
                 for e in &recent[recent.len().saturating_sub(n)..] {
@@ -114,7 +114,7 @@ impl<A: App> Host<A> {
             }
             name => {
                 if !self.app.console_commands().iter().any(|c| c.name == name) {
-                    return Err("unknown command (try help)".to_owned());
+                    return Err(ConsoleError::UnknownCommand);
                 }
                 return self.app.console(&mut self.node, words, now);
             }
@@ -122,14 +122,14 @@ impl<A: App> Host<A> {
         Ok(out)
     }
 
-    fn console_param(&mut self, args: &[&str], now: SimTime) -> Result<String, String> {
+    fn console_param(&mut self, args: &[&str], now: SimTime) -> Result<String, ConsoleError> {
         let Some(table) = self.app.params() else {
-            return Err("this node has no parameters".to_owned());
+            return Err(ConsoleError::NoParams);
         };
         let defs = table.defs();
-        let find = |key: Option<&&str>| -> Result<&'static ParamDef, String> {
-            let key = key.ok_or("name a parameter")?;
-            params::find(defs, key).ok_or_else(|| format!("no parameter {key:?}"))
+        let find = |key: Option<&&str>| -> Result<&'static ParamDef, ConsoleError> {
+            let key = key.ok_or(ConsoleError::NameAParameter)?;
+            params::find(defs, key).ok_or_else(|| ConsoleError::NoParameter((*key).to_owned()))
         };
         let line = |d: &ParamDef, v: f64| {
             format!(
@@ -153,11 +153,11 @@ impl<A: App> Host<A> {
             }
             Some("get") => {
                 let d = find(args.get(1))?;
-                out = line(d, table.get(d.id).ok_or("no value")?);
+                out = line(d, table.get(d.id).ok_or(ConsoleError::NoValue)?);
             }
             Some("info") => {
                 let d = find(args.get(1))?;
-                let v = table.get(d.id).ok_or("no value")?;
+                let v = table.get(d.id).ok_or(ConsoleError::NoValue)?;
                 let fmt_opt = |v: Option<f64>| v.map_or("-".to_owned(), |v| d.ty.format(v));
                 out = format!(
                     "{}value {}, default {}, saved {}\n    {}\n",
@@ -170,11 +170,13 @@ impl<A: App> Host<A> {
             }
             Some("set") => {
                 let d = find(args.get(1))?;
-                let text = args.get(2).ok_or("give a value")?;
-                let v = d
-                    .ty
-                    .parse_text(text)
-                    .ok_or_else(|| format!("{}: {text:?} is not a value of its type", d.name))?;
+                let text = args.get(2).ok_or(ConsoleError::GiveAValue)?;
+                let v =
+                    d.ty.parse_text(text)
+                        .ok_or_else(|| ConsoleError::NotAValue {
+                            name: d.name,
+                            text: (*text).to_owned(),
+                        })?;
                 params::set_checked(table, d, v)?;
                 let now_v = table.get(d.id).unwrap_or(v);
                 out = line(d, now_v);
@@ -197,10 +199,10 @@ impl<A: App> Host<A> {
                 );
                 out.push_str("defaults restored\n");
                 if !errors.is_empty() {
-                    return Err(errors.join("; "));
+                    return Err(ConsoleError::Defaults(errors));
                 }
             }
-            Some(other) => return Err(format!("unknown subcommand {other:?}")),
+            Some(other) => return Err(ConsoleError::UnknownSubcommand(other.to_owned())),
         }
         Ok(out)
     }

@@ -185,21 +185,75 @@ pub const fn def(
     }
 }
 
+/// Why a parameter was not set.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ParamError {
+    /// The value is NaN or infinite.
+    #[error("{name}: not a finite number")]
+    NotFinite {
+        /// The parameter's name.
+        name: &'static str,
+    },
+    /// The value is outside the definition's range (shown as its type formats values).
+    #[error("{name}: {} out of range {}..={} {unit}", .ty.format(*.value), .ty.format(*.min), .ty.format(*.max))]
+    OutOfRange {
+        /// The parameter's name.
+        name: &'static str,
+        /// Its type.
+        ty: ParamType,
+        /// The value refused.
+        value: f64,
+        /// Smallest value accepted.
+        min: f64,
+        /// Largest value accepted.
+        max: f64,
+        /// Its unit.
+        unit: &'static str,
+    },
+    /// The table has no parameter with this id.
+    #[error("no parameter {id}")]
+    Unknown {
+        /// The id asked for.
+        id: u8,
+    },
+    /// The node refuses the value for a rule of its own (between parameters, or nothing in
+    /// the node for it to apply to); the node's error says which.
+    #[error(transparent)]
+    Refused(Box<dyn std::error::Error + Send + Sync>),
+}
+
+impl ParamError {
+    /// A node's own reason for refusing a value.
+    pub fn refused(e: impl std::error::Error + Send + Sync + 'static) -> Self {
+        ParamError::Refused(Box::new(e))
+    }
+}
+
+/// Errors as one line, `; ` between them (the log's and the console's form).
+pub fn join_errors(errors: &[ParamError]) -> String {
+    errors
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
 impl ParamDef {
     /// Why `v` is not acceptable, if it is not.
-    pub fn check(&self, v: f64) -> Result<(), String> {
+    pub fn check(&self, v: f64) -> Result<(), ParamError> {
         if !v.is_finite() {
-            return Err(format!("{}: not a finite number", self.name));
+            return Err(ParamError::NotFinite { name: self.name });
         }
         if v < self.min || v > self.max {
-            return Err(format!(
-                "{}: {} out of range {}..={} {}",
-                self.name,
-                self.ty.format(v),
-                self.ty.format(self.min),
-                self.ty.format(self.max),
-                self.unit
-            ));
+            return Err(ParamError::OutOfRange {
+                name: self.name,
+                ty: self.ty,
+                value: v,
+                min: self.min,
+                max: self.max,
+                unit: self.unit,
+            });
         }
         Ok(())
     }
@@ -302,7 +356,7 @@ pub trait Table {
     /// The running value of `id`.
     fn get(&self, id: u8) -> Option<f64>;
     /// Apply `v` (in the definition's range) to `id`; `Err` says why the node refuses it.
-    fn set(&mut self, id: u8, v: f64) -> Result<(), String>;
+    fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError>;
 }
 
 impl ParamStore {
@@ -321,7 +375,7 @@ impl ParamStore {
     /// Values refused for a rule between parameters (a lower threshold above the upper one
     /// still running) are tried again after the others, pass by pass, so a table that is
     /// consistent as a whole loads whatever order its values must go in.
-    pub fn load(&self, table: &mut dyn Table) -> Vec<String> {
+    pub fn load(&self, table: &mut dyn Table) -> Vec<ParamError> {
         let values = self.saved.as_ref().unwrap_or(&self.defaults);
         let all: Vec<(u8, f64)> = table
             .defs()
@@ -342,7 +396,7 @@ impl ParamStore {
         self.saves += 1;
     }
     /// Restore the factory defaults to the running table and forget the saved one.
-    pub fn restore_defaults(&mut self, table: &mut dyn Table) -> Vec<String> {
+    pub fn restore_defaults(&mut self, table: &mut dyn Table) -> Vec<ParamError> {
         self.saved = None;
         self.load(table)
     }
@@ -359,7 +413,7 @@ impl ParamStore {
 /// Set `values` (id, value) on `table`, those it refuses for a rule between parameters again
 /// after the others, pass by pass, so that a set consistent as a whole goes in whatever order
 /// its values must take; what is still refused at the end is named.
-pub fn apply(table: &mut dyn Table, values: &[(u8, f64)]) -> Vec<String> {
+pub fn apply(table: &mut dyn Table, values: &[(u8, f64)]) -> Vec<ParamError> {
     let mut pending: Vec<(u8, f64)> = values
         .iter()
         .copied()
@@ -394,7 +448,7 @@ pub fn find(defs: &'static [ParamDef], key: &str) -> Option<&'static ParamDef> {
 }
 
 /// Set `def` to `v` after the range check: the error says why not.
-pub fn set_checked(table: &mut dyn Table, def: &ParamDef, v: f64) -> Result<(), String> {
+pub fn set_checked(table: &mut dyn Table, def: &ParamDef, v: f64) -> Result<(), ParamError> {
     def.check(v)?;
     table.set(def.id, v)
 }
@@ -525,7 +579,7 @@ pub fn serve(
             (
                 reqrep::success(command, &[]),
                 Effect::Defaults,
-                (!errors.is_empty()).then(|| errors.join("; ")),
+                (!errors.is_empty()).then(|| join_errors(&errors)),
             )
         }
         (cmd::SELFTEST, []) => (
@@ -576,6 +630,11 @@ mod tests {
         },
     ];
 
+    /// A rule of the test table's own.
+    #[derive(Debug, thiserror::Error)]
+    #[error("{0}")]
+    struct Rule(&'static str);
+
     #[derive(Default)]
     struct T {
         v: BTreeMap<u8, f64>,
@@ -587,9 +646,9 @@ mod tests {
         fn get(&self, id: u8) -> Option<f64> {
             self.v.get(&id).copied()
         }
-        fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+        fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
             if id == 2 && v == 1.5 {
-                return Err("gain: 1.5 is refused by a rule".into());
+                return Err(ParamError::refused(Rule("gain: 1.5 is refused by a rule")));
             }
             self.v.insert(id, v);
             Ok(())
@@ -657,6 +716,12 @@ mod tests {
             lo: f64,
             hi: f64,
         }
+        #[derive(Debug, thiserror::Error)]
+        #[error("lo {lo} not below hi {hi}")]
+        struct Order {
+            lo: f64,
+            hi: f64,
+        }
         const PAIR: &[ParamDef] = &[
             ParamDef {
                 id: 1,
@@ -684,10 +749,10 @@ mod tests {
             fn get(&self, id: u8) -> Option<f64> {
                 Some(if id == 1 { self.lo } else { self.hi })
             }
-            fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+            fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
                 let (lo, hi) = if id == 1 { (v, self.hi) } else { (self.lo, v) };
                 if lo >= hi {
-                    return Err(format!("lo {lo} not below hi {hi}"));
+                    return Err(ParamError::refused(Order { lo, hi }));
                 }
                 (self.lo, self.hi) = (lo, hi);
                 Ok(())
@@ -703,7 +768,7 @@ mod tests {
         s.saved = Some([(1, 50.0), (2, 45.0)].into_iter().collect());
         let e = s.load(&mut t);
         assert_eq!((t.lo, t.hi), (30.0, 45.0));
-        assert_eq!(e, vec!["lo 50 not below hi 45".to_owned()]);
+        assert_eq!(join_errors(&e), "lo 50 not below hi 45");
     }
 
     #[test]

@@ -708,7 +708,7 @@ pub async fn serve_link<W: FrameSink>(input: InputRx, stream: &mut W, k: Connect
     let writer = async {
         while let Some((t, frame)) = out_rx.recv().await {
             if let Err(e) = write_out(stream, name, cfg, stats, t, &frame).await {
-                return e;
+                return format!("write error: {e}");
             }
             if let Some(l) = k.live {
                 l.touch();
@@ -1142,14 +1142,11 @@ async fn write_out<W: FrameSink>(
     stats: &SharedStats,
     t: SimTime,
     frame: &[u8],
-) -> Result<(), String> {
+) -> std::io::Result<()> {
     if let Some(tap) = &cfg.tap {
         (tap.0)(t, name, false, frame);
     }
-    stream
-        .send_frame(frame)
-        .await
-        .map_err(|e| format!("write error: {e}"))?;
+    stream.send_frame(frame).await?;
     bump(stats, |s| {
         s.packets_out += 1;
         s.bytes_out += frame.len() as u64;

@@ -76,17 +76,30 @@ impl std::fmt::Display for HubAddr {
     }
 }
 
+/// Why a text is not a [`HubAddr`] (the text, as given).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum HubAddrError {
+    /// Not `HOST` or `HOST:PUB:SUB` with an IP address and two port numbers.
+    #[error(
+        "`{0}` is not a hub address: expected HOST (an IP address, as given to \
+         csp_zmqhub_init) or HOST:PUBLISH_PORT:SUBSCRIBE_PORT"
+    )]
+    Syntax(String),
+    /// A port 0, or the same port twice.
+    #[error(
+        "`{0}` is not a hub address: expected HOST (an IP address, as given to \
+         csp_zmqhub_init) or HOST:PUBLISH_PORT:SUBSCRIBE_PORT: two different, non-zero ports"
+    )]
+    Ports(String),
+}
+
 impl std::str::FromStr for HubAddr {
-    type Err = String;
+    type Err = HubAddrError;
     /// `HOST` or `HOST:PUB:SUB` (an IPv4 or bracketed IPv6 address; the ports the programs
     /// publish to and subscribe at).
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = || {
-            format!(
-                "`{s}` is not a hub address: expected HOST (an IP address, as given to \
-                 csp_zmqhub_init) or HOST:PUBLISH_PORT:SUBSCRIBE_PORT"
-            )
-        };
+    fn from_str(s: &str) -> Result<Self, HubAddrError> {
+        let bad = || HubAddrError::Syntax(s.to_owned());
         let (host, ports) = match s.strip_prefix('[') {
             Some(rest) => {
                 let (h, tail) = rest.split_once(']').ok_or_else(bad)?;
@@ -107,7 +120,7 @@ impl std::str::FromStr for HubAddr {
                 || addr.subscribe_port == 0
                 || addr.publish_port == addr.subscribe_port
             {
-                return Err(format!("{}: two different, non-zero ports", bad()));
+                return Err(HubAddrError::Ports(s.to_owned()));
             }
         }
         Ok(addr)
@@ -267,14 +280,23 @@ mod tests {
         assert_eq!(b.to_string(), "127.0.0.3:6100:7100");
         let c: HubAddr = "[::1]:6000:7001".parse().unwrap();
         assert_eq!(c.endpoint(6000), "tcp://[::1]:6000");
-        for bad in [
-            "localhost",
-            "127.0.0.2:6000",
-            "127.0.0.2:0:7000",
-            "1.2.3.4:5:5",
-            "",
-        ] {
-            assert!(bad.parse::<HubAddr>().is_err(), "{bad}");
+        for bad in ["localhost", "127.0.0.2:6000", ""] {
+            assert_eq!(
+                bad.parse::<HubAddr>(),
+                Err(HubAddrError::Syntax(bad.to_owned())),
+                "{bad}"
+            );
         }
+        assert_eq!(
+            "127.0.0.2:0:7000".parse::<HubAddr>(),
+            Err(HubAddrError::Ports("127.0.0.2:0:7000".to_owned()))
+        );
+        let e = "1.2.3.4:5:5".parse::<HubAddr>().unwrap_err();
+        assert_eq!(e, HubAddrError::Ports("1.2.3.4:5:5".to_owned()));
+        assert_eq!(
+            e.to_string(),
+            "`1.2.3.4:5:5` is not a hub address: expected HOST (an IP address, as given to \
+             csp_zmqhub_init) or HOST:PUBLISH_PORT:SUBSCRIBE_PORT: two different, non-zero ports"
+        );
     }
 }

@@ -25,7 +25,7 @@
 
 use std::time::Duration;
 
-use csp::params::{Check, Health, ParamDef, ParamType, Table, def};
+use csp::params::{Check, Health, ParamDef, ParamError, ParamType, Table, def};
 
 use crate::{CommApp, SimTime, wire};
 
@@ -60,6 +60,23 @@ pub const PARAMS: &[ParamDef] = &[
     ),
 ];
 
+/// Why COMM refuses a parameter value the table's range lets through.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CommParamError {
+    /// A beacon period below BEACONSET's shortest (other than 0, off).
+    #[error(
+        "beacon_period {period_s} s: 0 (off) or {min_s}..={} s",
+        wire::BEACON_PERIOD_MAX_S
+    )]
+    BeaconPeriod {
+        /// The period asked for.
+        period_s: u64,
+        /// The shortest period other than off.
+        min_s: u64,
+    },
+}
+
 impl Table for CommApp {
     fn defs(&self) -> &'static [ParamDef] {
         PARAMS
@@ -74,16 +91,16 @@ impl Table for CommApp {
         })
     }
 
-    fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+    fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
         match id {
             1 => {
                 let s = v as u64;
                 let min = u64::from(wire::BEACON_PERIOD_MIN_S);
                 if s != 0 && s < min {
-                    return Err(format!(
-                        "beacon_period {s} s: 0 (off) or {min}..={} s",
-                        wire::BEACON_PERIOD_MAX_S
-                    ));
+                    return Err(ParamError::refused(CommParamError::BeaconPeriod {
+                        period_s: s,
+                        min_s: min,
+                    }));
                 }
                 let p = Duration::from_secs(s);
                 self.cfg.beacon_period = p;
@@ -94,7 +111,7 @@ impl Table for CommApp {
             }
             2 => self.cfg.ground_addr = v as u8,
             3 => self.cfg.link.eirp_dbm = v,
-            _ => return Err(format!("no parameter {id}")),
+            _ => return Err(ParamError::Unknown { id }),
         }
         Ok(())
     }

@@ -136,6 +136,61 @@ impl Default for CommConfig {
     }
 }
 
+/// What is wrong with a COMM configuration (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CommConfigError {
+    /// COMM's own port is in the ephemeral range.
+    #[error("COMM port {port} must be below 32")]
+    Port {
+        /// The port.
+        port: u8,
+    },
+    /// The beacons' port is beyond CSP's ports.
+    #[error("beacon port {port} > 63")]
+    BeaconPort {
+        /// The port.
+        port: u8,
+    },
+    /// The beacons' address is not a ground station's.
+    #[error("beacon address {addr} is not a ground station (16-20)")]
+    BeaconAddr {
+        /// The address.
+        addr: u8,
+    },
+    /// A beacon period BEACONSET could not set.
+    #[error(
+        "beacon period {period:?}: 0 (off) or whole seconds {}..={}",
+        wire::BEACON_PERIOD_MIN_S,
+        wire::BEACON_PERIOD_MAX_S
+    )]
+    BeaconPeriod {
+        /// The period.
+        period: Duration,
+    },
+    /// An elevation mask outside -90..=90 deg.
+    #[error("elevation mask {mask_deg} deg")]
+    Mask {
+        /// The mask.
+        mask_deg: f64,
+    },
+    /// A UHF rate of 0 bit/s.
+    #[error("UHF rate 0 bit/s")]
+    ZeroRate,
+    /// A station's latitude or longitude is out of range.
+    #[error("station {name}: bad latitude/longitude")]
+    Station {
+        /// The station's name.
+        name: String,
+    },
+    /// More stations than the telemetry can number.
+    #[error("{count} stations (at most 254)")]
+    TooManyStations {
+        /// How many.
+        count: usize,
+    },
+}
+
 impl CommConfig {
     /// The default configuration with the secondary role (COMM2).
     pub fn secondary() -> Self {
@@ -146,18 +201,19 @@ impl CommConfig {
     }
 
     /// Check the configuration (for the scenario loader); the message names the problem.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), CommConfigError> {
         if self.port >= csp::header::EPHEMERAL_PORT_MIN {
-            return Err(format!("COMM port {} must be below 32", self.port));
+            return Err(CommConfigError::Port { port: self.port });
         }
         if self.ground_port > csp::header::MAX_PORT {
-            return Err(format!("beacon port {} > 63", self.ground_port));
+            return Err(CommConfigError::BeaconPort {
+                port: self.ground_port,
+            });
         }
         if !(16..=20).contains(&self.ground_addr) {
-            return Err(format!(
-                "beacon address {} is not a ground station (16-20)",
-                self.ground_addr
-            ));
+            return Err(CommConfigError::BeaconAddr {
+                addr: self.ground_addr,
+            });
         }
         let p = self.beacon_period;
         let whole = p.subsec_nanos() == 0;
@@ -166,25 +222,27 @@ impl CommConfig {
             || (u64::from(wire::BEACON_PERIOD_MIN_S)..=u64::from(wire::BEACON_PERIOD_MAX_S))
                 .contains(&s);
         if !whole || !ok_range {
-            return Err(format!(
-                "beacon period {p:?}: 0 (off) or whole seconds {}..={}",
-                wire::BEACON_PERIOD_MIN_S,
-                wire::BEACON_PERIOD_MAX_S
-            ));
+            return Err(CommConfigError::BeaconPeriod { period: p });
         }
         if !(-90.0..=90.0).contains(&self.mask_deg) {
-            return Err(format!("elevation mask {} deg", self.mask_deg));
+            return Err(CommConfigError::Mask {
+                mask_deg: self.mask_deg,
+            });
         }
         if self.air_rate_bps == 0 {
-            return Err("UHF rate 0 bit/s".to_owned());
+            return Err(CommConfigError::ZeroRate);
         }
         for s in &self.stations {
             if !(-90.0..=90.0).contains(&s.lat_deg) || !s.lon_deg.is_finite() {
-                return Err(format!("station {}: bad latitude/longitude", s.name));
+                return Err(CommConfigError::Station {
+                    name: s.name.clone(),
+                });
             }
         }
         if self.stations.len() > usize::from(wire::NO_STATION) {
-            return Err(format!("{} stations (at most 254)", self.stations.len()));
+            return Err(CommConfigError::TooManyStations {
+                count: self.stations.len(),
+            });
         }
         Ok(())
     }
@@ -554,9 +612,14 @@ impl App for CommApp {
         &[csp::console::TM]
     }
 
-    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+    fn console(
+        &mut self,
+        node: &mut Node,
+        words: &[&str],
+        now: SimTime,
+    ) -> Result<String, csp::console::ConsoleError> {
         if words != ["tm"] {
-            return Err("usage: tm".to_owned());
+            return Err(csp::console::ConsoleError::Usage("tm".to_owned()));
         }
         self.last_now = self.last_now.max(now);
         // As TMCOMM on port 10 at `now`.

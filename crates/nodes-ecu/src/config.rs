@@ -22,7 +22,7 @@
 
 use std::time::Duration;
 
-use csp::params::{Check, Health, ParamDef, ParamType, Table, def};
+use csp::params::{Check, Health, ParamDef, ParamError, ParamType, Table, def};
 
 use crate::{EcuApp, EcuState, SimTime};
 
@@ -68,12 +68,12 @@ impl Table for EcuApp {
         })
     }
 
-    fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+    fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
         let d = Duration::from_millis(v as u64);
         match id {
             1 => self.cfg.max_burn = d,
             2 => self.cfg.warmup = d,
-            _ => return Err(format!("no parameter {id}")),
+            _ => return Err(ParamError::Unknown { id }),
         }
         Ok(())
     }

@@ -59,7 +59,7 @@ use csp::reqrep::{RESULT_FAILURE, RESULT_SUCCESS, serve};
 use csp::{Packet, SimTime};
 use platform::board::{Activity, ActivityBoard, Burn, BurnBoard};
 
-pub use crate::thruster::ThrusterConfig;
+pub use crate::thruster::{ThrusterConfig, ThrusterConfigError};
 use crate::wire::{ArmReply, EcuCommand, FireReply, Repr};
 pub use crate::wire::{EcuState, TmEcu};
 
@@ -99,20 +99,40 @@ impl Default for EcuConfig {
     }
 }
 
+/// What is wrong with an ECU configuration (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EcuConfigError {
+    /// The thruster's figures.
+    #[error(transparent)]
+    Thruster(#[from] ThrusterConfigError),
+    /// A burn limit the 32-bit millisecond field cannot hold, or zero.
+    #[error("ECU max_burn {max_burn:?}: must be between 1 ms and 2^32 ms")]
+    MaxBurn {
+        /// The limit.
+        max_burn: Duration,
+    },
+    /// The ECU's port is in the ephemeral range.
+    #[error("ECU port {port}: must be below 32")]
+    Port {
+        /// The port.
+        port: u8,
+    },
+}
+
 impl EcuConfig {
     /// Check the configuration (for the scenario loader); the message names the problem.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), EcuConfigError> {
         self.thruster.validate()?;
         if self.max_burn < Duration::from_millis(1)
             || self.max_burn.as_millis() > u128::from(u32::MAX)
         {
-            return Err(format!(
-                "ECU max_burn {:?}: must be between 1 ms and 2^32 ms",
-                self.max_burn
-            ));
+            return Err(EcuConfigError::MaxBurn {
+                max_burn: self.max_burn,
+            });
         }
         if self.port >= csp::header::EPHEMERAL_PORT_MIN {
-            return Err(format!("ECU port {}: must be below 32", self.port));
+            return Err(EcuConfigError::Port { port: self.port });
         }
         Ok(())
     }
@@ -569,14 +589,15 @@ impl App for EcuApp {
         _node: &mut Node,
         words: &[&str],
         now: SimTime,
-    ) -> Result<String, String> {
+    ) -> Result<String, csp::console::ConsoleError> {
+        use csp::console::ConsoleError;
         if words != ["tm"] {
-            return Err("usage: tm".to_owned());
+            return Err(ConsoleError::Usage("tm".to_owned()));
         }
         let bytes = self
             .command(EcuCommand::Telemetry, now)
-            .map_err(|_| "TMECU refused".to_owned())?;
-        let tm = wire::TmEcu::parse(&bytes).map_err(|e| e.to_string())?;
+            .map_err(|_| ConsoleError::Refused("TMECU"))?;
+        let tm = wire::TmEcu::parse(&bytes)?;
         Ok(csp::console::fields(&tm))
     }
 

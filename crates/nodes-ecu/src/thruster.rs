@@ -64,9 +64,41 @@ impl Default for ThrusterConfig {
     }
 }
 
+/// What is wrong with a thruster configuration (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ThrusterConfigError {
+    /// A figure that must be positive (thrust, Isp, dry mass, full pressure) is not.
+    #[error("ECU {name} = {value}: must be finite and > 0")]
+    NotPositive {
+        /// The field's name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A negative or non-finite propellant mass.
+    #[error("ECU propellant_kg = {propellant_kg}: must be finite and >= 0")]
+    Propellant {
+        /// The mass, kg.
+        propellant_kg: f64,
+    },
+    /// A blowdown ratio below 1 (the pressure would rise as the tank empties).
+    #[error("ECU blowdown_ratio = {blowdown_ratio}: must be finite and >= 1")]
+    BlowdownRatio {
+        /// The ratio.
+        blowdown_ratio: f64,
+    },
+    /// A thrust direction without a direction.
+    #[error("ECU dir_body = {dir_body:?}: must be a non-zero vector")]
+    Direction {
+        /// The direction, body frame.
+        dir_body: Vector3<f64>,
+    },
+}
+
 impl ThrusterConfig {
     /// Check the configuration (for the scenario loader); the message names the problem.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ThrusterConfigError> {
         let positive = [
             ("thrust_n", self.thrust_n),
             ("isp_s", self.isp_s),
@@ -75,27 +107,24 @@ impl ThrusterConfig {
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("ECU {name} = {v}: must be finite and > 0"));
+                return Err(ThrusterConfigError::NotPositive { name, value: v });
             }
         }
         if !(self.propellant_kg.is_finite() && self.propellant_kg >= 0.0) {
-            return Err(format!(
-                "ECU propellant_kg = {}: must be finite and >= 0",
-                self.propellant_kg
-            ));
+            return Err(ThrusterConfigError::Propellant {
+                propellant_kg: self.propellant_kg,
+            });
         }
         if !(self.blowdown_ratio.is_finite() && self.blowdown_ratio >= 1.0) {
-            return Err(format!(
-                "ECU blowdown_ratio = {}: must be finite and >= 1",
-                self.blowdown_ratio
-            ));
+            return Err(ThrusterConfigError::BlowdownRatio {
+                blowdown_ratio: self.blowdown_ratio,
+            });
         }
         let n = self.dir_body.norm();
         if !(n.is_finite() && n > 0.0) {
-            return Err(format!(
-                "ECU dir_body = {:?}: must be a non-zero vector",
-                self.dir_body
-            ));
+            return Err(ThrusterConfigError::Direction {
+                dir_body: self.dir_body,
+            });
         }
         Ok(())
     }
@@ -176,12 +205,22 @@ mod tests {
             isp_s: 0.0,
             ..ThrusterConfig::default()
         };
-        assert!(bad.validate().unwrap_err().contains("isp_s"));
+        let e = bad.validate().unwrap_err();
+        assert!(matches!(
+            e,
+            ThrusterConfigError::NotPositive { name: "isp_s", .. }
+        ));
+        assert_eq!(e.to_string(), "ECU isp_s = 0: must be finite and > 0");
         let bad = ThrusterConfig {
             blowdown_ratio: 0.5,
             ..ThrusterConfig::default()
         };
-        assert!(bad.validate().unwrap_err().contains("blowdown"));
+        assert_eq!(
+            bad.validate(),
+            Err(ThrusterConfigError::BlowdownRatio {
+                blowdown_ratio: 0.5
+            })
+        );
         let bad = ThrusterConfig {
             dir_body: Vector3::zeros(),
             ..ThrusterConfig::default()

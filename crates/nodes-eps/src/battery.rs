@@ -79,29 +79,68 @@ impl Default for BatteryConfig {
     }
 }
 
+/// What is wrong with a battery configuration (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BatteryConfigError {
+    /// A capacity that is not positive.
+    #[error("battery capacity {capacity_wh} Wh")]
+    Capacity {
+        /// The capacity, Wh.
+        capacity_wh: f64,
+    },
+    /// An OCV table that does not cover the whole charge range.
+    #[error("OCV table must run from soc 0 to soc 1")]
+    OcvEnds,
+    /// An OCV table out of order.
+    #[error("OCV table: soc must increase and voltage must not fall")]
+    OcvOrder,
+    /// An OCV table with a voltage that is not positive.
+    #[error("OCV table: voltages must be positive")]
+    OcvVoltage,
+    /// An efficiency outside (0, 1].
+    #[error("battery {what} {value} not in (0, 1]")]
+    Efficiency {
+        /// Which (`charge efficiency`, `discharge efficiency`).
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A resistance or power limit that is negative or not finite.
+    #[error("battery {what} {value}")]
+    Negative {
+        /// Which (`internal resistance`, `max charge power`, `max discharge power`).
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
+}
+
 impl BatteryConfig {
-    /// Check the configuration (for the scenario loader); the message names the problem.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Check the configuration (for the scenario loader); the error names the problem.
+    pub fn validate(&self) -> Result<(), BatteryConfigError> {
         if !(self.capacity_wh.is_finite() && self.capacity_wh > 0.0) {
-            return Err(format!("battery capacity {} Wh", self.capacity_wh));
+            return Err(BatteryConfigError::Capacity {
+                capacity_wh: self.capacity_wh,
+            });
         }
         let t = &self.ocv_table;
         if t.len() < 2 || t.first().map(|p| p.0) != Some(0.0) || t.last().map(|p| p.0) != Some(1.0)
         {
-            return Err("OCV table must run from soc 0 to soc 1".to_owned());
+            return Err(BatteryConfigError::OcvEnds);
         }
         if t.windows(2).any(|w| !(w[1].0 > w[0].0 && w[1].1 >= w[0].1)) {
-            return Err("OCV table: soc must increase and voltage must not fall".to_owned());
+            return Err(BatteryConfigError::OcvOrder);
         }
         if t.iter().any(|p| !(p.1.is_finite() && p.1 > 0.0)) {
-            return Err("OCV table: voltages must be positive".to_owned());
+            return Err(BatteryConfigError::OcvVoltage);
         }
         for (what, v) in [
             ("charge efficiency", self.charge_efficiency),
             ("discharge efficiency", self.discharge_efficiency),
         ] {
             if !(v > 0.0 && v <= 1.0) {
-                return Err(format!("battery {what} {v} not in (0, 1]"));
+                return Err(BatteryConfigError::Efficiency { what, value: v });
             }
         }
         for (what, v) in [
@@ -110,7 +149,7 @@ impl BatteryConfig {
             ("max discharge power", self.max_discharge_w),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("battery {what} {v}"));
+                return Err(BatteryConfigError::Negative { what, value: v });
             }
         }
         Ok(())

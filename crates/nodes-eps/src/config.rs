@@ -26,7 +26,7 @@
 //! The battery has no temperature model (a heated box near 20 C, [`crate::battery`]): the
 //! self-test reports none.
 
-use csp::params::{Check, Health, ParamDef, ParamType, Table, check, def};
+use csp::params::{Check, Health, ParamDef, ParamError, ParamType, Table, check, def};
 use platform::board::Activity;
 
 use crate::loads::{CHANNELS, Channel};
@@ -105,7 +105,7 @@ impl Table for EpsApp {
         })
     }
 
-    fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+    fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
         match id {
             1..=4 => {
                 let mut t = self.eps.thresholds();
@@ -119,7 +119,7 @@ impl Table for EpsApp {
                 // At boot the table is taken whole (it kept the rule when it was saved);
                 // one value at a time it could cross the one in force before.
                 if !self.booting {
-                    rule(&t)?;
+                    rule(&t).map_err(ParamError::refused)?;
                 }
                 self.cfg.thresholds = t;
                 self.eps.set_configured_thresholds(t);
@@ -128,24 +128,42 @@ impl Table for EpsApp {
                 self.cfg.battery.max_charge_w = v;
                 self.eps.set_max_charge_w(v);
             }
-            _ => return Err(format!("no parameter {id}")),
+            _ => return Err(ParamError::Unknown { id }),
         }
         Ok(())
     }
 }
 
+/// A parameter value that breaks THRSET's rule, with the parameters' names.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ThresholdRuleError {
+    /// A group's shed threshold at or above its restore threshold, or a restore above 100 %.
+    #[error("{group}_shed_soc {shed_pct} % must stay below {group}_restore_soc {restore_pct} %")]
+    ShedNotBelowRestore {
+        /// The group's name in the parameters' (`payload`, `platform`).
+        group: &'static str,
+        /// Its shed threshold, % SOC.
+        shed_pct: u8,
+        /// Its restore threshold, % SOC.
+        restore_pct: u8,
+    },
+}
+
 /// THRSET's rule, with the parameters' names.
-fn rule(t: &Thresholds) -> Result<(), String> {
+fn rule(t: &Thresholds) -> Result<(), ThresholdRuleError> {
     for g in Group::ALL {
         let (shed, restore) = t.of(g);
         if shed >= restore || restore > 100 {
-            let name = match g {
+            let group = match g {
                 Group::Payload => "payload",
                 Group::Platform => "platform",
             };
-            return Err(format!(
-                "{name}_shed_soc {shed} % must stay below {name}_restore_soc {restore} %"
-            ));
+            return Err(ThresholdRuleError::ShedNotBelowRestore {
+                group,
+                shed_pct: shed,
+                restore_pct: restore,
+            });
         }
     }
     Ok(())

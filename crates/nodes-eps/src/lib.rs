@@ -56,11 +56,11 @@ use csp::reqrep::serve;
 use csp::{Packet, SimTime};
 use platform::board::{Activity, ActivityBoard, TruthBoard};
 
-pub use crate::battery::{Battery, BatteryConfig};
+pub use crate::battery::{Battery, BatteryConfig, BatteryConfigError};
 pub use crate::eps::{Eps, EpsInputs, StepState, SwitchRefused};
 pub use crate::loads::{ALL_CHANNELS, CHANNELS, Channel, Duties, LoadConfig, LoadInputs};
 pub use crate::protect::{Group, Protection, Thresholds};
-pub use crate::solar::{Panel, SolarArray, SunInput};
+pub use crate::solar::{Panel, SolarArray, SolarConfigError, SunInput};
 use crate::wire::{EpsCommand, Repr};
 
 /// The ports this node binds for its ICD services (INTERPRETATION.md section 4).
@@ -145,29 +145,65 @@ impl Default for EpsConfig {
     }
 }
 
+/// What is wrong with an EPS configuration (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EpsConfigError {
+    /// The solar array's geometry.
+    #[error(transparent)]
+    Solar(#[from] SolarConfigError),
+    /// The battery's figures.
+    #[error(transparent)]
+    Battery(#[from] BatteryConfigError),
+    /// Load-shedding thresholds that break THRSET's rule (the threshold named).
+    #[error("thresholds: {0}")]
+    Thresholds(&'static str),
+    /// An initial state of charge outside 0..=1.
+    #[error("initial soc {initial_soc} not in 0..=1")]
+    InitialSoc {
+        /// The fraction given.
+        initial_soc: f64,
+    },
+    /// A zero integration step.
+    #[error("EPS tick 0")]
+    ZeroTick,
+    /// Channels switched on that the EPS does not have.
+    #[error("channels_on {channels_on:#06x} has bits past channel {}", CHANNELS - 1)]
+    ChannelsOn {
+        /// The channel mask.
+        channels_on: u16,
+    },
+    /// The EPS's port is in the ephemeral range.
+    #[error("EPS port {port} must be below 32")]
+    Port {
+        /// The port.
+        port: u8,
+    },
+}
+
 impl EpsConfig {
-    /// Check the configuration (for the scenario loader); the message names the problem.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Check the configuration (for the scenario loader); the error names the problem.
+    pub fn validate(&self) -> Result<(), EpsConfigError> {
         self.panels.validate()?;
         self.battery.validate()?;
         self.thresholds
             .validate()
-            .map_err(|f| format!("thresholds: {f}"))?;
+            .map_err(EpsConfigError::Thresholds)?;
         if !(0.0..=1.0).contains(&self.initial_soc) {
-            return Err(format!("initial soc {} not in 0..=1", self.initial_soc));
+            return Err(EpsConfigError::InitialSoc {
+                initial_soc: self.initial_soc,
+            });
         }
         if self.tick.is_zero() {
-            return Err("EPS tick 0".to_owned());
+            return Err(EpsConfigError::ZeroTick);
         }
         if self.channels_on & !ALL_CHANNELS != 0 {
-            return Err(format!(
-                "channels_on {:#06x} has bits past channel {}",
-                self.channels_on,
-                CHANNELS - 1
-            ));
+            return Err(EpsConfigError::ChannelsOn {
+                channels_on: self.channels_on,
+            });
         }
         if self.port >= csp::header::EPHEMERAL_PORT_MIN {
-            return Err(format!("EPS port {} must be below 32", self.port));
+            return Err(EpsConfigError::Port { port: self.port });
         }
         Ok(())
     }
@@ -584,16 +620,17 @@ impl App for EpsApp {
         _node: &mut Node,
         words: &[&str],
         now: SimTime,
-    ) -> Result<String, String> {
+    ) -> Result<String, csp::console::ConsoleError> {
+        use csp::console::ConsoleError;
         if words != ["tm"] {
-            return Err("usage: tm".to_owned());
+            return Err(ConsoleError::Usage("tm".to_owned()));
         }
         // As TMEPS on port 10 at `now`.
         self.advance(now);
         let bytes = self
             .command(EpsCommand::TmEps, now)
-            .map_err(|_| "TMEPS refused".to_owned())?;
-        let tm = wire::TmEps::parse(&bytes).map_err(|e| e.to_string())?;
+            .map_err(|_| ConsoleError::Refused("TMEPS"))?;
+        let tm = wire::TmEps::parse(&bytes)?;
         Ok(csp::console::fields(&tm))
     }
 

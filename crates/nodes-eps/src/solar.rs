@@ -159,6 +159,48 @@ impl SunInput {
     }
 }
 
+/// What is wrong with a solar array's geometry (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SolarConfigError {
+    /// More panels than TMEPS reports.
+    #[error("{count} panels; the EPS reports at most {}", MAX_PANELS)]
+    TooManyPanels {
+        /// Panels configured.
+        count: usize,
+    },
+    /// A panel facing no direction.
+    #[error("panel {panel}: zero normal")]
+    ZeroNormal {
+        /// The panel's name.
+        panel: String,
+    },
+    /// A negative or non-finite area.
+    #[error("panel {panel}: area {area_m2} m^2")]
+    Area {
+        /// The panel's name.
+        panel: String,
+        /// Its area, m^2.
+        area_m2: f64,
+    },
+    /// A packing factor or efficiency outside 0..=1.
+    #[error("panel {panel}: {what} {value} not in 0..=1")]
+    Fraction {
+        /// The panel's name.
+        panel: String,
+        /// Which (`packing factor`, `efficiency`).
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A negative or non-finite solar constant.
+    #[error("solar constant {value}")]
+    SolarConstant {
+        /// The value, W/m^2.
+        value: f64,
+    },
+}
+
 impl SolarArray {
     /// Power of each panel (the first [`MAX_PANELS`]), W; `failed` panels give 0.
     pub fn panels_w(&self, sun: &SunInput, failed: &[bool]) -> Vec<f64> {
@@ -181,31 +223,41 @@ impl SolarArray {
     }
 
     /// Check the geometry (for the scenario loader); the message names the problem.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SolarConfigError> {
         if self.panels.len() > MAX_PANELS {
-            return Err(format!(
-                "{} panels; the EPS reports at most {MAX_PANELS}",
-                self.panels.len()
-            ));
+            return Err(SolarConfigError::TooManyPanels {
+                count: self.panels.len(),
+            });
         }
         for p in &self.panels {
             if p.normal_body.try_normalize(1e-9).is_none() {
-                return Err(format!("panel {}: zero normal", p.name));
+                return Err(SolarConfigError::ZeroNormal {
+                    panel: p.name.clone(),
+                });
             }
             if !(p.area_m2.is_finite() && p.area_m2 >= 0.0) {
-                return Err(format!("panel {}: area {} m^2", p.name, p.area_m2));
+                return Err(SolarConfigError::Area {
+                    panel: p.name.clone(),
+                    area_m2: p.area_m2,
+                });
             }
             for (what, v) in [
                 ("packing factor", p.packing_factor),
                 ("efficiency", p.efficiency),
             ] {
                 if !(0.0..=1.0).contains(&v) {
-                    return Err(format!("panel {}: {what} {v} not in 0..=1", p.name));
+                    return Err(SolarConfigError::Fraction {
+                        panel: p.name.clone(),
+                        what,
+                        value: v,
+                    });
                 }
             }
         }
         if !(self.solar_constant_w_m2.is_finite() && self.solar_constant_w_m2 >= 0.0) {
-            return Err(format!("solar constant {}", self.solar_constant_w_m2));
+            return Err(SolarConfigError::SolarConstant {
+                value: self.solar_constant_w_m2,
+            });
         }
         Ok(())
     }

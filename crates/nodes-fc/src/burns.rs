@@ -44,7 +44,7 @@ use orbit::tle::Tle;
 use platform::SimTime;
 use platform::board::{Burn, BurnBoard};
 
-use crate::environment::EnvModel;
+use crate::environment::{DeltaVError, EnvModel};
 
 /// Longest interval applied as one impulse, ns.
 pub const MAX_IMPULSE_SPACING_NS: u64 = 1_000_000_000;
@@ -151,7 +151,7 @@ pub fn apply(
     now_ns: u64,
     unix_ns_at_now: i64,
     applied_until_ns: &mut u64,
-) -> Result<Applied, String> {
+) -> Result<Applied, DeltaVError> {
     let from_ns = *applied_until_ns;
     if now_ns <= from_ns {
         return Ok(Applied::default());

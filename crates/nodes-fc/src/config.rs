@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 
 use csp::console::Command;
 use csp::node::Node;
-use csp::params::{Check, Health, ParamDef, ParamType, Table, check, def};
+use csp::params::{Check, Health, ParamDef, ParamError, ParamType, Table, check, def};
 use csp::reqrep::le::Repr;
 
 use crate::sensors::SensorReadings;
@@ -165,6 +165,65 @@ fn flag(b: bool) -> f64 {
     if b { 1.0 } else { 0.0 }
 }
 
+/// Why the FC refuses a parameter value the table's range lets through.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FcParamError {
+    /// Safe mode would be left below the charge it is entered at.
+    #[error(
+        "safe_exit_soc {:.0} % would be below safe_enter_soc {:.0} %",
+        .exit_soc * 100.0,
+        .enter_soc * 100.0
+    )]
+    SafeExitBelowEnter {
+        /// The exit threshold, fraction of full.
+        exit_soc: f64,
+        /// The entry threshold, fraction of full.
+        enter_soc: f64,
+    },
+    /// A store mask with bits the store does not offer.
+    #[error(
+        "store_mask {mask:#04x}: bit 0x20 (TMALL) is not offered (it is the sum of the others)"
+    )]
+    StoreMask {
+        /// The mask.
+        mask: u8,
+    },
+}
+
+/// An error as text, `-` for none.
+fn or_dash(e: Option<&crate::OrbitError>) -> String {
+    e.map_or_else(|| "-".to_owned(), ToString::to_string)
+}
+
+/// Why the console's `tm` printed nothing.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum TmConsoleError {
+    /// Not one of the FC's telemetries.
+    #[error("no telemetry {which:?} (gen, atp, acd, sens, rawsens, all)")]
+    NoTelemetry {
+        /// The word given.
+        which: String,
+    },
+    /// The request was refused: the FC has no orbit to report.
+    #[error("{which}: refused (no onboard orbit: {})", or_dash(.orbit.as_ref()))]
+    Refused {
+        /// The telemetry.
+        which: String,
+        /// Why the FC has no true orbit, if it has none.
+        orbit: Option<crate::OrbitError>,
+    },
+    /// The reply did not decode as its telemetry.
+    #[error("{which}: {source}")]
+    Decode {
+        /// The telemetry.
+        which: String,
+        /// The decoder's error.
+        source: csp::Error,
+    },
+}
+
 impl Table for FcApp {
     fn defs(&self) -> &'static [ParamDef] {
         PARAMS
@@ -199,7 +258,7 @@ impl Table for FcApp {
         })
     }
 
-    fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+    fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
         let on = v != 0.0;
         // The scenario's configuration and the running software, together: a reboot
         // rebuilds the software from the first, and the boot then applies the saved table.
@@ -230,11 +289,10 @@ impl Table for FcApp {
                     exit = v / 100.0;
                 }
                 if exit < enter {
-                    return Err(format!(
-                        "safe_exit_soc {:.0} % would be below safe_enter_soc {:.0} %",
-                        exit * 100.0,
-                        enter * 100.0
-                    ));
+                    return Err(ParamError::refused(FcParamError::SafeExitBelowEnter {
+                        exit_soc: exit,
+                        enter_soc: enter,
+                    }));
                 }
                 for s in [&mut self.cfg.safe, self.safe.config_mut()] {
                     s.enter_soc = enter;
@@ -256,9 +314,7 @@ impl Table for FcApp {
                 } else {
                     mask = v as u8;
                     if mask & !crate::store::MASK_ALL != 0 {
-                        return Err(format!(
-                            "store_mask {mask:#04x}: bit 0x20 (TMALL) is not offered (it is the sum of the others)"
-                        ));
+                        return Err(ParamError::refused(FcParamError::StoreMask { mask }));
                     }
                 }
                 self.cfg.store.period = period;
@@ -267,7 +323,7 @@ impl Table for FcApp {
                 let now = self.store_now;
                 self.store.set(period, mask, now);
             }
-            _ => return Err(format!("no parameter {id}")),
+            _ => return Err(ParamError::Unknown { id }),
         }
         Ok(())
     }
@@ -430,7 +486,7 @@ impl FcApp {
         node: &Node,
         which: &str,
         now: SimTime,
-    ) -> Result<String, String> {
+    ) -> Result<String, TmConsoleError> {
         let c = match which {
             "gen" => TelemetryCommand::TmGen,
             "atp" => TelemetryCommand::TmAtp,
@@ -439,18 +495,21 @@ impl FcApp {
             "rawsens" => TelemetryCommand::TmRawSens,
             "all" => TelemetryCommand::TmAll,
             other => {
-                return Err(format!(
-                    "no telemetry {other:?} (gen, atp, acd, sens, rawsens, all)"
-                ));
+                return Err(TmConsoleError::NoTelemetry {
+                    which: other.to_owned(),
+                });
             }
         };
-        let bytes = self.telemetry(node, c, now).map_err(|_| {
-            format!(
-                "{which}: refused (no onboard orbit: {})",
-                self.orbit_error().unwrap_or("-")
-            )
-        })?;
-        let bad = |e: csp::Error| format!("{which}: {e}");
+        let bytes = self
+            .telemetry(node, c, now)
+            .map_err(|_| TmConsoleError::Refused {
+                which: which.to_owned(),
+                orbit: self.orbit_error().cloned(),
+            })?;
+        let bad = |source: csp::Error| TmConsoleError::Decode {
+            which: which.to_owned(),
+            source,
+        };
         let mut out = String::new();
         match c {
             TelemetryCommand::TmGen => gen_lines(&TmGen::parse(&bytes).map_err(bad)?, &mut out),
@@ -530,7 +589,7 @@ impl FcApp {
         v.push(self.estimator_check());
         v.push(match self.orbit_error() {
             None => check("orbit", Health::Ok, 0.0, "", String::new()),
-            Some(e) => check("orbit", Health::Failed, 0.0, "", e.to_owned()),
+            Some(e) => check("orbit", Health::Failed, 0.0, "", e.to_string()),
         });
         let t = r.map_or(f64::NAN, |r| r.mcu_temp_c);
         v.push(check(

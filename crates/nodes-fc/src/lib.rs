@@ -36,18 +36,19 @@ pub mod store;
 pub mod timesync;
 pub use icd::fc as wire;
 
+use csp::console::ConsoleError;
 use csp::node::{App, Node, NodeEvent, Outbox};
 use csp::reqrep::{self, CommandSet, RESULT_FAILURE, RESULT_SUCCESS, Request, serve};
 use csp::{Packet, SimTime};
 use nalgebra::{UnitQuaternion, Vector3};
-use orbit::propagate::Sgp4Propagator;
-use orbit::tle::{ChecksumMode, Tle};
+use orbit::propagate::{PropagationError, Sgp4Propagator};
+use orbit::tle::{ChecksumMode, Tle, TleError};
 use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
 use crate::adcs::{Adcs, AdcsConfig};
 use crate::environment::{DragConfig, EnvModel, Environment, SlowModels};
 use crate::guidance::Pointing;
-use crate::scripts::{Schedule, Script, ScriptAttitude};
+use crate::scripts::{Schedule, Script, ScriptAttitude, ScriptError};
 use crate::sensors::{SensorConfig, SensorFault, SensorId, SensorInputs, SensorReadings, Sensors};
 use crate::truth::{AttitudeState, BodyConfig, Torques};
 use crate::wire::{
@@ -158,15 +159,27 @@ pub enum WheelFault {
     Off,
 }
 
+/// A text that is not a [`WheelFault`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum WheelFaultError {
+    /// Neither `stuck` nor `off` (the name trimmed and lower-cased).
+    #[error("unknown wheel fault `{name}`: expected `stuck` or `off`")]
+    Unknown {
+        /// The name.
+        name: String,
+    },
+}
+
 impl std::str::FromStr for WheelFault {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = WheelFaultError;
+    fn from_str(s: &str) -> Result<Self, WheelFaultError> {
         match s.trim().to_ascii_lowercase().as_str() {
             "stuck" => Ok(WheelFault::Stuck),
             "off" => Ok(WheelFault::Off),
-            other => Err(format!(
-                "unknown wheel fault `{other}`: expected `stuck` or `off`"
-            )),
+            other => Err(WheelFaultError::Unknown {
+                name: other.to_owned(),
+            }),
         }
     }
 }
@@ -311,11 +324,69 @@ pub struct Published {
     pub adcs: Box<AdcsSnapshot>,
 }
 
+/// Why the FC has no orbit model for a TLE.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum OrbitError {
+    /// The scenario gives no TLE.
+    #[error("no TLE")]
+    NoTle,
+    /// The TLE does not parse.
+    #[error("TLE: {0}")]
+    Tle(TleError),
+    /// SGP4 does not initialise from the elements.
+    #[error("SGP4: {0}")]
+    Sgp4(PropagationError),
+}
+
+/// Why the FC cannot tell its position.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PositionError {
+    /// Neither a TLE uploaded nor a recent GPS fix.
+    #[error("no TLE uploaded and no GPS fix")]
+    NoKnowledge,
+    /// The TLE gives no orbit model.
+    #[error(transparent)]
+    Orbit(#[from] OrbitError),
+    /// The orbit cannot be propagated to the instant (decay, bad elements, a time before
+    /// the last burn).
+    #[error(transparent)]
+    Propagation(#[from] PropagationError),
+}
+
+/// Why a script line was rejected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SubmitError {
+    /// The line does not parse, or the schedule refuses it.
+    #[error(transparent)]
+    Script(#[from] ScriptError),
+    /// Its window is longer than the FC lets one script hold the ADCS.
+    #[error(
+        "window of {window_s} s is longer than the FC's {} s (a day)",
+        MAX_SCRIPT_WINDOW_S
+    )]
+    WindowTooLong {
+        /// The window, s.
+        window_s: f64,
+    },
+    /// Its end is after the last time the RTC can hold.
+    #[error(
+        "END {end_unix_s} is after the RTC's range (2100-01-01, {})",
+        wire::RTC_MAX_UNIX_S
+    )]
+    EndAfterRtc {
+        /// The end, UTC unix s.
+        end_unix_s: f64,
+    },
+}
+
 /// The onboard orbit knowledge: the uploaded TLE.
 #[derive(Debug, Clone)]
 struct OnboardOrbit {
     lines: TleLines,
-    model: Result<EnvModel, String>,
+    model: Result<EnvModel, OrbitError>,
     /// The same elements as the true orbit: reuse the truth's environment.
     same_as_truth: bool,
 }
@@ -340,7 +411,7 @@ pub struct FcApp {
     dt_ns: u64,
     publish_every: u64,
     // --- truth (survives reboots) ---
-    truth_orbit: Result<EnvModel, String>,
+    truth_orbit: Result<EnvModel, OrbitError>,
     att: AttitudeState,
     sensors: Sensors,
     wheel_fault: [Option<WheelFault>; 4],
@@ -381,14 +452,14 @@ pub struct FcApp {
     burns_applied_until_ns: u64,
 }
 
-fn truth_model(tle: Option<&(String, String)>) -> Result<EnvModel, String> {
+fn truth_model(tle: Option<&(String, String)>) -> Result<EnvModel, OrbitError> {
     match tle {
-        None => Err("no TLE".to_owned()),
+        None => Err(OrbitError::NoTle),
         Some((l1, l2)) => Tle::parse(l1, l2, ChecksumMode::Strict)
-            .map_err(|e| format!("TLE: {e}"))
+            .map_err(OrbitError::Tle)
             .and_then(|tle| {
                 Sgp4Propagator::new(&tle)
-                    .map_err(|e| format!("SGP4: {e}"))
+                    .map_err(OrbitError::Sgp4)
                     .map(|p| EnvModel::new(p).with_cowell_config(burns::cowell_config_for(&tle)))
             }),
     }
@@ -492,8 +563,8 @@ impl FcApp {
     }
 
     /// Why the FC has no true orbit, if it has none.
-    pub fn orbit_error(&self) -> Option<&str> {
-        self.truth_orbit.as_ref().err().map(String::as_str)
+    pub fn orbit_error(&self) -> Option<&OrbitError> {
+        self.truth_orbit.as_ref().err()
     }
 
     /// The commanded target.
@@ -563,7 +634,7 @@ impl FcApp {
     /// The FC's knowledge of its ECI J2000 position in metres at `now`: the latest GPS fix
     /// (when younger than [`GPS_FIX_MAX_AGE_NS`]) carried to `now` under two-body gravity,
     /// else the onboard TLE through `orbit`'s SGP4, or why there is neither.
-    pub fn position_eci_m(&mut self, now: SimTime) -> Result<[f64; 3], String> {
+    pub fn position_eci_m(&mut self, now: SimTime) -> Result<[f64; 3], PositionError> {
         let t = self.true_unix_ns_i64(now);
         if let Some((t_fix, r, v)) = self.fsw.gps_fix
             && (t - t_fix).abs() <= GPS_FIX_MAX_AGE_NS
@@ -575,10 +646,7 @@ impl FcApp {
             let p = r + v * dt_s + a * (0.5 * dt_s * dt_s);
             return Ok([p.x, p.y, p.z]);
         }
-        let onboard = self
-            .onboard
-            .as_mut()
-            .ok_or("no TLE uploaded and no GPS fix")?;
+        let onboard = self.onboard.as_mut().ok_or(PositionError::NoKnowledge)?;
         if onboard.same_as_truth {
             // The onboard orbit is the truth's: after a burn, its numerical continuation.
             let model = self.truth_orbit.as_mut().map_err(|e| e.clone())?;
@@ -670,28 +738,21 @@ impl FcApp {
     }
 
     /// Submit a script line to the mission controller at `now`.
-    fn submit_script(&mut self, bytes: &[u8], now: SimTime) -> Result<(), String> {
-        let script = Script::parse_bytes(bytes).map_err(|e| e.to_string())?;
+    fn submit_script(&mut self, bytes: &[u8], now: SimTime) -> Result<(), SubmitError> {
+        let script = Script::parse_bytes(bytes)?;
         // The FC's own limits: one script holds the ADCS for at most a day, and its window
         // ends within the RTC's range (a line cannot take the attitude for ever).
         let window_s = script.end_unix_s - script.start_unix_s;
         if window_s > MAX_SCRIPT_WINDOW_S {
-            return Err(format!(
-                "window of {window_s} s is longer than the FC's {MAX_SCRIPT_WINDOW_S} s (a day)"
-            ));
+            return Err(SubmitError::WindowTooLong { window_s });
         }
         if script.end_unix_s > f64::from(wire::RTC_MAX_UNIX_S) {
-            return Err(format!(
-                "END {} is after the RTC's range (2100-01-01, {})",
-                script.end_unix_s,
-                wire::RTC_MAX_UNIX_S
-            ));
+            return Err(SubmitError::EndAfterRtc {
+                end_unix_s: script.end_unix_s,
+            });
         }
         let now_s = self.rtc_unix_s_f64(now);
-        self.fsw
-            .scripts
-            .add(script, now_s)
-            .map_err(|e| e.to_string())?;
+        self.fsw.scripts.add(script, now_s)?;
         self.log
             .push(NodeEvent::info(now, format!("script accepted: {script}")));
         Ok(())
@@ -1007,7 +1068,7 @@ impl FcApp {
         }
     }
 
-    fn tm_atp(&mut self, now: SimTime) -> Result<TmAtp, String> {
+    fn tm_atp(&mut self, now: SimTime) -> Result<TmAtp, PositionError> {
         let q = self
             .fsw
             .adcs
@@ -1444,13 +1505,18 @@ impl App for FcApp {
         config::COMMANDS
     }
 
-    fn console(&mut self, node: &mut Node, words: &[&str], now: SimTime) -> Result<String, String> {
+    fn console(
+        &mut self,
+        node: &mut Node,
+        words: &[&str],
+        now: SimTime,
+    ) -> Result<String, ConsoleError> {
         // As a CSP request at `now` would see the FC.
         self.clock = node.clock_errors().clone();
         self.store_now = Some(now);
         let r = match words {
-            ["tm"] => self.console_tm(node, "gen", now),
-            ["tm", which] => self.console_tm(node, which, now),
+            ["tm"] => self.console_tm(node, "gen", now).map_err(ConsoleError::app),
+            ["tm", which] => self.console_tm(node, which, now).map_err(ConsoleError::app),
             ["store"] => {
                 let i = self.store.info();
                 let w = |k: usize| u32::from_le_bytes([i[k], i[k + 1], i[k + 2], i[k + 3]]);
@@ -1480,7 +1546,7 @@ impl App for FcApp {
                     },
                 ))
             }
-            _ => Err(format!("usage: {}", words.join(" "))),
+            _ => Err(ConsoleError::Usage(words.join(" "))),
         };
         self.flush_log(node);
         r
@@ -2377,7 +2443,7 @@ mod tests {
     fn no_tle_or_a_decayed_orbit_fails_tmatp_and_tmall_only() {
         let mut h = host(None);
         let t = SimTime::from_secs(1);
-        assert_eq!(h.app.orbit_error(), Some("no TLE"));
+        assert_eq!(h.app.orbit_error(), Some(&OrbitError::NoTle));
         assert_eq!(ask(&mut h, 10, &[2], t), vec![2, 0]);
         assert_eq!(ask(&mut h, 10, &[6], t), vec![6, 0]);
         assert_eq!(ask(&mut h, 10, &[1], t)[..2], [1, 1]);
@@ -2386,7 +2452,9 @@ mod tests {
             L1,
             "2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 5000",
         )));
-        assert!(h.app.orbit_error().unwrap().starts_with("TLE"));
+        let e = h.app.orbit_error().unwrap();
+        assert!(matches!(e, OrbitError::Tle(_)), "{e:?}");
+        assert!(e.to_string().starts_with("TLE: "), "{e}");
         assert_eq!(ask(&mut h, 10, &[2], t), vec![2, 0]);
 
         // A very low, high-drag orbit decays within days: propagation errors, no panic.
@@ -2402,8 +2470,13 @@ mod tests {
         let late = SimTime::from_secs(200 * 86_400);
         let why = h.app.position_eci_m(late).unwrap_err();
         assert!(
-            why.contains("SGP4 error") || why.contains("decayed"),
-            "{why}"
+            matches!(
+                why,
+                PositionError::Propagation(
+                    PropagationError::Sgp4 { .. } | PropagationError::Decayed
+                )
+            ),
+            "{why:?}"
         );
         assert_eq!(ask(&mut h, 10, &[2], late), vec![2, 0]);
         assert_eq!(ask(&mut h, 10, &[1], late)[..2], [1, 1]);

@@ -54,21 +54,41 @@ impl Default for SafeConfig {
     }
 }
 
+/// What is wrong with a safe-mode configuration (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SafeConfigError {
+    /// A threshold outside 0..=1.
+    #[error("safe-mode state of charge thresholds must be within 0-1")]
+    ThresholdRange,
+    /// Safe mode would be left below the charge it is entered at.
+    #[error("safe-mode exit state of charge {exit_soc} is below the entry's {enter_soc}")]
+    ExitBelowEnter {
+        /// The exit threshold, fraction of full.
+        exit_soc: f64,
+        /// The entry threshold, fraction of full.
+        enter_soc: f64,
+    },
+    /// A zero poll period.
+    #[error("the EPS poll period must be above zero (or none)")]
+    ZeroPoll,
+}
+
 impl SafeConfig {
     /// Thresholds within 0..=1, exit not below enter, a poll period above zero.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SafeConfigError> {
         let unit = 0.0..=1.0;
         if !unit.contains(&self.enter_soc) || !unit.contains(&self.exit_soc) {
-            return Err("safe-mode state of charge thresholds must be within 0-1".into());
+            return Err(SafeConfigError::ThresholdRange);
         }
         if self.exit_soc < self.enter_soc {
-            return Err(format!(
-                "safe-mode exit state of charge {} is below the entry's {}",
-                self.exit_soc, self.enter_soc
-            ));
+            return Err(SafeConfigError::ExitBelowEnter {
+                exit_soc: self.exit_soc,
+                enter_soc: self.enter_soc,
+            });
         }
         if self.eps_poll == Some(Duration::ZERO) {
-            return Err("the EPS poll period must be above zero (or none)".into());
+            return Err(SafeConfigError::ZeroPoll);
         }
         Ok(())
     }

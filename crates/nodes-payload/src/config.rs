@@ -24,7 +24,7 @@
 
 use std::time::Duration;
 
-use csp::params::{Check, Health, ParamDef, ParamType, Table, def};
+use csp::params::{Check, Health, ParamDef, ParamError, ParamType, Table, def};
 
 use crate::{Behaviour, MAX_QUEUED_REPLIES, PayloadApp, SimTime};
 
@@ -68,6 +68,15 @@ pub const PARAMS: &[ParamDef] = &[
     ),
 ];
 
+/// Why a payload refuses a parameter value the table's range lets through.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PushParamError {
+    /// `push_rate` or `push_packet_bytes` on a payload that is polled, not pushing.
+    #[error("push: this payload does not push (polling)")]
+    Polling,
+}
+
 impl Table for PayloadApp {
     fn defs(&self) -> &'static [ParamDef] {
         PARAMS
@@ -83,11 +92,11 @@ impl Table for PayloadApp {
         })
     }
 
-    fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+    fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
         match id {
             1 | 2 => {
                 let Some(p) = &mut self.cfg.push else {
-                    return Err("push: this payload does not push (polling)".to_owned());
+                    return Err(ParamError::refused(PushParamError::Polling));
                 };
                 if id == 1 {
                     p.rate_bytes_per_s = v as u64;
@@ -101,7 +110,7 @@ impl Table for PayloadApp {
                 self.stream_rate_pending = true;
             }
             4 => self.cfg.reply_latency = Duration::from_millis(v as u64),
-            _ => return Err(format!("no parameter {id}")),
+            _ => return Err(ParamError::Unknown { id }),
         }
         Ok(())
     }

@@ -133,20 +133,72 @@ impl std::fmt::Display for Behaviour {
     }
 }
 
+/// Why a text is not a [`Behaviour`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BehaviourError {
+    /// A behaviour that takes a value without one.
+    #[error("`{name}` needs a value: `{name}:<{what}>`")]
+    NeedsValue {
+        /// The behaviour's name as written.
+        name: String,
+        /// What the value is (`ms`, `polls`, `bytes`).
+        what: &'static str,
+    },
+    /// The value is not a whole number.
+    #[error("`{text}`: bad {what}: {source}")]
+    BadNumber {
+        /// The whole text.
+        text: String,
+        /// What the value is.
+        what: &'static str,
+        /// Why it did not parse.
+        source: std::num::ParseIntError,
+    },
+    /// The value is too large for the behaviour.
+    #[error("`{text}`: {source}")]
+    TooLarge {
+        /// The whole text.
+        text: String,
+        /// The conversion's error.
+        source: std::num::TryFromIntError,
+    },
+    /// Not one of the behaviours.
+    #[error(
+        "unknown payload behaviour `{name}`: expected normal, no-ack, wrong-echo, \
+         slow:<ms>, silent-for:<n>, silent, oversize:<n>, garbage or zero-length"
+    )]
+    Unknown {
+        /// The name as written.
+        name: String,
+    },
+}
+
 impl std::str::FromStr for Behaviour {
-    type Err = String;
+    type Err = BehaviourError;
     /// Parse `normal`, `no-ack`, `wrong-echo`, `slow:<ms>[ms]`, `silent-for:<n>`, `silent`,
     /// `oversize:<n>`, `garbage` or `zero-length`.
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, BehaviourError> {
         let (name, arg) = match s.split_once(':') {
             Some((n, a)) => (n, Some(a.trim())),
             None => (s, None),
         };
-        let num = |what: &str| -> Result<u64, String> {
-            let a = arg.ok_or_else(|| format!("`{name}` needs a value: `{name}:<{what}>`"))?;
+        let num = |what: &'static str| -> Result<u64, BehaviourError> {
+            let a = arg.ok_or_else(|| BehaviourError::NeedsValue {
+                name: name.to_owned(),
+                what,
+            })?;
             a.trim_end_matches("ms")
                 .parse::<u64>()
-                .map_err(|e| format!("`{s}`: bad {what}: {e}"))
+                .map_err(|source| BehaviourError::BadNumber {
+                    text: s.to_owned(),
+                    what,
+                    source,
+                })
+        };
+        let too_large = |source| BehaviourError::TooLarge {
+            text: s.to_owned(),
+            source,
         };
         let b = match name.trim() {
             "normal" => Behaviour::Normal,
@@ -156,19 +208,18 @@ impl std::str::FromStr for Behaviour {
                 extra: Duration::from_millis(num("ms")?),
             },
             "silent-for" => Behaviour::SilentFor {
-                polls: u32::try_from(num("polls")?).map_err(|e| format!("`{s}`: {e}"))?,
+                polls: u32::try_from(num("polls")?).map_err(too_large)?,
             },
             "silent" => Behaviour::Silent,
             "oversize" => Behaviour::Oversize {
-                extra_bytes: u8::try_from(num("bytes")?).map_err(|e| format!("`{s}`: {e}"))?,
+                extra_bytes: u8::try_from(num("bytes")?).map_err(too_large)?,
             },
             "garbage" => Behaviour::Garbage,
             "zero-length" => Behaviour::ZeroLength,
             other => {
-                return Err(format!(
-                    "unknown payload behaviour `{other}`: expected normal, no-ack, wrong-echo, \
-                     slow:<ms>, silent-for:<n>, silent, oversize:<n>, garbage or zero-length"
-                ));
+                return Err(BehaviourError::Unknown {
+                    name: other.to_owned(),
+                });
             }
         };
         Ok(b)
@@ -783,9 +834,22 @@ mod tests {
                 extra: Duration::from_millis(300)
             }
         );
-        assert!("slow".parse::<Behaviour>().is_err());
-        assert!("oversize:300".parse::<Behaviour>().is_err());
-        assert!("loud".parse::<Behaviour>().is_err());
+        let e = "slow".parse::<Behaviour>().unwrap_err();
+        assert_eq!(e.to_string(), "`slow` needs a value: `slow:<ms>`");
+        let e = "oversize:300".parse::<Behaviour>().unwrap_err();
+        assert!(matches!(e, BehaviourError::TooLarge { .. }));
+        assert_eq!(
+            e.to_string(),
+            "`oversize:300`: out of range integral type conversion attempted"
+        );
+        assert!(matches!(
+            "silent-for:x".parse::<Behaviour>(),
+            Err(BehaviourError::BadNumber { what: "polls", .. })
+        ));
+        assert!(matches!(
+            "loud".parse::<Behaviour>(),
+            Err(BehaviourError::Unknown { name }) if name == "loud"
+        ));
     }
 
     #[test]

@@ -26,7 +26,7 @@
 
 use std::time::Duration;
 
-use csp::params::{Check, Health, ParamDef, ParamType, Table, def};
+use csp::params::{Check, Health, ParamDef, ParamError, ParamType, Table, def};
 
 use crate::{PcApp, SessionMode, SessionResult, SessionState, SimTime};
 
@@ -117,6 +117,22 @@ impl PcApp {
     }
 }
 
+/// Why the PC refuses a parameter value the table's range lets through: nothing running
+/// that the parameter sets.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PcParamError {
+    /// `buffer_capacity` without a buffering session.
+    #[error("buffer_capacity: no buffering session")]
+    NoBuffering,
+    /// `poll_period` or `reply_timeout` without a polling session.
+    #[error("{name}: no polling session")]
+    NoPolling {
+        /// The parameter's name.
+        name: &'static str,
+    },
+}
+
 impl Table for PcApp {
     fn defs(&self) -> &'static [ParamDef] {
         PARAMS
@@ -138,13 +154,13 @@ impl Table for PcApp {
         })
     }
 
-    fn set(&mut self, id: u8, v: f64) -> Result<(), String> {
+    fn set(&mut self, id: u8, v: f64) -> Result<(), ParamError> {
         let d = Duration::from_millis(v as u64);
         match id {
             1 => {
                 let slots = self.slots_where(|m| *m == SessionMode::Buffering);
                 if slots.is_empty() {
-                    return Err("buffer_capacity: no buffering session".to_owned());
+                    return Err(ParamError::refused(PcParamError::NoBuffering));
                 }
                 for i in slots {
                     self.respec(i, |s| s.buffer_capacity_bytes = v as u64);
@@ -153,14 +169,12 @@ impl Table for PcApp {
             2 | 3 => {
                 let slots = self.slots_where(|m| matches!(m, SessionMode::Polling { .. }));
                 if slots.is_empty() {
-                    return Err(format!(
-                        "{}: no polling session",
-                        if id == 2 {
-                            "poll_period"
-                        } else {
-                            "reply_timeout"
-                        }
-                    ));
+                    let name = if id == 2 {
+                        "poll_period"
+                    } else {
+                        "reply_timeout"
+                    };
+                    return Err(ParamError::refused(PcParamError::NoPolling { name }));
                 }
                 for i in slots {
                     self.respec(i, |s| {
@@ -182,7 +196,7 @@ impl Table for PcApp {
                 self.cfg.sband.rate_bps = v as u64;
                 self.sband.set_rate(v as u64);
             }
-            _ => return Err(format!("no parameter {id}")),
+            _ => return Err(ParamError::Unknown { id }),
         }
         Ok(())
     }

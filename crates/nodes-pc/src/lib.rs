@@ -229,54 +229,123 @@ impl Default for PcConfig {
     }
 }
 
+/// What is wrong with a PC configuration (for the scenario loader).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PcConfigError {
+    /// More sessions than the PC has slots.
+    #[error("{count} sessions configured; the PC serves at most {}", MAX_SESSIONS)]
+    TooManySessions {
+        /// Sessions configured.
+        count: usize,
+    },
+    /// A session's payload address is not a payload's.
+    #[error("session {session_id}: payload address {addr} is not a payload (12-15)")]
+    PayloadAddr {
+        /// The session.
+        session_id: u8,
+        /// The address.
+        addr: u8,
+    },
+    /// A session's payload port is beyond CSP's ports.
+    #[error("session {session_id}: payload port {port} > 63")]
+    PayloadPort {
+        /// The session.
+        session_id: u8,
+        /// The port.
+        port: u8,
+    },
+    /// Two sessions with one id.
+    #[error("session id {session_id} repeated")]
+    RepeatedId {
+        /// The id.
+        session_id: u8,
+    },
+    /// Two sessions for one payload.
+    #[error("payload {addr} has two sessions ({first} and {second})")]
+    TwoSessions {
+        /// The payload's address.
+        addr: u8,
+        /// The first session's id.
+        first: u8,
+        /// The second session's id.
+        second: u8,
+    },
+    /// A polling session whose replies could never arrive in time.
+    #[error("session {session_id}: reply timeout 0")]
+    ZeroTimeout {
+        /// The session.
+        session_id: u8,
+    },
+    /// A PC port in the ephemeral range (control, ingest, telemetry).
+    #[error("PC ports {ports:?}: each must be below 32")]
+    PortRange {
+        /// Control, ingest and telemetry ports.
+        ports: [u8; 3],
+    },
+    /// Two of the PC's ports are one (control, ingest, telemetry).
+    #[error("PC ports {ports:?} must differ")]
+    PortsEqual {
+        /// Control, ingest and telemetry ports.
+        ports: [u8; 3],
+    },
+    /// S-band frames that carry nothing.
+    #[error("S-band frame_data_bytes 0")]
+    ZeroFrame,
+}
+
 impl PcConfig {
-    /// Check the configuration (for the scenario loader); the message names the problem.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Check the configuration (for the scenario loader); the error names the problem.
+    pub fn validate(&self) -> Result<(), PcConfigError> {
         if self.sessions.len() > MAX_SESSIONS {
-            return Err(format!(
-                "{} sessions configured; the PC serves at most {MAX_SESSIONS}",
-                self.sessions.len()
-            ));
+            return Err(PcConfigError::TooManySessions {
+                count: self.sessions.len(),
+            });
         }
         for (i, s) in self.sessions.iter().enumerate() {
             if !(12..=15).contains(&s.payload_addr) {
-                return Err(format!(
-                    "session {}: payload address {} is not a payload (12-15)",
-                    s.session_id, s.payload_addr
-                ));
+                return Err(PcConfigError::PayloadAddr {
+                    session_id: s.session_id,
+                    addr: s.payload_addr,
+                });
             }
             if s.payload_port > csp::header::MAX_PORT {
-                return Err(format!(
-                    "session {}: payload port {} > 63",
-                    s.session_id, s.payload_port
-                ));
+                return Err(PcConfigError::PayloadPort {
+                    session_id: s.session_id,
+                    port: s.payload_port,
+                });
             }
             for o in self.sessions.iter().skip(i + 1) {
                 if o.session_id == s.session_id {
-                    return Err(format!("session id {} repeated", s.session_id));
+                    return Err(PcConfigError::RepeatedId {
+                        session_id: s.session_id,
+                    });
                 }
                 if o.payload_addr == s.payload_addr {
-                    return Err(format!(
-                        "payload {} has two sessions ({} and {})",
-                        s.payload_addr, s.session_id, o.session_id
-                    ));
+                    return Err(PcConfigError::TwoSessions {
+                        addr: s.payload_addr,
+                        first: s.session_id,
+                        second: o.session_id,
+                    });
                 }
             }
             if let SessionMode::Polling { reply_timeout, .. } = s.mode
                 && reply_timeout.is_zero()
             {
-                return Err(format!("session {}: reply timeout 0", s.session_id));
+                return Err(PcConfigError::ZeroTimeout {
+                    session_id: s.session_id,
+                });
             }
         }
         let ports = [self.control_port, self.ingest_port, self.telemetry_port];
         if ports.iter().any(|&p| p >= csp::header::EPHEMERAL_PORT_MIN) {
-            return Err(format!("PC ports {ports:?}: each must be below 32"));
+            return Err(PcConfigError::PortRange { ports });
         }
         if ports[0] == ports[1] || ports[0] == ports[2] || ports[1] == ports[2] {
-            return Err(format!("PC ports {ports:?} must differ"));
+            return Err(PcConfigError::PortsEqual { ports });
         }
         if self.sband.frame_data_bytes == 0 {
-            return Err("S-band frame_data_bytes 0".to_owned());
+            return Err(PcConfigError::ZeroFrame);
         }
         Ok(())
     }
@@ -1708,9 +1777,9 @@ impl App for PcApp {
         _node: &mut Node,
         words: &[&str],
         _now: SimTime,
-    ) -> Result<String, String> {
+    ) -> Result<String, csp::console::ConsoleError> {
         if words != ["tm"] {
-            return Err("usage: tm".to_owned());
+            return Err(csp::console::ConsoleError::Usage("tm".to_owned()));
         }
         // As TMPC on port 12.
         Ok(csp::console::fields(&self.tmpc()))

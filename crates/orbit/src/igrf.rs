@@ -355,18 +355,32 @@ fn model() -> &'static Igrf14 {
     })
 }
 
+/// Why the coefficient file did not parse.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+enum CoeffFileError {
+    #[error("no `g/h n m` header line")]
+    NoHeader,
+    #[error("no column {0}")]
+    NoColumn(String),
+    /// A `g`/`h` row is malformed; `what` names the part.
+    #[error("line {line}: {what}")]
+    BadRow { line: usize, what: &'static str },
+    #[error("{seen} coefficient rows, expected 195")]
+    RowCount { seen: usize },
+}
+
 /// Parse `igrf14coeffs.txt`: find the 2020.0, 2025.0 and `2025-30` columns by their header
 /// and read every `g`/`h` row.
-fn parse(text: &str) -> Result<Igrf14, String> {
+fn parse(text: &str) -> Result<Igrf14, CoeffFileError> {
     let header = text
         .lines()
         .find(|l| l.starts_with("g/h"))
-        .ok_or("no `g/h n m` header line")?;
+        .ok_or(CoeffFileError::NoHeader)?;
     let cols: Vec<&str> = header.split_whitespace().collect();
     let find = |name: &str| {
         cols.iter()
             .position(|c| *c == name)
-            .ok_or(format!("no column {name}"))
+            .ok_or_else(|| CoeffFileError::NoColumn(name.to_owned()))
     };
     let (i2020, i2025, isv) = (find("2020.0")?, find("2025.0")?, find("2025-30")?);
     let mut model = Igrf14 {
@@ -382,7 +396,10 @@ fn parse(text: &str) -> Result<Igrf14, String> {
             Some(&"h") => 'h',
             _ => continue,
         };
-        let bad = |what: &str| format!("line {}: {what}", line_no + 1);
+        let bad = |what: &'static str| CoeffFileError::BadRow {
+            line: line_no + 1,
+            what,
+        };
         if fields.len() != cols.len() {
             return Err(bad("wrong number of columns"));
         }
@@ -408,7 +425,7 @@ fn parse(text: &str) -> Result<Igrf14, String> {
     }
     // 104 g (n = 1..13, m = 0..n) and 91 h (m = 1..n) coefficients.
     if seen != 195 {
-        return Err(format!("{seen} coefficient rows, expected 195"));
+        return Err(CoeffFileError::RowCount { seen });
     }
     Ok(model)
 }

@@ -3,10 +3,42 @@
 
 use std::time::Duration;
 
+/// Why a text is not a duration; each names the text (trimmed).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DurationError {
+    /// Not a number and a unit, or nothing at all.
+    #[error("`{text}` is not a duration (try 90, 90s, 10m, 2h, 1h 30m)")]
+    NotADuration {
+        /// The text.
+        text: String,
+    },
+    /// A bare number is seconds only when it is the whole duration.
+    #[error("`{text}`: a number without a unit among several terms")]
+    NoUnit {
+        /// The text.
+        text: String,
+    },
+    /// A unit other than ms, s, m (min), h, d.
+    #[error("unknown unit `{unit}` in `{text}` (use ms, s, m, h or d)")]
+    UnknownUnit {
+        /// The unit as written.
+        unit: String,
+        /// The text.
+        text: String,
+    },
+    /// A term beyond 10^9 s, or a sum beyond 10^9 s, or not finite.
+    #[error("`{text}` is out of range")]
+    OutOfRange {
+        /// The text.
+        text: String,
+    },
+}
+
 /// Parse a duration; a bare number is seconds; terms add up (`1h 30m`, `6h100s`).
-pub fn parse_duration(s: &str) -> Result<Duration, String> {
+pub fn parse_duration(s: &str) -> Result<Duration, DurationError> {
     let s = s.trim();
-    let hint = || format!("`{s}` is not a duration (try 90, 90s, 10m, 2h, 1h 30m)");
+    let hint = || DurationError::NotADuration { text: s.to_owned() };
     let mut rest = s;
     let mut total_ns: u128 = 0;
     let mut terms = 0;
@@ -29,19 +61,18 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
             "h" => 3600.0,
             "d" => 86400.0,
             "" => {
-                return Err(format!(
-                    "`{s}`: a number without a unit among several terms"
-                ));
+                return Err(DurationError::NoUnit { text: s.to_owned() });
             }
             u => {
-                return Err(format!(
-                    "unknown unit `{u}` in `{s}` (use ms, s, m, h or d)"
-                ));
+                return Err(DurationError::UnknownUnit {
+                    unit: u.to_owned(),
+                    text: s.to_owned(),
+                });
             }
         };
         let secs = value * scale;
         if !secs.is_finite() || !(0.0..=1e9).contains(&secs) {
-            return Err(format!("`{s}` is out of range"));
+            return Err(DurationError::OutOfRange { text: s.to_owned() });
         }
         total_ns += (secs * 1e9).round() as u128;
         terms += 1;
@@ -51,7 +82,7 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
         return Err(hint());
     }
     if total_ns > 1_000_000_000 * 1_000_000_000 {
-        return Err(format!("`{s}` is out of range"));
+        return Err(DurationError::OutOfRange { text: s.to_owned() });
     }
     Ok(Duration::from_nanos(total_ns as u64))
 }
@@ -72,6 +103,7 @@ pub fn format_duration(d: Duration) -> String {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]
@@ -97,5 +129,35 @@ mod tests {
         ] {
             assert!(parse_duration(bad).is_err(), "{bad}");
         }
+        let e = parse_duration(" 10x ").unwrap_err();
+        assert_eq!(
+            e,
+            DurationError::UnknownUnit {
+                unit: "x".into(),
+                text: "10x".into()
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "unknown unit `x` in `10x` (use ms, s, m, h or d)"
+        );
+        assert_eq!(
+            parse_duration("1h 30").unwrap_err().to_string(),
+            "`1h 30`: a number without a unit among several terms"
+        );
+        assert_eq!(
+            parse_duration("abc").unwrap_err().to_string(),
+            "`abc` is not a duration (try 90, 90s, 10m, 2h, 1h 30m)"
+        );
+        assert_eq!(
+            parse_duration("1..5s"),
+            Err(DurationError::NotADuration {
+                text: "1..5s".into()
+            })
+        );
+        assert_eq!(
+            parse_duration("2000000000s").unwrap_err().to_string(),
+            "`2000000000s` is out of range"
+        );
     }
 }

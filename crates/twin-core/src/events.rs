@@ -28,8 +28,14 @@ pub enum Level {
     Error = 4,
 }
 
-/// One thing that happened during a run.
-#[derive(Debug, Clone, PartialEq)]
+/// One thing that happened during a run. Its kinds ([`EventKind`], one per variant, same
+/// name) are derived from it.
+#[derive(Debug, Clone, PartialEq, strum::EnumDiscriminants)]
+#[strum_discriminants(
+    name(EventKind),
+    derive(Hash, strum::EnumIter),
+    doc = "The kinds of [`RunEvent`], one per variant (what [`Kinds`] selects)."
+)]
 pub enum RunEvent {
     /// A CAN frame on a bus or a packet on the ground network (see [`TraceEvent`]).
     Medium(TraceEvent),
@@ -147,37 +153,6 @@ pub enum RunEvent {
     },
 }
 
-/// What kind of event a [`RunEvent`] is: its variant.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EventKind {
-    /// [`RunEvent::Medium`].
-    Medium,
-    /// [`RunEvent::Kiss`].
-    Kiss,
-    /// [`RunEvent::Log`].
-    Log,
-    /// [`RunEvent::PacketDropped`].
-    PacketDropped,
-    /// [`RunEvent::Fault`].
-    Fault,
-    /// [`RunEvent::Command`].
-    Command,
-    /// [`RunEvent::CommandResult`].
-    CommandResult,
-    /// [`RunEvent::Truth`].
-    Truth,
-    /// [`RunEvent::Pc`].
-    Pc,
-    /// [`RunEvent::Beacon`].
-    Beacon,
-    /// [`RunEvent::Eps`].
-    Eps,
-    /// [`RunEvent::Payload`].
-    Payload,
-    /// [`RunEvent::Expectation`].
-    Expectation,
-}
-
 /// A set of [`EventKind`]s: what an observer of the run looks at, so that it is not handed
 /// the rest (a run has hundreds of thousands of events an hour, most of them frames).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -207,21 +182,7 @@ impl Kinds {
 impl RunEvent {
     /// Its kind.
     pub fn kind(&self) -> EventKind {
-        match self {
-            RunEvent::Medium(_) => EventKind::Medium,
-            RunEvent::Kiss { .. } => EventKind::Kiss,
-            RunEvent::Log { .. } => EventKind::Log,
-            RunEvent::PacketDropped { .. } => EventKind::PacketDropped,
-            RunEvent::Fault { .. } => EventKind::Fault,
-            RunEvent::Command { .. } => EventKind::Command,
-            RunEvent::CommandResult { .. } => EventKind::CommandResult,
-            RunEvent::Truth { .. } => EventKind::Truth,
-            RunEvent::Pc(_) => EventKind::Pc,
-            RunEvent::Beacon { .. } => EventKind::Beacon,
-            RunEvent::Eps(_) => EventKind::Eps,
-            RunEvent::Payload { .. } => EventKind::Payload,
-            RunEvent::Expectation { .. } => EventKind::Expectation,
-        }
+        EventKind::from(self)
     }
 
     /// The simulated time of the event.
@@ -358,36 +319,27 @@ impl From<nodes_ecu::EcuOutput> for RunEvent {
 mod tests {
     use super::*;
 
-    const EVERY: [EventKind; 13] = [
-        EventKind::Medium,
-        EventKind::Kiss,
-        EventKind::Log,
-        EventKind::PacketDropped,
-        EventKind::Fault,
-        EventKind::Command,
-        EventKind::CommandResult,
-        EventKind::Truth,
-        EventKind::Pc,
-        EventKind::Beacon,
-        EventKind::Eps,
-        EventKind::Payload,
-        EventKind::Expectation,
-    ];
+    /// Every kind, from the enum.
+    fn every() -> Vec<EventKind> {
+        <EventKind as strum::IntoEnumIterator>::iter().collect()
+    }
 
     #[test]
     fn a_set_of_kinds_holds_exactly_those_listed() {
-        for (i, &k) in EVERY.iter().enumerate() {
+        let every = every();
+        assert!(every.len() <= 16, "Kinds holds 16");
+        for (i, &k) in every.iter().enumerate() {
             assert!(Kinds::ALL.has(k));
             assert!(!Kinds::of(&[]).has(k));
             let one = Kinds::of(&[k]);
-            let rest: Vec<EventKind> = EVERY
+            let rest: Vec<EventKind> = every
                 .iter()
                 .enumerate()
                 .filter(|&(j, _)| j != i)
                 .map(|(_, &k)| k)
                 .collect();
             let others = Kinds::of(&rest);
-            for &m in &EVERY {
+            for &m in &every {
                 assert_eq!(one.has(m), m == k, "{k:?} {m:?}");
                 assert_eq!(others.has(m), m != k, "{k:?} {m:?}");
             }

@@ -714,18 +714,55 @@ fn data_lines(label: &str, d: &Data, out: &mut String) {
     }
 }
 
+/// Why a node or a command is not in the ICD; each lists what there is.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum IcdLookupError {
+    /// [`to_text`] of a node the ICD does not have.
+    #[error("no node {name:?}: the nodes are {}", .known.join(", "))]
+    NoNodeNamed {
+        /// The name asked for.
+        name: String,
+        /// The ICD's nodes.
+        known: Vec<&'static str>,
+    },
+    /// [`find_command`] of a name without a dot.
+    #[error("`{name}` is not NODE.COMMAND (for example FC.TMGEN; `m6p-twin icd` lists them)")]
+    NotNodeCommand {
+        /// The name asked for.
+        name: String,
+    },
+    /// [`find_command`] of a node the ICD does not have.
+    #[error("no node `{node}`: {}", .known.join(", "))]
+    NoNodeForCommand {
+        /// The node part of the name.
+        node: String,
+        /// The ICD's nodes.
+        known: Vec<&'static str>,
+    },
+    /// [`find_command`] of a command the node does not have.
+    #[error("the {node} has no command `{command}`: {}", .known.join(", "))]
+    NoCommand {
+        /// The node.
+        node: &'static str,
+        /// The command part of the name.
+        command: String,
+        /// The node's commands.
+        known: Vec<&'static str>,
+    },
+}
+
+/// The names of the ICD's nodes, for errors.
+fn node_names() -> Vec<&'static str> {
+    nodes().iter().map(|n| n.name).collect()
+}
+
 /// The whole ICD as text (`m6p-twin icd`), or one node's.
-pub fn to_text(node: Option<&str>) -> Result<String, String> {
+pub fn to_text(node: Option<&str>) -> Result<String, IcdLookupError> {
     let list = match node {
-        Some(n) => vec![node_named(n).ok_or_else(|| {
-            format!(
-                "no node {n:?}: the nodes are {}",
-                nodes()
-                    .iter()
-                    .map(|n| n.name)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
+        Some(n) => vec![node_named(n).ok_or_else(|| IcdLookupError::NoNodeNamed {
+            name: n.to_owned(),
+            known: node_names(),
         })?],
         None => nodes(),
     };
@@ -768,35 +805,30 @@ pub fn to_text(node: Option<&str>) -> Result<String, String> {
 
 /// The node and command named `NODE.COMMAND` (`PC.SETUP`, `FC.TMGEN`, case-insensitive),
 /// with the port it is on (default number). The error lists what exists.
-pub fn find_command(name: &str) -> Result<(NodeIcd, Port, &'static Command), String> {
-    let (node, cmd) = name.split_once('.').ok_or_else(|| {
-        format!("`{name}` is not NODE.COMMAND (for example FC.TMGEN; `m6p-twin icd` lists them)")
-    })?;
-    let n = node_named(node).ok_or_else(|| {
-        format!(
-            "no node `{node}`: {}",
-            nodes()
-                .iter()
-                .map(|n| n.name)
-                .collect::<Vec<_>>()
-                .join(", ")
-        )
+pub fn find_command(name: &str) -> Result<(NodeIcd, Port, &'static Command), IcdLookupError> {
+    let (node, cmd) = name
+        .split_once('.')
+        .ok_or_else(|| IcdLookupError::NotNodeCommand {
+            name: name.to_owned(),
+        })?;
+    let n = node_named(node).ok_or_else(|| IcdLookupError::NoNodeForCommand {
+        node: node.to_owned(),
+        known: node_names(),
     })?;
     for p in &n.ports {
         if let Some(c) = p.command_named(cmd) {
             return Ok((n.clone(), *p, c));
         }
     }
-    let all: Vec<&str> = n
-        .ports
-        .iter()
-        .flat_map(|p| p.commands.iter().map(|c| c.name))
-        .collect();
-    Err(format!(
-        "the {} has no command `{cmd}`: {}",
-        n.name,
-        all.join(", ")
-    ))
+    Err(IcdLookupError::NoCommand {
+        node: n.name,
+        command: cmd.to_owned(),
+        known: n
+            .ports
+            .iter()
+            .flat_map(|p| p.commands.iter().map(|c| c.name))
+            .collect(),
+    })
 }
 
 /// Whether `typed` names the value `name`: case aside, and with `_` or `-` for a space
@@ -809,11 +841,39 @@ pub fn value_name_is(name: &str, typed: &str) -> bool {
             .all(|(a, b)| a.eq_ignore_ascii_case(&b) || (a == b' ' && (b == b'_' || b == b'-')))
 }
 
+/// Why an argument is not a number for its field.
+#[derive(Debug, thiserror::Error)]
+enum ArgNumberError {
+    /// A JSON number with no `f64` (arbitrary precision).
+    #[error("not a number")]
+    NotF64,
+    /// Text that is neither a number nor anything else the field takes.
+    #[error("`{text}` is not a number")]
+    Text {
+        /// The text.
+        text: String,
+    },
+    /// Text that is not a number nor one of the other forms the field takes.
+    #[error("`{text}` is not a number or {}", .also.join(" or "))]
+    TextNotAlso {
+        /// The text.
+        text: String,
+        /// What else the field takes (`a duration such as "10m"`, `one of "nadir", ...`).
+        also: Vec<String>,
+    },
+    /// An array, an object or null.
+    #[error("{value} is not a number")]
+    NotScalar {
+        /// The value.
+        value: serde_json::Value,
+    },
+}
+
 /// A number for field `f` from an argument: a number, a value's name (`nadir`), or a
 /// duration for a field in seconds or milliseconds (`"10m"`).
-fn arg_number(f: &Field, v: &serde_json::Value) -> Result<f64, String> {
+fn arg_number(f: &Field, v: &serde_json::Value) -> Result<f64, ArgNumberError> {
     match v {
-        serde_json::Value::Number(n) => n.as_f64().ok_or_else(|| "not a number".to_owned()),
+        serde_json::Value::Number(n) => n.as_f64().ok_or(ArgNumberError::NotF64),
         serde_json::Value::Bool(b) => Ok(f64::from(u8::from(*b))),
         serde_json::Value::String(s) => {
             if let Some((k, _)) = f.values.iter().find(|(_, n)| value_name_is(n, s)) {
@@ -844,12 +904,17 @@ fn arg_number(f: &Field, v: &serde_json::Value) -> Result<f64, String> {
                 ));
             }
             Err(if also.is_empty() {
-                format!("`{s}` is not a number")
+                ArgNumberError::Text { text: s.clone() }
             } else {
-                format!("`{s}` is not a number or {}", also.join(" or "))
+                ArgNumberError::TextNotAlso {
+                    text: s.clone(),
+                    also,
+                }
             })
         }
-        other => Err(format!("{other} is not a number")),
+        other => Err(ArgNumberError::NotScalar {
+            value: other.clone(),
+        }),
     }
 }
 
@@ -921,7 +986,7 @@ pub fn encode_args(
             (n, _) => return Err(bad(format!("an array of {n} values expected"))),
         };
         for item in items {
-            let x = arg_number(f, item).map_err(bad)?;
+            let x = arg_number(f, item).map_err(|e| bad(e.to_string()))?;
             if !f.accepts(x) {
                 return Err(bad(format!(
                     "{x} is outside the ICD's range {}",
@@ -938,7 +1003,8 @@ pub fn encode_args(
             });
         }
     }
-    let mut data = csp::icd::encode(fields, &values).map_err(|m| {
+    let mut data = csp::icd::encode(fields, &values).map_err(|e| {
+        let m = e.to_string();
         let field = m.split(':').next().unwrap_or_default();
         let name = field
             .split(['[', '.'])
@@ -1313,8 +1379,23 @@ mod tests {
         );
         let (_, _, tmgen) = find_command("FC.TMGEN").unwrap();
         assert!(encode_args(tmgen, &BTreeMap::new()).unwrap().is_empty());
-        assert!(find_command("FC.NOPE").unwrap_err().contains("TMGEN"));
-        assert!(find_command("XX.TMGEN").unwrap_err().contains("FC"));
+        let e = find_command("FC.NOPE").unwrap_err();
+        assert!(
+            matches!(&e, IcdLookupError::NoCommand { node: "FC", command, known }
+                if command == "NOPE" && known.contains(&"TMGEN")),
+            "{e:?}"
+        );
+        assert!(
+            e.to_string().starts_with("the FC has no command `NOPE`: "),
+            "{e}"
+        );
+        assert!(e.to_string().contains("TMGEN"), "{e}");
+        let e = find_command("XX.TMGEN").unwrap_err().to_string();
+        assert!(e.starts_with("no node `XX`: ") && e.contains("FC"), "{e}");
+        assert_eq!(
+            find_command("tmgen").unwrap_err().to_string(),
+            "`tmgen` is not NODE.COMMAND (for example FC.TMGEN; `m6p-twin icd` lists them)"
+        );
     }
 
     #[test]
@@ -1407,6 +1488,10 @@ mod tests {
             md.contains("| 12 | `current_mode` | u8 |  | 0 idle, 1 detumble"),
             "{md}"
         );
-        assert!(to_text(Some("nope")).unwrap_err().contains("FC"));
+        let e = to_text(Some("nope")).unwrap_err().to_string();
+        assert!(
+            e.starts_with("no node \"nope\": the nodes are ") && e.contains("FC"),
+            "{e}"
+        );
     }
 }

@@ -19,7 +19,8 @@ use csp::reqrep::RESULT_SUCCESS;
 
 /// A reply's whole data length (`command | result | data`) allowed on success.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Len {
+pub enum Len {
+    /// Exactly this many bytes.
     Exact(usize),
     /// Inclusive.
     Range(usize, usize),
@@ -53,6 +54,35 @@ const NONE: Len = Len::Exact(HEAD);
 enum PortRule {
     Commands(BTreeMap<u8, Len>),
     Any(Len),
+}
+
+/// How a reply contradicts the ICD's table.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReplyLengthError {
+    /// No command byte.
+    #[error("{header}: an empty reply")]
+    Empty {
+        /// The reply's header.
+        header: Header,
+    },
+    /// A length the table does not give the command and result.
+    #[error(
+        "{header}: reply to command {command} (result {}) is {len_bytes} bytes; the ICD's table gives {allowed}",
+        .result.map_or("none".to_owned(), |r| r.to_string())
+    )]
+    WrongLength {
+        /// The reply's header.
+        header: Header,
+        /// The command byte.
+        command: u8,
+        /// The result byte, if the reply has one.
+        result: Option<u8>,
+        /// The reply's data length, without a CRC.
+        len_bytes: usize,
+        /// What the table allows.
+        allowed: Len,
+    },
 }
 
 /// The ICD's reply lengths of one run's platform nodes, by node address and port.
@@ -99,7 +129,12 @@ impl IcdTable {
     /// flag is set) starting with `head`: `Ok(true)` for a platform node's reply of the
     /// table's length, `Ok(false)` for what is not such a reply, `Err` says how a reply
     /// contradicts the table.
-    pub fn check(&self, header: &Header, data_len: usize, head: &[u8]) -> Result<bool, String> {
+    pub fn check(
+        &self,
+        header: &Header,
+        data_len: usize,
+        head: &[u8],
+    ) -> Result<bool, ReplyLengthError> {
         if header.dport < EPHEMERAL_PORT_MIN {
             return Ok(false);
         }
@@ -108,7 +143,7 @@ impl IcdTable {
         };
         let n = data_len.saturating_sub(if header.has_crc() { 4 } else { 0 });
         let (Some(&cmd), result) = (head.first(), head.get(1).copied()) else {
-            return Err(format!("{header}: an empty reply"));
+            return Err(ReplyLengthError::Empty { header: *header });
         };
         let want = match (rule, result) {
             (_, Some(r)) if r != RESULT_SUCCESS => NONE,
@@ -118,10 +153,13 @@ impl IcdTable {
         if want.holds(n) {
             Ok(true)
         } else {
-            Err(format!(
-                "{header}: reply to command {cmd} (result {}) is {n} bytes; the ICD's table gives {want}",
-                result.map_or("none".to_owned(), |r| r.to_string())
-            ))
+            Err(ReplyLengthError::WrongLength {
+                header: *header,
+                command: cmd,
+                result,
+                len_bytes: n,
+                allowed: want,
+            })
         }
     }
 }
@@ -149,7 +187,26 @@ mod tests {
         assert_eq!(t.check(&reply(3, 20), 2, &[1, 0]), Ok(true));
         assert_eq!(t.check(&reply(3, 20), 2, &[99, 0]), Ok(true));
         let e = t.check(&reply(3, 20), 17, &[1, 1]).unwrap_err();
-        assert!(e.contains("is 17 bytes; the ICD's table gives 18"), "{e}");
+        assert!(
+            matches!(
+                e,
+                ReplyLengthError::WrongLength {
+                    command: 1,
+                    result: Some(1),
+                    len_bytes: 17,
+                    allowed: Len::Exact(18),
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        let e = e.to_string();
+        assert!(
+            e.ends_with(": reply to command 1 (result 1) is 17 bytes; the ICD's table gives 18"),
+            "{e}"
+        );
+        let e = t.check(&reply(3, 20), 0, &[]).unwrap_err();
+        assert!(e.to_string().ends_with(": an empty reply"), "{e}");
         assert!(t.check(&reply(3, 20), 5, &[1, 0]).is_err());
         // ATCATGET by the ICD's types (32 data bytes), not its size column (16).
         assert_eq!(t.check(&reply(3, 12), 34, &[1, 1]), Ok(true));

@@ -205,24 +205,44 @@ impl std::fmt::Display for NodeRef {
     }
 }
 
+/// Why a [`NodeRef`] names no node of the network.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum NodeRefError {
+    /// No node at the address.
+    #[error("no node has address {addr}")]
+    NoAddress {
+        /// The address.
+        addr: u8,
+    },
+    /// No node of the name (any case).
+    #[error("unknown node `{name}` (nodes: {})", .known.join(", "))]
+    UnknownName {
+        /// The name.
+        name: String,
+        /// The network's nodes.
+        known: Vec<String>,
+    },
+}
+
 impl NetworkSpec {
     /// The address of a node reference, or an error naming the known nodes.
-    pub fn resolve(&self, r: &NodeRef) -> Result<u8, String> {
+    pub fn resolve(&self, r: &NodeRef) -> Result<u8, NodeRefError> {
         match r {
             NodeRef::Addr(a) => self
                 .nodes
                 .iter()
                 .find(|n| n.addr == *a)
                 .map(|n| n.addr)
-                .ok_or_else(|| format!("no node has address {a}")),
+                .ok_or(NodeRefError::NoAddress { addr: *a }),
             NodeRef::Name(name) => self
                 .nodes
                 .iter()
                 .find(|n| n.name.eq_ignore_ascii_case(name))
                 .map(|n| n.addr)
-                .ok_or_else(|| {
-                    let names: Vec<&str> = self.nodes.iter().map(|n| n.name.as_str()).collect();
-                    format!("unknown node `{name}` (nodes: {})", names.join(", "))
+                .ok_or_else(|| NodeRefError::UnknownName {
+                    name: name.clone(),
+                    known: self.nodes.iter().map(|n| n.name.clone()).collect(),
                 }),
         }
     }
@@ -230,6 +250,7 @@ impl NetworkSpec {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
 
     #[test]
@@ -238,6 +259,26 @@ mod tests {
         let addrs: Vec<u8> = net.nodes.iter().map(|n| n.addr).collect();
         assert_eq!(addrs, vec![1, 2, 3, 4, 5, 6, 12, 13, 16]);
         assert!(addrs.iter().all(|a| !RESERVED.contains(a)));
+    }
+
+    #[test]
+    fn a_node_reference_resolves_or_names_the_nodes() {
+        let net = NetworkSpec::default_m6p();
+        assert_eq!(net.resolve(&NodeRef::Name("fc".into())), Ok(FC));
+        assert_eq!(net.resolve(&NodeRef::Addr(12)), Ok(12));
+        let e = net.resolve(&NodeRef::Addr(9)).unwrap_err();
+        assert_eq!(e, NodeRefError::NoAddress { addr: 9 });
+        assert_eq!(e.to_string(), "no node has address 9");
+        let e = net.resolve(&NodeRef::Name("sat".into())).unwrap_err();
+        assert!(
+            matches!(&e, NodeRefError::UnknownName { name, known } if name == "sat" && known.len() == 9),
+            "{e:?}"
+        );
+        assert!(
+            e.to_string()
+                .starts_with("unknown node `sat` (nodes: COMM1, COMM2, FC, "),
+            "{e}"
+        );
     }
 
     #[test]

@@ -9,7 +9,7 @@ use schemars::JsonSchema;
 use serde::Deserialize;
 
 use crate::expectations::{
-    CheckCx, ExpectCx, ExpectKind, Extremes, Judged, Occurrence, Watch, WatchCx, When,
+    CheckCx, ExpectCx, ExpectKind, Extremes, Judgement, Occurrence, Watch, WatchCx, When,
 };
 use crate::faults::{FaultAction, TimedFault};
 use twin_core::events::RunEvent;
@@ -38,7 +38,7 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
         err(p("publish_hz"), "must not exceed `adcs_hz`".into());
     }
     if let Some(e) = fc.safe.and_then(|sf| sf.config().validate().err()) {
-        err(p("safe"), e);
+        err(p("safe"), e.to_string());
     }
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
     let nonzero = |v: &[f64]| finite(v) && v.iter().any(|x| *x != 0.0);
@@ -127,7 +127,7 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
                     err(q("wheel"), format!("wheel {w} is not 0-3"));
                 }
                 if let Err(e) = f.fault.parse::<nodes_fc::WheelFault>() {
-                    err(q("fault"), e);
+                    err(q("fault"), e.to_string());
                 }
             }
             _ => err(
@@ -382,7 +382,7 @@ impl ExpectKind for AttitudeExpect {
         }
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let mut tally = AttitudeTally::default();
         for s in &cx.report.attitude {
             self.tally(&mut tally, s);
@@ -430,7 +430,7 @@ impl Watch for AttitudeWatch {
         }
     }
 
-    fn judge(&self, cx: &CheckCx<'_>) -> Judged {
+    fn judge(&self, cx: &CheckCx<'_>) -> Judgement {
         self.expect.judge(&self.tally, cx.report.sim_time)
     }
 }
@@ -496,13 +496,13 @@ impl AttitudeExpect {
 
     /// Every selected sample in the window within bounds (or, with `any`, one), the run
     /// having ended at `end`: the end, or the first failing time, and what was seen.
-    fn judge(&self, k: &AttitudeTally, end: SimTime) -> Judged {
+    fn judge(&self, k: &AttitudeTally, end: SimTime) -> Judgement {
         let from = self.from.map_or(SimTime::ZERO, |d| SimTime::ZERO + d.0);
         let to = self.to.map_or(end, |d| SimTime::ZERO + d.0);
         let window = format!("{from} to {to} ({:?})", self.when.unwrap_or(When::Always));
         let n = k.n;
         if n == 0 {
-            return (false, to, format!("no FC samples in {window}"));
+            return Judgement::fail(to, format!("no FC samples in {window}"));
         }
         let range = format!(
             "{n} samples in {window}, {} from {:.4} to {:.4}",
@@ -510,22 +510,16 @@ impl AttitudeExpect {
         );
         if self.occurrence.unwrap_or(Occurrence::Every) == Occurrence::Any {
             return if k.failures < n {
-                (
-                    true,
-                    to,
-                    format!("{} of {range} within bounds", n - k.failures),
-                )
+                Judgement::pass(to, format!("{} of {range} within bounds", n - k.failures))
             } else {
-                (false, to, format!("none of {range} within bounds"))
+                Judgement::fail(to, format!("none of {range} within bounds"))
             };
         }
         match &k.first {
-            Some((t, p)) => (
-                false,
-                *t,
-                format!("{} of {range}; first at {t}: {p}", k.failures),
-            ),
-            None => (true, to, range),
+            Some((t, p)) => {
+                Judgement::fail(*t, format!("{} of {range}; first at {t}: {p}", k.failures))
+            }
+            None => Judgement::pass(to, range),
         }
     }
 }

@@ -5,7 +5,7 @@
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, bounds};
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judgement, bounds};
 use twin_scenario::scenario::NodeRef;
 
 /// A controller's fault confinement state, by name.
@@ -66,7 +66,7 @@ impl ExpectKind for CanExpect {
             );
         }
         if let Err(e) = cx.net.resolve(&self.node) {
-            err("node", e);
+            err("node", e.to_string());
         }
         if self.state == Some(CanStateName::ErrorActive) {
             err(
@@ -83,7 +83,7 @@ impl ExpectKind for CanExpect {
         }
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let end = cx.report.sim_time;
         let name = cx
             .net
@@ -99,7 +99,7 @@ impl ExpectKind for CanExpect {
             .find(|b| b.name == self.bus)
             .and_then(|b| b.ports.iter().find(|p| p.name == name))
         else {
-            return (false, end, format!("{name} is not on the {} bus", self.bus));
+            return Judgement::fail(end, format!("{name} is not on the {} bus", self.bus));
         };
         let state = self.state.unwrap_or(CanStateName::BusOff);
         let n = match state {
@@ -129,9 +129,9 @@ impl ExpectKind for CanExpect {
             why.push(format!("expected {} at the end", s.state().name()));
         }
         if why.is_empty() {
-            (true, end, seen)
+            Judgement::pass(end, seen)
         } else {
-            (false, end, format!("{seen} ({})", why.join("; ")))
+            Judgement::fail(end, format!("{seen} ({})", why.join("; ")))
         }
     }
 }

@@ -24,9 +24,45 @@ pub enum RealtimeFrom {
     FirstPass(Option<String>),
 }
 
+/// Why a text is not a [`RealtimeFrom`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RealtimeFromError {
+    /// Neither a pass nor a duration. The duration's message is part of this one's, so it
+    /// is not also its `source()`.
+    #[error(
+        "`{text}`: {duration}; expected a simulated time (\"13000s\", \"3h35m\"), \"first pass\" \
+         or \"first pass over STATION\""
+    )]
+    NotATime {
+        /// The text as given.
+        text: String,
+        /// Why it is not a duration.
+        duration: twin_core::duration::DurationError,
+    },
+}
+
+/// Why `realtime_from` names no time of the scenario.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RealtimeStartError {
+    /// A pass with no orbit.
+    #[error("\"first pass\" needs an orbit: [satellite] tle")]
+    NoOrbit,
+    /// A station `[comm] stations` does not have.
+    #[error(transparent)]
+    Station(#[from] crate::comm::StationError),
+    /// No pass (over the station, if one is named) before the end of the run.
+    #[error("no pass over {} within the scenario's duration", .station.as_deref().unwrap_or("any station"))]
+    NoPass {
+        /// The station named, if any.
+        station: Option<String>,
+    },
+}
+
 impl std::str::FromStr for RealtimeFrom {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = RealtimeFromError;
+    fn from_str(s: &str) -> Result<Self, RealtimeFromError> {
         let t = s.trim();
         let lower = t.to_ascii_lowercase();
         if lower == "first pass" {
@@ -38,22 +74,24 @@ impl std::str::FromStr for RealtimeFrom {
         }
         twin_core::duration::parse_duration(t)
             .map(RealtimeFrom::At)
-            .map_err(|e| {
-                format!(
-                    "`{s}`: {e}; expected a simulated time (\"13000s\", \"3h35m\"), \"first pass\" \
-                 or \"first pass over STATION\""
-                )
+            .map_err(|duration| RealtimeFromError::NotATime {
+                text: s.to_owned(),
+                duration,
             })
     }
 }
 
 /// The simulated time `from` names in scenario `s` whose time zero is `epoch_unix_s`.
-pub fn resolve(s: &Scenario, epoch_unix_s: u64, from: &RealtimeFrom) -> Result<SimTime, String> {
+pub fn resolve(
+    s: &Scenario,
+    epoch_unix_s: u64,
+    from: &RealtimeFrom,
+) -> Result<SimTime, RealtimeStartError> {
     match from {
         RealtimeFrom::At(d) => Ok(SimTime::ZERO + *d),
         RealtimeFrom::FirstPass(station) => {
             if s.satellite.tle.is_empty() {
-                return Err("\"first pass\" needs an orbit: [satellite] tle".to_owned());
+                return Err(RealtimeStartError::NoOrbit);
             }
             if let Some(name) = station {
                 crate::comm::check_station(s, name)?;
@@ -61,11 +99,8 @@ pub fn resolve(s: &Scenario, epoch_unix_s: u64, from: &RealtimeFrom) -> Result<S
             crate::comm::station_passes(s, epoch_unix_s, s.duration.0, station.as_deref())
                 .first()
                 .map(|p| SimTime::from_ns(p.rise_ns.max(0) as u64))
-                .ok_or_else(|| {
-                    format!(
-                        "no pass over {} within the scenario's duration",
-                        station.as_deref().unwrap_or("any station")
-                    )
+                .ok_or_else(|| RealtimeStartError::NoPass {
+                    station: station.clone(),
                 })
         }
     }
@@ -83,12 +118,12 @@ pub fn validate(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
         ]
     };
     match text.parse::<RealtimeFrom>() {
-        Err(e) => err(at(), e),
+        Err(e) => err(at(), e.to_string()),
         Ok(from) => {
             let epoch = twin_core::timefmt::parse_utc(&s.start)
                 .map_or(0, |ns| ns.div_euclid(1_000_000_000));
             match resolve(s, epoch.max(0) as u64, &from) {
-                Err(e) => err(at(), e),
+                Err(e) => err(at(), e.to_string()),
                 Ok(t) if t >= SimTime::ZERO + s.duration.0 => err(
                     at(),
                     format!(
@@ -132,11 +167,12 @@ mod tests {
             "first pass over Vilnius".parse::<RealtimeFrom>(),
             Ok(RealtimeFrom::FirstPass(Some("Vilnius".into())))
         );
-        assert!(
-            "soon"
-                .parse::<RealtimeFrom>()
-                .unwrap_err()
-                .contains("first pass over")
+        let e = " soon".parse::<RealtimeFrom>().unwrap_err();
+        assert!(matches!(&e, RealtimeFromError::NotATime { text, .. } if text == " soon"));
+        assert_eq!(
+            e.to_string(),
+            "` soon`: `soon` is not a duration (try 90, 90s, 10m, 2h, 1h 30m); expected a \
+             simulated time (\"13000s\", \"3h35m\"), \"first pass\" or \"first pass over STATION\""
         );
     }
 

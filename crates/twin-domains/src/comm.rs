@@ -11,7 +11,7 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, bounds};
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judgement, bounds};
 use crate::faults::{FaultAction, TimedFault};
 use twin_report::RunReport;
 use twin_scenario::scenario::{Dur, NodeRef, PathStep, Scenario};
@@ -89,8 +89,22 @@ pub fn compile(s: &Scenario) -> nodes_comm::CommConfig {
     cfg
 }
 
+/// Why a station name names none of the scenario's.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum StationError {
+    /// `[comm] stations` has none of the name (any case).
+    #[error("no station `{name}` in [comm] stations ({})", .known.join(", "))]
+    NotListed {
+        /// The name.
+        name: String,
+        /// The scenario's stations.
+        known: Vec<String>,
+    },
+}
+
 /// `Ok` when `[comm] stations` has one named `name` (any case), else the error naming them.
-pub fn check_station(s: &Scenario, name: &str) -> Result<(), String> {
+pub fn check_station(s: &Scenario, name: &str) -> Result<(), StationError> {
     let c = &s.comm;
     if c.stations
         .iter()
@@ -98,11 +112,10 @@ pub fn check_station(s: &Scenario, name: &str) -> Result<(), String> {
     {
         return Ok(());
     }
-    let names: Vec<&str> = c.stations.iter().map(|st| st.name.as_str()).collect();
-    Err(format!(
-        "no station `{name}` in [comm] stations ({})",
-        names.join(", ")
-    ))
+    Err(StationError::NotListed {
+        name: name.to_owned(),
+        known: c.stations.iter().map(|st| st.name.clone()).collect(),
+    })
 }
 
 /// One pass of the scenario's orbit over one of its stations, in simulated time.
@@ -277,7 +290,7 @@ impl ExpectKind for BeaconExpect {
         cx.window(self.from, self.to, err);
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let report = cx.report;
         check_beacons(
             report,
@@ -322,7 +335,7 @@ fn check_beacons(
     (min, max): (Option<u64>, Option<u64>),
     sender: Option<u8>,
     (from, to): (SimTime, SimTime),
-) -> (bool, SimTime, String) {
+) -> Judgement {
     let end = to;
     let beacons: Vec<(SimTime, u8, u32)> = report
         .beacons
@@ -350,11 +363,7 @@ fn check_beacons(
         windows.len()
     );
     if min.is_some_and(|m| n < m) || max.is_some_and(|m| n > m) {
-        return (
-            false,
-            end,
-            format!("{seen} (expected {})", bounds(min, max)),
-        );
+        return Judgement::fail(end, format!("{seen} (expected {})", bounds(min, max)));
     }
     if let Some(gap) = within {
         for &(a, b) in &windows {
@@ -365,8 +374,7 @@ fn check_beacons(
             let mut last = a;
             for &(t, _, _) in beacons.iter().filter(|(t, _, _)| *t >= a && *t <= b) {
                 if t - last > gap {
-                    return (
-                        false,
+                    return Judgement::fail(
                         t,
                         format!(
                             "{seen}; no beacon from {last} to {t} in contact (longer than {gap:?})"
@@ -376,8 +384,7 @@ fn check_beacons(
                 last = t;
             }
             if b - last > gap {
-                return (
-                    false,
+                return Judgement::fail(
                     b,
                     format!(
                         "{seen}; no beacon from {last} to the loss of contact at {b} (longer than {gap:?})"
@@ -396,13 +403,9 @@ fn check_beacons(
                 .any(|(a, b)| t >= a && *t <= *b + std::time::Duration::from_secs(1))
         })
     {
-        return (
-            false,
-            t,
-            format!("{seen}; a beacon arrived out of contact at {t}"),
-        );
+        return Judgement::fail(t, format!("{seen}; a beacon arrived out of contact at {t}"));
     }
-    (true, end, seen)
+    Judgement::pass(end, seen)
 }
 
 #[cfg(test)]

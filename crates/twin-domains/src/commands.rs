@@ -12,7 +12,7 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, Watch, WatchCx};
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judgement, Occurrence, Watch, WatchCx};
 use twin_core::events::{EventKind, Kinds, RunEvent};
 use twin_core::network::NetworkSpec;
 use twin_report::RunReport;
@@ -126,7 +126,7 @@ fn check_endpoints(
                 );
             }
         }
-        Some(Err(e)) => err(p("from"), e),
+        Some(Err(e)) => err(p("from"), e.to_string()),
         Some(Ok(a)) if !(16..=20).contains(&a) => err(
             p("from"),
             format!("commands are sent from a ground station (16-20), not from {a}"),
@@ -140,7 +140,7 @@ fn check_endpoints(
         Some(NodeRef::Addr(_)) => {}
         Some(r @ NodeRef::Name(_)) => {
             if let Err(e) = net.resolve(r) {
-                err(p("to"), e);
+                err(p("to"), e.to_string());
             }
         }
         None if c.command.is_none() => err(
@@ -171,7 +171,7 @@ fn check_typed(
         );
     }
     match twin_core::icd::find_command(name) {
-        Err(e) => err(p("command"), e),
+        Err(e) => err(p("command"), e.to_string()),
         Ok((node, _, cmd)) => {
             let to = c.to.as_ref().and_then(|r| match r {
                 NodeRef::Addr(a) => Some(*a),
@@ -262,7 +262,7 @@ fn check_request_fields(
     if let Some(d) = &c.data
         && let Err(e) = parse_hex(d)
     {
-        err(p("data"), e);
+        err(p("data"), e.to_string());
     }
     if c.size.is_some() && c.request != Some(RequestKind::Ping) {
         err(p("size"), "only a `ping` takes `size`".into());
@@ -364,21 +364,61 @@ pub struct ReplyPattern {
     pub open_end: bool,
 }
 
+/// Why a text is not hex bytes (or a reply pattern); each names the text.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum HexBytesError {
+    /// An odd number of digits.
+    #[error("`{text}` is not hex bytes: an odd number of digits")]
+    OddDigits {
+        /// The text.
+        text: String,
+    },
+    /// A character beyond ASCII.
+    #[error("`{text}` is not hex bytes: `{found}`")]
+    NotAscii {
+        /// The text.
+        text: String,
+        /// The first such character.
+        found: char,
+    },
+    /// Two characters that are neither a hex byte nor `??`.
+    #[error("`{text}` is not hex bytes: `{pair}` (use ?? for any byte)")]
+    NotAByte {
+        /// The text.
+        text: String,
+        /// The pair.
+        pair: String,
+    },
+    /// Not hex ([`parse_hex`]). The decoder's message is part of this one's, so it is not
+    /// also its `source()`.
+    #[error("`{text}` is not hex bytes: {hex}")]
+    NotHex {
+        /// The text.
+        text: String,
+        /// The decoder's error.
+        hex: hex::FromHexError,
+    },
+}
+
 impl ReplyPattern {
     /// Parse `"01 ?? ff ..."`.
-    pub fn parse(s: &str) -> Result<Self, String> {
+    pub fn parse(s: &str) -> Result<Self, HexBytesError> {
         let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
         let (body, open_end) = match compact.strip_suffix("...") {
             Some(b) => (b.to_owned(), true),
             None => (compact, false),
         };
         if body.len() % 2 != 0 {
-            return Err(format!("`{s}` is not hex bytes: an odd number of digits"));
+            return Err(HexBytesError::OddDigits { text: s.to_owned() });
         }
         // By bytes, not by string slices: a character of several bytes is not hex, and a
         // slice through it would panic.
-        if let Some(c) = body.chars().find(|c| !c.is_ascii()) {
-            return Err(format!("`{s}` is not hex bytes: `{c}`"));
+        if let Some(found) = body.chars().find(|c| !c.is_ascii()) {
+            return Err(HexBytesError::NotAscii {
+                text: s.to_owned(),
+                found,
+            });
         }
         let bytes = body
             .as_bytes()
@@ -390,9 +430,9 @@ impl ReplyPattern {
                     .filter(|p| p.bytes().all(|c| c.is_ascii_hexdigit()))
                     .and_then(|p| u8::from_str_radix(p, 16).ok())
                     .map(Some)
-                    .ok_or_else(|| {
-                        let pair = String::from_utf8_lossy(pair);
-                        format!("`{s}` is not hex bytes: `{pair}` (use ?? for any byte)")
+                    .ok_or_else(|| HexBytesError::NotAByte {
+                        text: s.to_owned(),
+                        pair: String::from_utf8_lossy(pair).into_owned(),
                     }),
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -431,9 +471,12 @@ impl std::fmt::Display for ReplyPattern {
 }
 
 /// Parse hex bytes, with optional spaces (`"06 01 00"` or `"060100"`).
-pub fn parse_hex(s: &str) -> Result<Vec<u8>, String> {
+pub fn parse_hex(s: &str) -> Result<Vec<u8>, HexBytesError> {
     let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
-    hex::decode(&compact).map_err(|e| format!("`{s}` is not hex bytes: {e}"))
+    hex::decode(&compact).map_err(|hex| HexBytesError::NotHex {
+        text: s.to_owned(),
+        hex,
+    })
 }
 
 /// `reply`: every (or any) occurrence of a command is answered, within `within`, with
@@ -495,11 +538,11 @@ impl ExpectKind for ReplyExpect {
         if let Some(d) = &self.data
             && let Err(e) = ReplyPattern::parse(d)
         {
-            err("data", e);
+            err("data", e.to_string());
         }
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         judge(cx.report, &self.command, self.occurrence, |o, t| {
             reply_problem(o, t, self)
         })
@@ -523,7 +566,7 @@ impl ExpectKind for NoReplyExpect {
         known_command(&self.command, cx, err);
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         judge(cx.report, &self.command, self.occurrence, no_reply_problem)
     }
 
@@ -583,35 +626,31 @@ impl OccurrenceTally {
     }
 
     /// Every (or any) occurrence of `command` held; `end` is the run's end.
-    fn verdict(&self, command: &str, occurrence: Option<Occurrence>, end: SimTime) -> Judged {
+    fn verdict(&self, command: &str, occurrence: Option<Occurrence>, end: SimTime) -> Judgement {
         let n = self.n;
         if n == 0 {
-            return (
-                false,
+            return Judgement::fail(
                 end,
                 format!("command `{command}` was never sent before the end of the run"),
             );
         }
         match occurrence.unwrap_or(Occurrence::Every) {
             Occurrence::Every => match &self.first {
-                Some(((t, _), p)) => (
-                    false,
+                Some(((t, _), p)) => Judgement::fail(
                     *t,
                     format!(
                         "{} of {n} occurrences failed; first, sent at {t}: {p}",
                         self.problems
                     ),
                 ),
-                None => (true, end, format!("{n} of {n} occurrences held")),
+                None => Judgement::pass(end, format!("{n} of {n} occurrences held")),
             },
             Occurrence::Any => match &self.last {
-                Some(((t, _), p)) if self.problems == n => (
-                    false,
+                Some(((t, _), p)) if self.problems == n => Judgement::fail(
                     *t,
                     format!("none of {n} occurrences held; last, sent at {t}: {p}"),
                 ),
-                _ => (
-                    true,
+                _ => Judgement::pass(
                     end,
                     format!("{} of {n} occurrences held", n - self.problems),
                 ),
@@ -626,7 +665,7 @@ fn judge(
     command: &str,
     occurrence: Option<Occurrence>,
     problem: impl Fn(&Outcome, Duration) -> Option<String>,
-) -> Judged {
+) -> Judgement {
     let mut tally = OccurrenceTally::default();
     for (i, r) in report.results.iter().enumerate() {
         if r.request.label == command {
@@ -716,7 +755,7 @@ impl Watch for CommandWatch {
         }
     }
 
-    fn judge(&self, cx: &CheckCx<'_>) -> Judged {
+    fn judge(&self, cx: &CheckCx<'_>) -> Judgement {
         let mut tally = self.tally.clone();
         for (i, (&(sent, _), &timeout)) in self.waiting.iter().enumerate() {
             let p = (self.problem)(&Outcome::Unfinished, timeout);
@@ -782,7 +821,7 @@ fn unfinished(timeout: Duration) -> String {
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
-    use super::ReplyPattern;
+    use super::{HexBytesError, ReplyPattern, parse_hex};
 
     #[test]
     fn a_reply_pattern_takes_any_bytes_and_an_open_end() {
@@ -797,6 +836,40 @@ mod tests {
         for bad in ["0", "zz", "01 0?", "... 01", "+f"] {
             assert!(ReplyPattern::parse(bad).is_err(), "{bad}");
         }
+        let e = ReplyPattern::parse("01 0?").unwrap_err();
+        assert_eq!(
+            e,
+            HexBytesError::NotAByte {
+                text: "01 0?".into(),
+                pair: "0?".into()
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "`01 0?` is not hex bytes: `0?` (use ?? for any byte)"
+        );
+        assert_eq!(
+            ReplyPattern::parse("0").unwrap_err().to_string(),
+            "`0` is not hex bytes: an odd number of digits"
+        );
+        assert_eq!(
+            ReplyPattern::parse("\u{45d}").unwrap_err(),
+            HexBytesError::NotAscii {
+                text: "\u{45d}".into(),
+                found: '\u{45d}'
+            }
+        );
+    }
+
+    #[test]
+    fn hex_bytes_take_spaces_and_name_the_text_when_wrong() {
+        assert_eq!(parse_hex("06 01 00").unwrap(), vec![6, 1, 0]);
+        let e = parse_hex("06 0g").unwrap_err();
+        assert!(matches!(&e, HexBytesError::NotHex { text, .. } if text == "06 0g"));
+        assert_eq!(
+            e.to_string(),
+            "`06 0g` is not hex bytes: Invalid character 'g' at position 3"
+        );
     }
 
     /// A character of more than one byte is an error, not a panic (the fuzzer's
@@ -805,7 +878,7 @@ mod tests {
     fn a_reply_pattern_with_a_multibyte_character_is_an_error() {
         for bad in ["f\u{45d}0506b9", "\u{45d}", "0\u{e9}", "01 \u{1f600} ..."] {
             let e = ReplyPattern::parse(bad).unwrap_err();
-            assert!(e.contains("not hex bytes"), "{bad}: {e}");
+            assert!(e.to_string().contains("not hex bytes"), "{bad}: {e}");
         }
     }
 }

@@ -3,7 +3,7 @@
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, bounds};
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Grade, Judgement, bounds};
 use twin_report::RunReport;
 use twin_scenario::scenario::NodeRef;
 
@@ -82,7 +82,7 @@ impl ExpectKind for CounterExpect {
             }
         } else {
             if let Err(e) = cx.net.resolve(&self.target) {
-                err("target", e);
+                err("target", e.to_string());
             }
             match c.strip_prefix("drops.") {
                 Some(reason) if csp::drop::DropReason::from_name(reason).is_none() => {
@@ -122,7 +122,7 @@ impl ExpectKind for CounterExpect {
         }
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let target = match &self.target {
             NodeRef::Name(n) if is_medium(&self.target) => CounterTarget::Medium(n.clone()),
             r => CounterTarget::Node(cx.net.resolve(r).unwrap_or(0)),
@@ -130,16 +130,12 @@ impl ExpectKind for CounterExpect {
         let counter = &self.counter;
         let t = cx.report.sim_time;
         match counter_value(cx.report, &target, counter) {
-            None => (
-                false,
-                t,
-                format!("counter `{counter}` not found on {target:?}"),
-            ),
+            None => Judgement::fail(t, format!("counter `{counter}` not found on {target:?}")),
             Some(v) => {
                 let low = self.min.is_some_and(|m| v < m);
                 let high = self.max.is_some_and(|m| v > m);
-                (
-                    !(low || high),
+                Judgement::new(
+                    Grade::of(!(low || high)),
                     t,
                     format!("{counter} = {v} (expected {})", bounds(self.min, self.max)),
                 )

@@ -8,7 +8,9 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Extremes, Judged, Watch, WatchCx, When};
+use crate::expectations::{
+    CheckCx, ExpectCx, ExpectKind, Extremes, Judgement, Watch, WatchCx, When,
+};
 use twin_core::events::RunEvent;
 use twin_scenario::scenario::{Dur, PathStep, Scenario};
 
@@ -189,7 +191,7 @@ impl ExpectKind for PowerExpect {
         cx.window(self.from, self.to, err);
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let mut tally = PowerTally::default();
         for s in &cx.report.power {
             self.tally(&mut tally, s);
@@ -245,7 +247,7 @@ impl Watch for PowerWatch {
         }
     }
 
-    fn judge(&self, cx: &CheckCx<'_>) -> Judged {
+    fn judge(&self, cx: &CheckCx<'_>) -> Judgement {
         self.expect.judge(&self.tally, cx.report.sim_time)
     }
 }
@@ -290,7 +292,7 @@ impl PowerExpect {
     }
 
     /// The verdict on the samples taken in, the run having ended at `end`.
-    fn judge(&self, k: &PowerTally, end: SimTime) -> Judged {
+    fn judge(&self, k: &PowerTally, end: SimTime) -> Judgement {
         let (statistic, when) = (
             self.statistic.unwrap_or(Statistic::Every),
             self.when.unwrap_or(When::Always),
@@ -300,8 +302,7 @@ impl PowerExpect {
         let to = self.to.map_or(end, |d| SimTime::ZERO + d.0);
         let quantity = &self.quantity;
         if k.n == 0 {
-            return (
-                false,
+            return Judgement::fail(
                 to,
                 format!("no EPS sample ({when:?}) between {from} and {to} (is the EPS running?)"),
             );
@@ -320,12 +321,11 @@ impl PowerExpect {
         };
         match statistic {
             Statistic::Every => match k.first_bad {
-                Some((t, v)) => (
-                    false,
+                Some((t, v)) => Judgement::fail(
                     t,
                     format!("{range}; first at {t}: {quantity} = {v:.4} (expected {bounds})"),
                 ),
-                None => (true, to, range),
+                None => Judgement::pass(to, range),
             },
             Statistic::Mean | Statistic::Min | Statistic::Max => {
                 let (name, v) = match statistic {
@@ -333,16 +333,11 @@ impl PowerExpect {
                     Statistic::Min => ("min", lo),
                     _ => ("max", hi),
                 };
-                let held = ok(v);
-                (
-                    held,
-                    to,
-                    if held {
-                        range
-                    } else {
-                        format!("{range} ({name} {v:.4}, expected {bounds})")
-                    },
-                )
+                if ok(v) {
+                    Judgement::pass(to, range)
+                } else {
+                    Judgement::fail(to, format!("{range} ({name} {v:.4}, expected {bounds})"))
+                }
             }
         }
     }

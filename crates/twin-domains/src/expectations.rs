@@ -43,9 +43,59 @@ pub enum VerdictKind {
     Invariant(twin_scenario::invariants::InvariantName),
 }
 
+/// Whether a check held.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Grade {
+    /// It held.
+    Pass,
+    /// It did not.
+    Fail,
+}
+
+impl Grade {
+    /// `Pass` if `held`, else `Fail`.
+    pub fn of(held: bool) -> Grade {
+        if held { Grade::Pass } else { Grade::Fail }
+    }
+}
+
 /// What a check found: whether it held, when (the failing occurrence, or the end), and what
 /// was observed.
-pub type Judged = (bool, SimTime, String);
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Judgement {
+    /// Whether it held.
+    pub grade: Grade,
+    /// The simulated time it refers to: the failing occurrence, or the end of the run.
+    pub at: SimTime,
+    /// What was observed, for example `reply after 1.204 s (limit 1.000 s)`.
+    pub detail: String,
+}
+
+impl Judgement {
+    /// A check of grade `grade` at `at` that observed `detail`.
+    pub fn new(grade: Grade, at: SimTime, detail: impl Into<String>) -> Self {
+        Judgement {
+            grade,
+            at,
+            detail: detail.into(),
+        }
+    }
+
+    /// A check that held at `at`.
+    pub fn pass(at: SimTime, detail: impl Into<String>) -> Self {
+        Judgement::new(Grade::Pass, at, detail)
+    }
+
+    /// A check that failed at `at`.
+    pub fn fail(at: SimTime, detail: impl Into<String>) -> Self {
+        Judgement::new(Grade::Fail, at, detail)
+    }
+
+    /// Whether it held.
+    pub fn passed(&self) -> bool {
+        self.grade == Grade::Pass
+    }
+}
 
 /// The lowest and highest of the values a [`Watch`] (or a check) took in so far: infinite
 /// before the first.
@@ -162,7 +212,7 @@ pub trait Watch: Send {
         twin_core::events::Kinds::ALL
     }
     /// The verdict, once the run has ended.
-    fn judge(&self, cx: &CheckCx<'_>) -> Judged;
+    fn judge(&self, cx: &CheckCx<'_>) -> Judgement;
 }
 
 /// A kind of expectation (see the module doc).
@@ -176,7 +226,7 @@ pub trait ExpectKind:
     /// Check its meaning in the scenario; `err(field, message)`.
     fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String));
     /// Judge the run.
-    fn check(&self, cx: &CheckCx<'_>) -> Judged;
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement;
     /// Judge the run as it goes instead ([`Watch`]; the same verdict as `check` on a
     /// report that kept everything). `None`: `check` judges it from the report.
     fn watch(&self, _cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
@@ -187,7 +237,7 @@ pub trait ExpectKind:
 /// An expectation of any kind.
 pub(crate) trait AnyExpect: std::fmt::Debug + Send + Sync {
     fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String));
-    fn check(&self, cx: &CheckCx<'_>) -> Judged;
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement;
     fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>>;
 }
 
@@ -195,7 +245,7 @@ impl<K: ExpectKind> AnyExpect for K {
     fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
         ExpectKind::validate(self, cx, err)
     }
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         ExpectKind::check(self, cx)
     }
     fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
@@ -250,13 +300,13 @@ impl Expectation {
         self.kind.watch(cx)
     }
 
-    fn verdict(&self, (passed, t, observed): Judged) -> Verdict {
+    fn verdict(&self, j: Judgement) -> Verdict {
         Verdict {
             kind: VerdictKind::Expectation,
             name: self.name.clone(),
-            passed,
-            t,
-            observed,
+            passed: j.passed(),
+            t: j.at,
+            observed: j.detail,
         }
     }
 }

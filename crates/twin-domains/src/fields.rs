@@ -13,7 +13,7 @@ use csp::icd::{Field, Value};
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Watch, WatchCx};
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Grade, Judgement, Watch, WatchCx};
 use twin_core::events::RunEvent;
 use twin_core::icd::{Direction, IcdMap};
 use twin_core::network::NetworkSpec;
@@ -101,8 +101,8 @@ impl FieldExpect {
                 ),
             ));
         };
-        let (n, _, c) =
-            twin_core::icd::find_command(&format!("{node}.{cmd}")).map_err(|e| ("field", e))?;
+        let (n, _, c) = twin_core::icd::find_command(&format!("{node}.{cmd}"))
+            .map_err(|e| ("field", e.to_string()))?;
         let leaves = c
             .reply
             .parts()
@@ -232,13 +232,12 @@ impl ExpectKind for FieldExpect {
         cx.window(self.from, self.to, err);
     }
 
-    fn check(&self, _cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, _cx: &CheckCx<'_>) -> Judgement {
         // The replies are read from the run's traffic as it goes (`watch`); a report
         // keeps no packets to judge from afterwards.
-        (
-            false,
+        Judgement::fail(
             SimTime::ZERO,
-            "a `field` expectation is judged while the run goes".into(),
+            "a `field` expectation is judged while the run goes",
         )
     }
 
@@ -348,14 +347,13 @@ impl Watch for FieldWatch {
         }
     }
 
-    fn judge(&self, cx: &CheckCx<'_>) -> Judged {
+    fn judge(&self, cx: &CheckCx<'_>) -> Judgement {
         let (e, t, k) = (&self.expect, &self.target, &self.tally);
         let name = format!("{}.{}.{}", t.node, t.command, t.path);
         let wanted = self.expect.wanted(t);
         let end = cx.report.sim_time;
         if k.n == 0 {
-            return (
-                false,
+            return Judgement::fail(
                 end,
                 format!(
                     "no successful {}.{} reply {}",
@@ -375,9 +373,8 @@ impl Watch for FieldWatch {
         };
         match e.when {
             FieldWhen::Always => match k.first_failed {
-                None => (true, end, format!("{name} {wanted} in all {seen}")),
-                Some((at, x)) => (
-                    false,
+                None => Judgement::pass(end, format!("{name} {wanted} in all {seen}")),
+                Some((at, x)) => Judgement::fail(
                     at,
                     format!(
                         "{name} = {} at {at}, not {wanted} ({seen})",
@@ -386,17 +383,15 @@ impl Watch for FieldWatch {
                 ),
             },
             FieldWhen::Eventually => match k.first_held {
-                Some((at, x)) => (
-                    true,
-                    at,
-                    format!("{name} = {} at {at} ({seen})", show(t.leaf, x)),
-                ),
-                None => (false, end, format!("{name} never {wanted} ({seen})")),
+                Some((at, x)) => {
+                    Judgement::pass(at, format!("{name} = {} at {at} ({seen})", show(t.leaf, x)))
+                }
+                None => Judgement::fail(end, format!("{name} never {wanted} ({seen})")),
             },
             FieldWhen::At => {
                 let (at, x) = k.last.unwrap_or((end, f64::NAN));
-                (
-                    e.holds(t, x),
+                Judgement::new(
+                    Grade::of(e.holds(t, x)),
                     at,
                     format!(
                         "{name} = {} in the latest reply, at {at} (wanted {wanted})",

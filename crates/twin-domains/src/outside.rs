@@ -308,6 +308,34 @@ fn validate_uart(
     }
 }
 
+/// Why a command line link cannot take a twin node's place.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CliReplaceError {
+    /// A COMM: the twin's radio.
+    #[error(
+        "--kiss-addr {addr} is {node_name}'s address: a COMM carries the twin's UHF radio: it \
+         cannot be replaced by an outside program"
+    )]
+    Comm {
+        /// The address.
+        addr: u8,
+        /// The node's name.
+        node_name: String,
+    },
+    /// The PC: on both CAN buses.
+    #[error(
+        "--kiss-addr {addr} is {node_name}'s address: the PC sits on both CAN buses and a KISS \
+         link joins one segment: replace it with two socketcan links, one per bus"
+    )]
+    Pc {
+        /// The address.
+        addr: u8,
+        /// The node's name.
+        node_name: String,
+    },
+}
+
 /// The command line's links (`--kiss-addr` after `--kiss-listen` and the others) take the
 /// place of the twin's nodes at their addresses, as a scenario link's `replaces` does:
 /// `--kiss-addr 12` is the user's payload 12, so the simulated PL12 is not started (before,
@@ -317,25 +345,20 @@ fn validate_uart(
 pub fn cli_replaces<'a>(
     net: &NetworkSpec,
     links: impl IntoIterator<Item = &'a KissLinkConfig>,
-) -> Result<Vec<(u8, String)>, String> {
+) -> Result<Vec<(u8, String)>, CliReplaceError> {
     let mut out: Vec<(u8, String)> = Vec::new();
     for cfg in links {
         for &a in &cfg.addrs {
             let Some(node) = net.nodes.iter().find(|n| n.addr == a) else {
                 continue;
             };
-            let why = match node.role {
+            let (addr, node_name) = (a, node.name.clone());
+            match node.role {
                 Role::CommPrimary | Role::CommSecondary => {
-                    "a COMM carries the twin's UHF radio: it cannot be replaced by an outside program"
+                    return Err(CliReplaceError::Comm { addr, node_name });
                 }
-                Role::Pc => {
-                    "the PC sits on both CAN buses and a KISS link joins one segment: replace it \
-                     with two socketcan links, one per bus"
-                }
-                _ => "",
-            };
-            if !why.is_empty() {
-                return Err(format!("--kiss-addr {a} is {}'s address: {why}", node.name));
+                Role::Pc => return Err(CliReplaceError::Pc { addr, node_name }),
+                _ => {}
             }
             if !out.iter().any(|(b, _)| *b == a) {
                 out.push((a, node.name.clone()));
@@ -506,6 +529,16 @@ mod tests {
         for bad in ["FC", "=1.2.3.4:5", "FC=", "FC=localhost"] {
             assert!(UartLink::parse_arg(bad).is_err(), "{bad}");
         }
+        assert_eq!(
+            UartLink::parse_arg("FC").unwrap_err().to_string(),
+            "`FC`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)"
+        );
+        assert_eq!(
+            UartLink::parse_arg("FC=localhost"),
+            Err(twin_runtime::LinkArgError::NotAddrOrPath {
+                at: "localhost".into()
+            })
+        );
     }
 
     #[test]
@@ -521,12 +554,23 @@ mod tests {
             replaces(&[link(&[17]), link(&[12])]).unwrap(),
             vec![(12, "PL12".to_owned())]
         );
-        assert!(
-            replaces(&[link(&[6])])
-                .unwrap_err()
-                .contains("both CAN buses")
+        assert_eq!(
+            replaces(&[link(&[6])]).unwrap_err().to_string(),
+            "--kiss-addr 6 is PC's address: the PC sits on both CAN buses and a KISS link joins \
+             one segment: replace it with two socketcan links, one per bus"
         );
-        assert!(replaces(&[link(&[1])]).unwrap_err().contains("UHF radio"));
+        assert_eq!(
+            replaces(&[link(&[1])]).unwrap_err(),
+            CliReplaceError::Comm {
+                addr: 1,
+                node_name: "COMM1".into()
+            }
+        );
+        assert_eq!(
+            replaces(&[link(&[2])]).unwrap_err().to_string(),
+            "--kiss-addr 2 is COMM2's address: a COMM carries the twin's UHF radio: it cannot be \
+             replaced by an outside program"
+        );
         // Two connections of one link (a replay's) name it once.
         assert_eq!(replaces(&[link(&[12]), link(&[12])]).unwrap().len(), 1);
     }

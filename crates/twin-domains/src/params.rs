@@ -28,16 +28,46 @@ pub fn defs_for(role: Role) -> &'static [ParamDef] {
     }
 }
 
+/// Why a scenario's value does not fit its parameter.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ParamValueError {
+    /// A number for a bool.
+    #[error("{name} is a bool: true or false")]
+    NotBool {
+        /// The parameter.
+        name: &'static str,
+    },
+    /// A bool for a number.
+    #[error("{name} is a number, not a bool")]
+    NotNumber {
+        /// The parameter.
+        name: &'static str,
+    },
+    /// A fraction for an integer.
+    #[error("{name} is an integer, not {value}")]
+    NotInteger {
+        /// The parameter.
+        name: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// Outside the table's range.
+    #[error(transparent)]
+    Range(#[from] csp::params::ParamError),
+}
+
 /// The value `v` gives parameter `d`, or why not.
-fn value(d: &ParamDef, v: ParamValue) -> Result<f64, String> {
+fn value(d: &ParamDef, v: ParamValue) -> Result<f64, ParamValueError> {
+    let name = d.name;
     let x = match (d.ty, v) {
         (ParamType::Bool, ParamValue::Bool(b)) => f64::from(u8::from(b)),
-        (ParamType::Bool, _) => return Err(format!("{} is a bool: true or false", d.name)),
-        (_, ParamValue::Bool(_)) => return Err(format!("{} is a number, not a bool", d.name)),
+        (ParamType::Bool, _) => return Err(ParamValueError::NotBool { name }),
+        (_, ParamValue::Bool(_)) => return Err(ParamValueError::NotNumber { name }),
         (ParamType::F32, ParamValue::Float(f)) => f,
         (_, ParamValue::Int(i)) => i as f64,
         (_, ParamValue::Float(f)) if f.fract() == 0.0 => f,
-        (_, ParamValue::Float(f)) => return Err(format!("{} is an integer, not {f}", d.name)),
+        (_, ParamValue::Float(value)) => return Err(ParamValueError::NotInteger { name, value }),
     };
     d.check(x)?;
     Ok(x)
@@ -65,7 +95,7 @@ fn resolve(defs: &'static [ParamDef], params: &BTreeMap<String, ParamValue>) -> 
             }
             Some(d) => match value(d, *v) {
                 Ok(x) => ok.push((d.id, x)),
-                Err(e) => errs.push((name.clone(), e)),
+                Err(e) => errs.push((name.clone(), e.to_string())),
             },
         }
     }
@@ -107,6 +137,7 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
+    use super::{ParamValue, ParamValueError, value};
 
     fn errors(nodes: &str) -> String {
         let text = format!("name = \"t\"\nduration = \"1m\"\n{nodes}");
@@ -160,5 +191,22 @@ mod tests {
             let e = errors(&format!("{nodes}\n"));
             assert!(e.contains(key) && e.contains(says), "{nodes}: {e}");
         }
+    }
+
+    #[test]
+    fn a_value_that_does_not_fit_says_why_by_kind() {
+        let def = |name| csp::params::find(nodes_fc::config::PARAMS, name).unwrap();
+        let e = value(def("store_period"), ParamValue::Float(1.5)).unwrap_err();
+        assert!(matches!(e, ParamValueError::NotInteger { value, .. } if value == 1.5));
+        assert_eq!(e.to_string(), "store_period is an integer, not 1.5");
+        let e = value(def("use_gyro"), ParamValue::Int(1)).unwrap_err();
+        assert_eq!(e.to_string(), "use_gyro is a bool: true or false");
+        let e = value(def("bdot_gain"), ParamValue::Float(3.0)).unwrap_err();
+        assert!(matches!(e, ParamValueError::Range(_)), "{e:?}");
+        assert!(e.to_string().starts_with("bdot_gain: "), "{e}");
+        assert_eq!(
+            value(def("bdot_gain"), ParamValue::Float(0.5)).unwrap(),
+            0.5
+        );
     }
 }

@@ -36,7 +36,7 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
     };
     for (i, r) in s.rules.time_sync_to.iter().flatten().enumerate() {
         match net.resolve(r) {
-            Err(e) => err(path(i), e),
+            Err(e) => err(path(i), e.to_string()),
             Ok(platform::addr::FC) => err(path(i), "the FC's own RTC is the source".into()),
             Ok(_) => {}
         }

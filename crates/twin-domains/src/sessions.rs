@@ -13,22 +13,81 @@ use csp::SimTime;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Judged, Occurrence, bounds};
+use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Grade, Judgement, Occurrence, bounds};
 use twin_scenario::scenario::{PathStep, Scenario};
 
 pub use twin_scenario::pc::*;
 
+/// Why a text is not a payload behaviour; each names the text (trimmed).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BehaviourError {
+    /// A behaviour that takes an argument, without it.
+    #[error("behaviour `{text}`: {keyword} needs a {what}, as {keyword}:<{what}>")]
+    NeedsArgument {
+        /// The text.
+        text: String,
+        /// The behaviour's name, in lower case.
+        keyword: String,
+        /// What it takes (`duration`, `count`).
+        what: &'static str,
+    },
+    /// `slow:` with no duration. The duration's message is part of this one's, so it is
+    /// not also its `source()`.
+    #[error("behaviour `{text}`: {duration}")]
+    NotADuration {
+        /// The text.
+        text: String,
+        /// Why the argument is not a duration.
+        duration: twin_core::duration::DurationError,
+    },
+    /// `silent-for:` with no whole number.
+    #[error("behaviour `{text}`: the count must be a whole number")]
+    CountNotWhole {
+        /// The text.
+        text: String,
+    },
+    /// `oversize:` with no count of 1-255.
+    #[error("behaviour `{text}`: the extra bytes must be 1-255")]
+    ExtraBytes {
+        /// The text.
+        text: String,
+    },
+    /// No such behaviour.
+    #[error(
+        "unknown behaviour `{text}`: expected normal, no-ack, wrong-echo, slow:<duration>, \
+         silent-for:<polls>, silent, oversize:<bytes>, garbage or zero-length"
+    )]
+    Unknown {
+        /// The text.
+        text: String,
+    },
+    /// An argument to a behaviour that takes none.
+    #[error("behaviour `{text}`: {keyword} takes no argument")]
+    TakesNoArgument {
+        /// The text.
+        text: String,
+        /// The behaviour's name, in lower case.
+        keyword: String,
+    },
+}
+
 /// Parse a payload behaviour name (see [`PayloadSpec::behaviour`]).
-pub fn parse_behaviour(s: &str) -> Result<nodes_payload::Behaviour, String> {
+pub fn parse_behaviour(s: &str) -> Result<nodes_payload::Behaviour, BehaviourError> {
     use nodes_payload::Behaviour as B;
     let t = s.trim();
+    let text = || t.to_owned();
     let (kw, arg) = match t.split_once(':') {
         Some((k, a)) => (k.trim().to_ascii_lowercase(), Some(a.trim())),
         None => (t.to_ascii_lowercase(), None),
     };
-    let need = |what: &str| {
+    let need = |what: &'static str| {
         arg.filter(|a| !a.is_empty())
-            .ok_or_else(|| format!("behaviour `{t}`: {kw} needs a {what}, as {kw}:<{what}>"))
+            .ok_or_else(|| BehaviourError::NeedsArgument {
+                text: text(),
+                keyword: kw.clone(),
+                what,
+            })
     };
     let b = match kw.as_str() {
         "normal" => B::Normal,
@@ -38,30 +97,32 @@ pub fn parse_behaviour(s: &str) -> Result<nodes_payload::Behaviour, String> {
         "garbage" => B::Garbage,
         "zero-length" => B::ZeroLength,
         "slow" => B::Slow {
-            extra: twin_core::duration::parse_duration(need("duration")?)
-                .map_err(|e| format!("behaviour `{t}`: {e}"))?,
+            extra: twin_core::duration::parse_duration(need("duration")?).map_err(|duration| {
+                BehaviourError::NotADuration {
+                    text: text(),
+                    duration,
+                }
+            })?,
         },
         "silent-for" => B::SilentFor {
             polls: need("count")?
                 .parse()
-                .map_err(|_| format!("behaviour `{t}`: the count must be a whole number"))?,
+                .map_err(|_| BehaviourError::CountNotWhole { text: text() })?,
         },
         "oversize" => B::Oversize {
             extra_bytes: need("count")?
                 .parse()
                 .ok()
                 .filter(|n: &u8| *n > 0)
-                .ok_or_else(|| format!("behaviour `{t}`: the extra bytes must be 1-255"))?,
+                .ok_or_else(|| BehaviourError::ExtraBytes { text: text() })?,
         },
-        _ => {
-            return Err(format!(
-                "unknown behaviour `{t}`: expected normal, no-ack, wrong-echo, slow:<duration>, \
-                 silent-for:<polls>, silent, oversize:<bytes>, garbage or zero-length"
-            ));
-        }
+        _ => return Err(BehaviourError::Unknown { text: text() }),
     };
     if arg.is_some() && !matches!(kw.as_str(), "slow" | "silent-for" | "oversize") {
-        return Err(format!("behaviour `{t}`: {kw} takes no argument"));
+        return Err(BehaviourError::TakesNoArgument {
+            text: text(),
+            keyword: kw,
+        });
     }
     Ok(b)
 }
@@ -202,7 +263,7 @@ fn validate_payloads(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
         if let Some(b) = &p.behaviour
             && let Err(e) = parse_behaviour(b)
         {
-            err(q("behaviour"), e);
+            err(q("behaviour"), e.to_string());
         }
         for (k, c) in p.changes.iter().enumerate() {
             if let Err(e) = parse_behaviour(&c.behaviour) {
@@ -214,7 +275,7 @@ fn validate_payloads(s: &Scenario, err: &mut dyn FnMut(Vec<PathStep>, String)) {
                         PathStep::Index(k),
                         key("behaviour"),
                     ],
-                    e,
+                    e.to_string(),
                 );
             }
         }
@@ -461,7 +522,7 @@ impl ExpectKind for SessionExpect {
         min_max(self.min, self.max, err);
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let report = cx.report;
         let r = &report.sessions;
         let end = report.sim_time;
@@ -478,8 +539,7 @@ impl ExpectKind for SessionExpect {
             .collect();
         if ended.is_empty() {
             let started = r.runs.iter().any(|x| x.session == *session);
-            return (
-                false,
+            return Judgement::fail(
                 end,
                 format!(
                     "session {session} never ended{}",
@@ -526,20 +586,12 @@ impl ExpectKind for SessionExpect {
         let held = n - bad.len();
         match occurrence {
             Occurrence::Every => match bad.first() {
-                Some(t) => (false, *t, format!("{held} of {n} runs held: {runs}")),
-                None => (
-                    true,
-                    ended[n - 1].0,
-                    format!("{n} of {n} runs held: {runs}"),
-                ),
+                Some(t) => Judgement::fail(*t, format!("{held} of {n} runs held: {runs}")),
+                None => Judgement::pass(ended[n - 1].0, format!("{n} of {n} runs held: {runs}")),
             },
             Occurrence::Any => match ended.iter().find(|e| problem(e).is_none()) {
-                Some(e) => (true, e.0, format!("{held} of {n} runs held: {runs}")),
-                None => (
-                    false,
-                    ended[n - 1].0,
-                    format!("none of {n} runs held: {runs}"),
-                ),
+                Some(e) => Judgement::pass(e.0, format!("{held} of {n} runs held: {runs}")),
+                None => Judgement::fail(ended[n - 1].0, format!("none of {n} runs held: {runs}")),
             },
         }
     }
@@ -561,7 +613,7 @@ impl ExpectKind for DownlinkExpect {
         min_max(self.min, self.max, err);
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let report = cx.report;
         let r = &report.sessions;
         let end = report.sim_time;
@@ -655,9 +707,9 @@ impl ExpectKind for DownlinkExpect {
             }
         }
         if why.is_empty() {
-            (true, end, seen)
+            Judgement::pass(end, seen)
         } else {
-            (false, end, format!("{seen} ({})", why.join("; ")))
+            Judgement::fail(end, format!("{seen} ({})", why.join("; ")))
         }
     }
 }
@@ -679,18 +731,14 @@ impl ExpectKind for AccountingExpect {
         }
     }
 
-    fn check(&self, cx: &CheckCx<'_>) -> Judged {
+    fn check(&self, cx: &CheckCx<'_>) -> Judgement {
         let report = cx.report;
         let r = &report.sessions;
         let end = report.sim_time;
         let (payload, max) = (&self.payload, &self.max);
 
         let Some(held) = &r.held else {
-            return (
-                false,
-                end,
-                "the PC gave no final accounting (was it running?)".to_owned(),
-            );
+            return Judgement::fail(end, "the PC gave no final accounting (was it running?)");
         };
         let addrs: Vec<u8> = match payload {
             Some(a) => vec![*a],
@@ -731,7 +779,7 @@ impl ExpectKind for AccountingExpect {
             }
             lines.push(line);
         }
-        (ok, end, lines.join("; "))
+        Judgement::new(Grade::of(ok), end, lines.join("; "))
     }
 }
 
@@ -742,12 +790,13 @@ mod tests {
     use nodes_payload::Behaviour as B;
     use twin_core::events::RunEvent;
 
-    /// The verdict of `k` on `report` in the default network.
-    fn check<K: ExpectKind>(k: &K, report: &twin_report::RunReport) -> Judged {
-        k.check(&CheckCx {
+    /// Whether `k` held on `report` in the default network, and what it observed.
+    fn check<K: ExpectKind>(k: &K, report: &twin_report::RunReport) -> (bool, String) {
+        let j = k.check(&CheckCx {
             report,
             net: &twin_core::network::NetworkSpec::default_m6p(),
-        })
+        });
+        (j.passed(), j.detail)
     }
 
     #[test]
@@ -780,9 +829,23 @@ mod tests {
             ("normal:1", "takes no argument"),
             ("grumpy", "unknown behaviour"),
         ] {
-            let e = parse_behaviour(s).unwrap_err();
+            let e = parse_behaviour(s).unwrap_err().to_string();
             assert!(e.contains(part), "{s}: {e}");
         }
+        assert_eq!(
+            parse_behaviour(" Oversize:0 "),
+            Err(BehaviourError::ExtraBytes {
+                text: "Oversize:0".into()
+            })
+        );
+        assert_eq!(
+            parse_behaviour("slow").unwrap_err().to_string(),
+            "behaviour `slow`: slow needs a duration, as slow:<duration>"
+        );
+        assert_eq!(
+            parse_behaviour("normal:1").unwrap_err().to_string(),
+            "behaviour `normal:1`: normal takes no argument"
+        );
     }
 
     fn report_of(events: Vec<RunEvent>) -> twin_report::RunReport {
@@ -933,7 +996,7 @@ mod tests {
             payload: Some(12),
             max: None,
         };
-        let (ok, _, seen) = check(&acc, &report);
+        let (ok, seen) = check(&acc, &report);
         assert!(ok, "{seen}");
         assert!(seen.contains(&format!("{LATE_AT_CSP} 100")), "{seen}");
     }
@@ -965,7 +1028,7 @@ mod tests {
             payload: Some(12),
             max: None,
         };
-        let (ok, _, seen) = check(&acc, &report);
+        let (ok, seen) = check(&acc, &report);
         assert!(!ok, "{seen}");
         assert!(seen.contains("10 bytes unaccounted for"), "{seen}");
         assert!(seen.contains("oversize 40"), "{seen}");
@@ -996,7 +1059,7 @@ mod tests {
             final_held(12, 50),
         ]);
         let report = report_of(events2);
-        assert!(check(&acc, &report).0, "{}", check(&acc, &report).2);
+        assert!(check(&acc, &report).0, "{}", check(&acc, &report).1);
         let strict = AccountingExpect {
             payload: Some(12),
             max: Some(49),
@@ -1009,7 +1072,7 @@ mod tests {
             max: Some(500),
             intact: Some(true),
         };
-        let (ok, _, seen) = check(&dl, &report);
+        let (ok, seen) = check(&dl, &report);
         assert!(ok, "{seen}");
     }
 
@@ -1047,11 +1110,11 @@ mod tests {
         assert!(
             !check(&lenient, &report).0,
             "{}",
-            check(&lenient, &report).2
+            check(&lenient, &report).1
         );
         let mut flipped = nodes_payload::counter_stream(12, 0, 3000);
         flipped[1500] ^= 1;
-        let (ok, _, seen) = check(&lenient, &mk(flipped));
+        let (ok, seen) = check(&lenient, &mk(flipped));
         assert!(!ok && seen.contains("1 damaged"), "{seen}");
     }
 
@@ -1080,21 +1143,21 @@ mod tests {
             intact: Some(true),
         };
         // Split mid-frame (byte 1000 is inside a frame): every frame is intact.
-        let (ok, _, seen) = check(&strict, &runs(&[&bytes[..1000], &bytes[1000..]]));
+        let (ok, seen) = check(&strict, &runs(&[&bytes[..1000], &bytes[1000..]]));
         assert!(ok && seen.contains("0 missing"), "{seen}");
         // 30 bytes lost between the runs: the frames they cut into are missing (13 and 14
         // here), none is taken for damaged.
-        let (ok, _, seen) = check(&strict, &runs(&[&bytes[..1000], &bytes[1030..]]));
+        let (ok, seen) = check(&strict, &runs(&[&bytes[..1000], &bytes[1030..]]));
         assert!(!ok && seen.contains("0 damaged, 2 missing"), "{seen}");
         // A short run holding no whole frame between two others: still whole.
-        let (ok, _, seen) = check(
+        let (ok, seen) = check(
             &strict,
             &runs(&[&bytes[..1000], &bytes[1000..1060], &bytes[1060..]]),
         );
         assert!(ok && seen.contains("0 missing"), "{seen}");
         // Split exactly between two frames: nothing to join, nothing missing.
         let first = nodes_payload::stream::frame_len(0) + nodes_payload::stream::frame_len(1);
-        let (ok, _, seen) = check(&strict, &runs(&[&bytes[..first], &bytes[first..]]));
+        let (ok, seen) = check(&strict, &runs(&[&bytes[..first], &bytes[first..]]));
         assert!(ok && seen.contains("0 missing"), "{seen}");
     }
 
@@ -1108,7 +1171,7 @@ mod tests {
             min: None,
             max: None,
         };
-        let (ok, _, seen) = check(&c, &report);
+        let (ok, seen) = check(&c, &report);
         assert!(!ok);
         assert!(seen.contains("never started"), "{seen}");
     }

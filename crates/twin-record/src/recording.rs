@@ -121,44 +121,79 @@ enum Item {
 /// metadata, data end.
 const USED_OPCODES: [u8; 7] = [0x01, 0x03, 0x04, 0x05, 0x09, 0x0c, 0x0f];
 
+/// What is wrong in a record or a chunk, found before its bytes are trusted (`what` names
+/// the field: `schema name`, `chunk records`).
+#[derive(Debug, thiserror::Error)]
+enum Malformed {
+    #[error("{what} claims {claimed} bytes, {left} are left in the record")]
+    PastRecord {
+        what: &'static str,
+        claimed: usize,
+        left: usize,
+    },
+    #[error("{what}: record too short for its length")]
+    TooShort { what: &'static str },
+    #[error("{what}: length overflow")]
+    LengthOverflow { what: &'static str },
+    #[error(
+        "chunk claims {size} uncompressed bytes, more than the {RECORD_LIMIT} a recording holds"
+    )]
+    ChunkTooLarge { size: u64 },
+    #[error("zstd decompressor: {0}")]
+    Decompressor(std::io::Error),
+    #[error("chunk does not decompress (zstd): {0}")]
+    Decompress(std::io::Error),
+    #[error("chunk compression {compression:?} is not supported (zstd or none)")]
+    Compression { compression: String },
+    #[error("chunk holds {held} bytes of records, it claims {claimed}")]
+    ChunkSize { held: usize, claimed: usize },
+    #[error("chunk CRC mismatch (saved {saved:#010x}, calculated {calculated:#010x})")]
+    ChunkCrc { saved: u32, calculated: u32 },
+    #[error("the chunk ends inside a record's header")]
+    ChunkRecordHeader,
+    #[error("a record (opcode {opcode:#04x}) claims {len} bytes, {left} are left in its chunk")]
+    PastChunk { opcode: u8, len: usize, left: usize },
+}
+
 /// The unread rest of a record's body, read with its lengths checked.
 struct Body<'a>(&'a [u8]);
 impl<'a> Body<'a> {
-    fn skip(&mut self, n: usize, what: &str) -> Result<(), String> {
+    fn skip(&mut self, n: usize, what: &'static str) -> Result<(), Malformed> {
         self.bytes(n, what).map(drop)
     }
-    fn bytes(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+    fn bytes(&mut self, n: usize, what: &'static str) -> Result<&'a [u8], Malformed> {
         if n > self.0.len() {
-            return Err(format!(
-                "{what} claims {n} bytes, {} are left in the record",
-                self.0.len()
-            ));
+            return Err(Malformed::PastRecord {
+                what,
+                claimed: n,
+                left: self.0.len(),
+            });
         }
         let (b, rest) = self.0.split_at(n);
         self.0 = rest;
         Ok(b)
     }
-    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], String> {
+    fn take<const N: usize>(&mut self, what: &'static str) -> Result<[u8; N], Malformed> {
         let b: [u8; N] = self
             .0
             .get(..N)
             .and_then(|b| b.try_into().ok())
-            .ok_or_else(|| format!("{what}: record too short for its length"))?;
+            .ok_or(Malformed::TooShort { what })?;
         self.0 = &self.0[N..];
         Ok(b)
     }
-    fn len32(&mut self, what: &str) -> Result<usize, String> {
+    fn len32(&mut self, what: &'static str) -> Result<usize, Malformed> {
         Ok(u32::from_le_bytes(self.take(what)?) as usize)
     }
-    fn len64(&mut self, what: &str) -> Result<usize, String> {
+    fn len64(&mut self, what: &'static str) -> Result<usize, Malformed> {
         usize::try_from(u64::from_le_bytes(self.take(what)?))
-            .map_err(|_| format!("{what}: length overflow"))
+            .map_err(|_| Malformed::LengthOverflow { what })
     }
-    fn string(&mut self, what: &str) -> Result<(), String> {
+    fn string(&mut self, what: &'static str) -> Result<(), Malformed> {
         let n = self.len32(what)?;
         self.skip(n, what)
     }
-    fn string_map(&mut self, what: &str) -> Result<(), String> {
+    fn string_map(&mut self, what: &'static str) -> Result<(), Malformed> {
         let n = self.len32(what)?;
         if n > self.0.len() {
             return self.skip(n, what);
@@ -174,7 +209,7 @@ impl<'a> Body<'a> {
 
 /// Check every length prefix of a record the reader decodes (MCAP spec, records section)
 /// against the bytes the record has, before the decoder trusts them.
-fn check_lengths(opcode: u8, data: &[u8]) -> Result<(), String> {
+fn check_lengths(opcode: u8, data: &[u8]) -> Result<(), Malformed> {
     let mut b = Body(data);
     match opcode {
         0x01 => {
@@ -220,7 +255,7 @@ fn unpack_chunk(
     data: &[u8],
     zstd: &mut Option<zstd::bulk::Decompressor<'static>>,
     out: &mut Vec<u8>,
-) -> Result<(), String> {
+) -> Result<(), Malformed> {
     let mut b = Body(data);
     b.skip(16, "chunk times")?;
     let size = u64::from_le_bytes(b.take("chunk uncompressed size")?);
@@ -232,63 +267,59 @@ fn unpack_chunk(
     let size = usize::try_from(size)
         .ok()
         .filter(|&n| n <= RECORD_LIMIT)
-        .ok_or_else(|| {
-            format!("chunk claims {size} uncompressed bytes, more than the {RECORD_LIMIT} a recording holds")
-        })?;
+        .ok_or(Malformed::ChunkTooLarge { size })?;
     out.clear();
     match compression.as_slice() {
         b"" => out.extend_from_slice(records),
         b"zstd" => {
             let z = match zstd {
                 Some(z) => z,
-                None => zstd.insert(
-                    zstd::bulk::Decompressor::new()
-                        .map_err(|e| format!("zstd decompressor: {e}"))?,
-                ),
+                None => {
+                    zstd.insert(zstd::bulk::Decompressor::new().map_err(Malformed::Decompressor)?)
+                }
             };
             out.reserve_exact(size);
             z.decompress_to_buffer(records, out)
-                .map_err(|e| format!("chunk does not decompress (zstd): {e}"))?;
+                .map_err(Malformed::Decompress)?;
         }
         other => {
-            return Err(format!(
-                "chunk compression {:?} is not supported (zstd or none)",
-                String::from_utf8_lossy(other)
-            ));
+            return Err(Malformed::Compression {
+                compression: String::from_utf8_lossy(other).into_owned(),
+            });
         }
     }
     if out.len() != size {
-        return Err(format!(
-            "chunk holds {} bytes of records, it claims {size}",
-            out.len()
-        ));
+        return Err(Malformed::ChunkSize {
+            held: out.len(),
+            claimed: size,
+        });
     }
     // A CRC of 0 means none was computed (MCAP spec).
     let calculated = crc32fast::hash(out);
     if crc != 0 && calculated != crc {
-        return Err(format!(
-            "chunk CRC mismatch (saved {crc:#010x}, calculated {calculated:#010x})"
-        ));
+        return Err(Malformed::ChunkCrc {
+            saved: crc,
+            calculated,
+        });
     }
     Ok(())
 }
 
 /// The next record of a chunk's `records` from `*pos`: its opcode and body, `*pos` moved
 /// past it. A record header or body running past the chunk is an error.
-fn next_chunk_record<'a>(records: &'a [u8], pos: &mut usize) -> Result<(u8, &'a [u8]), String> {
+fn next_chunk_record<'a>(records: &'a [u8], pos: &mut usize) -> Result<(u8, &'a [u8]), Malformed> {
     let rest = &records[*pos..];
     let mut b = Body(rest);
     let [opcode] = b
         .take::<1>("chunk record opcode")
-        .map_err(|_| "the chunk ends inside a record's header".to_owned())?;
+        .map_err(|_| Malformed::ChunkRecordHeader)?;
     let len = b
         .len64("chunk record")
-        .map_err(|_| "the chunk ends inside a record's header".to_owned())?;
-    let body = b.bytes(len, "").map_err(|_| {
-        format!(
-            "a record (opcode {opcode:#04x}) claims {len} bytes, {} are left in its chunk",
-            rest.len() - 9
-        )
+        .map_err(|_| Malformed::ChunkRecordHeader)?;
+    let body = b.bytes(len, "").map_err(|_| Malformed::PastChunk {
+        opcode,
+        len,
+        left: rest.len() - 9,
     })?;
     *pos += 9 + len;
     Ok((opcode, body))
@@ -424,7 +455,7 @@ impl Reader {
                 let chunk = std::mem::take(&mut self.chunk);
                 let r = match next_chunk_record(&chunk, &mut self.chunk_pos) {
                     Ok((opcode, data)) => self.decode(opcode, data),
-                    Err(why) => Some(Err(self.malformed(&why))),
+                    Err(why) => Some(Err(self.malformed(why))),
                 };
                 self.chunk = chunk;
                 match r {
@@ -469,7 +500,7 @@ impl Reader {
                     }
                     Err(why) => {
                         self.chunk.clear();
-                        return Some(Err(self.malformed(&why)));
+                        return Some(Err(self.malformed(why)));
                     }
                 }
             }
@@ -485,7 +516,7 @@ impl Reader {
     }
 
     /// An error in the record read last, with where.
-    fn malformed(&self, why: &str) -> anyhow::Error {
+    fn malformed(&self, why: impl fmt::Display) -> anyhow::Error {
         anyhow!(
             "{}: malformed MCAP after {} messages, near byte offset {} of {}: {why}",
             self.path.display(),
@@ -510,7 +541,7 @@ impl Reader {
             return None;
         }
         if let Err(why) = check_lengths(opcode, data) {
-            return Some(Err(self.malformed(&format!("record {opcode:#04x}: {why}"))));
+            return Some(Err(self.malformed(format!("record {opcode:#04x}: {why}"))));
         }
         let record = match mcap::parse_record(opcode, data) {
             Ok(r) => r,

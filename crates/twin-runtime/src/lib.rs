@@ -274,24 +274,46 @@ pub enum UartAt {
     Pty(std::path::PathBuf),
 }
 
+/// Why a `--uart` or `--socketcan` argument was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum LinkArgError {
+    /// `--uart` without a node or a place.
+    #[error("`{arg}`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)")]
+    NotNodeAt {
+        /// The argument.
+        arg: String,
+    },
+    /// `--uart`'s place is neither a socket address nor a path.
+    #[error("`{at}` is neither a TCP address like 127.0.0.1:5010 nor a path like /tmp/fc-uart")]
+    NotAddrOrPath {
+        /// The part after `=`.
+        at: String,
+    },
+    /// `--socketcan`'s bus is not `main` or `payload`.
+    #[error("unknown bus `{bus}`: expected IFACE, IFACE:main or IFACE:payload")]
+    UnknownBus {
+        /// The part after the last `:`.
+        bus: String,
+    },
+    /// `--socketcan` without an interface.
+    #[error("missing interface name: expected IFACE[:main|:payload]")]
+    NoInterface,
+}
+
 impl UartLink {
     /// Parse `--uart`'s `NODE=ADDR` (a TCP address) or `NODE=PATH` (a pty).
-    pub fn parse_arg(s: &str) -> Result<Self, String> {
-        let (node, at) = s
-            .split_once('=')
-            .ok_or_else(|| format!("`{s}`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)"))?;
+    pub fn parse_arg(s: &str) -> Result<Self, LinkArgError> {
+        let not_node_at = || LinkArgError::NotNodeAt { arg: s.to_owned() };
+        let (node, at) = s.split_once('=').ok_or_else(not_node_at)?;
         if node.is_empty() || at.is_empty() {
-            return Err(format!(
-                "`{s}`: expected NODE=ADDR or NODE=PATH (FC=127.0.0.1:5010)"
-            ));
+            return Err(not_node_at());
         }
         let at = match at.parse::<SocketAddr>() {
             Ok(a) => UartAt::Tcp(a),
             Err(_) if at.contains('/') => UartAt::Pty(at.into()),
             Err(_) => {
-                return Err(format!(
-                    "`{at}` is neither a TCP address like 127.0.0.1:5010 nor a path like /tmp/fc-uart"
-                ));
+                return Err(LinkArgError::NotAddrOrPath { at: at.to_owned() });
             }
         };
         Ok(UartLink {
@@ -328,19 +350,19 @@ impl std::fmt::Display for SocketCanBus {
 
 impl SocketCanBus {
     /// Parse the `--socketcan` argument `IFACE[:main|:payload]` (default: the main bus).
-    pub fn parse_arg(arg: &str) -> Result<(String, SocketCanBus), String> {
+    pub fn parse_arg(arg: &str) -> Result<(String, SocketCanBus), LinkArgError> {
         let (ifname, which) = match arg.rsplit_once(':') {
             Some((i, "main")) => (i, SocketCanBus::Main),
             Some((i, "payload")) => (i, SocketCanBus::Payload),
             Some((_, other)) => {
-                return Err(format!(
-                    "unknown bus `{other}`: expected IFACE, IFACE:main or IFACE:payload"
-                ));
+                return Err(LinkArgError::UnknownBus {
+                    bus: other.to_owned(),
+                });
             }
             None => (arg, SocketCanBus::Main),
         };
         if ifname.is_empty() {
-            return Err("missing interface name: expected IFACE[:main|:payload]".to_owned());
+            return Err(LinkArgError::NoInterface);
         }
         Ok((ifname.to_owned(), which))
     }
@@ -774,9 +796,19 @@ mod tests {
             parse("can1:payload"),
             Ok(("can1".to_owned(), SocketCanBus::Payload))
         );
-        assert!(parse("can0:ground").is_err_and(|e| e.contains("ground")));
-        assert!(parse(":main").is_err());
-        assert!(parse("").is_err());
+        let e = parse("can0:ground").expect_err("no such bus");
+        assert_eq!(
+            e,
+            LinkArgError::UnknownBus {
+                bus: "ground".into()
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "unknown bus `ground`: expected IFACE, IFACE:main or IFACE:payload"
+        );
+        assert_eq!(parse(":main"), Err(LinkArgError::NoInterface));
+        assert_eq!(parse(""), Err(LinkArgError::NoInterface));
     }
 
     #[test]

@@ -98,7 +98,7 @@ impl FcPeriodicSpec {
         net: &NetworkSpec,
     ) -> Result<nodes_fc::wire::Periodic, (&'static str, String)> {
         const NAMES: [&str; 6] = ["TMGEN", "TMATP", "TMACD", "TMSENS", "TMRAWSENS", "TMALL"];
-        let dst = net.resolve(&self.to).map_err(|e| ("to", e))?;
+        let dst = net.resolve(&self.to).map_err(|e| ("to", e.to_string()))?;
         let mut mask = 0u8;
         for name in &self.telemetry {
             let i = NAMES

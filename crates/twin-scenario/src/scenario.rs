@@ -348,16 +348,35 @@ impl IdleLimit {
     }
 }
 
+/// Why a text is not an [`IdleLimit`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum IdleLimitError {
+    /// A duration below 100 ms.
+    #[error("`{text}`: at least 100ms, or \"off\"")]
+    TooShort {
+        /// The text as given.
+        text: String,
+    },
+    /// Neither a duration nor `off`. The duration's message is part of this one's, so it is
+    /// not also its `source()`.
+    #[error("{duration}, or \"off\"")]
+    NotADuration {
+        /// Why it is not a duration.
+        duration: twin_core::duration::DurationError,
+    },
+}
+
 impl std::str::FromStr for IdleLimit {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = IdleLimitError;
+    fn from_str(s: &str) -> Result<Self, IdleLimitError> {
         if s.trim().eq_ignore_ascii_case("off") {
             return Ok(IdleLimit::Off);
         }
         match parse_duration(s) {
             Ok(d) if d >= Duration::from_millis(100) => Ok(IdleLimit::After(d)),
-            Ok(_) => Err(format!("`{s}`: at least 100ms, or \"off\"")),
-            Err(e) => Err(format!("{e}, or \"off\"")),
+            Ok(_) => Err(IdleLimitError::TooShort { text: s.to_owned() }),
+            Err(duration) => Err(IdleLimitError::NotADuration { duration }),
         }
     }
 }
@@ -783,7 +802,7 @@ fn check_links(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep
             }
             LinkKind::ZmqHub => {
                 if let Err(e) = l.addr.parse::<links::zmq_hub::HubAddr>() {
-                    err(p("addr"), e);
+                    err(p("addr"), e.to_string());
                 }
             }
             LinkKind::Uart => match (&l.pty, l.addr.is_empty()) {
@@ -911,4 +930,33 @@ fn table_header(line: &str) -> Option<(String, bool)> {
     }
     let inner = l.strip_prefix('[')?.strip_suffix(']')?;
     Some((inner.trim().to_owned(), false))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn an_idle_limit_is_a_duration_of_100ms_or_more_or_off() {
+        assert_eq!("OFF".parse::<IdleLimit>(), Ok(IdleLimit::Off));
+        assert_eq!(
+            "2m".parse::<IdleLimit>(),
+            Ok(IdleLimit::After(Duration::from_secs(120)))
+        );
+        let e = "50ms".parse::<IdleLimit>().unwrap_err();
+        assert_eq!(
+            e,
+            IdleLimitError::TooShort {
+                text: "50ms".into()
+            }
+        );
+        assert_eq!(e.to_string(), "`50ms`: at least 100ms, or \"off\"");
+        let e = "soon".parse::<IdleLimit>().unwrap_err();
+        assert!(matches!(e, IdleLimitError::NotADuration { .. }), "{e:?}");
+        assert_eq!(
+            e.to_string(),
+            "`soon` is not a duration (try 90, 90s, 10m, 2h, 1h 30m), or \"off\""
+        );
+    }
 }

@@ -147,15 +147,106 @@ pub enum Scalar {
     Millis(f64),
 }
 
+/// Why a distribution is not one; shown at the campaign's field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DistError {
+    /// Not a table.
+    #[error("expected a distribution table, found {found}")]
+    NotATable {
+        /// What was written.
+        found: toml::Value,
+    },
+    /// A table with none of `uniform`, `normal`, `choice`.
+    #[error("expected one of `uniform`, `normal`, `choice`")]
+    NoKind,
+    /// A key the distribution does not take.
+    #[error("unknown key `{key}` (this distribution takes {})", .allowed.join(", "))]
+    UnknownKey {
+        /// The key.
+        key: String,
+        /// The keys it takes.
+        allowed: &'static [&'static str],
+    },
+    /// `uniform` or `normal` without two values.
+    #[error("`{key}` takes two values: [a, b]")]
+    NotAPair {
+        /// `uniform` or `normal`.
+        key: &'static str,
+    },
+    /// A number and a duration together.
+    #[error("`{key}`: both values must be numbers, or both durations")]
+    MixedKinds {
+        /// `uniform` or `normal`.
+        key: &'static str,
+    },
+    /// Text that is not a duration. The duration's message is part of this one's, so it
+    /// is not also its `source()`.
+    #[error("`{text}` is neither a number nor a duration: {duration}")]
+    NotNumberOrDuration {
+        /// The text.
+        text: String,
+        /// Why it is not a duration.
+        duration: crate::duration::DurationError,
+    },
+    /// Neither a finite number nor text.
+    #[error("expected a number or a duration, found {found}")]
+    NotScalar {
+        /// What was written.
+        found: toml::Value,
+    },
+    /// `uniform = [a, b]` with a above b.
+    #[error("uniform: {low} is above {high}")]
+    UniformReversed {
+        /// a.
+        low: f64,
+        /// b.
+        high: f64,
+    },
+    /// A negative standard deviation.
+    #[error("normal: the standard deviation must be >= 0")]
+    NegativeSd,
+    /// `min` above `max`.
+    #[error("normal: min {min} is above max {max}")]
+    BoundsReversed {
+        /// `min`.
+        min: f64,
+        /// `max`.
+        max: f64,
+    },
+    /// `choice` not a list, or empty.
+    #[error("`choice` takes a non-empty list of values")]
+    NoChoices,
+    /// `weights` not a list.
+    #[error("`weights` takes a list of numbers")]
+    WeightsNotAList,
+    /// Not one weight per choice.
+    #[error("{weights} weights for {choices} choices")]
+    WeightCount {
+        /// Weights given.
+        weights: usize,
+        /// Choices given.
+        choices: usize,
+    },
+    /// A negative weight, or none above 0.
+    #[error("weights must be >= 0 with a positive sum")]
+    BadWeights,
+}
+
 impl Scalar {
-    fn of(v: &toml::Value) -> Result<Scalar, String> {
+    fn of(v: &toml::Value) -> Result<Scalar, DistError> {
         match v {
             toml::Value::Integer(i) => Ok(Scalar::Int(*i)),
             toml::Value::Float(f) if f.is_finite() => Ok(Scalar::Float(*f)),
             toml::Value::String(s) => crate::duration::parse_duration(s)
                 .map(|d| Scalar::Millis(d.as_secs_f64() * 1e3))
-                .map_err(|e| format!("`{s}` is neither a number nor a duration: {e}")),
-            other => Err(format!("expected a number or a duration, found {other}")),
+                .map_err(|duration| DistError::NotNumberOrDuration {
+                    text: s.clone(),
+                    duration,
+                }),
+            other => Err(DistError::NotScalar {
+                found: other.clone(),
+            }),
         }
     }
     fn value(self) -> f64 {
@@ -195,39 +286,37 @@ impl Dist {
     }
 
     /// Parse a distribution table.
-    pub fn parse(v: &toml::Value) -> Result<Dist, String> {
+    pub fn parse(v: &toml::Value) -> Result<Dist, DistError> {
         let t = v
             .as_table()
-            .ok_or_else(|| format!("expected a distribution table, found {v}"))?;
-        let allowed: &[&str] = if t.contains_key("uniform") {
+            .ok_or_else(|| DistError::NotATable { found: v.clone() })?;
+        let allowed: &'static [&'static str] = if t.contains_key("uniform") {
             &["uniform"]
         } else if t.contains_key("normal") {
             &["normal", "min", "max"]
         } else if t.contains_key("choice") {
             &["choice", "weights"]
         } else {
-            return Err("expected one of `uniform`, `normal`, `choice`".into());
+            return Err(DistError::NoKind);
         };
         if let Some(k) = t.keys().find(|k| !allowed.contains(&k.as_str())) {
-            return Err(format!(
-                "unknown key `{k}` (this distribution takes {})",
-                allowed.join(", ")
-            ));
+            return Err(DistError::UnknownKey {
+                key: k.clone(),
+                allowed,
+            });
         }
-        let pair = |k: &str| -> Result<(Scalar, Scalar), String> {
-            let a = t[k]
+        let pair = |key: &'static str| -> Result<(Scalar, Scalar), DistError> {
+            let a = t[key]
                 .as_array()
                 .filter(|a| a.len() == 2)
-                .ok_or_else(|| format!("`{k}` takes two values: [a, b]"))?;
+                .ok_or(DistError::NotAPair { key })?;
             let (x, y) = (Scalar::of(&a[0])?, Scalar::of(&a[1])?);
             if !x.same_kind(y) {
-                return Err(format!(
-                    "`{k}`: both values must be numbers, or both durations"
-                ));
+                return Err(DistError::MixedKinds { key });
             }
             Ok((x, y))
         };
-        let bound = |k: &str| -> Result<Option<f64>, String> {
+        let bound = |k: &str| -> Result<Option<f64>, DistError> {
             t.get(k)
                 .map(|v| Scalar::of(v).map(Scalar::value))
                 .transpose()
@@ -235,19 +324,22 @@ impl Dist {
         if t.contains_key("uniform") {
             let (a, b) = pair("uniform")?;
             if a.value() > b.value() {
-                return Err(format!("uniform: {} is above {}", a.value(), b.value()));
+                return Err(DistError::UniformReversed {
+                    low: a.value(),
+                    high: b.value(),
+                });
             }
             Ok(Dist::Uniform(a, b))
         } else if t.contains_key("normal") {
             let (mean, sd) = pair("normal")?;
             if sd.value() < 0.0 {
-                return Err("normal: the standard deviation must be >= 0".into());
+                return Err(DistError::NegativeSd);
             }
             let (min, max) = (bound("min")?, bound("max")?);
             if let (Some(lo), Some(hi)) = (min, max)
                 && lo > hi
             {
-                return Err(format!("normal: min {lo} is above max {hi}"));
+                return Err(DistError::BoundsReversed { min: lo, max: hi });
             }
             Ok(Dist::Normal {
                 mean,
@@ -259,22 +351,25 @@ impl Dist {
             let values = t["choice"]
                 .as_array()
                 .filter(|a| !a.is_empty())
-                .ok_or("`choice` takes a non-empty list of values")?
+                .ok_or(DistError::NoChoices)?
                 .clone();
             let weights = match t.get("weights") {
                 None => vec![1.0; values.len()],
                 Some(w) => {
                     let w: Vec<f64> = w
                         .as_array()
-                        .ok_or("`weights` takes a list of numbers")?
+                        .ok_or(DistError::WeightsNotAList)?
                         .iter()
                         .map(|x| Scalar::of(x).map(Scalar::value))
                         .collect::<Result<_, _>>()?;
                     if w.len() != values.len() {
-                        return Err(format!("{} weights for {} choices", w.len(), values.len()));
+                        return Err(DistError::WeightCount {
+                            weights: w.len(),
+                            choices: values.len(),
+                        });
                     }
                     if w.iter().any(|x| *x < 0.0) || w.iter().sum::<f64>() <= 0.0 {
-                        return Err("weights must be >= 0 with a positive sum".into());
+                        return Err(DistError::BadWeights);
                     }
                     w
                 }
@@ -338,26 +433,81 @@ fn stream(seed: u64, k: u64, entry: &str) -> ChaCha8Rng {
     ChaCha8Rng::seed_from_u64(mix(mix(seed, k), h))
 }
 
+/// Why a text is not a field path; each names the text.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FieldPathError {
+    /// A key that is empty or not `[A-Za-z0-9_]`, or text after a `]`.
+    #[error("`{path}` is not a field path (like `faults[0].at`)")]
+    NotAPath {
+        /// The text.
+        path: String,
+    },
+    /// A `[` without its `]`.
+    #[error("`{path}`: unclosed `[`")]
+    Unclosed {
+        /// The text.
+        path: String,
+    },
+    /// An index that is not a number.
+    #[error("`{path}`: `{index}` is not an index")]
+    NotAnIndex {
+        /// The text.
+        path: String,
+        /// What is between the brackets.
+        index: String,
+    },
+}
+
+/// Why a drawn value cannot be written at its path in the base scenario.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SetPathError {
+    /// A key under a value that is not a table.
+    #[error("`{key}`: its parent is not a table")]
+    ParentNotATable {
+        /// The key.
+        key: String,
+    },
+    /// An index into what is not a list.
+    #[error("[{index}]: not a list in the base scenario")]
+    NotAList {
+        /// The index.
+        index: usize,
+    },
+    /// An index past the list's end.
+    #[error("[{index}]: the base scenario's list has {len} entries")]
+    NoEntry {
+        /// The index.
+        index: usize,
+        /// The list's length.
+        len: usize,
+    },
+}
+
 /// Parse a field path: `fc.initial_rate_deg_s`, `faults[0].at`, `payload[1].behaviour`.
-pub fn parse_path(s: &str) -> Result<Vec<PathStep>, String> {
+pub fn parse_path(s: &str) -> Result<Vec<PathStep>, FieldPathError> {
+    let not_a_path = || FieldPathError::NotAPath { path: s.to_owned() };
     let mut out = Vec::new();
     for part in s.split('.') {
         let (name, mut rest) = part.split_once('[').map_or((part, ""), |(n, r)| (n, r));
         if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            return Err(format!("`{s}` is not a field path (like `faults[0].at`)"));
+            return Err(not_a_path());
         }
         out.push(PathStep::Key(name.to_owned()));
         while !rest.is_empty() {
             let (ix, after) = rest
                 .split_once(']')
-                .ok_or_else(|| format!("`{s}`: unclosed `[`"))?;
-            out.push(PathStep::Index(
-                ix.parse()
-                    .map_err(|_| format!("`{s}`: `{ix}` is not an index"))?,
-            ));
+                .ok_or_else(|| FieldPathError::Unclosed { path: s.to_owned() })?;
+            out.push(PathStep::Index(ix.parse().map_err(|_| {
+                FieldPathError::NotAnIndex {
+                    path: s.to_owned(),
+                    index: ix.to_owned(),
+                }
+            })?));
             rest = after.strip_prefix('[').unwrap_or(after);
             if !after.is_empty() && !after.starts_with('[') {
-                return Err(format!("`{s}` is not a field path (like `faults[0].at`)"));
+                return Err(not_a_path());
             }
         }
     }
@@ -366,7 +516,11 @@ pub fn parse_path(s: &str) -> Result<Vec<PathStep>, String> {
 
 /// Write `value` at `path` in `root`. Tables on the way are made when missing; an index
 /// must exist. (Recursion over the path's steps: a path has a handful.)
-fn set_path(root: &mut toml::Table, path: &[PathStep], value: toml::Value) -> Result<(), String> {
+fn set_path(
+    root: &mut toml::Table,
+    path: &[PathStep],
+    value: toml::Value,
+) -> Result<(), SetPathError> {
     let mut whole = toml::Value::Table(std::mem::take(root));
     let r = set_in(&mut whole, path, value);
     if let toml::Value::Table(t) = whole {
@@ -375,7 +529,11 @@ fn set_path(root: &mut toml::Table, path: &[PathStep], value: toml::Value) -> Re
     r
 }
 
-fn set_in(node: &mut toml::Value, path: &[PathStep], value: toml::Value) -> Result<(), String> {
+fn set_in(
+    node: &mut toml::Value,
+    path: &[PathStep],
+    value: toml::Value,
+) -> Result<(), SetPathError> {
     let Some((step, rest)) = path.split_first() else {
         *node = value;
         return Ok(());
@@ -383,16 +541,16 @@ fn set_in(node: &mut toml::Value, path: &[PathStep], value: toml::Value) -> Resu
     let next = match step {
         PathStep::Key(k) => node
             .as_table_mut()
-            .ok_or_else(|| format!("`{k}`: its parent is not a table"))?
+            .ok_or_else(|| SetPathError::ParentNotATable { key: k.clone() })?
             .entry(k.clone())
             .or_insert_with(|| toml::Value::Table(toml::Table::new())),
         PathStep::Index(i) => {
             let a = node
                 .as_array_mut()
-                .ok_or_else(|| format!("[{i}]: not a list in the base scenario"))?;
-            let n = a.len();
+                .ok_or(SetPathError::NotAList { index: *i })?;
+            let len = a.len();
             a.get_mut(*i)
-                .ok_or_else(|| format!("[{i}]: the base scenario's list has {n} entries"))?
+                .ok_or(SetPathError::NoEntry { index: *i, len })?
         }
     };
     set_in(next, rest, value)
@@ -409,7 +567,7 @@ pub(crate) fn get_path<'a>(root: &'a toml::Table, path: &[PathStep]) -> Option<&
 }
 
 /// Resolve every distribution inside `v` (a catalogue entry's fields), drawing from `rng`.
-fn draw_inside(v: &toml::Value, rng: &mut ChaCha8Rng) -> Result<toml::Value, String> {
+fn draw_inside(v: &toml::Value, rng: &mut ChaCha8Rng) -> Result<toml::Value, DistError> {
     if Dist::is_dist(v) {
         return Ok(Dist::parse(v)?.sample(rng));
     }
@@ -417,12 +575,12 @@ fn draw_inside(v: &toml::Value, rng: &mut ChaCha8Rng) -> Result<toml::Value, Str
         toml::Value::Table(t) => toml::Value::Table(
             t.iter()
                 .map(|(k, x)| draw_inside(x, rng).map(|x| (k.clone(), x)))
-                .collect::<Result<_, String>>()?,
+                .collect::<Result<_, DistError>>()?,
         ),
         toml::Value::Array(a) => toml::Value::Array(
             a.iter()
                 .map(|x| draw_inside(x, rng))
-                .collect::<Result<_, String>>()?,
+                .collect::<Result<_, DistError>>()?,
         ),
         other => other.clone(),
     })
@@ -539,7 +697,8 @@ impl Campaign {
                 (Ok(p), Ok(d)) => {
                     dists.insert(k.clone(), (p, d));
                 }
-                (Err(e), _) | (_, Err(e)) => errors.push(err_at(file, text, &field, e)),
+                (Err(e), _) => errors.push(err_at(file, text, &field, e.to_string())),
+                (_, Err(e)) => errors.push(err_at(file, text, &field, e.to_string())),
             }
         }
         if let Some(f) = &spec.faults {
@@ -554,7 +713,12 @@ impl Campaign {
             for (i, entry) in f.catalogue.iter().enumerate() {
                 let mut rng = stream(0, 0, "check");
                 if let Err(e) = draw_inside(&toml::Value::Table(entry.clone()), &mut rng) {
-                    errors.push(err_at(file, text, &format!("faults.catalogue[{i}]"), e));
+                    errors.push(err_at(
+                        file,
+                        text,
+                        &format!("faults.catalogue[{i}]"),
+                        e.to_string(),
+                    ));
                 }
             }
         }
@@ -693,8 +857,8 @@ impl Campaign {
                 )])
             };
             let mut rng = stream(seed, k, &format!("faults.catalogue[{i}]"));
-            let mut entry =
-                draw_inside(&toml::Value::Table(f.catalogue[i].clone()), &mut rng).map_err(at)?;
+            let mut entry = draw_inside(&toml::Value::Table(f.catalogue[i].clone()), &mut rng)
+                .map_err(|e| at(e.to_string()))?;
             let into = match entry.as_table_mut().and_then(|t| t.remove("into")) {
                 None => "faults".to_owned(),
                 Some(toml::Value::String(p)) => p,
@@ -708,7 +872,7 @@ impl Campaign {
                 .and_then(toml::Value::as_str)
                 .unwrap_or("?");
             kinds.push(format!("{what}#{i}"));
-            let path = parse_path(&into).map_err(at)?;
+            let path = parse_path(&into).map_err(|e| at(e.to_string()))?;
             let mut list = match get_path(table, &path) {
                 Some(toml::Value::Array(a)) => a.clone(),
                 None => Vec::new(),
@@ -719,7 +883,7 @@ impl Campaign {
             // Where the entry lands (`faults[3]`), to name it if the scenario refuses it.
             appended.push((format!("{}[{}]", path_string(&path), list.len()), i));
             list.push(entry);
-            set_path(table, &path, toml::Value::Array(list)).map_err(at)?;
+            set_path(table, &path, toml::Value::Array(list)).map_err(|e| at(e.to_string()))?;
         }
         Ok(kinds.join(" "))
     }
@@ -867,6 +1031,72 @@ jump_s = 60
             let ms = crate::duration::parse_duration(ms.as_str().unwrap()).unwrap();
             assert!(ms.as_millis() >= 1000 && ms.as_millis() <= 2000);
         }
+    }
+
+    #[test]
+    fn bad_distributions_and_paths_say_what_is_wrong() {
+        let dist = |t: toml::Table| Dist::parse(&toml::Value::Table(t)).unwrap_err();
+        assert_eq!(
+            dist(toml::toml! { uniform = [5, 3] }),
+            DistError::UniformReversed {
+                low: 5.0,
+                high: 3.0
+            }
+        );
+        assert_eq!(
+            dist(toml::toml! { uniform = [1, "2s"] }).to_string(),
+            "`uniform`: both values must be numbers, or both durations"
+        );
+        assert_eq!(
+            dist(toml::toml! { normal = [1, 1]
+            weights = [1] })
+            .to_string(),
+            "unknown key `weights` (this distribution takes normal, min, max)"
+        );
+        assert_eq!(
+            dist(toml::toml! { choice = [1, 2]
+            weights = [1] })
+            .to_string(),
+            "1 weights for 2 choices"
+        );
+        let e = dist(toml::toml! { uniform = ["1s", "soon"] });
+        assert!(
+            matches!(&e, DistError::NotNumberOrDuration { text, .. } if text == "soon"),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "`soon` is neither a number nor a duration: `soon` is not a duration (try 90, 90s, \
+             10m, 2h, 1h 30m)"
+        );
+        assert_eq!(
+            parse_path("faults[x].at"),
+            Err(FieldPathError::NotAnIndex {
+                path: "faults[x].at".into(),
+                index: "x".into()
+            })
+        );
+        assert_eq!(
+            parse_path("faults[0").unwrap_err().to_string(),
+            "`faults[0`: unclosed `[`"
+        );
+        assert_eq!(
+            parse_path("a.b-c").unwrap_err().to_string(),
+            "`a.b-c` is not a field path (like `faults[0].at`)"
+        );
+        let mut root: toml::Table = toml::toml! { faults = [1] };
+        let to = |p: &str| parse_path(p).unwrap();
+        assert_eq!(
+            set_path(&mut root, &to("faults[2]"), 1.into()),
+            Err(SetPathError::NoEntry { index: 2, len: 1 })
+        );
+        assert_eq!(
+            set_path(&mut root, &to("faults[0].at"), 1.into())
+                .unwrap_err()
+                .to_string(),
+            "`at`: its parent is not a table"
+        );
+        assert_eq!(root, toml::toml! { faults = [1] });
     }
 
     #[test]

@@ -355,6 +355,57 @@ pub fn junit(name: &str, rows: &[RunRow]) -> anyhow::Result<String> {
     report.to_string().context("writing the JUnit report")
 }
 
+/// Why a text is not a shard `I/N`; each names the text.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ShardError {
+    /// No `/`.
+    #[error("`{text}`: expected I/N, for example 0/4")]
+    NotIOverN {
+        /// The text.
+        text: String,
+    },
+    /// I or N is not a number.
+    #[error("`{text}`: `{part}` is not a number")]
+    NotANumber {
+        /// The text.
+        text: String,
+        /// The part that is not.
+        part: String,
+    },
+    /// I not below N.
+    #[error("`{text}`: the index must be below the count (0/4 .. 3/4)")]
+    IndexNotBelowCount {
+        /// The text.
+        text: String,
+    },
+}
+
+/// Why the environment's shard is not one.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ShardEnvError {
+    /// The index variable without the count variable.
+    #[error("{index_var} is set but {count_var} is not")]
+    NoCount {
+        /// The index's variable.
+        index_var: &'static str,
+        /// The count's variable.
+        count_var: &'static str,
+    },
+    /// The two do not make a shard. The shard's message is part of this one's, so it is
+    /// not also its `source()`.
+    #[error("from {index_var} and {count_var}: {shard}")]
+    Invalid {
+        /// The index's variable.
+        index_var: &'static str,
+        /// The count's variable.
+        count_var: &'static str,
+        /// Why `index/count` is not a shard.
+        shard: ShardError,
+    },
+}
+
 /// Which runs a shard takes: those whose index modulo `count` is `index`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Shard {
@@ -366,22 +417,20 @@ pub struct Shard {
 
 impl Shard {
     /// `I/N`.
-    pub fn parse(s: &str) -> Result<Shard, String> {
+    pub fn parse(s: &str) -> Result<Shard, ShardError> {
+        let text = || s.to_owned();
         let (i, n) = s
             .split_once('/')
-            .ok_or_else(|| format!("`{s}`: expected I/N, for example 0/4"))?;
-        let index = i
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{s}`: `{i}` is not a number"))?;
-        let count = n
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{s}`: `{n}` is not a number"))?;
+            .ok_or_else(|| ShardError::NotIOverN { text: text() })?;
+        let number = |part: &str| {
+            part.trim().parse().map_err(|_| ShardError::NotANumber {
+                text: text(),
+                part: part.to_owned(),
+            })
+        };
+        let (index, count) = (number(i)?, number(n)?);
         if count == 0 || index >= count {
-            return Err(format!(
-                "`{s}`: the index must be below the count (0/4 .. 3/4)"
-            ));
+            return Err(ShardError::IndexNotBelowCount { text: text() });
         }
         Ok(Shard { index, count })
     }
@@ -390,16 +439,23 @@ impl Shard {
     /// a variable): a Slurm job array (`SLURM_ARRAY_TASK_ID`, `SLURM_ARRAY_TASK_COUNT`), or a
     /// Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`, and the count in `JOB_COMPLETIONS`,
     /// which the Job's manifest sets from its `completions`). `None` when neither is set.
-    pub fn from_env(get: impl Fn(&str) -> Option<String>) -> Result<Option<Shard>, String> {
-        for (i, n) in [
+    pub fn from_env(get: impl Fn(&str) -> Option<String>) -> Result<Option<Shard>, ShardEnvError> {
+        for (index_var, count_var) in [
             ("SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_COUNT"),
             ("JOB_COMPLETION_INDEX", "JOB_COMPLETIONS"),
         ] {
-            if let Some(index) = get(i) {
-                let count = get(n).ok_or_else(|| format!("{i} is set but {n} is not"))?;
+            if let Some(index) = get(index_var) {
+                let count = get(count_var).ok_or(ShardEnvError::NoCount {
+                    index_var,
+                    count_var,
+                })?;
                 return Shard::parse(&format!("{index}/{count}"))
                     .map(Some)
-                    .map_err(|e| format!("from {i} and {n}: {e}"));
+                    .map_err(|shard| ShardEnvError::Invalid {
+                        index_var,
+                        count_var,
+                        shard,
+                    });
             }
         }
         Ok(None)
@@ -746,6 +802,17 @@ mod tests {
     fn shards_come_from_the_flag_or_the_cluster_engine() {
         assert_eq!(Shard::parse("1/4"), Ok(Shard { index: 1, count: 4 }));
         assert!(Shard::parse("4/4").is_err() && Shard::parse("1").is_err());
+        assert_eq!(
+            Shard::parse("1/x"),
+            Err(ShardError::NotANumber {
+                text: "1/x".into(),
+                part: "x".into()
+            })
+        );
+        assert_eq!(
+            Shard::parse("4/4").map_err(|e| e.to_string()),
+            Err("`4/4`: the index must be below the count (0/4 .. 3/4)".to_owned())
+        );
         assert_eq!(Shard { index: 1, count: 4 }.runs(10), [1, 5, 9]);
         let env = |vars: &'static [(&'static str, &'static str)]| {
             move |k: &str| {
@@ -768,7 +835,25 @@ mod tests {
             ])),
             Ok(Some(Shard { index: 0, count: 3 }))
         );
-        assert!(Shard::from_env(env(&[("JOB_COMPLETION_INDEX", "0")])).is_err());
+        assert_eq!(
+            Shard::from_env(env(&[("JOB_COMPLETION_INDEX", "0")])),
+            Err(ShardEnvError::NoCount {
+                index_var: "JOB_COMPLETION_INDEX",
+                count_var: "JOB_COMPLETIONS"
+            })
+        );
+        assert_eq!(
+            Shard::from_env(env(&[
+                ("SLURM_ARRAY_TASK_ID", "4"),
+                ("SLURM_ARRAY_TASK_COUNT", "4")
+            ]))
+            .map_err(|e| e.to_string()),
+            Err(
+                "from SLURM_ARRAY_TASK_ID and SLURM_ARRAY_TASK_COUNT: `4/4`: the index must be \
+                 below the count (0/4 .. 3/4)"
+                    .to_owned()
+            )
+        );
         assert_eq!(Shard::from_env(env(&[])), Ok(None));
     }
 

@@ -379,8 +379,7 @@ pub async fn icd_command(
             "usage: m6p-twin gs --connect ADDR NODE COMMAND [NAME=VALUE ...] (`m6p-twin icd` lists them)"
         );
     };
-    let (icd_node, icd_port, cmd) =
-        crate::icd::find_command(&format!("{node}.{command}")).map_err(anyhow::Error::msg)?;
+    let (icd_node, icd_port, cmd) = crate::icd::find_command(&format!("{node}.{command}"))?;
     let Some(dst) = node_addr(node, &icd_node) else {
         bail!(
             "which {} is `{node}`? Name one: {}",

@@ -62,13 +62,76 @@ pub enum Line {
     Icd(Vec<String>),
 }
 
+/// Why the console cannot take a line: the message of its `error:` line.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConsoleLineError {
+    /// A number above 30 for a node.
+    #[error("{addr} is not a CSP node address (0-30)")]
+    NotAnAddress {
+        /// The number.
+        addr: u8,
+    },
+    /// A builtin's node that is none of the console's node names.
+    #[error("no node `{word}` ({})", node_names().join(", "))]
+    NoNode {
+        /// The word.
+        word: String,
+    },
+    /// A builtin without an argument it needs.
+    #[error("{builtin}: needs {what}")]
+    Missing {
+        /// The builtin, as typed.
+        builtin: String,
+        /// What it needs (`a node`, `a port`).
+        what: &'static str,
+    },
+    /// A builtin with words beyond its arguments.
+    #[error("{builtin}: too many words (`help` shows its use)")]
+    TooManyWords {
+        /// The builtin, as typed.
+        builtin: String,
+    },
+    /// `ping`'s size is not a number.
+    #[error("ping: `{size}` is not a size in bytes")]
+    NotASize {
+        /// The word.
+        size: String,
+    },
+    /// `raw`'s port is not 0-63.
+    #[error("raw: `{port}` is not a CSP port (0-63)")]
+    NotAPort {
+        /// The word.
+        port: String,
+    },
+    /// `raw`'s data is not hex. The hex error's message is part of this one's, so it is
+    /// not also its `source()`.
+    #[error("raw: {hex}")]
+    RawNotHex {
+        /// Why the data is not hex bytes.
+        hex: crate::commands::HexBytesError,
+    },
+    /// One word that is no builtin.
+    #[error(
+        "`{word}`: a line is NODE COMMAND [NAME=VALUE ...] or one of {} (`help`)",
+        BUILTINS.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
+    )]
+    NotALine {
+        /// The word.
+        word: String,
+    },
+    /// `NODE COMMAND` that the ICD does not have.
+    #[error(transparent)]
+    Icd(#[from] crate::icd::IcdLookupError),
+}
+
 /// A node as the builtins take it: a name (`fc`, `pl12`, `comm2`) or an address.
-fn addr_of(word: &str) -> Result<u8, String> {
+fn addr_of(word: &str) -> Result<u8, ConsoleLineError> {
     if let Ok(a) = word.parse::<u8>() {
         return if a <= 30 {
             Ok(a)
         } else {
-            Err(format!("{a} is not a CSP node address (0-30)"))
+            Err(ConsoleLineError::NotAnAddress { addr: a })
         };
     }
     let w = word.to_ascii_uppercase();
@@ -84,11 +147,13 @@ fn addr_of(word: &str) -> Result<u8, String> {
             .and_then(|n| n.parse().ok())
             .filter(|n| (12..=15).contains(n)),
     };
-    a.ok_or_else(|| format!("no node `{word}` ({})", node_names().join(", ")))
+    a.ok_or_else(|| ConsoleLineError::NoNode {
+        word: word.to_owned(),
+    })
 }
 
 /// The meaning of one console line; the error is the message of its `error:` line.
-pub fn parse(line: &str) -> Result<Line, String> {
+pub fn parse(line: &str) -> Result<Line, ConsoleLineError> {
     let words: Vec<String> = line.split_whitespace().map(str::to_owned).collect();
     let Some(first) = words.first() else {
         return Ok(Line::Empty);
@@ -96,15 +161,20 @@ pub fn parse(line: &str) -> Result<Line, String> {
     if first.starts_with('#') {
         return Ok(Line::Empty);
     }
-    let arg = |i: usize, what: &str| -> Result<&str, String> {
+    let arg = |i: usize, what: &'static str| -> Result<&str, ConsoleLineError> {
         words
             .get(i)
             .map(String::as_str)
-            .ok_or_else(|| format!("{first}: needs {what}"))
+            .ok_or_else(|| ConsoleLineError::Missing {
+                builtin: first.clone(),
+                what,
+            })
     };
-    let too_many = |n: usize| -> Result<(), String> {
+    let too_many = |n: usize| -> Result<(), ConsoleLineError> {
         if words.len() > n {
-            Err(format!("{first}: too many words (`help` shows its use)"))
+            Err(ConsoleLineError::TooManyWords {
+                builtin: first.clone(),
+            })
         } else {
             Ok(())
         }
@@ -119,7 +189,7 @@ pub fn parse(line: &str) -> Result<Line, String> {
                 None => 16,
                 Some(s) => s
                     .parse()
-                    .map_err(|_| format!("ping: `{s}` is not a size in bytes"))?,
+                    .map_err(|_| ConsoleLineError::NotASize { size: s.clone() })?,
             };
             Ok(Line::Ping(node, size))
         }
@@ -134,21 +204,21 @@ pub fn parse(line: &str) -> Result<Line, String> {
         "raw" => {
             let node = addr_of(arg(1, "a node")?)?;
             let port = arg(2, "a port")?;
-            let port: u8 = port
-                .parse()
-                .ok()
-                .filter(|p| *p <= 63)
-                .ok_or_else(|| format!("raw: `{port}` is not a CSP port (0-63)"))?;
+            let port: u8 = port.parse().ok().filter(|p| *p <= 63).ok_or_else(|| {
+                ConsoleLineError::NotAPort {
+                    port: port.to_owned(),
+                }
+            })?;
             let hex: String = words[3..].concat();
-            let data = crate::commands::parse_hex(&hex).map_err(|e| format!("raw: {e}"))?;
+            let data = crate::commands::parse_hex(&hex)
+                .map_err(|hex| ConsoleLineError::RawNotHex { hex })?;
             Ok(Line::Raw(node, port, data))
         }
         _ => {
             if words.len() < 2 {
-                return Err(format!(
-                    "`{first}`: a line is NODE COMMAND [NAME=VALUE ...] or one of {} (`help`)",
-                    BUILTINS.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
-                ));
+                return Err(ConsoleLineError::NotALine {
+                    word: first.clone(),
+                });
             }
             crate::icd::find_command(&format!("{}.{}", words[0], words[1]))?;
             Ok(Line::Icd(words))
@@ -157,7 +227,7 @@ pub fn parse(line: &str) -> Result<Line, String> {
 }
 
 /// `help`, `help NODE`, `help NODE COMMAND`.
-pub fn help(words: &[String]) -> Result<String, String> {
+pub fn help(words: &[String]) -> Result<String, crate::icd::IcdLookupError> {
     match words {
         [] => {
             let mut s = String::from(
@@ -342,10 +412,10 @@ async fn dispatch(
     port: Option<u8>,
     timeout: Duration,
 ) -> anyhow::Result<bool> {
-    match parse(line).map_err(anyhow::Error::msg)? {
+    match parse(line)? {
         Line::Empty => {}
         Line::Quit => return Ok(false),
-        Line::Help(words) => print!("{}", help(&words).map_err(anyhow::Error::msg)?),
+        Line::Help(words) => print!("{}", help(&words)?),
         Line::Ping(node, size) => {
             gs::ping(client, node, 1, size, Duration::ZERO, timeout).await?;
         }
@@ -529,16 +599,35 @@ mod tests {
         assert_eq!(parse("raw 6 12 01"), Ok(Line::Raw(6, 12, vec![1])));
         assert_eq!(parse("exit"), Ok(Line::Quit));
         assert!(matches!(parse("fc tmgen"), Ok(Line::Icd(w)) if w.len() == 2));
-        assert!(parse("ping 40").unwrap_err().contains("0-30"));
-        assert!(parse("ping sat").unwrap_err().contains("no node `sat`"));
-        assert!(parse("raw 6 64 01").unwrap_err().contains("0-63"));
-        assert!(
-            parse("fc tmgne")
-                .unwrap_err()
-                .contains("no command `tmgne`")
+        let says = |line: &str| parse(line).unwrap_err().to_string();
+        assert_eq!(
+            parse("ping 40"),
+            Err(ConsoleLineError::NotAnAddress { addr: 40 })
         );
-        assert!(parse("hello").unwrap_err().contains("NODE COMMAND"));
-        assert!(parse("uptime fc eps").unwrap_err().contains("too many"));
+        assert_eq!(says("ping 40"), "40 is not a CSP node address (0-30)");
+        assert!(says("ping sat").starts_with("no node `sat` (COMM, COMM1, "));
+        assert_eq!(says("raw 6 64 01"), "raw: `64` is not a CSP port (0-63)");
+        assert_eq!(says("raw 6"), "raw: needs a port");
+        assert_eq!(
+            says("raw 6 12 0g"),
+            "raw: `0g` is not hex bytes: Invalid character 'g' at position 1"
+        );
+        assert!(matches!(
+            parse("fc tmgne"),
+            Err(ConsoleLineError::Icd(
+                crate::icd::IcdLookupError::NoCommand { .. }
+            ))
+        ));
+        assert!(says("fc tmgne").starts_with("the FC has no command `tmgne`: "));
+        assert!(
+            says("hello")
+                .starts_with("`hello`: a line is NODE COMMAND [NAME=VALUE ...] or one of ping, ")
+        );
+        assert_eq!(
+            says("uptime fc eps"),
+            "uptime: too many words (`help` shows its use)"
+        );
+        assert_eq!(says("ping fc x"), "ping: `x` is not a size in bytes");
     }
 
     #[test]

@@ -43,7 +43,7 @@ impl FaultKind for Babble {
             );
         }
         match cx.net.resolve(&self.node) {
-            Err(e) => err("node", e),
+            Err(e) => err("node", e.to_string()),
             Ok(a) if bus.is_some_and(|b| !cx.on_bus(a, b)) => err(
                 "node",
                 format!("{} is not on the `{}` bus", self.node, cx.common.target),

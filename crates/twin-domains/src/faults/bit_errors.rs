@@ -42,7 +42,7 @@ impl FaultKind for BitErrors {
         }
         if let Some(n) = &self.node {
             match cx.net.resolve(n) {
-                Err(e) => err("node", e),
+                Err(e) => err("node", e.to_string()),
                 Ok(a) if bus.is_some_and(|b| !cx.on_bus(a, b)) => err(
                     "node",
                     format!("{n} is not on the `{}` bus", cx.common.target),

@@ -28,7 +28,7 @@ impl FaultKind for Clock {
 
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
         if let Err(e) = cx.node() {
-            err("target", e);
+            err("target", e.to_string());
         }
         if self.jump_s.is_none() && self.drift_ppm.is_none() {
             err(

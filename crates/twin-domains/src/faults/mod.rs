@@ -99,7 +99,7 @@ impl FaultCx<'_> {
         }
     }
     /// The node `target` names, if it names one.
-    pub fn node(&self) -> Result<u8, String> {
+    pub fn node(&self) -> Result<u8, twin_core::network::NodeRefError> {
         self.net.resolve(&self.common.target)
     }
     /// Whether the node at `addr` sits on CAN bus `bus` (the PC on both).

@@ -10,7 +10,7 @@ use super::{FaultAction, FaultCx, FaultKind, FaultPlan};
 
 fn node_target(cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
     if let Err(e) = cx.node() {
-        err("target", e);
+        err("target", e.to_string());
     }
 }
 

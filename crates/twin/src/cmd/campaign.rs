@@ -78,10 +78,8 @@ pub fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     c.check(runs)?;
     let jobs = campaign_run::default_jobs(a.jobs);
     let shard = match &a.shard {
-        Some(s) => Some(campaign_run::Shard::parse(s).map_err(anyhow::Error::msg)?),
-        None => {
-            campaign_run::Shard::from_env(|k| std::env::var(k).ok()).map_err(anyhow::Error::msg)?
-        }
+        Some(s) => Some(campaign_run::Shard::parse(s)?),
+        None => campaign_run::Shard::from_env(|k| std::env::var(k).ok())?,
     };
     let mut indices: Vec<u64> = shard.map_or_else(|| (0..runs).collect(), |s| s.runs(runs));
     let meta = campaign_run::CampaignMeta::of(&c, runs);

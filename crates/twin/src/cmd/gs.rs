@@ -124,7 +124,7 @@ pub fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
             GsRequest::Ident { node } => gs::ident(&mut client, node, a.timeout).await,
             GsRequest::Icd(words) => gs::icd_command(&mut client, &words, a.port, a.timeout).await,
             GsRequest::Raw { node, port, data } => {
-                let bytes = m6p_twin::commands::parse_hex(&data).map_err(anyhow::Error::msg)?;
+                let bytes = m6p_twin::commands::parse_hex(&data)?;
                 gs::raw(&mut client, node, port, bytes, a.timeout).await
             }
             GsRequest::Setup {
@@ -142,8 +142,7 @@ pub fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
                     format!("max_packets={max_packets}"),
                     format!("poll_frame_size={frame}"),
                 ];
-                let (_, _, cmd) =
-                    m6p_twin::icd::find_command("PC.SETUP").map_err(anyhow::Error::msg)?;
+                let (_, _, cmd) = m6p_twin::icd::find_command("PC.SETUP")?;
                 let mut args = gs::parse_args(&words)?;
                 args.insert("sync_message".into(), sync.into());
                 words.clear();

@@ -18,10 +18,7 @@ pub fn cmd_icd(a: Args) -> anyhow::Result<bool> {
     } else if a.json {
         println!("{}", m6p_twin::icd::to_json());
     } else {
-        print!(
-            "{}",
-            m6p_twin::icd::to_text(a.node.as_deref()).map_err(anyhow::Error::msg)?
-        );
+        print!("{}", m6p_twin::icd::to_text(a.node.as_deref())?);
     }
     Ok(true)
 }

@@ -267,8 +267,8 @@ fn add_links(
     cli_links: Vec<m6p_twin::runtime::KissLink>,
     a: &RunArgs,
 ) -> anyhow::Result<()> {
-    let replaced = m6p_twin::outside::cli_replaces(&opts.network, cli_links.iter().map(|l| &l.cfg))
-        .map_err(|e| anyhow::anyhow!(e))?;
+    let replaced =
+        m6p_twin::outside::cli_replaces(&opts.network, cli_links.iter().map(|l| &l.cfg))?;
     for (addr, name) in replaced {
         if opts.replaced.insert(addr) {
             eprintln!(
