@@ -63,6 +63,7 @@ macro_rules! registry {
 registry! {
     crate::commands::ReplyExpect,
     crate::commands::NoReplyExpect,
+    crate::latency::LatencyExpect,
     crate::counters::CounterExpect,
     crate::adcs::AttitudeExpect,
     crate::sessions::SessionExpect,

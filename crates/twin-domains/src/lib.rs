@@ -6,7 +6,7 @@
 //! Slices: [`adcs`] (the FC), [`sessions`] (the PC and payloads), [`eps`], [`comm`] (the
 //! radio and passes), [`commands`] (the ground's requests), [`outside`] (links to outside
 //! programs), [`clock`], [`params`], [`rules`], [`invariants`], and the expectation kinds
-//! [`can`], [`counters`], [`fields`].
+//! [`can`], [`counters`], [`fields`], [`latency`].
 
 pub mod adcs;
 pub mod can;
@@ -20,6 +20,7 @@ pub mod expectations;
 pub mod faults;
 pub mod fields;
 pub mod invariants;
+pub mod latency;
 pub mod outside;
 pub mod params;
 pub mod plan;
