@@ -93,6 +93,12 @@ pub enum EpsEvent {
     /// The battery loses this fraction (0..1) of its capacity, for good
     /// ([`Battery::fade`]).
     BatteryFade(f64),
+    /// The channel's switch stops obeying commands (CHSET and the scenario's channel
+    /// events) in whatever state it is; the protection still sheds and restores it. Holds
+    /// compose: the switch obeys again when every hold is freed.
+    ChannelStuck(Channel),
+    /// One hold of [`EpsEvent::ChannelStuck`] on the channel ends.
+    ChannelFreed(Channel),
 }
 
 /// An [`EpsEvent`] at a simulated time.
@@ -277,6 +283,9 @@ pub struct EpsApp {
     /// Between a reset and the start: the boot applies the parameter table, whose values
     /// are taken whole ([`config`]).
     booting: bool,
+    /// Holds of [`EpsEvent::ChannelStuck`] on each channel (by [`Channel::id`]): a fault of
+    /// the switch, so an EPS reboot keeps them.
+    stuck: [u16; CHANNELS],
     log: Vec<NodeEvent>,
 }
 
@@ -300,6 +309,7 @@ impl EpsApp {
             cut_off: false,
             refused: 0,
             booting: true,
+            stuck: [0; CHANNELS],
             log: Vec::new(),
         }
     }
@@ -404,8 +414,34 @@ impl EpsApp {
         });
     }
 
+    /// Whether `channel`'s switch ignores commands now.
+    pub fn is_stuck(&self, channel: Channel) -> bool {
+        self.stuck
+            .get(usize::from(channel.id()))
+            .is_some_and(|&n| n > 0)
+    }
+
     /// Switch a channel for a command or a scenario event; `false` if refused.
     fn switch(&mut self, t: SimTime, channel: Channel, on: bool, cause: SwitchCause) -> bool {
+        // A stuck switch is not refused: the EPS drives it, it does not move, and the
+        // reply's channel states say so. The protection's refusal comes first, as it
+        // would for a working switch.
+        if self.is_stuck(channel)
+            && self.eps.is_on(channel) != on
+            && (!on || self.eps.protection().allows_on(channel))
+        {
+            let state = |on: bool| if on { "on" } else { "off" };
+            self.log.push(NodeEvent::warning(
+                t,
+                format!(
+                    "eps: channel {} stuck {}: switching it {} ({cause:?}) had no effect",
+                    channel.name(),
+                    state(!on),
+                    state(on)
+                ),
+            ));
+            return true;
+        }
         match self.eps.switch(channel, on) {
             Ok(true) => {
                 self.switched(t, channel, on, cause);
@@ -447,6 +483,28 @@ impl EpsApp {
                 self.eps.set_panel_failed(i, false);
                 self.log
                     .push(NodeEvent::info(t, format!("eps: panel {i} restored")));
+            }
+            EpsEvent::ChannelStuck(c) | EpsEvent::ChannelFreed(c) => {
+                let stuck = matches!(ev, EpsEvent::ChannelStuck(_));
+                if let Some(n) = self.stuck.get_mut(usize::from(c.id())) {
+                    *n = if stuck {
+                        n.saturating_add(1)
+                    } else {
+                        n.saturating_sub(1)
+                    };
+                }
+                self.log.push(NodeEvent::info(
+                    t,
+                    if self.is_stuck(c) {
+                        format!(
+                            "eps: channel {} stuck {}",
+                            c.name(),
+                            if self.eps.is_on(c) { "on" } else { "off" }
+                        )
+                    } else {
+                        format!("eps: channel {} obeys again", c.name())
+                    },
+                ));
             }
             EpsEvent::BatteryFade(f) => {
                 self.eps.fade_battery(f);

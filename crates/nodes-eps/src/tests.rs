@@ -821,3 +821,87 @@ fn a_payload_reads_the_eps_but_may_not_switch_it() {
     assert_eq!(ask(&mut bench, &[3, 3, 0])[..2], [3, 1]);
     assert_eq!(switches(&out).len(), 1);
 }
+
+/// A stuck switch ignores CHSET (a success reply whose channel states show it unchanged)
+/// and the scenario's channel events, while the protection still sheds it; holds compose,
+/// and once every hold is freed CHSET switches it again.
+#[test]
+fn a_stuck_channel_ignores_chset_until_it_is_freed() {
+    let s = SimTime::from_secs;
+    let pl12 = Channel::Payload12;
+    let at = |t: SimTime, event: EpsEvent| TimedEpsEvent { at: t, event };
+    let cfg = EpsConfig {
+        timeline: vec![
+            at(s(1), EpsEvent::ChannelStuck(pl12)),
+            at(
+                s(3),
+                EpsEvent::Channel {
+                    channel: pl12,
+                    on: false,
+                },
+            ),
+            at(s(5), EpsEvent::ChannelFreed(pl12)),
+            // Stuck off, twice over; one hold freed.
+            at(s(7), EpsEvent::ChannelStuck(pl12)),
+            at(s(7), EpsEvent::ChannelStuck(pl12)),
+            at(s(8), EpsEvent::ChannelFreed(pl12)),
+            at(s(10), EpsEvent::ChannelFreed(pl12)),
+            // Stuck on, and the battery low: the protection sheds it all the same.
+            at(s(11), EpsEvent::ChannelStuck(pl12)),
+            at(s(12), EpsEvent::SetSoc(0.1)),
+        ],
+        ..EpsConfig::default()
+    };
+    let (mut h, out) = host(EpsApp::new(cfg));
+    let on = |r: &[u8]| u16_at(r, 2) & pl12.bit() != 0;
+
+    // CHSET PL12 off: success, the channel states show it on; nothing switches.
+    let r = one_reply(&mut h, &[3, 4, 0], s(2));
+    assert_eq!(r[..2], [3, 1]);
+    assert!(on(&r), "{r:?}");
+    assert!(h.app.is_stuck(pl12));
+    assert!(
+        h.node.recent_events().any(|e| e
+            .to_string()
+            .contains("channel PL12 stuck on: switching it off (Command) had no effect")),
+        "a warning"
+    );
+    // The scenario's event at 3 s neither.
+    let r = one_reply(&mut h, &[2], s(4));
+    assert!(on(&r), "CHGET {r:?}");
+    assert!(switches(&out).is_empty(), "{:?}", switches(&out));
+    assert_eq!(h.app.eps().channels_on() & pl12.bit(), pl12.bit());
+
+    // Freed: CHSET switches it.
+    let r = one_reply(&mut h, &[3, 4, 0], s(6));
+    assert!(!h.app.is_stuck(pl12));
+    assert!(!on(&r), "{r:?}");
+    assert_eq!(
+        switches(&out),
+        vec![(s(6), pl12, false, SwitchCause::Command)]
+    );
+
+    // Two holds, one freed: still stuck (off).
+    let r = one_reply(&mut h, &[3, 4, 1], s(9));
+    assert_eq!(r[..2], [3, 1]);
+    assert!(!on(&r) && h.app.is_stuck(pl12), "{r:?}");
+    // Both freed.
+    let r = one_reply(&mut h, &[3, 4, 1], s(10) + Duration::from_millis(500));
+    assert!(on(&r), "{r:?}");
+    assert_eq!(switches(&out).len(), 2);
+
+    // Stuck on at 11 s, 10 % at 12 s: shed at the tick (12 s, after the event) with its
+    // group.
+    run_until(&mut h, s(13));
+    assert!(h.app.is_stuck(pl12));
+    assert_eq!(
+        switches(&out).get(2),
+        Some(&(s(12), pl12, false, SwitchCause::Shed(Group::Payload))),
+        "{:?}",
+        switches(&out)
+    );
+    assert_eq!(h.app.eps().channels_on() & pl12.bit(), 0);
+    // The group shed, a CHSET on is refused before the switch is driven, as it is for a
+    // working one.
+    assert_eq!(one_reply(&mut h, &[3, 4, 1], s(14)), [3, 0]);
+}

@@ -27,6 +27,7 @@ pub mod clock;
 pub mod media;
 pub mod node;
 pub mod panel_loss;
+pub mod stuck_switch;
 
 use csp::SimTime;
 use schemars::JsonSchema;
@@ -262,6 +263,7 @@ registry! {
     babble::Babble,
     panel_loss::PanelLoss,
     battery_fade::BatteryFade,
+    stuck_switch::StuckSwitch,
     clock::Clock,
 }
 
