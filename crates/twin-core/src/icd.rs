@@ -174,10 +174,20 @@ pub fn node_named(name: &str) -> Option<NodeIcd> {
 }
 
 /// The ICD placed on one run's ports: (node address, port) to the node's name and the
-/// port's table.
+/// port's table; and the PC's sessions, which its commands name by id.
 #[derive(Debug, Clone, Default)]
 pub struct IcdMap {
     ports: BTreeMap<(u8, u8), (&'static str, Port)>,
+    /// The PC's sessions as (session id, payload address), in its configuration's order.
+    pc_sessions: Vec<(u8, u8)>,
+}
+
+/// The sessions of a PC's configuration as (session id, payload address).
+fn pc_sessions(pc: &nodes_pc::PcConfig) -> Vec<(u8, u8)> {
+    pc.sessions
+        .iter()
+        .map(|s| (s.session_id, s.payload_addr))
+        .collect()
 }
 
 /// Request or reply.
@@ -239,7 +249,10 @@ impl IcdMap {
                 }
             }
         }
-        IcdMap { ports }
+        IcdMap {
+            ports,
+            pc_sessions: pc_sessions(&nodes_pc::PcConfig::default()),
+        }
     }
 
     /// The ICD on the ports the nodes' configurations give (a run's:
@@ -309,7 +322,19 @@ impl IcdMap {
         ] {
             put(a, csp::params::PORT, PLATFORM_PORT);
         }
-        IcdMap { ports }
+        IcdMap {
+            ports,
+            pc_sessions: pc_sessions(opts.pc),
+        }
+    }
+
+    /// The payload address of the PC's session `session_id` (SETUP, STATUS and ABORT name a
+    /// session by id; the payload is fixed for the run), if the PC has that session.
+    pub fn pc_session_payload(&self, session_id: u8) -> Option<u8> {
+        self.pc_sessions
+            .iter()
+            .find(|(s, _)| *s == session_id)
+            .map(|(_, a)| *a)
     }
 
     /// The port table at `addr`:`port`.
@@ -1493,5 +1518,33 @@ mod tests {
             e.starts_with("no node \"nope\": the nodes are ") && e.contains("FC"),
             "{e}"
         );
+    }
+
+    /// A run's map names the payload of each of its PC's sessions (what the recorder's
+    /// session summaries say); the default map, the default PC's.
+    #[test]
+    fn the_map_knows_the_payload_of_each_pc_session() {
+        let defaults = IcdMap::defaults();
+        assert_eq!(defaults.pc_session_payload(1), Some(12));
+        assert_eq!(defaults.pc_session_payload(2), Some(13));
+        assert_eq!(defaults.pc_session_payload(3), None);
+        let pc = nodes_pc::PcConfig {
+            sessions: vec![
+                nodes_pc::SessionSpec::buffering(7, 15),
+                nodes_pc::SessionSpec::polling(1, 14),
+            ],
+            ..nodes_pc::PcConfig::default()
+        };
+        let map = IcdMap::for_nodes(&NodePorts {
+            seed: 1,
+            fc: &nodes_fc::FcConfig::default(),
+            pc: &pc,
+            eps: &nodes_eps::EpsConfig::default(),
+            ecu: &nodes_ecu::EcuConfig::default(),
+            comm: &nodes_comm::CommConfig::default(),
+        });
+        assert_eq!(map.pc_session_payload(7), Some(15));
+        assert_eq!(map.pc_session_payload(1), Some(14));
+        assert_eq!(map.pc_session_payload(2), None);
     }
 }

@@ -22,6 +22,7 @@
 //! | `/fc/truth/state` | `m6p.TruthState` | FC truth sample: orbit, sun, field, rates, actuators |
 //! | `/fc/adcs` | `m6p.Adcs` | FC truth sample: mode, estimate, target, errors, commands |
 //! | `/fc/scene` | `foxglove.SceneUpdate` | FC truth sample: the satellite drawn in `body` |
+//! | `/pc/sessions/summary` | `m6p.PcSessionSummary` | PC session run, when it ends or is lost (the encoder tallies each session's open run: its start and the bytes downlinked) |
 //!
 //! The fixed channels ([`FIXED_CHANNELS`]: both CAN buses, the ground network, `/csp/packets`,
 //! `/log`, `/faults`, `/commands`, `/expectations`) are registered at creation in that order;
@@ -151,6 +152,8 @@ pub const TOPIC_ADCS: &str = "/fc/adcs";
 pub const TOPIC_SCENE: &str = "/fc/scene";
 /// The PC's session events and drops.
 pub const TOPIC_PC_SESSIONS: &str = "/pc/sessions";
+/// One message per PC session run, when it ends or is lost.
+pub const TOPIC_PC_SESSION_SUMMARY: &str = "/pc/sessions/summary";
 /// Payload bytes at the ground (the S-band sink).
 pub const TOPIC_PC_DOWNLINK: &str = "/pc/downlink";
 /// What the simulated payloads did.
@@ -493,6 +496,34 @@ pub struct PcSessionMsg {
     pub reason: Option<String>,
     /// `dropped`: how many bytes; `final`: bytes still held (buffer and S-band queue).
     pub bytes: Option<u64>,
+}
+
+/// `/pc/sessions/summary`: one run of a PC session, written when the run ended or was lost:
+/// how it ended, the packets the PC counted and the bytes of it the ground received.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, foxglove::Encode)]
+pub struct PcSessionSummaryMsg {
+    /// Simulated ns since the start of the run when the run ended or was lost.
+    pub t_ns: u64,
+    /// The session id.
+    pub session: u8,
+    /// The session's payload address (null when the recorder was not given the run's PC
+    /// sessions).
+    pub payload: Option<u8>,
+    /// `done`, `aborted`, `no-ack` or `s-band-failure` (the PC's result, as scenarios name
+    /// it: `twin_scenario::pc::result_name`), or `lost` (the run was lost with the PC's
+    /// memory; `cause` says how).
+    pub result: String,
+    /// With `lost`: `power` or `reboot`.
+    pub cause: Option<String>,
+    /// Packets the PC counted in the run (STATUS's count at its end).
+    pub packets: u32,
+    /// Payload bytes of the session the ground received from the run's start to its end.
+    /// Bytes still in the S-band queue at the end reach the ground after it (`/pc/downlink`,
+    /// and the run's downlink file), so they are not in this count.
+    pub downlinked_bytes: u64,
+    /// When the run became ACTIVE, simulated ns since the start of the run (null: the PC
+    /// reported its end without its start).
+    pub start_ns: Option<u64>,
 }
 
 /// `/pc/downlink`: an S-band frame's worth of payload bytes reached the ground (its length and
@@ -1067,6 +1098,8 @@ channels! {
         "`/ground/beacons` (`m6p.Beacon`).",
     CanError => ("m6p.CanError", schema_of::<CanErrorMsg>("CanError"), |k| format!("/can/{k}/errors"), "bus", true):
         "`/can/<bus>/errors` (`m6p.CanError`), keyed by bus.",
+    PcSessionSummary => ("m6p.PcSessionSummary", schema_of::<PcSessionSummaryMsg>("PcSessionSummary"), |_| fixed(TOPIC_PC_SESSION_SUMMARY), "medium", false):
+        "`/pc/sessions/summary` (`m6p.PcSessionSummary`).",
 }
 
 /// The channels every run has, as (kind, key), in registration order; others (another
@@ -1133,8 +1166,13 @@ pub struct EventEncoder {
     trains: Vec<(Arc<str>, Option<Train>)>,
     /// The run's packets (CFP reassembled per bus), for `/csp/packets`.
     tap: twin_core::packets::PacketTap,
-    /// The ICD on the run's ports, to decode `/csp/packets`.
+    /// The ICD on the run's ports, to decode `/csp/packets` (and the payload of each PC
+    /// session, for `/pc/sessions/summary`).
     icd: twin_core::icd::IcdMap,
+    /// Each PC session's open run, by session id (at most the PC's sessions), summed up
+    /// on `/pc/sessions/summary` when it ends: the events of its end carry no start and no
+    /// byte count.
+    pc_runs: BTreeMap<u8, PcRunTally>,
     buf: Vec<u8>,
     key: String,
     /// The last `/csp/packets` message, reused for the next.
@@ -1147,6 +1185,15 @@ pub struct EventEncoder {
     ecef: EcefFromEci,
     /// Trains handed out, kept for their vectors.
     spare_trains: Vec<Train>,
+}
+
+/// A PC session's open run as far as its summary needs it.
+#[derive(Debug, Clone, Copy, Default)]
+struct PcRunTally {
+    /// When it became ACTIVE.
+    started: Option<SimTime>,
+    /// Payload bytes of the session the ground received since.
+    downlinked_bytes: u64,
 }
 
 impl std::fmt::Debug for EventEncoder {
@@ -1664,6 +1711,7 @@ impl EventEncoder {
             path: String::new(),
             ecef: EcefFromEci::default(),
             spare_trains: Vec::new(),
+            pc_runs: BTreeMap::new(),
         }
     }
 
@@ -1917,6 +1965,7 @@ impl EventEncoder {
         emit: &mut Emit<'_>,
     ) -> anyhow::Result<()> {
         use nodes_pc::PcOutput as O;
+        let summary = self.pc_run_summary(t, o);
         let t_ns = t.as_ns();
         let base_ns = self.base_ns;
         let buf = &mut self.buf;
@@ -2006,7 +2055,79 @@ impl EventEncoder {
                 ..none
             },
         };
-        emit_msg(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)
+        emit_msg(buf, base_ns, (ChannelKind::PcSession, ""), t, &msg, emit)?;
+        // A run's summary follows the `/pc/sessions` message of its end.
+        match summary {
+            Some(s) => emit_msg(
+                buf,
+                base_ns,
+                (ChannelKind::PcSessionSummary, ""),
+                t,
+                &s,
+                emit,
+            ),
+            None => Ok(()),
+        }
+    }
+
+    /// Keep each PC session's open run up to date with `o` (at `t`): a start opens it, a
+    /// downlink of the session adds its bytes; an end or a loss closes it, and gives its
+    /// `/pc/sessions/summary` message.
+    fn pc_run_summary(
+        &mut self,
+        t: SimTime,
+        o: &nodes_pc::PcOutput,
+    ) -> Option<PcSessionSummaryMsg> {
+        use nodes_pc::PcOutput as O;
+        let (session, result, cause, packets) = match o {
+            O::SessionStarted { session_id, .. } => {
+                let run = PcRunTally {
+                    started: Some(t),
+                    downlinked_bytes: 0,
+                };
+                self.pc_runs.insert(*session_id, run);
+                return None;
+            }
+            O::Downlinked {
+                session_id, bytes, ..
+            } => {
+                // Bytes that arrive between runs (the queue draining after an end) belong to
+                // no open run: the ended run's summary is already written.
+                if let Some(run) = self.pc_runs.get_mut(session_id) {
+                    run.downlinked_bytes += bytes.len() as u64;
+                }
+                return None;
+            }
+            O::SessionEnded {
+                session_id,
+                result,
+                packets,
+                ..
+            } => (
+                *session_id,
+                twin_scenario::pc::result_name(result.to_u8()),
+                None,
+                *packets,
+            ),
+            O::SessionLost {
+                session_id,
+                cause,
+                packets,
+                ..
+            } => (*session_id, "lost", Some(cause.as_str()), *packets),
+            O::Dropped { .. } | O::Final { .. } => return None,
+        };
+        let run = self.pc_runs.remove(&session).unwrap_or_default();
+        Some(PcSessionSummaryMsg {
+            t_ns: t.as_ns(),
+            session,
+            payload: self.icd.pc_session_payload(session),
+            result: result.to_owned(),
+            cause: cause.map(str::to_owned),
+            packets,
+            downlinked_bytes: run.downlinked_bytes,
+            start_ns: run.started.map(SimTime::as_ns),
+        })
     }
 
     /// What the EPS did: a power sample or a channel switched (`t_ns` the event's time).
@@ -3178,6 +3299,144 @@ mod tests {
             worst_m = worst_m.max((ecef.at(unix_ns) * r_eci_m - exact * r_eci_m).norm());
         }
         assert!(worst_m < 1e-6, "{worst_m} m");
+    }
+
+    /// A session run's end gives its `/pc/sessions` message as before, then one
+    /// `/pc/sessions/summary`: its payload from the run's ICD, its start, and the bytes of
+    /// the session downlinked from its start to its end (not another session's, not those
+    /// arriving after its end); a lost run names its cause; an end without a start has none.
+    #[test]
+    fn a_session_runs_end_is_summed_up_after_its_session_message() {
+        use nodes_pc::PcOutput as O;
+        // The default PC's sessions (the run's are `twin_core::icd`'s to map): 1 polls
+        // payload 12, 2 buffers payload 13.
+        let mut enc = EventEncoder::new(0);
+        let s = SimTime::from_secs;
+        let down = |t, session_id, n: usize| O::Downlinked {
+            t,
+            session_id,
+            payload_addr: 11 + session_id,
+            bytes: vec![7; n],
+        };
+        let events = [
+            O::SessionStarted {
+                t: s(10),
+                session_id: 1,
+            },
+            down(s(11), 1, 100),
+            down(s(12), 2, 50),
+            down(s(13), 1, 30),
+            O::SessionEnded {
+                t: s(20),
+                session_id: 1,
+                result: nodes_pc::SessionResult::NoAck,
+                packets: 9,
+            },
+            down(s(21), 1, 1000),
+            O::SessionStarted {
+                t: s(30),
+                session_id: 1,
+            },
+            down(s(31), 1, 5),
+            O::SessionLost {
+                t: s(40),
+                session_id: 1,
+                cause: nodes_pc::LostCause::Reboot,
+                packets: 3,
+            },
+            O::SessionEnded {
+                t: s(50),
+                session_id: 2,
+                result: nodes_pc::SessionResult::Aborted,
+                packets: 0,
+            },
+        ];
+        let mut got: Vec<(ChannelKind, serde_json::Value)> = Vec::new();
+        let mut emit = |m: Encoded<'_>| -> anyhow::Result<()> {
+            let data: Arc<[u8]> = m.kind.schema_data()?.into();
+            let v = crate::protobuf::decode(m.kind.schema_name(), SCHEMA_ENCODING, &data, m.data)?;
+            got.push((m.kind, v));
+            Ok(())
+        };
+        for o in events {
+            enc.encode(&RunEvent::Pc(Box::new(o)), &mut emit).unwrap();
+        }
+        use ChannelKind::{Downlink as D, PcSession as P, PcSessionSummary as S};
+        let kinds: Vec<ChannelKind> = got.iter().map(|(k, _)| *k).collect();
+        assert_eq!(kinds, [P, D, D, D, P, S, D, P, D, P, S, P, S]);
+        // The `/pc/sessions` message of an end is what it always was.
+        let ended: PcSessionMsg = serde_json::from_value(got[4].1.clone()).unwrap();
+        assert_eq!(
+            ended,
+            PcSessionMsg {
+                t_ns: s(20).as_ns(),
+                event: "ended".into(),
+                session: Some(1),
+                payload: None,
+                result: Some("no-ack".into()),
+                packets: Some(9),
+                reason: None,
+                bytes: None,
+            }
+        );
+        let summaries: Vec<PcSessionSummaryMsg> = got
+            .iter()
+            .filter(|(k, _)| *k == S)
+            .map(|(_, v)| serde_json::from_value(v.clone()).unwrap())
+            .collect();
+        let summary =
+            |t: SimTime, session, payload, result: &str, cause: Option<&str>| PcSessionSummaryMsg {
+                t_ns: t.as_ns(),
+                session,
+                payload,
+                result: result.into(),
+                cause: cause.map(str::to_owned),
+                packets: 0,
+                downlinked_bytes: 0,
+                start_ns: None,
+            };
+        assert_eq!(
+            summaries,
+            [
+                PcSessionSummaryMsg {
+                    packets: 9,
+                    downlinked_bytes: 130,
+                    start_ns: Some(s(10).as_ns()),
+                    ..summary(s(20), 1, Some(12), "no-ack", None)
+                },
+                PcSessionSummaryMsg {
+                    packets: 3,
+                    downlinked_bytes: 5,
+                    start_ns: Some(s(30).as_ns()),
+                    ..summary(s(40), 1, Some(12), "lost", Some("reboot"))
+                },
+                summary(s(50), 2, Some(13), "aborted", None),
+            ]
+        );
+        // Without the run's ICD, the encoder does not guess a session's payload.
+        let mut bare = EventEncoder::new(0);
+        bare.set_icd(twin_core::icd::IcdMap::default());
+        let mut payloads = Vec::new();
+        let lost = O::SessionLost {
+            t: s(1),
+            session_id: 1,
+            cause: nodes_pc::LostCause::PowerLoss,
+            packets: 0,
+        };
+        bare.encode(&RunEvent::Pc(Box::new(lost)), &mut |m| {
+            if m.kind == S {
+                let data: Arc<[u8]> = m.kind.schema_data()?.into();
+                let v =
+                    crate::protobuf::decode(m.kind.schema_name(), SCHEMA_ENCODING, &data, m.data)?;
+                payloads.push((v["payload"].clone(), v["cause"].clone()));
+            }
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(
+            payloads,
+            [(serde_json::Value::Null, serde_json::json!("power"))]
+        );
     }
 
     #[test]
