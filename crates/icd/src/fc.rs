@@ -23,6 +23,7 @@
 //! | TMALL 6 | - | [`TmAll`] 177 (the twin's layout) |
 //! | TMPERSET 7 / TMPERGET 8 (the twin's) | [`Periodic`] 7 / - | - / [`Periodic`] 7 |
 //! | TMSTOREINFO 9 / TMSTOREGET 10 / TMSTORECLEAR 11 (the twin's) | - / 12: `u32 from_rtc, u32 to_rtc, u32 skip` / - | `nodes_fc::store` |
+//! | TWINSIM 12 (the twin's own: a spacecraft's FC has no such command) | - | [`TwinSim`] 27 |
 //! | RTCSTMSET 1 | [`RtcTimestamp`] 4 | - |
 //! | RTCSTMGET 2 | - | [`RtcTimestamp`] 4 |
 //! | ATCATGET 1 / ATCATSET 2 | - / [`TargetAttitude`] 32 | [`TargetAttitude`] 32 / - |
@@ -72,6 +73,9 @@ pub mod cmd {
     pub const TMSTOREGET: u8 = 10;
     /// Telemetry port: erase the telemetry store (the twin's).
     pub const TMSTORECLEAR: u8 = 11;
+    /// Telemetry port: the simulation's own state (the twin's own: a spacecraft's FC has no
+    /// such command).
+    pub const TWINSIM: u8 = 12;
     /// RTC port: set the RTC.
     pub const RTCSTMSET: u8 = 1;
     /// RTC port: get the RTC.
@@ -397,6 +401,29 @@ csp::wire_struct! {
 }
 
 csp::wire_struct! {
+    /// TWINSIM reply (the twin's own, 27 bytes; a spacecraft's FC has no such command):
+    /// enough for ground software to tell that it talks to the twin, to find the instant in
+    /// the run's recording and to run the same run again.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct TwinSim {
+        /// Simulated time since the run's start, ns: a recording's `t_ns` (the true time,
+        /// whatever the FC's RTC or clock faults say).
+        pub sim_time_ns: u64 { unit: "ns" },
+        /// The run's seed (a recording's `seed`; `m6p-twin run --seed`).
+        pub seed: u64,
+        /// UTC at the run's start (simulated time zero), unix seconds: a recording's
+        /// `start_utc`.
+        pub start_unix_s: u64 { unit: "s" },
+        /// The twin's version, major (`m6p-twin --version`).
+        pub version_major: u8,
+        /// The twin's version, minor.
+        pub version_minor: u8,
+        /// The twin's version, patch.
+        pub version_patch: u8,
+    }
+}
+
+csp::wire_struct! {
     /// TMSTORECLEAR reply (the twin's, 4 bytes).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
     pub struct StoreCleared {
@@ -448,6 +475,14 @@ pub const ICD_TELEMETRY: Port = Port {
             .reply(Data::of::<StoreCleared>())
             .no_payloads()
             .twin(),
+        Command::new(
+            cmd::TWINSIM,
+            "TWINSIM",
+            "the twin's own, not the spacecraft's: simulated time since the run's start, the run's seed and start, the twin's version",
+        )
+        .reply(Data::of::<TwinSim>())
+        .no_payloads()
+        .twin(),
     ],
 };
 
@@ -620,6 +655,8 @@ pub enum TelemetryCommand {
     },
     /// TMSTORECLEAR 11.
     StoreClear,
+    /// TWINSIM 12 (the twin's own).
+    TwinSim,
 }
 
 impl CommandSet for TelemetryCommand {
@@ -641,6 +678,7 @@ impl CommandSet for TelemetryCommand {
                 skip: q.skip,
             }),
             cmd::TMSTORECLEAR => no_data(r, StoreClear),
+            cmd::TWINSIM => no_data(r, TwinSim),
             c => Err(RequestError::UnknownCommand(c)),
         }
     }
@@ -875,6 +913,36 @@ mod tests {
         assert_eq!(TmGen::parse(&long), Err(Error::TooLong));
     }
 
+    /// TWINSIM's reply: three little-endian u64 and the version's three bytes, 27 in all;
+    /// in the port's table as the twin's own, refused to payloads as every command ICD 4.1
+    /// does not star.
+    #[test]
+    fn twinsim_bytes_and_table_entry() {
+        assert_eq!(TwinSim::LEN, 8 + 8 + 8 + 1 + 1 + 1);
+        let v = TwinSim {
+            sim_time_ns: 0x0102_0304_0506_0708,
+            seed: u64::MAX - 1,
+            start_unix_s: 1_777_572_000,
+            version_major: 1,
+            version_minor: 2,
+            version_patch: 3,
+        };
+        let mut bytes = vec![8, 7, 6, 5, 4, 3, 2, 1, 0xfe];
+        bytes.extend_from_slice(&[0xff; 7]);
+        bytes.extend_from_slice(&1_777_572_000u64.to_le_bytes());
+        bytes.extend_from_slice(&[1, 2, 3]);
+        assert_eq!(v.to_vec(), bytes);
+        assert_eq!(TwinSim::parse(&bytes).unwrap(), v);
+        assert_eq!(TwinSim::parse(&bytes[..26]), Err(Error::Truncated));
+        let c = ICD_TELEMETRY.command(cmd::TWINSIM).unwrap();
+        assert_eq!(c.name, "TWINSIM");
+        assert!(c.twin);
+        assert!(c.doc.starts_with("the twin's own, not the spacecraft's"));
+        assert_eq!(c.access, csp::icd::Access::NoPayloads);
+        assert_eq!(c.request.fixed_len(), Some(0));
+        assert_eq!(c.reply.fixed_len(), Some(27));
+    }
+
     #[test]
     fn tmatp_bytes() {
         let v = TmAtp {
@@ -1041,9 +1109,18 @@ mod tests {
             TelemetryCommand::parse(&req(2, &[])),
             Ok(TelemetryCommand::TmAtp)
         );
+        // TWINSIM 12, the twin's own, takes no data; 13 is nothing.
         assert_eq!(
             TelemetryCommand::parse(&req(12, &[])),
-            Err(RequestError::UnknownCommand(12))
+            Ok(TelemetryCommand::TwinSim)
+        );
+        assert!(matches!(
+            TelemetryCommand::parse(&req(12, &[0])),
+            Err(RequestError::WrongLength { .. })
+        ));
+        assert_eq!(
+            TelemetryCommand::parse(&req(13, &[])),
+            Err(RequestError::UnknownCommand(13))
         );
         // TMPERSET takes 7 bytes, TMPERGET none.
         assert!(matches!(
@@ -1129,6 +1206,7 @@ mod tests {
             bytes_round_trip::<RtcTimestamp>(&b[..4]);
             bytes_round_trip::<TargetAttitude>(&b[..32]);
             bytes_round_trip::<TargetPoint>(&b[..24]);
+            bytes_round_trip::<TwinSim>(&b[..27]);
         }
 
         /// Values survive emit then parse.
@@ -1172,6 +1250,7 @@ mod tests {
             let _ = TargetAttitude::parse(&b);
             let _ = TargetPoint::parse(&b);
             let _ = TargetModeRepr::parse(&b);
+            let _ = TwinSim::parse(&b);
             let r = req(command, &b);
             let _ = TelemetryCommand::parse(&r);
             let _ = RtcCommand::parse(&r);

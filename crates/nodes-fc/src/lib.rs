@@ -218,6 +218,9 @@ pub struct FcConfig {
     pub ports: FcPorts,
     /// Seed of the sensor noise.
     pub seed: u64,
+    /// The run's seed, which TWINSIM reports (the sensor noise's `seed` is drawn from it and
+    /// does not give it back).
+    pub run_seed: u64,
     /// ADCS loop rate, Hz (1-100).
     pub adcs_hz: u32,
     /// Truth publication rate, Hz (0: none; at most `adcs_hz`).
@@ -264,6 +267,7 @@ impl Default for FcConfig {
             tle_uploaded: true,
             ports: FcPorts::default(),
             seed: 0,
+            run_seed: 0,
             adcs_hz: 10,
             publish_hz: 1,
             body: BodyConfig::default(),
@@ -1167,6 +1171,7 @@ impl FcApp {
                 ));
                 n.to_le_bytes().to_vec()
             }
+            TelemetryCommand::TwinSim => twin_sim(&self.cfg, now).to_vec(),
         })
     }
 
@@ -1550,6 +1555,23 @@ impl App for FcApp {
         };
         self.flush_log(node);
         r
+    }
+}
+
+/// TWINSIM's reply at `now` (the twin's own command): the true simulated time, not the RTC,
+/// so that ground software finds the instant in the recording whatever RTCSTMSET or a
+/// clock fault did to the FC's time.
+fn twin_sim(cfg: &FcConfig, now: SimTime) -> wire::TwinSim {
+    // The workspace's version, which every crate of the twin shares; Cargo's parts are
+    // decimal numbers.
+    let part = |p: &str| p.parse().unwrap_or(u8::MAX);
+    wire::TwinSim {
+        sim_time_ns: now.as_ns(),
+        seed: cfg.run_seed,
+        start_unix_s: cfg.epoch_unix_s,
+        version_major: part(env!("CARGO_PKG_VERSION_MAJOR")),
+        version_minor: part(env!("CARGO_PKG_VERSION_MINOR")),
+        version_patch: part(env!("CARGO_PKG_VERSION_PATCH")),
     }
 }
 
@@ -2164,10 +2186,11 @@ mod tests {
             (10, vec![4]),
             (11, vec![2]),
         ];
-        let others: [(u8, Vec<u8>); 9] = [
+        let others: [(u8, Vec<u8>); 10] = [
             (10, vec![5]),
             (10, vec![6]),
             (10, vec![8]),
+            (10, vec![wire::cmd::TWINSIM]),
             (11, [vec![1], 1_000u32.to_le_bytes().to_vec()].concat()),
             (12, vec![1]),
             (12, vec![5]),
@@ -2210,6 +2233,50 @@ mod tests {
         let before = *h.app.target();
         assert_eq!(ask_from(&mut h, 12, 12, &[6, 3], t), vec![6, 0]);
         assert_eq!(*h.app.target(), before);
+    }
+
+    /// TWINSIM (the twin's own) answers the true simulated time since the run's start, the
+    /// run's seed, the run's start and the twin's version, whatever RTCSTMSET did to the RTC.
+    #[test]
+    fn twinsim_answers_the_simulated_time_the_run_seed_and_the_version() {
+        let mut h = host(Some((L1, L2)));
+        h.app.cfg.run_seed = 0xfeed_0000_0000_0042;
+        let t = SimTime::from_ns(95_300_000_123);
+        let r = ask(&mut h, 10, &[wire::cmd::TWINSIM], t);
+        assert_eq!(r[..2], [wire::cmd::TWINSIM, 1]);
+        assert_eq!(r.len(), 2 + 27);
+        let sim = wire::TwinSim::parse(&r[2..]).unwrap();
+        let version: Vec<u8> = env!("CARGO_PKG_VERSION")
+            .split('.')
+            .map(|p| p.parse().unwrap())
+            .collect();
+        assert_eq!(
+            sim,
+            wire::TwinSim {
+                sim_time_ns: 95_300_000_123,
+                seed: 0xfeed_0000_0000_0042,
+                start_unix_s: START,
+                version_major: version[0],
+                version_minor: version[1],
+                version_patch: version[2],
+            }
+        );
+        // The bytes: the time first, little-endian.
+        assert_eq!(r[2..10], 95_300_000_123u64.to_le_bytes());
+        // An RTC set a day ahead moves TMGEN's time, not TWINSIM's.
+        let t2 = SimTime::from_secs(100);
+        let ahead = u32::try_from(START + 100 + 86_400).unwrap();
+        let set = [vec![wire::cmd::RTCSTMSET], ahead.to_le_bytes().to_vec()].concat();
+        assert_eq!(ask(&mut h, 11, &set, t2), [wire::cmd::RTCSTMSET, 1]);
+        let tm_gen = wire::TmGen::parse(&ask(&mut h, 10, &[1], t2)[2..]).unwrap();
+        assert_eq!(tm_gen.rtc_timestamp, ahead);
+        let sim = wire::TwinSim::parse(&ask(&mut h, 10, &[wire::cmd::TWINSIM], t2)[2..]).unwrap();
+        assert_eq!(sim.sim_time_ns, t2.as_ns());
+        // A request with data is refused, as the port's other reads.
+        assert_eq!(
+            ask(&mut h, 10, &[wire::cmd::TWINSIM, 0], t2),
+            [wire::cmd::TWINSIM, 0]
+        );
     }
 
     #[test]

@@ -91,13 +91,14 @@ impl Nodes {
     }
 }
 
-/// The FC's configuration in the run `opts`: the scenario's, with the run's epoch, TLE and
-/// the FC's seed.
+/// The FC's configuration in the run `opts`: the scenario's, with the run's epoch, TLE,
+/// the FC's seed and the run's (TWINSIM reports it).
 pub fn fc_config(opts: &RunOptions) -> nodes_fc::FcConfig {
     nodes_fc::FcConfig {
         epoch_unix_s: opts.epoch_unix_s,
         tle: opts.tle.clone(),
         seed: mix(opts.seed, 0x300),
+        run_seed: opts.seed,
         ..opts.fc.clone()
     }
 }
