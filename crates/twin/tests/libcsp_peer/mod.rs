@@ -176,6 +176,11 @@ pub fn default_options() -> RunOptions {
     opts.clock = ClockMode::Realtime { speed: 1.0 };
     opts.duration = None;
     opts.faults.clear();
+    // The scenario's own ground station requests share the UHF air (half duplex, 9600
+    // bit/s) with the client's checks of node 16: a 200-byte ping behind them took over the
+    // client's 1 s timeout on a loaded CI machine (wall-clock timing decides whether they
+    // meet). The checks are of libcsp's wire, not of the air's queueing: the air is theirs.
+    opts.ground_plan.clear();
     opts
 }
 
