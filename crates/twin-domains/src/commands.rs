@@ -516,8 +516,22 @@ pub struct NoReplyExpect {
 
 /// The command must exist.
 fn known_command(command: &str, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
+    let _ = command_named(command, cx, err);
+}
+
+/// The `[[commands]]` entry an expectation's `command` names (`name`, or `commands[i]`);
+/// `err("command", ...)` listing the names when there is none.
+pub(crate) fn command_named<'a>(
+    command: &str,
+    cx: &ExpectCx<'a>,
+    err: &mut dyn FnMut(&str, String),
+) -> Option<&'a CommandSpec> {
     let names = names(cx.scenario);
-    if !names.iter().any(|n| n == command) {
+    let found = names
+        .iter()
+        .position(|n| n == command)
+        .and_then(|i| cx.scenario.commands.get(i));
+    if found.is_none() {
         err(
             "command",
             format!(
@@ -526,6 +540,7 @@ fn known_command(command: &str, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, Str
             ),
         );
     }
+    found
 }
 
 impl ExpectKind for ReplyExpect {

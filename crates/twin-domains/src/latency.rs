@@ -55,28 +55,13 @@ impl ExpectKind for LatencyExpect {
     const ABOUT: &'static str = "a percentile of the command's round trips is below `below` (unanswered ones count as over it)";
 
     fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String)) {
-        // The `[[commands]]` names, as `commands` gives them (`name`, or `commands[i]`).
-        let names: Vec<String> = (cx.scenario.commands.iter().enumerate())
-            .map(|(i, c)| c.name.clone().unwrap_or_else(|| format!("commands[{i}]")))
-            .collect();
-        let named = names.iter().position(|n| *n == self.command);
-        match named.and_then(|i| cx.scenario.commands.get(i)) {
-            None => err(
-                "command",
-                format!(
-                    "no command is named `{}` (commands: {})",
-                    self.command,
-                    names.join(", ")
-                ),
-            ),
-            Some(c) => {
-                let count = u64::from(c.count.unwrap_or(1));
-                if self.min_samples.is_some_and(|m| m > count) {
-                    err(
-                        "min_samples",
-                        format!("`{}` is sent at most {count} times", self.command),
-                    );
-                }
+        if let Some(c) = crate::commands::command_named(&self.command, cx, err) {
+            let count = u64::from(c.count.unwrap_or(1));
+            if self.min_samples.is_some_and(|m| m > count) {
+                err(
+                    "min_samples",
+                    format!("`{}` is sent at most {count} times", self.command),
+                );
             }
         }
         if let Some(p) = self.percentile
