@@ -382,22 +382,31 @@ pub fn build_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 
 /// The runtime for the run `opts`: [`build_runtime`], without the IO driver when the run is
 /// in virtual time with no link to the outside (every wake-up then costs no `epoll_wait`
-/// and no eventfd write: the paused clock only needs the timer).
+/// and no eventfd write: the paused clock only needs the timer), and without the idle hook
+/// too when nothing from outside is fed in either (no replayed input: the hook would only
+/// note each idle point, at every park of the run).
 pub fn build_runtime_for(opts: &RunOptions) -> anyhow::Result<tokio::runtime::Runtime> {
     if !opts.is_self_contained() {
         return build_runtime();
     }
-    build_virtual_runtime()
+    if opts.kiss_replay.is_empty() {
+        return build_virtual_runtime();
+    }
+    tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .start_paused(true)
+        // A replay's recorded input is taken in at the run's idle points (`bus::pace`).
+        .on_thread_park(bus::pace::on_idle)
+        .build()
+        .context("building the tokio runtime")
 }
 
-/// The runtime of a run in virtual time with no link to the outside: tokio's paused clock
-/// and its timer, no IO driver.
+/// The runtime of a run in virtual time with nothing from outside: tokio's paused clock and
+/// its timer, no IO driver, no idle hook.
 pub fn build_virtual_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_current_thread()
         .enable_time()
         .start_paused(true)
-        // A replay's recorded input is taken in by the same hook.
-        .on_thread_park(bus::pace::on_idle)
         .build()
         .context("building the tokio runtime")
 }
