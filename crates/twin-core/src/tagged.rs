@@ -57,6 +57,148 @@ impl Tagged {
     }
 }
 
+/// How a kind types an entry, given the words naming it in messages; an error is (field,
+/// message).
+pub type TypeEntry<P> = fn(&Tagged, &str) -> Result<P, (String, String)>;
+
+/// An entry parsed: its common fields `C` and its kind `P`, or every problem of both as
+/// (field, message).
+pub type Parsed<C, P> = Result<(C, P), Vec<(String, String)>>;
+
+/// One kind of a registry: its name in scenarios (`drop`), one line on what it does, how an
+/// entry of it is typed (given the words naming it in messages: ``a `drop` fault``), and its
+/// own fields' JSON schema.
+pub struct Kind<P> {
+    name: &'static str,
+    about: &'static str,
+    typed: TypeEntry<P>,
+    schema: fn() -> serde_json::Value,
+}
+
+impl<P> Kind<P> {
+    /// A kind of the registry (see [`Kind`]).
+    pub const fn new(
+        name: &'static str,
+        about: &'static str,
+        typed: TypeEntry<P>,
+        schema: fn() -> serde_json::Value,
+    ) -> Self {
+        Kind {
+            name,
+            about,
+            typed,
+            schema,
+        }
+    }
+}
+
+impl<P> std::fmt::Debug for Kind<P> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Kind")
+            .field("name", &self.name)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The JSON schema of `T` as a value (a [`Kind`]'s fields, a registry's common fields).
+pub fn schema_of<T: schemars::JsonSchema>() -> serde_json::Value {
+    serde_json::to_value(schemars::schema_for!(T)).unwrap_or_default()
+}
+
+/// Every kind of one tagged table (`[[faults]]`, `[[expectations]]`), each entry typed as
+/// `P` (the table's kind-erased form): how an entry is parsed into its common fields and its
+/// kind, the kinds' names for messages, and the table's JSON schema. A new kind is one line
+/// of its table's registry.
+pub struct Registry<P: 'static> {
+    /// What an entry is called in messages (`fault`).
+    noun: &'static str,
+    /// The fields every kind takes.
+    common: &'static [&'static str],
+    kinds: &'static [Kind<P>],
+}
+
+impl<P> Registry<P> {
+    /// The registry of the table whose entries are `noun`s, with the `common` fields.
+    pub const fn new(
+        noun: &'static str,
+        common: &'static [&'static str],
+        kinds: &'static [Kind<P>],
+    ) -> Self {
+        Registry {
+            noun,
+            common,
+            kinds,
+        }
+    }
+
+    /// The kinds' names, in registry order.
+    pub fn names(&self) -> impl Iterator<Item = &'static str> + '_ {
+        self.kinds.iter().map(|k| k.name)
+    }
+
+    /// The entry's kind, typed; an error is (field, message).
+    pub fn kind_of(&self, e: &Tagged) -> Result<P, (String, String)> {
+        let kind = e.kind().unwrap_or("");
+        if let Some(k) = self.kinds.iter().find(|k| k.name == kind) {
+            let what = format!("{} `{}` {}", article(k.name), k.name, self.noun);
+            return (k.typed)(e, &what);
+        }
+        let kinds = self.names().collect::<Vec<_>>().join(", ");
+        let noun = self.noun;
+        Err((
+            "kind".to_owned(),
+            if e.0.contains_key("kind") {
+                format!("unknown {noun} kind `{kind}` (kinds: {kinds})")
+            } else {
+                format!("{} {noun} needs `kind` ({kinds})", article(noun))
+            },
+        ))
+    }
+
+    /// The entry's common fields `C` and its kind; every problem of both, as (field,
+    /// message).
+    pub fn parse<C: DeserializeOwned>(&self, e: &Tagged) -> Parsed<C, P> {
+        let kind = self.kind_of(e);
+        let common = e.common::<C>(self.common);
+        match (common, kind) {
+            (Ok(c), Ok(k)) => Ok((c, k)),
+            (c, k) => Err([c.err(), k.err()].into_iter().flatten().collect()),
+        }
+    }
+
+    /// The JSON schema of an entry, one of the kinds, each with the common fields `C` (a
+    /// scenario schema's definition of the table's entry).
+    pub fn entry_schema<C: schemars::JsonSchema>(
+        &self,
+        generator: &mut schemars::SchemaGenerator,
+    ) -> schemars::Schema {
+        let kinds = self
+            .kinds
+            .iter()
+            .map(|k| (k.name, k.about, (k.schema)()))
+            .collect();
+        one_of(generator, schema_of::<C>(), kinds)
+    }
+}
+
+impl<P> std::fmt::Debug for Registry<P> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Registry")
+            .field("noun", &self.noun)
+            .field("kinds", &self.kinds)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The indefinite article of `word` as messages spell it.
+fn article(word: &str) -> &'static str {
+    if word.starts_with(['a', 'e', 'i', 'o', 'u']) {
+        "an"
+    } else {
+        "a"
+    }
+}
+
 /// A serde error as the scenario reports it: the field it is about and a message that says
 /// what the kind takes.
 fn explain(what: &str, common: &[&str], path: &str, message: &str) -> (String, String) {

@@ -6,84 +6,49 @@
 use crate::expectations::{
     AnyExpect, COMMON, Common, ExpectCx, ExpectEntry, ExpectKind, Expectation,
 };
+use std::sync::Arc;
 use twin_core::network::NetworkSpec;
-use twin_core::tagged::Tagged;
+
+use twin_core::tagged::{Kind, Parsed, Registry, Tagged, schema_of};
 use twin_scenario::scenario::{PathStep, Scenario};
 
-fn typed<K: ExpectKind>(e: &Tagged) -> Result<std::sync::Arc<dyn AnyExpect>, (String, String)> {
-    let what = format!(
-        "{} `{}` expectation",
-        if K::NAME.starts_with(['a', 'e', 'i', 'o', 'u']) {
-            "an"
-        } else {
-            "a"
-        },
-        K::NAME
-    );
-    e.params::<K>(&what, COMMON)
-        .map(|k| std::sync::Arc::new(k) as std::sync::Arc<dyn AnyExpect>)
+fn typed<K: ExpectKind>(e: &Tagged, what: &str) -> Result<Arc<dyn AnyExpect>, (String, String)> {
+    e.params::<K>(what, COMMON)
+        .map(|k| Arc::new(k) as Arc<dyn AnyExpect>)
+}
+
+const fn kind<K: ExpectKind>() -> Kind<Arc<dyn AnyExpect>> {
+    Kind::new(K::NAME, K::ABOUT, typed::<K>, schema_of::<K>)
 }
 
 /// The registry: every expectation kind, by name (see the module doc).
-macro_rules! registry {
-    ($($kind:ty),* $(,)?) => {
-        /// The kinds' names.
-        pub const KINDS: &[&str] = &[$(<$kind as ExpectKind>::NAME),*];
+static REGISTRY: Registry<Arc<dyn AnyExpect>> = Registry::new(
+    "expectation",
+    COMMON,
+    &[
+        kind::<crate::commands::ReplyExpect>(),
+        kind::<crate::commands::NoReplyExpect>(),
+        kind::<crate::latency::LatencyExpect>(),
+        kind::<crate::counters::CounterExpect>(),
+        kind::<crate::adcs::AttitudeExpect>(),
+        kind::<crate::sessions::SessionExpect>(),
+        kind::<crate::sessions::DownlinkExpect>(),
+        kind::<crate::sessions::AccountingExpect>(),
+        kind::<crate::eps::PowerExpect>(),
+        kind::<crate::comm::BeaconExpect>(),
+        kind::<crate::can::CanExpect>(),
+        kind::<crate::fields::FieldExpect>(),
+    ],
+);
 
-        fn parse_kind(e: &Tagged) -> Result<std::sync::Arc<dyn AnyExpect>, (String, String)> {
-            let kind = e.kind().unwrap_or("");
-            $(if kind == <$kind as ExpectKind>::NAME {
-                return typed::<$kind>(e);
-            })*
-            Err((
-                "kind".to_owned(),
-                if e.0.contains_key("kind") {
-                    format!("unknown expectation kind `{kind}` (kinds: {})", KINDS.join(", "))
-                } else {
-                    format!("an expectation needs `kind` ({})", KINDS.join(", "))
-                },
-            ))
-        }
-
-        /// The JSON schema of an entry: one of the kinds, each with the common fields
-        /// (the scenario's schema takes it as its `Expectation` definition).
-        pub fn entry_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
-            let common = serde_json::to_value(schemars::schema_for!(Common))
-                .unwrap_or_default();
-            let kinds = vec![$((
-                <$kind as ExpectKind>::NAME,
-                <$kind as ExpectKind>::ABOUT,
-                serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
-            )),*];
-            twin_core::tagged::one_of(generator, common, kinds)
-        }
-    };
+/// The JSON schema of an entry: one of the kinds, each with the common fields (the
+/// scenario's schema takes it as its `Expectation` definition).
+pub fn entry_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    REGISTRY.entry_schema::<Common>(generator)
 }
 
-registry! {
-    crate::commands::ReplyExpect,
-    crate::commands::NoReplyExpect,
-    crate::latency::LatencyExpect,
-    crate::counters::CounterExpect,
-    crate::adcs::AttitudeExpect,
-    crate::sessions::SessionExpect,
-    crate::sessions::DownlinkExpect,
-    crate::sessions::AccountingExpect,
-    crate::eps::PowerExpect,
-    crate::comm::BeaconExpect,
-    crate::can::CanExpect,
-    crate::fields::FieldExpect,
-}
-
-type Parsed = (Common, std::sync::Arc<dyn AnyExpect>);
-
-fn parse(e: &ExpectEntry) -> Result<Parsed, Vec<(String, String)>> {
-    let kind = parse_kind(&e.0);
-    let common = e.0.common::<Common>(COMMON);
-    match (common, kind) {
-        (Ok(c), Ok(k)) => Ok((c, k)),
-        (c, k) => Err([c.err(), k.err()].into_iter().flatten().collect()),
-    }
+fn parse(e: &ExpectEntry) -> Parsed<Common, Arc<dyn AnyExpect>> {
+    REGISTRY.parse(&e.0)
 }
 
 /// Check every `[[expectations]]` entry; `err(path, message)` for each problem.

@@ -35,7 +35,7 @@ use serde::Deserialize;
 use serde::de::DeserializeOwned;
 
 use twin_core::network::NetworkSpec;
-use twin_core::tagged::Tagged;
+use twin_core::tagged::{Kind, Parsed, Registry, Tagged, schema_of};
 use twin_runtime::RunOptions;
 use twin_scenario::scenario::{Dur, NodeRef, PathStep, Scenario};
 
@@ -208,72 +208,44 @@ impl<K: FaultKind> AnyFault for K {
 
 pub use twin_scenario::entries::FaultEntry;
 
-type Parsed = (Common, Box<dyn AnyFault>);
-
-fn typed<K: FaultKind>(e: &Tagged) -> Result<Box<dyn AnyFault>, (String, String)> {
-    e.params::<K>(&format!("a `{}` fault", K::NAME), COMMON)
+fn typed<K: FaultKind>(e: &Tagged, what: &str) -> Result<Box<dyn AnyFault>, (String, String)> {
+    e.params::<K>(what, COMMON)
         .map(|k| Box::new(k) as Box<dyn AnyFault>)
 }
 
+const fn kind<K: FaultKind>() -> Kind<Box<dyn AnyFault>> {
+    Kind::new(K::NAME, K::ABOUT, typed::<K>, schema_of::<K>)
+}
+
 /// The registry: every fault kind, by name (see the module doc).
-macro_rules! registry {
-    ($($kind:ty),* $(,)?) => {
-        /// The kinds' names.
-        pub const KINDS: &[&str] = &[$(<$kind as FaultKind>::NAME),*];
+static REGISTRY: Registry<Box<dyn AnyFault>> = Registry::new(
+    "fault",
+    COMMON,
+    &[
+        kind::<media::Drop>(),
+        kind::<media::Corrupt>(),
+        kind::<media::Delay>(),
+        kind::<media::LinkDown>(),
+        kind::<node::PowerOff>(),
+        kind::<node::Reboot>(),
+        kind::<node::Hang>(),
+        kind::<bit_errors::BitErrors>(),
+        kind::<babble::Babble>(),
+        kind::<panel_loss::PanelLoss>(),
+        kind::<battery_fade::BatteryFade>(),
+        kind::<stuck_switch::StuckSwitch>(),
+        kind::<clock::Clock>(),
+    ],
+);
 
-        fn parse_kind(e: &Tagged) -> Result<Box<dyn AnyFault>, (String, String)> {
-            let kind = e.kind().unwrap_or("");
-            $(if kind == <$kind as FaultKind>::NAME {
-                return typed::<$kind>(e);
-            })*
-            Err((
-                "kind".to_owned(),
-                if e.0.contains_key("kind") {
-                    format!("unknown fault kind `{kind}` (kinds: {})", KINDS.join(", "))
-                } else {
-                    format!("a fault needs `kind` ({})", KINDS.join(", "))
-                },
-            ))
-        }
-
-        /// The JSON schema of an entry: one of the kinds, each with the common fields
-        /// (the scenario's schema takes it as its `Fault` definition).
-        pub fn entry_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
-            let common = serde_json::to_value(schemars::schema_for!(Common))
-                .unwrap_or_default();
-            let kinds = vec![$((
-                <$kind as FaultKind>::NAME,
-                <$kind as FaultKind>::ABOUT,
-                serde_json::to_value(schemars::schema_for!($kind)).unwrap_or_default(),
-            )),*];
-            twin_core::tagged::one_of(generator, common, kinds)
-        }
-    };
+/// The JSON schema of an entry: one of the kinds, each with the common fields (the
+/// scenario's schema takes it as its `Fault` definition).
+pub fn entry_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    REGISTRY.entry_schema::<Common>(generator)
 }
 
-registry! {
-    media::Drop,
-    media::Corrupt,
-    media::Delay,
-    media::LinkDown,
-    node::PowerOff,
-    node::Reboot,
-    node::Hang,
-    bit_errors::BitErrors,
-    babble::Babble,
-    panel_loss::PanelLoss,
-    battery_fade::BatteryFade,
-    stuck_switch::StuckSwitch,
-    clock::Clock,
-}
-
-fn parse(e: &FaultEntry) -> Result<Parsed, Vec<(String, String)>> {
-    let kind = parse_kind(&e.0);
-    let common = e.0.common::<Common>(COMMON);
-    match (common, kind) {
-        (Ok(c), Ok(k)) => Ok((c, k)),
-        (c, k) => Err([c.err(), k.err()].into_iter().flatten().collect()),
-    }
+fn parse(e: &FaultEntry) -> Parsed<Common, Box<dyn AnyFault>> {
+    REGISTRY.parse(&e.0)
 }
 
 /// Check every `[[faults]]` entry; `err(path, message)` for each problem.
