@@ -95,12 +95,22 @@ pub enum RunEvent {
         /// How long it waits for its reply.
         timeout: Duration,
     },
-    /// The outcome of a scenario command.
+    /// The outcome of a scenario command, with the command as it was sent (or tried to
+    /// be): the one way a command's outcome reaches the report, the expectations and the
+    /// recording.
     CommandResult {
         /// When it was decided (reply arrival or timeout).
         t: SimTime,
         /// Command name.
         name: String,
+        /// Destination node.
+        dst: u8,
+        /// Destination port.
+        dport: u8,
+        /// Request bytes.
+        data: Vec<u8>,
+        /// How long it waited for its reply.
+        timeout: Duration,
         /// Reply bytes, or `None` on timeout.
         reply: Option<Vec<u8>>,
         /// Round-trip time in nanoseconds, when answered.
@@ -358,6 +368,10 @@ mod tests {
         let cmd = RunEvent::CommandResult {
             t: SimTime::ZERO,
             name: "x".into(),
+            dst: 3,
+            dport: 1,
+            data: Vec::new(),
+            timeout: Duration::from_secs(1),
             reply: None,
             rtt_ns: None,
             sent: SimTime::ZERO,

@@ -753,14 +753,7 @@ impl Watch for CommandWatch {
                         .map(|(k, _)| *k)
                         .and_then(|k| self.waiting.remove(&k))
                 };
-                let outcome = match (reply, rtt_ns, failed) {
-                    (_, _, Some(e)) => Outcome::SendFailed(e.clone()),
-                    (Some(data), Some(rtt), None) => Outcome::Reply {
-                        data: data.clone(),
-                        rtt: Duration::from_nanos(*rtt),
-                    },
-                    _ => Outcome::Timeout,
-                };
+                let outcome = Outcome::of_result(reply.as_deref(), *rtt_ns, failed.as_deref());
                 let timeout = timeout.unwrap_or_default();
                 let p = (self.problem)(&outcome, timeout);
                 self.tally.add(*sent, self.outcomes, p);

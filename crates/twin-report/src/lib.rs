@@ -15,11 +15,11 @@ use csp::SimTime;
 use links::kiss_tcp::KissLinkStats;
 
 use crate::observe::attitude::AttitudeSample;
+use crate::observe::commands::{RequestResult, RequestSummary};
 use crate::observe::power::PowerSample;
 use crate::observe::{Keep, Observed, Observer};
 use twin_core::events::RunEvent;
 pub use twin_runtime::counters::{Interruption, NodeReport, RunCounters, StopCause};
-use twin_runtime::ground::RequestResult;
 use twin_runtime::{RunOptions, RunSink};
 
 /// What a run did.
@@ -51,7 +51,7 @@ pub struct RunReport {
     /// `RunOptions::keep_series`).
     pub results: Vec<RequestResult>,
     /// What the ground stations' requests came to, counted.
-    pub requests: twin_runtime::ground::RequestSummary,
+    pub requests: RequestSummary,
     /// Every frame and packet, when tracing was asked for.
     pub trace: Vec<TraceEvent>,
     /// The FC's published attitude samples, in time order (empty unless the run kept
@@ -85,8 +85,8 @@ impl RunReport {
             boards: c.boards,
             links: c.links,
             socketcan: c.socketcan,
-            results: c.results,
-            requests: c.requests,
+            results: o.results,
+            requests: o.requests,
             trace: o.trace,
             attitude: o.attitude,
             attitude_summary: o.attitude_summary,

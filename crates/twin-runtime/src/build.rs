@@ -16,7 +16,7 @@ use platform::board::Boards;
 use tokio::sync::mpsc;
 
 use super::{RunOptions, mix};
-use crate::ground::{GroundApp, Recurring, Results};
+use crate::ground::{GroundApp, Recurring};
 use twin_core::events::RunEvent;
 use twin_core::network::{Medium, NodeSpec, Role, node_config};
 
@@ -103,14 +103,12 @@ pub fn fc_config(opts: &RunOptions) -> nodes_fc::FcConfig {
     }
 }
 
-/// Boot every node of `opts.network` on `segs` and start its task; the ground stations
-/// record their requests' outcomes in `results`.
+/// Boot every node of `opts.network` on `segs` and start its task.
 pub(super) fn nodes(
     opts: &mut RunOptions,
     segs: &Segments,
     clock: Clock,
     boards: &Boards,
-    results: &Results,
     events: &mpsc::UnboundedSender<RunEvent>,
 ) -> Nodes {
     let ev_tx = events;
@@ -137,7 +135,7 @@ pub(super) fn nodes(
         let ports = attach(spec, &media, segs, &inbox_tx);
         drop(inbox_tx);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
-        let mut app = app_for(spec.role, spec.addr, opts, boards, plan, results);
+        let mut app = app_for(spec.role, spec.addr, opts, boards, plan);
         // The scenario's parameter values are the node's factory values.
         if let (Some(values), Some(table)) = (opts.params.get(&spec.addr), app.params()) {
             for e in csp::params::apply(table, values) {
@@ -266,7 +264,6 @@ fn app_for(
     opts: &RunOptions,
     boards: &Boards,
     plan: Vec<Recurring>,
-    results: &Results,
 ) -> NodeApp {
     match role {
         Role::CommPrimary | Role::CommSecondary => {
@@ -312,7 +309,7 @@ fn app_for(
                 move |out| RunEvent::Payload { addr, out },
             ))
         }
-        Role::Ground => Box::new(GroundApp::new(plan, results.clone())),
+        Role::Ground => Box::new(GroundApp::new(plan)),
     }
 }
 
@@ -338,7 +335,6 @@ mod tests {
         let net = NetworkSpec::m6p(&[12, 13, 14, 15], &[16, 17]);
         let opts = RunOptions::new(net.clone(), Duration::from_secs(60));
         let boards = Boards::default();
-        let results = Results::default();
         let mut roles = Vec::new();
         for spec in &net.nodes {
             if roles.contains(&spec.role) {
@@ -347,7 +343,7 @@ mod tests {
             roles.push(spec.role);
             let (cfg, _) = node_config(spec);
             let ifaces: Vec<IfaceKind> = cfg.ifaces.iter().map(|i| i.kind).collect();
-            let app = app_for(spec.role, spec.addr, &opts, &boards, Vec::new(), &results);
+            let app = app_for(spec.role, spec.addr, &opts, &boards, Vec::new());
             let mut host = Host::new(cfg, app, SimTime::ZERO);
             let mut t = SimTime::ZERO;
             for (iface, kind) in ifaces.iter().enumerate() {

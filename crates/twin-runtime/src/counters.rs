@@ -11,7 +11,6 @@ use csp::SimTime;
 use csp::node::NodeCounters;
 use links::kiss_tcp::KissLinkStats;
 
-use crate::ground::{RequestResult, RequestSummary};
 use twin_core::events::RunEvent;
 
 /// Whoever observes a run (the recorder, the report's observers, the invariants): handed
@@ -66,10 +65,6 @@ pub struct RunCounters {
     pub links: Vec<(String, bus::gate::GateStats)>,
     /// SocketCAN bridge counters, by interface and bus.
     pub socketcan: Vec<(String, BridgeStats)>,
-    /// Outcomes of the ground stations' requests (if kept).
-    pub results: Vec<RequestResult>,
-    /// What the ground stations' requests came to, counted.
-    pub requests: RequestSummary,
 }
 
 /// Why a run stopped before its end.

@@ -1,8 +1,7 @@
 //! A ground station inside the twin: it sends planned requests (pings, uptime, ICD
-//! commands) at given times and records every outcome. Scenario command timelines drive it.
+//! commands) at given times and reports every outcome as a run event. Scenario command timelines drive it.
 
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use csp::client::Client;
@@ -159,86 +158,19 @@ pub enum Outcome {
     Unfinished,
 }
 
-/// A request and its outcome.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct RequestResult {
-    /// The request.
-    pub request: PlannedRequest,
-    /// When it was sent.
-    pub sent: SimTime,
-    /// What became of it.
-    pub outcome: Outcome,
-}
-
-/// What the stations' requests came to: how many had an outcome, were answered, were
-/// still waiting at the end.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct RequestSummary {
-    /// Requests with an outcome (sent or not).
-    pub requests: u64,
-    /// Those answered.
-    pub answered: u64,
-    /// Those sent and still waiting for their reply or timeout when the run ended.
-    pub unfinished: u64,
-}
-
-impl RequestSummary {
-    /// Count `outcome` in.
-    pub fn add(&mut self, outcome: &Outcome) {
-        self.requests += 1;
-        match outcome {
-            Outcome::Reply { .. } => self.answered += 1,
-            Outcome::Unfinished => self.unfinished += 1,
-            Outcome::Timeout | Outcome::SendFailed(_) => {}
+impl Outcome {
+    /// The outcome a [`RunEvent::CommandResult`] carries (`reply`, `rtt_ns`, `failed`).
+    ///
+    /// [`RunEvent::CommandResult`]: twin_core::events::RunEvent::CommandResult
+    pub fn of_result(reply: Option<&[u8]>, rtt_ns: Option<u64>, failed: Option<&str>) -> Self {
+        match (reply, rtt_ns, failed) {
+            (_, _, Some(e)) => Outcome::SendFailed(e.to_owned()),
+            (Some(data), Some(rtt), None) => Outcome::Reply {
+                data: data.to_vec(),
+                rtt: Duration::from_nanos(rtt),
+            },
+            _ => Outcome::Timeout,
         }
-    }
-}
-
-#[derive(Debug, Default)]
-struct ResultLog {
-    keep: bool,
-    kept: Vec<RequestResult>,
-    summary: RequestSummary,
-}
-
-/// Where the stations record their outcomes (shared with the run that reports them): the
-/// counts always, every result only when asked to keep them (a result per request grows
-/// with the simulated time; the expectations on commands judge the run as it goes). The
-/// default keeps none.
-#[derive(Debug, Clone, Default)]
-pub struct Results(Arc<Mutex<ResultLog>>);
-
-impl Results {
-    /// Outcomes counted, and each kept when `keep`.
-    pub fn new(keep: bool) -> Results {
-        Results(Arc::new(Mutex::new(ResultLog {
-            keep,
-            ..ResultLog::default()
-        })))
-    }
-
-    fn log(&self) -> std::sync::MutexGuard<'_, ResultLog> {
-        self.0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-    }
-
-    /// Record one outcome.
-    pub fn push(&self, r: RequestResult) {
-        let mut log = self.log();
-        log.summary.add(&r.outcome);
-        if log.keep {
-            log.kept.push(r);
-        }
-    }
-
-    /// The results kept and the counts, leaving none.
-    pub fn take(&self) -> (Vec<RequestResult>, RequestSummary) {
-        let mut log = self.log();
-        (
-            std::mem::take(&mut log.kept),
-            std::mem::take(&mut log.summary),
-        )
     }
 }
 
@@ -249,20 +181,19 @@ pub struct GroundApp {
     client: Client,
     in_flight: BTreeMap<u64, (PlannedRequest, SimTime)>,
     next_tag: u64,
-    results: Results,
     events: Outbox<twin_core::events::RunEvent>,
 }
 
 impl GroundApp {
-    /// A station that will send the occurrences of `plan`, each at its time, and record
-    /// outcomes in `results`.
-    pub fn new(plan: Vec<Recurring>, results: Results) -> Self {
+    /// A station that will send the occurrences of `plan`, each at its time, each
+    /// outcome a [`twin_core::events::RunEvent::CommandResult`] (a request still waiting
+    /// when the run ends has none: it was sent and not decided).
+    pub fn new(plan: Vec<Recurring>) -> Self {
         GroundApp {
             plan: Plan::new(plan),
             client: Client::new(),
             in_flight: BTreeMap::new(),
             next_tag: 0,
-            results,
             events: Outbox::default(),
         }
     }
@@ -272,28 +203,25 @@ impl GroundApp {
     }
 
     fn record(&mut self, request: PlannedRequest, sent: SimTime, outcome: Outcome) {
-        let (reply, rtt_ns) = match &outcome {
-            Outcome::Reply { data, rtt } => (Some(data.clone()), Some(rtt.as_nanos() as u64)),
-            _ => (None, None),
+        let (reply, rtt_ns, failed) = match outcome {
+            Outcome::Reply { data, rtt } => (Some(data), Some(rtt.as_nanos() as u64), None),
+            Outcome::SendFailed(e) => (None, None, Some(e)),
+            Outcome::Timeout | Outcome::Unfinished => (None, None, None),
         };
         let decided = sent + rtt_ns.map_or(request.timeout, std::time::Duration::from_nanos);
         // Release the requests that wait for this one (its first outcome only).
         self.plan.release(&request.label, decided);
         self.emit(twin_core::events::RunEvent::CommandResult {
             t: decided,
-            name: request.label.clone(),
+            name: request.label,
+            dst: request.dst,
+            dport: request.dport,
+            data: request.data,
+            timeout: request.timeout,
             reply,
             rtt_ns,
             sent,
-            failed: match &outcome {
-                Outcome::SendFailed(e) => Some(e.clone()),
-                _ => None,
-            },
-        });
-        self.results.push(RequestResult {
-            request,
-            sent,
-            outcome,
+            failed,
         });
     }
 }
@@ -313,17 +241,6 @@ impl App for GroundApp {
     }
     fn start(&mut self, node: &mut Node, _now: SimTime) {
         node.bind(BEACON_PORT);
-    }
-
-    fn finish(&mut self, _node: &mut Node, _now: SimTime) {
-        // What is still waiting was sent: say so (no event: nothing was decided in the run).
-        for (_, (request, sent)) in std::mem::take(&mut self.in_flight) {
-            self.results.push(RequestResult {
-                request,
-                sent,
-                outcome: Outcome::Unfinished,
-            });
-        }
     }
 
     fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
@@ -548,40 +465,10 @@ mod tests {
     }
 
     #[test]
-    fn outcomes_are_counted_and_kept_only_when_asked() {
-        let result = |outcome| RequestResult {
-            request: entry(0, 1, 1, 1, None).first,
-            sent: SimTime::from_secs(1),
-            outcome,
-        };
-        for keep in [false, true] {
-            let results = Results::new(keep);
-            results.push(result(Outcome::Reply {
-                data: vec![1],
-                rtt: Duration::from_millis(5),
-            }));
-            results.push(result(Outcome::Timeout));
-            results.push(result(Outcome::SendFailed("no route".into())));
-            results.push(result(Outcome::Unfinished));
-            let (kept, summary) = results.take();
-            assert_eq!(kept.len(), if keep { 4 } else { 0 });
-            assert_eq!(
-                summary,
-                RequestSummary {
-                    requests: 4,
-                    answered: 1,
-                    unfinished: 1
-                }
-            );
-        }
-    }
-
-    #[test]
     fn a_backlog_goes_out_in_batches_in_order() {
         use csp::node::{Host, NodeConfig};
         let n = 3 * SENDS_PER_CALL as u32 + 5;
-        let results = Results::new(true);
-        let app = GroundApp::new(vec![entry(0, 0, 1, n, None)], results.clone());
+        let app = GroundApp::new(vec![entry(0, 0, 1, n, None)]);
         let mut host = Host::new(NodeConfig::new("GS16", 16), app, SimTime::ZERO);
         // Everything is overdue at once (a station back from a long hang).
         let now = SimTime::from_secs(u64::from(n) + 10);
@@ -602,13 +489,8 @@ mod tests {
             assert!(batch <= SENDS_PER_CALL, "{batch} events from one call");
         }
         assert_eq!(calls, 4);
-        // No interface: each send fails at once, in plan order.
+        // No interface: each send fails at once.
         assert_eq!(sent.len(), n as usize);
         assert!(sent.iter().all(|t| *t == now), "{sent:?}");
-        let (kept, summary) = results.take();
-        assert_eq!(summary.requests, u64::from(n));
-        let planned: Vec<SimTime> = kept.iter().map(|r| r.request.at).collect();
-        let want: Vec<SimTime> = (0..u64::from(n)).map(SimTime::from_secs).collect();
-        assert_eq!(planned, want);
     }
 }

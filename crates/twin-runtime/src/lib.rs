@@ -35,7 +35,7 @@ use csp::SimTime;
 use platform::board::Boards;
 use tokio::sync::{mpsc, oneshot};
 
-use crate::ground::{Recurring, Results};
+use crate::ground::Recurring;
 pub use build::fc_config;
 pub use counters::{Interruption, NodeReport, RunCounters, RunSink, StopCause};
 use faults::{FaultAction, TimedFault};
@@ -517,9 +517,8 @@ pub async fn run_with(
     let gates = links::gates(&opts);
     let socketcan_stats =
         links::spawn_socketcan_bridges(&opts, &segs, clock, &gates, &mut background)?;
-    let results = Results::new(opts.keep_series);
     let boards = Boards::default();
-    let nodes = build::nodes(&mut opts, &segs, clock, &boards, &results, &ev_tx);
+    let nodes = build::nodes(&mut opts, &segs, clock, &boards, &ev_tx);
     let mut kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
     let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
     // The KISS servers' addresses, then the TCP consoles'.
@@ -599,7 +598,6 @@ pub async fn run_with(
     while let Ok(ev) = ev_rx.try_recv() {
         handle_event(ev, sink);
     }
-    let (results, requests) = results.take();
     Ok(RunCounters {
         sim_time,
         interrupted,
@@ -616,8 +614,6 @@ pub async fn run_with(
             .zip(&gates)
             .map(|(l, g)| (l.name.clone(), g.stats()))
             .collect(),
-        results,
-        requests,
     })
 }
 

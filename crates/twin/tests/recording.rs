@@ -100,6 +100,10 @@ fn events() -> Vec<RunEvent> {
     ev.push(RunEvent::CommandResult {
         t,
         name: "ping FC".into(),
+        dst: 3,
+        dport: 1,
+        data: req.data.clone(),
+        timeout: std::time::Duration::from_secs(5),
         reply: Some(rep.data.clone()),
         rtt_ns: Some(t.as_ns() - 5_000_000_000),
         sent: SimTime::from_secs(5),

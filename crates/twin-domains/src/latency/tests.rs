@@ -136,6 +136,10 @@ fn the_watch_counts_what_the_report_counts() {
     let ev = |name: &str, rtt_ms: Option<u64>, failed: bool| RunEvent::CommandResult {
         t: SimTime::ZERO,
         name: name.into(),
+        dst: 3,
+        dport: 1,
+        data: vec![],
+        timeout: Duration::from_secs(1),
         reply: rtt_ms.map(|_| vec![1]),
         rtt_ns: rtt_ms.map(|m| m * 1_000_000),
         sent: SimTime::ZERO,

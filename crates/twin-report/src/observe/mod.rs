@@ -2,6 +2,7 @@
 //! each domain's observer beside the others.
 
 pub mod attitude;
+pub mod commands;
 pub mod link;
 pub mod power;
 pub mod sessions;
@@ -23,6 +24,7 @@ pub struct Observer {
     power: power::PowerObserver,
     link: link::LinkObserver,
     sessions: sessions::SessionsReport,
+    commands: commands::CommandObserver,
 }
 
 /// What an [`Observer`] gathered.
@@ -44,6 +46,10 @@ pub struct Observed {
     pub beacons: Vec<(SimTime, u8, u32)>,
     /// UHF contact switches.
     pub contact: Vec<(SimTime, bool)>,
+    /// Outcomes of the ground stations' requests (if kept).
+    pub results: Vec<commands::RequestResult>,
+    /// What the ground stations' requests came to, counted.
+    pub requests: commands::RequestSummary,
 }
 
 /// What an [`Observer`] keeps beyond the run's summaries.
@@ -51,7 +57,7 @@ pub struct Observed {
 pub struct Keep {
     /// The trace of every frame.
     pub trace: bool,
-    /// Every sample and downlinked byte.
+    /// Every sample, downlinked byte and command outcome.
     pub series: bool,
 }
 
@@ -73,6 +79,7 @@ impl Observer {
                 forget_bytes: !keep_series,
                 ..Default::default()
             },
+            commands: commands::CommandObserver::new(keep_series),
         }
     }
 
@@ -85,6 +92,7 @@ impl Observer {
         self.power.observe(ev);
         self.link.observe(ev);
         self.sessions.observe(ev);
+        self.commands.observe(ev);
     }
 
     /// The UHF link's contact with the ground switched at `t` (a pass began or ended).
@@ -97,6 +105,7 @@ impl Observer {
         let (beacons, contact) = self.link.finish();
         let (attitude, attitude_summary) = self.attitude.finish();
         let (power, power_summary) = self.power.finish();
+        let (results, requests) = self.commands.finish();
         Observed {
             trace: self.trace.unwrap_or_default(),
             attitude,
@@ -106,6 +115,8 @@ impl Observer {
             power_summary,
             beacons,
             contact,
+            results,
+            requests,
         }
     }
 }
