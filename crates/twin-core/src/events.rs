@@ -28,6 +28,46 @@ pub enum Level {
     Error = 4,
 }
 
+/// A whole packet a medium delivered ([`RunEvent::Packet`]), reassembled by the run's
+/// [`crate::packets::PacketTap`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SeenPacket {
+    /// When its last frame (or the packet itself) arrived.
+    pub t: SimTime,
+    /// The medium (`main`, `payload`, `ground`).
+    pub medium: std::sync::Arc<str>,
+    /// Who sent it on that medium (a node's name, or an outside link's).
+    pub from: std::sync::Arc<str>,
+    /// The packet.
+    pub packet: csp::Packet,
+}
+
+/// The outcome of a scenario command, with the command as it was sent (or tried to be):
+/// the one way a command's outcome reaches the report, the expectations and the recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CommandResult {
+    /// When it was decided (reply arrival or timeout).
+    pub t: SimTime,
+    /// Command name.
+    pub name: String,
+    /// Destination node.
+    pub dst: u8,
+    /// Destination port.
+    pub dport: u8,
+    /// Request bytes.
+    pub data: Vec<u8>,
+    /// How long it waited for its reply.
+    pub timeout: Duration,
+    /// Reply bytes, or `None` on timeout.
+    pub reply: Option<Vec<u8>>,
+    /// Round-trip time in nanoseconds, when answered.
+    pub rtt_ns: Option<u64>,
+    /// When it was sent (or failed to be).
+    pub sent: SimTime,
+    /// Why it could not be sent, when it could not (`reply` and `rtt_ns` are `None`).
+    pub failed: Option<String>,
+}
+
 /// One thing that happened during a run. Its kinds ([`EventKind`], one per variant, same
 /// name) are derived from it.
 #[derive(Debug, Clone, PartialEq, strum::EnumDiscriminants)]
@@ -39,6 +79,11 @@ pub enum Level {
 pub enum RunEvent {
     /// A CAN frame on a bus or a packet on the ground network (see [`TraceEvent`]).
     Medium(TraceEvent),
+    /// A whole CSP packet a medium delivered: a ground packet as it is, or the CFP packet a
+    /// CAN frame completed, right after that frame's `Medium` event. The run's one
+    /// reassembly ([`crate::packets::PacketTap`]), in a run asked for packets (a recording,
+    /// the live view, a `field` expectation: `RunOptions::packet_events`).
+    Packet(std::sync::Arc<SeenPacket>),
     /// Raw bytes of one KISS frame on an outside link.
     Kiss {
         /// When.
@@ -95,31 +140,8 @@ pub enum RunEvent {
         /// How long it waits for its reply.
         timeout: Duration,
     },
-    /// The outcome of a scenario command, with the command as it was sent (or tried to
-    /// be): the one way a command's outcome reaches the report, the expectations and the
-    /// recording.
-    CommandResult {
-        /// When it was decided (reply arrival or timeout).
-        t: SimTime,
-        /// Command name.
-        name: String,
-        /// Destination node.
-        dst: u8,
-        /// Destination port.
-        dport: u8,
-        /// Request bytes.
-        data: Vec<u8>,
-        /// How long it waited for its reply.
-        timeout: Duration,
-        /// Reply bytes, or `None` on timeout.
-        reply: Option<Vec<u8>>,
-        /// Round-trip time in nanoseconds, when answered.
-        rtt_ns: Option<u64>,
-        /// When it was sent (or failed to be).
-        sent: SimTime,
-        /// Why it could not be sent, when it could not (`reply` and `rtt_ns` are `None`).
-        failed: Option<String>,
-    },
+    /// The outcome of a scenario command (boxed: the largest event, and rare).
+    CommandResult(Box<CommandResult>),
     /// The FC's published truth and what its ADCS believes and does, at one instant.
     Truth {
         /// When (equals `truth.t_ns`).
@@ -199,12 +221,13 @@ impl RunEvent {
     pub fn t(&self) -> SimTime {
         match self {
             RunEvent::Medium(e) => e.t,
+            RunEvent::Packet(p) => p.t,
+            RunEvent::CommandResult(r) => r.t,
             RunEvent::PacketDropped { log, .. } => log.t(),
             RunEvent::Kiss { t, .. }
             | RunEvent::Log { t, .. }
             | RunEvent::Fault { t, .. }
             | RunEvent::Command { t, .. }
-            | RunEvent::CommandResult { t, .. }
             | RunEvent::Truth { t, .. }
             | RunEvent::Beacon { t, .. }
             | RunEvent::Expectation { t, .. } => *t,
@@ -365,7 +388,7 @@ mod tests {
             message: String::new(),
         };
         assert_eq!(log.kind(), EventKind::Log);
-        let cmd = RunEvent::CommandResult {
+        let cmd = RunEvent::CommandResult(Box::new(CommandResult {
             t: SimTime::ZERO,
             name: "x".into(),
             dst: 3,
@@ -376,7 +399,20 @@ mod tests {
             rtt_ns: None,
             sent: SimTime::ZERO,
             failed: None,
-        };
+        }));
         assert_eq!(cmd.kind(), EventKind::CommandResult);
+    }
+
+    /// Every event of a run is moved through the run's channel and its sinks: the enum
+    /// stays the size of its common variants (a trace event and its tag), the rare large
+    /// ones boxed.
+    #[test]
+    fn an_event_is_no_bigger_than_a_trace_event_and_its_tag() {
+        let size = std::mem::size_of::<RunEvent>();
+        eprintln!("RunEvent: {size} bytes");
+        assert!(
+            size <= std::mem::size_of::<TraceEvent>() + 8,
+            "{size} bytes"
+        );
     }
 }

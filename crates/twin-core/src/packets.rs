@@ -1,6 +1,9 @@
 //! Whole CSP packets from the run's trace of its media: a packet on the ground network as
-//! it is, a CAN bus's CFP frames reassembled per bus. The recorder's `/csp/packets` and the
-//! `field` expectations read the run's packets through it.
+//! it is, a CAN bus's CFP frames reassembled per bus. The run reassembles once, when asked
+//! (`RunOptions::packet_events`), and hands each packet out as a [`RunEvent::Packet`] right
+//! after the medium event that completed it: the recorder's `/csp/packets`, the live view
+//! and the `field` expectations read that event. (What was lost in transit is another
+//! question, of frames' fates rather than packets' contents: `crate::transit`.)
 //!
 //! Pure and bounded: one reassembler per bus, each with a fixed number of slots (it sees
 //! every conversation on its bus, so more than a node's) and libcsp's timeouts; frames it
@@ -11,6 +14,8 @@ use std::sync::Arc;
 use bus::trace::{TraceEvent, TraceFrame};
 use csp::cfp::{CFP_MAX_DATA, Reassembler, ReassemblerConfig};
 use csp::packet::Packet;
+
+use crate::events::{RunEvent, SeenPacket};
 
 /// Partial packets each bus's reassembler holds at most.
 pub const SLOTS_PER_BUS: usize = 64;
@@ -53,6 +58,18 @@ impl PacketTap {
         }
     }
 
+    /// The [`RunEvent::Packet`] the event `ev` completes, if any (see [`PacketTap::take`]).
+    pub fn event(&mut self, ev: &RunEvent) -> Option<RunEvent> {
+        let RunEvent::Medium(m) = ev else { return None };
+        let packet = self.take(m)?;
+        Some(RunEvent::Packet(Arc::new(SeenPacket {
+            t: m.t,
+            medium: m.medium.clone(),
+            from: m.from.clone(),
+            packet,
+        })))
+    }
+
     /// CFP frames or partial packets the reassemblers dropped (lost frames).
     pub fn cfp_drops(&self) -> u64 {
         self.cfp_drops
@@ -79,4 +96,17 @@ impl PacketTap {
         };
         &mut self.reassemblers[i].1
     }
+}
+
+/// `events` with the [`RunEvent::Packet`] each completes after it, as a run asked for
+/// packets hands them out (for programs and tests that feed a recorder events of their own).
+pub fn with_packets(events: impl IntoIterator<Item = RunEvent>) -> Vec<RunEvent> {
+    let mut tap = PacketTap::new();
+    let mut out = Vec::new();
+    for ev in events {
+        let p = tap.event(&ev);
+        out.push(ev);
+        out.extend(p);
+    }
+    out
 }

@@ -735,14 +735,14 @@ impl Watch for CommandWatch {
                 self.waiting.insert((*t, self.sends), *timeout);
                 self.sends += 1;
             }
-            RunEvent::CommandResult {
-                name,
-                reply,
-                rtt_ns,
-                sent,
-                failed,
-                ..
-            } if *name == self.command => {
+            RunEvent::CommandResult(r) if r.name == self.command => {
+                let twin_core::events::CommandResult {
+                    reply,
+                    rtt_ns,
+                    sent,
+                    failed,
+                    ..
+                } = &**r;
                 // The oldest request sent then: those sent at one time are alike.
                 let timeout = if failed.is_some() {
                     None

@@ -17,7 +17,6 @@ use crate::expectations::{CheckCx, ExpectCx, ExpectKind, Grade, Judgement, Watch
 use twin_core::events::RunEvent;
 use twin_core::icd::{Direction, IcdMap};
 use twin_core::network::NetworkSpec;
-use twin_core::packets::PacketTap;
 use twin_scenario::scenario::Dur;
 
 /// A value to compare with: a number, or the name the ICD gives a value (`"idle"`).
@@ -250,7 +249,6 @@ impl ExpectKind for FieldExpect {
             target,
             icd,
             net,
-            tap: PacketTap::new(),
             tally: Tally::default(),
         }))
     }
@@ -275,15 +273,14 @@ struct FieldWatch {
     target: Target,
     icd: IcdMap,
     net: NetworkSpec,
-    tap: PacketTap,
     tally: Tally,
 }
 
 impl FieldWatch {
     /// The value of the watched field in the reply event `ev` completes, if any.
     fn value(&mut self, ev: &RunEvent) -> Option<(SimTime, f64)> {
-        let RunEvent::Medium(m) = ev else { return None };
-        let p = self.tap.take(m)?;
+        let RunEvent::Packet(m) = ev else { return None };
+        let p = &m.packet;
         let h = &p.header;
         if self.expect.src.is_some_and(|s| s != h.src) {
             return None;
@@ -317,6 +314,10 @@ impl FieldWatch {
 }
 
 impl Watch for FieldWatch {
+    fn kinds(&self) -> twin_core::events::Kinds {
+        twin_core::events::Kinds::of(&[twin_core::events::EventKind::Packet])
+    }
+
     fn observe(&mut self, ev: &RunEvent) {
         let Some((t, x)) = self.value(ev) else { return };
         let e = &self.expect;
@@ -407,7 +408,7 @@ impl Watch for FieldWatch {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
-    use bus::trace::{TraceEvent, TraceFrame};
+    use twin_core::events::SeenPacket;
 
     /// A TMGEN reply from CSP 3 with mode `mode`, as the ground network carries it, sent by
     /// `from`.
@@ -415,14 +416,13 @@ mod tests {
         let mut data = vec![1, 1];
         data.extend([0u8; 12]);
         data.extend([mode, 0, 20, 0]);
-        let p = csp::Packet::new(csp::Header::new(3, 17, 40, 10), data);
-        RunEvent::Medium(TraceEvent {
+        let packet = csp::Packet::new(csp::Header::new(3, 17, 40, 10), data);
+        RunEvent::Packet(std::sync::Arc::new(SeenPacket {
             t: SimTime::from_secs(t_s),
             medium: "ground".into(),
             from: from.into(),
-            frame: TraceFrame::Packet(p.to_bytes()),
-            dropped: false,
-        })
+            packet,
+        }))
     }
 
     fn watch(net: &NetworkSpec) -> FieldWatch {
@@ -435,7 +435,6 @@ mod tests {
             expect: e,
             icd: IcdMap::defaults(),
             net: net.clone(),
-            tap: PacketTap::new(),
             tally: Tally::default(),
         }
     }

@@ -267,23 +267,20 @@ impl Watch for LatencyWatch {
     fn observe(&mut self, ev: &RunEvent) {
         match ev {
             RunEvent::Command { name, .. } if *name == self.expect.command => self.sent += 1,
-            RunEvent::CommandResult {
-                name,
-                rtt_ns,
-                failed,
-                ..
-            } if *name == self.expect.command => match (rtt_ns, failed) {
-                // Never sent: no `Command` came before it.
-                (_, Some(_)) => self.trips.unanswered += 1,
-                (Some(rtt_ns), None) => {
-                    self.trips.answered_ns.push(*rtt_ns);
-                    self.decided += 1;
+            RunEvent::CommandResult(r) if r.name == self.expect.command => {
+                match (&r.rtt_ns, &r.failed) {
+                    // Never sent: no `Command` came before it.
+                    (_, Some(_)) => self.trips.unanswered += 1,
+                    (Some(rtt_ns), None) => {
+                        self.trips.answered_ns.push(*rtt_ns);
+                        self.decided += 1;
+                    }
+                    (None, None) => {
+                        self.trips.unanswered += 1;
+                        self.decided += 1;
+                    }
                 }
-                (None, None) => {
-                    self.trips.unanswered += 1;
-                    self.decided += 1;
-                }
-            },
+            }
             _ => {}
         }
     }

@@ -95,9 +95,9 @@ use crate::mcap_file::McapFile;
 use crate::protobuf::{Nested, Packed};
 use anyhow::{Context as _, bail};
 use bus::trace::{TraceEvent, TraceFrame};
+use csp::SimTime;
 use csp::cfp::{CanFrame, CfpId, FrameType};
 use csp::header::{HEADER_LEN, Header};
-use csp::{Packet, SimTime};
 use serde::{Deserialize, Serialize};
 
 use nalgebra::Matrix3;
@@ -106,6 +106,7 @@ use orbit::geodetic::ecef_m_to_geodetic;
 use orbit::time::UtcTime;
 use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
+use twin_core::events::SeenPacket;
 use twin_core::events::{Direction, RunEvent};
 
 /// Target uncompressed size of one chunk: 4 MiB. Measured on `scenarios/full-day.toml`
@@ -239,8 +240,6 @@ pub struct RecordingStats {
     pub chunks: u32,
     /// File size in bytes.
     pub bytes: u64,
-    /// CFP frames or partial packets the recorder's reassemblers dropped (lost frames).
-    pub cfp_drops: u64,
 }
 
 /// The CFP fields of a CAN id.
@@ -1165,7 +1164,6 @@ pub struct EventEncoder {
     /// The CAN frame train being gathered on each bus, by bus name, in order of appearance.
     trains: Vec<(Arc<str>, Option<Train>)>,
     /// The run's packets (CFP reassembled per bus), for `/csp/packets`.
-    tap: twin_core::packets::PacketTap,
     /// The ICD on the run's ports, to decode `/csp/packets` (and the payload of each PC
     /// session, for `/pc/sessions/summary`).
     icd: twin_core::icd::IcdMap,
@@ -1200,7 +1198,6 @@ impl std::fmt::Debug for EventEncoder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("EventEncoder")
             .field("base_ns", &self.base_ns)
-            .field("cfp_drops", &self.tap.cfp_drops())
             .finish_non_exhaustive()
     }
 }
@@ -1702,7 +1699,6 @@ impl EventEncoder {
         EventEncoder {
             base_ns,
             trains: Vec::new(),
-            tap: twin_core::packets::PacketTap::new(),
             icd: twin_core::icd::IcdMap::defaults(),
             buf: Vec::with_capacity(1024),
             key: String::new(),
@@ -1724,11 +1720,6 @@ impl EventEncoder {
     /// The run's start, in ns since the Unix epoch.
     pub fn base_ns(&self) -> u64 {
         self.base_ns
-    }
-
-    /// CFP frames or partial packets the reassemblers dropped (lost frames).
-    pub fn cfp_drops(&self) -> u64 {
-        self.tap.cfp_drops()
     }
 
     /// Hand out the CAN frame trains still being gathered (at the end of a run, before
@@ -1837,6 +1828,7 @@ impl EventEncoder {
         let buf = &mut self.buf;
         match ev {
             RunEvent::Medium(m) => self.encode_medium(m, emit),
+            RunEvent::Packet(p) => self.encode_csp(p, emit),
             // Recorded as the log line it is.
             RunEvent::PacketDropped { log, .. } => self.encode(log, emit),
             RunEvent::Kiss {
@@ -1879,15 +1871,9 @@ impl EventEncoder {
                 let msg = command_sent_msg(t_ns, name, *dst, *dport, data);
                 emit_msg(buf, base_ns, (ChannelKind::Command, ""), *t, &msg, emit)
             }
-            RunEvent::CommandResult {
-                t,
-                name,
-                reply,
-                rtt_ns,
-                ..
-            } => {
-                let msg = command_result_msg(t_ns, name, reply.as_deref(), *rtt_ns);
-                emit_msg(buf, base_ns, (ChannelKind::Command, ""), *t, &msg, emit)
+            RunEvent::CommandResult(r) => {
+                let msg = command_result_msg(t_ns, &r.name, r.reply.as_deref(), r.rtt_ns);
+                emit_msg(buf, base_ns, (ChannelKind::Command, ""), r.t, &msg, emit)
             }
             RunEvent::Expectation {
                 t,
@@ -2270,17 +2256,11 @@ impl EventEncoder {
         emit_msg(buf, base_ns, (ChannelKind::Scene, ""), t, &msg, emit)
     }
 
-    /// A frame or packet, and the CSP packet it completes.
+    /// A frame or packet (the CSP packet it completes comes as its own event after it).
     fn encode_medium(&mut self, m: &TraceEvent, emit: &mut Emit<'_>) -> anyhow::Result<()> {
         let t_ns = m.t.as_ns();
         match &m.frame {
-            TraceFrame::Can(f) | TraceFrame::CanUnreceived(f, _) => {
-                self.add_frame(m, f, emit)?;
-                match self.tap.take(m) {
-                    Some(p) => self.encode_csp(m, &p, emit),
-                    None => Ok(()),
-                }
-            }
+            TraceFrame::Can(f) | TraceFrame::CanUnreceived(f, _) => self.add_frame(m, f, emit),
             // Never on the wire: counted by the bus (`tx_overflow`, `bus_off_drops`,
             // `off_drops`), not a frame of `/can/<bus>/frames`.
             TraceFrame::CanLost(..) => Ok(()),
@@ -2316,22 +2296,14 @@ impl EventEncoder {
                     flags: h.map(|h| h.flags),
                 };
                 let chan = (ChannelKind::Net, &*m.medium);
-                emit_msg(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)?;
-                match self.tap.take(m) {
-                    Some(p) => self.encode_csp(m, &p, emit),
-                    None => Ok(()),
-                }
+                emit_msg(&mut self.buf, self.base_ns, chan, m.t, &msg, emit)
             }
         }
     }
 
-    /// The `/csp/packets` message of a packet `m`'s medium delivered.
-    fn encode_csp(
-        &mut self,
-        m: &TraceEvent,
-        p: &Packet,
-        emit: &mut Emit<'_>,
-    ) -> anyhow::Result<()> {
+    /// The `/csp/packets` message of a packet a medium delivered.
+    fn encode_csp(&mut self, seen: &SeenPacket, emit: &mut Emit<'_>) -> anyhow::Result<()> {
+        let (m, p) = (seen, &seen.packet);
         let h = &p.header;
         let body = if h.has_crc() && p.data.len() >= 4 {
             &p.data[..p.data.len() - 4]
@@ -2760,7 +2732,7 @@ impl Recorder {
                     chans,
                     ..
                 },
-            enc,
+            enc: _,
             target,
         } = self;
         let ctx = || format!("finishing recording {}", path.display());
@@ -2780,7 +2752,6 @@ impl Recorder {
             channels,
             chunks,
             bytes,
-            cfp_drops: enc.cfp_drops(),
         })
     }
 }

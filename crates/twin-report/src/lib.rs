@@ -47,6 +47,9 @@ pub struct RunReport {
     pub links: Vec<(String, bus::gate::GateStats)>,
     /// SocketCAN bridge counters, by interface and bus (`vcan0 (main bus)`).
     pub socketcan: Vec<(String, BridgeStats)>,
+    /// CFP frames or partial packets the run's packet tap could not place (lost frames),
+    /// when packets were tapped (`RunOptions::packet_events`).
+    pub cfp_drops: u64,
     /// Outcomes of the ground stations' requests (empty unless the run kept them:
     /// `RunOptions::keep_series`).
     pub results: Vec<RequestResult>,
@@ -85,6 +88,7 @@ impl RunReport {
             boards: c.boards,
             links: c.links,
             socketcan: c.socketcan,
+            cfp_drops: c.cfp_drops,
             results: o.results,
             requests: o.requests,
             trace: o.trace,

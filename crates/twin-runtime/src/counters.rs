@@ -1,6 +1,6 @@
 //! What the runtime itself counts in a run ([`RunCounters`]: every node's and medium's
-//! counters, the ground stations' outcomes, why it stopped early), and the hook that hands
-//! every event of the run to whoever observes it ([`RunSink`]).
+//! counters, why it stopped early), and the hook that hands every event of the run to
+//! whoever observes it ([`RunSink`]).
 
 use std::time::Duration;
 
@@ -28,6 +28,39 @@ pub trait RunSink: Send {
 impl<F: FnMut(&RunEvent) + Send> RunSink for F {
     fn event(&mut self, ev: &RunEvent) {
         self(ev);
+    }
+}
+
+/// A sink that also gets the [`RunEvent::Packet`] each medium event completes, right after
+/// it, when packets are tapped (`RunOptions::packet_events`): the run's one reassembly.
+pub(crate) struct Tapped<'a> {
+    sink: &'a mut dyn RunSink,
+    tap: Option<twin_core::packets::PacketTap>,
+}
+
+impl<'a> Tapped<'a> {
+    pub(crate) fn new(sink: &'a mut dyn RunSink, packets: bool) -> Self {
+        Tapped {
+            sink,
+            tap: packets.then(twin_core::packets::PacketTap::new),
+        }
+    }
+
+    /// CFP frames or partial packets the tap could not place (lost frames).
+    pub(crate) fn cfp_drops(&self) -> u64 {
+        self.tap.as_ref().map_or(0, |t| t.cfp_drops())
+    }
+}
+
+impl RunSink for Tapped<'_> {
+    fn event(&mut self, ev: &RunEvent) {
+        self.sink.event(ev);
+        if let Some(p) = self.tap.as_mut().and_then(|tap| tap.event(ev)) {
+            self.sink.event(&p);
+        }
+    }
+    fn contact(&mut self, t: SimTime, on: bool) {
+        self.sink.contact(t, on);
     }
 }
 
@@ -65,6 +98,9 @@ pub struct RunCounters {
     pub links: Vec<(String, bus::gate::GateStats)>,
     /// SocketCAN bridge counters, by interface and bus.
     pub socketcan: Vec<(String, BridgeStats)>,
+    /// CFP frames or partial packets the run's packet tap could not place (lost frames),
+    /// when packets were tapped.
+    pub cfp_drops: u64,
 }
 
 /// Why a run stopped before its end.

@@ -211,18 +211,20 @@ impl GroundApp {
         let decided = sent + rtt_ns.map_or(request.timeout, std::time::Duration::from_nanos);
         // Release the requests that wait for this one (its first outcome only).
         self.plan.release(&request.label, decided);
-        self.emit(twin_core::events::RunEvent::CommandResult {
-            t: decided,
-            name: request.label,
-            dst: request.dst,
-            dport: request.dport,
-            data: request.data,
-            timeout: request.timeout,
-            reply,
-            rtt_ns,
-            sent,
-            failed,
-        });
+        self.emit(twin_core::events::RunEvent::CommandResult(Box::new(
+            twin_core::events::CommandResult {
+                t: decided,
+                name: request.label,
+                dst: request.dst,
+                dport: request.dport,
+                data: request.data,
+                timeout: request.timeout,
+                reply,
+                rtt_ns,
+                sent,
+                failed,
+            },
+        )));
     }
 }
 
@@ -481,7 +483,7 @@ mod tests {
             while let Some(ev) = host.app.poll_event() {
                 match ev {
                     twin_core::events::RunEvent::Command { .. } => {}
-                    twin_core::events::RunEvent::CommandResult { sent: t, .. } => sent.push(t),
+                    twin_core::events::RunEvent::CommandResult(r) => sent.push(r.sent),
                     other => panic!("{other:?}"),
                 }
                 batch += 1;

@@ -81,6 +81,10 @@ pub struct RunOptions {
     pub tle: Option<(String, String)>,
     /// Keep the trace of every frame and packet in the report.
     pub trace: bool,
+    /// Hand out each whole CSP packet the media deliver as a `RunEvent::Packet` after the
+    /// frame that completed it (for a recording, the live view, `field` expectations): the
+    /// run's one reassembly of CFP packets, which costs nothing when off.
+    pub packet_events: bool,
     /// Keep every FC and EPS sample, every downlinked byte and every ground request's
     /// outcome in the report (`attitude`, `power`, each session run's `bytes`, `results`),
     /// for the programs and tests that read them. Without, the report has their summaries
@@ -230,6 +234,7 @@ impl RunOptions {
             epoch_unix_s: 1_577_836_800,
             tle: None,
             trace: false,
+            packet_events: false,
             keep_series: true,
             faults: Vec::new(),
             kiss_replay: Vec::new(),
@@ -507,6 +512,8 @@ pub async fn run_with(
     sink: &mut dyn RunSink,
 ) -> anyhow::Result<RunCounters> {
     let wall_start = Instant::now();
+    let mut tapped = counters::Tapped::new(sink, opts.packet_events);
+    let sink: &mut dyn RunSink = &mut tapped;
     let clock = Clock::new(opts.clock);
     // Outside input taken in at the run's idle points, and real time's hold (`bus::pace`).
     let _pace = bus::pace::install(clock);
@@ -607,6 +614,7 @@ pub async fn run_with(
         ground: segs.ground.stats(),
         kiss: links::snapshot(kiss.stats),
         socketcan: links::snapshot(socketcan_stats),
+        cfp_drops: tapped.cfp_drops(),
         boards: boards.stats(),
         links: opts
             .outside

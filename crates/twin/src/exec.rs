@@ -176,6 +176,10 @@ pub async fn execute_keeping(
         })
         .collect();
     compiled.opts.keep_series = keep;
+    // A watch that reads whole packets (`field`) gets the run's own (`RunEvent::Packet`).
+    compiled.opts.packet_events |= kinds
+        .iter()
+        .any(|k| k.has(crate::events::EventKind::Packet));
     // The invariants the scenario checks (`[invariants] check`; a campaign's runs: all).
     let mut invariants = (!compiled.invariants.check.is_empty())
         .then(|| crate::invariants::Invariants::for_run(&compiled.opts, &compiled.invariants));
@@ -365,6 +369,9 @@ async fn execute_inner(
     let every = (compiled.opts.clock != bus::ClockMode::Virtual)
         .then_some(std::time::Duration::from_secs(1));
     let mut recorder = crate::record::RecorderThread::start_flushing(recorder, every)?;
+    // `/csp/packets` is the run's packets (`RunEvent::Packet`).
+    let mut compiled = compiled;
+    compiled.opts.packet_events = true;
     let outcome = execute(compiled, &mut |ev| {
         recorder.write(ev);
         live(ev);

@@ -97,18 +97,20 @@ fn events() -> Vec<RunEvent> {
         TraceFrame::Packet(rep.to_bytes()),
         false,
     ));
-    ev.push(RunEvent::CommandResult {
-        t,
-        name: "ping FC".into(),
-        dst: 3,
-        dport: 1,
-        data: req.data.clone(),
-        timeout: std::time::Duration::from_secs(5),
-        reply: Some(rep.data.clone()),
-        rtt_ns: Some(t.as_ns() - 5_000_000_000),
-        sent: SimTime::from_secs(5),
-        failed: None,
-    });
+    ev.push(RunEvent::CommandResult(Box::new(
+        m6p_twin::events::CommandResult {
+            t,
+            name: "ping FC".into(),
+            dst: 3,
+            dport: 1,
+            data: req.data.clone(),
+            timeout: std::time::Duration::from_secs(5),
+            reply: Some(rep.data.clone()),
+            rtt_ns: Some(t.as_ns() - 5_000_000_000),
+            sent: SimTime::from_secs(5),
+            failed: None,
+        },
+    )));
     ev.push(RunEvent::Log {
         t,
         source: "GS16".into(),
@@ -246,7 +248,8 @@ fn the_recorders_thread_writes_the_same_bytes() {
         Recorder::create(b.path(), meta(), m6p_twin::record::Existing::Replace).unwrap(),
     )
     .unwrap();
-    for e in &ev {
+    // As `record` does: with the packets the events complete.
+    for e in &m6p_twin::packets::with_packets(ev.iter().cloned()) {
         t.write(e);
     }
     let sb = t.finish().unwrap();
@@ -335,8 +338,13 @@ fn stats_count_every_channel() {
         27 - all_frames + trains(&ev, "main") + trains(&ev, "payload")
     );
     assert_eq!(s.chunks, 1);
+    let mut tap = m6p_twin::packets::PacketTap::new();
+    for e in &ev {
+        tap.event(e);
+    }
     assert_eq!(
-        s.cfp_drops, 1,
+        tap.cfp_drops(),
+        1,
         "the frame after the lost one is out of sequence"
     );
     let topics: Vec<&str> = s.channels.iter().map(|c| c.topic.as_str()).collect();

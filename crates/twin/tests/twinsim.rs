@@ -36,8 +36,8 @@ fn twinsim(seed: Option<u64>) -> (TwinSim, u64) {
     let mut reply = None;
     rt.block_on(execute(compiled, &mut |ev| match ev {
         RunEvent::Command { t, name, .. } if name == "twinsim" => sent = Some(t.as_ns()),
-        RunEvent::CommandResult { name, reply: r, .. } if name == "twinsim" => {
-            reply = r.clone();
+        RunEvent::CommandResult(r) if r.name == "twinsim" => {
+            reply = r.reply.clone();
         }
         _ => {}
     }))

@@ -133,17 +133,19 @@ fn too_few_answered_or_none_sent_fails_saying_so() {
 
 #[test]
 fn the_watch_counts_what_the_report_counts() {
-    let ev = |name: &str, rtt_ms: Option<u64>, failed: bool| RunEvent::CommandResult {
-        t: SimTime::ZERO,
-        name: name.into(),
-        dst: 3,
-        dport: 1,
-        data: vec![],
-        timeout: Duration::from_secs(1),
-        reply: rtt_ms.map(|_| vec![1]),
-        rtt_ns: rtt_ms.map(|m| m * 1_000_000),
-        sent: SimTime::ZERO,
-        failed: failed.then(|| "no route".to_owned()),
+    let ev = |name: &str, rtt_ms: Option<u64>, failed: bool| {
+        RunEvent::CommandResult(Box::new(twin_core::events::CommandResult {
+            t: SimTime::ZERO,
+            name: name.into(),
+            dst: 3,
+            dport: 1,
+            data: vec![],
+            timeout: Duration::from_secs(1),
+            reply: rtt_ms.map(|_| vec![1]),
+            rtt_ns: rtt_ms.map(|m| m * 1_000_000),
+            sent: SimTime::ZERO,
+            failed: failed.then(|| "no route".to_owned()),
+        }))
     };
     let send = |name: &str| RunEvent::Command {
         t: SimTime::ZERO,

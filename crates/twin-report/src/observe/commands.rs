@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use csp::SimTime;
-use twin_core::events::RunEvent;
+use twin_core::events::{CommandResult, RunEvent};
 use twin_runtime::ground::Outcome;
 
 /// A command as the station sent it (or tried to).
@@ -107,18 +107,19 @@ impl CommandObserver {
                 }
                 self.sends += 1;
             }
-            RunEvent::CommandResult {
-                name,
-                dst,
-                dport,
-                data,
-                timeout,
-                reply,
-                rtt_ns,
-                sent,
-                failed,
-                ..
-            } => {
+            RunEvent::CommandResult(r) => {
+                let CommandResult {
+                    name,
+                    dst,
+                    dport,
+                    data,
+                    timeout,
+                    reply,
+                    rtt_ns,
+                    sent,
+                    failed,
+                    ..
+                } = &**r;
                 let outcome = Outcome::of_result(reply.as_deref(), *rtt_ns, failed.as_deref());
                 if failed.is_none() {
                     self.waiting = self.waiting.saturating_sub(1);
@@ -185,7 +186,7 @@ mod tests {
     }
 
     fn result(sent: SimTime, reply: Option<Vec<u8>>, failed: Option<&str>) -> RunEvent {
-        RunEvent::CommandResult {
+        RunEvent::CommandResult(Box::new(CommandResult {
             t: sent + Duration::from_millis(5),
             name: "ping".into(),
             dst: 3,
@@ -196,7 +197,7 @@ mod tests {
             reply,
             sent,
             failed: failed.map(str::to_owned),
-        }
+        }))
     }
 
     /// A reply, a timeout, a send that failed (no `Command`) and one still waiting: four

@@ -204,6 +204,11 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
         .record
         .clone()
         .or_else(|| loaded.scenario.record.file.as_ref().map(PathBuf::from));
+    // The live view shows `/csp/packets` too: the run hands its packets out.
+    #[cfg(feature = "live")]
+    if a.live.is_some() {
+        opts.packet_events = true;
+    }
     let rt = build_runtime_for(opts)?;
     #[cfg(feature = "live")]
     let mut live = match a.live {

@@ -67,7 +67,7 @@ pub fn assert_python_mcap() {
     );
 }
 
-/// Record `events` to `path` with `meta`.
+/// Record `events` to `path` with `meta`, and the packets they complete.
 pub fn record(
     path: &Path,
     meta: m6p_twin::record::RecordingMeta,
@@ -75,7 +75,8 @@ pub fn record(
 ) -> m6p_twin::record::RecordingStats {
     let mut r = m6p_twin::record::Recorder::create(path, meta, m6p_twin::record::Existing::Replace)
         .unwrap();
-    for e in events {
+    // With the packets each event completes, as a run that records hands them out.
+    for e in &m6p_twin::packets::with_packets(events.iter().cloned()) {
         r.write(e).unwrap();
     }
     r.finish().unwrap()
