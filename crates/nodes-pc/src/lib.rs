@@ -503,6 +503,8 @@ pub enum PcOutput {
         t: SimTime,
         /// Which.
         session_id: u8,
+        /// The session's payload.
+        payload_addr: u8,
     },
     /// A session ended with its result.
     SessionEnded {
@@ -1143,7 +1145,12 @@ impl PcApp {
         let id = self.session_id(i);
         self.log
             .push(NodeEvent::info(t, format!("pc: session {id} ACTIVE")));
-        self.emit(PcOutput::SessionStarted { t, session_id: id });
+        let payload_addr = self.table.slot(i).map_or(0, |s| s.spec.payload_addr);
+        self.emit(PcOutput::SessionStarted {
+            t,
+            session_id: id,
+            payload_addr,
+        });
         if self.table.slot(i).is_some_and(|s| s.end_at <= t) {
             self.end_session(node, i, SessionResult::Done, t);
             return;

@@ -101,10 +101,31 @@ pub fn format_duration(d: Duration) -> String {
     }
 }
 
+/// A simulated instant as people read it: in the scenarios' units when it is whole (`3h`,
+/// `10m`, `90s`), else seconds with the digits that matter (`30.000141s`).
+pub fn format_instant(t: csp::SimTime) -> String {
+    let d = Duration::from_nanos(t.as_ns());
+    if d.subsec_nanos() == 0 {
+        return format_duration(d);
+    }
+    let s = format!("{}.{:09}", d.as_secs(), d.subsec_nanos());
+    format!("{}s", s.trim_end_matches('0'))
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn an_instant_reads_in_the_scenarios_units() {
+        let at = |ns| format_instant(csp::SimTime::from_ns(ns));
+        assert_eq!(at(10_800_000_000_000), "3h");
+        assert_eq!(at(30_000_000_000), "30s");
+        assert_eq!(at(0), "0s");
+        assert_eq!(at(30_000_141_000), "30.000141s");
+        assert_eq!(at(1), "0.000000001s");
+    }
 
     #[test]
     fn accepts_the_documented_forms() {

@@ -899,13 +899,21 @@ mod tests {
             })
         };
         let events = vec![
-            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            pc(nodes_pc::PcOutput::SessionStarted {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+            }),
             down(1, b"abc"),
             down(1, b"de"),
             end(1),
             // Bytes still queued for S-band after the end belong to that run.
             down(1, b"f"),
-            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            pc(nodes_pc::PcOutput::SessionStarted {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+            }),
             down(1, b"xyz"),
             // An end without a start is a run of its own, as in the report.
             end(2),
@@ -977,7 +985,11 @@ mod tests {
             },
         };
         let events = vec![
-            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            pc(nodes_pc::PcOutput::SessionStarted {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+            }),
             produced(12, 600),
             pc(nodes_pc::PcOutput::Downlinked {
                 t,
@@ -1006,7 +1018,11 @@ mod tests {
         let t = SimTime::from_secs(2);
         let stream = nodes_payload::counter_stream(12, 0, 500);
         let events = vec![
-            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            pc(nodes_pc::PcOutput::SessionStarted {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+            }),
             produced(12, 600),
             pc(nodes_pc::PcOutput::Downlinked {
                 t,
@@ -1041,7 +1057,11 @@ mod tests {
             bytes: 10,
         })];
         events2.extend([
-            pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+            pc(nodes_pc::PcOutput::SessionStarted {
+                t,
+                session_id: 1,
+                payload_addr: 12,
+            }),
             produced(12, 600),
             pc(nodes_pc::PcOutput::Downlinked {
                 t,
@@ -1083,7 +1103,11 @@ mod tests {
         bytes.drain(1000..1400);
         let mk = |b: Vec<u8>| {
             report_of(vec![
-                pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }),
+                pc(nodes_pc::PcOutput::SessionStarted {
+                    t,
+                    session_id: 1,
+                    payload_addr: 12,
+                }),
                 pc(nodes_pc::PcOutput::Downlinked {
                     t,
                     session_id: 1,
@@ -1126,7 +1150,11 @@ mod tests {
         let runs = |parts: &[&[u8]]| {
             let mut ev = Vec::new();
             for part in parts {
-                ev.push(pc(nodes_pc::PcOutput::SessionStarted { t, session_id: 1 }));
+                ev.push(pc(nodes_pc::PcOutput::SessionStarted {
+                    t,
+                    session_id: 1,
+                    payload_addr: 12,
+                }));
                 ev.push(pc(nodes_pc::PcOutput::Downlinked {
                     t,
                     session_id: 1,

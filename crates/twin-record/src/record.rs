@@ -3293,6 +3293,7 @@ mod tests {
             O::SessionStarted {
                 t: s(10),
                 session_id: 1,
+                payload_addr: 12,
             },
             down(s(11), 1, 100),
             down(s(12), 2, 50),
@@ -3307,6 +3308,7 @@ mod tests {
             O::SessionStarted {
                 t: s(30),
                 session_id: 1,
+                payload_addr: 12,
             },
             down(s(31), 1, 5),
             O::SessionLost {

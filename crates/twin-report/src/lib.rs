@@ -160,13 +160,17 @@ impl RunReport {
         self.table_boards(&mut s);
         self.table_links(&mut s);
         self.table_requests(&mut s);
+        self.table_sessions(&mut s);
         s
     }
 
     /// The table's head: whether the run was cut short, and how fast it ran.
     fn table_time(&self, s: &mut String) {
         if let Some(i) = &self.interrupted {
-            let _ = writeln!(s, "{i}: the verdicts below judge only what ran\n");
+            let _ = writeln!(
+                s,
+                "{i}: not a whole run (any verdicts below judge only what ran)\n"
+            );
         }
         let _ = writeln!(
             s,
@@ -387,6 +391,45 @@ impl RunReport {
     }
 
     /// The ground's requests and how many were answered, when it sent any.
+    /// Every payload session run: when, how it ended, what reached the ground (the ground
+    /// sink writes each run's bytes to `session-S-runN.bin`, N counting the session's runs).
+    fn table_sessions(&self, s: &mut String) {
+        let runs = &self.sessions.runs;
+        if runs.is_empty() {
+            return;
+        }
+        let _ = writeln!(
+            s,
+            "\npayload sessions:\n  {:>7} {:>7} {:>3} {:>10} {:>10}  {:<14} {:>8} {:>12}",
+            "session", "payload", "run", "start s", "end s", "result", "packets", "downlinked"
+        );
+        let mut nth: std::collections::BTreeMap<u8, u32> = std::collections::BTreeMap::new();
+        for r in runs {
+            let n = nth.entry(r.session).or_default();
+            *n += 1;
+            let payload = match r.payload {
+                0 => "-".to_owned(),
+                p => p.to_string(),
+            };
+            let start = r
+                .started
+                .map_or("-".to_owned(), |t| format!("{:.3}", t.as_secs_f64()));
+            let (end, result, packets) = match &r.ended {
+                Some((t, how, packets)) => (
+                    format!("{:.3}", t.as_secs_f64()),
+                    how.to_string(),
+                    packets.to_string(),
+                ),
+                None => ("-".to_owned(), "still active".to_owned(), "-".to_owned()),
+            };
+            let _ = writeln!(
+                s,
+                "  {:>7} {payload:>7} {n:>3} {start:>10} {end:>10}  {result:<14} {packets:>8} {:>10} B",
+                r.session, r.len
+            );
+        }
+    }
+
     fn table_requests(&self, s: &mut String) {
         let r = self.requests;
         if r.requests > 0 {

@@ -59,6 +59,28 @@ pub fn load_default() -> anyhow::Result<Loaded> {
     })
 }
 
+/// A `gs` command that works through a KISS link holding the CSP addresses `ids`: a
+/// program there may only send from them, so `gs` takes one (a ground station's, if the
+/// link holds one) and pings a node its segment reaches.
+fn gs_hint(at: std::net::SocketAddr, ids: &[u8]) -> String {
+    use platform::addr::Segment;
+    let Some(&me) = ids
+        .iter()
+        .find(|&&id| Segment::of(id) == Segment::Ground)
+        .or(ids.first())
+    else {
+        // A link holding no address learns its program's: `gs`'s own (17) will do.
+        return format!("m6p-twin gs --connect {at} ping 3");
+    };
+    let target = match Segment::of(me) {
+        Segment::Payload => 6,
+        Segment::Ground => 3,
+        _ if me == 3 => 4,
+        _ => 3,
+    };
+    format!("m6p-twin gs --connect {at} --as {me} ping {target}")
+}
+
 /// What a scenario run produced.
 #[derive(Debug, Clone)]
 pub struct Outcome {
@@ -89,7 +111,7 @@ impl Outcome {
                 "  {} {} (t = {}): {}",
                 if v.passed { "PASS" } else { "FAIL" },
                 v.name,
-                v.t,
+                crate::duration::format_instant(v.t),
                 v.observed
             );
         }
@@ -136,18 +158,36 @@ pub async fn execute_keeping(
         .filter(|l| matches!(l.mode, crate::runtime::KissMode::Listen(_)))
         .map(|l| l.cfg.addrs.clone())
         .collect();
+    // The TCP consoles' nodes, bound after the KISS servers.
+    let consoles: Vec<String> = compiled
+        .opts
+        .uart
+        .iter()
+        .filter(|u| matches!(u.at, crate::runtime::UartAt::Tcp(_)))
+        .map(|u| u.node.clone())
+        .collect();
     let print_listen = async move {
         if let Ok(addrs) = rx.await {
-            for (i, a) in addrs.into_iter().enumerate() {
-                let csp = match listen_addrs.get(i) {
-                    Some(ids) if !ids.is_empty() => format!(
+            let (kiss, rest) = addrs.split_at(listen_addrs.len().min(addrs.len()));
+            for (a, ids) in kiss.iter().zip(&listen_addrs) {
+                let csp = if ids.is_empty() {
+                    String::new()
+                } else {
+                    format!(
                         " for CSP {}",
                         ids.iter().map(u8::to_string).collect::<Vec<_>>().join(", ")
-                    ),
-                    _ => String::new(),
+                    )
                 };
                 eprintln!(
-                    "KISS/TCP: listening on {a}{csp} (try: m6p-twin gs --connect {a} ping 3)"
+                    "KISS/TCP: listening on {a}{csp} (try: {})",
+                    gs_hint(*a, ids)
+                );
+            }
+            for (a, node) in rest.iter().zip(&consoles) {
+                eprintln!(
+                    "console of {node} (UART): on {a} (try: nc {} {}, then `help`)",
+                    a.ip(),
+                    a.port()
                 );
             }
         }

@@ -89,14 +89,16 @@ fn main() -> ExitCode {
     let matches = <Cli as clap::CommandFactory>::command().get_matches();
     let cli =
         <Cli as clap::FromArgMatches>::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
-    // A benchmark runs the scenario many times: only warnings, unless RUST_LOG says more.
-    let default_filter = if matches!(
-        cli.command,
-        Command::Bench(_) | Command::BenchRun(_) | Command::Campaign(_)
-    ) {
-        "warn"
-    } else {
-        "info,foxglove=warn"
+    // A benchmark runs the scenario many times, and `test` reports its verdicts on stdout:
+    // only warnings, unless `-v` or RUST_LOG says more.
+    let default_filter = match &cli.command {
+        Command::Bench(_) | Command::BenchRun(_) | Command::Campaign(_) => "warn",
+        Command::Test(a) => match a.verbose {
+            0 => "warn",
+            1 => "info,foxglove=warn",
+            _ => "debug,foxglove=warn",
+        },
+        _ => "info,foxglove=warn",
     };
     tracing_subscriber::fmt()
         .with_env_filter(

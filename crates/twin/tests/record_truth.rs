@@ -29,15 +29,8 @@ const START_NS: u64 = 1_774_008_000_000_000_000; // 2026-03-20T12:00:00Z
 
 fn meta() -> RecordingMeta {
     RecordingMeta {
-        scenario_name: "adcs".into(),
         scenario_toml: "name = \"adcs\"\n".into(),
-        seed: 7,
-        start_utc: "2026-03-20T12:00:00Z".into(),
-        twin_version: "0.1.0".into(),
-        duration_ns: None,
-        replaced: Vec::new(),
-        link_addrs: Default::default(),
-        link_tx_budgets: Default::default(),
+        ..common::meta("adcs", 7)
     }
 }
 

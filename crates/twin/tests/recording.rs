@@ -19,15 +19,8 @@ use m6p_twin::recording::{self, DiffResult, RecordedMessage};
 
 fn meta() -> RecordingMeta {
     RecordingMeta {
-        scenario_name: "ping-fc".into(),
         scenario_toml: "# a ping to the FC\nname = \"ping-fc\"\nseed = 42 # ü\n".into(),
-        seed: 42,
-        start_utc: "2026-03-20T12:00:00Z".into(),
-        twin_version: "0.1.0".into(),
-        duration_ns: None,
-        replaced: Vec::new(),
-        link_addrs: Default::default(),
-        link_tx_budgets: Default::default(),
+        ..common::meta("ping-fc", 42)
     }
 }
 

@@ -392,7 +392,7 @@ impl Sim {
         self.outputs()
             .into_iter()
             .filter_map(|o| match o {
-                PcOutput::SessionStarted { t, session_id } => Some((t, session_id)),
+                PcOutput::SessionStarted { t, session_id, .. } => Some((t, session_id)),
                 _ => None,
             })
             .collect()

@@ -10,6 +10,8 @@ use twin_scenario::pc::RunEnd;
 pub struct SessionRun {
     /// Session id.
     pub session: u8,
+    /// The session's payload (0 when the run ended without starting).
+    pub payload: u8,
     /// When it became ACTIVE (`None`: it ended without starting, as an ABORT of a
     /// PENDING session may report).
     pub started: Option<SimTime>,
@@ -118,8 +120,13 @@ impl SessionsReport {
     fn observe_pc(&mut self, o: &nodes_pc::PcOutput) {
         use nodes_pc::PcOutput as O;
         match o {
-            O::SessionStarted { t, session_id } => self.runs.push(SessionRun {
+            O::SessionStarted {
+                t,
+                session_id,
+                payload_addr,
+            } => self.runs.push(SessionRun {
                 session: *session_id,
+                payload: *payload_addr,
                 started: Some(*t),
                 ended: None,
                 bytes: Vec::new(),
@@ -188,6 +195,7 @@ impl SessionsReport {
             Some(r) => r.ended = Some(end),
             None => self.runs.push(SessionRun {
                 session,
+                payload: 0,
                 started: None,
                 ended: Some(end),
                 bytes: Vec::new(),

@@ -28,6 +28,11 @@ pub struct RunArgs {
     /// the scenario itself).
     #[arg(long)]
     pub overwrite: bool,
+    /// Write what the ground receives of each payload session (one file per session run)
+    /// into DIR, overriding the scenario's `[pc] downlink_dir` [default: beside the
+    /// recording, `x.mcap` -> `x.downlink/`; nowhere without one].
+    #[arg(long, value_name = "DIR")]
+    pub downlink_dir: Option<PathBuf>,
     /// Follow the wall clock (needed by outside programs; implied by --kiss-* and --socketcan).
     #[arg(long)]
     pub realtime: bool,
@@ -42,6 +47,11 @@ pub struct RunArgs {
     /// With --realtime and no --duration: run until Ctrl-C instead of the scenario's duration.
     #[arg(long)]
     pub forever: bool,
+    /// Lab mode: the platform without the scenario's expectations and invariants, for
+    /// interactive work, a shortened run or your own payload program in a simulated one's
+    /// place. Nothing is judged; the exit status says whether the run reached its end.
+    #[arg(long)]
+    pub no_checks: bool,
     /// Listen for outside CSP nodes speaking KISS over TCP (for example 127.0.0.1:52001).
     #[arg(long = "kiss-listen", value_name = "ADDR")]
     pub kiss_listen: Vec<SocketAddr>,
@@ -173,11 +183,17 @@ pub fn cli_kiss_links(
 }
 
 pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyhow::Result<bool> {
-    let loaded = match &a.scenario {
+    let mut loaded = match &a.scenario {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
     };
+    if let Some(d) = &a.downlink_dir {
+        loaded.scenario.pc.downlink_dir = Some(d.display().to_string());
+    }
     let mut compiled = exec::compile_seeded(&loaded, a.seed);
+    if a.no_checks {
+        lab_mode(&mut compiled);
+    }
     let opts = &mut compiled.opts;
     if let Some(d) = a.duration {
         opts.duration = Some(d);
@@ -263,6 +279,17 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
         _ => true,
     };
     Ok(outcome.passed() && recorded)
+}
+
+/// `--no-checks`: no expectation and no invariant is judged (the scenario's commands and
+/// faults still run: they are the platform's activity).
+fn lab_mode(compiled: &mut m6p_twin::plan::Compiled) {
+    let expectations = std::mem::take(&mut compiled.expectations).len();
+    let invariants = std::mem::take(&mut compiled.invariants.check).len();
+    eprintln!(
+        "lab mode (--no-checks): the scenario's {expectations} expectation(s) and \
+         {invariants} invariant(s) are not checked"
+    );
 }
 
 /// The command line's outside links into `opts`: KISS links (and the nodes their

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
+use m6p_twin::duration::format_instant;
 use m6p_twin::exec;
 use m6p_twin::runtime::build_runtime_for;
 
@@ -21,6 +22,10 @@ pub struct TestArgs {
     /// links to the outside run one at a time all the same.
     #[arg(long)]
     pub jobs: Option<usize>,
+    /// More of the runs' logs on stderr: `-v` their news (info), `-vv` debug detail
+    /// [default: warnings only; RUST_LOG, when set, decides instead].
+    #[arg(short, long, action = clap::ArgAction::Count)]
+    pub verbose: u8,
 }
 
 /// One scenario of `m6p-twin test`: its table row (name, passed, failed, simulated s,
@@ -62,6 +67,7 @@ pub fn test_one_with(
         );
         case.set_classname(classname.to_owned());
         case.set_system_err(e);
+        case.set_time(started.elapsed());
         case
     };
     let loaded = match exec::load(f) {
@@ -112,23 +118,29 @@ pub fn test_one_with(
     };
     let mut cases = Vec::with_capacity(out.verdicts.len());
     let mut errors = Vec::new();
+    // The verdicts of one run share its time: each case gets an equal part, so that the
+    // cases' times add up to the run's.
+    let case_time = started.elapsed() / u32::try_from(out.verdicts.len().max(1)).unwrap_or(1);
     for v in &out.verdicts {
         let status = if v.passed {
             quick_junit::TestCaseStatus::success()
         } else {
             let mut st =
                 quick_junit::TestCaseStatus::non_success(quick_junit::NonSuccessKind::Failure);
-            st.set_message(format!("t = {}: {}", v.t, v.observed));
+            st.set_message(format!("t = {}: {}", format_instant(v.t), v.observed));
             st
         };
         let mut case = quick_junit::TestCase::new(v.name.clone(), status);
         case.set_classname(name.as_str());
-        case.set_system_out(format!("t = {}: {}", v.t, v.observed));
+        case.set_time(case_time);
+        case.set_system_out(format!("t = {}: {}", format_instant(v.t), v.observed));
         cases.push(case);
         if !v.passed {
             errors.push(format!(
                 "FAIL {name}: {} (t = {}): {}",
-                v.name, v.t, v.observed
+                v.name,
+                format_instant(v.t),
+                v.observed
             ));
         }
     }
@@ -155,9 +167,11 @@ pub fn test_one_with(
 
 pub fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
     use std::io::IsTerminal as _;
+    let started = std::time::Instant::now();
     let show_bar = std::io::stderr().is_terminal() && std::env::var_os("CI").is_none();
+    let total = a.files.len();
     let bar = if show_bar {
-        let b = indicatif::ProgressBar::new(a.files.len() as u64);
+        let b = indicatif::ProgressBar::new(total as u64);
         b.set_style(
             indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}")
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
@@ -168,47 +182,81 @@ pub fn cmd_test(a: TestArgs) -> anyhow::Result<bool> {
     };
     let jobs = m6p_twin::campaign_run::default_jobs(a.jobs);
     let turns = std::sync::RwLock::new(());
-    // The scenarios run side by side; what each says on stderr comes as it ends, and the
-    // table and the JUnit report are in the files' order.
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    // The scenarios run side by side; each says how it went as it ends (its failures on
+    // stdout, a progress line on stderr), and the table and the JUnit report are in the
+    // files' order.
     let tested = m6p_twin::campaign_run::in_parallel(
         &a.files,
         jobs,
         &|f| test_one(f, a.seed, &turns),
         &|t| {
+            let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             bar.suspend(|| {
                 for e in &t.errors {
-                    eprintln!("{e}");
+                    println!("{e}");
+                }
+                if !show_bar {
+                    eprintln!("[{n}/{total}] {}", progress_line(t));
                 }
             });
             bar.set_message(format!("done: {}", t.row.0));
             bar.inc(1);
         },
     );
-    let mut suite = quick_junit::TestSuite::new("m6p-twin scenarios");
-    let mut all_ok = true;
-    let mut rows = Vec::with_capacity(tested.len());
-    for t in tested {
-        all_ok &= t.ok;
-        suite.add_test_cases(t.cases);
-        rows.push(t.row);
-    }
     bar.finish_and_clear();
-    println!(
-        "{:<36} {:>6} {:>6} {:>12} {:>10} {:>12}",
-        "scenario", "passed", "failed", "sim time s", "wall s", "real-time x"
-    );
-    for (name, p, f, sim, wall, broken) in &rows {
-        let rtf = if *wall > 0.0 { sim / wall } else { 0.0 };
-        let note = if *broken { "  (did not run)" } else { "" };
-        println!("{name:<36} {p:>6} {f:>6} {sim:>12.1} {wall:>10.3} {rtf:>12.0}{note}");
-    }
+    let all_ok = tested.iter().all(|t| t.ok);
+    print_table(&tested, started.elapsed());
     if let Some(path) = &a.junit {
         let mut report = quick_junit::Report::new("m6p-twin");
-        report.add_test_suite(suite);
+        for t in tested {
+            let mut suite = quick_junit::TestSuite::new(t.row.0.clone());
+            suite.set_time(std::time::Duration::from_secs_f64(t.row.4));
+            suite.add_test_cases(t.cases);
+            report.add_test_suite(suite);
+        }
+        report.set_time(started.elapsed());
         let xml = report.to_string().context("serialising the JUnit report")?;
         std::fs::write(path, xml).with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(all_ok)
+}
+
+/// One scenario's progress line: `name: 12 passed, 1 failed (3.2 s)`.
+fn progress_line(t: &ScenarioTested) -> String {
+    let (name, p, f, _, wall, broken) = &t.row;
+    if *broken {
+        format!("{name}: did not run ({wall:.1} s)")
+    } else {
+        format!("{name}: {p} passed, {f} failed ({wall:.1} s)")
+    }
+}
+
+/// The table, in the files' order, and the totals line.
+fn print_table(tested: &[ScenarioTested], took: std::time::Duration) {
+    println!(
+        "{:<36} {:>6} {:>6} {:>12} {:>10} {:>12}",
+        "scenario", "passed", "failed", "sim time s", "wall s", "real-time x"
+    );
+    for t in tested {
+        let (name, p, f, sim, wall, broken) = &t.row;
+        let rtf = if *wall > 0.0 { sim / wall } else { 0.0 };
+        let note = if *broken { "  (did not run)" } else { "" };
+        println!("{name:<36} {p:>6} {f:>6} {sim:>12.1} {wall:>10.3} {rtf:>12.0}{note}");
+    }
+    let passed: usize = tested.iter().map(|t| t.row.1).sum();
+    let failed: usize = tested.iter().map(|t| t.row.2).sum();
+    let broken = tested.iter().filter(|t| t.row.5).count();
+    let not_run = if broken > 0 {
+        format!(", {broken} did not run")
+    } else {
+        String::new()
+    };
+    println!(
+        "\n{passed} passed, {failed} failed ({} scenario(s){not_run}) in {:.1} s",
+        tested.len(),
+        took.as_secs_f64()
+    );
 }
 
 #[cfg(test)]

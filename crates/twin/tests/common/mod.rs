@@ -156,3 +156,58 @@ pub fn assert_one_session_done(report: &m6p_twin::report::RunReport, session: u8
         "expected DONE after {packets} packets"
     );
 }
+
+/// The metadata of a recording a test writes itself: scenario `name`, `seed`.
+pub fn meta(name: &str, seed: u64) -> m6p_twin::record::RecordingMeta {
+    m6p_twin::record::RecordingMeta {
+        scenario_name: name.into(),
+        scenario_toml: format!("name = \"{name}\"\nseed = {seed}\n"),
+        seed,
+        start_utc: "2026-03-20T12:00:00Z".into(),
+        twin_version: "0.1.0".into(),
+        duration_ns: None,
+        replaced: Vec::new(),
+        link_addrs: Default::default(),
+        link_tx_budgets: Default::default(),
+    }
+}
+
+/// Session 4 (payload 14) polls for 60 s from 5 s of a 90 s run: some 600 packets and
+/// 60 kB downlinked, in a fraction of a second.
+pub const ONE_SESSION_SCENARIO: &str = r#"
+name = "inspect-sessions"
+duration = "90s"
+seed = 3
+
+[network]
+payloads = [12, 14]
+
+[[pc.sessions]]
+id = 4
+payload = 14
+mode = "polling"
+
+[[commands]]
+name = "setup-4"
+at = "5s"
+to = "PC"
+command = "PC.SETUP"
+args = { session_id = 4, timestamp = "now", duration_s = 60, max_packets = "no limit", poll_frame_size = 100, sync_message = "go" }
+"#;
+
+/// `m6p-twin ARGS` in the repository, with no `RUST_LOG` or `CI` of the caller's: exit
+/// code, stdout, stderr.
+pub fn twin_cli(args: &[&str]) -> (i32, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args(args)
+        .current_dir(repo_root())
+        .env_remove("RUST_LOG")
+        .env_remove("CI")
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
