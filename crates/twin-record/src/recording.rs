@@ -1493,6 +1493,155 @@ pub fn describe(m: &RecordedMessage) -> String {
 /// (logs, decoded packets, verdicts) follow from these and are not compared. An unreadable
 /// or truncated recording is an error unless a divergence comes before the damage.
 pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
+    Ok(diff_summary(a, b, 0)?.result)
+}
+
+/// Where one medium channel of two recordings differs: the message's index within the
+/// channel (0-based) and its simulated time, ns since the start of the run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DivergencePoint {
+    /// Index of the message within its channel (0-based).
+    pub index: u64,
+    /// Simulated time of the divergence (as `DiffResult::Diverged::t_ns`).
+    pub t_ns: u64,
+}
+
+/// One medium channel of two recordings compared.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelDiff {
+    /// The channel (topic).
+    pub channel: String,
+    /// Messages on it in the expected recording (A).
+    pub expected: u64,
+    /// Messages on it in the actual recording (B).
+    pub actual: u64,
+    /// Positions where the two differ, a message only one of them has included.
+    pub differing: u64,
+    /// The first of them.
+    pub first: Option<DivergencePoint>,
+}
+
+impl ChannelDiff {
+    /// Whether the channel is the same message for message in both recordings.
+    pub fn is_identical(&self) -> bool {
+        self.differing == 0
+    }
+}
+
+/// One divergence of a `--all` listing: where, and the two messages as a report shows them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Divergence {
+    /// The channel.
+    pub channel: String,
+    /// Index within the channel and simulated time.
+    pub at: DivergencePoint,
+    /// The expected message (first recording): bytes and decoded fields.
+    pub expected: String,
+    /// The actual message (second recording).
+    pub actual: String,
+}
+
+/// Two recordings compared: the first divergence in detail, a line per medium channel and,
+/// when asked, the earliest divergences of all channels.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DiffSummary {
+    /// The first divergence (as [`diff`] returns it).
+    pub result: DiffResult,
+    /// Every medium channel of either recording, in name order.
+    pub channels: Vec<ChannelDiff>,
+    /// The earliest divergences of all channels by time (then channel, then index), at
+    /// most the `max_listed` given to [`diff_summary`].
+    pub listed: Vec<Divergence>,
+}
+
+impl DiffSummary {
+    /// Whether the recordings are identical.
+    pub fn is_identical(&self) -> bool {
+        self.result.is_identical()
+    }
+
+    /// Divergences on all channels together.
+    pub fn differing(&self) -> u64 {
+        self.channels.iter().map(|c| c.differing).sum()
+    }
+}
+
+impl fmt::Display for DiffSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "{}", self.result)?;
+        let width = self
+            .channels
+            .iter()
+            .map(|c| c.channel.len())
+            .chain(["channel".len()])
+            .max()
+            .unwrap_or_default();
+        writeln!(f, "per channel (expected = A, actual = B):")?;
+        write!(
+            f,
+            "  {:width$}  {:>8}  {:>8}  {:>9}  first divergence",
+            "channel", "expected", "actual", "differing"
+        )?;
+        for c in &self.channels {
+            let first = match c.first {
+                Some(p) => format!("message {} at t = {} s", p.index, secs(p.t_ns)),
+                None => "identical".to_owned(),
+            };
+            write!(
+                f,
+                "\n  {:width$}  {:>8}  {:>8}  {:>9}  {first}",
+                c.channel, c.expected, c.actual, c.differing
+            )?;
+        }
+        let total = self.differing();
+        if !self.listed.is_empty() {
+            let shown = self.listed.len() as u64;
+            if shown < total {
+                write!(f, "\nthe first {shown} of {total} divergences, by time:")?;
+            } else {
+                write!(f, "\nall {total} divergences, by time:")?;
+            }
+            for d in &self.listed {
+                write!(
+                    f,
+                    "\n  t = {} s on {} (message {})\n    expected: {}\n    actual:   {}",
+                    secs(d.at.t_ns),
+                    d.channel,
+                    d.at.index,
+                    d.expected,
+                    d.actual
+                )?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// When `x` and `y` (the same position of one channel, either may be missing) differ:
+/// the first different frame's time for CAN trains, else the expected message's time.
+fn divergence_t_ns(x: Option<&RecordedMessage>, y: Option<&RecordedMessage>) -> u64 {
+    match (x, y) {
+        (Some(x), Some(y)) => first_frame_difference(x, y).map_or(t_ns_of(x), |d| d.0),
+        _ => x.or(y).map_or(u64::MAX, t_ns_of),
+    }
+}
+
+/// `x` and `y` as a divergence report shows them: the first different frame of CAN trains,
+/// else the whole messages, `(end of recording)` for a missing one.
+fn divergence_text(x: Option<&RecordedMessage>, y: Option<&RecordedMessage>) -> (String, String) {
+    if let (Some(x), Some(y)) = (x, y)
+        && let Some((_, expected, actual)) = first_frame_difference(x, y)
+    {
+        return (expected, actual);
+    }
+    let end = || "(end of recording)".to_owned();
+    (x.map_or_else(end, describe), y.map_or_else(end, describe))
+}
+
+/// [`diff`] with a line per medium channel (messages in each recording, how many differ,
+/// the first divergence) and the earliest `max_listed` divergences of all channels in
+/// detail (none when 0). The listing is kept in a heap of at most `max_listed` entries.
+pub fn diff_summary(a: &Path, b: &Path, max_listed: usize) -> anyhow::Result<DiffSummary> {
     // Each medium channel is compared as its own sequence: messages of different channels
     // that happen within the same scheduler tick may be written in either order, and that
     // order is not part of what happened on the wire.
@@ -1507,22 +1656,33 @@ pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
         };
     let xa = collect(a, "expected")?;
     let xb = collect(b, "actual")?;
-    let topics: std::collections::BTreeSet<&Arc<str>> = xa.keys().chain(xb.keys()).collect();
+    let topics: Vec<&Arc<str>> = xa
+        .keys()
+        .chain(xb.keys())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
     let empty = Vec::new();
     let mut same = 0u64;
-    #[allow(clippy::type_complexity)]
-    let mut first: Option<(
-        u64,
-        u64,
-        &Arc<str>,
-        Option<&RecordedMessage>,
-        Option<&RecordedMessage>,
-    )> = None;
-    for topic in topics {
+    let mut channels = Vec::with_capacity(topics.len());
+    // The first divergence of all: (time, topic, index); the earliest channel in name
+    // order wins a tie.
+    let mut first: Option<(u64, usize, u64)> = None;
+    // The latest of the earliest `max_listed` divergences on top: (time, topic, index).
+    let mut heap: std::collections::BinaryHeap<(u64, usize, u64)> =
+        std::collections::BinaryHeap::with_capacity(max_listed.saturating_add(1).min(1024));
+    for (k, topic) in topics.iter().enumerate() {
         let (ea, eb) = (
-            xa.get(topic).unwrap_or(&empty),
-            xb.get(topic).unwrap_or(&empty),
+            xa.get(*topic).unwrap_or(&empty),
+            xb.get(*topic).unwrap_or(&empty),
         );
+        let mut c = ChannelDiff {
+            channel: topic.to_string(),
+            expected: ea.len() as u64,
+            actual: eb.len() as u64,
+            differing: 0,
+            first: None,
+        };
         for i in 0..ea.len().max(eb.len()) {
             let (x, y) = (ea.get(i), eb.get(i));
             if let (Some(x), Some(y)) = (x, y)
@@ -1531,37 +1691,71 @@ pub fn diff(a: &Path, b: &Path) -> anyhow::Result<DiffResult> {
                 same += 1;
                 continue;
             }
-            let t = match (x, y) {
-                (Some(x), Some(y)) => first_frame_difference(x, y).map_or(t_ns_of(x), |d| d.0),
-                _ => x.or(y).map_or(u64::MAX, t_ns_of),
-            };
-            if first.as_ref().is_none_or(|f| t < f.0) {
-                first = Some((t, i as u64, topic, x, y));
+            c.differing += 1;
+            // Times are worked out only where they are reported: a channel's first
+            // divergence and, with a listing, every candidate for it.
+            if c.first.is_some() && max_listed == 0 {
+                continue;
             }
-            break;
+            let t = divergence_t_ns(x, y);
+            if c.first.is_none() {
+                c.first = Some(DivergencePoint {
+                    index: i as u64,
+                    t_ns: t,
+                });
+                if first.is_none_or(|f| t < f.0) {
+                    first = Some((t, k, i as u64));
+                }
+            }
+            if max_listed > 0 {
+                heap.push((t, k, i as u64));
+                if heap.len() > max_listed {
+                    heap.pop();
+                }
+            }
         }
+        channels.push(c);
     }
-    let Some((t_ns, index, topic, x, y)) = first else {
-        return Ok(DiffResult::Identical { messages: same });
+    let at = |k: usize, i: u64| {
+        let (ea, eb) = (
+            xa.get(topics[k]).unwrap_or(&empty),
+            xb.get(topics[k]).unwrap_or(&empty),
+        );
+        let i = usize::try_from(i).unwrap_or(usize::MAX);
+        (ea.get(i), eb.get(i))
     };
-    let end = "(end of recording)".to_owned();
-    if let (Some(x), Some(y)) = (x, y)
-        && let Some((_, expected, actual)) = first_frame_difference(x, y)
-    {
-        return Ok(DiffResult::Diverged {
-            index,
-            t_ns,
-            channel: topic.to_string(),
-            expected,
-            actual,
-        });
-    }
-    Ok(DiffResult::Diverged {
-        index,
-        t_ns,
-        channel: topic.to_string(),
-        expected: x.map_or_else(|| end.clone(), describe),
-        actual: y.map_or_else(|| end.clone(), describe),
+    let listed = heap
+        .into_sorted_vec()
+        .into_iter()
+        .map(|(t_ns, k, index)| {
+            let (x, y) = at(k, index);
+            let (expected, actual) = divergence_text(x, y);
+            Divergence {
+                channel: topics[k].to_string(),
+                at: DivergencePoint { index, t_ns },
+                expected,
+                actual,
+            }
+        })
+        .collect();
+    let result = match first {
+        None => DiffResult::Identical { messages: same },
+        Some((t_ns, k, index)) => {
+            let (x, y) = at(k, index);
+            let (expected, actual) = divergence_text(x, y);
+            DiffResult::Diverged {
+                index,
+                t_ns,
+                channel: topics[k].to_string(),
+                expected,
+                actual,
+            }
+        }
+    };
+    Ok(DiffSummary {
+        result,
+        channels,
+        listed,
     })
 }
 

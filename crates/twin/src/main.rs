@@ -116,7 +116,7 @@ fn main() -> ExitCode {
         Command::Icd(a) => cmd::icd::cmd_icd(a),
         Command::Campaign(c) => cmd::campaign::cmd_campaign(c),
         Command::Inspect(a) => cmd::inspect::cmd_inspect(&a.file, a.csv.as_deref(), a.sizes),
-        Command::Diff(a) => cmd::diff::cmd_diff(&a.a, &a.b),
+        Command::Diff(a) => cmd::diff::cmd_diff(&a),
         Command::Replay(a) => cmd::replay::cmd_replay(a),
         Command::Bench(a) => {
             cmd::bench::cmd_bench(a.scenario.as_deref(), a.duration, a.runs, a.json)

@@ -2,16 +2,28 @@
 
 use std::path::PathBuf;
 
+/// How many divergences `--all` lists unless `--max` says otherwise.
+const DEFAULT_MAX_LISTED: usize = 100;
+
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The expected recording.
     pub a: PathBuf,
     /// The actual recording.
     pub b: PathBuf,
+    /// Also list every divergence of every channel in detail, earliest first, up to `--max`.
+    #[arg(long)]
+    pub all: bool,
+    /// The most divergences `--all` lists.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_LISTED, requires = "all")]
+    pub max: usize,
 }
 
-pub fn cmd_diff(a: &std::path::Path, b: &std::path::Path) -> anyhow::Result<bool> {
-    let d = m6p_twin::recording::diff(a, b)?;
+/// Print the first divergence, a line per medium channel and, with `--all`, the listing;
+/// `Ok(true)` when the recordings are identical (the exit code follows from it).
+pub fn cmd_diff(a: &Args) -> anyhow::Result<bool> {
+    let max_listed = if a.all { a.max } else { 0 };
+    let d = m6p_twin::recording::diff_summary(&a.a, &a.b, max_listed)?;
     println!("{d}");
     Ok(d.is_identical())
 }
