@@ -1,12 +1,16 @@
 //! `report.html`: a campaign's results for a person: one self-contained page (inline SVG, no
-//! script, nothing fetched) with the pass rate per fault kind, the failures plotted against
-//! every drawn value, histograms of the runs' metrics, and the failures with what they drew.
-//! Built from the rows alone, so a merged campaign's page is the unsharded one's.
+//! script, nothing fetched) with the failures by check (each expectation or invariant that
+//! failed: in how many runs, and the first), the pass rate per fault kind, the failures
+//! plotted against every drawn value, histograms of the runs' metrics that vary (a metric
+//! with one value is one line), and the failures with what they drew. Axes carry the unit
+//! the plotted name gives in its suffix ([`unit_of`]). Built from the rows alone, so a merged
+//! campaign's page is the unsharded one's; the failures by check are also text, for the
+//! terminal ([`failures_by_check_text`]).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use crate::campaign_rows::{CampaignMeta, RunRow, RunVerdict};
+use crate::campaign_rows::{CampaignMeta, CheckKind, RunRow, RunVerdict};
 
 const PASS: &str = "#2e8b57";
 const FAIL: &str = "#d0453a";
@@ -24,13 +28,69 @@ fn esc(s: &str) -> String {
 
 /// A number for an axis: at most 4 decimals, no trailing zeros.
 fn num(x: f64) -> String {
-    let s = format!("{x:.4}");
+    num_to(x, 4)
+}
+
+/// A number with at most `decimals` decimals, no trailing zeros.
+fn num_to(x: f64, decimals: usize) -> String {
+    let s = format!("{x:.decimals$}");
     let s = if s.contains('.') {
         s.trim_end_matches('0').trim_end_matches('.')
     } else {
         &s
     };
     s.to_owned()
+}
+
+/// The unit a metric's or a drawn path's name gives in its suffix (`max_rate_deg_s`:
+/// `deg/s`; `detumble_s`: `s`), for an axis or a value; `None` for a name without one.
+pub fn unit_of(name: &str) -> Option<&'static str> {
+    /// Name suffixes and their units. The longest suffix that matches wins (`_deg_s` over
+    /// `_s`), so the order does not matter.
+    const UNITS: &[(&str, &str)] = &[
+        ("_s", "s"),
+        ("_ms", "ms"),
+        ("_ns", "ns"),
+        ("_deg_s", "deg/s"),
+        ("_rad_s", "rad/s"),
+        ("_m_s", "m/s"),
+        ("_km_s", "km/s"),
+        ("_deg", "deg"),
+        ("_m", "m"),
+        ("_km", "km"),
+        ("_wh", "Wh"),
+        ("_w", "W"),
+        ("_v", "V"),
+        ("_a", "A"),
+        ("_nt", "nT"),
+        ("_b", "B"),
+        ("_bytes", "bytes"),
+        ("_bps", "bit/s"),
+        ("_pct", "%"),
+        ("_soc", "of full charge"),
+    ];
+    UNITS
+        .iter()
+        .filter(|(suffix, _)| name.ends_with(suffix))
+        .max_by_key(|(suffix, _)| suffix.len())
+        .map(|(_, unit)| *unit)
+}
+
+/// The two ends of an axis: [`num`], or with more decimals (up to 12) where 4 would show
+/// different values as one.
+fn ends(lo: f64, hi: f64) -> (String, String) {
+    (4..=12)
+        .map(|d| (num_to(lo, d), num_to(hi, d)))
+        .find(|(a, b)| a != b)
+        .unwrap_or_else(|| (num(lo), num(hi)))
+}
+
+/// An axis's title: the name, and its unit when there is one.
+fn axis_title(name: &str, unit: Option<&str>) -> String {
+    match unit {
+        Some(u) => format!("{} ({})", esc(name), esc(u)),
+        None => esc(name),
+    }
 }
 
 fn colour(v: &RunVerdict) -> &'static str {
@@ -86,8 +146,8 @@ fn rate_bars(out: &mut String, rows: &[(String, u64, u64)]) {
 }
 
 /// A strip plot of one drawn number: every run a dot at its value, passes above, failures
-/// below.
-fn strip(out: &mut String, name: &str, points: &[(f64, &RunRow)]) {
+/// below; the axis titled with the name and `unit`.
+fn strip(out: &mut String, name: &str, unit: Option<&str>, points: &[(f64, &RunRow)]) {
     let (lo, hi) = points
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (x, _)| {
@@ -96,12 +156,15 @@ fn strip(out: &mut String, name: &str, points: &[(f64, &RunRow)]) {
     let span = if hi > lo { hi - lo } else { 1.0 };
     let (left, right) = (60.0, WIDTH - 20.0);
     let x_of = |x: f64| left + (x - lo) / span * (right - left);
+    let ends = ends(lo, hi);
     let _ = writeln!(
         out,
-        r#"<svg width="{WIDTH}" height="110" role="img" aria-label="{n}"><text x="4" y="34">pass</text><text x="4" y="74">fail</text><line x1="{left}" y1="90" x2="{right}" y2="90" stroke="gray"/><text x="{left}" y="105">{lo}</text><text x="{right}" y="105" text-anchor="end">{hi}</text>"#,
+        r#"<svg width="{WIDTH}" height="110" role="img" aria-label="{n}"><text x="4" y="34">pass</text><text x="4" y="74">fail</text><line x1="{left}" y1="90" x2="{right}" y2="90" stroke="gray"/><text x="{left}" y="105">{lo}</text><text x="{mid}" y="105" text-anchor="middle">{title}</text><text x="{right}" y="105" text-anchor="end">{hi}</text>"#,
         n = esc(name),
-        lo = num(lo),
-        hi = num(hi),
+        lo = ends.0,
+        hi = ends.1,
+        mid = (left + right) / 2.0,
+        title = axis_title(name, unit),
     );
     for (x, r) in points {
         let lane = if r.verdict == RunVerdict::Pass {
@@ -124,8 +187,9 @@ fn strip(out: &mut String, name: &str, points: &[(f64, &RunRow)]) {
     out.push_str("</svg>\n");
 }
 
-/// A histogram of one metric, 20 bins, passes and failures stacked.
-fn histogram(out: &mut String, name: &str, values: &[(f64, &RunRow)]) {
+/// A histogram of one metric, 20 bins, passes and failures stacked; the x axis titled with
+/// the name and `unit`, the y axis counting runs.
+fn histogram(out: &mut String, name: &str, unit: Option<&str>, values: &[(f64, &RunRow)]) {
     const BINS: usize = 20;
     let (lo, hi) = values
         .iter()
@@ -146,16 +210,20 @@ fn histogram(out: &mut String, name: &str, values: &[(f64, &RunRow)]) {
     let top = bins.iter().map(|(p, f)| p + f).max().unwrap_or(1).max(1) as f64;
     let (left, plot_h) = (60.0, 120.0);
     let bw = (WIDTH - left - 20.0) / BINS as f64;
+    let ends = ends(lo, hi);
     let _ = writeln!(
         out,
-        r#"<svg width="{WIDTH}" height="{h}" role="img" aria-label="{n}"><text x="4" y="14">{top}</text><text x="4" y="{b}">0</text><text x="{left}" y="{lb}">{lo}</text><text x="{r}" y="{lb}" text-anchor="end">{hi}</text>"#,
-        lo = num(lo),
-        hi = num(hi),
+        r#"<svg width="{WIDTH}" height="{h}" role="img" aria-label="{n}"><text x="4" y="14">{top}</text><text x="4" y="{my}">runs</text><text x="4" y="{b}">0</text><text x="{left}" y="{lb}">{lo}</text><text x="{mid}" y="{lb}" text-anchor="middle">{title}</text><text x="{r}" y="{lb}" text-anchor="end">{hi}</text>"#,
+        lo = ends.0,
+        hi = ends.1,
         h = plot_h + 30.0,
         n = esc(name),
         b = plot_h,
+        my = plot_h / 2.0,
         lb = plot_h + 20.0,
         r = WIDTH - 20.0,
+        mid = (left + WIDTH - 20.0) / 2.0,
+        title = axis_title(name, unit),
     );
     for (i, (p, f)) in bins.iter().enumerate() {
         let x = left + bw * i as f64;
@@ -176,6 +244,7 @@ fn histogram(out: &mut String, name: &str, values: &[(f64, &RunRow)]) {
 pub fn report_html(meta: &CampaignMeta, rows: &[RunRow]) -> String {
     let mut out = String::new();
     page_head(&mut out, meta, rows);
+    failures_by_check_html(&mut out, rows);
     fault_kinds(&mut out, rows);
     drawn_values(&mut out, rows);
     metric_histograms(&mut out, rows);
@@ -263,7 +332,16 @@ fn drawn_values(out: &mut String, rows: &[RunRow]) {
             .map(|(v, r)| number(v).map(|x| (x, *r)))
             .collect();
         match numbers {
-            Some(points) => strip(out, col, &points),
+            Some(points) => {
+                // A duration is plotted in seconds.
+                let unit = unit_of(col).or_else(|| {
+                    values
+                        .iter()
+                        .any(|(v, _)| v.parse::<f64>().is_err())
+                        .then_some("s")
+                });
+                strip(out, col, unit, &points);
+            }
             None => {
                 let mut by: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
                 for (v, r) in &values {
@@ -283,7 +361,8 @@ fn drawn_values(out: &mut String, rows: &[RunRow]) {
     }
 }
 
-/// A histogram per metric the runs measured, passes apart from the others.
+/// A histogram per metric the runs measured, passes apart from the others; a metric with
+/// one value in every run that has it (a body rate that stays 0) is one line.
 fn metric_histograms(out: &mut String, rows: &[RunRow]) {
     let mut metrics: Vec<&String> = rows.iter().flat_map(|r| r.metrics.keys()).collect();
     metrics.sort();
@@ -296,9 +375,139 @@ fn metric_histograms(out: &mut String, rows: &[RunRow]) {
             .iter()
             .filter_map(|r| r.metrics.get(m).map(|v| (*v, r)))
             .collect();
+        let unit = unit_of(m);
+        if let Some((first, _)) = values.first()
+            && values.iter().all(|(x, _)| x == first)
+        {
+            let others = if values.len() < rows.len() {
+                " (the other runs did not measure it)"
+            } else {
+                ""
+            };
+            let _ = writeln!(
+                out,
+                "<p><b>{}</b>: all {} runs: {}{}{others}</p>",
+                esc(m),
+                values.len(),
+                num(*first),
+                unit.map_or_else(String::new, |u| format!(" {}", esc(u))),
+            );
+            continue;
+        }
         let _ = writeln!(out, "<h3>{} ({} runs)</h3>", esc(m), values.len());
-        histogram(out, m, &values);
+        histogram(out, m, unit, &values);
     }
+}
+
+/// One check that failed in some run of a campaign.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CheckFailures {
+    /// The check's name, as its verdict gives it (`invariant soc-range`, `fc-answers`).
+    pub name: String,
+    /// An expectation or an invariant; `None` when the rows did not keep it.
+    pub kind: Option<CheckKind>,
+    /// The runs that failed it.
+    pub failed: u64,
+    /// The runs judged: passed or failed (a run that ended in an error, or was not run,
+    /// judged nothing).
+    pub judged: u64,
+    /// The first run (lowest index) that failed it.
+    pub first: u64,
+}
+
+/// Every check that failed in any run: the most failed first, then by name.
+pub fn failures_by_check(rows: &[RunRow]) -> Vec<CheckFailures> {
+    let judged = rows
+        .iter()
+        .filter(|r| matches!(r.verdict, RunVerdict::Pass | RunVerdict::Fail(_)))
+        .count() as u64;
+    let mut by: BTreeMap<&str, CheckFailures> = BTreeMap::new();
+    for r in rows {
+        let RunVerdict::Fail(f) = &r.verdict else {
+            continue;
+        };
+        let mut names: Vec<&str> = f.iter().map(|(n, _)| n.as_str()).collect();
+        names.sort_unstable();
+        names.dedup();
+        for name in names {
+            let kind = r.failed_kinds.get(name).copied();
+            let c = by.entry(name).or_insert_with(|| CheckFailures {
+                name: name.to_owned(),
+                kind,
+                failed: 0,
+                judged,
+                first: r.run,
+            });
+            c.failed += 1;
+            c.first = c.first.min(r.run);
+            c.kind = c.kind.or(kind);
+        }
+    }
+    let mut checks: Vec<CheckFailures> = by.into_values().collect();
+    checks.sort_by(|a, b| b.failed.cmp(&a.failed).then_with(|| a.name.cmp(&b.name)));
+    checks
+}
+
+/// A check's kind as a word; `?` when the rows did not keep it.
+fn kind_word(kind: Option<CheckKind>) -> &'static str {
+    kind.map_or("?", CheckKind::word)
+}
+
+/// The failures by check for a terminal: a title, a header and a line per check; empty when
+/// no check failed.
+pub fn failures_by_check_text(rows: &[RunRow]) -> String {
+    let checks = failures_by_check(rows);
+    if checks.is_empty() {
+        return String::new();
+    }
+    let w = checks
+        .iter()
+        .map(|c| c.name.len())
+        .fold("check".len(), usize::max);
+    let failed: Vec<String> = checks
+        .iter()
+        .map(|c| format!("{} of {}", c.failed, c.judged))
+        .collect();
+    let fw = failed
+        .iter()
+        .map(String::len)
+        .fold("runs failed".len(), usize::max);
+    let mut out = format!(
+        "failures by check:\n  {:<w$}  {:<11}  {:>fw$}  first\n",
+        "check", "kind", "runs failed"
+    );
+    for (c, f) in checks.iter().zip(&failed) {
+        let _ = writeln!(
+            out,
+            "  {:<w$}  {:<11}  {f:>fw$}  run {}",
+            c.name,
+            kind_word(c.kind),
+            c.first
+        );
+    }
+    out
+}
+
+/// The failures by check, near the top: which expectation or invariant fails, and how often.
+fn failures_by_check_html(out: &mut String, rows: &[RunRow]) {
+    let checks = failures_by_check(rows);
+    if checks.is_empty() {
+        return;
+    }
+    out.push_str("<h2>Failures by check</h2>\n<p>Each expectation or invariant that failed in any run, the most failed first: the runs that failed it, of the runs judged (passed or failed), and the first.</p>\n<table><tr><th>check</th><th>kind</th><th>runs failed</th><th>first failing run</th></tr>\n");
+    for c in checks {
+        let _ = writeln!(
+            out,
+            r#"<tr><td>{n}</td><td>{kind}</td><td class="fail">{f} of {t} ({pct:.0} %)</td><td><a href="failures/run-{k}.toml">run {k}</a></td></tr>"#,
+            n = esc(&c.name),
+            kind = kind_word(c.kind),
+            f = c.failed,
+            t = c.judged,
+            pct = 100.0 * c.failed as f64 / c.judged.max(1) as f64,
+            k = c.first,
+        );
+    }
+    out.push_str("</table>\n");
 }
 
 /// The runs that did not pass, with what they drew and why, linked to their scenarios.
@@ -353,9 +562,138 @@ mod tests {
                 .map(|(k, v)| ((*k).to_owned(), (*v).to_owned()))
                 .collect(),
             verdict,
+            failed_kinds: BTreeMap::new(),
             metrics: BTreeMap::from([("min_soc".to_owned(), soc)]),
             scenario: String::new(),
         }
+    }
+
+    /// Run `run`, failing `checks` (none: a pass), with `metrics`.
+    fn judged(run: u64, checks: &[(&str, CheckKind)], metrics: &[(&str, f64)]) -> RunRow {
+        let verdict = if checks.is_empty() {
+            RunVerdict::Pass
+        } else {
+            RunVerdict::Fail(
+                checks
+                    .iter()
+                    .map(|(n, _)| ((*n).to_owned(), "t = 1 s: no".to_owned()))
+                    .collect(),
+            )
+        };
+        RunRow {
+            run,
+            seed: run,
+            draws: BTreeMap::new(),
+            verdict,
+            failed_kinds: checks.iter().map(|(n, k)| ((*n).to_owned(), *k)).collect(),
+            metrics: metrics.iter().map(|(n, v)| ((*n).to_owned(), *v)).collect(),
+            scenario: String::new(),
+        }
+    }
+
+    /// Runs 0-4: `invariant soc-range` fails in runs 1, 3 and 4, `fc-answers` in run 3, run
+    /// 2 ends in an error; `max_rate_deg_s` is 0 in every run, `detumble_s` varies.
+    fn five_runs() -> Vec<RunRow> {
+        let inv = ("invariant soc-range", CheckKind::Invariant);
+        let exp = ("fc-answers", CheckKind::Expectation);
+        let m = |d: f64| [("max_rate_deg_s", 0.0), ("detumble_s", d)];
+        let mut error = judged(2, &[], &m(30.0));
+        error.verdict = RunVerdict::Error("it broke".into());
+        vec![
+            judged(0, &[], &m(10.0)),
+            judged(1, &[inv], &m(20.0)),
+            error,
+            judged(3, &[inv, exp], &m(40.0)),
+            judged(4, &[inv], &m(50.0)),
+        ]
+    }
+
+    #[test]
+    fn failures_by_check_count_the_runs_that_failed_each_check_of_those_judged() {
+        let rows = five_runs();
+        let checks = failures_by_check(&rows);
+        let c = |name: &str, kind, failed, first| CheckFailures {
+            name: name.into(),
+            kind: Some(kind),
+            failed,
+            judged: 4,
+            first,
+        };
+        assert_eq!(
+            checks,
+            vec![
+                c("invariant soc-range", CheckKind::Invariant, 3, 1),
+                c("fc-answers", CheckKind::Expectation, 1, 3),
+            ]
+        );
+        let text = failures_by_check_text(&rows);
+        assert_eq!(
+            text,
+            "failures by check:\n\
+             \x20 check                kind         runs failed  first\n\
+             \x20 invariant soc-range  invariant         3 of 4  run 1\n\
+             \x20 fc-answers           expectation       1 of 4  run 3\n",
+            "{text}"
+        );
+        assert_eq!(failures_by_check_text(&rows[..1]), "");
+        let meta = CampaignMeta {
+            name: "c".into(),
+            file: "c.toml".into(),
+            seed: 1,
+            runs: 5,
+        };
+        let html = report_html(&meta, &rows);
+        let table = html.find("<h2>Failures by check</h2>").unwrap();
+        // Near the top: before the plots and the list of failures.
+        assert!(table < html.find("<h2>Metrics</h2>").unwrap());
+        assert!(html.contains(
+            r#"<tr><td>invariant soc-range</td><td>invariant</td><td class="fail">3 of 4 (75 %)</td><td><a href="failures/run-1.toml">run 1</a></td></tr>"#
+        ), "{html}");
+        assert!(html.contains(
+            r#"<tr><td>fc-answers</td><td>expectation</td><td class="fail">1 of 4 (25 %)</td>"#
+        ));
+    }
+
+    #[test]
+    fn a_metric_with_one_value_is_a_line_and_the_others_axes_carry_their_units() {
+        let meta = CampaignMeta {
+            name: "c".into(),
+            file: "c.toml".into(),
+            seed: 1,
+            runs: 5,
+        };
+        let html = report_html(&meta, &five_runs());
+        assert!(
+            html.contains("<p><b>max_rate_deg_s</b>: all 5 runs: 0 deg/s</p>"),
+            "{html}"
+        );
+        assert!(!html.contains(r#"aria-label="max_rate_deg_s""#));
+        assert!(html.contains(r#"aria-label="detumble_s""#));
+        assert!(html.contains(">detumble_s (s)</text>"), "{html}");
+        assert!(html.contains(r#"<text x="4" y="60">runs</text>"#), "{html}");
+    }
+
+    #[test]
+    fn units_come_from_the_names_suffix_the_longest_that_matches() {
+        assert_eq!(unit_of("max_rate_deg_s"), Some("deg/s"));
+        assert_eq!(unit_of("detumble_s"), Some("s"));
+        assert_eq!(unit_of("fc.initial_rate_deg_s"), Some("deg/s"));
+        assert_eq!(unit_of("downlinked_bytes"), Some("bytes"));
+        assert_eq!(unit_of("energy_wh"), Some("Wh"));
+        assert_eq!(unit_of("queued_b"), Some("B"));
+        assert_eq!(unit_of("min_soc"), Some("of full charge"));
+        assert_eq!(unit_of("verdicts"), None);
+        assert_eq!(unit_of("faults[0].at"), None);
+    }
+
+    #[test]
+    fn an_axis_shows_its_ends_apart_when_they_differ() {
+        assert_eq!(ends(0.5, 2.25), ("0.5".into(), "2.25".into()));
+        assert_eq!(
+            ends(0.799_973_04, 0.799_973_8),
+            ("0.799973".into(), "0.799974".into())
+        );
+        assert_eq!(ends(3.0, 3.0), ("3".into(), "3".into()));
     }
 
     #[test]
@@ -393,6 +731,8 @@ mod tests {
         // hang: 1 of 2 passed; clock: 2 of 2.
         assert!(html.contains("hang: 1 of 2 passed") && html.contains("clock: 2 of 2 passed"));
         assert!(html.contains("<h3>x</h3>") && html.contains("run 2: x = 30"));
+        // `30s` is a duration: the axis is in seconds.
+        assert!(html.contains(">x (s)</text>"));
         assert!(html.contains("normal: 2 of 2 passed"));
         assert!(html.contains("<h3>min_soc (3 runs)</h3>"));
         assert!(html.contains(r#"<a href="failures/run-1.toml">1</a>"#));

@@ -41,6 +41,35 @@ impl RunVerdict {
     }
 }
 
+/// What a failed check was: one of the scenario's expectations, or an invariant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CheckKind {
+    /// One of the scenario's expectations.
+    Expectation,
+    /// An invariant the run checked (`[invariants] check`).
+    Invariant,
+}
+
+impl CheckKind {
+    /// `expectation` or `invariant`.
+    pub fn word(self) -> &'static str {
+        match self {
+            CheckKind::Expectation => "expectation",
+            CheckKind::Invariant => "invariant",
+        }
+    }
+}
+
+impl From<crate::expectations::VerdictKind> for CheckKind {
+    fn from(k: crate::expectations::VerdictKind) -> CheckKind {
+        match k {
+            crate::expectations::VerdictKind::Expectation => CheckKind::Expectation,
+            crate::expectations::VerdictKind::Invariant(_) => CheckKind::Invariant,
+        }
+    }
+}
+
 /// One run's row.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunRow {
@@ -52,6 +81,10 @@ pub struct RunRow {
     pub draws: BTreeMap<String, String>,
     /// How it ended.
     pub verdict: RunVerdict,
+    /// The kind of each check the run failed, by its name in [`RunVerdict::Fail`]; empty
+    /// for any other verdict (and in rows written before kinds were kept).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub failed_kinds: BTreeMap<String, CheckKind>,
     /// Key figures of the run ([`crate::campaign_run::metrics`]), by name; absent where they do not apply.
     #[serde(default)]
     pub metrics: BTreeMap<String, f64>,

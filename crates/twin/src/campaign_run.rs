@@ -15,8 +15,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{Context as _, bail};
 
 use crate::campaign::Campaign;
-pub use crate::campaign_rows::{CampaignMeta, RunRow, RunVerdict};
+pub use crate::campaign_rows::{CampaignMeta, CheckKind, RunRow, RunVerdict};
 use crate::exec;
+use twin_scenario::scenario::{ScenarioError, ScenarioErrors};
 
 /// Run run `k` of `c`: resolve, compile, run in virtual time, check. A panic inside the
 /// run is caught and becomes the row's error.
@@ -28,28 +29,124 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
                 run: k,
                 seed: 0,
                 draws: BTreeMap::new(),
-                verdict: RunVerdict::Error(e.to_string()),
+                verdict: RunVerdict::Error(located(c, k, &e)),
+                failed_kinds: BTreeMap::new(),
                 metrics: BTreeMap::new(),
                 scenario: String::new(),
             };
         }
     };
-    let (verdict, metrics) = run_limited(&format!("{} run {k}", c.file), &r.text, c.spec.limits);
+    let j = run_limited(&format!("{} run {k}", c.file), &r.text, c.spec.limits);
     RunRow {
         run: k,
         seed: r.seed,
         draws: r.draws,
-        verdict,
-        metrics,
+        verdict: j.verdict,
+        failed_kinds: j.failed_kinds,
+        metrics: j.metrics,
         scenario: r.text,
     }
+}
+
+/// Run `k`'s scenario errors for a person. An error the campaign located in its own file
+/// is as it is. One located in the run's resolved scenario (the base with the run's draws
+/// written in: a text in no file, whose lines are none of the user's) is moved to the
+/// field's line in the base scenario (the campaign's `[scenario]`, or its scenario file)
+/// when the base has that field, and says that its line is the resolved scenario's
+/// otherwise.
+pub fn located(c: &Campaign, k: u64, errors: &ScenarioErrors) -> String {
+    // The name `Campaign::resolve` gives the resolved scenario in its errors.
+    let resolved = format!("{} run {k}", c.file);
+    errors
+        .0
+        .iter()
+        .map(|e| match e.line {
+            Some(line) if e.file == resolved => match in_base(c, &e.field) {
+                Some(at) => ScenarioError {
+                    message: e.message.clone(),
+                    ..at
+                }
+                .to_string(),
+                None => format!(
+                    "{resolved}: in the resolved scenario of run {k} (the base scenario with the run's draws written in, not a line of {file}), line {line}{col}{field}: {m}",
+                    file = c.file,
+                    col = e.column.map_or_else(String::new, |c| format!(", column {c}")),
+                    field = if e.field.is_empty() {
+                        String::new()
+                    } else {
+                        format!(", field `{}`", e.field)
+                    },
+                    m = e.message,
+                ),
+            },
+            _ => e.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Where the base scenario of `c` holds `field` (a path into the scenario): in the campaign
+/// file under `scenario`, or in the scenario file. `None` when the base has no such field
+/// (a draw made it).
+fn in_base(c: &Campaign, field: &str) -> Option<ScenarioError> {
+    use crate::campaign::{ScenarioSource, get_path, parse_path};
+    use twin_scenario::scenario::{PathStep, line_col, locate};
+    let steps = parse_path(field).ok()?;
+    get_path(&c.base, &steps)?;
+    let (file, text, steps, field) = match &c.spec.scenario {
+        ScenarioSource::Inline(_) => {
+            let mut under = vec![PathStep::Key("scenario".into())];
+            under.extend(steps);
+            (
+                c.file.clone(),
+                c.text.clone(),
+                under,
+                format!("scenario.{field}"),
+            )
+        }
+        ScenarioSource::Path(_) => (
+            c.base_file.clone(),
+            std::fs::read_to_string(&c.base_file).ok()?,
+            steps,
+            field.to_owned(),
+        ),
+    };
+    let (line, column) = line_col(&text, locate(&text, &steps)?.start);
+    Some(ScenarioError {
+        file,
+        line: Some(line),
+        column: Some(column),
+        field,
+        message: String::new(),
+    })
+}
+
+/// Resolve runs `0..runs` of `c` (every problem before anything runs): the first run's
+/// errors, [`located`].
+pub fn check(c: &Campaign, runs: u64) -> anyhow::Result<()> {
+    for k in 0..runs {
+        c.resolve(k)
+            .map_err(|e| anyhow::anyhow!("{}", located(c, k, &e)))?;
+    }
+    Ok(())
 }
 
 /// Run one complete scenario (`file` names it in errors) in virtual time and judge it:
 /// its expectations and the invariants. A panic inside the run is caught and becomes the
 /// error.
 pub fn run_text(file: &str, text: &str) -> RunVerdict {
-    run_judged(file, text).0
+    run_judged(file, text).verdict
+}
+
+/// A run judged: how it ended, the kind of each check it failed, its key figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Judged {
+    /// How it ended.
+    pub verdict: RunVerdict,
+    /// The kind of each check it failed, by the check's name.
+    pub failed_kinds: BTreeMap<String, CheckKind>,
+    /// Its [`metrics`]: none when it did not run to its end.
+    pub metrics: BTreeMap<String, f64>,
 }
 
 /// The key figures of a run, for `results.csv` and the report: `min_soc` (the battery's
@@ -95,9 +192,10 @@ pub fn default_jobs(asked: Option<usize>) -> usize {
         .max(1)
 }
 
-/// [`run_text`] with the run's [`metrics`] (none when it did not run to its end), within
-/// the default [`RunLimits`](crate::campaign::RunLimits).
-pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>) {
+/// [`run_text`] with the kinds of the checks that failed and the run's [`metrics`] (none
+/// when it did not run to its end), within the default
+/// [`RunLimits`](crate::campaign::RunLimits).
+pub fn run_judged(file: &str, text: &str) -> Judged {
     run_limited(file, text, crate::campaign::RunLimits::default())
 }
 
@@ -106,11 +204,7 @@ pub fn run_judged(file: &str, text: &str) -> (RunVerdict, BTreeMap<String, f64>)
 /// signal (SIGINT, SIGTERM) cut or kept from starting is not run. The invariants are the
 /// scenario's (`[invariants] check`: a campaign's resolved runs check all), judged with
 /// its expectations.
-pub fn run_limited(
-    file: &str,
-    text: &str,
-    limits: crate::campaign::RunLimits,
-) -> (RunVerdict, BTreeMap<String, f64>) {
+pub fn run_limited(file: &str, text: &str, limits: crate::campaign::RunLimits) -> Judged {
     use crate::runtime::StopCause;
     let outcome = std::panic::catch_unwind(|| -> anyhow::Result<exec::Outcome> {
         let scenario = crate::validate::parse(file, text)?;
@@ -139,11 +233,22 @@ pub fn run_limited(
             StopCause::WallLimit(_) => RunVerdict::Error(format!("{i} ([limits] wall)")),
             StopCause::Interrupt | StopCause::Terminate => RunVerdict::NotRun(i.to_string()),
         };
-        return (verdict, BTreeMap::new());
+        return Judged {
+            verdict,
+            failed_kinds: BTreeMap::new(),
+            metrics: BTreeMap::new(),
+        };
     }
-    let figures = match &outcome {
-        Ok(Ok(o)) => metrics(&o.report),
-        _ => BTreeMap::new(),
+    let (figures, failed_kinds) = match &outcome {
+        Ok(Ok(o)) => (
+            metrics(&o.report),
+            o.verdicts
+                .iter()
+                .filter(|v| !v.passed)
+                .map(|v| (v.name.clone(), CheckKind::from(v.kind)))
+                .collect(),
+        ),
+        _ => (BTreeMap::new(), BTreeMap::new()),
     };
     let verdict = match outcome {
         Ok(Ok(o)) if o.passed() => RunVerdict::Pass,
@@ -162,7 +267,11 @@ pub fn run_limited(
         Ok(Err(e)) => RunVerdict::Error(format!("{e:#}")),
         Err(p) => RunVerdict::Error(format!("panicked: {}", panic_text(p.as_ref()))),
     };
-    (verdict, figures)
+    Judged {
+        verdict,
+        failed_kinds,
+        metrics: figures,
+    }
 }
 
 /// Run a failed row's scenario again, recording it to `path` (MCAP), and read the file back:
@@ -650,9 +759,73 @@ mod tests {
         for r in &one {
             let late = r.draws["commands[0].at"] == "5s";
             assert_eq!(r.verdict != RunVerdict::Pass, late, "{r:?}");
+            // The failed check's kind is kept with the row, for the report's table.
+            let kinds: Vec<_> = r
+                .failed_kinds
+                .iter()
+                .map(|(n, k)| (n.as_str(), *k))
+                .collect();
+            let want = if late {
+                vec![("fc-answers", CheckKind::Expectation)]
+            } else {
+                vec![]
+            };
+            assert_eq!(kinds, want, "{r:?}");
         }
         assert!(one.iter().any(|r| r.verdict == RunVerdict::Pass));
         assert!(one.iter().any(|r| r.verdict != RunVerdict::Pass));
+    }
+
+    /// A draw that makes a base field invalid: the error is at that field's line in the
+    /// campaign file, not at a line of the resolved scenario passed off as the campaign's;
+    /// where the base has no such field, the error says its line is the resolved scenario's.
+    #[test]
+    fn errors_in_a_resolved_scenario_are_told_in_the_users_file_or_said_to_be_resolved() {
+        let text = "runs = 6\nseed = 3\n\n[dispersions]\n\"faults[0].at\" = { uniform = [\"5s\", \"30s\"] }\n\n\
+                    [scenario]\nname = \"short\"\nduration = \"40s\"\n\n[[scenario.faults]]\nat = \"10s\"\n\
+                    until = \"20s\"\nkind = \"clock\"\ntarget = \"FC\"\njump_s = 60\n";
+        let c = Campaign::parse("c.toml", text).unwrap();
+        let (k, e) = (0..6)
+            .find_map(|k| c.resolve(k).err().map(|e| (k, e)))
+            .unwrap();
+        // `Campaign::resolve` locates it in the resolved scenario, under the campaign's name.
+        assert!(
+            e.to_string().starts_with(&format!("c.toml run {k}:")),
+            "{e}"
+        );
+        let message = &e.0[0].message;
+        assert!(
+            message.starts_with(&format!("run {k}: must be after `at`")),
+            "{e}"
+        );
+        // Line 13 of the campaign file: `until = "20s"`.
+        assert_eq!(
+            located(&c, k, &e),
+            format!("c.toml:13:9: field `scenario.faults[0].until`: {message}")
+        );
+        // The row of such a run says the same.
+        assert_eq!(
+            run_one(&c, k).verdict,
+            RunVerdict::Error(located(&c, k, &e))
+        );
+        // A field the base does not have.
+        let made = ScenarioErrors(vec![ScenarioError {
+            file: "c.toml run 2".into(),
+            line: Some(4),
+            column: Some(1),
+            field: "fc.initial_rate_deg_s".into(),
+            message: "too fast".into(),
+        }]);
+        assert_eq!(
+            located(&c, 2, &made),
+            "c.toml run 2: in the resolved scenario of run 2 (the base scenario with the run's draws written in, not a line of c.toml), line 4, column 1, field `fc.initial_rate_deg_s`: too fast"
+        );
+        // An error the campaign located in its own file stays as it is.
+        let own = ScenarioErrors(vec![ScenarioError {
+            file: "c.toml".into(),
+            ..made.0[0].clone()
+        }]);
+        assert_eq!(located(&c, 2, &own), own.0[0].to_string());
     }
 
     #[test]
@@ -774,6 +947,7 @@ mod tests {
             seed: run,
             draws: BTreeMap::new(),
             verdict: RunVerdict::Pass,
+            failed_kinds: BTreeMap::new(),
             metrics: [("max_rate_deg_s".to_owned(), 3.774_809_598_937_888_5)].into(),
             scenario: String::new(),
         };

@@ -74,8 +74,9 @@ pub fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     use m6p_twin::campaign_run::{self, RunVerdict};
     let c = m6p_twin::campaign::Campaign::load(&a.file)?;
     let runs = a.runs.unwrap_or(c.spec.runs);
-    // Every run's scenario is drawn and validated before anything runs.
-    c.check(runs)?;
+    // Every run's scenario is drawn and validated before anything runs; an error in a run's
+    // resolved scenario says so.
+    campaign_run::check(&c, runs)?;
     let jobs = campaign_run::default_jobs(a.jobs);
     let shard = match &a.shard {
         Some(s) => Some(campaign_run::Shard::parse(s)?),
@@ -136,6 +137,10 @@ pub fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
             a.out.display()
         );
     }
+    print!(
+        "{}",
+        m6p_twin::campaign_report::failures_by_check_text(&rows)
+    );
     for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
         let why = match &r.verdict {
             RunVerdict::Fail(f) => f
@@ -259,13 +264,19 @@ pub fn cmd_campaign_merge(dirs: &[PathBuf], out: &std::path::Path) -> anyhow::Re
         dirs.len(),
         out.display()
     );
+    print!(
+        "{}",
+        m6p_twin::campaign_report::failures_by_check_text(&rows)
+    );
     Ok(failed == 0)
 }
 
 /// `campaign resolve`: run `run`'s complete scenario, every draw resolved.
 pub fn cmd_campaign_resolve(file: &Path, run: u64) -> anyhow::Result<bool> {
     let c = m6p_twin::campaign::Campaign::load(file)?;
-    let r = c.resolve(run)?;
+    let r = c
+        .resolve(run)
+        .map_err(|e| anyhow::anyhow!("{}", m6p_twin::campaign_run::located(&c, run, &e)))?;
     print!("# Run {run} of campaign {}\n{}", file.display(), r.text);
     Ok(true)
 }
