@@ -102,7 +102,8 @@ def main():
     r0, d0 = peer.ask(FC, 10, 2)
     f = fields(con.run("tm atp"))
     a0 = TMATP.unpack(d0)
-    r_km = [float(x) for x in f["r_eci"].split()[:3]]
+    # One `name value unit` line per field, arrays by element: r_eci_m[0] .. r_eci_m[2] in m.
+    r_km = [float(f[f"r_eci_m[{i}]"].split()[0]) / 1000 for i in range(3)]
     dist = sum((r_km[i] - a0[5 + i] / 1000) ** 2 for i in range(3)) ** 0.5
     check("tm atp: position as TMATP (within 1 s of flight)", dist < 8.0, f"{dist:.3f} km")
 

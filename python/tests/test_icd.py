@@ -102,6 +102,10 @@ def test_nested_layouts_and_bit_names() -> None:
     assert r.value("slots[0].state", int) == 2
     assert r.name("slots[0].state") == "ACTIVE"
     assert r.name("sband_flags") == "on, transmitting"
+    # One line per leaf, as the twin's `gs` and console `tm` print it: masks in hex.
+    lines = [str(leaf) for leaf in r.leaves()]
+    assert "slots[0].state 2 (ACTIVE)" in lines and "slots[0].downlinked_bytes 6000 B" in lines
+    assert "sband_flags 0x5 (on, transmitting)" in lines
 
 
 def test_the_sync_tail_and_the_length_limits() -> None:

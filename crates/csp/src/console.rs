@@ -10,6 +10,8 @@
 
 use std::fmt::Write as _;
 
+use crate::icd::{Describe, Field};
+
 /// A console command, for `help`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Command {
@@ -67,38 +69,26 @@ pub const TM: Command = Command {
     help: "the node's telemetry now (the bytes its CSP request gets, field by field)",
 };
 
-/// A decoded telemetry as the console prints it: one `field value` line per field (the
-/// fields' names carry their units: `battery_v`, `elevation_deg`), arrays on one line.
-pub fn fields<T: std::fmt::Debug>(t: &T) -> String {
-    let pretty = format!("{t:#?}");
+/// A layout's bytes as the console prints them: one `name value unit` line per field, in
+/// wire order, with the ICD's names, units and value names ([`crate::icd::show`]); an
+/// array's elements and a nested layout's fields by path (`panels_w[3]`,
+/// `slots[0].state`), as `gs` and the Python package name them.
+pub fn lines(fields: &'static [Field], bytes: &[u8]) -> Result<String, crate::Error> {
     let mut out = String::new();
-    let mut array: Option<String> = None;
-    let lines: Vec<&str> = pretty.lines().collect();
-    for line in lines.iter().skip(1).take(lines.len().saturating_sub(2)) {
-        let l = line.trim().trim_end_matches(',');
-        match &mut array {
-            Some(a) if l == "]" => {
-                let _ = writeln!(out, "{a}]");
-                array = None;
-            }
-            Some(a) => {
-                if !a.ends_with('[') {
-                    a.push(' ');
-                }
-                a.push_str(l);
-            }
-            None => match l.split_once(": ") {
-                Some((k, "[")) => array = Some(format!("{k} [")),
-                Some((k, v)) => {
-                    let _ = writeln!(out, "{k} {v}");
-                }
-                None => {
-                    let _ = writeln!(out, "{l}");
-                }
-            },
-        }
-    }
-    out
+    crate::icd::decode_each(
+        fields,
+        bytes,
+        &mut String::new(),
+        &mut |path, value, field| {
+            let _ = writeln!(out, "{path} {}", crate::icd::show(&value, field));
+        },
+    )?;
+    Ok(out)
+}
+
+/// A decoded layout as the console prints it ([`lines`] of its bytes).
+pub fn layout<T: Describe>(t: &T) -> Result<String, ConsoleError> {
+    Ok(lines(T::FIELDS, &t.to_vec())?)
 }
 
 /// Longest console line taken (longer ones are refused whole).
@@ -186,24 +176,37 @@ pub fn prompt(node_name: &str) -> String {
 
 #[cfg(test)]
 mod tests {
-    #[derive(Debug)]
-    #[allow(dead_code)] // read through Debug only
-    struct Tm {
-        battery_v: f32,
-        panels_w: [f32; 3],
-        flags: u8,
+    #![allow(clippy::unwrap_used)]
+
+    crate::wire_struct! {
+        /// A demo telemetry.
+        #[derive(Debug, Clone, Copy, PartialEq, Default)]
+        struct Tm {
+            /// Battery voltage.
+            battery_v: f32 { unit: "V" },
+            /// Per-panel power.
+            panels_w: [f32; 2] { unit: "W" },
+            /// Channels on.
+            on: u16 { bits: &[(0, "COMM1"), (2, "ECU")] },
+            /// Mode.
+            mode: u8 { values: &[(1, "detumble")] },
+        }
     }
 
     #[test]
-    fn telemetry_fields_one_per_line_arrays_on_one() {
+    fn a_layout_is_one_name_value_unit_line_per_field() {
         let t = Tm {
             battery_v: 7.5,
-            panels_w: [1.0, 2.5, 0.0],
-            flags: 3,
+            panels_w: [1.0, 2.5],
+            on: 5,
+            mode: 1,
         };
         assert_eq!(
-            super::fields(&t),
-            "battery_v 7.5\npanels_w [1.0 2.5 0.0]\nflags 3\n"
+            super::layout(&t).unwrap(),
+            "battery_v 7.5 V\npanels_w[0] 1 W\npanels_w[1] 2.5 W\non 0x5 (COMM1, ECU)\nmode 1 (detumble)\n"
         );
+        let none = super::layout(&Tm::default()).unwrap();
+        assert!(none.contains("\non 0x0 (none)\n"), "{none}");
+        assert!(super::lines(<Tm as crate::icd::Describe>::FIELDS, &[0; 3]).is_err());
     }
 }

@@ -672,36 +672,47 @@ pub struct Decoded {
 }
 
 impl Decoded {
-    /// The value as an operator reads it: the number, its unit, and the name of an
-    /// enumerated value (`1 (detumble)`).
+    /// The value as an operator reads it ([`show`]).
     pub fn show(&self) -> String {
-        let mut s = match &self.value {
-            // A single's shortest decimal (0.3, not 0.30000001192092896).
-            Value::Float(x) if matches!(self.field.ty, Ty::F32) => format!("{}", *x as f32),
-            Value::Float(x) => format!("{x}"),
-            v => v.to_string(),
-        };
-        let unit = self.field.unit;
-        if unit.starts_with(|c: char| c.is_ascii_digit()) {
-            // A scaled count: `10 x 0.01 deg/s`.
-            s.push_str(" x ");
-            s.push_str(unit);
-        } else if !unit.is_empty() {
-            s.push(' ');
-            s.push_str(unit);
+        show(&self.value, self.field)
+    }
+}
+
+/// A value of `field` as an operator reads it: the number, its unit, the name of an
+/// enumerated value (`1 (detumble)`), and a mask in hex with the names of its bits set
+/// (`0x5 (COMM1, ECU)`, `0x0 (none)`).
+pub fn show(value: &Value, field: &Field) -> String {
+    let mut s = match value {
+        // A single's shortest decimal (0.3, not 0.30000001192092896).
+        Value::Float(x) if matches!(field.ty, Ty::F32) => format!("{}", *x as f32),
+        Value::Float(x) => format!("{x}"),
+        Value::Int(i) if !field.bits.is_empty() && field.value_name(*i).is_none() => {
+            format!("{i:#x}")
         }
-        if let Value::Int(i) = self.value {
-            if let Some(n) = self.field.value_name(i) {
-                s.push_str(&format!(" ({n})"));
-            } else if !self.field.bits.is_empty() {
-                let on = self.field.bit_names(i);
-                if !on.is_empty() {
-                    s.push_str(&format!(" ({on})"));
-                }
+        v => v.to_string(),
+    };
+    let unit = field.unit;
+    if unit.starts_with(|c: char| c.is_ascii_digit()) {
+        // A scaled count: `10 x 0.01 deg/s`.
+        s.push_str(" x ");
+        s.push_str(unit);
+    } else if !unit.is_empty() {
+        s.push(' ');
+        s.push_str(unit);
+    }
+    if let Value::Int(i) = *value {
+        if let Some(n) = field.value_name(i) {
+            s.push_str(&format!(" ({n})"));
+        } else if !field.bits.is_empty() {
+            let on = field.bit_names(i);
+            if i == 0 {
+                s.push_str(" (none)");
+            } else if !on.is_empty() {
+                s.push_str(&format!(" ({on})"));
             }
         }
-        s
     }
+    s
 }
 
 fn read_scalar(ty: Ty, r: &mut Reader<'_>) -> Result<Value, Error> {

@@ -109,13 +109,13 @@ csp::wire_struct! {
     /// traffic counters.
     #[derive(Debug, Clone, Copy, PartialEq, Default)]
     pub struct TmComm {
-        /// [`role::PRIMARY`] or [`role::SECONDARY`].
+        /// Which radio answers: 1 the primary (COMM1), 2 the secondary (COMM2).
         pub role: u8 { values: ROLES },
         /// 1: the radio is active (on the UHF route, beaconing); 0: standby.
         pub radio_active: u8 { values: &[(0, "standby"), (1, "active")] },
         /// 1: a configured station sees the satellite at or above the elevation mask.
         pub in_contact: u8 { values: &[(0, "no"), (1, "yes")] },
-        /// Index of the station reported below (configuration order), [`NO_STATION`] if none.
+        /// Index of the station reported below (configuration order), 255 if none.
         pub station: u8,
         /// Elevation of the satellite over that station, deg.
         pub elevation_deg: f32 { unit: "deg" },
@@ -153,7 +153,8 @@ csp::wire_struct! {
     /// BEACONSET request and BEACONGET reply (2 bytes).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
     pub struct BeaconPeriod {
-        /// Beacon period, s: 0 = off, else [`BEACON_PERIOD_MIN_S`]..=[`BEACON_PERIOD_MAX_S`].
+        /// Beacon period, s: 0 = off, else 10..=3600 (one beacon every 10 s at the most,
+        /// every hour at the least).
         pub period_s: u16 { unit: "s", range: (0.0, 3600.0), except: (1.0, 9.0), values: &[(0, "off")] },
     }
 }
@@ -171,7 +172,9 @@ csp::wire_struct! {
         pub utc_s: u32 { unit: "s" },
         /// COMM uptime, s.
         pub uptime_s: u32 { unit: "s" },
-        /// [`BEACON_TRUTH_VALID`] | [`BEACON_IN_CONTACT`] | [`BEACON_SECONDARY`].
+        /// Flags: bit 0 the fields below come from a truth snapshot (clear: none yet, they
+        /// are zero), bit 1 a configured station sees the satellite, bit 2 sent by the
+        /// secondary COMM.
         pub flags: u8 { bits: BEACON_FLAG_BITS },
         /// UTC unix seconds of the truth snapshot the fields below come from.
         pub truth_utc_s: u32 { unit: "s" },
@@ -199,7 +202,7 @@ csp::wire_struct! {
         pub wheel_speed_rpm: [f32; 4] { unit: "rpm" },
         /// Magnetorquer dipoles along body X, Y, Z, A m^2.
         pub mtq_dipole_am2: [f32; 3] { unit: "A m^2" },
-        /// The station of the link fields below ([`NO_STATION`] if none).
+        /// The station of the link fields below (255 if none).
         pub station: u8,
         /// Elevation over that station, deg.
         pub elevation_deg: f32 { unit: "deg" },
@@ -207,7 +210,7 @@ csp::wire_struct! {
         pub azimuth_deg: f32 { unit: "deg" },
         /// Slant range, km.
         pub range_km: f32 { unit: "km" },
-        /// RSSI estimate at that station, dBm (as [`TmComm::rssi_dbm`]).
+        /// RSSI estimate at that station, dBm (as TMCOMM's `rssi_dbm`).
         pub rssi_dbm: f32 { unit: "dBm" },
         /// CSP packets received by COMM.
         pub rx_packets: u32,

@@ -117,7 +117,7 @@ csp::wire_struct! {
     /// TMECU reply data (42 bytes): the ECU's state, tank and totals.
     #[derive(Debug, Clone, Copy, PartialEq, Default)]
     pub struct TmEcu {
-        /// [`EcuState`] as a byte (0 safe, 1 warming, 2 armed, 3 firing).
+        /// The ECU's state: 0 safe, 1 warming, 2 armed, 3 firing.
         pub state: u8 { values: ECU_STATES },
         /// Heaters: 0 off, 1 on (on while armed, firing included).
         pub heater: u8 { values: csp::icd::OFF_ON },

@@ -109,7 +109,7 @@ csp::wire_struct! {
         pub uptime_s: u32 { unit: "s" },
         /// Seconds the FC has been powered since the start of the run (reboots included).
         pub global_on_time_s: u32 { unit: "s" },
-        /// Mode in effect (the [`TargetMode`] enumeration).
+        /// Mode in effect (the target modes of ATCMDSET).
         pub current_mode: u8 { values: TARGET_MODES },
         /// FC state (0 nominal; see docs/protocol.md "FC ports").
         pub current_state: u8 { values: &[(0, "nominal"), (1, "SAFE")] },
@@ -147,7 +147,7 @@ csp::wire_struct! {
         pub rw_rpm_100: [u8; 4] { unit: "100 rpm" },
         /// Magnetorquer states (0 off, 1 positive, 2 negative).
         pub mtq_state: [u8; 3] { values: &[(0, "off"), (1, "positive"), (2, "negative")] },
-        /// Target mode ([`TargetMode`]).
+        /// Target mode commanded (ATCMDSET's).
         pub target_mode: u8 { values: TARGET_MODES },
         /// 1 when a target attitude was commanded (ATCATSET) since boot, else 0.
         pub target_attitude: u8 { values: &[(0, "no"), (1, "yes")] },
@@ -593,7 +593,8 @@ csp::wire_struct! {
         pub dst: u8 { range: (0.0, 30.0) },
         /// Destination port (7-63: not a service port).
         pub dport: u8 { range: (7.0, 63.0) },
-        /// Period, ms: 0 (off) or [`PERIODIC_MIN_MS`]..=[`PERIODIC_MAX_MS`].
+        /// Period, ms: 0 (off) or 100..=3600000 (ten times a second at the most, once an
+        /// hour at the least).
         pub period_ms: u32 { unit: "ms", range: (0.0, 3600000.0), except: (1.0, 99.0), values: &[(0, "off")] },
         /// Telemetry sent: bit `n - 1` for command `n` (1-6).
         pub mask: u8 { range: (1.0, 63.0), bits: TELEMETRY_BITS },

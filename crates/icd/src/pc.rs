@@ -535,9 +535,9 @@ csp::wire_struct! {
         pub session_id: u8,
         /// Payload CSP address (0 for an unused slot).
         pub payload_addr: u8,
-        /// [`SessionState`] value.
+        /// The session's state: 0 NOT ACTIVE, 1 PENDING, 2 ACTIVE.
         pub state: u8 { values: SESSION_STATES },
-        /// [`SessionResult`] value of the last finished session.
+        /// How the last finished session ended: 0 DONE, 1 ABORTED, 2 NO ACK, 3 S-BAND FAILURE.
         pub last_result: u8 { values: SESSION_RESULTS },
         /// Packets counted in the current (or last) session.
         pub packets: u32,
@@ -564,7 +564,8 @@ csp::wire_struct! {
     pub struct Tmpc {
         /// Session slots.
         pub slots: [TmpcSlot; TMPC_SLOTS],
-        /// [`SBAND_ON`] | [`SBAND_FAILED`] | [`SBAND_TRANSMITTING`].
+        /// S-band flags: bit 0 switched on, bit 1 failed (hardware fault), bit 2 a frame on
+        /// the air.
         pub sband_flags: u8 { bits: SBAND_BITS },
         /// Bytes waiting in the transmitter (frame on the air included).
         pub sband_queue_bytes: u32 { unit: "B" },
@@ -604,7 +605,7 @@ csp::wire_struct! {
         pub payload_addr: u8,
         /// Stream offset to read from.
         pub offset: u64,
-        /// Bytes wanted, 1..=[`FREAD_MAX_LEN`].
+        /// Bytes wanted, 1..=200.
         pub length: u8 { unit: "B", range: (1.0, 200.0) },
     }
 }

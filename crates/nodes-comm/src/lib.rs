@@ -623,7 +623,7 @@ impl App for CommApp {
         }
         self.last_now = self.last_now.max(now);
         // As TMCOMM on port 10 at `now`.
-        Ok(csp::console::fields(&self.tmcomm(node, now)))
+        csp::console::layout(&self.tmcomm(node, now))
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

@@ -139,6 +139,34 @@ fn beacons_every_period_to_ground_station_16_port_10() {
     assert_eq!(h.app.next_beacon(), Some(SimTime::from_secs(660)));
 }
 
+/// The console's `tm` is TMCOMM of the same instant, one `name value unit` line per field
+/// with the ICD's names, units and value names.
+#[test]
+fn console_tm_is_tmcomm_one_field_a_line() {
+    let mut h = host(CommConfig::default());
+    let t = SimTime::from_secs(600);
+    drive(&mut h, t);
+    let text = h.console("tm", t);
+    let tm = tmcomm(&mut h, t);
+    let fields = <TmComm as csp::icd::Describe>::FIELDS;
+    let names: Vec<&str> = fields.iter().map(|f| f.name).collect();
+    let got: Vec<&str> = text.lines().filter_map(|l| l.split(' ').next()).collect();
+    assert_eq!(got, names, "{text}");
+    for want in [
+        "role 1 (primary)".to_owned(),
+        "radio_active 1 (active)".to_owned(),
+        "station 255".to_owned(),
+        "uptime_s 600 s".to_owned(),
+        "beacons_sent 10".to_owned(),
+        "beacon_period_s 60 s".to_owned(),
+        format!("beacon_air_ms {} ms", tm.beacon_air_ms),
+        format!("rssi_dbm {} dBm", tm.rssi_dbm),
+        "elevation_deg 0 deg".to_owned(),
+    ] {
+        assert!(text.lines().any(|l| l == want), "{want:?} in\n{text}");
+    }
+}
+
 #[test]
 fn beaconset_changes_the_period_and_zero_stops_them() {
     let mut h = host(CommConfig::default());

@@ -269,4 +269,30 @@ mod tests {
         assert_eq!(entry(&r, 2), (0, 60.0));
         assert_eq!(entry(&r, 3).0, 0);
     }
+
+    /// The console's `tm` is TMECU of the same instant, one `name value unit` line per field
+    /// with the ICD's names, units and state names.
+    #[test]
+    fn console_tm_is_tmecu_one_field_a_line() {
+        let mut h = host();
+        let s = SimTime::from_secs;
+        assert_eq!(ask_port(&mut h, 10, &[2], s(1))[..2], [2, 1]);
+        let text = h.console("tm", s(2));
+        let r = ask_port(&mut h, 10, &[1], s(2));
+        let tm = <crate::wire::TmEcu as csp::reqrep::le::Repr>::parse(&r[2..]).unwrap();
+        let fields = <crate::wire::TmEcu as csp::icd::Describe>::FIELDS;
+        let names: Vec<&str> = fields.iter().map(|f| f.name).collect();
+        let got: Vec<&str> = text.lines().filter_map(|l| l.split(' ').next()).collect();
+        assert_eq!(got, names, "{text}");
+        for want in [
+            "state 1 (warming)".to_owned(),
+            "heater 1 (on)".to_owned(),
+            format!("warmup_left_ms {} ms", tm.warmup_left_ms),
+            format!("propellant_kg {} kg", tm.propellant_kg),
+            format!("tank_pressure_kpa {} kPa", tm.tank_pressure_kpa),
+            format!("total_impulse_n_s {} N s", tm.total_impulse_n_s),
+        ] {
+            assert!(text.lines().any(|l| l == want), "{want:?} in\n{text}");
+        }
+    }
 }

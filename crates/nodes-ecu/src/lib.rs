@@ -597,8 +597,10 @@ impl App for EcuApp {
         let bytes = self
             .command(EcuCommand::Telemetry, now)
             .map_err(|_| ConsoleError::Refused("TMECU"))?;
-        let tm = wire::TmEcu::parse(&bytes)?;
-        Ok(csp::console::fields(&tm))
+        Ok(csp::console::lines(
+            <wire::TmEcu as csp::icd::Describe>::FIELDS,
+            &bytes,
+        )?)
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

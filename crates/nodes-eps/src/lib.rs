@@ -688,8 +688,10 @@ impl App for EpsApp {
         let bytes = self
             .command(EpsCommand::TmEps, now)
             .map_err(|_| ConsoleError::Refused("TMEPS"))?;
-        let tm = wire::TmEps::parse(&bytes)?;
-        Ok(csp::console::fields(&tm))
+        Ok(csp::console::lines(
+            <wire::TmEps as csp::icd::Describe>::FIELDS,
+            &bytes,
+        )?)
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

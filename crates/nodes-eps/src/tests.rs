@@ -337,6 +337,41 @@ fn channel_commands_switch_and_report() {
     );
 }
 
+/// The console's `tm` is TMEPS of the same instant, one `name value unit` line per field
+/// with the ICD's names and units: volts, amps, watts, Wh, mA, and the channel masks in hex
+/// with the channels they hold.
+#[test]
+fn console_tm_is_tmeps_with_units_one_field_a_line() {
+    let (mut h, _out) = host(app());
+    let t = SimTime::from_secs(60);
+    // PC off: a mask that is not every channel.
+    one_reply(&mut h, &[3, 3, 0], SimTime::from_secs(5));
+    run_until(&mut h, t);
+    let text = h.console("tm", t);
+    let tm = wire::TmEps::parse(&one_reply(&mut h, &[1], t)[2..]).unwrap();
+    let fields = <wire::TmEps as csp::icd::Describe>::FIELDS;
+    let names: Vec<String> = csp::icd::leaves(fields).into_iter().map(|l| l.0).collect();
+    let got: Vec<&str> = text.lines().filter_map(|l| l.split(' ').next()).collect();
+    assert_eq!(got, names, "{text}");
+    for want in [
+        format!("battery_v {} V", tm.battery_v),
+        format!("battery_a {} A", tm.battery_a),
+        format!("battery_wh {} Wh", tm.battery_wh),
+        format!("load_w {} W", tm.load_w),
+        format!("panels_w[0] {} W", tm.panels_w[0]),
+        "channel_ma[3] 0 mA".to_owned(),
+        format!("channel_ma[8] {} mA", tm.channel_ma[8]),
+        format!("load_wh {} Wh", tm.load_wh),
+        "channels_on 0x1f7 (COMM1, COMM2, ECU, PL12, PL13, PL14, PL15, SBAND)".to_owned(),
+        "channels_shed 0x0 (none)".to_owned(),
+        "protection 0x0 (none)".to_owned(),
+    ] {
+        assert!(text.lines().any(|l| l == want), "{want:?} in\n{text}");
+    }
+    // No Debug syntax: no braces, no bracketed lists.
+    assert!(!text.contains('{') && !text.contains(" ["), "{text}");
+}
+
 #[test]
 fn thresholds_get_and_set_and_reboot_keeps_the_physics() {
     let cfg = EpsConfig {

@@ -2,12 +2,10 @@
 //! [`csp::params`]; the console, [`csp::console`]). docs/protocol.md "Platform port" lists
 //! the table.
 
-use std::fmt::Write as _;
-
 use csp::console::Command;
+use csp::icd::Describe as _;
 use csp::node::Node;
 use csp::params::{Check, Health, ParamDef, ParamError, ParamType, Table, check, def};
-use csp::reqrep::le::Repr;
 
 use crate::sensors::SensorReadings;
 use crate::wire::{self, TelemetryCommand, TmAcd, TmAtp, TmGen, TmRawSens, TmSens};
@@ -334,7 +332,7 @@ pub const COMMANDS: &[Command] = &[
     Command {
         name: "tm",
         args: "[gen|atp|acd|sens|rawsens|all]",
-        help: "telemetry in human units (the bytes a CSP request gets now; default gen)",
+        help: "telemetry (the bytes a CSP request gets now, one `name value unit` line per field; default gen)",
     },
     Command {
         name: "store",
@@ -348,139 +346,9 @@ pub const COMMANDS: &[Command] = &[
     },
 ];
 
-fn mode_name(m: u8) -> String {
-    wire::TargetMode::try_from(m).map_or_else(|_| format!("{m}?"), |m| format!("{m:?}"))
-}
-
-fn adcs_state(s: u8) -> &'static str {
-    match s {
-        crate::adcs::STATE_OFF => "off",
-        crate::adcs::STATE_DETUMBLING => "detumbling",
-        crate::adcs::STATE_ACQUIRING => "acquiring",
-        crate::adcs::STATE_TRACKING => "tracking",
-        _ => "?",
-    }
-}
-
-fn v3<T: Into<f64> + Copy>(v: &[T], scale: f64) -> String {
-    v.iter()
-        .map(|x| format!("{:.6}", (*x).into() * scale))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-fn gen_lines(g: &TmGen, out: &mut String) {
-    let _ = writeln!(out, "rtc_timestamp {} s", g.rtc_timestamp);
-    let _ = writeln!(out, "uptime {} s", g.uptime_s);
-    let _ = writeln!(out, "global_on_time {} s", g.global_on_time_s);
-    let _ = writeln!(
-        out,
-        "current_mode {} {}",
-        g.current_mode,
-        mode_name(g.current_mode)
-    );
-    let state = if g.current_state == crate::safe::STATE_SAFE {
-        "safe"
-    } else {
-        "nominal"
-    };
-    let _ = writeln!(out, "current_state {} {state}", g.current_state);
-    let _ = writeln!(out, "mcu_temp {} degC", g.mcu_temp_c);
-    let cause = if g.reset_cause == crate::RESET_POWER_ON {
-        "power-on"
-    } else {
-        "software"
-    };
-    let _ = writeln!(out, "reset_cause {} {cause}", g.reset_cause);
-}
-
-fn atp_lines(a: &TmAtp, out: &mut String) {
-    let _ = writeln!(out, "rtc_timestamp {} s", a.rtc_timestamp);
-    let _ = writeln!(out, "q_eci_from_body {}", v3(&a.q_eci_from_body, 1.0));
-    let _ = writeln!(out, "r_eci {} km", v3(&a.r_eci_m, 1e-3));
-    let r = a.r_eci_m.iter().map(|x| x * x).sum::<f64>().sqrt();
-    let _ = writeln!(out, "radius {:.3} km", r * 1e-3);
-}
-
-fn acd_lines(a: &TmAcd, out: &mut String) {
-    let _ = writeln!(out, "rtc_timestamp {} s", a.rtc_timestamp);
-    let _ = writeln!(out, "state {} {}", a.state, adcs_state(a.state));
-    let _ = writeln!(
-        out,
-        "rw_state {}",
-        v3(&a.rw_state, 1.0).replace(".000000", "")
-    );
-    let _ = writeln!(
-        out,
-        "rw_speed {} rpm",
-        v3(&a.rw_rpm_100, 100.0).replace(".000000", "")
-    );
-    let _ = writeln!(
-        out,
-        "mtq_state {}",
-        v3(&a.mtq_state, 1.0).replace(".000000", "")
-    );
-    let _ = writeln!(
-        out,
-        "target_mode {} {}",
-        a.target_mode,
-        mode_name(a.target_mode)
-    );
-    let _ = writeln!(out, "target_attitude_set {}", a.target_attitude);
-    let _ = writeln!(out, "target_point_set {}", a.target_point);
-}
-
-fn sens_lines(s: &TmSens, out: &mut String) {
-    let _ = writeln!(out, "rtc_timestamp {} s", s.rtc_timestamp);
-    let _ = writeln!(out, "sun_body {}", v3(&s.sun_body, 1.0));
-    let _ = writeln!(
-        out,
-        "rate_body {} deg/s",
-        v3(&s.rate_body_rad_s, 180.0 / std::f64::consts::PI)
-    );
-    let _ = writeln!(out, "acc_body {} m/s2", v3(&s.acc_body_m_s2, 1.0));
-    let _ = writeln!(out, "b_body {} nT", v3(&s.b_body_nt, 1.0));
-    let temps: Vec<String> = s.temps_c.iter().map(|t| t.to_string()).collect();
-    let _ = writeln!(out, "temps {} degC", temps.join(" "));
-}
-
-fn raw_lines(s: &TmRawSens, out: &mut String) {
-    let _ = writeln!(out, "rtc_timestamp {} s", s.rtc_timestamp);
-    let ints = |v: &[i64]| {
-        v.iter()
-            .map(|x| x.to_string())
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
-    let _ = writeln!(out, "css_counts {}", ints(&s.css_counts.map(i64::from)));
-    let _ = writeln!(
-        out,
-        "gyro_raw {} (0.01 deg/s)",
-        ints(&s.gyro_raw.map(i64::from))
-    );
-    let _ = writeln!(out, "acc_raw {} (mg)", ints(&s.acc_raw.map(i64::from)));
-    let _ = writeln!(out, "mag_raw {} (10 nT)", ints(&s.mag_raw.map(i64::from)));
-    let _ = writeln!(
-        out,
-        "temps_raw {} (0.1 degC)",
-        ints(&s.temps_raw.map(i64::from))
-    );
-    let _ = writeln!(
-        out,
-        "horizon_raw {} (1e-4)",
-        ints(&s.horizon_raw.map(i64::from))
-    );
-    let limb = ["no limb", "full limb", "partial limb"];
-    let _ = writeln!(
-        out,
-        "horizon_status {} {}",
-        s.horizon_status,
-        limb.get(usize::from(s.horizon_status)).unwrap_or(&"?")
-    );
-}
-
 impl FcApp {
-    /// The console's `tm`: the telemetry a CSP request would get at `now`, decoded.
+    /// The console's `tm`: the telemetry a CSP request would get at `now`, one `name value
+    /// unit` line per field ([`csp::console::lines`]).
     pub(crate) fn console_tm(
         &mut self,
         node: &Node,
@@ -510,25 +378,15 @@ impl FcApp {
             which: which.to_owned(),
             source,
         };
-        let mut out = String::new();
-        match c {
-            TelemetryCommand::TmGen => gen_lines(&TmGen::parse(&bytes).map_err(bad)?, &mut out),
-            TelemetryCommand::TmAtp => atp_lines(&TmAtp::parse(&bytes).map_err(bad)?, &mut out),
-            TelemetryCommand::TmAcd => acd_lines(&TmAcd::parse(&bytes).map_err(bad)?, &mut out),
-            TelemetryCommand::TmSens => sens_lines(&TmSens::parse(&bytes).map_err(bad)?, &mut out),
-            TelemetryCommand::TmRawSens => {
-                raw_lines(&TmRawSens::parse(&bytes).map_err(bad)?, &mut out)
-            }
-            _ => {
-                let all = wire::TmAll::parse(&bytes).map_err(bad)?;
-                gen_lines(&all.general, &mut out);
-                atp_lines(&all.attitude_position, &mut out);
-                acd_lines(&all.attitude_control, &mut out);
-                sens_lines(&all.sensors, &mut out);
-                let _ = writeln!(out, "nadir_body {}", v3(&all.nadir_body, 1.0));
-            }
-        }
-        Ok(out)
+        let fields = match c {
+            TelemetryCommand::TmGen => TmGen::FIELDS,
+            TelemetryCommand::TmAtp => TmAtp::FIELDS,
+            TelemetryCommand::TmAcd => TmAcd::FIELDS,
+            TelemetryCommand::TmSens => TmSens::FIELDS,
+            TelemetryCommand::TmRawSens => TmRawSens::FIELDS,
+            _ => wire::TmAll::FIELDS,
+        };
+        csp::console::lines(fields, &bytes).map_err(bad)
     }
 
     /// The FC's self-test: sensors, wheels, magnetorquers, the estimator and the orbit.

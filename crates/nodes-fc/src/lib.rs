@@ -1728,37 +1728,48 @@ mod tests {
         let csp = wire::TmGen::parse(&ask(&mut h, 10, &[1], t)[2..]).unwrap();
         let text = h.console("tm gen", t);
         let f = console_fields(&text);
+        // The ICD's names and units, one field a line, as `gs` prints the same reply.
         assert_eq!(
             f["rtc_timestamp"],
             format!("{} s", csp.rtc_timestamp),
             "{text}"
         );
-        assert_eq!(f["uptime"], format!("{} s", csp.uptime_s));
-        assert_eq!(f["current_mode"], format!("{} Detumble", csp.current_mode));
-        assert_eq!(f["current_state"], "0 nominal");
-        assert_eq!(f["reset_cause"], "0 power-on");
-        assert_eq!(f["mcu_temp"], format!("{} degC", csp.mcu_temp_c));
+        assert_eq!(f["uptime_s"], format!("{} s", csp.uptime_s));
+        assert_eq!(
+            f["current_mode"],
+            format!("{} (detumble)", csp.current_mode)
+        );
+        assert_eq!(f["current_state"], "0 (nominal)");
+        assert_eq!(f["reset_cause"], "0 (power-on)");
+        assert_eq!(f["mcu_temp_c"], format!("{} degC", csp.mcu_temp_c));
+        assert_eq!(
+            text.lines().count(),
+            <wire::TmGen as csp::icd::Describe>::FIELDS.len(),
+            "{text}"
+        );
         let sens = wire::TmSens::parse(&ask(&mut h, 10, &[4], t)[2..]).unwrap();
-        let f = console_fields(&h.console("tm sens", t));
-        let b: Vec<f64> = f["b_body"]
-            .trim_end_matches(" nT")
-            .split(' ')
-            .map(|x| x.parse().unwrap())
-            .collect();
-        for (c, k) in b.iter().zip(sens.b_body_nt) {
-            assert!(
-                (c - f64::from(k)).abs() < 1e-6,
-                "{b:?} {:?}",
-                sens.b_body_nt
-            );
+        let text = h.console("tm sens", t);
+        let f = console_fields(&text);
+        for (i, k) in sens.b_body_nt.iter().enumerate() {
+            let c: f64 = f[&format!("b_body_nt[{i}]")]
+                .strip_suffix(" nT")
+                .unwrap()
+                .parse()
+                .unwrap();
+            assert!((c - f64::from(*k)).abs() < 1e-3, "{text}");
         }
         let atp = wire::TmAtp::parse(&ask(&mut h, 10, &[2], t)[2..]).unwrap();
         let f = console_fields(&h.console("tm atp", t));
-        let q: Vec<f64> = f["q_eci_from_body"]
-            .split(' ')
-            .map(|x| x.parse().unwrap())
-            .collect();
-        for (c, k) in q.iter().zip(atp.q_eci_from_body) {
+        for (i, k) in atp.q_eci_from_body.iter().enumerate() {
+            let c: f64 = f[&format!("q_eci_from_body[{i}]")].parse().unwrap();
+            assert!((c - k).abs() < 1e-6);
+        }
+        for (i, k) in atp.r_eci_m.iter().enumerate() {
+            let c: f64 = f[&format!("r_eci_m[{i}]")]
+                .strip_suffix(" m")
+                .unwrap()
+                .parse()
+                .unwrap();
             assert!((c - k).abs() < 1e-6);
         }
         // Every telemetry has its readout; a bad one is a one-line error.

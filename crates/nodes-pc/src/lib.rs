@@ -1789,7 +1789,7 @@ impl App for PcApp {
             return Err(csp::console::ConsoleError::Usage("tm".to_owned()));
         }
         // As TMPC on port 12.
-        Ok(csp::console::fields(&self.tmpc()))
+        csp::console::layout(&self.tmpc())
     }
 
     fn self_test(&mut self, _node: &Node, now: SimTime) -> Vec<csp::params::Check> {

@@ -753,6 +753,35 @@ fn tmpc_reports_sessions_and_sband() {
     assert_eq!(t.sband_downlinked_bytes, 640);
 }
 
+/// The console's `tm` is TMPC of the same instant, one `name value unit` line per field with
+/// the ICD's names (`slots[0].state`, as `gs` names them), units and value names; no Debug
+/// dump of the slots.
+#[test]
+fn console_tm_is_tmpc_one_field_a_line() {
+    let mut s = sim();
+    s.send_from(13, 40, 11, &[5; 100]);
+    assert_eq!(s.setup(&session(1, 0, 60, 0, 64, b"")), 1);
+    s.run_until(SimTime::from_ms(1000));
+    let text = s.host.console("tm", s.now);
+    let fields = <wire::Tmpc as csp::icd::Describe>::FIELDS;
+    let names: Vec<String> = csp::icd::leaves(fields).into_iter().map(|l| l.0).collect();
+    let got: Vec<&str> = text.lines().filter_map(|l| l.split(' ').next()).collect();
+    assert_eq!(got, names, "{text}");
+    for want in [
+        "slots[0].session_id 1",
+        "slots[0].payload_addr 12",
+        "slots[0].state 2 (ACTIVE)",
+        "slots[0].packets 10",
+        "slots[0].downlinked_bytes 640 B",
+        "slots[1].buffer_bytes 100 B",
+        "sband_flags 0x1 (on)",
+        "sband_downlinked_bytes 640 B",
+    ] {
+        assert!(text.lines().any(|l| l == want), "{want:?} in\n{text}");
+    }
+    assert!(!text.contains('{') && !text.contains("TmpcSlot"), "{text}");
+}
+
 #[test]
 fn poll_period_zero_polls_back_to_back() {
     let mut c = cfg();

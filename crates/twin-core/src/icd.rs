@@ -1310,6 +1310,49 @@ mod tests {
         );
     }
 
+    /// Rust paths (`role::PRIMARY`) and constants' names (`BEACON_PERIOD_MIN_S`) in
+    /// backticks: what doc comments leak into the ICD's text if written for rustdoc.
+    fn rust_items(text: &str) -> Vec<&str> {
+        let screaming = |w: &str| {
+            w.starts_with(|c: char| c.is_ascii_uppercase())
+                && w.contains('_')
+                && w.chars()
+                    .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
+        };
+        text.lines()
+            .flat_map(|l| l.split('`').skip(1).step_by(2))
+            .filter(|s| {
+                s.contains("::")
+                    || s.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                        .any(screaming)
+            })
+            .collect()
+    }
+
+    /// `m6p-twin icd` (text, `--json`, `--markdown`) is for people: it names values and
+    /// their meanings, never the Rust items behind them.
+    #[test]
+    fn the_icd_text_names_no_rust_items() {
+        assert_eq!(
+            rust_items(
+                "`role::PRIMARY` or 2\n0 or `BEACON_PERIOD_MIN_S`..=`3600` (`TMGEN`, `r_eci_m`)"
+            ),
+            ["role::PRIMARY", "BEACON_PERIOD_MIN_S"]
+        );
+        let text = to_text(None).unwrap();
+        for (what, text) in [
+            ("icd --json", to_json()),
+            ("icd", text),
+            ("icd --markdown", to_markdown()),
+        ] {
+            let found = rust_items(&text);
+            assert!(
+                found.is_empty(),
+                "Rust items in `m6p-twin {what}` (write the value and its meaning): {found:?}"
+            );
+        }
+    }
+
     #[test]
     fn the_python_package_carries_the_current_icd() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../python/src/m6p/icd.json");

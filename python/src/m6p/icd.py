@@ -380,19 +380,25 @@ class Data:
 @dataclass(frozen=True)
 class Leaf:
     """One decoded value: its path (``slots[0].state``), the value, the ICD's name for it
-    (a value's or the set bits', ``None`` otherwise) and its unit."""
+    (a value's or the set bits', ``None`` otherwise), its unit, and whether it is a mask.
+    ``str`` gives the twin's one line for it (``gs``, the node consoles' ``tm``): a mask in
+    hex with its bits' names (``channels_on 0x1f7 (COMM1, ...)``, ``0x0 (none)``)."""
 
     path: str
     value: int | float | str
     name: str | None
     unit: str | None
+    mask: bool = False
 
     def __str__(self) -> str:
-        s = f"{self.path} {self.value}"
+        mask = self.mask and isinstance(self.value, int)
+        s = f"{self.path} {self.value:#x}" if mask else f"{self.path} {self.value}"
         if self.unit:
             s += f" {self.unit}"
         if self.name:
             s += f" ({self.name})"
+        elif mask and self.value == 0:
+            s += " (none)"
         return s
 
 
@@ -427,13 +433,13 @@ def _leaves(fields: Sequence[Field], values: Mapping[str, Value], prefix: str) -
                 continue
             if isinstance(item, (bytes, list)):
                 raise TypeError(f"{path}: {type(item).__name__} where the ICD has {f.type}")
-            name = None
+            name, mask = None, False
             if isinstance(item, int) and item in f.values:
                 name = f.values[item]
             elif isinstance(item, int) and f.bits:
                 set_bits = [n for bit, n in sorted(f.bits.items()) if item >> bit & 1]
-                name = ", ".join(set_bits) if set_bits else None
-            yield Leaf(path, item, name, f.unit)
+                name, mask = (", ".join(set_bits) if set_bits else None), True
+            yield Leaf(path, item, name, f.unit, mask)
 
 
 def _at(fields: Mapping[str, Value], path: str) -> Value:
