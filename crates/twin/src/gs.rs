@@ -135,15 +135,24 @@ pub async fn ping(
             tokio::time::sleep(interval).await;
         }
     }
-    rtts.sort();
-    let median = rtts
-        .get(rtts.len() / 2)
-        .map_or(0.0, |d| d.as_secs_f64() * 1e3);
-    println!(
-        "--- node {node}: {count} sent, {} answered, median {median:.3} ms",
-        rtts.len()
-    );
+    println!("{}", ping_summary(node, count, &rtts));
     Ok(!rtts.is_empty())
+}
+
+/// The last line of `gs ping`: how many of the `sent` pings were answered and, when any
+/// were, the median round-trip time of those (an empty set has no median: nothing
+/// answered says so instead).
+pub fn ping_summary(node: u8, sent: u32, rtts: &[Duration]) -> String {
+    let mut sorted = rtts.to_vec();
+    sorted.sort();
+    match sorted.get(sorted.len() / 2) {
+        Some(median) => format!(
+            "--- node {node}: {sent} sent, {} answered, median {:.3} ms",
+            sorted.len(),
+            median.as_secs_f64() * 1e3
+        ),
+        None => format!("--- node {node}: 0 of {sent} answered, no round-trip time"),
+    }
 }
 
 /// `gs uptime`.
@@ -235,7 +244,7 @@ fn no_reply(node: u8, timeout: Duration) -> anyhow::Result<bool> {
     Ok(false)
 }
 
-/// `gs raw`: any request; prints the reply in hex.
+/// `gs raw`: any request; prints the reply as [`raw_reply`] reads it.
 pub async fn raw(
     gs: &mut GsClient,
     node: u8,
@@ -245,15 +254,88 @@ pub async fn raw(
 ) -> anyhow::Result<bool> {
     match gs.request(node, port, data, timeout).await? {
         Some((reply, rtt)) => {
-            println!(
-                "{node}:{port} replied {} ({:.3} ms)",
-                hex::encode(&reply.data),
-                rtt.as_secs_f64() * 1e3
-            );
+            let (text, _) = raw_reply(&reply.header, &reply.data, rtt.as_secs_f64() * 1e3);
+            print!("{text}");
             Ok(true)
         }
         None => no_reply(node, timeout),
     }
+}
+
+/// A reply to `gs raw` (`header` as it came, from the port the request went to), `ms`
+/// after the request: decoded as a by-name ICD command's reply ([`show_reply`]) when it
+/// comes from an ICD port (the default ports) with a command id of that port's table,
+/// else its bytes in hex. The flag is [`show_reply`]'s (hex: `true`).
+pub fn raw_reply(header: &csp::Header, data: &[u8], ms: f64) -> (String, bool) {
+    let map = crate::icd::IcdMap::defaults();
+    if let Some(c) = map.classify(header, data)
+        && c.direction == crate::icd::Direction::Reply
+        && let Some(d) = map.decode(header, data)
+    {
+        return show_reply(&d, c.command, header.src, data, ms);
+    }
+    (
+        format!(
+            "{}:{} replied {} ({ms:.3} ms)\n",
+            header.src,
+            header.sport,
+            hex::encode(data)
+        ),
+        true,
+    )
+}
+
+/// A reply the ICD decoded (`d`, of command `cmd` from node `src`; `data` its bytes from the
+/// command id on), as `gs` prints it: a head line (`PC.TMPC from 6: ok, 89 bytes (1.234
+/// ms)`), then one line per field with the ICD's name, the value, its unit and value name;
+/// or the refusal. The flag: the node answered with success and the reply fits the ICD's
+/// layout.
+pub fn show_reply(
+    d: &crate::icd::DecodedPacket,
+    cmd: &csp::icd::Command,
+    src: u8,
+    data: &[u8],
+    ms: f64,
+) -> (String, bool) {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let name = format!("{}.{}", d.node, cmd.name);
+    if d.result != Some(csp::reqrep::RESULT_SUCCESS) {
+        let _ = writeln!(
+            s,
+            "{name} from {src}: refused (result {}; the reason is in the run log, `/log` of the recording) ({ms:.3} ms)",
+            d.result.unwrap_or(0)
+        );
+        return (s, false);
+    }
+    let _ = writeln!(
+        s,
+        "{name} from {src}: ok, {} bytes ({ms:.3} ms)",
+        data.len().saturating_sub(2)
+    );
+    for f in &d.fields {
+        let _ = writeln!(s, "  {:<36} {}", f.path, f.show());
+    }
+    if let Some(t) = &d.tail {
+        let tail = cmd
+            .reply
+            .parts()
+            .and_then(|p| p.1)
+            .map_or("(tail)", |t| t.name);
+        if t.iter().all(|b| (0x20..0x7f).contains(b)) {
+            let _ = writeln!(s, "  {tail:<36} {:?}", String::from_utf8_lossy(t));
+        } else {
+            let _ = writeln!(s, "  {tail:<36} {} ({} bytes)", hex::encode(t), t.len());
+        }
+    }
+    if d.fields.is_empty() && d.tail.is_none() && data.len() > 2 {
+        let _ = writeln!(s, "  data {}", hex::encode(&data[2..]));
+    }
+    if !d.fits {
+        s.push_str("  (the reply's length does not fit the ICD's layout)\n");
+        return (s, false);
+    }
+    (s, true)
 }
 
 /// `gs setup|status|abort`: a request to the PC's session control port (6:10); the reply
@@ -422,45 +504,10 @@ pub async fn icd_command(
     h.dport = h.dport.max(csp::header::EPHEMERAL_PORT_MIN);
     let body = &reply.data[..];
     match map.decode(&h, body) {
-        Some(d) if d.result == Some(csp::reqrep::RESULT_SUCCESS) && d.command == cmd.name => {
-            println!(
-                "{}.{} from {dst}: ok, {} bytes ({ms:.3} ms)",
-                icd_node.name,
-                cmd.name,
-                body.len().saturating_sub(2)
-            );
-            for f in &d.fields {
-                println!("  {:<36} {}", f.path, f.show());
-            }
-            if let Some(t) = &d.tail {
-                let name = cmd
-                    .reply
-                    .parts()
-                    .and_then(|p| p.1)
-                    .map_or("(tail)", |t| t.name);
-                if t.iter().all(|b| (0x20..0x7f).contains(b)) {
-                    println!("  {name:<36} {:?}", String::from_utf8_lossy(t));
-                } else {
-                    println!("  {name:<36} {} ({} bytes)", hex::encode(t), t.len());
-                }
-            }
-            if d.fields.is_empty() && d.tail.is_none() && body.len() > 2 {
-                println!("  data {}", hex::encode(&body[2..]));
-            }
-            if !d.fits {
-                println!("  (the reply's length does not fit the ICD's layout)");
-                return Ok(false);
-            }
-            Ok(true)
-        }
         Some(d) if d.command == cmd.name => {
-            println!(
-                "{}.{} from {dst}: refused (result {}; the reason is in the run log, `/log` of the recording) ({ms:.3} ms)",
-                icd_node.name,
-                cmd.name,
-                d.result.unwrap_or(0)
-            );
-            Ok(false)
+            let (text, ok) = show_reply(&d, cmd, dst, body, ms);
+            print!("{text}");
+            Ok(ok)
         }
         _ => {
             println!(
@@ -471,5 +518,79 @@ pub async fn icd_command(
             );
             Ok(false)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn a_ping_summary_has_a_median_only_of_answers() {
+        assert_eq!(
+            ping_summary(8, 5, &[]),
+            "--- node 8: 0 of 5 answered, no round-trip time"
+        );
+        let ms = Duration::from_millis;
+        assert_eq!(
+            ping_summary(3, 4, &[ms(40), ms(10), ms(30)]),
+            "--- node 3: 4 sent, 3 answered, median 30.000 ms"
+        );
+    }
+
+    /// The reply to `raw 6 12 01` (PC telemetry port, TMPC), all fields zero but the
+    /// command and result bytes, from the ICD's own layout.
+    fn tmpc_reply() -> (csp::Header, Vec<u8>) {
+        let (_, port, cmd) = crate::icd::find_command("PC.TMPC").unwrap();
+        let (len, _) = cmd.reply.bounds();
+        let mut data = vec![cmd.id, csp::reqrep::RESULT_SUCCESS];
+        data.resize(2 + len, 0);
+        (Header::new(6, 17, 40, port.port), data)
+    }
+
+    #[test]
+    fn raw_decodes_a_reply_the_icd_knows_as_a_command_by_name_does() {
+        let (header, data) = tmpc_reply();
+        assert_eq!(header.sport, 12);
+        let (text, ok) = raw_reply(&header, &data, 1.5);
+        assert!(ok);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[0],
+            format!("PC.TMPC from 6: ok, {} bytes (1.500 ms)", data.len() - 2)
+        );
+        // One line per field, with the ICD's name, the value and its unit or value name.
+        let d = crate::icd::IcdMap::defaults()
+            .decode(&header, &data)
+            .unwrap();
+        assert!(!d.fields.is_empty());
+        assert_eq!(lines.len(), 1 + d.fields.len(), "{text}");
+        for (line, f) in lines[1..].iter().zip(&d.fields) {
+            assert_eq!(line.split_whitespace().next(), Some(f.path.as_str()));
+        }
+        assert!(text.contains("slots[0].state                       0 (NOT ACTIVE)"));
+        assert!(text.contains("sband_queue_bytes                    0 B"));
+        assert!(!text.contains("replied"), "{text}");
+        // The same text as the by-name command prints.
+        let (_, _, cmd) = crate::icd::find_command("PC.TMPC").unwrap();
+        assert_eq!(show_reply(&d, cmd, 6, &data, 1.5), (text, true));
+    }
+
+    #[test]
+    fn raw_falls_back_to_hex_where_the_icd_knows_nothing() {
+        // A ping's echo (port 1 is no ICD port).
+        let (text, ok) = raw_reply(&Header::new(3, 17, 40, 1), &[1, 2], 2.0);
+        assert_eq!((text.as_str(), ok), ("3:1 replied 0102 (2.000 ms)\n", true));
+        // An ICD port, but a command id its table does not have.
+        let (text, _) = raw_reply(&Header::new(6, 17, 40, 12), &[0xee, 1], 2.0);
+        assert_eq!(text, "6:12 replied ee01 (2.000 ms)\n");
+        // A refusal is read as one.
+        let (text, ok) = raw_reply(&Header::new(6, 17, 40, 12), &[1, 0], 2.0);
+        assert!(!ok);
+        assert!(
+            text.starts_with("PC.TMPC from 6: refused (result 0"),
+            "{text}"
+        );
     }
 }

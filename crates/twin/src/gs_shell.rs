@@ -23,7 +23,10 @@ pub const BUILTINS: &[(&str, &str)] = &[
     ("ping", "ping NODE [SIZE]: a CSP ping (port 1)"),
     ("uptime", "uptime NODE: CSP uptime (port 6)"),
     ("ident", "ident NODE: CMP ident (port 0)"),
-    ("raw", "raw NODE PORT HEX: any request, the reply in hex"),
+    (
+        "raw",
+        "raw NODE PORT HEX: any request, the reply decoded where the ICD knows it, else in hex",
+    ),
     (
         "help",
         "help [NODE [COMMAND]]: what the console takes, a node's commands, a command's fields",

@@ -9,14 +9,22 @@ installed; otherwise add ``pytest_plugins = ["m6p.pytest_plugin"]`` to a conftes
 - ``payload``: a :class:`m6p.session.Payload` serving payload 12's polling sessions with
   :func:`m6p.session.counter_frames` (``payload.source = ...`` to change the data).
 
-Options: ``--m6p-twin PATH`` (the binary; default :func:`m6p.twin.find_binary`) and
-``--m6p-keep`` (keep each twin's working directory: recording, downlink, log).
+Options: ``--m6p-twin PATH`` or ``--m6p-twin=PATH`` (the binary; default
+:func:`m6p.twin.find_binary`) and ``--m6p-keep`` (keep each twin's working directory:
+recording, downlink, log).
+
+pytest finds its rootdir and configuration file before it loads installed plugins, from
+the paths on the command line: in the space form it takes ``PATH`` for a test path then
+(the binary's folder would become the rootdir, and the project's own ``pytest.ini`` or
+``pyproject.toml`` go unread). The plugin finds them again as pytest would have without
+``PATH``, before the first conftest is read (:func:`pytest_load_initial_conftests`).
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Iterator
-from typing import cast
+from typing import Any, cast
 
 import pytest
 
@@ -27,12 +35,56 @@ from .twin import Twin, TwinOptions
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("m6p", "M6P twin")
-    group.addoption("--m6p-twin", default=None, help="the m6p-twin binary to run")
+    group.addoption(
+        "--m6p-twin",
+        default=None,
+        metavar="PATH",
+        help="the m6p-twin binary to run (--m6p-twin PATH or --m6p-twin=PATH)",
+    )
     group.addoption(
         "--m6p-keep",
         action="store_true",
         help="keep each twin's working directory (recording, downlinked files)",
     )
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_load_initial_conftests(early_config: pytest.Config, args: list[str]) -> None:
+    """After ``--m6p-twin PATH`` (the space form), find the rootdir and the configuration
+    file as pytest would have without ``PATH``, which it took for a test path."""
+    if "--m6p-twin" in args:
+        _find_root_again(early_config)
+
+
+def _find_root_again(config: pytest.Config) -> None:
+    """Find ``config``'s rootdir and configuration file again from the test paths it knows
+    now (pytest's own ``determine_setup``, whose arguments differ between versions), and
+    the conftest boundary that came from them, unless given."""
+    from _pytest.config import findpaths
+
+    ns = config.known_args_namespace
+    known: dict[str, Any] = {
+        "inifile": ns.inifilename,
+        "args": list(ns.file_or_dir),
+        "rootdir_cmd_arg": ns.rootdir or None,
+        "invocation_dir": config.invocation_params.dir,
+        "override_ini": getattr(ns, "override_ini", None),
+        "config": config,
+    }
+    wanted = inspect.signature(findpaths.determine_setup).parameters
+    found = findpaths.determine_setup(**{k: v for k, v in known.items() if k in wanted})
+    rootpath, inipath, inicfg = found[0], found[1], found[2]
+    if (rootpath, inipath) == (config.rootpath, config.inipath):
+        return
+    derived_cut = str(config.inipath.parent if config.inipath else config.rootpath)
+    config._rootpath = rootpath
+    config._inipath = inipath
+    config._inicfg = inicfg
+    config._inicache.clear()
+    config._parser.extra_info["rootdir"] = str(rootpath)
+    config._parser.extra_info["inifile"] = str(inipath)
+    if ns.confcutdir is None or ns.confcutdir == derived_cut:
+        ns.confcutdir = str(inipath.parent if inipath else rootpath)
 
 
 def pytest_configure(config: pytest.Config) -> None:

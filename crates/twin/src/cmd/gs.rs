@@ -7,7 +7,27 @@ use clap::Subcommand;
 use m6p_twin::duration::parse_duration;
 use m6p_twin::gs;
 
+/// What `gs --help` shows after its lists: the two forms the subcommand list cannot show
+/// (an ICD command by name, the console), each with an example.
+const AFTER_HELP: &str = "\
+ICD commands by name (any command of any node, as `m6p-twin icd NODE` lists them):
+  m6p-twin gs --connect ADDR NODE COMMAND [NAME=VALUE ...]
+  The arguments are checked against the ICD before anything is sent; the reply is decoded,
+  one line per field with the ICD's names and units. For example:
+    m6p-twin gs --connect 127.0.0.1:52001 fc tmgen
+    m6p-twin gs --connect 127.0.0.1:52001 eps chset channel=PC on=off
+    m6p-twin gs --connect 127.0.0.1:52001 pc setup session_id=1 timestamp=now duration_s=10m \\
+        max_packets=0 poll_frame_size=200 sync_message=go
+
+The console (interactive): give no request. One line per request, as above without
+`m6p-twin gs --connect ADDR` (`fc tmgen`, `ping fc`, `raw 6 12 01`), with history, Tab
+completion of nodes, commands, argument names and values, and `help`; Ctrl-D leaves:
+    m6p-twin gs --connect 127.0.0.1:52001
+  With standard input not a terminal it runs the lines of standard input (a script):
+    m6p-twin gs --connect 127.0.0.1:52001 < lines.txt";
+
 #[derive(Debug, clap::Args)]
+#[command(after_help = AFTER_HELP)]
 pub struct GsArgs {
     /// The twin's KISS/TCP server.
     #[arg(long, value_name = "ADDR")]
@@ -57,7 +77,8 @@ pub enum GsRequest {
         /// Node address.
         node: u8,
     },
-    /// Any request: `raw NODE PORT HEX` (the reply is printed in hex).
+    /// Any request: `raw NODE PORT HEX`; the reply decoded where the ICD knows it, else in
+    /// hex.
     Raw {
         /// Node address.
         node: u8,
