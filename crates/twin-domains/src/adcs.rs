@@ -399,6 +399,10 @@ impl ExpectKind for AttitudeExpect {
             tally: AttitudeTally::default(),
         }))
     }
+
+    fn describe(&self) -> String {
+        format!("attitude {}", self.quantity)
+    }
 }
 
 /// An `attitude` expectation's figures over the samples it selected so far.

@@ -134,4 +134,8 @@ impl ExpectKind for CanExpect {
             Judgement::fail(end, format!("{seen} ({})", why.join("; ")))
         }
     }
+
+    fn describe(&self) -> String {
+        format!("{} on the {} bus", self.node, self.bus)
+    }
 }

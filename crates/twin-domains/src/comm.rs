@@ -303,6 +303,13 @@ impl ExpectKind for BeaconExpect {
             ),
         )
     }
+
+    fn describe(&self) -> String {
+        match &self.target {
+            Some(t) => format!("beacons from {t}"),
+            None => "beacons".to_owned(),
+        }
+    }
 }
 
 /// The contact windows of a run: from each acquisition to the next loss (the whole run

@@ -571,6 +571,10 @@ impl ExpectKind for ReplyExpect {
             move |o, t| reply_problem(o, t, &x),
         )))
     }
+
+    fn describe(&self) -> String {
+        format!("reply to {}", self.command)
+    }
 }
 
 impl ExpectKind for NoReplyExpect {
@@ -591,6 +595,10 @@ impl ExpectKind for NoReplyExpect {
             self.occurrence,
             no_reply_problem,
         )))
+    }
+
+    fn describe(&self) -> String {
+        format!("no reply to {}", self.command)
     }
 }
 

@@ -142,6 +142,10 @@ impl ExpectKind for CounterExpect {
             }
         }
     }
+
+    fn describe(&self) -> String {
+        format!("{} {}", self.target, self.counter)
+    }
 }
 
 /// A counter's value at the end of the run.

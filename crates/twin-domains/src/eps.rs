@@ -205,6 +205,10 @@ impl ExpectKind for PowerExpect {
             tally: PowerTally::default(),
         }))
     }
+
+    fn describe(&self) -> String {
+        format!("power {}", self.quantity)
+    }
 }
 
 /// A `power` expectation's figures over the samples it selected so far, in time order.

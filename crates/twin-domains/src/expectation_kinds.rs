@@ -75,15 +75,84 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
 
 /// The expectations of a validated scenario, in file order.
 pub fn compile(s: &Scenario) -> Vec<Expectation> {
-    s.expectations
+    let parsed: Vec<(usize, Common, Arc<dyn AnyExpect>)> = s
+        .expectations
         .iter()
         .enumerate()
-        .filter_map(|(i, e)| {
-            let (common, kind) = parse(e).ok()?;
-            Some(Expectation::of_any(
-                common.name.unwrap_or_else(|| format!("expectations[{i}]")),
-                kind,
-            ))
+        .filter_map(|(i, e)| parse(e).ok().map(|(c, k)| (i, c, k)))
+        .collect();
+    // An unnamed expectation is named by what it is about (`reply to ping-eps`); one that
+    // would take a name already given says where it is in the file as well.
+    let mut taken: std::collections::BTreeSet<String> = parsed
+        .iter()
+        .filter_map(|(_, c, _)| c.name.clone())
+        .collect();
+    parsed
+        .into_iter()
+        .map(|(i, common, kind)| {
+            let name = common.name.unwrap_or_else(|| {
+                let d = kind.describe();
+                let name = if taken.contains(&d) {
+                    format!("{d} (expectations[{i}])")
+                } else {
+                    d
+                };
+                taken.insert(name.clone());
+                name
+            });
+            Expectation::of_any(name, kind)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    /// An unnamed expectation is named by what it is about; a name already taken gets its
+    /// place in the file; a given name stays as it is.
+    #[test]
+    fn an_unnamed_expectation_is_named_by_what_it_is_about() {
+        let text = r#"name = "t"
+duration = "60s"
+[[commands]]
+name = "ping-eps"
+at = "10s"
+to = "EPS"
+request = "ping"
+[[expectations]]
+kind = "reply"
+command = "ping-eps"
+[[expectations]]
+kind = "reply"
+command = "ping-eps"
+within = "1s"
+[[expectations]]
+name = "no reply to ping-eps"
+kind = "counter"
+target = "PC"
+counter = "drops"
+max = 0
+[[expectations]]
+kind = "no-reply"
+command = "ping-eps"
+[[expectations]]
+kind = "counter"
+target = "PC"
+counter = "drops"
+max = 0
+"#;
+        let s = crate::validate::parse("t.toml", text).unwrap();
+        let names: Vec<String> = super::compile(&s).into_iter().map(|e| e.name).collect();
+        assert_eq!(
+            names,
+            [
+                "reply to ping-eps",
+                "reply to ping-eps (expectations[1])",
+                "no reply to ping-eps",
+                "no reply to ping-eps (expectations[3])",
+                "PC drops",
+            ]
+        );
+    }
 }

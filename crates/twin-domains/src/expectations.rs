@@ -232,6 +232,9 @@ pub trait ExpectKind:
     fn watch(&self, _cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
         None
     }
+    /// What it is about in a few words (`reply to ping-eps`): the name of an expectation
+    /// the scenario leaves unnamed.
+    fn describe(&self) -> String;
 }
 
 /// An expectation of any kind.
@@ -239,6 +242,7 @@ pub(crate) trait AnyExpect: std::fmt::Debug + Send + Sync {
     fn validate(&self, cx: &ExpectCx<'_>, err: &mut dyn FnMut(&str, String));
     fn check(&self, cx: &CheckCx<'_>) -> Judgement;
     fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>>;
+    fn describe(&self) -> String;
 }
 
 impl<K: ExpectKind> AnyExpect for K {
@@ -250,6 +254,9 @@ impl<K: ExpectKind> AnyExpect for K {
     }
     fn watch(&self, cx: &WatchCx<'_>) -> Option<Box<dyn Watch>> {
         ExpectKind::watch(self, cx)
+    }
+    fn describe(&self) -> String {
+        ExpectKind::describe(self)
     }
 }
 

@@ -252,6 +252,10 @@ impl ExpectKind for FieldExpect {
             tally: Tally::default(),
         }))
     }
+
+    fn describe(&self) -> String {
+        self.field.clone()
+    }
 }
 
 /// What a `field` expectation saw of its replies in the window.

@@ -108,6 +108,10 @@ impl ExpectKind for LatencyExpect {
             decided: 0,
         }))
     }
+
+    fn describe(&self) -> String {
+        format!("latency of {}", self.command)
+    }
 }
 
 /// A `Duration` in nanoseconds (a round trip is shorter than 584 years).

@@ -595,6 +595,10 @@ impl ExpectKind for SessionExpect {
             },
         }
     }
+
+    fn describe(&self) -> String {
+        format!("session {}", self.session)
+    }
 }
 
 impl ExpectKind for DownlinkExpect {
@@ -712,6 +716,10 @@ impl ExpectKind for DownlinkExpect {
             Judgement::fail(end, format!("{seen} ({})", why.join("; ")))
         }
     }
+
+    fn describe(&self) -> String {
+        format!("downlink of session {}", self.session)
+    }
 }
 
 impl ExpectKind for AccountingExpect {
@@ -780,6 +788,13 @@ impl ExpectKind for AccountingExpect {
             lines.push(line);
         }
         Judgement::new(Grade::of(ok), end, lines.join("; "))
+    }
+
+    fn describe(&self) -> String {
+        match self.payload {
+            Some(p) => format!("accounting of payload {p}"),
+            None => "accounting".to_owned(),
+        }
     }
 }
 
