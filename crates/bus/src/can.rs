@@ -597,6 +597,16 @@ impl CanBus {
         Ok(())
     }
 
+    /// The node of the twin attached with `addr` (not an outside connection's claim), if
+    /// one is.
+    pub fn node_holding(&self, addr: u8) -> Option<String> {
+        let st = self.lock();
+        match st.held_by(addr, st.holder(addr)?) {
+            ClaimError::Node(name) => Some(name),
+            _ => None,
+        }
+    }
+
     /// Reserve `addr` for outside link `link` for the whole run: only that link's endpoints
     /// may claim it, its program connected or not. Refused with the holder's name when a
     /// node of the twin or another link has it.
@@ -608,7 +618,7 @@ impl CanBus {
     ) -> Result<(), ClaimError> {
         let mut st = self.lock();
         if let Some(h) = st.holder(addr) {
-            return Err(ClaimError::Held(st.ports[h].stats.name.clone()));
+            return Err(st.held_by(addr, h));
         }
         st.reserved.reserve(addr, link, label)
     }
@@ -795,12 +805,23 @@ impl State {
         link: Option<crate::reserve::LinkId>,
     ) -> Option<ClaimError> {
         if let Some(h) = self.holder(addr).filter(|&h| Some(h) != me) {
-            return Some(ClaimError::Held(self.ports[h].stats.name.clone()));
+            return Some(self.held_by(addr, h));
         }
         self.reserved.refusal(addr, link)
     }
 
     /// The endpoint holding `addr`: its claimant, or a node attached with it.
+    /// Why `h` keeps `addr` from a claim: a node of the twin attached with it, or another
+    /// outside connection that claimed it.
+    fn held_by(&self, addr: u8, h: usize) -> ClaimError {
+        let name = self.ports[h].stats.name.clone();
+        if self.claims.contains_key(&addr) {
+            ClaimError::Held(name)
+        } else {
+            ClaimError::Node(name)
+        }
+    }
+
     fn holder(&self, addr: u8) -> Option<usize> {
         self.claims
             .get(&addr)
@@ -1885,7 +1906,7 @@ mod tests {
         // The twin's payload 12 keeps its address; 14 is free and becomes the link's only.
         assert_eq!(
             bus.claim(&outside, 12),
-            Err(ClaimError::Held("payload12".to_owned()))
+            Err(ClaimError::Node("payload12".to_owned()))
         );
         assert_eq!(bus.claim(&outside, 14), Ok(()));
         assert_eq!(

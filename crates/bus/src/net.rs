@@ -353,6 +353,16 @@ impl PacketNet {
         Ok(())
     }
 
+    /// The node of the twin attached with `addr` (not an outside connection's claim), if
+    /// one is.
+    pub fn node_holding(&self, addr: u8) -> Option<String> {
+        let st = self.lock();
+        match st.held_by(addr, st.holder(addr)?) {
+            ClaimError::Node(name) => Some(name),
+            _ => None,
+        }
+    }
+
     /// Reserve `addr` for outside link `link` for the whole run: only that link's endpoints
     /// may claim it, its program connected or not. Refused with the holder's name when a
     /// node of the twin or another link has it.
@@ -364,7 +374,7 @@ impl PacketNet {
     ) -> Result<(), ClaimError> {
         let mut st = self.lock();
         if let Some(h) = st.holder(addr) {
-            return Err(ClaimError::Held(st.eps[h].name.clone()));
+            return Err(st.held_by(addr, h));
         }
         st.reserved.reserve(addr, link, label)
     }
@@ -478,9 +488,20 @@ impl State {
         link: Option<crate::reserve::LinkId>,
     ) -> Option<ClaimError> {
         if let Some(h) = self.holder(addr).filter(|&h| Some(h) != me) {
-            return Some(ClaimError::Held(self.eps[h].name.clone()));
+            return Some(self.held_by(addr, h));
         }
         self.reserved.refusal(addr, link)
+    }
+
+    /// Why `h` keeps `addr` from a claim: a node of the twin attached with it, or another
+    /// outside connection that claimed it.
+    fn held_by(&self, addr: u8, h: usize) -> ClaimError {
+        let name = self.eps[h].name.clone();
+        if self.claims.contains_key(&addr) {
+            ClaimError::Held(name)
+        } else {
+            ClaimError::Node(name)
+        }
     }
 
     /// The endpoint holding `addr`: its claimant, or a node attached with it.

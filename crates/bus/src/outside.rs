@@ -39,6 +39,15 @@ impl Segments {
             SegmentKind::Ground => self.ground.reserve(addr, link, label),
         }
     }
+
+    /// The node of the twin attached with `addr` on its segment, if one is.
+    pub fn node_holding(&self, addr: u8) -> Option<String> {
+        match SegmentKind::of(addr) {
+            SegmentKind::Main => self.main.node_holding(addr),
+            SegmentKind::Payload => self.payload.node_holding(addr),
+            SegmentKind::Ground => self.ground.node_holding(addr),
+        }
+    }
 }
 
 /// Counters of a bridge between a CAN segment and a real CAN interface
@@ -307,7 +316,7 @@ mod tests {
                     e.err(),
                     Some(OutsideError::Held {
                         addr,
-                        holder: ClaimError::Held(holder.to_owned())
+                        holder: ClaimError::Node(holder.to_owned())
                     })
                 );
             }

@@ -16,8 +16,10 @@ pub struct LinkId(pub u32);
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
 pub enum ClaimError {
-    /// An endpoint holds it: a node of the twin attached with it, or another claim (the
-    /// endpoint's name).
+    /// A node of the twin holds it (the node's name).
+    #[error("{0}, a node of the twin")]
+    Node(String),
+    /// Another outside connection claimed it (the endpoint's name).
     #[error("{0}")]
     Held(String),
     /// Another outside link reserved it (the link's label).

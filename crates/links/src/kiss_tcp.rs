@@ -1001,7 +1001,8 @@ impl Conn<'_> {
                     s.refused += 1;
                     s.claims_refused += 1;
                 });
-                self.refused(t, src, &format!("refused packet {}: {e}", p.header));
+                let hint = take_place_hint(&e);
+                self.refused(t, src, &format!("refused packet {}: {e}{hint}", p.header));
             }
             Err(e @ OutsideError::QueueFull { .. }) => {
                 bump(self.k.stats, |s| {
@@ -1017,7 +1018,8 @@ impl Conn<'_> {
         }
     }
 
-    /// Log a refused address, once per address and connection.
+    /// Log a refused address, once per address and connection (when it is a node of the
+    /// twin's, with the flag that gives the program that node's place).
     fn refused(&mut self, t: SimTime, addr: u8, text: &str) {
         if self.warned.insert(addr) {
             warn(
@@ -1162,6 +1164,41 @@ impl Drop for Claims {
         for ep in &self.0 {
             ep.release();
         }
+    }
+}
+
+/// Warn that a program listens on `addr`, which node `node` of the twin holds (the twin's
+/// node answers in its place), with what gives the program that node's place.
+pub(crate) fn warn_held(cfg: &KissLinkConfig, t: SimTime, name: &str, addr: u8, node: &str) {
+    let e = OutsideError::Held {
+        addr,
+        holder: bus::outside::ClaimError::Node(node.to_owned()),
+    };
+    let hint = take_place_hint(&e);
+    warn(
+        cfg,
+        t,
+        name,
+        format!(
+            "a program listens on address {addr}, but {e}: the twin's {node} answers in its place{hint}"
+        ),
+    );
+}
+
+/// What gives an outside program the address a node of the twin holds, for the refusal
+/// of its claim (`--kiss-addr 12` after the link's flag, or the scenario link's `addrs`
+/// and `replaces`); nothing for any other refusal.
+fn take_place_hint(e: &OutsideError) -> String {
+    match e {
+        OutsideError::Held {
+            addr,
+            holder: bus::outside::ClaimError::Node(node),
+        } => format!(
+            "; to run this program in {node}'s place, give its link the address: \
+             `--kiss-addr {addr}` after the link's flag, or `addrs = [{addr}]` and \
+             `replaces = [\"{node}\"]` on its [[links]] entry"
+        ),
+        _ => String::new(),
     }
 }
 

@@ -131,7 +131,9 @@ impl std::str::FromStr for HubAddr {
 pub struct Hub {
     addr: HubAddr,
     sub: zeromq::SubSocket,
-    publ: zeromq::PubSocket,
+    /// An XPUB socket: a PUB socket that also hands out its subscribers' subscriptions, so
+    /// the hub sees which addresses its programs listen on.
+    publ: zeromq::XPubSocket,
 }
 
 impl std::fmt::Debug for Hub {
@@ -163,7 +165,7 @@ impl Hub {
         sub.subscribe("")
             .await
             .map_err(err(addr.endpoint(addr.publish_port)))?;
-        let mut publ = zeromq::PubSocket::new();
+        let mut publ = zeromq::XPubSocket::new();
         let e = addr.endpoint(addr.subscribe_port);
         publ.bind(&e).await.map_err(err(e))?;
         Ok(Hub { addr, sub, publ })
@@ -175,15 +177,69 @@ impl Hub {
     }
 }
 
-/// The twin's PUB side as a link's frame sink: one message per packet.
-struct Publisher(zeromq::PubSocket);
+/// The twin's PUB side as a link's frame sink: one message per packet, handed to the task
+/// that owns the socket ([`publish`]).
+struct Publisher(tokio::sync::mpsc::Sender<Vec<u8>>);
 
 impl FrameSink for Publisher {
     async fn send_frame(&mut self, frame: &[u8]) -> std::io::Result<()> {
         self.0
-            .send(zeromq::ZmqMessage::from(frame.to_vec()))
+            .send(frame.to_vec())
             .await
-            .map_err(std::io::Error::other)
+            .map_err(|_| std::io::Error::other("the hub's publisher ended"))
+    }
+}
+
+/// Own the hub's XPUB socket: publish what the link sends, in order, and read the programs'
+/// subscriptions. A program that listens on an address a node of the twin holds (a payload
+/// program at 12 while the twin runs PL12) gets nothing from the twin, which answers in its
+/// place: warned once per address, naming what would give the program that address.
+async fn publish(
+    mut publ: zeromq::XPubSocket,
+    mut frames: tokio::sync::mpsc::Receiver<Vec<u8>>,
+    segs: Segments,
+    cfg: KissLinkConfig,
+    name: String,
+    clock: Clock,
+) {
+    let mut warned = std::collections::BTreeSet::new();
+    loop {
+        tokio::select! {
+            m = publ.recv() => match m {
+                Ok(m) => {
+                    let Some(addr) = subscribed_address(m.get(0).map(|b| &b[..])) else {
+                        continue;
+                    };
+                    if cfg.addrs.contains(&addr) || !warned.insert(addr) {
+                        continue;
+                    }
+                    if let Some(node) = segs.node_holding(addr) {
+                        crate::kiss_tcp::warn_held(&cfg, clock.now(), &name, addr, &node);
+                    }
+                }
+                Err(e) => {
+                    tracing::debug!("{name}: reading subscriptions failed: {e}");
+                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                }
+            },
+            f = frames.recv() => match f {
+                Some(f) => {
+                    if let Err(e) = publ.send(zeromq::ZmqMessage::from(f)).await {
+                        tracing::debug!("{name}: publishing failed: {e}");
+                    }
+                }
+                None => return,
+            },
+        }
+    }
+}
+
+/// The CSP address a subscription message subscribes to: `1` then the one-byte topic a
+/// libcsp 1.4 program subscribes with (`csp_if_zmqhub.c`: its own address).
+fn subscribed_address(m: Option<&[u8]>) -> Option<u8> {
+    match m? {
+        [1, addr] if *addr < 31 => Some(*addr),
+        _ => None,
     }
 }
 
@@ -233,7 +289,16 @@ pub async fn serve(
             }
         }
     };
-    let mut out = Publisher(publ);
+    let (frames_tx, frames_rx) = tokio::sync::mpsc::channel(cfg.limits.input_chunks.max(1));
+    let publisher = tokio::spawn(publish(
+        publ,
+        frames_rx,
+        segs.clone(),
+        cfg.clone(),
+        name.clone(),
+        clock,
+    ));
+    let mut out = Publisher(frames_tx);
     let k = Connection {
         name: &name,
         segs: &segs,
@@ -247,6 +312,7 @@ pub async fn serve(
     let reader = tokio::spawn(reader);
     let why = serve_link(in_rx, &mut out, k).await;
     reader.abort();
+    publisher.abort();
     tracing::info!("{name}: hub closed: {why}");
     bump(&stats, |s| s.disconnects += 1);
 }

@@ -247,3 +247,57 @@ fn the_end_of_run_table_lists_the_sessions_and_the_downlink_goes_where_asked() {
         file.display()
     );
 }
+
+/// A program that sends from an address a simulated node holds (a payload program at 12 on
+/// a link given no address) is refused, and the warning names the flag that would give it
+/// that node's place.
+#[test]
+fn a_program_refused_a_nodes_address_is_told_the_flag_that_gives_it() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args([
+            "run",
+            "--realtime",
+            "--no-checks",
+            "--duration",
+            "60s",
+            "--kiss-listen",
+            "127.0.0.1:0",
+        ])
+        .current_dir(repo())
+        .env_remove("RUST_LOG")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let at = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|l| {
+            l.strip_prefix("KISS/TCP: listening on ")
+                .and_then(|r| r.split_whitespace().next())
+                .map(str::to_owned)
+        })
+        .expect("the KISS server is announced");
+    let rest = std::thread::spawn(move || lines.map_while(Result::ok).collect::<Vec<_>>());
+    let out = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args(["gs", "--connect", &at, "--as", "12", "--timeout", "300ms"])
+        .args(["ping", "6", "--count", "1"])
+        .output()
+        .unwrap();
+    assert!(
+        !out.status.success(),
+        "PL12 runs: the program's ping is refused"
+    );
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let _ = child.wait();
+    let err = rest.join().unwrap().join("\n");
+    assert!(
+        err.contains("address 12 is held by PL12, a node of the twin")
+            && err.contains("`--kiss-addr 12` after the link's flag")
+            && err.contains(r#"`replaces = ["PL12"]`"#),
+        "{err}"
+    );
+}

@@ -241,6 +241,26 @@ fn an_empty_hub_message_does_not_close_the_hub() {
     );
 }
 
+/// A program that joins the hub listening on 12 while the twin runs PL12 (a forgotten
+/// `--kiss-addr 12`) gets nothing: the twin warns at once, naming the flag that gives the
+/// program PL12's place. A program on an address nobody holds (17) brings no warning.
+#[test]
+fn a_program_listening_on_a_nodes_address_is_warned_with_the_flag() {
+    let twin = twin_with_hub("hub-listens", "127.0.0.93:6493:7493", 30);
+    let mut ground = HubClient::join("127.0.0.93", 6493, 7493, 17);
+    ground.first_ping(17, 3);
+    let _payload = HubClient::join("127.0.0.93", 6493, 7493, 12);
+    // The subscription travels while the program waits for its requests.
+    std::thread::sleep(Duration::from_millis(500));
+    let (_, out, err) = twin.finish_now();
+    assert!(
+        err.contains("a program listens on address 12, but address 12 is held by PL12")
+            && err.contains("`--kiss-addr 12` after the link's flag"),
+        "{out}{err}"
+    );
+    assert!(!err.contains("listens on address 17"), "{err}");
+}
+
 /// A million hub messages of pings from 12 (PL12's address, a node of the twin) to 3: every
 /// one refused, the twin's memory grows by less than 20 MiB, and a program on the hub is
 /// answered by the FC within a second after the flood.
