@@ -177,6 +177,16 @@ impl Hub {
     }
 }
 
+/// A task of the hub that ends with it, however the hub ends (its task aborted at the end
+/// of the run included).
+struct AbortOnDrop(tokio::task::JoinHandle<()>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
+
 /// The twin's PUB side as a link's frame sink: one message per packet, handed to the task
 /// that owns the socket ([`publish`]).
 struct Publisher(tokio::sync::mpsc::Sender<Vec<u8>>);
@@ -203,6 +213,7 @@ async fn publish(
     clock: Clock,
 ) {
     let mut warned = std::collections::BTreeSet::new();
+    let mut send_failed = false;
     loop {
         tokio::select! {
             m = publ.recv() => match m {
@@ -217,15 +228,17 @@ async fn publish(
                         crate::kiss_tcp::warn_held(&cfg, clock.now(), &name, addr, &node);
                     }
                 }
-                Err(e) => {
-                    tracing::debug!("{name}: reading subscriptions failed: {e}");
-                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-                }
+                // The library has dropped the failed subscriber already: the others go on.
+                Err(e) => tracing::debug!("{name}: a subscriber failed: {e}"),
             },
             f = frames.recv() => match f {
                 Some(f) => {
                     if let Err(e) = publ.send(zeromq::ZmqMessage::from(f)).await {
-                        tracing::debug!("{name}: publishing failed: {e}");
+                        if std::mem::replace(&mut send_failed, true) {
+                            tracing::debug!("{name}: publishing failed: {e}");
+                        } else {
+                            tracing::warn!("{name}: publishing failed: {e} (further failures at debug level)");
+                        }
                     }
                 }
                 None => return,
@@ -289,15 +302,17 @@ pub async fn serve(
             }
         }
     };
-    let (frames_tx, frames_rx) = tokio::sync::mpsc::channel(cfg.limits.input_chunks.max(1));
-    let publisher = tokio::spawn(publish(
+    // One frame in hand at most: the link's own output queue (`output_frames`, dropping and
+    // counting) is the bound, as it was with the socket itself.
+    let (frames_tx, frames_rx) = tokio::sync::mpsc::channel(1);
+    let mut publisher = AbortOnDrop(tokio::spawn(publish(
         publ,
         frames_rx,
         segs.clone(),
         cfg.clone(),
         name.clone(),
         clock,
-    ));
+    )));
     let mut out = Publisher(frames_tx);
     let k = Connection {
         name: &name,
@@ -309,10 +324,11 @@ pub async fn serve(
         opened,
         live: None,
     };
-    let reader = tokio::spawn(reader);
+    let _reader = AbortOnDrop(tokio::spawn(reader));
     let why = serve_link(in_rx, &mut out, k).await;
-    reader.abort();
-    publisher.abort();
+    // What was handed to the publisher goes out before the hub closes.
+    drop(out);
+    let _ = tokio::time::timeout(std::time::Duration::from_secs(1), &mut publisher.0).await;
     tracing::info!("{name}: hub closed: {why}");
     bump(&stats, |s| s.disconnects += 1);
 }
