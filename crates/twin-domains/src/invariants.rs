@@ -429,7 +429,7 @@ mod tests {
         report.power = vec![sample(1, 0.5), sample(2, 1.2), sample(3, -0.1)];
         let run = |session: u8, from: u64, to: Option<u64>| SessionRun {
             session,
-            payload: 12,
+            payload: Some(12),
             started: Some(SimTime(from)),
             ended: to.map(|t| {
                 (

@@ -390,9 +390,9 @@ impl RunReport {
         }
     }
 
-    /// The ground's requests and how many were answered, when it sent any.
     /// Every payload session run: when, how it ended, what reached the ground (the ground
-    /// sink writes each run's bytes to `session-S-runN.bin`, N counting the session's runs).
+    /// sink writes each run's bytes to `session-S-runN.bin`, N counting the session's runs
+    /// that started; one that ended without starting has no number and no file).
     fn table_sessions(&self, s: &mut String) {
         let runs = &self.sessions.runs;
         if runs.is_empty() {
@@ -405,12 +405,15 @@ impl RunReport {
         );
         let mut nth: std::collections::BTreeMap<u8, u32> = std::collections::BTreeMap::new();
         for r in runs {
-            let n = nth.entry(r.session).or_default();
-            *n += 1;
-            let payload = match r.payload {
-                0 => "-".to_owned(),
-                p => p.to_string(),
+            let n = match r.started {
+                Some(_) => {
+                    let n = nth.entry(r.session).or_default();
+                    *n += 1;
+                    n.to_string()
+                }
+                None => "-".to_owned(),
             };
+            let payload = r.payload.map_or("-".to_owned(), |p| p.to_string());
             let start = r
                 .started
                 .map_or("-".to_owned(), |t| format!("{:.3}", t.as_secs_f64()));
@@ -430,6 +433,7 @@ impl RunReport {
         }
     }
 
+    /// The ground's requests and how many were answered, when it sent any.
     fn table_requests(&self, s: &mut String) {
         let r = self.requests;
         if r.requests > 0 {
@@ -452,6 +456,40 @@ impl RunReport {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each session run is a row; a run that ended without starting (an ABORT of a
+    /// PENDING session) has no run number, so the numbers stay those of the ground sink's
+    /// files (`session-S-runN.bin`, counted as runs start).
+    #[test]
+    fn the_sessions_table_numbers_only_the_runs_that_started() {
+        use crate::observe::sessions::SessionRun;
+        use twin_scenario::pc::RunEnd;
+        let run = |started: Option<u64>, result| SessionRun {
+            session: 1,
+            payload: started.map(|_| 12),
+            started: started.map(SimTime::from_secs),
+            ended: Some((SimTime::from_secs(100), RunEnd::Result(result), 3)),
+            bytes: Vec::new(),
+            len: 30,
+            stream: Default::default(),
+        };
+        let mut r = RunReport::default();
+        r.sessions.runs = vec![
+            run(None, nodes_pc::SessionResult::Aborted),
+            run(Some(10), nodes_pc::SessionResult::Done),
+        ];
+        let table = r.table();
+        let rows: Vec<Vec<&str>> = table
+            .lines()
+            .skip_while(|l| *l != "payload sessions:")
+            .skip(2)
+            .take_while(|l| !l.is_empty())
+            .map(|l| l.split_whitespace().collect())
+            .collect();
+        assert_eq!(rows.len(), 2, "{table}");
+        assert_eq!(rows[0][..3], ["1", "-", "-"], "{table}");
+        assert_eq!(rows[1][..3], ["1", "12", "1"], "{table}");
+    }
 
     #[test]
     fn the_table_says_what_the_boards_refused_and_the_links_held_back() {

@@ -10,8 +10,8 @@ use twin_scenario::pc::RunEnd;
 pub struct SessionRun {
     /// Session id.
     pub session: u8,
-    /// The session's payload (0 when the run ended without starting).
-    pub payload: u8,
+    /// The session's payload (`None`: the run ended without starting).
+    pub payload: Option<u8>,
     /// When it became ACTIVE (`None`: it ended without starting, as an ABORT of a
     /// PENDING session may report).
     pub started: Option<SimTime>,
@@ -126,7 +126,7 @@ impl SessionsReport {
                 payload_addr,
             } => self.runs.push(SessionRun {
                 session: *session_id,
-                payload: *payload_addr,
+                payload: Some(*payload_addr),
                 started: Some(*t),
                 ended: None,
                 bytes: Vec::new(),
@@ -195,7 +195,7 @@ impl SessionsReport {
             Some(r) => r.ended = Some(end),
             None => self.runs.push(SessionRun {
                 session,
-                payload: 0,
+                payload: None,
                 started: None,
                 ended: Some(end),
                 bytes: Vec::new(),

@@ -79,7 +79,8 @@ fn session_runs(file: &Path) -> anyhow::Result<String> {
     use std::fmt::Write as _;
     let dir = file.with_extension("downlink");
     // The ground sink numbers each session's runs from 1 as they start; a session's runs
-    // end in the order they started, and each end (or loss) is one run, with a file.
+    // end in the order they started. A run that ended without starting (an ABORT of a
+    // PENDING session) has no number and no file.
     let mut runs_of: BTreeMap<u8, u32> = BTreeMap::new();
     let mut s = String::from(
         "PC session runs (/pc/sessions/summary, in the order they ended):\n  \
@@ -90,11 +91,13 @@ fn session_runs(file: &Path) -> anyhow::Result<String> {
         .filter(|m| &*m.topic == TOPIC_PC_SESSION_SUMMARY)
         .filter_map(|m| m.decode::<PcSessionSummaryMsg>().ok());
     for run in runs {
-        let k = runs_of.entry(run.session).or_default();
-        *k += 1;
-        let path = dir.join(format!("session-{}-run{k}.bin", run.session));
-        let downlink = match std::fs::metadata(&path) {
-            Ok(meta) if meta.is_file() => format!("{} ({} B)", path.display(), meta.len()),
+        let path = run.start_ns.map(|_| {
+            let k = runs_of.entry(run.session).or_default();
+            *k += 1;
+            dir.join(format!("session-{}-run{k}.bin", run.session))
+        });
+        let downlink = match path.as_ref().map(|p| (p, std::fs::metadata(p))) {
+            Some((p, Ok(meta))) if meta.is_file() => format!("{} ({} B)", p.display(), meta.len()),
             _ => "-".to_owned(),
         };
         let result = match &run.cause {
