@@ -18,6 +18,7 @@
 //! | 10 | SETUP 1 | [`SessionConfig`] 10 + N (N 0..=128) | 0 |
 //! | 10 | STATUS 2 | session id, 1 | [`Status`] 11 + N |
 //! | 10 | ABORT 3 | session id, 1 | 0 |
+//! | 10 | WHY 4 (the twin's own: a spacecraft's PC has no such command) | 0 | [`Why`] 5 + N (N 0..=64) |
 //! | payload | SYNC 1 | message, N (0..=128) | the same N bytes |
 //! | payload | POLL 2 | frame size, 1 | 0..=frame size |
 //! | 11 | (none: raw data) | 0..=256 bytes, no command byte, no reply | - |
@@ -54,6 +55,9 @@ pub mod cmd {
     pub const STATUS: u8 = 2;
     /// Control port: abort a PENDING or ACTIVE session.
     pub const ABORT: u8 = 3;
+    /// Control port: why the asker's last refused request was refused (the twin's own: a
+    /// spacecraft's PC has no such command).
+    pub const WHY: u8 = 4;
     /// Payload port: synchronisation message, echoed by the payload.
     pub const SYNC: u8 = 1;
     /// Payload port: poll for one data frame.
@@ -90,6 +94,10 @@ pub const FRAME_SIZE_MIN: u8 = 1;
 pub const FRAME_SIZE_MAX: u8 = 254;
 /// Largest ingest packet (ICD 3.1.5: "the maximum data size in one CSP packet is 256 bytes").
 pub const INGEST_MAX_LEN: usize = 256;
+/// Longest reason text in a WHY reply.
+pub const WHY_REASON_MAX_LEN: usize = 64;
+/// Bytes of WHY reply data before the reason text.
+pub const WHY_FIXED_LEN: usize = 5;
 /// Session slots in TMPC (one per payload id 12-15).
 pub const TMPC_SLOTS: usize = 4;
 
@@ -152,6 +160,76 @@ impl SessionResult {
     }
 }
 
+/// Why the PC refused a request: a WHY reply's `code` (the twin's own numbering; a value,
+/// once given, keeps its meaning).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+#[non_exhaustive]
+pub enum RefusalCode {
+    /// No request of the asker's refused since the PC booted.
+    #[default]
+    None = 0,
+    /// No session with the id is configured.
+    UnknownSession = 1,
+    /// SETUP of a session that is PENDING or ACTIVE.
+    Busy = 2,
+    /// The window overlaps a PENDING or ACTIVE session's.
+    Overlap = 3,
+    /// An immediate start while another session is ACTIVE.
+    OtherActive = 4,
+    /// ABORT of a session that is NOT ACTIVE.
+    NotRunning = 5,
+    /// A command refused to payloads (ICD 3.1.1, 3.1.5).
+    PayloadDenied = 6,
+    /// A buffer file asked of a payload without a buffering session.
+    NoFile = 7,
+    /// No command id, or request data of the wrong length.
+    Malformed = 8,
+    /// A field outside its range.
+    OutOfRange = 9,
+    /// A command id the port does not have.
+    UnknownCommand = 10,
+}
+
+impl RefusalCode {
+    /// Every code, in order of value.
+    pub const ALL: [RefusalCode; 11] = [
+        RefusalCode::None,
+        RefusalCode::UnknownSession,
+        RefusalCode::Busy,
+        RefusalCode::Overlap,
+        RefusalCode::OtherActive,
+        RefusalCode::NotRunning,
+        RefusalCode::PayloadDenied,
+        RefusalCode::NoFile,
+        RefusalCode::Malformed,
+        RefusalCode::OutOfRange,
+        RefusalCode::UnknownCommand,
+    ];
+    /// The wire value.
+    pub fn to_u8(self) -> u8 {
+        self as u8
+    }
+    /// From the wire value.
+    pub fn from_u8(v: u8) -> Option<Self> {
+        Self::ALL.get(usize::from(v)).copied()
+    }
+}
+
+/// [`RefusalCode`]'s values by name.
+pub const REFUSAL_CODES: &[(i64, &str)] = &[
+    (0, "none"),
+    (1, "unknown session"),
+    (2, "busy"),
+    (3, "overlap"),
+    (4, "other active"),
+    (5, "not running"),
+    (6, "payload denied"),
+    (7, "no file"),
+    (8, "malformed"),
+    (9, "out of range"),
+    (10, "unknown command"),
+];
+
 /// [`SessionState`]'s values by name.
 pub const SESSION_STATES: &[(i64, &str)] = &[(0, "NOT ACTIVE"), (1, "PENDING"), (2, "ACTIVE")];
 
@@ -199,6 +277,25 @@ csp::wire_struct! {
         pub max_packets: u16,
         /// Poll frame size, as SETUP gave it.
         pub poll_frame_size: u8 { unit: "B" },
+    }
+}
+
+csp::wire_struct! {
+    /// WHY reply data before the reason text (the twin's own, 5 bytes; a spacecraft's PC has
+    /// no such command).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub struct WhyHead {
+        /// Why the asker's last refused request was refused (0: none of its requests was
+        /// refused since the PC booted).
+        pub code: u8 { values: REFUSAL_CODES },
+        /// The port that request went to (0 with none).
+        pub port: u8,
+        /// Its command id (0 with none).
+        pub command: u8,
+        /// The session it named (SETUP, STATUS or ABORT; 0 with none).
+        pub session_id: u8,
+        /// The session in its way (overlap, another ACTIVE; 0 with none).
+        pub other_session_id: u8,
     }
 }
 
@@ -266,6 +363,19 @@ pub const ICD_CONTROL: Port = Port {
             .request(Data::of::<SessionId>())
             .examples(&[&[1]])
             .no_payloads(),
+        Command::new(
+            cmd::WHY,
+            "WHY",
+            "the twin's own, not the spacecraft's: why the PC refused the asker's last refused \
+             request (the asker is the request's source address)",
+        )
+        .reply(Data::with_tail::<WhyHead>(
+            "reason",
+            "the reason in words (ASCII)",
+            0,
+            WHY_REASON_MAX_LEN,
+        ))
+        .twin(),
     ],
 };
 
@@ -527,6 +637,82 @@ impl Status {
     }
 }
 
+/// WHY reply data (the twin's own: `5 + N` bytes, N at most [`WHY_REASON_MAX_LEN`]): the
+/// asker's last refusal, by code and in words.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Why {
+    /// Why.
+    pub code: RefusalCode,
+    /// The port the refused request went to (0 with none).
+    pub port: u8,
+    /// Its command id (0 with none).
+    pub command: u8,
+    /// The session it named (0 with none).
+    pub session_id: u8,
+    /// The session in its way (0 with none).
+    pub other_session_id: u8,
+    /// The reason in words: ASCII, at most [`WHY_REASON_MAX_LEN`] bytes.
+    pub reason: String,
+}
+
+impl Why {
+    /// Parse `5 + N` bytes, N at most 64; an unknown code or a reason that is not ASCII
+    /// fails.
+    pub fn parse(buf: &[u8]) -> Result<Self, Error> {
+        if buf.len() < WHY_FIXED_LEN {
+            return Err(Error::Truncated);
+        }
+        if buf.len() > WHY_FIXED_LEN + WHY_REASON_MAX_LEN {
+            return Err(Error::TooLong);
+        }
+        let mut r = Reader::new(buf);
+        let h = WhyHead::read(&mut r)?;
+        let code = RefusalCode::from_u8(h.code).ok_or(Error::FieldRange("code"))?;
+        let text = r.remaining();
+        if !text.is_ascii() {
+            return Err(Error::FieldRange("reason"));
+        }
+        Ok(Why {
+            code,
+            port: h.port,
+            command: h.command,
+            session_id: h.session_id,
+            other_session_id: h.other_session_id,
+            reason: String::from_utf8_lossy(text).into_owned(),
+        })
+    }
+    /// The reason's bytes as sent: its ASCII characters (others become `?`), at most
+    /// [`WHY_REASON_MAX_LEN`].
+    fn reason_bytes(&self) -> impl Iterator<Item = u8> + '_ {
+        self.reason
+            .chars()
+            .map(|c| u8::try_from(c).ok().filter(u8::is_ascii).unwrap_or(b'?'))
+            .take(WHY_REASON_MAX_LEN)
+    }
+    /// Length of the emitted bytes.
+    pub fn buffer_len(&self) -> usize {
+        WHY_FIXED_LEN + self.reason_bytes().count()
+    }
+    /// Append the bytes to `out`.
+    pub fn emit(&self, out: &mut Vec<u8>) {
+        WhyHead {
+            code: self.code.to_u8(),
+            port: self.port,
+            command: self.command,
+            session_id: self.session_id,
+            other_session_id: self.other_session_id,
+        }
+        .emit(out);
+        out.extend(self.reason_bytes());
+    }
+    /// The bytes.
+    pub fn to_vec(&self) -> Vec<u8> {
+        let mut v = Vec::with_capacity(self.buffer_len());
+        self.emit(&mut v);
+        v
+    }
+}
+
 csp::wire_struct! {
     /// One session slot of [`Tmpc`] (20 bytes).
     #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -681,6 +867,8 @@ pub enum ControlCommand {
         /// Session id.
         session_id: u8,
     },
+    /// WHY 4 (the twin's own).
+    Why,
 }
 
 impl CommandSet for ControlCommand {
@@ -711,6 +899,7 @@ impl CommandSet for ControlCommand {
                     session_id: r.data.first().copied().unwrap_or(0),
                 })
             }
+            cmd::WHY => expect_len(r, 0, "0").map(|_| ControlCommand::Why),
             c => Err(RequestError::UnknownCommand(c)),
         }
     }
@@ -818,6 +1007,60 @@ mod tests {
         assert_eq!(Status::parse(&[0; 10]), Err(Error::Truncated));
     }
 
+    /// WHY's reply: code, port, command, the two sessions, then at most 64 bytes of ASCII
+    /// text; in the control port's table as the twin's own and open to payloads, as STATUS
+    /// (it tells the asker of its own refusals only).
+    #[test]
+    fn why_bytes_and_table_entry() {
+        assert_eq!(WhyHead::LEN, WHY_FIXED_LEN);
+        let w = Why {
+            code: RefusalCode::Overlap,
+            port: 10,
+            command: cmd::SETUP,
+            session_id: 3,
+            other_session_id: 1,
+            reason: "window overlaps session 1".to_owned(),
+        };
+        let mut bytes = vec![3, 10, 1, 3, 1];
+        bytes.extend_from_slice(b"window overlaps session 1");
+        assert_eq!(w.to_vec(), bytes);
+        assert_eq!(w.buffer_len(), bytes.len());
+        assert_eq!(Why::parse(&bytes).unwrap(), w);
+        assert_eq!(Why::parse(&bytes[..4]), Err(Error::Truncated));
+        // None: five zeros and no text.
+        assert_eq!(Why::default().to_vec(), vec![0; 5]);
+        // The text is cut at 64 bytes and sent as ASCII.
+        let long = Why {
+            reason: "x".repeat(100),
+            ..Why::default()
+        };
+        assert_eq!(long.to_vec().len(), 5 + 64);
+        let odd = Why {
+            reason: "é!".to_owned(),
+            ..Why::default()
+        };
+        assert_eq!(odd.to_vec()[5..], *b"?!");
+        assert_eq!(Why::parse(&[0; 70]), Err(Error::TooLong));
+        assert!(Why::parse(&[11, 0, 0, 0, 0]).is_err(), "no code 11");
+        assert!(
+            Why::parse(&[1, 0, 0, 0, 0, 0xc3, 0xa9]).is_err(),
+            "not ASCII"
+        );
+        // The codes' numbering is the table's.
+        for (i, c) in RefusalCode::ALL.iter().enumerate() {
+            assert_eq!(usize::from(c.to_u8()), i);
+            assert_eq!(REFUSAL_CODES[i].0, i as i64);
+        }
+        assert_eq!(RefusalCode::ALL.len(), REFUSAL_CODES.len());
+        let c = ICD_CONTROL.command(cmd::WHY).unwrap();
+        assert_eq!(c.name, "WHY");
+        assert!(c.twin);
+        assert!(c.doc.starts_with("the twin's own, not the spacecraft's"));
+        assert_eq!(c.access, csp::icd::Access::Any);
+        assert_eq!(c.request.fixed_len(), Some(0));
+        assert_eq!(c.reply.bounds(), (5, 5 + 64));
+    }
+
     #[test]
     fn tmpc_is_89_bytes_with_fields_in_order() {
         assert_eq!(Tmpc::LEN, 89);
@@ -862,7 +1105,13 @@ mod tests {
             req(&[3, 1, 2]),
             Err(RequestError::WrongLength { .. })
         ));
-        assert!(matches!(req(&[4, 1]), Err(RequestError::UnknownCommand(4))));
+        // WHY 4, the twin's own, takes no data; 5 is nothing.
+        assert_eq!(req(&[4]), Ok(ControlCommand::Why));
+        assert!(matches!(
+            req(&[4, 1]),
+            Err(RequestError::WrongLength { .. })
+        ));
+        assert!(matches!(req(&[5, 1]), Err(RequestError::UnknownCommand(5))));
         let mut c = icd_example();
         c.duration_s = 901;
         assert!(matches!(
@@ -950,6 +1199,14 @@ mod tests {
         }
 
         #[test]
+        fn why_round_trip(code in 0u8..11, port: u8, command: u8, a: u8, b: u8,
+                          reason in "[ -~]{0,64}") {
+            let w = Why { code: RefusalCode::from_u8(code).unwrap(), port, command,
+                session_id: a, other_session_id: b, reason };
+            prop_assert_eq!(Why::parse(&w.to_vec()).unwrap(), w);
+        }
+
+        #[test]
         fn tmpc_round_trip(b in proptest::collection::vec(any::<u8>(), 89)) {
             prop_assert_eq!(Tmpc::parse(&b).unwrap().to_vec(), b);
         }
@@ -959,6 +1216,7 @@ mod tests {
             let _ = SessionConfig::parse(&b);
             let _ = Status::parse(&b);
             let _ = Tmpc::parse(&b);
+            let _ = Why::parse(&b);
             if let Ok(r) = Request::parse(&b) {
                 let _ = ControlCommand::parse(&r);
                 let _ = TelemetryCommand::parse(&r);

@@ -3,7 +3,8 @@
 //! CAN buses is the CSP node's job, configured by the twin.)
 //!
 //! [`PcApp`] is a pure core ([`csp::node::App`]) driven by packets and timers:
-//! - port 10 (control): SETUP 1, STATUS 2, ABORT 3 over the session table ([`session`]);
+//! - port 10 (control): SETUP 1, STATUS 2, ABORT 3 over the session table ([`session`]),
+//!   and WHY 4, the twin's own: why the asker's last refused request was refused ([`why`]);
 //! - port 11 (ingest, ICD 3.1.5): raw data packets of buffering payloads, appended to the
 //!   payload's file (the CSP packet data as is: there is no command byte);
 //! - port 12 (the twin's PC telemetry): TMPC 1 ([`wire::Tmpc`]);
@@ -66,6 +67,7 @@
 pub mod config;
 pub mod sband;
 pub mod session;
+pub mod why;
 pub use icd::pc as wire;
 
 use std::collections::{BTreeMap, VecDeque};
@@ -79,6 +81,7 @@ use csp::{Header, Packet, SimTime};
 
 pub use crate::sband::{Sband, SbandConfig};
 pub use crate::session::{Accepted, Refusal, SessionTable};
+pub use crate::why::{Denied, Reason, Refusals};
 use crate::wire::{ControlCommand, FileStat, FilesCommand, TelemetryCommand, Tmpc, TmpcSlot, cmd};
 pub use crate::wire::{SessionConfig, SessionResult, SessionState, Status};
 
@@ -749,6 +752,8 @@ pub struct PcApp {
     activity: Option<platform::board::ActivityBoard>,
     /// The transmitter is off because its power channel is (not by a scenario event).
     unpowered: bool,
+    /// Each address's last refused request, for WHY.
+    refusals: Refusals,
 }
 
 impl PcApp {
@@ -780,6 +785,7 @@ impl PcApp {
             log,
             activity: None,
             unpowered: false,
+            refusals: Refusals::default(),
             cfg,
         }
     }
@@ -917,8 +923,9 @@ impl PcApp {
         }
     }
 
-    fn files(&mut self, c: FilesCommand, src: u8, now: SimTime) -> Result<Vec<u8>, u8> {
-        let slot = |a| self.file_slot(a).ok_or(csp::reqrep::RESULT_FAILURE);
+    fn files(&mut self, c: FilesCommand, src: u8, now: SimTime) -> Result<Vec<u8>, Reason> {
+        let no_file = |payload_addr| Reason::NoFile { payload_addr };
+        let slot = |a| self.file_slot(a).ok_or(no_file(a));
         match c {
             FilesCommand::List => {
                 let slots: Vec<usize> = (0..self.table.slots().len())
@@ -936,7 +943,7 @@ impl PcApp {
             FilesCommand::Stat { payload_addr } => Ok(self.file_stat(slot(payload_addr)?).to_vec()),
             FilesCommand::Read(q) => {
                 let i = slot(q.payload_addr)?;
-                let file = &self.runs.get(i).ok_or(csp::reqrep::RESULT_FAILURE)?.file;
+                let file = &self.runs.get(i).ok_or(no_file(q.payload_addr))?.file;
                 let head = file.head_offset();
                 let end = head + file.len() as u64;
                 let served = q.offset.clamp(head, end);
@@ -1452,17 +1459,22 @@ impl PcApp {
 
     // ---- packets ----
 
+    /// A control request of `src`; `Err` the reason for a refusal.
     fn control(
         &mut self,
         node: &mut Node,
         c: ControlCommand,
+        src: u8,
         now: SimTime,
         start_now: &mut Option<usize>,
-    ) -> Result<Vec<u8>, u8> {
-        let refused = |this: &mut Self, why: Refusal| {
+    ) -> Result<Vec<u8>, Reason> {
+        let refused = |this: &mut Self, session_id: u8, why: Refusal| {
             this.log
                 .push(NodeEvent::info(now, format!("pc: refused: {why}")));
-            csp::reqrep::RESULT_FAILURE
+            Reason::Session {
+                session_id,
+                refusal: why,
+            }
         };
         match c {
             ControlCommand::Setup(cfg) => {
@@ -1485,7 +1497,7 @@ impl PcApp {
                         }
                         Ok(Vec::new())
                     }
-                    Err(why) => Err(refused(self, why)),
+                    Err(why) => Err(refused(self, cfg.session_id, why)),
                 }
             }
             ControlCommand::Status { session_id } => match self.table.index_of(session_id) {
@@ -1494,7 +1506,11 @@ impl PcApp {
                     .slot(i)
                     .map(|s| s.status().to_vec())
                     .unwrap_or_default()),
-                None => Err(refused(self, Refusal::UnknownSession(session_id))),
+                None => Err(refused(
+                    self,
+                    session_id,
+                    Refusal::UnknownSession(session_id),
+                )),
             },
             ControlCommand::Abort { session_id } => match self.table.abort(session_id) {
                 Ok((i, SessionState::Active)) => {
@@ -1508,8 +1524,9 @@ impl PcApp {
                     ));
                     Ok(Vec::new())
                 }
-                Err(why) => Err(refused(self, why)),
+                Err(why) => Err(refused(self, session_id, why)),
             },
+            ControlCommand::Why => Ok(self.refusals.why(src).to_vec()),
         }
     }
 
@@ -1660,41 +1677,55 @@ impl App for PcApp {
             // system (ICD 3.1.5).
             let closed = if dport == c.control_port {
                 match command {
-                    Some(wire::cmd::SETUP) => {
-                        Some("SETUP: session configuration is the mission's (ICD 3.1.1)")
-                    }
-                    Some(wire::cmd::ABORT) => {
-                        Some("ABORT: session configuration is the mission's (ICD 3.1.1)")
-                    }
+                    Some(wire::cmd::SETUP) => Some(Denied::Setup),
+                    Some(wire::cmd::ABORT) => Some(Denied::Abort),
                     _ => None,
                 }
             } else if dport == c.files_port {
-                Some(
-                    "the buffer files: the file system interface is denied to payloads (ICD 3.1.5)",
-                )
+                Some(Denied::Files)
             } else {
                 None
             };
-            let (reply, refused) =
-                if let Some(why) = closed.filter(|_| c.payload_access.refuses(src, false)) {
-                    self.counters.denied += 1;
-                    self.log.push(NodeEvent::warning(
-                        now,
-                        format!("pc: payload {src} refused {why}"),
-                    ));
-                    (csp::reqrep::failure(command.unwrap_or(0)), None)
-                } else if dport == c.control_port {
-                    serve::<ControlCommand>(&packet.data, |c| {
-                        self.control(node, c, now, &mut start_now)
-                    })
-                } else if dport == c.files_port {
-                    serve::<FilesCommand>(&packet.data, |c| self.files(c, src, now))
-                } else {
-                    serve::<TelemetryCommand>(&packet.data, |_| Ok(self.tmpc().to_vec()))
-                };
+            // Why the request is refused, if it is (for WHY).
+            let mut reason = None;
+            let mut keep = |r: Reason| {
+                reason = Some(r);
+                csp::reqrep::RESULT_FAILURE
+            };
+            let (reply, refused) = if let Some(why) =
+                closed.filter(|_| c.payload_access.refuses(src, false))
+            {
+                self.counters.denied += 1;
+                self.log.push(NodeEvent::warning(
+                    now,
+                    format!("pc: payload {src} refused {}", why.log_text()),
+                ));
+                keep(Reason::Denied(why));
+                (csp::reqrep::failure(command.unwrap_or(0)), None)
+            } else if dport == c.control_port {
+                serve::<ControlCommand>(&packet.data, |c| {
+                    self.control(node, c, src, now, &mut start_now)
+                        .map_err(&mut keep)
+                })
+            } else if dport == c.files_port {
+                serve::<FilesCommand>(&packet.data, |c| self.files(c, src, now).map_err(&mut keep))
+            } else {
+                serve::<TelemetryCommand>(&packet.data, |_| Ok(self.tmpc().to_vec()))
+            };
             if let Some(e) = refused {
                 self.log
                     .push(NodeEvent::info(now, format!("pc: request refused: {e}")));
+                keep(Reason::Request(e));
+            }
+            if let Some(reason) = reason {
+                self.refusals.record(
+                    src,
+                    why::Refused {
+                        port: dport,
+                        command: command.unwrap_or(0),
+                        reason,
+                    },
+                );
             }
             if reply.get(1) != Some(&csp::reqrep::RESULT_SUCCESS) {
                 self.counters.refused += 1;
@@ -1809,6 +1840,7 @@ impl PcApp {
     /// What a reboot or a loss of power takes: the buffered data (counted as dropped for
     /// `PowerLoss`), the S-band queue, the sessions' state.
     fn lose_volatile(&mut self, now: SimTime, why: LostCause) {
+        self.refusals.clear();
         if self.sband.is_transmitting() {
             self.tx_activity(now, false);
         }

@@ -21,6 +21,7 @@ fn malformed_requests_get_failure_replies() {
         (10, vec![], vec![0, 0]),
         (10, vec![0], vec![0, 0]),
         (10, vec![4, 1], vec![4, 0]),
+        (10, vec![5], vec![5, 0]),
         (10, vec![255], vec![255, 0]),
         (10, short_setup, vec![1, 0]),
         (10, long_setup, vec![1, 0]),

@@ -285,11 +285,23 @@ pub fn raw_reply(header: &csp::Header, data: &[u8], ms: f64) -> (String, bool) {
     )
 }
 
+/// The line `gs` prints for a refusal of `name` (`PC.SETUP`) by node `src` with result
+/// `result`, `ms` after the request: with the node's `reason` when it told it (the PC's WHY,
+/// the twin's own command), else where the reason is to be found.
+pub fn refused_line(name: &str, src: u8, result: u8, reason: Option<&str>, ms: f64) -> String {
+    match reason {
+        Some(why) => format!("{name} from {src}: refused: {why} (result {result}) ({ms:.3} ms)\n"),
+        None => format!(
+            "{name} from {src}: refused (result {result}; the reason is in the run log, `/log` of the recording) ({ms:.3} ms)\n"
+        ),
+    }
+}
+
 /// A reply the ICD decoded (`d`, of command `cmd` from node `src`; `data` its bytes from the
 /// command id on), as `gs` prints it: a head line (`PC.TMPC from 6: ok, 89 bytes (1.234
 /// ms)`), then one line per field with the ICD's name, the value, its unit and value name;
-/// or the refusal. The flag: the node answered with success and the reply fits the ICD's
-/// layout.
+/// or the refusal ([`refused_line`], without the reason). The flag: the node answered with
+/// success and the reply fits the ICD's layout.
 pub fn show_reply(
     d: &crate::icd::DecodedPacket,
     cmd: &csp::icd::Command,
@@ -301,12 +313,10 @@ pub fn show_reply(
     let mut s = String::new();
     let name = format!("{}.{}", d.node, cmd.name);
     if d.result != Some(csp::reqrep::RESULT_SUCCESS) {
-        let _ = writeln!(
-            s,
-            "{name} from {src}: refused (result {}; the reason is in the run log, `/log` of the recording) ({ms:.3} ms)",
-            d.result.unwrap_or(0)
+        return (
+            refused_line(&name, src, d.result.unwrap_or(0), None, ms),
+            false,
         );
-        return (s, false);
     }
     let _ = writeln!(
         s,
@@ -338,61 +348,116 @@ pub fn show_reply(
     (s, true)
 }
 
-/// `gs setup|status|abort`: a request to the PC's session control port (6:10); the reply
-/// decoded (ICD 3.1.8.1). Succeeds when the PC answers with result 1.
+/// `gs setup|status|abort`: a request to the PC's session control port (6:10), its reply
+/// printed as the same command by name prints it ([`show_reply`]), a refusal with the PC's
+/// reason. Succeeds when the PC answers with result 1.
 pub async fn pc_request(
     gs: &mut GsClient,
     request: Vec<u8>,
     timeout: Duration,
 ) -> anyhow::Result<bool> {
-    use nodes_pc::wire::{PORT_CONTROL, Status, cmd};
-    const PC: u8 = 6;
-    let command = request.first().copied().unwrap_or(0);
-    let name = match command {
-        cmd::SETUP => "SETUP",
-        cmd::STATUS => "STATUS",
-        _ => "ABORT",
+    use nodes_pc::wire::{ICD_CONTROL, PORT_CONTROL};
+    let id = request.first().copied().unwrap_or(0);
+    let Some(cmd) = ICD_CONTROL.command(id) else {
+        bail!("the PC's control port has no command {id}");
     };
-    let Some((reply, rtt)) = gs.request(PC, PORT_CONTROL, request, timeout).await? else {
-        return no_reply(PC, timeout);
+    let to = Target {
+        node: "PC",
+        addr: platform::addr::PC,
+        port: PORT_CONTROL,
+        icd_port: PORT_CONTROL,
+    };
+    send_and_show(gs, to, cmd, request, timeout).await
+}
+
+/// Where a request by name goes: the ICD's node name, its address, the port it is sent to
+/// and the port the ICD lists the command on.
+#[derive(Debug, Clone, Copy)]
+struct Target<'a> {
+    node: &'a str,
+    addr: u8,
+    port: u8,
+    icd_port: u8,
+}
+
+/// Send `request` (command `cmd`) to `to` and print the reply decoded ([`show_reply`]); a
+/// PC's refusal with the reason its WHY gives ([`pc_reason`]). Succeeds when the node
+/// answers with result 1.
+async fn send_and_show(
+    gs: &mut GsClient,
+    to: Target<'_>,
+    cmd: &'static csp::icd::Command,
+    request: Vec<u8>,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
+    let Some((reply, rtt)) = gs.request(to.addr, to.port, request, timeout).await? else {
+        return no_reply(to.addr, timeout);
     };
     let ms = rtt.as_secs_f64() * 1e3;
-    match reply.data.as_slice() {
-        [c, 1, rest @ ..] if *c == command => {
-            if command == cmd::STATUS {
-                match Status::parse(rest) {
-                    Ok(st) => println!(
-                        "STATUS: state {:?}, last result {:?}, start {}, {} s, max packets {}, \
-                         frame {} bytes, sync {:?} ({ms:.3} ms)",
-                        st.state,
-                        st.last_result,
-                        st.timestamp,
-                        st.duration_s,
-                        st.max_packets,
-                        st.poll_frame_size,
-                        String::from_utf8_lossy(&st.sync_message)
-                    ),
-                    Err(e) => {
-                        println!("STATUS: malformed reply {} ({e:?})", hex::encode(rest));
-                        return Ok(false);
-                    }
-                }
-            } else {
-                println!("{name}: accepted ({ms:.3} ms)");
+    let map = crate::icd::IcdMap::defaults();
+    let mut h = reply.header;
+    // Read it as a reply from the ICD's default port, wherever the node answered from.
+    h.sport = to.icd_port;
+    h.dport = h.dport.max(csp::header::EPHEMERAL_PORT_MIN);
+    let body = &reply.data[..];
+    match map.decode(&h, body) {
+        Some(d) if d.command == cmd.name => {
+            if d.result != Some(csp::reqrep::RESULT_SUCCESS)
+                && to.addr == platform::addr::PC
+                && let Some(why) = pc_reason(gs, to, cmd.id, timeout).await?
+            {
+                let name = format!("{}.{}", d.node, cmd.name);
+                let result = d.result.unwrap_or(0);
+                print!("{}", refused_line(&name, to.addr, result, Some(&why), ms));
+                return Ok(false);
             }
-            Ok(true)
+            let (text, ok) = show_reply(&d, cmd, to.addr, body, ms);
+            print!("{text}");
+            Ok(ok)
         }
-        [c, 0, ..] if *c == command => {
+        _ => {
             println!(
-                "{name}: refused by the PC (result 0; the reason is in the run log, `/log` of the recording) ({ms:.3} ms)"
+                "{}.{}: unexpected reply {}",
+                to.node,
+                cmd.name,
+                hex::encode(body)
             );
             Ok(false)
         }
-        other => {
-            println!("{name}: unexpected reply {}", hex::encode(other));
-            Ok(false)
-        }
     }
+}
+
+/// Why the PC at `to` refused this client's request `command` on `to.port`, as its WHY (the
+/// twin's own command, on the control port) tells it, from this client's address. `None`
+/// when the PC does not answer WHY (a real PC has no such command) or its last refusal of
+/// this address is another request.
+async fn pc_reason(
+    gs: &mut GsClient,
+    to: Target<'_>,
+    command: u8,
+    timeout: Duration,
+) -> anyhow::Result<Option<String>> {
+    use nodes_pc::wire::{PORT_CONTROL, RefusalCode, Why, cmd};
+    // WHY is on the control port: the one the request went to if it went there (`--port`
+    // moves it), else the ICD's.
+    let control = if to.icd_port == PORT_CONTROL {
+        to.port
+    } else {
+        PORT_CONTROL
+    };
+    let Some((reply, _)) = gs
+        .request(to.addr, control, vec![cmd::WHY], timeout)
+        .await?
+    else {
+        return Ok(None);
+    };
+    let [cmd::WHY, csp::reqrep::RESULT_SUCCESS, data @ ..] = reply.data.as_slice() else {
+        return Ok(None);
+    };
+    Ok(Why::parse(data)
+        .ok()
+        .filter(|w| w.code != RefusalCode::None && (w.port, w.command) == (to.port, command))
+        .map(|w| w.reason))
 }
 
 /// Arguments `name=value` as the ICD's encoder takes them: a number where the text is one,
@@ -448,8 +513,8 @@ fn node_addr(name: &str, icd_node: &crate::icd::NodeIcd) -> Option<u8> {
 /// `gs NODE COMMAND [NAME=VALUE ...]`: any ICD command by name (`fc tmatp`, `pc setup
 /// session_id=1 timestamp=now duration_s=10m max_packets=0 poll_frame_size=200`), its
 /// arguments checked against the ICD before anything is sent, and the reply decoded with
-/// units and value names. `port` overrides the ICD's default port. Succeeds when the node
-/// answers with result 1.
+/// units and value names; a PC's refusal with the PC's reason. `port` overrides the ICD's
+/// default port. Succeeds when the node answers with result 1.
 pub async fn icd_command(
     gs: &mut GsClient,
     words: &[String],
@@ -490,35 +555,15 @@ pub async fn icd_command(
             anyhow::anyhow!("{}.{field}: {m}", cmd.name)
         }
     })?;
-    let dport = port.unwrap_or(icd_port.port);
     let mut request = vec![cmd.id];
     request.extend(data);
-    let Some((reply, rtt)) = gs.request(dst, dport, request, timeout).await? else {
-        return no_reply(dst, timeout);
+    let to = Target {
+        node: icd_node.name,
+        addr: dst,
+        port: port.unwrap_or(icd_port.port),
+        icd_port: icd_port.port,
     };
-    let ms = rtt.as_secs_f64() * 1e3;
-    let map = crate::icd::IcdMap::defaults();
-    let mut h = reply.header;
-    // Read it as a reply from the ICD's default port, wherever the node answered from.
-    h.sport = icd_port.port;
-    h.dport = h.dport.max(csp::header::EPHEMERAL_PORT_MIN);
-    let body = &reply.data[..];
-    match map.decode(&h, body) {
-        Some(d) if d.command == cmd.name => {
-            let (text, ok) = show_reply(&d, cmd, dst, body, ms);
-            print!("{text}");
-            Ok(ok)
-        }
-        _ => {
-            println!(
-                "{}.{}: unexpected reply {}",
-                icd_node.name,
-                cmd.name,
-                hex::encode(body)
-            );
-            Ok(false)
-        }
-    }
+    send_and_show(gs, to, cmd, request, timeout).await
 }
 
 #[cfg(test)]
@@ -575,6 +620,20 @@ mod tests {
         // The same text as the by-name command prints.
         let (_, _, cmd) = crate::icd::find_command("PC.TMPC").unwrap();
         assert_eq!(show_reply(&d, cmd, 6, &data, 1.5), (text, true));
+    }
+
+    /// A refusal with the node's reason names it; without one it says where it is.
+    #[test]
+    fn a_refusal_line_has_the_reason_when_the_node_told_it() {
+        assert_eq!(
+            refused_line("PC.SETUP", 6, 0, Some("window overlaps session 2"), 1.5),
+            "PC.SETUP from 6: refused: window overlaps session 2 (result 0) (1.500 ms)\n"
+        );
+        assert_eq!(
+            refused_line("FC.TMPERSET", 3, 0, None, 2.0),
+            "FC.TMPERSET from 3: refused (result 0; the reason is in the run log, `/log` of \
+             the recording) (2.000 ms)\n"
+        );
     }
 
     #[test]
