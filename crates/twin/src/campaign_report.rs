@@ -1,16 +1,18 @@
 //! `report.html`: a campaign's results for a person: one self-contained page (inline SVG, no
 //! script, nothing fetched) with the failures by check (each expectation or invariant that
-//! failed: in how many runs, and the first), the pass rate per fault kind, the failures
-//! plotted against every drawn value, histograms of the runs' metrics that vary (a metric
-//! with one value is one line), and the failures with what they drew. Axes carry the unit
-//! the plotted name gives in its suffix ([`unit_of`]). Built from the rows alone, so a merged
-//! campaign's page is the unsharded one's; the failures by check are also text, for the
-//! terminal ([`failures_by_check_text`]).
+//! failed: in how many runs, and the first), the payload sessions (each session id: the runs
+//! it ran in, how its session runs ended, packets and bytes, the runs where it ended other
+//! than done), the pass rate per fault kind, the failures plotted against every drawn value,
+//! histograms of the runs' metrics that vary (a metric with one value is one line), and the
+//! failures with what they drew. Axes carry the unit the plotted name gives in its suffix
+//! ([`unit_of`]). Built from the rows alone, so a merged campaign's page is the unsharded
+//! one's; the failures by check and the sessions are also text, for the terminal
+//! ([`failures_by_check_text`], [`sessions_text`]).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 
-use crate::campaign_rows::{CampaignMeta, CheckKind, RunRow, RunVerdict};
+use crate::campaign_rows::{CampaignMeta, CheckKind, RunRow, RunVerdict, SessionEnd};
 
 const PASS: &str = "#2e8b57";
 const FAIL: &str = "#d0453a";
@@ -245,6 +247,7 @@ pub fn report_html(meta: &CampaignMeta, rows: &[RunRow]) -> String {
     let mut out = String::new();
     page_head(&mut out, meta, rows);
     failures_by_check_html(&mut out, rows);
+    sessions_html(&mut out, meta, rows);
     fault_kinds(&mut out, rows);
     drawn_values(&mut out, rows);
     metric_histograms(&mut out, rows);
@@ -510,6 +513,268 @@ fn failures_by_check_html(out: &mut String, rows: &[RunRow]) {
     out.push_str("</table>\n");
 }
 
+/// The lowest, the median and the highest of some runs' figures. The median of an even
+/// count is the lower of the two middle values: a value some run had.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Spread {
+    /// The lowest.
+    pub min: u64,
+    /// The median.
+    pub median: u64,
+    /// The highest.
+    pub max: u64,
+}
+
+impl Spread {
+    /// The spread of `values`; `None` when there are none.
+    pub fn of(mut values: Vec<u64>) -> Option<Spread> {
+        values.sort_unstable();
+        Some(Spread {
+            min: *values.first()?,
+            median: values[(values.len() - 1) / 2],
+            max: *values.last()?,
+        })
+    }
+
+    /// `min / median / max unit`.
+    fn text(self, unit: &str) -> String {
+        format!("{} / {} / {} {unit}", self.min, self.median, self.max)
+    }
+}
+
+/// One payload session id over a campaign's runs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SessionAcross {
+    /// The session id.
+    pub session: u8,
+    /// The payloads its runs polled, in any run.
+    pub payloads: BTreeSet<u8>,
+    /// The campaign runs it ran in (it had a session run there).
+    pub runs: u64,
+    /// The campaign runs that ran to their end (passed or failed), which `runs` is of: a
+    /// run that ended in an error, or was not run, kept no sessions.
+    pub judged: u64,
+    /// Its session runs over all the campaign's runs, by how they ended.
+    pub ends: BTreeMap<SessionEnd, u64>,
+    /// Packets the PC counted for it per campaign run it ran in.
+    pub packets: Spread,
+    /// Bytes of it downlinked per campaign run it ran in.
+    pub downlinked_bytes: Spread,
+    /// The campaign runs in which a session run of it ended other than `done`, by index,
+    /// with those ends and how many.
+    pub not_done: Vec<(u64, BTreeMap<SessionEnd, u32>)>,
+}
+
+/// Every payload session id that ran in any run, by id.
+pub fn sessions_across(rows: &[RunRow]) -> Vec<SessionAcross> {
+    let judged = rows
+        .iter()
+        .filter(|r| matches!(r.verdict, RunVerdict::Pass | RunVerdict::Fail(_)))
+        .count() as u64;
+    let ids: BTreeSet<u8> = rows
+        .iter()
+        .flat_map(|r| r.sessions.keys().copied())
+        .collect();
+    ids.into_iter()
+        .filter_map(|session| {
+            let tallies: Vec<(u64, &crate::campaign_rows::SessionTally)> = rows
+                .iter()
+                .filter_map(|r| r.sessions.get(&session).map(|t| (r.run, t)))
+                .collect();
+            let mut ends: BTreeMap<SessionEnd, u64> = BTreeMap::new();
+            for (_, t) in &tallies {
+                for (e, n) in &t.ends {
+                    *ends.entry(*e).or_default() += u64::from(*n);
+                }
+            }
+            Some(SessionAcross {
+                session,
+                payloads: tallies
+                    .iter()
+                    .flat_map(|(_, t)| t.payloads.iter().copied())
+                    .collect(),
+                runs: tallies.len() as u64,
+                judged,
+                ends,
+                packets: Spread::of(tallies.iter().map(|(_, t)| t.packets).collect())?,
+                downlinked_bytes: Spread::of(
+                    tallies.iter().map(|(_, t)| t.downlinked_bytes).collect(),
+                )?,
+                not_done: tallies
+                    .iter()
+                    .filter(|(_, t)| t.any_not_done())
+                    .map(|(run, t)| {
+                        let ends = t
+                            .ends
+                            .iter()
+                            .filter(|(e, n)| **e != SessionEnd::Done && **n > 0)
+                            .map(|(e, n)| (*e, *n))
+                            .collect();
+                        (*run, ends)
+                    })
+                    .collect(),
+            })
+        })
+        .collect()
+}
+
+/// The ends any session run of the campaign had, in table order: a column each.
+fn end_columns(sessions: &[SessionAcross]) -> Vec<SessionEnd> {
+    SessionEnd::ALL
+        .into_iter()
+        .filter(|e| sessions.iter().any(|s| s.ends.contains_key(e)))
+        .collect()
+}
+
+/// A session's payloads: `12`, `12, 13`, or `-` (no run of it started).
+fn payloads_text(p: &BTreeSet<u8>) -> String {
+    if p.is_empty() {
+        return "-".to_owned();
+    }
+    p.iter().map(u8::to_string).collect::<Vec<_>>().join(", ")
+}
+
+/// The sessions for a terminal: a title, a header and a line per session id (the runs where
+/// it ended other than done: the first 10); empty when no run had a session.
+pub fn sessions_text(rows: &[RunRow]) -> String {
+    const RUNS_SHOWN: usize = 10;
+    let sessions = sessions_across(rows);
+    if sessions.is_empty() {
+        return String::new();
+    }
+    let ends = end_columns(&sessions);
+    let mut head: Vec<String> = ["session", "payload", "ran in"].map(str::to_owned).to_vec();
+    head.extend(ends.iter().map(|e| e.word().to_owned()));
+    head.extend(
+        [
+            "packets (min / median / max)",
+            "downlinked (min / median / max)",
+            "not done",
+        ]
+        .map(str::to_owned),
+    );
+    let mut lines = vec![head];
+    for s in &sessions {
+        let mut line = vec![
+            s.session.to_string(),
+            payloads_text(&s.payloads),
+            format!("{} of {}", s.runs, s.judged),
+        ];
+        line.extend(
+            ends.iter()
+                .map(|e| s.ends.get(e).copied().unwrap_or(0).to_string()),
+        );
+        let runs: Vec<String> = s
+            .not_done
+            .iter()
+            .take(RUNS_SHOWN)
+            .map(|(k, _)| k.to_string())
+            .collect();
+        let not_done = match s.not_done.len() {
+            0 => "-".to_owned(),
+            n if n > RUNS_SHOWN => format!("runs {} and {} more", runs.join(", "), n - RUNS_SHOWN),
+            1 => format!("run {}", runs[0]),
+            _ => format!("runs {}", runs.join(", ")),
+        };
+        line.extend([
+            s.packets.text("packets"),
+            s.downlinked_bytes.text("B"),
+            not_done,
+        ]);
+        lines.push(line);
+    }
+    let widths: Vec<usize> = (0..lines[0].len())
+        .map(|i| lines.iter().map(|l| l[i].len()).max().unwrap_or(0))
+        .collect();
+    let mut out = String::from("sessions:\n");
+    for l in &lines {
+        let cells: Vec<String> = l
+            .iter()
+            .zip(&widths)
+            .map(|(c, w)| format!("{c:<w$}"))
+            .collect();
+        let _ = writeln!(out, "  {}", cells.join("  ").trim_end());
+    }
+    out
+}
+
+/// Whether the run has a failure file (`failures/run-<k>.toml`): a result that did not pass,
+/// as [`crate::campaign_run::write_outputs`] writes them.
+fn has_failure_file(r: &RunRow) -> bool {
+    r.verdict != RunVerdict::Pass && r.verdict.is_result() && !r.scenario.is_empty()
+}
+
+/// The payload sessions: each session id, in how many runs it ran, its session runs by how
+/// they ended, packets and bytes per run, and the runs where it ended other than done
+/// (linked to their failure file where they have one). One line when no run had a session.
+fn sessions_html(out: &mut String, meta: &CampaignMeta, rows: &[RunRow]) {
+    let sessions = sessions_across(rows);
+    out.push_str("<h2>Sessions</h2>\n");
+    if sessions.is_empty() {
+        out.push_str("<p>No payload session ran in any run.</p>\n");
+        return;
+    }
+    let _ = writeln!(
+        out,
+        "<p>Each payload session id, over the runs that ran to their end (passed or failed): the runs it ran in, its session runs by how they ended, the packets the PC counted and the bytes downlinked per run it ran in (min / median / max), and the runs in which a session run ended other than done. A run that failed links to its scenario; <code>m6p-twin campaign resolve {} K</code> writes run K's.</p>",
+        esc(&meta.file)
+    );
+    let ends = end_columns(&sessions);
+    out.push_str("<table><tr><th>session</th><th>payload</th><th>ran in</th>");
+    for e in &ends {
+        let _ = write!(out, "<th>{}</th>", esc(e.word()));
+    }
+    out.push_str("<th>packets per run (min / median / max)</th><th>downlinked per run (min / median / max)</th><th>runs where it ended other than done</th></tr>\n");
+    let by_run: BTreeMap<u64, &RunRow> = rows.iter().map(|r| (r.run, r)).collect();
+    for s in &sessions {
+        let _ = write!(
+            out,
+            "<tr><td>{}</td><td>{}</td><td>{} of {} runs</td>",
+            s.session,
+            payloads_text(&s.payloads),
+            s.runs,
+            s.judged
+        );
+        for e in &ends {
+            let _ = write!(out, "<td>{}</td>", s.ends.get(e).copied().unwrap_or(0));
+        }
+        // By end: `no-ack: run 2, run 3 (2)`, a run linked where it has a failure file.
+        let not_done = ends
+            .iter()
+            .filter(|e| **e != SessionEnd::Done)
+            .filter_map(|e| {
+                let runs: Vec<String> = s
+                    .not_done
+                    .iter()
+                    .filter_map(|(k, ends)| {
+                        let n = ends.get(e)?;
+                        let run = if by_run.get(k).is_some_and(|r| has_failure_file(r)) {
+                            format!(r#"<a href="failures/run-{k}.toml">run {k}</a>"#)
+                        } else {
+                            format!("run {k}")
+                        };
+                        Some(if *n > 1 { format!("{run} ({n})") } else { run })
+                    })
+                    .collect();
+                (!runs.is_empty()).then(|| format!("<b>{}</b>: {}", esc(e.word()), runs.join(", ")))
+            })
+            .collect::<Vec<_>>()
+            .join("<br>");
+        let _ = writeln!(
+            out,
+            "<td>{}</td><td>{}</td><td>{}</td></tr>",
+            s.packets.text("packets"),
+            s.downlinked_bytes.text("B"),
+            if not_done.is_empty() {
+                "-".to_owned()
+            } else {
+                not_done
+            }
+        );
+    }
+    out.push_str("</table>\n");
+}
+
 /// The runs that did not pass, with what they drew and why, linked to their scenarios.
 fn failures(out: &mut String, rows: &[RunRow]) {
     let failed: Vec<&RunRow> = rows
@@ -564,6 +829,7 @@ mod tests {
             verdict,
             failed_kinds: BTreeMap::new(),
             metrics: BTreeMap::from([("min_soc".to_owned(), soc)]),
+            sessions: BTreeMap::new(),
             scenario: String::new(),
         }
     }
@@ -587,6 +853,7 @@ mod tests {
             verdict,
             failed_kinds: checks.iter().map(|(n, k)| ((*n).to_owned(), *k)).collect(),
             metrics: metrics.iter().map(|(n, v)| ((*n).to_owned(), *v)).collect(),
+            sessions: BTreeMap::new(),
             scenario: String::new(),
         }
     }
@@ -652,6 +919,130 @@ mod tests {
         assert!(html.contains(
             r#"<tr><td>fc-answers</td><td>expectation</td><td class="fail">1 of 4 (25 %)</td>"#
         ));
+    }
+
+    /// Session `id` in a run: `ends`, `packets`, `bytes`, polling payload 12.
+    fn tally(
+        ends: &[(SessionEnd, u32)],
+        packets: u64,
+        bytes: u64,
+    ) -> crate::campaign_rows::SessionTally {
+        crate::campaign_rows::SessionTally {
+            payloads: [12].into(),
+            ends: ends.iter().copied().collect(),
+            packets,
+            downlinked_bytes: bytes,
+        }
+    }
+
+    /// Session 1 runs in runs 0-4 (no-ack in run 1, which passed, and in run 3, which
+    /// failed; lost in run 3 too), session 2 only in run 4; run 2 ended in an error (no
+    /// sessions kept): the counts per end, the spreads per run it ran in, and the runs not
+    /// done, linked where they have a failure file.
+    #[test]
+    fn sessions_are_counted_per_id_over_the_runs_with_their_spreads_and_the_runs_not_done() {
+        use SessionEnd::{Done, LostPower, NoAck};
+        let mut rows = five_runs();
+        // Run 1 passes; an unsharded campaign's rows keep every run's scenario, a pass has
+        // no failure file all the same.
+        rows[1].verdict = RunVerdict::Pass;
+        rows[1].failed_kinds.clear();
+        for k in [1, 3] {
+            rows[k].scenario = format!("name = \"run {k}\"\n");
+        }
+        let per_run = [
+            tally(&[(Done, 1)], 90, 9000),
+            tally(&[(NoAck, 1)], 0, 0),
+            tally(&[(Done, 1)], 0, 0),
+            tally(&[(NoAck, 2), (LostPower, 1)], 10, 1000),
+            tally(&[(Done, 1)], 80, 8000),
+        ];
+        for (r, t) in rows.iter_mut().zip(per_run) {
+            if !matches!(r.verdict, RunVerdict::Error(_)) {
+                r.sessions.insert(1, t);
+            }
+        }
+        rows[4].sessions.insert(2, tally(&[(Done, 1)], 5, 500));
+        let s = sessions_across(&rows);
+        assert_eq!(
+            s[0],
+            SessionAcross {
+                session: 1,
+                payloads: [12].into(),
+                runs: 4,
+                judged: 4,
+                ends: [(Done, 2), (NoAck, 3), (LostPower, 1)].into(),
+                packets: Spread {
+                    min: 0,
+                    median: 10,
+                    max: 90
+                },
+                downlinked_bytes: Spread {
+                    min: 0,
+                    median: 1000,
+                    max: 9000
+                },
+                not_done: vec![
+                    (1, [(NoAck, 1)].into()),
+                    (3, [(NoAck, 2), (LostPower, 1)].into()),
+                ],
+            }
+        );
+        assert_eq!((s[1].session, s[1].runs, s.len()), (2, 1, 2));
+        let text = sessions_text(&rows);
+        assert_eq!(
+            text,
+            "sessions:\n\
+             \x20 session  payload  ran in  done  no-ack  lost (power)  packets (min / median / max)  downlinked (min / median / max)  not done\n\
+             \x20 1        12       4 of 4  2     3       1             0 / 10 / 90 packets           0 / 1000 / 9000 B                runs 1, 3\n\
+             \x20 2        12       1 of 4  1     0       0             5 / 5 / 5 packets             500 / 500 / 500 B                -\n",
+            "{text}"
+        );
+        let meta = CampaignMeta {
+            name: "c".into(),
+            file: "c.toml".into(),
+            seed: 1,
+            runs: 5,
+        };
+        let html = report_html(&meta, &rows);
+        let at = html.find("<h2>Sessions</h2>").unwrap();
+        assert!(at > html.find("<h2>Failures by check</h2>").unwrap());
+        assert!(at < html.find("<h2>Metrics</h2>").unwrap());
+        assert!(html.contains(
+            "<tr><td>1</td><td>12</td><td>4 of 4 runs</td><td>2</td><td>3</td><td>1</td><td>0 / 10 / 90 packets</td><td>0 / 1000 / 9000 B</td><td><b>no-ack</b>: run 1, <a href=\"failures/run-3.toml\">run 3</a> (2)<br><b>lost (power)</b>: <a href=\"failures/run-3.toml\">run 3</a></td></tr>"
+        ), "{html}");
+        assert!(html.contains(
+            "<tr><td>2</td><td>12</td><td>1 of 4 runs</td><td>1</td><td>0</td><td>0</td><td>5 / 5 / 5 packets</td><td>500 / 500 / 500 B</td><td>-</td></tr>"
+        ), "{html}");
+        assert!(html.contains("campaign resolve c.toml K"), "{html}");
+    }
+
+    /// No run had a session: one line, no table; nothing on the terminal.
+    #[test]
+    fn a_campaign_without_sessions_says_so_in_one_line() {
+        let meta = CampaignMeta {
+            name: "c".into(),
+            file: "c.toml".into(),
+            seed: 1,
+            runs: 5,
+        };
+        let html = report_html(&meta, &five_runs());
+        let section: Vec<&str> = html
+            .lines()
+            .skip_while(|l| *l != "<h2>Sessions</h2>")
+            .take_while(|l| !l.starts_with("<h2>Pass") && !l.starts_with("<h2>Metrics"))
+            .collect();
+        assert_eq!(
+            section,
+            [
+                "<h2>Sessions</h2>",
+                "<p>No payload session ran in any run.</p>"
+            ],
+            "{html}"
+        );
+        assert_eq!(sessions_text(&five_runs()), "");
+        assert_eq!(Spread::of(vec![]), None);
+        assert_eq!(Spread::of(vec![4, 1, 3, 2]).map(|s| s.median), Some(2));
     }
 
     #[test]

@@ -15,7 +15,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{Context as _, bail};
 
 use crate::campaign::Campaign;
-pub use crate::campaign_rows::{CampaignMeta, CheckKind, RunRow, RunVerdict};
+pub use crate::campaign_rows::{
+    CampaignMeta, CheckKind, RunRow, RunVerdict, SessionEnd, SessionTally, session_tallies,
+};
 use crate::exec;
 use twin_scenario::scenario::{ScenarioError, ScenarioErrors};
 
@@ -32,6 +34,7 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
                 verdict: RunVerdict::Error(located(c, k, &e)),
                 failed_kinds: BTreeMap::new(),
                 metrics: BTreeMap::new(),
+                sessions: BTreeMap::new(),
                 scenario: String::new(),
             };
         }
@@ -44,6 +47,7 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
         verdict: j.verdict,
         failed_kinds: j.failed_kinds,
         metrics: j.metrics,
+        sessions: j.sessions,
         scenario: r.text,
     }
 }
@@ -147,6 +151,9 @@ pub struct Judged {
     pub failed_kinds: BTreeMap<String, CheckKind>,
     /// Its [`metrics`]: none when it did not run to its end.
     pub metrics: BTreeMap<String, f64>,
+    /// What its payload sessions did ([`session_tallies`]): none when it did not run to its
+    /// end.
+    pub sessions: BTreeMap<u8, SessionTally>,
 }
 
 /// The key figures of a run, for `results.csv` and the report: `min_soc` (the battery's
@@ -237,18 +244,20 @@ pub fn run_limited(file: &str, text: &str, limits: crate::campaign::RunLimits) -
             verdict,
             failed_kinds: BTreeMap::new(),
             metrics: BTreeMap::new(),
+            sessions: BTreeMap::new(),
         };
     }
-    let (figures, failed_kinds) = match &outcome {
+    let (figures, sessions, failed_kinds) = match &outcome {
         Ok(Ok(o)) => (
             metrics(&o.report),
+            session_tallies(&o.report.sessions),
             o.verdicts
                 .iter()
                 .filter(|v| !v.passed)
                 .map(|v| (v.name.clone(), CheckKind::from(v.kind)))
                 .collect(),
         ),
-        _ => (BTreeMap::new(), BTreeMap::new()),
+        _ => (BTreeMap::new(), BTreeMap::new(), BTreeMap::new()),
     };
     let verdict = match outcome {
         Ok(Ok(o)) if o.passed() => RunVerdict::Pass,
@@ -260,7 +269,10 @@ pub fn run_limited(file: &str, text: &str, limits: crate::campaign::RunLimits) -
             RunVerdict::Fail(
                 failed
                     .into_iter()
-                    .map(|v| (v.name.clone(), format!("t = {}: {}", v.t, v.observed)))
+                    .map(|v| {
+                        let t = twin_core::duration::format_instant(v.t);
+                        (v.name.clone(), format!("t = {t}: {}", v.observed))
+                    })
                     .collect(),
             )
         }
@@ -271,6 +283,7 @@ pub fn run_limited(file: &str, text: &str, limits: crate::campaign::RunLimits) -
         verdict,
         failed_kinds,
         metrics: figures,
+        sessions,
     }
 }
 
@@ -374,8 +387,61 @@ fn cell(s: &str) -> String {
     }
 }
 
+/// A column of what a session did in a run: `session_<id>_<what>`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum SessionColumn {
+    /// Its session runs (`session_1_runs`).
+    Runs,
+    /// Its session runs that ended so (`session_1_no_ack`).
+    Ended(SessionEnd),
+    /// Packets the PC counted (`session_1_packets`).
+    Packets,
+    /// Bytes downlinked (`session_1_downlinked_bytes`).
+    DownlinkedBytes,
+}
+
+impl SessionColumn {
+    fn name(self, session: u8) -> String {
+        let what = match self {
+            SessionColumn::Runs => "runs",
+            SessionColumn::Ended(e) => e.column(),
+            SessionColumn::Packets => "packets",
+            SessionColumn::DownlinkedBytes => "downlinked_bytes",
+        };
+        format!("session_{session}_{what}")
+    }
+
+    /// Its value in a run where the session ran.
+    fn value(self, t: &SessionTally) -> u64 {
+        match self {
+            SessionColumn::Runs => u64::from(t.runs()),
+            SessionColumn::Ended(e) => u64::from(t.ends.get(&e).copied().unwrap_or(0)),
+            SessionColumn::Packets => t.packets,
+            SessionColumn::DownlinkedBytes => t.downlinked_bytes,
+        }
+    }
+}
+
+/// The session columns of `rows`: per session id that ran in any of them (in id order), its
+/// runs, a count for each end any of its runs had (in [`SessionEnd::ALL`]'s order), packets
+/// and bytes.
+fn session_columns(rows: &[RunRow]) -> Vec<(u8, SessionColumn)> {
+    let mut cols: std::collections::BTreeSet<(u8, SessionColumn)> = Default::default();
+    for (id, t) in rows.iter().flat_map(|r| &r.sessions) {
+        cols.extend([
+            (*id, SessionColumn::Runs),
+            (*id, SessionColumn::Packets),
+            (*id, SessionColumn::DownlinkedBytes),
+        ]);
+        cols.extend(t.ends.keys().map(|e| (*id, SessionColumn::Ended(*e))));
+    }
+    cols.into_iter().collect()
+}
+
 /// `results.csv`: run, seed, every drawn value (one column per path), the run's
-/// [`metrics`], verdict, the failed expectations (or the error).
+/// [`metrics`], what each session did (`session_<id>_runs`, `session_<id>_<end>` for each
+/// end its runs had, `session_<id>_packets`, `session_<id>_downlinked_bytes`: empty where
+/// it did not run), verdict, the failed expectations (or the error).
 pub fn results_csv(rows: &[RunRow]) -> String {
     let mut cols: Vec<&String> = rows.iter().flat_map(|r| r.draws.keys()).collect();
     cols.sort();
@@ -392,6 +458,11 @@ pub fn results_csv(rows: &[RunRow]) -> String {
         out.push(',');
         out.push_str(&cell(c));
     }
+    let scols = session_columns(rows);
+    for (id, c) in &scols {
+        out.push(',');
+        out.push_str(&c.name(*id));
+    }
     out.push_str(",verdict,failed\n");
     for r in rows {
         out.push_str(&format!("{},{}", r.run, r.seed));
@@ -403,6 +474,12 @@ pub fn results_csv(rows: &[RunRow]) -> String {
             out.push(',');
             if let Some(v) = r.metrics.get(*c) {
                 out.push_str(&v.to_string());
+            }
+        }
+        for (id, c) in &scols {
+            out.push(',');
+            if let Some(t) = r.sessions.get(id) {
+                out.push_str(&c.value(t).to_string());
             }
         }
         let failed = match &r.verdict {
@@ -949,6 +1026,7 @@ mod tests {
             verdict: RunVerdict::Pass,
             failed_kinds: BTreeMap::new(),
             metrics: [("max_rate_deg_s".to_owned(), 3.774_809_598_937_888_5)].into(),
+            sessions: BTreeMap::new(),
             scenario: String::new(),
         };
         let base = std::env::temp_dir().join(format!("m6p-campaign-ulp-{}", std::process::id()));
@@ -969,6 +1047,80 @@ mod tests {
                 "{f}"
             );
         }
+        std::fs::remove_dir_all(&base).ok();
+    }
+
+    /// Rows with sessions: `results.csv` has a column per session id and what it did
+    /// (empty where the session did not run), and shards merged keep the sessions: the
+    /// rows and every file are the unsharded run's.
+    #[test]
+    fn sessions_are_columns_of_the_csv_and_survive_a_merge() {
+        let meta = CampaignMeta::of(&campaign(), 3);
+        let tally = |ends: &[(SessionEnd, u32)], packets, bytes| SessionTally {
+            payloads: [12].into(),
+            ends: ends.iter().copied().collect(),
+            packets,
+            downlinked_bytes: bytes,
+        };
+        let row = |run: u64| {
+            let sessions = match run {
+                0 => [(1, tally(&[(SessionEnd::Done, 1)], 90, 9000))].into(),
+                1 => [
+                    (1, tally(&[(SessionEnd::NoAck, 1)], 0, 0)),
+                    (2, tally(&[(SessionEnd::StillActive, 1)], 0, 300)),
+                ]
+                .into(),
+                _ => BTreeMap::new(),
+            };
+            RunRow {
+                run,
+                seed: run,
+                draws: BTreeMap::new(),
+                verdict: RunVerdict::Pass,
+                failed_kinds: BTreeMap::new(),
+                metrics: BTreeMap::new(),
+                sessions,
+                scenario: String::new(),
+            }
+        };
+        let rows: Vec<RunRow> = (0..3).map(row).collect();
+        assert_eq!(
+            results_csv(&rows),
+            "run,seed,session_1_runs,session_1_done,session_1_no_ack,session_1_packets,session_1_downlinked_bytes,\
+             session_2_runs,session_2_still_active,session_2_packets,session_2_downlinked_bytes,verdict,failed\n\
+             0,0,1,1,0,90,9000,,,,,pass,\n\
+             1,1,1,0,1,0,0,1,1,0,300,pass,\n\
+             2,2,,,,,,,,,,pass,\n"
+        );
+        let base =
+            std::env::temp_dir().join(format!("m6p-campaign-sessions-{}", std::process::id()));
+        write_outputs(&meta, &rows, &base.join("whole")).unwrap();
+        let dirs: Vec<_> = (0..2)
+            .map(|i| {
+                let d = base.join(format!("shard-{i}"));
+                let part: Vec<RunRow> = Shard { index: i, count: 2 }
+                    .runs(3)
+                    .into_iter()
+                    .map(row)
+                    .collect();
+                write_outputs(&meta, &part, &d).unwrap();
+                d
+            })
+            .collect();
+        let (_, merged) = merge(&dirs, &base.join("merged")).unwrap();
+        assert_eq!(merged, rows);
+        for f in ["results.csv", "rows.jsonl", "report.html"] {
+            assert_eq!(
+                std::fs::read(base.join("whole").join(f)).unwrap(),
+                std::fs::read(base.join("merged").join(f)).unwrap(),
+                "{f}"
+            );
+        }
+        let html = std::fs::read_to_string(base.join("merged/report.html")).unwrap();
+        assert!(
+            html.contains("<td>1</td><td>12</td><td>2 of 3 runs</td>"),
+            "{html}"
+        );
         std::fs::remove_dir_all(&base).ok();
     }
 

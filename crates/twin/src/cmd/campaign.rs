@@ -138,8 +138,9 @@ pub fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
         );
     }
     print!(
-        "{}",
-        m6p_twin::campaign_report::failures_by_check_text(&rows)
+        "{}{}",
+        m6p_twin::campaign_report::failures_by_check_text(&rows),
+        m6p_twin::campaign_report::sessions_text(&rows)
     );
     for r in rows.iter().filter(|r| r.verdict != RunVerdict::Pass) {
         let why = match &r.verdict {
@@ -265,8 +266,9 @@ pub fn cmd_campaign_merge(dirs: &[PathBuf], out: &std::path::Path) -> anyhow::Re
         out.display()
     );
     print!(
-        "{}",
-        m6p_twin::campaign_report::failures_by_check_text(&rows)
+        "{}{}",
+        m6p_twin::campaign_report::failures_by_check_text(&rows),
+        m6p_twin::campaign_report::sessions_text(&rows)
     );
     Ok(failed == 0)
 }
