@@ -451,6 +451,10 @@ pub struct FcApp {
     log: Vec<NodeEvent>,
     out: Outbox<Published>,
     truth_board: Option<platform::board::TruthBoard>,
+    /// Writes to the truth board refused in a row (a reader ran ahead of a late tick, as
+    /// after a hang): one warning when a streak starts, one line when it ends, not one per
+    /// tick (a campaign of hangs logged 22,000 lines). The board counts them all.
+    truth_refused_in_a_row: u64,
     // --- truth: the ECU's burns (not reset by a reboot) ---
     burns: Option<platform::board::BurnBoard>,
     burns_applied_until_ns: u64,
@@ -548,6 +552,7 @@ impl FcApp {
             log: Vec::new(),
             out: Outbox::default(),
             truth_board: None,
+            truth_refused_in_a_row: 0,
             burns: None,
             burns_applied_until_ns: 0,
             cfg,
@@ -846,11 +851,26 @@ impl FcApp {
         }
         // The other nodes' view of the truth: every tick, whether the FC software runs or not
         // (the truth is physics).
-        if let Some(board) = &self.truth_board
-            && let Err(e) = board.publish(&self.truth_snapshot(t, unix_ns))
-        {
-            self.log
-                .push(NodeEvent::warning(t, format!("truth not posted: {e}")));
+        if let Some(board) = &self.truth_board {
+            match board.publish(&self.truth_snapshot(t, unix_ns)) {
+                Err(e) => {
+                    if self.truth_refused_in_a_row == 0 {
+                        self.log.push(NodeEvent::warning(
+                            t,
+                            format!("truth not posted: {e}; later refusals in a row are counted, not logged"),
+                        ));
+                    }
+                    self.truth_refused_in_a_row += 1;
+                }
+                Ok(()) if self.truth_refused_in_a_row > 0 => {
+                    let n = std::mem::take(&mut self.truth_refused_in_a_row);
+                    self.log.push(NodeEvent::info(
+                        t,
+                        format!("truth posted again, after {n} refused write(s)"),
+                    ));
+                }
+                Ok(()) => {}
+            }
         }
 
         self.step_truth(env, dt_s);
@@ -2890,5 +2910,33 @@ mod tests {
         };
         assert_eq!(ask(&mut h, 12, &with_day("080"), t), vec![7, 0]);
         assert_eq!(ask(&mut h, 12, &with_day("100"), t), vec![7, 1]);
+    }
+
+    #[test]
+    fn truth_refused_in_a_row_is_one_warning_and_one_line_when_it_ends() {
+        // A reader already at 5 s (as after the FC hung): the ticks before it are refused.
+        let board = platform::board::TruthBoard::new();
+        let _ = board.latest_before(SimTime::from_secs(5));
+        let app = FcApp::new(FcConfig {
+            epoch_unix_s: START,
+            ..FcConfig::default()
+        })
+        .with_truth_board(board.clone());
+        let mut h = Host::new(node_cfg(), app, SimTime::ZERO);
+        while let Some(due) = h.poll_timeout().filter(|&d| d <= SimTime::from_secs(6)) {
+            h.handle_timeout(due);
+        }
+        let lines: Vec<String> = std::iter::from_fn(|| h.node.poll_event())
+            .map(|e| e.to_string())
+            .filter(|l| l.contains("truth"))
+            .collect();
+        let refused = board.stats().refused;
+        assert!(refused > 10, "{refused} refused");
+        assert_eq!(lines.len(), 2, "{lines:#?}");
+        assert!(lines[0].starts_with("truth not posted"), "{lines:#?}");
+        assert_eq!(
+            lines[1],
+            format!("truth posted again, after {refused} refused write(s)")
+        );
     }
 }
