@@ -254,8 +254,10 @@ pub async fn raw(
 ) -> anyhow::Result<bool> {
     match gs.request(node, port, data, timeout).await? {
         Some((reply, rtt)) => {
-            let (text, _) = raw_reply(&reply.header, &reply.data, rtt.as_secs_f64() * 1e3);
-            print!("{text}");
+            print!(
+                "{}",
+                raw_reply(&reply.header, &reply.data, rtt.as_secs_f64() * 1e3).text
+            );
             Ok(true)
         }
         None => no_reply(node, timeout),
@@ -265,8 +267,8 @@ pub async fn raw(
 /// A reply to `gs raw` (`header` as it came, from the port the request went to), `ms`
 /// after the request: decoded as a by-name ICD command's reply ([`show_reply`]) when it
 /// comes from an ICD port (the default ports) with a command id of that port's table,
-/// else its bytes in hex. The flag is [`show_reply`]'s (hex: `true`).
-pub fn raw_reply(header: &csp::Header, data: &[u8], ms: f64) -> (String, bool) {
+/// else its bytes in hex (judged [`ReplyVerdict::Ok`]: there is nothing to check it by).
+pub fn raw_reply(header: &csp::Header, data: &[u8], ms: f64) -> Shown {
     let map = crate::icd::IcdMap::defaults();
     if let Some(c) = map.classify(header, data)
         && c.direction == crate::icd::Direction::Reply
@@ -274,15 +276,35 @@ pub fn raw_reply(header: &csp::Header, data: &[u8], ms: f64) -> (String, bool) {
     {
         return show_reply(&d, c.command, header.src, data, ms);
     }
-    (
-        format!(
+    Shown {
+        text: format!(
             "{}:{} replied {} ({ms:.3} ms)\n",
             header.src,
             header.sport,
             hex::encode(data)
         ),
-        true,
-    )
+        verdict: ReplyVerdict::Ok,
+    }
+}
+
+/// What a reply said, as `gs` judges it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReplyVerdict {
+    /// Success, and the reply fits the ICD's layout.
+    Ok,
+    /// The node answered with a failure result.
+    Refused,
+    /// Success, but the reply's length does not fit the ICD's layout.
+    Misfit,
+}
+
+/// A reply as `gs` prints it: its lines and its verdict.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Shown {
+    /// The lines, each ending in a newline.
+    pub text: String,
+    /// What the reply said.
+    pub verdict: ReplyVerdict,
 }
 
 /// The line `gs` prints for a refusal of `name` (`PC.SETUP`) by node `src` with result
@@ -300,23 +322,22 @@ pub fn refused_line(name: &str, src: u8, result: u8, reason: Option<&str>, ms: f
 /// A reply the ICD decoded (`d`, of command `cmd` from node `src`; `data` its bytes from the
 /// command id on), as `gs` prints it: a head line (`PC.TMPC from 6: ok, 89 bytes (1.234
 /// ms)`), then one line per field with the ICD's name, the value, its unit and value name;
-/// or the refusal ([`refused_line`], without the reason). The flag: the node answered with
-/// success and the reply fits the ICD's layout.
+/// or the refusal ([`refused_line`], without the reason).
 pub fn show_reply(
     d: &crate::icd::DecodedPacket,
     cmd: &csp::icd::Command,
     src: u8,
     data: &[u8],
     ms: f64,
-) -> (String, bool) {
+) -> Shown {
     use std::fmt::Write as _;
     let mut s = String::new();
     let name = format!("{}.{}", d.node, cmd.name);
     if d.result != Some(csp::reqrep::RESULT_SUCCESS) {
-        return (
-            refused_line(&name, src, d.result.unwrap_or(0), None, ms),
-            false,
-        );
+        return Shown {
+            text: refused_line(&name, src, d.result.unwrap_or(0), None, ms),
+            verdict: ReplyVerdict::Refused,
+        };
     }
     let _ = writeln!(
         s,
@@ -343,9 +364,15 @@ pub fn show_reply(
     }
     if !d.fits {
         s.push_str("  (the reply's length does not fit the ICD's layout)\n");
-        return (s, false);
+        return Shown {
+            text: s,
+            verdict: ReplyVerdict::Misfit,
+        };
     }
-    (s, true)
+    Shown {
+        text: s,
+        verdict: ReplyVerdict::Ok,
+    }
 }
 
 /// `gs setup|status|abort`: a request to the PC's session control port (6:10), its reply
@@ -411,9 +438,9 @@ async fn send_and_show(
                 print!("{}", refused_line(&name, to.addr, result, Some(&why), ms));
                 return Ok(false);
             }
-            let (text, ok) = show_reply(&d, cmd, to.addr, body, ms);
-            print!("{text}");
-            Ok(ok)
+            let shown = show_reply(&d, cmd, to.addr, body, ms);
+            print!("{}", shown.text);
+            Ok(shown.verdict == ReplyVerdict::Ok)
         }
         _ => {
             println!(
@@ -598,8 +625,8 @@ mod tests {
     fn raw_decodes_a_reply_the_icd_knows_as_a_command_by_name_does() {
         let (header, data) = tmpc_reply();
         assert_eq!(header.sport, 12);
-        let (text, ok) = raw_reply(&header, &data, 1.5);
-        assert!(ok);
+        let Shown { text, verdict } = raw_reply(&header, &data, 1.5);
+        assert_eq!(verdict, ReplyVerdict::Ok);
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(
             lines[0],
@@ -619,7 +646,13 @@ mod tests {
         assert!(!text.contains("replied"), "{text}");
         // The same text as the by-name command prints.
         let (_, _, cmd) = crate::icd::find_command("PC.TMPC").unwrap();
-        assert_eq!(show_reply(&d, cmd, 6, &data, 1.5), (text, true));
+        assert_eq!(
+            show_reply(&d, cmd, 6, &data, 1.5),
+            Shown {
+                text,
+                verdict: ReplyVerdict::Ok
+            }
+        );
     }
 
     /// A refusal with the node's reason names it; without one it says where it is.
@@ -639,14 +672,17 @@ mod tests {
     #[test]
     fn raw_falls_back_to_hex_where_the_icd_knows_nothing() {
         // A ping's echo (port 1 is no ICD port).
-        let (text, ok) = raw_reply(&Header::new(3, 17, 40, 1), &[1, 2], 2.0);
-        assert_eq!((text.as_str(), ok), ("3:1 replied 0102 (2.000 ms)\n", true));
+        let shown = raw_reply(&Header::new(3, 17, 40, 1), &[1, 2], 2.0);
+        assert_eq!(
+            (shown.text.as_str(), shown.verdict),
+            ("3:1 replied 0102 (2.000 ms)\n", ReplyVerdict::Ok)
+        );
         // An ICD port, but a command id its table does not have.
-        let (text, _) = raw_reply(&Header::new(6, 17, 40, 12), &[0xee, 1], 2.0);
+        let text = raw_reply(&Header::new(6, 17, 40, 12), &[0xee, 1], 2.0).text;
         assert_eq!(text, "6:12 replied ee01 (2.000 ms)\n");
         // A refusal is read as one.
-        let (text, ok) = raw_reply(&Header::new(6, 17, 40, 12), &[1, 0], 2.0);
-        assert!(!ok);
+        let Shown { text, verdict } = raw_reply(&Header::new(6, 17, 40, 12), &[1, 0], 2.0);
+        assert_eq!(verdict, ReplyVerdict::Refused);
         assert!(
             text.starts_with("PC.TMPC from 6: refused (result 0"),
             "{text}"
