@@ -31,7 +31,7 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
                 run: k,
                 seed: 0,
                 draws: BTreeMap::new(),
-                verdict: RunVerdict::Error(located(c, k, &e)),
+                verdict: RunVerdict::Error(located(c, k, &e).to_string()),
                 failed_kinds: BTreeMap::new(),
                 metrics: BTreeMap::new(),
                 sessions: BTreeMap::new(),
@@ -58,35 +58,87 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
 /// field's line in the base scenario (the campaign's `[scenario]`, or its scenario file)
 /// when the base has that field, and says that its line is the resolved scenario's
 /// otherwise.
-pub fn located(c: &Campaign, k: u64, errors: &ScenarioErrors) -> String {
+pub fn located(c: &Campaign, k: u64, errors: &ScenarioErrors) -> LocatedErrors {
     // The name `Campaign::resolve` gives the resolved scenario in its errors.
     let resolved = format!("{} run {k}", c.file);
-    errors
-        .0
-        .iter()
-        .map(|e| match e.line {
-            Some(line) if e.file == resolved => match in_base(c, &e.field) {
-                Some(at) => ScenarioError {
-                    message: e.message.clone(),
-                    ..at
-                }
-                .to_string(),
-                None => format!(
-                    "{resolved}: in the resolved scenario of run {k} (the base scenario with the run's draws written in, not a line of {file}), line {line}{col}{field}: {m}",
-                    file = c.file,
-                    col = e.column.map_or_else(String::new, |c| format!(", column {c}")),
-                    field = if e.field.is_empty() {
-                        String::new()
-                    } else {
-                        format!(", field `{}`", e.field)
+    LocatedErrors(
+        errors
+            .0
+            .iter()
+            .map(|e| match e.line {
+                Some(line) if e.file == resolved => match in_base(c, &e.field) {
+                    Some(at) => Located::InUserFile(ScenarioError {
+                        message: e.message.clone(),
+                        ..at
+                    }),
+                    None => Located::InResolved {
+                        campaign: c.file.clone(),
+                        run: k,
+                        line,
+                        error: e.clone(),
                     },
-                    m = e.message,
-                ),
-            },
-            _ => e.to_string(),
-        })
-        .collect::<Vec<_>>()
-        .join("\n")
+                },
+                _ => Located::InUserFile(e.clone()),
+            })
+            .collect(),
+    )
+}
+
+/// A run's scenario errors, each where the user can find it ([`located`]); one per line.
+#[derive(Debug, Clone)]
+pub struct LocatedErrors(pub Vec<Located>);
+
+/// One error of a run's scenario, and where it is.
+#[derive(Debug, Clone)]
+pub enum Located {
+    /// At a line of one of the user's files (the campaign or its scenario file).
+    InUserFile(ScenarioError),
+    /// At `line` of run `run`'s resolved scenario, a text in no file (a draw made the field).
+    InResolved {
+        campaign: String,
+        run: u64,
+        line: usize,
+        error: ScenarioError,
+    },
+}
+
+impl std::fmt::Display for Located {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Located::InUserFile(e) => write!(f, "{e}"),
+            Located::InResolved {
+                campaign,
+                run,
+                line,
+                error: e,
+            } => {
+                write!(
+                    f,
+                    "{}: in the resolved scenario of run {run} (the base scenario with the run's draws written in, not a line of {campaign}), line {line}",
+                    e.file
+                )?;
+                if let Some(c) = e.column {
+                    write!(f, ", column {c}")?;
+                }
+                if !e.field.is_empty() {
+                    write!(f, ", field `{}`", e.field)?;
+                }
+                write!(f, ": {}", e.message)
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for LocatedErrors {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (i, e) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str("\n")?;
+            }
+            write!(f, "{e}")?;
+        }
+        Ok(())
+    }
 }
 
 /// Where the base scenario of `c` holds `field` (a path into the scenario): in the campaign
@@ -877,13 +929,13 @@ mod tests {
         );
         // Line 13 of the campaign file: `until = "20s"`.
         assert_eq!(
-            located(&c, k, &e),
+            located(&c, k, &e).to_string(),
             format!("c.toml:13:9: field `scenario.faults[0].until`: {message}")
         );
         // The row of such a run says the same.
         assert_eq!(
             run_one(&c, k).verdict,
-            RunVerdict::Error(located(&c, k, &e))
+            RunVerdict::Error(located(&c, k, &e).to_string())
         );
         // A field the base does not have.
         let made = ScenarioErrors(vec![ScenarioError {
@@ -894,7 +946,7 @@ mod tests {
             message: "too fast".into(),
         }]);
         assert_eq!(
-            located(&c, 2, &made),
+            located(&c, 2, &made).to_string(),
             "c.toml run 2: in the resolved scenario of run 2 (the base scenario with the run's draws written in, not a line of c.toml), line 4, column 1, field `fc.initial_rate_deg_s`: too fast"
         );
         // An error the campaign located in its own file stays as it is.
@@ -902,7 +954,7 @@ mod tests {
             file: "c.toml".into(),
             ..made.0[0].clone()
         }]);
-        assert_eq!(located(&c, 2, &own), own.0[0].to_string());
+        assert_eq!(located(&c, 2, &own).to_string(), own.0[0].to_string());
     }
 
     #[test]
