@@ -136,6 +136,14 @@ impl ExpectKind for CanExpect {
     }
 
     fn describe(&self) -> String {
-        format!("{} on the {} bus", self.node, self.bus)
+        // What it counts: entries into a state, or only the state at the end.
+        let what = match (self.min.or(self.max), self.end_state) {
+            (None, Some(s)) => format!("{} at the end", s.state().name()),
+            _ => format!(
+                "{} entries",
+                self.state.unwrap_or(CanStateName::BusOff).state().name()
+            ),
+        };
+        format!("{} {what} on the {} bus", self.node, self.bus)
     }
 }

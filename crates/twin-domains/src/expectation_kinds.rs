@@ -141,6 +141,17 @@ kind = "counter"
 target = "PC"
 counter = "drops"
 max = 0
+[[expectations]]
+kind = "can"
+bus = "main"
+node = "ECU"
+state = "error-passive"
+min = 2
+[[expectations]]
+kind = "can"
+bus = "main"
+node = "EPS"
+end_state = "error-active"
 "#;
         let s = crate::validate::parse("t.toml", text).unwrap();
         let names: Vec<String> = super::compile(&s).into_iter().map(|e| e.name).collect();
@@ -152,6 +163,8 @@ max = 0
                 "no reply to ping-eps",
                 "no reply to ping-eps (expectations[3])",
                 "PC drops",
+                "ECU error-passive entries on the main bus",
+                "EPS error-active at the end on the main bus",
             ]
         );
     }
