@@ -1310,8 +1310,9 @@ mod tests {
         );
     }
 
-    /// Rust paths (`role::PRIMARY`) and constants' names (`BEACON_PERIOD_MIN_S`) in
-    /// backticks: what doc comments leak into the ICD's text if written for rustdoc.
+    /// Rust paths (`role::PRIMARY`), constants' names (`BEACON_PERIOD_MIN_S`) and rustdoc's
+    /// links (``[`TargetMode`]``) in backticks: what doc comments leak into the ICD's text if
+    /// written for rustdoc.
     fn rust_items(text: &str) -> Vec<&str> {
         let screaming = |w: &str| {
             w.starts_with(|c: char| c.is_ascii_uppercase())
@@ -1319,6 +1320,10 @@ mod tests {
                 && w.chars()
                     .all(|c| c.is_ascii_uppercase() || c.is_ascii_digit() || c == '_')
         };
+        let links = text
+            .match_indices("[`")
+            .filter_map(|(i, _)| text[i + 2..].split_once("`]").map(|(item, _)| item))
+            .filter(|item| !item.contains('\n'));
         text.lines()
             .flat_map(|l| l.split('`').skip(1).step_by(2))
             .filter(|s| {
@@ -1326,6 +1331,7 @@ mod tests {
                     || s.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
                         .any(screaming)
             })
+            .chain(links)
             .collect()
     }
 
@@ -1335,9 +1341,9 @@ mod tests {
     fn the_icd_text_names_no_rust_items() {
         assert_eq!(
             rust_items(
-                "`role::PRIMARY` or 2\n0 or `BEACON_PERIOD_MIN_S`..=`3600` (`TMGEN`, `r_eci_m`)"
+                "`role::PRIMARY` or 2\n0 or `BEACON_PERIOD_MIN_S`..=`3600` (`TMGEN`, `r_eci_m`), [`TargetMode`]"
             ),
-            ["role::PRIMARY", "BEACON_PERIOD_MIN_S"]
+            ["role::PRIMARY", "BEACON_PERIOD_MIN_S", "TargetMode"]
         );
         let text = to_text(None).unwrap();
         for (what, text) in [
