@@ -237,6 +237,21 @@ fn guest_twin_over_vcan() {
     let pl = node(&report, "PL12");
     assert!(pl.service_replies >= 1, "PL12 {pl:?}");
 
+    // The command line's own flag (README's `m6p-twin run --socketcan vcan0[:main|:payload]`,
+    // which tools/docs-walk.py leaves to this test): the binary bridges the payload bus.
+    let cli = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+        .args(["run", "--no-checks", "--duration", "2s", "--socketcan"])
+        .arg(format!("{ifname}:payload"))
+        .output()
+        .expect("run m6p-twin");
+    let said = format!(
+        "{}{}",
+        String::from_utf8_lossy(&cli.stdout),
+        String::from_utf8_lossy(&cli.stderr)
+    );
+    assert!(cli.status.success(), "m6p-twin run --socketcan: {said}");
+    assert!(said.contains(&ifname), "no word of {ifname}: {said}");
+
     // A link-down fault on a bridge (its gate, as a scenario's `link-down` on a named
     // SocketCAN link sets it): a frame from the interface stops at the link, counted, and
     // crosses again once the fault is lifted.
