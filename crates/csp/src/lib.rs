@@ -29,6 +29,7 @@ pub mod reqrep;
 pub mod router;
 pub mod service;
 pub mod time;
+pub mod udp;
 pub mod zmqhub;
 
 pub use header::{Header, Priority};

@@ -30,6 +30,7 @@ use bus::clock::Clock;
 use bus::gate::{DelayLine, LinkGate, Passage};
 use bus::inbox::{Inbound, inbox};
 use bus::outside::{OutsideEndpoint, OutsideError, SegmentKind, Segments};
+use csp::udp::UdpDrop;
 use csp::zmqhub::HubDrop;
 
 /// The bounds of a KISS/TCP link, each with the real-world thing it models.
@@ -118,6 +119,8 @@ pub enum Framing {
     /// on several segments (an address's range decides), and a packet between two of them
     /// goes straight across the hub, as libcsp's own hub forwards it.
     ZmqHub,
+    /// CSP over UDP: one datagram per packet (`csp::udp`), one segment as on KISS.
+    Udp,
 }
 
 /// Where a link's frames towards the outside go: a byte stream ([`Stream`]) or a message
@@ -439,6 +442,16 @@ pub type InputRx = tokio::sync::mpsc::Receiver<(SimTime, LinkInput)>;
 
 /// Shared counters of a link.
 pub type SharedStats = Arc<Mutex<KissLinkStats>>;
+
+/// A task of a link that ends with it, however the link ends (its task aborted at the end
+/// of the run included).
+pub(crate) struct AbortOnDrop(pub(crate) tokio::task::JoinHandle<()>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
 
 pub(crate) fn bump(stats: &SharedStats, f: impl FnOnce(&mut KissLinkStats)) {
     f(&mut stats
@@ -873,6 +886,19 @@ fn decode_chunk(
                 }
             }
         }
+        Framing::Udp => {
+            bump(stats, |s| s.bytes_in += chunk.len() as u64);
+            match csp::udp::decode(chunk) {
+                Ok(p) => events.push(KissEvent::Packet(p)),
+                Err(d) => {
+                    tracing::debug!("{name}: dropped datagram: {d}");
+                    bump(stats, |s| match d {
+                        UdpDrop::Short => s.short += 1,
+                        UdpDrop::Oversize => s.oversize += 1,
+                    });
+                }
+            }
+        }
     }
 }
 
@@ -1110,7 +1136,7 @@ impl Conn<'_> {
 }
 
 /// Frame `p` for the outside in `out`; false when it does not fit the framing (more than
-/// the hub's 256 bytes).
+/// the hub's or a datagram's 256 bytes).
 fn encode(framing: Framing, p: &csp::Packet, out: &mut Vec<u8>) -> bool {
     match framing {
         Framing::Kiss => kiss::encode(p, out),
@@ -1119,6 +1145,12 @@ fn encode(framing: Framing, p: &csp::Packet, out: &mut Vec<u8>) -> bool {
                 return false;
             }
             csp::zmqhub::encode(p, p.header.dst, out);
+        }
+        Framing::Udp => {
+            if p.data.len() > csp::udp::UDP_MTU {
+                return false;
+            }
+            csp::udp::encode(p, out);
         }
     }
     true

@@ -26,7 +26,8 @@ use std::net::IpAddr;
 use zeromq::{Socket, SocketRecv, SocketSend};
 
 use crate::kiss_tcp::{
-    Connection, FrameSink, KissLinkConfig, LinkInput, SharedStats, bump, edge, serve_link, take_in,
+    AbortOnDrop, Connection, FrameSink, KissLinkConfig, LinkInput, SharedStats, bump, edge,
+    serve_link, take_in,
 };
 use bus::clock::Clock;
 use bus::outside::Segments;
@@ -174,16 +175,6 @@ impl Hub {
     /// Where it is bound.
     pub fn addr(&self) -> HubAddr {
         self.addr
-    }
-}
-
-/// A task of the hub that ends with it, however the hub ends (its task aborted at the end
-/// of the run included).
-struct AbortOnDrop(tokio::task::JoinHandle<()>);
-
-impl Drop for AbortOnDrop {
-    fn drop(&mut self) {
-        self.0.abort();
     }
 }
 

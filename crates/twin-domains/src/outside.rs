@@ -382,7 +382,11 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
         opts.replaced.extend(&replaced);
         // Every link gets its place in `opts.outside` (faults name it by its index).
         let label = match l.kind {
-            LinkKind::KissListen | LinkKind::KissConnect | LinkKind::KissPty | LinkKind::ZmqHub => {
+            LinkKind::KissListen
+            | LinkKind::KissConnect
+            | LinkKind::KissPty
+            | LinkKind::ZmqHub
+            | LinkKind::Udp => {
                 let mut addrs = l.addrs.clone();
                 addrs.extend(replaced.iter().filter(|a| !l.addrs.contains(a)));
                 let defaults = KissLimits::default();
@@ -399,6 +403,12 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) {
                     LinkKind::KissListen => l.addr.parse().ok().map(KissMode::Listen),
                     LinkKind::KissConnect => l.addr.parse().ok().map(KissMode::Connect),
                     LinkKind::KissPty => Some(KissMode::Pty(l.addr.clone().into())),
+                    LinkKind::Udp => l.addr.parse().ok().map(|bind| {
+                        KissMode::Udp(links::udp::UdpAddr {
+                            bind,
+                            peer: l.peer.as_deref().and_then(|p| p.parse().ok()),
+                        })
+                    }),
                     _ => l.addr.parse().ok().map(KissMode::ZmqHub),
                 };
                 match mode {

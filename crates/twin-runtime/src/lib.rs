@@ -171,6 +171,9 @@ pub enum KissMode {
     /// libcsp 1.4's ZMQ hub (`--zmq-hub`, `kind = "zmq-hub"`): the twin binds its two
     /// sockets on this host, the nodes' PUB side and SUB side (`links::zmq_hub`).
     ZmqHub(::links::zmq_hub::HubAddr),
+    /// CSP over UDP (`--udp`, `kind = "udp"`): the twin's socket, and where it sends
+    /// (`links::udp`).
+    Udp(::links::udp::UdpAddr),
 }
 
 /// A link of the run to outside programs: KISS (TCP or a pty) or the ZMQ hub.
@@ -204,13 +207,14 @@ impl KissLink {
         self
     }
     /// The runtime's name of the link: `listen 127.0.0.1:52001`, `connect ...`, `pty
-    /// /tmp/m6p-tty` or `zmq-hub 127.0.0.2`.
+    /// /tmp/m6p-tty`, `zmq-hub 127.0.0.2` or `udp 127.0.0.1:10015`.
     pub fn label(&self) -> String {
         match &self.mode {
             KissMode::Listen(a) => format!("listen {a}"),
             KissMode::Connect(a) => format!("connect {a}"),
             KissMode::Pty(p) => format!("pty {}", p.display()),
             KissMode::ZmqHub(h) => format!("zmq-hub {h}"),
+            KissMode::Udp(u) => format!("udp {}", u.bind),
         }
     }
 }
@@ -504,8 +508,9 @@ impl RunOptions {
 const EVENTS_PER_WAKE: usize = 1024;
 
 /// Run the twin, handing every [`RunEvent`] to `sink` in the order they happen; what the
-/// runtime counted at the end. `ready` receives the bound addresses of the KISS servers,
-/// then those of the TCP consoles (`opts.uart`), once they listen.
+/// runtime counted at the end. `ready` receives the bound addresses of the KISS servers
+/// and UDP links (in `opts.kiss_links`' order), then those of the TCP consoles
+/// (`opts.uart`), once they listen.
 pub async fn run_with(
     mut opts: RunOptions,
     ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
@@ -528,7 +533,7 @@ pub async fn run_with(
     let nodes = build::nodes(&mut opts, &segs, clock, &boards, &ev_tx);
     let mut kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
     let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
-    // The KISS servers' addresses, then the TCP consoles'.
+    // The KISS servers' and UDP links' addresses, then the TCP consoles'.
     kiss.bound.extend(consoles);
     spawn_pacer(&opts, clock, &ev_tx, &mut background);
     if let Some(r) = ready {

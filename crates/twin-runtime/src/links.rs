@@ -76,6 +76,7 @@ pub(super) async fn kiss(
         // The hub's messages; KISS on every other link.
         cfg.framing = match link.mode {
             KissMode::ZmqHub(_) => links::kiss_tcp::Framing::ZmqHub,
+            KissMode::Udp(_) => links::kiss_tcp::Framing::Udp,
             _ => links::kiss_tcp::Framing::Kiss,
         };
         kiss_stats.push(
@@ -192,8 +193,8 @@ fn reserve_configured(
     replay_ids
 }
 
-/// Start one KISS link (listen, connect, pty or hub) as a background task; its counters by
-/// name. A listening server's bound address goes to `bound`.
+/// Start one KISS link (listen, connect, pty or hub) or UDP link as a background task; its
+/// counters by name. A listening server's or UDP link's bound address goes to `bound`.
 #[allow(clippy::too_many_arguments)]
 async fn start_link(
     link: &super::KissLink,
@@ -264,6 +265,28 @@ async fn start_link(
             named = (label.clone(), stats.clone());
             background.push(tokio::spawn(links::zmq_hub::serve(
                 hub,
+                label,
+                segs.clone(),
+                cfg,
+                stats,
+                clock,
+            )));
+        }
+        KissMode::Udp(addr) => {
+            let link = links::udp::UdpLink::bind(*addr).await?;
+            let at = link.addr();
+            if !at.bind.ip().is_loopback() {
+                not_loopback(
+                    events,
+                    clock,
+                    &label,
+                    format!("CSP/UDP link on {}", at.bind),
+                );
+            }
+            bound.push(at.bind);
+            named = (label.clone(), stats.clone());
+            background.push(tokio::spawn(links::udp::serve(
+                link,
                 label,
                 segs.clone(),
                 cfg,

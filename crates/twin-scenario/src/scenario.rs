@@ -273,15 +273,19 @@ pub enum UptimeKind {
 #[derive(Debug, Clone, PartialEq, Eq, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LinkSpec {
-    /// `kiss-listen`, `kiss-connect`, `kiss-pty`, `zmq-hub`, `socketcan` or `uart` (a
-    /// node's text console).
+    /// `kiss-listen`, `kiss-connect`, `kiss-pty`, `zmq-hub`, `udp`, `socketcan` or `uart`
+    /// (a node's text console).
     pub kind: LinkKind,
     /// TCP address (KISS/TCP, and a `uart` console served over TCP), path (`kiss-pty`:
     /// where the pty is linked), host (`zmq-hub`: `127.0.0.2`, or `127.0.0.2:6000:7000`
-    /// with the ports the programs publish to and subscribe at) or interface name with an
-    /// optional `:main`/`:payload` (SocketCAN).
+    /// with the ports the programs publish to and subscribe at), the UDP address the twin
+    /// binds (`udp`) or interface name with an optional `:main`/`:payload` (SocketCAN).
     #[serde(default)]
     pub addr: String,
+    /// `udp`: where the twin sends (`127.0.0.1:10016`; default: the source of the latest
+    /// datagram received).
+    #[serde(default)]
+    pub peer: Option<String>,
     /// `uart`: the node whose console this is (`FC`, `EPS`, ...).
     #[serde(default)]
     pub node: Option<String>,
@@ -401,6 +405,8 @@ pub enum LinkKind {
     KissPty,
     /// libcsp 1.4's ZMQ hub bound on `addr` (`HOST` or `HOST:PUB:SUB`).
     ZmqHub,
+    /// CSP over UDP, one packet per datagram: the twin binds `addr` and sends to `peer`.
+    Udp,
     /// Bridge to a SocketCAN interface.
     Socketcan,
     /// A node's text console (`node`), on a TCP `addr` or a `pty` path.
@@ -805,6 +811,14 @@ fn check_links(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep
                     err(p("addr"), e.to_string());
                 }
             }
+            LinkKind::Udp => {
+                if l.addr.parse::<std::net::SocketAddr>().is_err() {
+                    err(
+                        p("addr"),
+                        format!("`{}` is not an address like 127.0.0.1:10015", l.addr),
+                    );
+                }
+            }
             LinkKind::Uart => match (&l.pty, l.addr.is_empty()) {
                 (Some(_), false) => err(
                     p("pty"),
@@ -838,6 +852,16 @@ fn check_links(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep
                     );
                 }
             }
+        }
+        match (&l.peer, l.kind) {
+            (Some(peer), LinkKind::Udp) if peer.parse::<std::net::SocketAddr>().is_err() => err(
+                p("peer"),
+                format!("`{peer}` is not an address like 127.0.0.1:10016"),
+            ),
+            (Some(_), kind) if kind != LinkKind::Udp => {
+                err(p("peer"), "only a `udp` link has a peer".to_owned())
+            }
+            _ => {}
         }
         if let Some(name) = &l.name {
             let taken = ["main", "payload", "uhf"]

@@ -140,36 +140,37 @@ pub async fn execute(
     execute_keeping(compiled, false, sink).await
 }
 
-/// [`execute`], the report keeping every sample, downlinked byte and request outcome when
-/// `keep` (`RunOptions::keep_series`), for the tests and programs that read them; the
-/// verdicts are the same.
-pub async fn execute_keeping(
-    mut compiled: Compiled,
-    keep: bool,
-    sink: &mut (dyn FnMut(&RunEvent) + Send),
-) -> anyhow::Result<Outcome> {
-    let (tx, rx) = tokio::sync::oneshot::channel::<Vec<std::net::SocketAddr>>();
-    // The CSP addresses of each listening link, in the order the servers are bound, so
-    // that a program starting the twin can tell its links apart (`m6p.Twin` does).
-    let listen_addrs: Vec<Vec<u8>> = compiled
-        .opts
+/// Say where the run's servers are bound, once the runtime has bound them (`ready`): each
+/// KISS server with a hint that works, each UDP link and where it sends, each TCP console.
+fn announce_bound(
+    opts: &crate::runtime::RunOptions,
+    ready: tokio::sync::oneshot::Receiver<Vec<std::net::SocketAddr>>,
+) -> impl std::future::Future<Output = ()> + use<> {
+    // The links that bind (KISS servers, UDP links) with their CSP addresses, in the order
+    // the runtime binds them, so that a program starting the twin can tell its links apart
+    // (`m6p.Twin` does).
+    let listen_addrs: Vec<(crate::runtime::KissMode, Vec<u8>)> = opts
         .kiss_links
         .iter()
-        .filter(|l| matches!(l.mode, crate::runtime::KissMode::Listen(_)))
-        .map(|l| l.cfg.addrs.clone())
+        .filter(|l| {
+            matches!(
+                l.mode,
+                crate::runtime::KissMode::Listen(_) | crate::runtime::KissMode::Udp(_)
+            )
+        })
+        .map(|l| (l.mode.clone(), l.cfg.addrs.clone()))
         .collect();
     // The TCP consoles' nodes, bound after the KISS servers.
-    let consoles: Vec<String> = compiled
-        .opts
+    let consoles: Vec<String> = opts
         .uart
         .iter()
         .filter(|u| matches!(u.at, crate::runtime::UartAt::Tcp(_)))
         .map(|u| u.node.clone())
         .collect();
-    let print_listen = async move {
-        if let Ok(addrs) = rx.await {
+    async move {
+        if let Ok(addrs) = ready.await {
             let (kiss, rest) = addrs.split_at(listen_addrs.len().min(addrs.len()));
-            for (a, ids) in kiss.iter().zip(&listen_addrs) {
+            for (a, (mode, ids)) in kiss.iter().zip(&listen_addrs) {
                 let csp = if ids.is_empty() {
                     String::new()
                 } else {
@@ -178,10 +179,18 @@ pub async fn execute_keeping(
                         ids.iter().map(u8::to_string).collect::<Vec<_>>().join(", ")
                     )
                 };
-                eprintln!(
-                    "KISS/TCP: listening on {a}{csp} (try: {})",
-                    gs_hint(*a, ids)
-                );
+                match mode {
+                    crate::runtime::KissMode::Udp(u) => eprintln!(
+                        "CSP/UDP: on {a}{csp}, sending to {}",
+                        u.peer
+                            .map_or("the source of the latest datagram".to_owned(), |p| p
+                                .to_string())
+                    ),
+                    _ => eprintln!(
+                        "KISS/TCP: listening on {a}{csp} (try: {})",
+                        gs_hint(*a, ids)
+                    ),
+                }
             }
             for (a, node) in rest.iter().zip(&consoles) {
                 eprintln!(
@@ -191,7 +200,19 @@ pub async fn execute_keeping(
                 );
             }
         }
-    };
+    }
+}
+
+/// [`execute`], the report keeping every sample, downlinked byte and request outcome when
+/// `keep` (`RunOptions::keep_series`), for the tests and programs that read them; the
+/// verdicts are the same.
+pub async fn execute_keeping(
+    mut compiled: Compiled,
+    keep: bool,
+    sink: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<Outcome> {
+    let (tx, rx) = tokio::sync::oneshot::channel::<Vec<std::net::SocketAddr>>();
+    let print_listen = announce_bound(&compiled.opts, rx);
     let net = compiled.opts.network.clone();
     let icd = compiled.opts.icd_map();
     // The nodes that run: an outside program in a replaced node's place sends under its

@@ -87,12 +87,14 @@ pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         // Each recorded connection with its link's settings (its addresses above all).
         for r in &mut input {
             let link = r.link.split_once('#').map_or(r.link.as_str(), |(l, _)| l);
-            // A hub's messages, even when the hub came from the command line.
+            // A hub's messages or datagrams, even when the link came from the command line.
             if let Some(k) = compiled.opts.kiss_links.iter().find(|k| k.label() == link) {
                 r.cfg = k.cfg.clone();
             }
             if link.starts_with("zmq-hub ") {
                 r.cfg.framing = links::kiss_tcp::Framing::ZmqHub;
+            } else if link.starts_with("udp ") {
+                r.cfg.framing = links::kiss_tcp::Framing::Udp;
             }
             // A command-line link's configured addresses and transmit budget, which the
             // scenario lacks.

@@ -66,8 +66,12 @@ pub struct RunArgs {
     /// HOST or HOST:PUB_PORT:SUB_PORT [default ports: 6000 7000]. Any 127.0.0.x works.
     #[arg(long = "zmq-hub", value_name = "HOST")]
     pub zmq_hub: Vec<links::zmq_hub::HubAddr>,
-    /// A CSP address behind the --kiss-listen, --kiss-connect, --kiss-pty or --zmq-hub
-    /// before it (repeat for more);
+    /// CSP over UDP, one packet per datagram (YAMCS's CSP links): the twin binds BIND
+    /// (IP:PORT) and sends to PEER, or without one to the source of the latest datagram.
+    #[arg(long = "udp", value_name = "BIND[,PEER]")]
+    pub udp: Vec<links::udp::UdpAddr>,
+    /// A CSP address behind the --kiss-listen, --kiss-connect, --kiss-pty, --zmq-hub or
+    /// --udp before it (repeat for more);
     /// claimed when a program connects, and the only sources that link accepts. A link
     /// without any learns them from the packets it receives. The address of a simulated
     /// node (a payload, the FC, a ground station) replaces that node: it is not started.
@@ -144,6 +148,12 @@ pub fn cli_kiss_links(
                 .zip(&a.zmq_hub)
                 .map(|(i, &h)| (i, KissLink::new(KissMode::ZmqHub(h)))),
         )
+        .chain(
+            at("udp")
+                .into_iter()
+                .zip(&a.udp)
+                .map(|(i, &u)| (i, KissLink::new(KissMode::Udp(u)))),
+        )
         .collect();
     links.sort_by_key(|(i, _)| *i);
     for (i, &id) in at("kiss_addr").into_iter().zip(&a.kiss_addr) {
@@ -152,8 +162,8 @@ pub fn cli_kiss_links(
         }
         let Some((_, link)) = links.iter_mut().rev().find(|(j, _)| *j < i) else {
             anyhow::bail!(
-                "--kiss-addr {id} comes before any --kiss-listen, --kiss-connect, --kiss-pty or \
-                 --zmq-hub: it names an address of the link before it"
+                "--kiss-addr {id} comes before any --kiss-listen, --kiss-connect, --kiss-pty, \
+                 --zmq-hub or --udp: it names an address of the link before it"
             );
         };
         let first = link.cfg.addrs.first().copied();
