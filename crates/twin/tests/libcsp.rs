@@ -78,9 +78,17 @@ libcsp_test! {
     }
 }
 
+/// One real-time payload session at a time: each polls its payload 25 times on the
+/// session's 200 ms reply timeout, and four at once beside this binary's other tests (and
+/// CI's fuzz build) on two cores once lost 8 polls to late replies.
+static ONE_SESSION_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// The libcsp payload serves session 1 as payload 12 at `mode`/`iface` with `api`; with
 /// `also` a libcsp client at 10 on the same link runs its checks during the session.
 fn payload_session(mode: KissMode, iface: Iface, api: &str, also: Option<&[&str]>) {
+    let _one = ONE_SESSION_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let progs = programs();
     let mut opts = readme_options();
     opts.kiss_links[0].mode = mode.clone();
