@@ -158,6 +158,15 @@ async fn outside_node(ifname: &str) -> Result<Outside, String> {
     })
 }
 
+/// Wait until `done` holds, 3 s at most: waited for, not slept on, since a guest on a busy
+/// host takes its time.
+async fn settled(done: impl Fn() -> bool) {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(3);
+    while !done() && tokio::time::Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
 fn node<'a>(report: &'a RunReport, name: &str) -> &'a csp::node::NodeCounters {
     &report
         .nodes
@@ -272,11 +281,11 @@ fn guest_twin_over_vcan() {
         let frame = CanFrame::new(0x0012_3456, &[1, 2, 3]).expect("valid frame");
         tokio::time::sleep(Duration::from_millis(50)).await;
         writer.send(&frame).await.expect("send");
-        tokio::time::sleep(Duration::from_millis(100)).await;
+        settled(|| gate.stats().down + can.stats().frames > 0).await;
         let held = (gate.stats().down, can.stats().frames);
         gate.set_fault(0, None);
         writer.send(&frame).await.expect("send");
-        tokio::time::sleep(Duration::from_millis(100)).await;
+        settled(|| can.stats().frames > 0).await;
         let passed = can.stats().frames;
         task.abort();
         (held, passed)
