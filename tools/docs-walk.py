@@ -12,9 +12,10 @@ the walk before anything runs: docs commands cannot drift.
 The walk copies the working tree's files (`git ls-files`) to target/docs-walk/m6p-twin, as a
 fresh clone would have them, and runs the docs in order there with `m6p-twin` put on PATH
 by the README's own `cargo install` (CARGO_INSTALL_ROOT inside the walk's folder), `pip`
-and `pytest` from a virtual environment of its own, and the builds in this checkout's
-target/ (CARGO_TARGET_DIR). A step fails when its exit status is not the one expected, when
-its output lacks a text the step names, or when it prints a FAIL the step did not ask for.
+and `pytest` from a virtual environment of its own, and the builds in a target folder of
+its own (target/docs-walk-target). A step fails when its exit status is not the one
+expected, when its output lacks a text the step names, or when it prints a FAIL the step
+did not ask for.
 A background program's hints (`(try: m6p-twin ...)`) are followed as steps of their own.
 
     python3 tools/docs-walk.py          # check the manifest, then walk (a release build)
@@ -321,7 +322,10 @@ def prepare(walk: Path) -> dict[str, str]:
     env["PATH"] = f"{walk / 'cargo-root' / 'bin'}:{walk / 'venv' / 'bin'}:{env['PATH']}"
     env["VIRTUAL_ENV"] = str(walk / "venv")
     env["CARGO_INSTALL_ROOT"] = str(walk / "cargo-root")
-    env["CARGO_TARGET_DIR"] = env.get("CARGO_TARGET_DIR", str(ROOT / "target"))
+    # A target folder of the walk's own: builds of a copy of the workspace in the checkout's
+    # target/ share the binary's fingerprint with the checkout's, whose release build then
+    # looks fresh when it is not. Kept between walks (outside the folder removed above).
+    env["CARGO_TARGET_DIR"] = str(ROOT / "target" / "docs-walk-target")
     env["M6P_GS_HISTORY"] = str(walk / "gs-history")
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
     # The README's `pip install mypy ruff` takes the versions .ci/run pins.
