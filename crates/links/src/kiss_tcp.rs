@@ -764,6 +764,30 @@ pub struct Connection<'a> {
     pub live: Option<&'a Liveness>,
 }
 
+impl<'a> Connection<'a> {
+    /// The one connection of a link that is a single connection for the whole run (the ZMQ
+    /// hub, a UDP link): number 1, no listener.
+    pub fn whole_run(
+        name: &'a str,
+        segs: &'a Segments,
+        cfg: &'a KissLinkConfig,
+        stats: &'a SharedStats,
+        clock: Clock,
+        opened: SimTime,
+    ) -> Self {
+        Connection {
+            name,
+            segs,
+            cfg,
+            stats,
+            n: 1,
+            clock,
+            opened,
+            live: None,
+        }
+    }
+}
+
 /// What a connection learned or refused so far.
 struct Conn<'a> {
     k: Connection<'a>,

@@ -205,16 +205,7 @@ pub async fn serve(
         name: name.clone(),
         told: false,
     };
-    let k = Connection {
-        name: &name,
-        segs: &segs,
-        cfg: &cfg,
-        stats: &stats,
-        n: 1,
-        clock,
-        opened,
-        live: None,
-    };
+    let k = Connection::whole_run(&name, &segs, &cfg, &stats, clock, opened);
     let why = serve_link(in_rx, &mut out, k).await;
     tracing::info!("{name}: closed: {why}");
     bump(&stats, |s| s.disconnects += 1);

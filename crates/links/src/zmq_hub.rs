@@ -305,16 +305,7 @@ pub async fn serve(
         clock,
     )));
     let mut out = Publisher(frames_tx);
-    let k = Connection {
-        name: &name,
-        segs: &segs,
-        cfg: &cfg,
-        stats: &stats,
-        n: 1,
-        clock,
-        opened,
-        live: None,
-    };
+    let k = Connection::whole_run(&name, &segs, &cfg, &stats, clock, opened);
     let _reader = AbortOnDrop(tokio::spawn(reader));
     let why = serve_link(in_rx, &mut out, k).await;
     // What was handed to the publisher goes out before the hub closes.
