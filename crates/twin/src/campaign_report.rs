@@ -818,6 +818,16 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
 
+    /// Campaign `c` of 5 runs, as the reports below name it.
+    fn five_run_meta() -> CampaignMeta {
+        CampaignMeta {
+            name: "c".into(),
+            file: "c.toml".into(),
+            seed: 1,
+            runs: 5,
+        }
+    }
+
     fn row(run: u64, draws: &[(&str, &str)], verdict: RunVerdict, soc: f64) -> RunRow {
         RunRow {
             run,
@@ -903,13 +913,7 @@ mod tests {
             "{text}"
         );
         assert_eq!(failures_by_check_text(&rows[..1]), "");
-        let meta = CampaignMeta {
-            name: "c".into(),
-            file: "c.toml".into(),
-            seed: 1,
-            runs: 5,
-        };
-        let html = report_html(&meta, &rows);
+        let html = report_html(&five_run_meta(), &rows);
         let table = html.find("<h2>Failures by check</h2>").unwrap();
         // Near the top: before the plots and the list of failures.
         assert!(table < html.find("<h2>Metrics</h2>").unwrap());
@@ -998,13 +1002,7 @@ mod tests {
              \x20 2        12       1 of 4  1     0       0             5 / 5 / 5 packets             500 / 500 / 500 B                -\n",
             "{text}"
         );
-        let meta = CampaignMeta {
-            name: "c".into(),
-            file: "c.toml".into(),
-            seed: 1,
-            runs: 5,
-        };
-        let html = report_html(&meta, &rows);
+        let html = report_html(&five_run_meta(), &rows);
         let at = html.find("<h2>Sessions</h2>").unwrap();
         assert!(at > html.find("<h2>Failures by check</h2>").unwrap());
         assert!(at < html.find("<h2>Metrics</h2>").unwrap());
@@ -1020,13 +1018,7 @@ mod tests {
     /// No run had a session: one line, no table; nothing on the terminal.
     #[test]
     fn a_campaign_without_sessions_says_so_in_one_line() {
-        let meta = CampaignMeta {
-            name: "c".into(),
-            file: "c.toml".into(),
-            seed: 1,
-            runs: 5,
-        };
-        let html = report_html(&meta, &five_runs());
+        let html = report_html(&five_run_meta(), &five_runs());
         let section: Vec<&str> = html
             .lines()
             .skip_while(|l| *l != "<h2>Sessions</h2>")
@@ -1047,13 +1039,7 @@ mod tests {
 
     #[test]
     fn a_metric_with_one_value_is_a_line_and_the_others_axes_carry_their_units() {
-        let meta = CampaignMeta {
-            name: "c".into(),
-            file: "c.toml".into(),
-            seed: 1,
-            runs: 5,
-        };
-        let html = report_html(&meta, &five_runs());
+        let html = report_html(&five_run_meta(), &five_runs());
         assert!(
             html.contains("<p><b>max_rate_deg_s</b>: all 5 runs: 0 deg/s</p>"),
             "{html}"
