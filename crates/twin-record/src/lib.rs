@@ -6,6 +6,8 @@
 
 #[cfg(feature = "live")]
 pub mod live;
+#[cfg(feature = "live")]
+pub mod live_front;
 pub mod mcap_file;
 pub mod protobuf;
 pub mod record;

@@ -9,7 +9,10 @@
 //! follows the run rather than the wall clock.
 //!
 //! The server is the `foxglove` crate's (`WebSocketServer`, WebSocket subprotocols
-//! `foxglove.sdk.v1` and `foxglove.sdk.v1.1`) on a [`foxglove::Context`] of its own, so its
+//! `foxglove.sdk.v1` and `foxglove.sdk.v1.1`) on a loopback port of its own, behind
+//! [`crate::live_front`] on the asked address, which also lets in clients that offer the
+//! protocol's older name `foxglove.websocket.v1` (Foxglove Studio 1.x, Lichtblick,
+//! `@foxglove/ws-protocol`). It has a [`foxglove::Context`] of its own, so its
 //! channels never mix with another server's or the SDK's global context, and no MCAP sink
 //! is attached: the SDK writes nothing to disk (recordings are [`crate::record::Recorder`]'s).
 //! It runs on a small tokio runtime of its own (one worker thread), so a busy simulation
@@ -18,6 +21,7 @@
 
 use std::net::SocketAddr;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
@@ -27,6 +31,7 @@ use foxglove::{
     WebSocketServerHandle,
 };
 
+use crate::live_front::{self, FrontCounts};
 use crate::record::{
     ChannelKind, Encoded, EventEncoder, FIXED_CHANNELS, MESSAGE_ENCODING, SCHEMA_ENCODING,
 };
@@ -48,6 +53,7 @@ pub struct LiveServer {
     server: Option<WebSocketServerHandle>,
     ctx: Arc<Context>,
     addr: SocketAddr,
+    front: Arc<FrontCounts>,
     enc: EventEncoder,
     /// Channels by (kind, key), in order of creation.
     chans: Vec<(ChannelKind, String, Arc<RawChannel>)>,
@@ -82,24 +88,31 @@ impl LiveServer {
             .build()
             .context("building the live view's runtime")?;
         let ctx = Context::new();
+        let listener = rt
+            .block_on(tokio::net::TcpListener::bind(addr))
+            .with_context(|| format!("starting the live view on {addr}"))?;
+        let addr = listener.local_addr()?;
         // Started from within `rt`, the server spawns its tasks on `rt`.
         let server = rt
             .block_on(
                 WebSocketServer::new()
                     .name(format!("m6p-twin {}", env!("CARGO_PKG_VERSION")))
-                    .bind(addr.ip().to_string(), addr.port())
+                    .bind("127.0.0.1", 0)
                     .capabilities([Capability::Time])
                     .message_backlog_size(BACKLOG)
                     .context(&ctx)
                     .start(),
             )
-            .with_context(|| format!("starting the live view on {addr}"))?;
-        let addr = SocketAddr::new(addr.ip(), server.port());
+            .context("starting the live view's server")?;
+        let inner = SocketAddr::from(([127, 0, 0, 1], server.port()));
+        let front = Arc::new(FrontCounts::default());
+        rt.spawn(live_front::serve(listener, inner, front.clone()));
         let mut live = LiveServer {
             rt: Some(rt),
             server: Some(server),
             ctx,
             addr,
+            front,
             enc: EventEncoder::new(start_ns),
             chans: Vec::new(),
             latest: start_ns,
@@ -180,6 +193,15 @@ impl LiveServer {
     /// waiting at most a second for it. Call it outside an async runtime.
     pub fn finish(mut self) {
         self.maybe_broadcast_time(true);
+        let legacy = self.front.legacy.load(Ordering::Relaxed);
+        let full = self.front.refused_full.load(Ordering::Relaxed);
+        let head = self.front.refused_head.load(Ordering::Relaxed);
+        if legacy + full + head > 0 {
+            tracing::info!(
+                "live view: {legacy} client(s) as {}, {full} refused (full), {head} refused (bad request)",
+                "foxglove.websocket.v1"
+            );
+        }
         self.shutdown(Duration::from_secs(1));
     }
 

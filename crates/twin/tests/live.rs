@@ -130,12 +130,23 @@ port = 20
             .enable_all()
             .build()
             .unwrap();
-        let (packets, times) = rt
+        // Two clients at once: one offers the protocol as the `foxglove` SDK names it, one
+        // under its older name, as Foxglove Studio 1.x, Lichtblick and
+        // `@foxglove/ws-protocol` do.
+        let (sdk, legacy) = rt
             .block_on(async {
-                tokio::time::timeout(Duration::from_secs(20), client(&addr, start_ns, end_ns)).await
+                tokio::time::timeout(Duration::from_secs(20), async {
+                    tokio::join!(
+                        client(&addr, "foxglove.sdk.v1", start_ns, end_ns),
+                        client(&addr, "foxglove.websocket.v1", start_ns, end_ns)
+                    )
+                })
+                .await
             })
-            .expect("the client saw packets and times within 20 s");
-        assert!(!packets.is_empty() && !times.is_empty());
+            .expect("both clients saw packets and times within 20 s");
+        for (packets, times) in [sdk, legacy] {
+            assert!(!packets.is_empty() && !times.is_empty());
+        }
 
         // The run ends on its own after 3 simulated (= wall) seconds, recording too.
         let (done_tx, done) = mpsc::channel();
@@ -156,16 +167,24 @@ port = 20
         let _ = std::fs::remove_file(&scenario);
     }
 
-    /// Join the server, check the advertisement, subscribe to `/csp/packets`, and return the
-    /// first few CSP packet messages (log time, JSON) and time broadcasts.
-    async fn client(addr: &str, start_ns: u64, end_ns: u64) -> (Vec<(u64, Value)>, Vec<u64>) {
+    /// Join the server offering `subprotocol`, check the advertisement, subscribe to
+    /// `/csp/packets`, and return the first few CSP packet messages (log time, JSON) and time
+    /// broadcasts.
+    async fn client(
+        addr: &str,
+        subprotocol: &str,
+        start_ns: u64,
+        end_ns: u64,
+    ) -> (Vec<(u64, Value)>, Vec<u64>) {
         let mut req = format!("ws://{addr}").into_client_request().unwrap();
         req.headers_mut()
-            .insert("sec-websocket-protocol", "foxglove.sdk.v1".parse().unwrap());
-        let (mut ws, resp) = tokio_tungstenite::connect_async(req).await.unwrap();
+            .insert("sec-websocket-protocol", subprotocol.parse().unwrap());
+        let (mut ws, resp) = tokio_tungstenite::connect_async(req)
+            .await
+            .unwrap_or_else(|e| panic!("{subprotocol}: {e}"));
         assert_eq!(
             resp.headers()["sec-websocket-protocol"],
-            "foxglove.sdk.v1",
+            subprotocol,
             "negotiated subprotocol"
         );
 
