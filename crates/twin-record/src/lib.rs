@@ -8,6 +8,7 @@
 pub mod live;
 #[cfg(feature = "live")]
 pub mod live_front;
+pub mod log_order;
 pub mod mcap_file;
 pub mod protobuf;
 pub mod record;

@@ -57,6 +57,12 @@
 //! The same event stream gives a byte-identical file:
 //! - message `log_time` and `publish_time` are simulated time (`start_utc` + `t`, in ns since
 //!   the Unix epoch); the attachment's times are `start_utc`; nothing reads the wall clock;
+//! - messages are in the file in log-time order ([`crate::log_order`]: a CAN frame train,
+//!   handed out when it closes, is written among the messages of its first frame's
+//!   instant, and so is any message handed out up to [`REORDER_WINDOW_NS`] late); one
+//!   handed out later than that (an expectation's verdict, given at the end of a run for
+//!   the instant it was decided) has the latest log time written and its own instant as
+//!   its publish time;
 //! - the header's `library` is `m6p-twin <twin_version>` (not the mcap crate's identifier);
 //! - messages come from structs (field order = declaration order, every field written),
 //!   schemas from the `foxglove` crate (its derive, and its well-known types);
@@ -91,6 +97,7 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use crate::log_order::{HOLD_MAX, LogOrder, REORDER_WINDOW_NS};
 use crate::mcap_file::McapFile;
 use crate::protobuf::{Nested, Packed};
 use anyhow::{Context as _, bail};
@@ -1722,6 +1729,17 @@ impl EventEncoder {
         self.base_ns
     }
 
+    /// The log time of the first frame of the earliest CAN frame train still being
+    /// gathered: every message handed out from now on has that log time or a later one
+    /// (events come in time order).
+    pub fn open_since(&self) -> Option<u64> {
+        self.trains
+            .iter()
+            .filter_map(|(_, t)| t.as_ref())
+            .map(|t| self.base_ns.saturating_add(t.t0.as_ns()))
+            .min()
+    }
+
     /// Hand out the CAN frame trains still being gathered (at the end of a run, before
     /// the file is closed), bus by bus.
     pub fn finish(&mut self, emit: &mut Emit<'_>) -> anyhow::Result<()> {
@@ -2534,6 +2552,18 @@ struct McapOut {
     /// Schema id per kind (`kind as usize`), once written.
     schema_ids: Vec<Option<u16>>,
     chans: Vec<Chan>,
+    /// Messages not due yet: the file is in log-time order ([`crate::log_order`]).
+    order: LogOrder,
+    /// The latest log time written.
+    written_max: u64,
+}
+
+impl Drop for McapOut {
+    /// Dropped unfinished (the run failed), the recording still holds every message handed
+    /// to it: the held ones are written before the writer ends the file.
+    fn drop(&mut self) {
+        let _ = self.release(None);
+    }
 }
 
 impl McapOut {
@@ -2569,7 +2599,8 @@ impl McapOut {
         Ok(self.chans.len() - 1)
     }
 
-    /// Write one message, registering its channel if it is the first.
+    /// Take one message, registering its channel if it is the first; it is written when
+    /// due ([`McapOut::release`]).
     fn put(&mut self, m: Encoded<'_>) -> anyhow::Result<()> {
         let chan = match self
             .chans
@@ -2579,13 +2610,35 @@ impl McapOut {
             Some(i) => i,
             None => self.add_channel(m.kind, m.key)?,
         };
-        let c = &mut self.chans[chan];
-        let (id, seq) = (c.id, c.seq);
-        c.seq = c.seq.wrapping_add(1);
-        c.messages += 1;
-        self.writer
-            .message(id, seq, m.log_time, m.log_time, m.data)
-            .with_context(|| format!("writing recording {}", self.path.display()))
+        self.order.hold(chan, m.log_time, m.data);
+        Ok(())
+    }
+
+    /// Write the messages taken that are earlier than `due_before` (all for `None`), in
+    /// log-time order.
+    fn release(&mut self, due_before: Option<u64>) -> anyhow::Result<()> {
+        let McapOut {
+            writer,
+            path,
+            chans,
+            order,
+            written_max,
+            ..
+        } = self;
+        order.release(due_before, |chan, at, data| {
+            let c = &mut chans[chan];
+            let (id, seq) = (c.id, c.seq);
+            c.seq = c.seq.wrapping_add(1);
+            c.messages += 1;
+            // A message handed out after later ones were written (an expectation's
+            // verdict, given at the end of the run for the instant it was decided) is
+            // logged when it is written; its publish time keeps its own instant.
+            let log_time = at.max(*written_max);
+            *written_max = log_time;
+            writer
+                .message(id, seq, log_time, at, data)
+                .with_context(|| format!("writing recording {}", path.display()))
+        })
     }
 }
 
@@ -2676,6 +2729,8 @@ impl Recorder {
             path: path.to_owned(),
             schema_ids: vec![None; CHANNEL_KINDS.len()],
             chans: Vec::new(),
+            order: LogOrder::default(),
+            written_max: 0,
         };
         for (kind, key) in FIXED_CHANNELS {
             out.add_channel(kind, key)?;
@@ -2706,12 +2761,26 @@ impl Recorder {
     /// Record one event.
     pub fn write(&mut self, ev: &RunEvent) -> anyhow::Result<()> {
         let out = &mut self.out;
-        self.enc.encode(ev, &mut |m| out.put(m))
+        self.enc.encode(ev, &mut |m| out.put(m))?;
+        if out.order.len() > HOLD_MAX {
+            // Bounded whatever the events: the trains close early, and all is due.
+            self.enc.finish(&mut |m| out.put(m))?;
+            return out.release(None);
+        }
+        let now = self.enc.base_ns().saturating_add(ev.t().as_ns());
+        let horizon = now.saturating_sub(REORDER_WINDOW_NS);
+        out.release(Some(
+            self.enc.open_since().map_or(horizon, |t| t.min(horizon)),
+        ))
     }
 
     /// Close the current chunk and flush it to the file, so a run killed after this loses
     /// nothing written before it (costs compression ratio if called often).
     pub fn flush(&mut self) -> anyhow::Result<()> {
+        // What is held goes too (on the wall clock, the reorder window would be a minute of
+        // it), but for the open trains' span: a message later than this flush is written
+        // at the latest log time written.
+        self.out.release(self.enc.open_since())?;
         self.out
             .writer
             .flush()
@@ -2723,21 +2792,18 @@ impl Recorder {
         {
             let out = &mut self.out;
             self.enc.finish(&mut |m| out.put(m))?;
+            out.release(None)?;
         }
         let Recorder {
-            out:
-                McapOut {
-                    mut writer,
-                    path,
-                    chans,
-                    ..
-                },
+            mut out,
             enc: _,
             target,
         } = self;
-        let ctx = || format!("finishing recording {}", path.display());
-        let written = writer.finish().with_context(ctx)?;
-        drop(writer);
+        let ctx = || format!("finishing recording {}", out.path.display());
+        let written = out.writer.finish().with_context(ctx)?;
+        let chans = std::mem::take(&mut out.chans);
+        // Closes the file (the writer is finished: its drop writes nothing more).
+        drop(out);
         target.place()?;
         let (bytes, chunks) = (written.bytes, written.chunks);
         let channels: Vec<ChannelStats> = chans
