@@ -12,6 +12,10 @@
 //! - `cfg(python_pytest)`: `python3` can import `pytest` and `zmq` (pyzmq), which the
 //!   Python package's own tests need (`tests/python_package.rs`). Under `CI` it is always
 //!   set (`.ci/run` installs them); `M6P_PYTHON_PROBE=off` forces "not available".
+//! - `cfg(python_xtce)`: `python3` can import `lxml` and find the `xtce-lib` package, whose
+//!   XTCE 1.2 schema `tools/xtce-validate.py` checks `icd --xtce` against (`tests/xtce.rs`).
+//!   Under `CI` it is always set (`.ci/run` installs them); `M6P_PYTHON_PROBE=off` forces
+//!   "not available".
 //! - `cfg(slurm_available)`: running as root with Debian's `slurm-wlm` and `munge` installed
 //!   (`tests/campaign_slurm.rs` starts a one-node cluster with `tools/slurm/cluster.sh`).
 //!   Under `CI` it is always set (`.ci/run` installs them); `M6P_SLURM_PROBE=off` forces
@@ -35,6 +39,7 @@ fn main() {
     uml_probe::main();
     python_probe();
     pytest_probe();
+    xtce_probe();
     slurm_probe();
     libcsp_probe();
     mount_probe();
@@ -163,20 +168,34 @@ fn python_probe() {
     }
 }
 
-fn pytest_probe() {
-    println!("cargo::rustc-check-cfg=cfg(python_pytest)");
+/// `cfg(name)` when `python3` runs `code` successfully; always under CI (which installs
+/// what it needs), never with `M6P_PYTHON_PROBE=off`.
+fn python_can(name: &str, code: &str) {
+    println!("cargo::rustc-check-cfg=cfg({name})");
     if std::env::var_os("CI").is_some() {
-        println!("cargo::rustc-cfg=python_pytest");
+        println!("cargo::rustc-cfg={name}");
         return;
     }
     if std::env::var("M6P_PYTHON_PROBE").is_ok_and(|v| v == "off") {
         return;
     }
     let found = std::process::Command::new("python3")
-        .args(["-c", "import pytest, zmq"])
+        .args(["-c", code])
         .output()
         .is_ok_and(|o| o.status.success());
     if found {
-        println!("cargo::rustc-cfg=python_pytest");
+        println!("cargo::rustc-cfg={name}");
     }
+}
+
+fn xtce_probe() {
+    python_can(
+        "python_xtce",
+        "import importlib.util, lxml.etree, sys\n\
+         sys.exit(importlib.util.find_spec('xtce_lib') is None)",
+    );
+}
+
+fn pytest_probe() {
+    python_can("python_pytest", "import pytest, zmq");
 }

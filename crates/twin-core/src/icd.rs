@@ -14,6 +14,8 @@ use csp::icd::{Access, Command, Data, Decoded, Field, Port, Ty};
 use csp::reqrep::RESULT_SUCCESS;
 use serde::Serialize;
 
+pub mod xtce;
+
 /// Platform port 14 (`csp::params`) as data: the same on every twin node.
 pub const PLATFORM_PORT: Port = Port {
     port: csp::params::PORT,

@@ -10,10 +10,15 @@ pub struct Args {
     /// The Markdown tables of docs/protocol.md.
     #[arg(long, conflicts_with_all = ["node", "json"])]
     pub markdown: bool,
+    /// An XTCE 1.2 mission database for YAMCS and other XTCE tools (docs/operations.md).
+    #[arg(long, conflicts_with_all = ["node", "json", "markdown"])]
+    pub xtce: bool,
 }
 
 pub fn cmd_icd(a: Args) -> anyhow::Result<bool> {
-    if a.markdown {
+    if a.xtce {
+        print!("{}", m6p_twin::icd::xtce::to_xtce().xml);
+    } else if a.markdown {
         print!("{}", m6p_twin::icd::to_markdown());
     } else if a.json {
         println!("{}", m6p_twin::icd::to_json());
