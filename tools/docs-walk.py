@@ -44,6 +44,7 @@ DOCS = [
     "python/README.md",
     "docs/scenarios.md",
     "docs/campaigns.md",
+    "docs/operations.md",
 ]
 SHELL_BLOCKS = {"sh", "bash", "shell", "console"}
 COMMAND_WORDS = ("m6p-twin", "cargo", "pip", "pytest", "python3", "nc", "sbatch", "mypy", "ruff", "gs")
