@@ -22,6 +22,8 @@ const pages = [
   ['02-fc-tmgen-uptime', `/telemetry/parameters/M6P/FC/TMGEN/uptime_s/-/summary?${c}`, 'Generation time'],
   ['03-packets', `/telemetry/packets?${c}`, '/M6P/FC/TMGEN/reply'],
   ['04-command-history', `/commanding/history?${c}`, '/M6P/FC/TMGEN'],
+  // The example's command stack (examples/yamcs/src/main/yamcs/stacks), loaded by the UI.
+  ['06-stack-payload-session', `/automation/stacks/files/payload-session.ycs?${c}`, 'Command: /M6P/PC/SETUP'],
 ];
 if (tmgen) {
   pages.push(['05-command-tmgen', `/commanding/history/${encodeURIComponent(tmgen.id)}?${c}`, 'Verifier']);
