@@ -17,6 +17,8 @@
 //! The bytes are kept in one arena, reused; what is held spans the window, and [`HOLD_MAX`]
 //! bounds it in messages whatever the events (the recorder then writes it all).
 
+use std::collections::VecDeque;
+
 /// Messages held at most before the recorder closes its open trains and writes them all.
 pub const HOLD_MAX: usize = 1 << 16;
 
@@ -34,12 +36,19 @@ struct Held {
 }
 
 /// Messages waiting for their turn, sorted by log time (ties: arrival).
+///
+/// Every operation is cheap whatever is held (a minute of messages): a message goes in at
+/// the back (a late one a binary search from it), due ones leave from the front, and the
+/// arena is compacted only when most of it is released (amortised: each byte is copied at
+/// most once more).
 #[derive(Debug, Default)]
 pub struct LogOrder {
-    held: Vec<Held>,
+    held: VecDeque<Held>,
     arena: Vec<u8>,
     /// The next arena, swapped in when the live bytes are compacted.
     spare: Vec<u8>,
+    /// Bytes of the held messages.
+    live: usize,
 }
 
 impl LogOrder {
@@ -62,14 +71,15 @@ impl LogOrder {
             len: data.len(),
         };
         self.arena.extend_from_slice(data);
-        // Most messages come in order: the search ends at once at the back.
-        let at = match self.held.last() {
+        self.live += data.len();
+        // Most messages come in order: they go at the back.
+        match self.held.back() {
             Some(last) if last.log_time > log_time => {
-                self.held.partition_point(|x| x.log_time <= log_time)
+                let at = self.held.partition_point(|x| x.log_time <= log_time);
+                self.held.insert(at, h);
             }
-            _ => self.held.len(),
-        };
-        self.held.insert(at, h);
+            _ => self.held.push_back(h),
+        }
     }
 
     /// Write the held messages earlier than `due_before` (all of them for `None`), in
@@ -86,10 +96,16 @@ impl LogOrder {
         if n == 0 {
             return Ok(());
         }
-        for h in &self.held[..n] {
-            write(h.chan, h.log_time, &self.arena[h.start..h.start + h.len])?;
+        for _ in 0..n {
+            let Some(h) = self.held.pop_front() else {
+                break;
+            };
+            self.live -= h.len;
+            if let Err(e) = write(h.chan, h.log_time, &self.arena[h.start..h.start + h.len]) {
+                self.compact();
+                return Err(e);
+            }
         }
-        self.held.drain(..n);
         self.compact();
         Ok(())
     }
@@ -101,8 +117,7 @@ impl LogOrder {
             self.arena.clear();
             return;
         }
-        let live: usize = self.held.iter().map(|h| h.len).sum();
-        if self.arena.len() < 64 * 1024 || live * 2 > self.arena.len() {
+        if self.arena.len() < 64 * 1024 || self.live * 2 > self.arena.len() {
             return;
         }
         self.spare.clear();
