@@ -77,7 +77,7 @@ pub fn to_xtce() -> Xtce {
     let (mut commands, mut replies) = (0, 0);
     for node in nodes() {
         x.open("SpaceSystem", &[("name", node.name.into())]);
-        let mut types = Types::new("Argument");
+        let mut types = Types::new(Side::Command);
         let mut cmds = Xml::at(x.depth + 2);
         for port in &node.ports {
             for c in port.commands {
@@ -117,10 +117,13 @@ pub fn to_xtce() -> Xtce {
 fn header_tm(x: &mut Xml) {
     x.open("TelemetryMetaData", &[]);
     x.open("ParameterTypeSet", &[]);
-    header_types(x, "Parameter");
+    header_types(x, Side::Telemetry);
     x.open("EnumeratedParameterType", &[("name", "result_t".into())]);
     x.leaf("IntegerDataEncoding", &int_encoding(8, false));
-    enumeration(x, &[(0, "failure"), (1, "success")]);
+    enumeration(
+        x,
+        &[(0, Outcome::Failure.label()), (1, Outcome::Success.label())],
+    );
     x.close("EnumeratedParameterType");
     x.close("ParameterTypeSet");
     x.open("ParameterSet", &[]);
@@ -175,9 +178,10 @@ fn header_tm(x: &mut Xml) {
     x.close("TelemetryMetaData");
 }
 
-/// The header's types, as parameter or argument (`kind`) types: unsigned integers of 2, 5, 6
+/// The header's types, on either `side`: unsigned integers of 2, 5, 6
 /// and 8 bits (big-endian bit fields) and a 1-bit flag.
-fn header_types(x: &mut Xml, kind: &str) {
+fn header_types(x: &mut Xml, side: Side) {
+    let kind = side.type_word();
     for (name, bits) in [("u2_t", 2), ("u5_t", 5), ("u6_t", 6), ("u8_t", 8)] {
         let tag = format!("Integer{kind}Type");
         x.open(
@@ -219,7 +223,7 @@ const HEADER_FIELDS: [(&str, &str, &str); 9] = [
 fn header_tc(x: &mut Xml) {
     x.open("CommandMetaData", &[]);
     x.open("ArgumentTypeSet", &[]);
-    header_types(x, "Argument");
+    header_types(x, Side::Command);
     x.close("ArgumentTypeSet");
     x.open("MetaCommandSet", &[]);
     x.open(
@@ -403,7 +407,7 @@ const VERIFY_WINDOW: &str = "PT10S";
 /// fields and its container `reply`.
 fn reply(x: &mut Xml, node: &NodeIcd, port: &Port, c: &Command) {
     let (fields, tail) = data_parts(&c.reply);
-    let mut types = Types::new("Parameter");
+    let mut types = Types::new(Side::Telemetry);
     let mut params = Vec::new();
     for f in fields {
         let ty = types.field(f.name, f);
@@ -438,7 +442,7 @@ fn reply(x: &mut Xml, node: &NodeIcd, port: &Port, c: &Command) {
         params.iter().map(|p| p.0),
     );
     x.open("BaseContainer", &[("containerRef", "/M6P/reply".into())]);
-    restriction(x, node, port, c, "success");
+    restriction(x, node, port, c, Outcome::Success);
     x.close("BaseContainer");
     x.close("SequenceContainer");
     x.open(
@@ -447,7 +451,7 @@ fn reply(x: &mut Xml, node: &NodeIcd, port: &Port, c: &Command) {
     );
     x.leaf("EntryList", &[]);
     x.open("BaseContainer", &[("containerRef", "/M6P/reply".into())]);
-    restriction(x, node, port, c, "failure");
+    restriction(x, node, port, c, Outcome::Failure);
     x.close("BaseContainer");
     x.close("SequenceContainer");
     x.close("ContainerSet");
@@ -458,7 +462,7 @@ fn reply(x: &mut Xml, node: &NodeIcd, port: &Port, c: &Command) {
 /// The conditions of a reply container: the node's address(es), the command's port (or,
 /// for pushed telemetry, an ephemeral port), the command id and the result (`success` or
 /// `failure`).
-fn restriction(x: &mut Xml, node: &NodeIcd, port: &Port, c: &Command, result: &str) {
+fn restriction(x: &mut Xml, node: &NodeIcd, port: &Port, c: &Command, result: Outcome) {
     x.open("RestrictionCriteria", &[]);
     x.open("BooleanExpression", &[]);
     x.open("ANDedConditions", &[]);
@@ -485,7 +489,7 @@ fn restriction(x: &mut Xml, node: &NodeIcd, port: &Port, c: &Command, result: &s
         condition(x, "csp_sport", "==", &port.port.to_string());
     }
     condition(x, "command", "==", &c.id.to_string());
-    condition(x, "result", "==", result);
+    condition(x, "result", "==", result.label());
     x.close("ANDedConditions");
     x.close("BooleanExpression");
     x.close("RestrictionCriteria");
@@ -589,18 +593,56 @@ fn is_enum(f: &Field) -> bool {
     }
 }
 
+/// Which half of the database a type belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Side {
+    /// A command's argument types (`...ArgumentType`).
+    Command,
+    /// A reply's parameter types (`...ParameterType`).
+    Telemetry,
+}
+
+impl Side {
+    /// The word XTCE's type names carry (`IntegerArgumentType`, `IntegerParameterType`).
+    fn type_word(self) -> &'static str {
+        match self {
+            Side::Command => "Argument",
+            Side::Telemetry => "Parameter",
+        }
+    }
+}
+
+/// An ICD reply's result byte, as the database names its values.
+#[derive(Debug, Clone, Copy)]
+enum Outcome {
+    Success,
+    Failure,
+}
+
+impl Outcome {
+    fn label(self) -> &'static str {
+        match self {
+            Outcome::Success => "success",
+            Outcome::Failure => "failure",
+        }
+    }
+}
+
 /// The XTCE types of one command's arguments or one reply's parameters.
 struct Types {
     /// `Argument` or `Parameter`.
-    kind: &'static str,
+    side: Side,
     xml: Xml,
 }
 
 impl Types {
-    fn new(kind: &'static str) -> Types {
+    fn new(side: Side) -> Types {
         Types {
-            kind,
-            xml: Xml::at(if kind == "Argument" { 4 } else { 5 }),
+            side,
+            xml: Xml::at(match side {
+                Side::Command => 4,
+                Side::Telemetry => 5,
+            }),
         }
     }
 
@@ -640,9 +682,9 @@ impl Types {
     }
 
     fn scalar(&mut self, name: &str, f: &Field) {
-        let k = self.kind;
+        let k = self.side.type_word();
         let x = &mut self.xml;
-        let range = (k == "Argument").then_some(f.range).flatten();
+        let range = (self.side == Side::Command).then_some(f.range).flatten();
         let unit = |x: &mut Xml| {
             if !f.unit.is_empty() {
                 x.open("UnitSet", &[]);
@@ -704,7 +746,7 @@ impl Types {
     }
 
     fn string(&mut self, name: &str, chars: usize) -> String {
-        let tag = format!("String{}Type", self.kind);
+        let tag = format!("String{}Type", self.side.type_word());
         let x = &mut self.xml;
         x.open(&tag, &[("name", name.into())]);
         x.open("StringDataEncoding", &[("encoding", "US-ASCII".into())]);
@@ -719,7 +761,7 @@ impl Types {
     }
 
     fn aggregate(&mut self, name: &str, members: &[(&str, String)]) {
-        let tag = format!("Aggregate{}Type", self.kind);
+        let tag = format!("Aggregate{}Type", self.side.type_word());
         let x = &mut self.xml;
         x.open(&tag, &[("name", name.into())]);
         x.open("MemberList", &[]);
@@ -731,7 +773,7 @@ impl Types {
     }
 
     fn array(&mut self, name: &str, element: &str, count: usize) {
-        let tag = format!("Array{}Type", self.kind);
+        let tag = format!("Array{}Type", self.side.type_word());
         let x = &mut self.xml;
         x.open(
             &tag,
@@ -755,7 +797,7 @@ impl Types {
     /// `RemainingBinaryDecoder`).
     fn remaining(&mut self, name: &str) -> String {
         let name = format!("{name}_t");
-        let tag = format!("Binary{}Type", self.kind);
+        let tag = format!("Binary{}Type", self.side.type_word());
         let x = &mut self.xml;
         x.open(&tag, &[("name", name.clone())]);
         x.open("BinaryDataEncoding", &[]);
@@ -767,7 +809,7 @@ impl Types {
         );
         x.close("DynamicValue");
         x.close("SizeInBits");
-        if self.kind == "Parameter" {
+        if self.side == Side::Telemetry {
             x.open(
                 "FromBinaryTransformAlgorithm",
                 &[("name", "RemainingBinaryDecoder".into())],
