@@ -36,7 +36,7 @@
 //! frames ahead of its tokio wake-ups by at most [`LOOKAHEAD`], so arbitration happens
 //! between the frames queued when a frame is picked.
 
-use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::task::Waker;
 use std::time::Duration;
@@ -287,9 +287,9 @@ struct Port {
     stats: PortStats,
     /// `stats.name`, shared: each traced frame names its sender without an allocation.
     name: Arc<str>,
-    addrs: BTreeSet<u8>,
+    addrs: AddrSet,
     /// The addresses given at attach (never taken out by an alias).
-    own: BTreeSet<u8>,
+    own: AddrSet,
     promiscuous: bool,
     enabled: bool,
     queue: VecDeque<(SimTime, CanFrame)>,
@@ -305,6 +305,30 @@ struct Port {
     departed: bool,
     /// Delivered, not yet handed to the inbox: each arrival, and whether it is quiet.
     arrivals: Vec<(Inbound, bool)>,
+}
+
+/// A set of addresses as a bit per address: the acceptance filter asked for every frame
+/// and every endpoint (a tree's lookup was a fifth of the bus task's delivery).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct AddrSet([u64; 4]);
+
+impl AddrSet {
+    fn of(addrs: &[u8]) -> Self {
+        let mut s = AddrSet::default();
+        for &a in addrs {
+            s.insert(a);
+        }
+        s
+    }
+    fn insert(&mut self, a: u8) {
+        self.0[usize::from(a >> 6)] |= 1 << (a & 63);
+    }
+    fn remove(&mut self, a: u8) {
+        self.0[usize::from(a >> 6)] &= !(1 << (a & 63));
+    }
+    fn contains(&self, a: u8) -> bool {
+        self.0[usize::from(a >> 6)] & (1 << (a & 63)) != 0
+    }
 }
 
 #[derive(Debug)]
@@ -575,8 +599,8 @@ impl CanBus {
         if let Some(p) = st.ports.get_mut(port.idx) {
             if on {
                 p.addrs.insert(addr);
-            } else if !p.own.contains(&addr) {
-                p.addrs.remove(&addr);
+            } else if !p.own.contains(addr) {
+                p.addrs.remove(addr);
             }
         }
     }
@@ -628,7 +652,7 @@ impl CanBus {
         let mut st = self.lock();
         st.claims.retain(|_, idx| *idx != port.idx);
         if let Some(p) = st.ports.get_mut(port.idx) {
-            p.addrs.clear();
+            p.addrs = AddrSet::default();
             p.enabled = false;
             p.departed = p.link.is_some();
         }
@@ -781,8 +805,8 @@ impl State {
                 ..Default::default()
             },
             name: name.into(),
-            addrs: addrs.iter().copied().collect(),
-            own: addrs.iter().copied().collect(),
+            addrs: AddrSet::of(addrs),
+            own: AddrSet::of(addrs),
             promiscuous,
             enabled: true,
             queue: VecDeque::new(),
@@ -826,7 +850,7 @@ impl State {
         self.claims
             .get(&addr)
             .copied()
-            .or_else(|| self.ports.iter().position(|p| p.own.contains(&addr)))
+            .or_else(|| self.ports.iter().position(|p| p.own.contains(addr)))
     }
 
     /// [`frame_bits`], remembered for the last frame (a babbler sends one frame over and
@@ -1365,7 +1389,7 @@ impl State {
                     .map_or_else(|| "?".into(), |p| p.name.clone());
                 // Addressed to endpoints of which none can take it: lost at the receiver.
                 let addressed = self.ports.iter().enumerate().filter(|&(i, p)| {
-                    i != from && p.addrs.contains(&dst) && claimed_by.is_none_or(|c| c == i)
+                    i != from && p.addrs.contains(dst) && claimed_by.is_none_or(|c| c == i)
                 });
                 let unreceived = addressed
                     .map(|(_, p)| {
@@ -1398,7 +1422,7 @@ impl State {
                     continue;
                 }
                 let wants =
-                    p.promiscuous || (p.addrs.contains(&dst) && claimed_by.is_none_or(|c| c == i));
+                    p.promiscuous || (p.addrs.contains(dst) && claimed_by.is_none_or(|c| c == i));
                 if wants {
                     p.stats.frames_rx += 1;
                     p.stats.bytes_rx += u64::from(frame.dlc);

@@ -89,8 +89,14 @@ impl LogOrder {
         due_before: Option<u64>,
         mut write: impl FnMut(usize, u64, &[u8]) -> Result<(), E>,
     ) -> Result<(), E> {
+        // From the front, not a binary search: this runs for every message, and nearly
+        // always finds none or a few due (each is written once).
         let n = match due_before {
-            Some(t) => self.held.partition_point(|x| x.log_time < t),
+            Some(t) => self
+                .held
+                .iter()
+                .position(|x| x.log_time >= t)
+                .unwrap_or(self.held.len()),
             None => self.held.len(),
         };
         if n == 0 {

@@ -4,111 +4,17 @@
 //! ADCS at 10 Hz, publishing at 1 Hz) for ten simulated minutes with and without the MCAP
 //! recorder (`m6p-twin run --record`).
 
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use bus::driver::{Attachment, NodeCtl, run_node};
-use bus::inbox::inbox;
-use bus::{CanBus, CanBusConfig, Clock, ClockMode};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use csp::client::Client;
-use csp::node::{App, Host, IfaceConfig, NoApp, Node, NodeConfig};
-use csp::router::Route;
-use csp::{Header, Packet, SimTime};
+use csp::SimTime;
 use m6p_twin::network::NetworkSpec;
 use m6p_twin::report::run;
-use m6p_twin::runtime::{RunOptions, build_runtime_for, build_virtual_runtime};
-
-/// Pings node 3 back to back: each reply sends the next request.
-struct PingPong {
-    client: Client,
-    left: u64,
-    done: Arc<Mutex<u64>>,
-}
-
-impl PingPong {
-    fn fire(&mut self, node: &mut Node, now: SimTime) {
-        if self.left == 0 {
-            return;
-        }
-        self.left -= 1;
-        let payload: Vec<u8> = (0..64u8).collect();
-        let h = Header::new(node.addr(), 3, 1, 0);
-        let _ = self
-            .client
-            .request(node, 0, h, 3, 1, payload, Duration::from_secs(1), now);
-    }
-}
-
-impl App for PingPong {
-    type Event = std::convert::Infallible;
-    fn start(&mut self, node: &mut Node, now: SimTime) {
-        self.fire(node, now);
-    }
-    fn handle_packet(&mut self, node: &mut Node, packet: Packet, now: SimTime) {
-        if self.client.handle_reply(node, &packet, now).is_some() {
-            *self
-                .done
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner) += 1;
-            self.fire(node, now);
-        }
-    }
-}
-
-fn node_cfg(name: &str, addr: u8) -> NodeConfig {
-    let mut c = NodeConfig::new(name, addr);
-    c.ifaces = vec![IfaceConfig::can("can")];
-    c.routes.set_default(Route::direct(0));
-    c
-}
+use m6p_twin::runtime::{RunOptions, build_runtime_for};
 
 /// Run `n` round trips; returns (wall time, simulated time).
 fn round_trips(n: u64) -> (Duration, SimTime) {
-    // As the twin runs in virtual time: the paused clock's timer, no IO driver.
-    let rt = build_virtual_runtime().expect("runtime");
-    rt.block_on(async move {
-        let clock = Clock::new(ClockMode::Virtual);
-        let bus = CanBus::new(CanBusConfig::new("bench"), 1);
-        let (ta, ra) = inbox();
-        let (tb, rb) = inbox();
-        let pa = bus.attach("A", &[16], false, ta, 0);
-        let pb = bus.attach("B", &[3], false, tb, 0);
-        tokio::spawn(bus.clone().run(clock));
-        let done = Arc::new(Mutex::new(0u64));
-        let (ca, cra) = tokio::sync::mpsc::unbounded_channel();
-        let (cb, crb) = tokio::sync::mpsc::unbounded_channel();
-        let a = Host::new(
-            node_cfg("A", 16),
-            PingPong {
-                client: Client::new(),
-                left: n,
-                done: done.clone(),
-            },
-            SimTime::ZERO,
-        );
-        let b = Host::new(node_cfg("B", 3), NoApp, SimTime::ZERO);
-        let start = Instant::now();
-        let ha = tokio::spawn(run_node(a, vec![Attachment::Can(pa)], ra, cra, clock));
-        let hb = tokio::spawn(run_node(b, vec![Attachment::Can(pb)], rb, crb, clock));
-        loop {
-            tokio::time::sleep(Duration::from_millis(100)).await;
-            if *done
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner)
-                >= n
-            {
-                break;
-            }
-        }
-        let wall = start.elapsed();
-        let sim = clock.now();
-        let _ = ca.send((SimTime::ZERO, NodeCtl::Stop));
-        let _ = cb.send((SimTime::ZERO, NodeCtl::Stop));
-        let _ = ha.await;
-        let _ = hb.await;
-        (wall, sim)
-    })
+    m6p_twin::bench::round_trips(n).expect("round trips")
 }
 
 fn bench_round_trips(c: &mut Criterion) {

@@ -56,7 +56,7 @@ impl Variant {
 }
 
 /// One timed run, as the `bench-run` process reports it.
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Sample {
     /// CPU seconds (user + system).
     pub cpu_s: f64,
@@ -68,6 +68,13 @@ pub struct Sample {
     pub mcap_bytes: u64,
     /// Its messages.
     pub messages: u64,
+    /// CAN frames that crossed each bus, by bus name (what the run's instructions are
+    /// counted against: `tools/perf/instructions.py`).
+    #[serde(default)]
+    pub can_frames: std::collections::BTreeMap<String, u64>,
+    /// Packets the ground segment carried.
+    #[serde(default)]
+    pub ground_packets: u64,
 }
 
 /// Median, minimum and maximum of a set of figures.
@@ -264,6 +271,7 @@ pub fn run_one(
     let cpu0 = cpu_now_s();
     let wall0 = Instant::now();
     let mut stats = None;
+    let mut report = None;
     match variant {
         Variant::AdcsFloor => {
             std::hint::black_box(adcs_floor(loaded, duration));
@@ -275,12 +283,11 @@ pub fn run_one(
             let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
             // Each round replaces the last round's file.
             let record = (variant == Variant::Recorded).then(|| exec::RecordTo::replacing(record));
-            stats = rt
-                .block_on(exec::execute_recorded_without_files(
-                    loaded, compiled, record,
-                ))?
-                .1
-                .transpose()?;
+            let (outcome, recording) = rt.block_on(exec::execute_recorded_without_files(
+                loaded, compiled, record,
+            ))?;
+            stats = recording.transpose()?;
+            report = Some(outcome.report);
         }
     }
     Ok(Sample {
@@ -289,7 +296,95 @@ pub fn run_one(
         peak_rss_mib: peak_rss_mib(),
         mcap_bytes: stats.as_ref().map_or(0, |s| s.bytes),
         messages: stats.as_ref().map_or(0, |s| s.messages),
+        can_frames: report.as_ref().map_or_else(Default::default, |r| {
+            r.buses.iter().map(|b| (b.name.clone(), b.frames)).collect()
+        }),
+        ground_packets: report.as_ref().map_or(0, |r| r.ground.packets),
     })
+}
+
+/// Request-reply round trips over timed CAN in virtual time, as the twin runs them: node
+/// 16 asks node 3 (the CSP ping service) with a 64-byte payload, each reply sending the
+/// next request, on one bus with its own task, each node in its own task. Returns the wall
+/// time and the simulated time the `n` round trips took. The network bench and
+/// `bench-run --variant round_trips` (counted in instructions by
+/// `tools/perf/instructions.py`) run it.
+pub fn round_trips(n: u64) -> anyhow::Result<(Duration, SimTime)> {
+    use bus::driver::{Attachment, NodeCtl, run_node};
+    use bus::{CanBus, CanBusConfig, Clock, ClockMode};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicU64, Ordering};
+
+    /// Pings node 3 back to back: each reply sends the next request.
+    struct PingPong {
+        client: csp::client::Client,
+        left: u64,
+        done: Arc<AtomicU64>,
+    }
+    impl PingPong {
+        fn fire(&mut self, node: &mut csp::node::Node, now: SimTime) {
+            if self.left == 0 {
+                return;
+            }
+            self.left -= 1;
+            let payload: Vec<u8> = (0..64u8).collect();
+            let h = csp::Header::new(node.addr(), 3, 1, 0);
+            let _ = self
+                .client
+                .request(node, 0, h, 3, 1, payload, Duration::from_secs(1), now);
+        }
+    }
+    impl csp::node::App for PingPong {
+        type Event = std::convert::Infallible;
+        fn start(&mut self, node: &mut csp::node::Node, now: SimTime) {
+            self.fire(node, now);
+        }
+        fn handle_packet(&mut self, node: &mut csp::node::Node, packet: csp::Packet, now: SimTime) {
+            if self.client.handle_reply(node, &packet, now).is_some() {
+                self.done.fetch_add(1, Ordering::Relaxed);
+                self.fire(node, now);
+            }
+        }
+    }
+    let node_cfg = |name: &str, addr: u8| {
+        let mut c = NodeConfig::new(name, addr);
+        c.ifaces = vec![IfaceConfig::can("can")];
+        c.routes.set_default(Route::direct(0));
+        c
+    };
+    let rt = crate::runtime::build_virtual_runtime()?;
+    Ok(rt.block_on(async move {
+        let clock = Clock::new(ClockMode::Virtual);
+        let bus = CanBus::new(CanBusConfig::new("bench"), 1);
+        let (ta, ra) = bus::inbox::inbox();
+        let (tb, rb) = bus::inbox::inbox();
+        let pa = bus.attach("A", &[16], false, ta, 0);
+        let pb = bus.attach("B", &[3], false, tb, 0);
+        tokio::spawn(bus.clone().run(clock));
+        let done = Arc::new(AtomicU64::new(0));
+        let (ca, cra) = tokio::sync::mpsc::unbounded_channel();
+        let (cb, crb) = tokio::sync::mpsc::unbounded_channel();
+        let app = PingPong {
+            client: csp::client::Client::new(),
+            left: n,
+            done: done.clone(),
+        };
+        let a = Host::new(node_cfg("A", 16), app, SimTime::ZERO);
+        let b = Host::new(node_cfg("B", 3), csp::node::NoApp, SimTime::ZERO);
+        let start = Instant::now();
+        let ha = tokio::spawn(run_node(a, vec![Attachment::Can(pa)], ra, cra, clock));
+        let hb = tokio::spawn(run_node(b, vec![Attachment::Can(pb)], rb, crb, clock));
+        while done.load(Ordering::Relaxed) < n {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        let wall = start.elapsed();
+        let sim = clock.now();
+        let _ = ca.send((SimTime::ZERO, NodeCtl::Stop));
+        let _ = cb.send((SimTime::ZERO, NodeCtl::Stop));
+        let _ = ha.await;
+        let _ = hb.await;
+        (wall, sim)
+    }))
 }
 
 /// Measure `loaded` over `duration`, `runs` runs of each variant, interleaved; `one` runs
@@ -313,7 +408,7 @@ pub fn run(
             }
             let sample = sample?;
             if v == Variant::Recorded {
-                last_recorded = Some(sample);
+                last_recorded = Some(sample.clone());
             }
             samples.entry(v.name()).or_default().push(sample);
         }

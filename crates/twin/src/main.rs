@@ -121,9 +121,7 @@ fn main() -> ExitCode {
         Command::Bench(a) => {
             cmd::bench::cmd_bench(a.scenario.as_deref(), a.duration, a.runs, a.json)
         }
-        Command::BenchRun(a) => {
-            cmd::bench::cmd_bench_run(a.scenario.as_deref(), &a.variant, a.duration_ns, &a.record)
-        }
+        Command::BenchRun(a) => cmd::bench::cmd_bench_run(&a),
         Command::Gs(a) => cmd::gs::cmd_gs(a),
         Command::Passes(a) => {
             cmd::passes::cmd_passes(a.scenario.as_deref(), a.station.as_deref(), a.duration)

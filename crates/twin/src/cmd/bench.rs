@@ -28,15 +28,19 @@ pub struct Args {
 pub struct RunOneArgs {
     /// Scenario file [default: the embedded default scenario].
     pub scenario: Option<PathBuf>,
-    /// `plain`, `recorded` or `adcs_floor`.
+    /// `plain`, `recorded`, `adcs_floor`, or `round_trips` (CSP request-reply over one
+    /// timed CAN bus, `--count` of them; no scenario).
     #[arg(long)]
     pub variant: String,
     /// Simulated duration, ns.
-    #[arg(long)]
+    #[arg(long, default_value_t = 0)]
     pub duration_ns: u64,
     /// Where a recorded run records.
-    #[arg(long)]
+    #[arg(long, default_value = "bench-run.mcap")]
     pub record: PathBuf,
+    /// Round trips of the `round_trips` variant.
+    #[arg(long, default_value_t = 1000)]
+    pub count: u64,
 }
 
 pub fn cmd_bench(
@@ -83,20 +87,25 @@ pub fn cmd_bench(
     Ok(true)
 }
 
-pub fn cmd_bench_run(
-    scenario: Option<&std::path::Path>,
-    variant: &str,
-    duration_ns: u64,
-    record: &std::path::Path,
-) -> anyhow::Result<bool> {
-    let variant = m6p_twin::bench::Variant::from_name(variant)
-        .with_context(|| format!("no bench variant {variant:?}"))?;
-    let loaded = match scenario {
+pub fn cmd_bench_run(a: &RunOneArgs) -> anyhow::Result<bool> {
+    if a.variant == "round_trips" {
+        let (wall, sim) = m6p_twin::bench::round_trips(a.count)?;
+        let figures = serde_json::json!({
+            "round_trips": a.count,
+            "wall_s": wall.as_secs_f64(),
+            "sim_s": sim.as_secs_f64(),
+        });
+        println!("{figures}");
+        return Ok(true);
+    }
+    let variant = m6p_twin::bench::Variant::from_name(&a.variant)
+        .with_context(|| format!("no bench variant {:?}", a.variant))?;
+    let loaded = match &a.scenario {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
     };
-    let sample =
-        m6p_twin::bench::run_one(&loaded, Duration::from_nanos(duration_ns), variant, record)?;
+    let duration = Duration::from_nanos(a.duration_ns);
+    let sample = m6p_twin::bench::run_one(&loaded, duration, variant, &a.record)?;
     println!("{}", serde_json::to_string(&sample)?);
     Ok(true)
 }
