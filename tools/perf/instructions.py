@@ -60,9 +60,12 @@ def cachegrind(argv: list[str], work: Path, tag: str) -> tuple[int, str]:
     return total, p.stdout
 
 
-def bench_run(bin_: str, variant: str, scenario: str, duration_ns: int, work: Path) -> dict:
+def bench_run(bin_: str, variant: str, scenario: str, duration_ns: int, work: Path,
+              channels: str | None) -> dict:
     argv = [bin_, "bench-run", "--variant", variant, "--duration-ns", str(duration_ns),
             "--record", str(work / f"{variant}.mcap"), scenario]
+    if channels and variant == "recorded":
+        argv += ["--channels", channels]
     instr, out = cachegrind(argv, work, variant)
     figures = json.loads(out.strip().splitlines()[-1])
     figures.pop("cpu_s", None)
@@ -119,6 +122,7 @@ def main() -> int:
     ap.add_argument("--only", default="plain,recorded,adcs_floor,round_trips,campaign",
                     help="what to count, comma-separated")
     ap.add_argument("--jobs", type=int, default=2, help="processes under valgrind at once")
+    ap.add_argument("--channels", help="the recorded run's channels, as `m6p-twin run --channels`")
     args = ap.parse_args()
     if not shutil.which("valgrind"):
         print("valgrind is not installed (apt-get install valgrind)", file=sys.stderr)
@@ -134,6 +138,7 @@ def main() -> int:
         "binary": bin_,
         "scenario": args.scenario,
         "duration_s": duration_ns / 1e9,
+        "channels": args.channels or "",
         "valgrind": subprocess.run(["valgrind", "--version"], check=False, capture_output=True,
                                    text=True).stdout.strip(),
     }
@@ -143,7 +148,8 @@ def main() -> int:
         with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
             for v in ("plain", "recorded", "adcs_floor"):
                 if v in only:
-                    jobs[v] = pool.submit(bench_run, bin_, v, args.scenario, duration_ns, work)
+                    jobs[v] = pool.submit(bench_run, bin_, v, args.scenario, duration_ns, work,
+                                          args.channels)
             if "round_trips" in only:
                 a, b = (int(x) for x in args.round_trips.split(","))
                 jobs["round_trips"] = pool.submit(round_trips, bin_, (a, b), work)

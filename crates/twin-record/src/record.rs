@@ -115,6 +115,7 @@ use platform::truth::{AdcsSnapshot, TruthSnapshot};
 
 use twin_core::events::SeenPacket;
 use twin_core::events::{Direction, RunEvent};
+use twin_scenario::channels::ChannelAction;
 
 /// Target uncompressed size of one chunk: 4 MiB. Measured on `scenarios/full-day.toml`
 /// (docs/recording.md, "Compression"): smaller files than mcap's default of 1 MiB at the
@@ -225,6 +226,10 @@ pub struct RecordingMeta {
     /// not in the scenario).
     #[serde(default)]
     pub link_tx_budgets: BTreeMap<String, u32>,
+    /// The rules that chose the recording's channels (`[record] channels`, `--channels`),
+    /// so that `replay` records the same channels; none: every channel, every message.
+    #[serde(default)]
+    pub channels: Vec<twin_scenario::channels::ChannelRule>,
 }
 
 /// Messages written to one channel.
@@ -2435,6 +2440,10 @@ struct Chan {
     kind: ChannelKind,
     seq: u32,
     messages: u64,
+    /// What the recording's channel rules do to it ([`twin_scenario::channels`]).
+    action: ChannelAction,
+    /// The log time of the last message kept, for a thinned channel.
+    last_kept: Option<u64>,
 }
 
 /// The MCAP side of a [`Recorder`]: the writer and its channels.
@@ -2556,6 +2565,8 @@ struct McapOut {
     order: LogOrder,
     /// The latest log time written.
     written_max: u64,
+    /// The rules that choose the channels ([`twin_scenario::channels`]).
+    rules: Vec<twin_scenario::channels::ChannelRule>,
 }
 
 impl Drop for McapOut {
@@ -2571,6 +2582,28 @@ impl McapOut {
     /// in `chans`.
     fn add_channel(&mut self, kind: ChannelKind, key: &str) -> anyhow::Result<usize> {
         let topic = kind.topic(key);
+        let action = twin_scenario::channels::action(&self.rules, &topic);
+        // A channel the rules leave out is known, so that its messages are dropped at once,
+        // and never in the file.
+        let id = match action {
+            ChannelAction::Omit => u16::MAX,
+            _ => self.write_channel(kind, key, &topic)?,
+        };
+        self.chans.push(Chan {
+            id,
+            topic,
+            key: key.to_owned(),
+            kind,
+            seq: 0,
+            messages: 0,
+            action,
+            last_kept: None,
+        });
+        Ok(self.chans.len() - 1)
+    }
+
+    /// Write a channel's record, and its schema's if it is the first of its kind; its id.
+    fn write_channel(&mut self, kind: ChannelKind, key: &str, topic: &str) -> anyhow::Result<u16> {
         let schema = match self.schema_ids[kind as usize] {
             Some(id) => id,
             None => {
@@ -2584,19 +2617,9 @@ impl McapOut {
                 id
             }
         };
-        let id = self
-            .writer
-            .add_channel(schema, &topic, MESSAGE_ENCODING, &kind.metadata(key))
-            .with_context(|| format!("writing recording {}", self.path.display()))?;
-        self.chans.push(Chan {
-            id,
-            topic,
-            key: key.to_owned(),
-            kind,
-            seq: 0,
-            messages: 0,
-        });
-        Ok(self.chans.len() - 1)
+        self.writer
+            .add_channel(schema, topic, MESSAGE_ENCODING, &kind.metadata(key))
+            .with_context(|| format!("writing recording {}", self.path.display()))
     }
 
     /// Take one message, registering its channel if it is the first; it is written when
@@ -2610,6 +2633,20 @@ impl McapOut {
             Some(i) => i,
             None => self.add_channel(m.kind, m.key)?,
         };
+        let c = &mut self.chans[chan];
+        match c.action {
+            ChannelAction::Keep => {}
+            ChannelAction::Omit => return Ok(()),
+            ChannelAction::Every(period) => {
+                let period = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
+                if c.last_kept
+                    .is_some_and(|last| m.log_time < last.saturating_add(period))
+                {
+                    return Ok(());
+                }
+                c.last_kept = Some(m.log_time);
+            }
+        }
         self.order.hold(chan, m.log_time, m.data);
         Ok(())
     }
@@ -2709,6 +2746,13 @@ impl Recorder {
             ),
         ]
         .into_iter()
+        // Only a recording that chose its channels says so (the others' bytes stay).
+        .chain((!meta.channels.is_empty()).then(|| {
+            (
+                "channels",
+                twin_scenario::channels::format_rules(&meta.channels),
+            )
+        }))
         .map(|(k, v)| (k.to_owned(), v))
         .collect();
         writer
@@ -2731,6 +2775,7 @@ impl Recorder {
             chans: Vec::new(),
             order: LogOrder::default(),
             written_max: 0,
+            rules: meta.channels,
         };
         for (kind, key) in FIXED_CHANNELS {
             out.add_channel(kind, key)?;
@@ -2808,6 +2853,8 @@ impl Recorder {
         let (bytes, chunks) = (written.bytes, written.chunks);
         let channels: Vec<ChannelStats> = chans
             .into_iter()
+            // Those left out are not in the file.
+            .filter(|c| c.action != ChannelAction::Omit)
             .map(|c| ChannelStats {
                 topic: c.topic,
                 messages: c.messages,

@@ -683,6 +683,11 @@ fn meta_from(m: &Metadata, scenario: Option<&[u8]>, path: &Path) -> anyhow::Resu
             .get("link_tx_budgets")
             .map(|l| crate::record::parse_link_budgets(l))
             .unwrap_or_default(),
+        channels: match m.metadata.get("channels") {
+            Some(rules) => twin_scenario::channels::parse_rules(rules)
+                .with_context(|| format!("{}: metadata `channels` {rules:?}", path.display()))?,
+            None => Vec::new(),
+        },
         // Older recordings have none: only a scenario's `replaces` replaced nodes then.
         replaced: m
             .metadata
@@ -941,7 +946,14 @@ impl fmt::Display for Summary {
             secs(self.duration_ns),
             self.messages
         )?;
-        writeln!(f, "channels:")?;
+        match self.meta.as_ref().map(|m| &m.channels) {
+            Some(rules) if !rules.is_empty() => writeln!(
+                f,
+                "channels (chosen: {}):",
+                twin_scenario::channels::format_rules(rules)
+            )?,
+            _ => writeln!(f, "channels:")?,
+        }
         for c in &self.channels {
             writeln!(f, "  {:<28} {:<24} {:>10}", c.topic, c.schema, c.messages)?;
         }

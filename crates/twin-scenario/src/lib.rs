@@ -4,6 +4,7 @@
 //! nodes' configurations, what a run observes) is the twin's, above this crate
 //! (tools/layers.toml); it plugs its checks in as [`scenario::Check`]s.
 
+pub mod channels;
 pub mod comm;
 pub mod commands;
 pub mod dur;

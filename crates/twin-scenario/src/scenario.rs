@@ -420,6 +420,12 @@ pub struct RecordSpec {
     /// MCAP file to write (relative to the working directory); none = no recording.
     #[serde(default)]
     pub file: Option<String>,
+    /// Which channels the recording holds: rules applied in order, the last matching a
+    /// topic deciding (`TOPIC` keeps, `-TOPIC` leaves out, `TOPIC@PERIOD` thins; a topic
+    /// may end in `*`); none: every channel, every message (docs/recording.md, "Choosing
+    /// the channels").
+    #[serde(default)]
+    pub channels: Vec<crate::channels::ChannelRule>,
 }
 
 /// A problem in a scenario file, located in its source.

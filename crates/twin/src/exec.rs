@@ -422,6 +422,7 @@ async fn execute_inner(
             .iter()
             .filter_map(|l| Some((l.label(), l.cfg.tx_frames_per_s?)))
             .collect(),
+        channels: loaded.scenario.record.channels.clone(),
     };
     let mut recorder = crate::record::Recorder::create(path, meta, existing)?;
     recorder.set_icd(compiled.opts.icd_map());
@@ -430,9 +431,12 @@ async fn execute_inner(
     let every = (compiled.opts.clock != bus::ClockMode::Virtual)
         .then_some(std::time::Duration::from_secs(1));
     let mut recorder = crate::record::RecorderThread::start_flushing(recorder, every)?;
-    // `/csp/packets` is the run's packets (`RunEvent::Packet`).
+    // `/csp/packets` is the run's packets (`RunEvent::Packet`): reassembled for it unless
+    // the recording leaves it out (an expectation or the live view may still want them).
     let mut compiled = compiled;
-    compiled.opts.packet_events = true;
+    compiled.opts.packet_events |=
+        twin_scenario::channels::action(&loaded.scenario.record.channels, crate::record::TOPIC_CSP)
+            != twin_scenario::channels::ChannelAction::Omit;
     let outcome = execute(compiled, &mut |ev| {
         recorder.write(ev);
         live(ev);

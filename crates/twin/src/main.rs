@@ -118,9 +118,7 @@ fn main() -> ExitCode {
         Command::Inspect(a) => cmd::inspect::cmd_inspect(&a.file, a.csv.as_deref(), a.sizes),
         Command::Diff(a) => cmd::diff::cmd_diff(&a),
         Command::Replay(a) => cmd::replay::cmd_replay(a),
-        Command::Bench(a) => {
-            cmd::bench::cmd_bench(a.scenario.as_deref(), a.duration, a.runs, a.json)
-        }
+        Command::Bench(a) => cmd::bench::cmd_bench(&a),
         Command::BenchRun(a) => cmd::bench::cmd_bench_run(&a),
         Command::Gs(a) => cmd::gs::cmd_gs(a),
         Command::Passes(a) => {

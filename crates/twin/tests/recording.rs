@@ -979,3 +979,89 @@ fn the_file_is_in_log_time_order() {
         .collect();
     assert_eq!(in_hang, (61..90).collect::<Vec<u64>>());
 }
+
+/// `--channels` chooses what the file holds: a channel left out is not in it, a thinned one
+/// keeps one message per period, the others every message, the same as a whole recording's;
+/// the rules are in the file, so `replay` records the same channels and finds the run
+/// identical.
+#[test]
+fn channel_rules_leave_out_and_thin_and_replay_keeps_them() {
+    let run = |rec: &Path, channels: Option<&str>| {
+        let mut cmd = std::process::Command::new(common::twin_process::twin_bin());
+        cmd.args(["run", "--duration", "2m", "--record"]).arg(rec);
+        if let Some(c) = channels {
+            cmd.arg("--channels").arg(c);
+        }
+        let out = cmd.output().unwrap();
+        assert!(out.status.success(), "{out:?}");
+    };
+    let (whole, chosen) = (TempFile::new("whole"), TempFile::new("chosen"));
+    run(whole.path(), None);
+    run(chosen.path(), Some("-/csp/packets,/fc/*@10s,-/fc/scene"));
+    let topics = |p: &Path| -> Vec<String> {
+        recording::read_summary(p)
+            .unwrap()
+            .channels
+            .into_iter()
+            .map(|c| c.topic)
+            .collect()
+    };
+    assert!(topics(whole.path()).iter().any(|t| t == "/csp/packets"));
+    assert!(topics(whole.path()).iter().any(|t| t == "/fc/scene"));
+    let chosen_topics = topics(chosen.path());
+    assert!(
+        !chosen_topics
+            .iter()
+            .any(|t| t == "/csp/packets" || t == "/fc/scene")
+    );
+    // One a second in the whole file, one in ten seconds here: the first, then each 10 s on.
+    let times =
+        |p: &Path, topic: &str| -> Vec<u64> { on(p, topic).iter().map(|m| m.log_time).collect() };
+    let all = times(whole.path(), "/fc/adcs");
+    let thinned = times(chosen.path(), "/fc/adcs");
+    assert!(all.len() >= 120, "{}", all.len());
+    let mut expected: Vec<u64> = Vec::new();
+    for &t in &all {
+        if expected
+            .last()
+            .is_none_or(|&last| t >= last + 10_000_000_000)
+        {
+            expected.push(t);
+        }
+    }
+    assert_eq!(thinned, expected);
+    assert_eq!(thinned.len(), 12);
+    for topic in ["/can/main/frames", "/ground/packets", "/eps/power"] {
+        let (a, b) = (on(whole.path(), topic), on(chosen.path(), topic));
+        assert_eq!(a.len(), b.len(), "{topic}");
+        assert!(
+            a.iter()
+                .zip(&b)
+                .all(|(x, y)| x.log_time == y.log_time && x.data == y.data),
+            "{topic}"
+        );
+    }
+    let meta = recording::load_meta(chosen.path()).unwrap();
+    assert_eq!(
+        twin_scenario_rules(&meta),
+        "-/csp/packets,/fc/*@10s,-/fc/scene"
+    );
+    let out = std::process::Command::new(common::twin_process::twin_bin())
+        .arg("replay")
+        .arg(chosen.path())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("identical"),
+        "{out:?}"
+    );
+}
+
+fn twin_scenario_rules(meta: &RecordingMeta) -> String {
+    meta.channels
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(",")
+}

@@ -93,6 +93,7 @@ fn small_recording(path: &Path) {
         replaced: Vec::new(),
         link_addrs: Default::default(),
         link_tx_budgets: Default::default(),
+        channels: Vec::new(),
     };
     let mut r = Recorder::create(path, meta, m6p_twin::record::Existing::Replace).unwrap();
     let mut t = SimTime::ZERO;

@@ -22,6 +22,9 @@ pub struct Args {
     /// `messages_per_hour`, `peak_rss_mib`, the ratios and per-variant spreads).
     #[arg(long)]
     pub json: bool,
+    /// The recorded runs' channels, as `run --channels` (overrides the scenario's).
+    #[arg(long, value_name = "RULES", allow_hyphen_values = true, value_parser = crate::cmd::run::parse_channel_rules)]
+    pub channels: Option<crate::cmd::run::ChannelRules>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -41,18 +44,21 @@ pub struct RunOneArgs {
     /// Round trips of the `round_trips` variant.
     #[arg(long, default_value_t = 1000)]
     pub count: u64,
+    /// The recorded run's channels, as `run --channels`.
+    #[arg(long, value_name = "RULES", allow_hyphen_values = true, value_parser = crate::cmd::run::parse_channel_rules)]
+    pub channels: Option<crate::cmd::run::ChannelRules>,
 }
 
-pub fn cmd_bench(
-    scenario: Option<&std::path::Path>,
-    duration: Duration,
-    runs: usize,
-    json: bool,
-) -> anyhow::Result<bool> {
-    let loaded = match scenario {
+pub fn cmd_bench(a: &Args) -> anyhow::Result<bool> {
+    let (scenario, duration, runs, json) = (a.scenario.as_deref(), a.duration, a.runs, a.json);
+    let mut loaded = match scenario {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
     };
+    let channels = a.channels.as_ref().map(|c| {
+        loaded.scenario.record.channels = c.0.clone();
+        twin_scenario::channels::format_rules(&c.0)
+    });
     let exe = std::env::current_exe().context("finding the m6p-twin executable")?;
     let report = m6p_twin::bench::run(&loaded, duration, runs, |variant, record| {
         let mut cmd = std::process::Command::new(&exe);
@@ -61,6 +67,9 @@ pub fn cmd_bench(
             .args(["--duration-ns", &duration.as_nanos().to_string()])
             .arg("--record")
             .arg(record);
+        if let Some(c) = &channels {
+            cmd.args(["--channels", c]);
+        }
         if let Some(p) = scenario {
             cmd.arg(p);
         }
@@ -100,10 +109,13 @@ pub fn cmd_bench_run(a: &RunOneArgs) -> anyhow::Result<bool> {
     }
     let variant = m6p_twin::bench::Variant::from_name(&a.variant)
         .with_context(|| format!("no bench variant {:?}", a.variant))?;
-    let loaded = match &a.scenario {
+    let mut loaded = match &a.scenario {
         Some(p) => exec::load(p)?,
         None => exec::load_default()?,
     };
+    if let Some(c) = &a.channels {
+        loaded.scenario.record.channels = c.0.clone();
+    }
     let duration = Duration::from_nanos(a.duration_ns);
     let sample = m6p_twin::bench::run_one(&loaded, duration, variant, &a.record)?;
     println!("{}", serde_json::to_string(&sample)?);

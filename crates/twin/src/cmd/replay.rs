@@ -65,7 +65,10 @@ pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         a.file.display(),
         meta.scenario_name
     );
-    let scenario = m6p_twin::scenario::parse(&file, &meta.scenario_toml)?;
+    let mut scenario = m6p_twin::scenario::parse(&file, &meta.scenario_toml)?;
+    // The channels the recording chose (the command line's `--channels` is not in the
+    // scenario): the replay records the same ones, to compare like with like.
+    scenario.record.channels = meta.channels.clone();
     let loaded = exec::Loaded {
         file,
         text: meta.scenario_toml.clone(),

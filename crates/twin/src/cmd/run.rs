@@ -28,6 +28,13 @@ pub struct RunArgs {
     /// the scenario itself).
     #[arg(long)]
     pub overwrite: bool,
+    /// Which channels the recording holds (overrides the scenario's `record.channels`):
+    /// comma-separated rules, the last matching a topic deciding: `TOPIC` keeps it, `-TOPIC`
+    /// leaves it out, `TOPIC@PERIOD` keeps at most one message per PERIOD of simulated
+    /// time; a topic may end in `*`. Default: every channel, every message
+    /// (docs/recording.md, "Choosing the channels").
+    #[arg(long, value_name = "RULES", allow_hyphen_values = true, value_parser = parse_channel_rules)]
+    pub channels: Option<ChannelRules>,
     /// Write what the ground receives of each payload session (one file per session run)
     /// into DIR, overriding the scenario's `[pc] downlink_dir` [default: beside the
     /// recording, `x.mcap` -> `x.downlink/`; nowhere without one].
@@ -199,6 +206,9 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
     };
     if let Some(d) = &a.downlink_dir {
         loaded.scenario.pc.downlink_dir = Some(d.display().to_string());
+    }
+    if let Some(ChannelRules(rules)) = &a.channels {
+        loaded.scenario.record.channels = rules.clone();
     }
     let mut compiled = exec::compile_seeded(&loaded, a.seed);
     if a.no_checks {
@@ -422,4 +432,15 @@ pub fn cmd_run_from(matches: &clap::ArgMatches, a: RunArgs) -> anyhow::Result<bo
         .ok_or_else(|| anyhow::anyhow!("no run arguments"))?;
     let links = cli_kiss_links(m, &a)?;
     cmd_run(a, links)
+}
+
+/// The rules of `--channels`.
+#[derive(Debug, Clone)]
+pub struct ChannelRules(pub Vec<twin_scenario::channels::ChannelRule>);
+
+/// Parse `--channels` ([`twin_scenario::channels::parse_rules`]).
+pub fn parse_channel_rules(text: &str) -> Result<ChannelRules, String> {
+    twin_scenario::channels::parse_rules(text)
+        .map(ChannelRules)
+        .map_err(|e| e.to_string())
 }

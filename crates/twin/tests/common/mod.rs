@@ -169,6 +169,7 @@ pub fn meta(name: &str, seed: u64) -> m6p_twin::record::RecordingMeta {
         replaced: Vec::new(),
         link_addrs: Default::default(),
         link_tx_budgets: Default::default(),
+        channels: Vec::new(),
     }
 }
 
