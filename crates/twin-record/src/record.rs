@@ -1195,6 +1195,15 @@ pub struct EventEncoder {
     ecef: EcefFromEci,
     /// Trains handed out, kept for their vectors.
     spare_trains: Vec<Train>,
+    /// The recording's channel rules, to skip encoding what they leave out (the
+    /// recorder's [`McapOut`] applies them to what is encoded).
+    rules: Vec<twin_scenario::channels::ChannelRule>,
+    /// Whether each channel seen so far is left out, by kind and key.
+    left_out: Vec<(ChannelKind, Arc<str>, bool)>,
+    /// Whether the rules leave out a whole channel at all (else nothing is looked up).
+    any_left_out: bool,
+    /// Whether the rules leave out each bus's frames, as `trains`.
+    train_left_out: Vec<bool>,
 }
 
 /// A PC session's open run as far as its summary needs it.
@@ -1720,7 +1729,44 @@ impl EventEncoder {
             ecef: EcefFromEci::default(),
             spare_trains: Vec::new(),
             pc_runs: BTreeMap::new(),
+            rules: Vec::new(),
+            left_out: Vec::new(),
+            any_left_out: false,
+            train_left_out: Vec::new(),
         }
+    }
+
+    /// Leave unencoded what `rules` leave out of the recording ([`twin_scenario::channels`]).
+    pub fn set_rules(&mut self, rules: Vec<twin_scenario::channels::ChannelRule>) {
+        self.any_left_out = rules.iter().any(|r| r.action == ChannelAction::Omit);
+        self.rules = rules;
+        self.left_out.clear();
+        self.train_left_out = self
+            .trains
+            .iter()
+            .map(|(bus, _)| {
+                twin_scenario::channels::action(&self.rules, &ChannelKind::Can.topic(bus))
+                    == ChannelAction::Omit
+            })
+            .collect();
+    }
+
+    /// Whether the rules leave the channel of `kind` for `key` out whole.
+    fn leaves_out(&mut self, kind: ChannelKind, key: &str) -> bool {
+        if !self.any_left_out {
+            return false;
+        }
+        if let Some(&(_, _, out)) = self
+            .left_out
+            .iter()
+            .find(|(k, name, _)| *k == kind && **name == *key)
+        {
+            return out;
+        }
+        let out =
+            twin_scenario::channels::action(&self.rules, &kind.topic(key)) == ChannelAction::Omit;
+        self.left_out.push((kind, key.into(), out));
+        out
     }
 
     /// Decode `/csp/packets` with the ICD on these ports (the run's; default: the ICD's
@@ -1800,9 +1846,15 @@ impl EventEncoder {
             Some(i) => i,
             None => {
                 self.trains.push((m.medium.clone(), None));
+                let out = self.leaves_out(ChannelKind::Can, &m.medium);
+                self.train_left_out.push(out);
                 self.trains.len() - 1
             }
         };
+        // A bus the rules leave out: no train is gathered (looked up once per bus).
+        if self.train_left_out.get(i).copied().unwrap_or(false) {
+            return Ok(());
+        }
         let continues = self.trains[i].1.as_ref().is_some_and(|tr| {
             tr.from
                 .as_ref()
@@ -2248,35 +2300,41 @@ impl EventEncoder {
         adcs: &AdcsSnapshot,
         emit: &mut Emit<'_>,
     ) -> anyhow::Result<()> {
+        use ChannelKind::{Adcs, EstimateTf, Scene, TruthLocation, TruthState, TruthTf};
+        let [tf, est, loc, st, ad, sc] =
+            [TruthTf, EstimateTf, TruthLocation, TruthState, Adcs, Scene]
+                .map(|k| !self.leaves_out(k, ""));
         let base_ns = self.base_ns;
         let buf = &mut self.buf;
         let stamp = foxglove_time(base_ns, t);
         let q = &truth.q_eci_from_body;
-        if let Some(rotation) = quat_xyzw([q.w, q.i, q.j, q.k]) {
+        if let Some(rotation) = quat_xyzw([q.w, q.i, q.j, q.k]).filter(|_| tf) {
             let msg = fg_transform(frame_transform(stamp, FRAME_BODY, rotation));
-            emit_msg(buf, base_ns, (ChannelKind::TruthTf, ""), t, &msg, emit)?;
+            emit_msg(buf, base_ns, (TruthTf, ""), t, &msg, emit)?;
         }
-        let q_est = adcs.q_eci_from_body_est.as_ref();
+        let q_est = adcs.q_eci_from_body_est.as_ref().filter(|_| est);
         if let Some(rotation) = q_est.and_then(|q| quat_xyzw([q.w, q.i, q.j, q.k])) {
             let msg = fg_transform(frame_transform(stamp, FRAME_BODY_EST, rotation));
-            emit_msg(buf, base_ns, (ChannelKind::EstimateTf, ""), t, &msg, emit)?;
+            emit_msg(buf, base_ns, (EstimateTf, ""), t, &msg, emit)?;
         }
-        let state = truth_state(t.as_ns(), truth, &mut self.ecef);
-        if let Some(msg) = location_fix(stamp, &state).map(fg_location) {
-            emit_msg(
-                buf,
-                base_ns,
-                (ChannelKind::TruthLocation, ""),
-                t,
-                &msg,
-                emit,
-            )?;
+        if loc || st {
+            let state = truth_state(t.as_ns(), truth, &mut self.ecef);
+            if let Some(msg) = location_fix(stamp, &state).map(fg_location).filter(|_| loc) {
+                emit_msg(buf, base_ns, (TruthLocation, ""), t, &msg, emit)?;
+            }
+            if st {
+                emit_msg(buf, base_ns, (TruthState, ""), t, &state, emit)?;
+            }
         }
-        emit_msg(buf, base_ns, (ChannelKind::TruthState, ""), t, &state, emit)?;
-        let msg = adcs_msg(t.as_ns(), adcs);
-        emit_msg(buf, base_ns, (ChannelKind::Adcs, ""), t, &msg, emit)?;
-        let msg = fg_scene(scene_update(stamp, truth));
-        emit_msg(buf, base_ns, (ChannelKind::Scene, ""), t, &msg, emit)
+        if ad {
+            let msg = adcs_msg(t.as_ns(), adcs);
+            emit_msg(buf, base_ns, (Adcs, ""), t, &msg, emit)?;
+        }
+        if sc {
+            let msg = fg_scene(scene_update(stamp, truth));
+            emit_msg(buf, base_ns, (Scene, ""), t, &msg, emit)?;
+        }
+        Ok(())
     }
 
     /// A frame or packet (the CSP packet it completes comes as its own event after it).
@@ -2284,6 +2342,7 @@ impl EventEncoder {
         let t_ns = m.t.as_ns();
         match &m.frame {
             TraceFrame::Can(f) | TraceFrame::CanUnreceived(f, _) => self.add_frame(m, f, emit),
+            TraceFrame::Packet(_) if self.leaves_out(ChannelKind::Net, &m.medium) => Ok(()),
             // Never on the wire: counted by the bus (`tx_overflow`, `bus_off_drops`,
             // `off_drops`), not a frame of `/can/<bus>/frames`.
             TraceFrame::CanLost(..) => Ok(()),
@@ -2326,6 +2385,9 @@ impl EventEncoder {
 
     /// The `/csp/packets` message of a packet a medium delivered.
     fn encode_csp(&mut self, seen: &SeenPacket, emit: &mut Emit<'_>) -> anyhow::Result<()> {
+        if self.leaves_out(ChannelKind::Csp, "") {
+            return Ok(());
+        }
         let (m, p) = (seen, &seen.packet);
         let h = &p.header;
         let body = if h.has_crc() && p.data.len() >= 4 {
@@ -2780,11 +2842,9 @@ impl Recorder {
         for (kind, key) in FIXED_CHANNELS {
             out.add_channel(kind, key)?;
         }
-        Ok(Recorder {
-            out,
-            enc: EventEncoder::new(base_ns),
-            target,
-        })
+        let mut enc = EventEncoder::new(base_ns);
+        enc.set_rules(out.rules.clone());
+        Ok(Recorder { out, enc, target })
     }
 
     /// The temporary file the recording is written to until it is complete (the name
