@@ -701,7 +701,9 @@ fn check_orbit(s: &Scenario, _: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>,
             // a day); the twin would otherwise fly it silently, far from any real orbit.
             Ok(t) => {
                 if let Some(start_ns) = twin_core::timefmt::parse_utc(&s.start) {
-                    let age_s = (t.epoch.unix_ns() - start_ns).unsigned_abs() as f64 * 1e-9;
+                    // In i128: centuries apart do not fit an i64 of nanoseconds.
+                    let apart_ns = i128::from(t.epoch.unix_ns()) - i128::from(start_ns);
+                    let age_s = apart_ns.unsigned_abs() as f64 * 1e-9;
                     if age_s > nodes_fc::TLE_MAX_AGE_S {
                         err(
                             vec![key("satellite"), key("tle")],
@@ -966,6 +968,22 @@ fn table_header(line: &str) -> Option<(String, bool)> {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    /// A `start` centuries from the TLE's epoch (further apart than an i64 of nanoseconds
+    /// holds; found by the scenario parser's fuzz target) is refused as any old TLE is.
+    #[test]
+    fn a_start_centuries_from_the_tles_epoch_is_refused_not_overflowed() {
+        let text = "start = \"1686-04-30T18:00:00Z\"\nduration = \"5m\"\n\n[satellite]\ntle = [\n  \
+            \"1 99903U 26012AC  26120.75000000  .00002345  00000-0  12345-3 0  9996\",\n  \
+            \"2 99903  97.5200  10.5000 0008000 300.0000  60.0000 15.14500000 50009\",\n]\n";
+        let e = Scenario::parse_with("old.toml", text, &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("satellite.tle") && e.contains("days from `start` 1686-04-30"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn an_idle_limit_is_a_duration_of_100ms_or_more_or_off() {
