@@ -439,8 +439,8 @@ pub fn cmd_run_from(matches: &clap::ArgMatches, a: RunArgs) -> anyhow::Result<bo
 pub struct ChannelRules(pub Vec<twin_scenario::channels::ChannelRule>);
 
 /// Parse `--channels` ([`twin_scenario::channels::parse_rules`]).
-pub fn parse_channel_rules(text: &str) -> Result<ChannelRules, String> {
-    twin_scenario::channels::parse_rules(text)
-        .map(ChannelRules)
-        .map_err(|e| e.to_string())
+pub fn parse_channel_rules(
+    text: &str,
+) -> Result<ChannelRules, twin_scenario::channels::ChannelRuleError> {
+    twin_scenario::channels::parse_rules(text).map(ChannelRules)
 }
