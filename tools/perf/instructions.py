@@ -13,7 +13,9 @@ What it counts, each in a process of its own (every thread counted):
 It prints one JSON object: the counts, the CAN frames and ground packets each run carried
 (from the run itself), and the figures derived from them (instructions per CAN frame of the
 network, the recorder's share of the plain run, instructions per round trip and per
-campaign run), so that a dashboard can plot them build after build.
+campaign run), so that a dashboard can plot them build after build. `by_area` splits the
+network's instructions per CAN frame and the round trip's by where they are spent (the
+functions' own instructions, grouped by name: AREAS below), the plain run's minus the floor's.
 
     python3 tools/perf/instructions.py target/release/m6p-twin > perf.json
 """
@@ -33,6 +35,21 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 SUMMARY = re.compile(r"^summary:\s+(\d+)", re.MULTILINE)
+
+# Where a function's own instructions go, by its (demangled) name; the first match decides.
+# "async runtime" is tokio's scheduler, timers and channels with the futures and clock reads
+# they drive; "memory" is allocation, copies and drops; the rest are the twin's crates.
+AREAS = [
+    ("async runtime", re.compile(r"tokio|PollFn|future::future::Future>::poll|Timespec"
+                                 r"|std::time::Instant|clock_gettime|std::thread|std::sync"
+                                 r"|parking|futex|syscall|epoll|[Ww]aker")),
+    ("bus", re.compile(r"^<?m6p_bus")),
+    ("memory", re.compile(r"memcpy|memmove|memset|malloc|free|realloc|calloc|alloc::|__rust_"
+                          r"|__rdl_|RawVec|drop_in_place")),
+    ("csp", re.compile(r"^<?(m6p_csp|crc32c)")),
+    ("nodes", re.compile(r"^<?m6p_nodes")),
+    ("run loop and observers", re.compile(r"^<?m6p_(twin|platform|icd|links)")),
+]
 
 
 def parse_duration_ns(text: str) -> int:
@@ -60,6 +77,28 @@ def cachegrind(argv: list[str], work: Path, tag: str) -> tuple[int, str]:
     return total, p.stdout
 
 
+def by_area(work: Path, tag: str) -> dict[str, int]:
+    """The own instructions of every function in `tag`'s cachegrind files, by area."""
+    got: dict[str, int] = {}
+    for f in work.glob(f"{tag}.*.cg"):
+        fn = None
+        for line in f.read_text().splitlines():
+            if line.startswith("fn="):
+                fn = line[3:]
+                area = next((a for a, rx in AREAS if rx.search(fn)), "other")
+            elif fn is not None and line[:1].isdigit():
+                parts = line.split()
+                if len(parts) >= 2:
+                    got[area] = got.get(area, 0) + int(parts[1])
+    return got
+
+
+def per_unit(a: dict[str, int], b: dict[str, int], units: float) -> dict[str, float]:
+    """(a - b) / units for each area, largest first."""
+    d = {k: (a.get(k, 0) - b.get(k, 0)) / units for k in set(a) | set(b)}
+    return {k: round(v, 1) for k, v in sorted(d.items(), key=lambda kv: -kv[1])}
+
+
 def bench_run(bin_: str, variant: str, scenario: str, duration_ns: int, work: Path,
               channels: str | None) -> dict:
     argv = [bin_, "bench-run", "--variant", variant, "--duration-ns", str(duration_ns),
@@ -68,6 +107,7 @@ def bench_run(bin_: str, variant: str, scenario: str, duration_ns: int, work: Pa
         argv += ["--channels", channels]
     instr, out = cachegrind(argv, work, variant)
     figures = json.loads(out.strip().splitlines()[-1])
+    figures["by_area"] = by_area(work, variant)
     figures.pop("cpu_s", None)
     figures.pop("wall_s", None)
     # Under valgrind: its own memory, not the twin's (`m6p-twin bench` gives the peak).
@@ -83,7 +123,9 @@ def round_trips(bin_: str, counts: tuple[int, int], work: Path) -> dict:
                                 work, f"rt{n}")
         got.append((n, instr, json.loads(out.strip().splitlines()[-1])))
     (n0, i0, _), (n1, i1, f1) = got
+    areas = per_unit(by_area(work, f"rt{n1}"), by_area(work, f"rt{n0}"), n1 - n0)
     return {
+        "by_area": areas,
         "payload_bytes": 64,
         "counts": [n0, n1],
         "instructions": [i0, i1],
@@ -174,6 +216,8 @@ def main() -> int:
         if floor and frames:
             derived["network_instructions_per_can_frame"] = (
                 (plain["instructions"] - floor["instructions"]) / frames)
+            derived["network_instructions_per_can_frame_by_area"] = per_unit(
+                plain["by_area"], floor["by_area"], frames)
     if plain and rec:
         extra = rec["instructions"] - plain["instructions"]
         derived["recorder_instructions"] = extra
@@ -183,6 +227,7 @@ def main() -> int:
             derived["recorder_instructions_per_mcap_byte"] = extra / rec["mcap_bytes"]
     if "round_trips" in result:
         derived["instructions_per_round_trip"] = result["round_trips"]["instructions_per_round_trip"]
+        derived["instructions_per_round_trip_by_area"] = result["round_trips"]["by_area"]
     if "campaign" in result:
         derived["campaign_instructions_per_run"] = result["campaign"]["instructions_per_run"]
     result["derived"] = derived
