@@ -44,6 +44,7 @@ DOCS = [
     "python/README.md",
     "docs/scenarios.md",
     "docs/campaigns.md",
+    "docs/control.md",
     "docs/operations.md",
 ]
 SHELL_BLOCKS = {"sh", "bash", "shell", "console"}

@@ -125,6 +125,18 @@ pub enum RunEvent {
         /// What, for example `faults[0]: Drop on main`.
         what: String,
     },
+    /// A request on the run's control channel (`run --control`), at the instant the run
+    /// took it in, with the reply it got: what `replay` feeds again.
+    Control {
+        /// When the run took it in.
+        t: SimTime,
+        /// The connection it came on (numbered from 1 in the run).
+        conn: u32,
+        /// The request line as it came (JSON).
+        request: String,
+        /// The reply line (JSON).
+        reply: String,
+    },
     /// A scenario command sent by a ground station.
     Command {
         /// When it was sent.
@@ -227,6 +239,7 @@ impl RunEvent {
             RunEvent::Kiss { t, .. }
             | RunEvent::Log { t, .. }
             | RunEvent::Fault { t, .. }
+            | RunEvent::Control { t, .. }
             | RunEvent::Command { t, .. }
             | RunEvent::Truth { t, .. }
             | RunEvent::Beacon { t, .. }

@@ -145,6 +145,8 @@ pub const TOPIC_LOG: &str = "/log";
 pub const TOPIC_FAULTS: &str = "/faults";
 /// Topic of scenario commands and their results.
 pub const TOPIC_COMMANDS: &str = "/commands";
+/// The run's control channel: each request with its reply (`run --control`).
+pub const TOPIC_CONTROL: &str = "/control";
 /// Topic of expectation verdicts.
 pub const TOPIC_EXPECTATIONS: &str = "/expectations";
 /// Topic of the FC's true attitude (`foxglove.FrameTransform`, `eci` -> `body`).
@@ -458,6 +460,20 @@ pub struct FaultMsg {
     pub t_ns: u64,
     /// What happened.
     pub what: String,
+}
+
+/// `/control`: a request on the run's control channel, at the instant the run took it in,
+/// with its reply (what `replay` feeds again).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, foxglove::Encode)]
+pub struct ControlMsg {
+    /// Simulated ns since the start of the run.
+    pub t_ns: u64,
+    /// The connection it came on (from 1).
+    pub conn: u32,
+    /// The request line (JSON).
+    pub request: String,
+    /// The reply line (JSON).
+    pub reply: String,
 }
 
 /// `/commands`: a scenario command sent (`event` = `sent`) or its outcome (`result`).
@@ -1111,6 +1127,8 @@ channels! {
         "`/can/<bus>/errors` (`m6p.CanError`), keyed by bus.",
     PcSessionSummary => ("m6p.PcSessionSummary", schema_of::<PcSessionSummaryMsg>("PcSessionSummary"), |_| fixed(TOPIC_PC_SESSION_SUMMARY), "medium", false):
         "`/pc/sessions/summary` (`m6p.PcSessionSummary`).",
+    Control => ("m6p.Control", schema_of::<ControlMsg>("Control"), |_| fixed(TOPIC_CONTROL), "medium", false):
+        "`/control` (`m6p.Control`), registered with its first request.",
 }
 
 /// The channels every run has, as (kind, key), in registration order; others (another
@@ -1934,6 +1952,20 @@ impl EventEncoder {
                     what: what.clone(),
                 };
                 emit_msg(buf, base_ns, (ChannelKind::Fault, ""), *t, &msg, emit)
+            }
+            RunEvent::Control {
+                t,
+                conn,
+                request,
+                reply,
+            } => {
+                let msg = ControlMsg {
+                    t_ns,
+                    conn: *conn,
+                    request: request.clone(),
+                    reply: reply.clone(),
+                };
+                emit_msg(buf, base_ns, (ChannelKind::Control, ""), *t, &msg, emit)
             }
             RunEvent::Command {
                 t,

@@ -40,6 +40,8 @@ pub struct RunReport {
     pub ground: NetStats,
     /// KISS/TCP link counters, by link.
     pub kiss: Vec<(String, KissLinkStats)>,
+    /// What the run's control channel counted (`run --control`), when it had one.
+    pub control: Option<twin_runtime::control::ControlStats>,
     /// The boards' writes and refused writes (a write behind a reader's horizon), by board.
     pub boards: [(&'static str, platform::board::BoardStats); 3],
     /// What the gates of the scenario's outside links held back (their faults and power),
@@ -85,6 +87,7 @@ impl RunReport {
             buses: c.buses,
             ground: c.ground,
             kiss: c.kiss,
+            control: c.control,
             boards: c.boards,
             links: c.links,
             socketcan: c.socketcan,
@@ -278,8 +281,21 @@ impl RunReport {
         }
     }
 
-    /// One paragraph per KISS link: its connections and what it let in and out.
+    /// One paragraph per KISS link: its connections and what it let in and out; the
+    /// control channel's.
     fn table_kiss(&self, s: &mut String) {
+        if let Some(c) = &self.control {
+            let _ = writeln!(
+                s,
+                "\ncontrol channel: {} connections ({} refused: {} open), {} requests, {} lines over {} bytes refused",
+                c.connections,
+                c.refused_connections,
+                twin_runtime::control::MAX_CONNECTIONS,
+                c.requests,
+                c.long_lines,
+                twin_runtime::control::MAX_LINE,
+            );
+        }
         for (name, k) in &self.kiss {
             let _ = writeln!(
                 s,

@@ -101,6 +101,8 @@ pub struct RunCounters {
     /// CFP frames or partial packets the run's packet tap could not place (lost frames),
     /// when packets were tapped.
     pub cfp_drops: u64,
+    /// What the control channel counted, when the run had one.
+    pub control: Option<crate::control::ControlStats>,
 }
 
 /// Why a run stopped before its end.

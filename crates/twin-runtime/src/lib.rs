@@ -17,6 +17,7 @@
 //!   the order it happens and applies the faults at their instants.
 
 mod build;
+pub mod control;
 pub mod counters;
 pub mod faults;
 pub mod ground;
@@ -112,6 +113,8 @@ pub struct RunOptions {
     pub ecu: nodes_ecu::EcuConfig,
     /// COMM1's configuration (COMM2 takes the same with the secondary role).
     pub comm: nodes_comm::CommConfig,
+    /// The run's control channel (`run --control`, or a replay's recorded requests).
+    pub control: Option<control::ControlOptions>,
 }
 
 /// A link of the scenario to a program outside the twin, which faults and power act on
@@ -249,12 +252,16 @@ impl RunOptions {
             eps: nodes_eps::EpsConfig::default(),
             ecu: nodes_ecu::EcuConfig::default(),
             comm: nodes_comm::CommConfig::default(),
+            control: None,
         }
     }
 
     /// Whether the run has links to programs outside the twin.
     pub fn has_outside_links(&self) -> bool {
-        !self.kiss_links.is_empty() || !self.socketcan.is_empty() || !self.uart.is_empty()
+        !self.kiss_links.is_empty()
+            || !self.socketcan.is_empty()
+            || !self.uart.is_empty()
+            || self.control.as_ref().is_some_and(|c| c.listen.is_some())
     }
 
     /// A run in virtual time with no link to the outside: nothing in it waits on the wall
@@ -398,13 +405,15 @@ pub fn build_runtime_for(opts: &RunOptions) -> anyhow::Result<tokio::runtime::Ru
     if !opts.is_self_contained() {
         return build_runtime();
     }
-    if opts.kiss_replay.is_empty() {
+    let control_replay = opts.control.as_ref().is_some_and(|c| !c.replay.is_empty());
+    if opts.kiss_replay.is_empty() && !control_replay {
         return build_virtual_runtime();
     }
     tokio::runtime::Builder::new_current_thread()
         .enable_time()
         .start_paused(true)
-        // A replay's recorded input is taken in at the run's idle points (`bus::pace`).
+        // A replay's recorded input (outside links, the control channel) is taken in at the
+        // run's idle points (`bus::pace`).
         .on_thread_park(bus::pace::on_idle)
         .build()
         .context("building the tokio runtime")
@@ -533,8 +542,12 @@ pub async fn run_with(
     let nodes = build::nodes(&mut opts, &segs, clock, &boards, &ev_tx);
     let mut kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
     let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
-    // The KISS servers' and UDP links' addresses, then the TCP consoles'.
+    // The KISS servers' and UDP links' addresses, then the TCP consoles', then the control
+    // channel's.
     kiss.bound.extend(consoles);
+    let mut control =
+        control::Control::start(opts.control.take(), clock, &mut kiss.bound, &mut background)
+            .await?;
     spawn_pacer(&opts, clock, &ev_tx, &mut background);
     if let Some(r) = ready {
         let _ = r.send(kiss.bound.clone());
@@ -546,7 +559,7 @@ pub async fn run_with(
     // One truth for power: the EPS's switches and the power and hang faults go through
     // the platform's rules.
     let mut power_shell = power_shell(&opts, &nodes, &boards, &segs, &gates);
-    let mut faults = std::mem::take(&mut opts.faults).into_iter().peekable();
+    let mut faults = control::Timeline::new(std::mem::take(&mut opts.faults));
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let kiss_budget = kiss.budget.clone();
     let handle_event = |ev: RunEvent, sink: &mut dyn RunSink| hand_on(ev, sink, &kiss_budget);
@@ -555,7 +568,7 @@ pub async fn run_with(
     let mut interrupted: Option<StopCause> = None;
     let wall_deadline = opts.wall_limit.map(|d| (d, wall_start + d));
     loop {
-        let next_fault = faults.peek().map_or(SimTime::MAX, |f| f.at).min(end);
+        let next_fault = faults.next_at().unwrap_or(SimTime::MAX).min(end);
         tokio::select! {
             biased;
             cause = &mut signalled => {
@@ -575,32 +588,27 @@ pub async fn run_with(
                     break;
                 }
             }
+            Some(req) = control.recv() => {
+                let t = req.t;
+                hand_on(control.answer(req, &mut faults), sink, &kiss_budget);
+                // What it asked for at this instant takes effect now.
+                let mut director = director(&segs, &ctls, &mut power_shell, &gates);
+                while let Some(f) = faults.pop_due(t) {
+                    apply_fault(&f, &mut director, sink, &kiss_budget);
+                }
+            }
             () = clock.sleep_until(next_fault), if next_fault < SimTime::MAX => {
-                if next_fault >= end && faults.peek().is_none_or(|f| f.at >= end) {
+                if next_fault >= end && faults.next_at().is_none_or(|at| at >= end) {
                     break;
                 }
-                let mut director = faults::Director {
-                    segs: &segs,
-                    ctls: &ctls,
-                    power: &mut power_shell,
-                    links: &gates,
-                };
-                while let Some(f) = faults.next_if(|f| f.at <= next_fault) {
+                let mut director = director(&segs, &ctls, &mut power_shell, &gates);
+                while let Some(f) = faults.pop_due(next_fault) {
                     apply_fault(&f, &mut director, sink, &kiss_budget);
                 }
             }
         }
     }
-    // A virtual run ends exactly at its duration, unless it was stopped before.
-    let sim_time = match opts.duration {
-        Some(d) if clock.is_virtual() && interrupted.is_none() => SimTime::ZERO + d,
-        _ => clock.now(),
-    };
-    let interrupted = interrupted.map(|cause| Interruption {
-        cause,
-        at: sim_time,
-        of: opts.duration,
-    });
+    let (sim_time, interrupted) = ended(opts.duration, clock, interrupted);
 
     let node_reports = stop_nodes(nodes.tasks, sim_time, &ev_tx).await?;
     for h in background {
@@ -620,6 +628,7 @@ pub async fn run_with(
         kiss: links::snapshot(kiss.stats),
         socketcan: links::snapshot(socketcan_stats),
         cfp_drops: tapped.cfp_drops(),
+        control: control.stats(),
         boards: boards.stats(),
         links: opts
             .outside
@@ -628,6 +637,25 @@ pub async fn run_with(
             .map(|(l, g)| (l.name.clone(), g.stats()))
             .collect(),
     })
+}
+
+/// Where a run ended, and why if it was stopped before its end: a virtual run ends exactly
+/// at its duration, unless it was stopped before.
+fn ended(
+    duration: Option<Duration>,
+    clock: Clock,
+    stopped: Option<StopCause>,
+) -> (SimTime, Option<Interruption>) {
+    let sim_time = match duration {
+        Some(d) if clock.is_virtual() && stopped.is_none() => SimTime::ZERO + d,
+        _ => clock.now(),
+    };
+    let interrupted = stopped.map(|cause| Interruption {
+        cause,
+        at: sim_time,
+        of: duration,
+    });
+    (sim_time, interrupted)
 }
 
 /// The first stop signal (SIGINT, SIGTERM) of the process, once it comes; watched from
@@ -742,6 +770,21 @@ fn handle_batch(
         } else {
             None
         };
+    }
+}
+
+/// The fault director of a run's media, nodes, power and links.
+fn director<'a>(
+    segs: &'a bus::outside::Segments,
+    ctls: &'a BTreeMap<u8, bus::driver::CtlTx>,
+    power: &'a mut power::PowerShell,
+    links: &'a [bus::gate::LinkGate],
+) -> faults::Director<'a> {
+    faults::Director {
+        segs,
+        ctls,
+        power,
+        links,
     }
 }
 

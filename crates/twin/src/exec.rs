@@ -167,8 +167,16 @@ fn announce_bound(
         .filter(|u| matches!(u.at, crate::runtime::UartAt::Tcp(_)))
         .map(|u| u.node.clone())
         .collect();
+    let control = opts.control.as_ref().is_some_and(|c| c.listen.is_some());
     async move {
-        if let Ok(addrs) = ready.await {
+        if let Ok(mut addrs) = ready.await {
+            // The control channel's, bound last.
+            if control && let Some(a) = addrs.pop() {
+                eprintln!(
+                    "control channel: on {a} (try: m6p-twin gs --control {a} time); \
+                     docs/operations.md, \"The control channel\""
+                );
+            }
             let (kiss, rest) = addrs.split_at(listen_addrs.len().min(addrs.len()));
             for (a, (mode, ids)) in kiss.iter().zip(&listen_addrs) {
                 let csp = if ids.is_empty() {

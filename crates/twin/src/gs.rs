@@ -593,6 +593,62 @@ pub async fn icd_command(
     send_and_show(gs, to, cmd, request, timeout).await
 }
 
+/// Send one request to a run's control channel (`run --control`) and print its reply:
+/// whether it was taken.
+pub fn control(
+    addr: SocketAddr,
+    req: &serde_json::Value,
+    timeout: Duration,
+) -> anyhow::Result<bool> {
+    use std::io::{BufRead as _, Write as _};
+    let stream = std::net::TcpStream::connect_timeout(&addr, timeout)
+        .with_context(|| format!("connecting to the control channel on {addr}"))?;
+    stream.set_read_timeout(Some(timeout))?;
+    let mut w = stream.try_clone()?;
+    writeln!(w, "{req}")?;
+    let mut line = String::new();
+    std::io::BufReader::new(stream)
+        .read_line(&mut line)
+        .with_context(|| format!("reading the reply from {addr} (waited {timeout:?})"))?;
+    let reply: serde_json::Value = serde_json::from_str(line.trim())
+        .with_context(|| format!("the reply is not JSON: {line:?}"))?;
+    let secs = |k: &str| {
+        reply[k]
+            .as_u64()
+            .map(|ns| format!("{:.3} s", ns as f64 * 1e-9))
+    };
+    if reply["ok"] != true {
+        eprintln!(
+            "refused: {}",
+            reply["error"].as_str().unwrap_or("(no reason given)")
+        );
+        return Ok(false);
+    }
+    let now = secs("t_ns").unwrap_or_default();
+    match req["op"].as_str() {
+        Some("fault") => {
+            let until = secs("until_ns").map_or(String::new(), |u| format!(" until {u}"));
+            println!(
+                "{} (id {}): from {}{until} (the run is at {now})",
+                reply["what"].as_str().unwrap_or(""),
+                reply["id"],
+                secs("at_ns").unwrap_or_default(),
+            );
+        }
+        Some("clear") => println!(
+            "control[{}] cleared at {now}: {}",
+            reply["id"],
+            match reply["was"].as_str() {
+                Some("active") => "lifted",
+                Some("pending") => "taken off before it started",
+                _ => "it was over already",
+            }
+        ),
+        _ => println!("{now}"),
+    }
+    Ok(true)
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -21,6 +21,7 @@ impl FaultKind for BatteryFade {
     const NAME: &'static str = "battery-fade";
     const LABEL: &'static str = "BatteryFade";
     const ABOUT: &'static str = "the battery loses a fraction of its capacity, for good";
+    const LIVE: bool = false;
     const LASTS: bool = false;
 
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {

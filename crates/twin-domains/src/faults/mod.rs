@@ -69,12 +69,17 @@ pub struct FaultCx<'a> {
     /// The whole scenario.
     pub scenario: &'a Scenario,
     label: &'static str,
+    /// Injected while the run goes on (`run --control`): its number there.
+    live: Option<u32>,
 }
 
 impl FaultCx<'_> {
     /// The fault's id.
     pub fn id(&self) -> u32 {
-        u32::try_from(self.index).unwrap_or(u32::MAX)
+        match self.live {
+            Some(n) => twin_runtime::control::LIVE_FAULT_ID_BASE.saturating_add(n),
+            None => u32::try_from(self.index).unwrap_or(u32::MAX),
+        }
     }
     /// When it starts.
     pub fn at(&self) -> SimTime {
@@ -130,10 +135,13 @@ impl FaultCx<'_> {
     }
     /// The description of the fault in the run's log (`faults[0]: Drop on main`).
     pub fn what(&self) -> String {
-        format!(
-            "faults[{}]: {} on {}",
-            self.index, self.label, self.common.target
-        )
+        match self.live {
+            Some(n) => format!("control[{n}]: {} on {}", self.label, self.common.target),
+            None => format!(
+                "faults[{}]: {} on {}",
+                self.index, self.label, self.common.target
+            ),
+        }
     }
 }
 
@@ -177,6 +185,9 @@ pub trait FaultKind: DeserializeOwned + JsonSchema + std::fmt::Debug + 'static {
     const ABOUT: &'static str;
     /// Whether it lasts until `until` (`false`: instantaneous, no `until`).
     const LASTS: bool = true;
+    /// Whether it can be injected while the run goes on (`run --control`): `false` for a
+    /// kind that a node applies from its own timeline, which is set before the run.
+    const LIVE: bool = true;
     /// Check its meaning; `err(field, message)`.
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String));
     /// Its actions.
@@ -187,6 +198,7 @@ pub trait FaultKind: DeserializeOwned + JsonSchema + std::fmt::Debug + 'static {
 trait AnyFault: std::fmt::Debug {
     fn label(&self) -> &'static str;
     fn lasts(&self) -> bool;
+    fn live(&self) -> bool;
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String));
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>);
 }
@@ -197,6 +209,9 @@ impl<K: FaultKind> AnyFault for K {
     }
     fn lasts(&self) -> bool {
         K::LASTS
+    }
+    fn live(&self) -> bool {
+        K::LIVE
     }
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
         FaultKind::validate(self, cx, err)
@@ -285,6 +300,7 @@ pub fn validate(s: &Scenario, net: &NetworkSpec, err: &mut dyn FnMut(Vec<PathSte
             net,
             scenario: s,
             label: kind.label(),
+            live: None,
         };
         kind.validate(&cx, &mut |f, m| err(p(f), m));
     }
@@ -305,6 +321,7 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) -> Vec<Ti
             net,
             scenario: s,
             label: kind.label(),
+            live: None,
         };
         let mut plan = FaultPlan {
             timeline: &mut timeline,
@@ -314,4 +331,89 @@ pub fn compile(s: &Scenario, net: &NetworkSpec, opts: &mut RunOptions) -> Vec<Ti
         kind.compile(&cx, &mut plan);
     }
     timeline
+}
+
+/// The scenario's fault catalogue for faults injected while its run goes on (`run
+/// --control`, `gs fault`): each request judged as a `[[faults]]` entry of the scenario is,
+/// and compiled into actions on the fault timeline.
+#[derive(Debug)]
+pub struct Live {
+    scenario: Scenario,
+    net: NetworkSpec,
+    /// Never changed: the kinds that would change it are not live.
+    opts: std::sync::Mutex<RunOptions>,
+}
+
+/// [`Live`] for scenario `s`.
+pub fn live(s: &Scenario) -> std::sync::Arc<dyn twin_runtime::control::LiveFaults> {
+    let net = s.network_spec_unchecked();
+    let opts = RunOptions::new(net.clone(), s.duration.0);
+    std::sync::Arc::new(Live {
+        scenario: s.clone(),
+        net,
+        opts: std::sync::Mutex::new(opts),
+    })
+}
+
+impl twin_runtime::control::LiveFaults for Live {
+    fn compile(&self, f: &twin_runtime::control::LiveFault) -> Result<Vec<TimedFault>, String> {
+        let table: toml::Table =
+            serde_json::from_value(serde_json::Value::Object(f.fields.clone()))
+                .map_err(|e| format!("not a fault: {e}"))?;
+        let entry = Tagged(table);
+        let target = entry
+            .0
+            .get("target")
+            .ok_or_else(|| "a fault needs `target` (a medium, a node or a link)".to_owned())?
+            .clone()
+            .try_into::<NodeRef>()
+            .map_err(|e| format!("`target`: {e}"))?;
+        let kind = REGISTRY
+            .kind_of(&entry)
+            .map_err(|(f, m)| format!("`{f}`: {m}"))?;
+        let name = entry.kind().unwrap_or_default().to_owned();
+        if !kind.live() {
+            return Err(format!(
+                "a `{name}` fault acts on its node's own timeline, which is set before the run: \
+                 put it in the scenario's [[faults]]"
+            ));
+        }
+        if !kind.lasts() && f.until.is_some() {
+            return Err(format!(
+                "a `{name}` fault is instantaneous: it takes no `for` or `until`"
+            ));
+        }
+        let common = Common {
+            at: Dur(f.at.saturating_since(SimTime::ZERO)),
+            until: f.until.map(|u| Dur(u.saturating_since(SimTime::ZERO))),
+            target,
+        };
+        let cx = FaultCx {
+            index: self.scenario.faults.len(),
+            common: &common,
+            net: &self.net,
+            scenario: &self.scenario,
+            label: kind.label(),
+            live: Some(f.n),
+        };
+        let mut problems = Vec::new();
+        kind.validate(&cx, &mut |field, m| {
+            problems.push(format!("`{field}`: {m}"))
+        });
+        if !problems.is_empty() {
+            return Err(problems.join("; "));
+        }
+        let mut timeline = Vec::new();
+        let mut opts = self
+            .opts
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut plan = FaultPlan {
+            timeline: &mut timeline,
+            opts: &mut opts,
+            what: cx.what(),
+        };
+        kind.compile(&cx, &mut plan);
+        Ok(timeline)
+    }
 }

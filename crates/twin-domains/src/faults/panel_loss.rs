@@ -30,6 +30,7 @@ impl FaultKind for PanelLoss {
     const NAME: &'static str = "panel-loss";
     const LABEL: &'static str = "PanelLoss";
     const ABOUT: &'static str = "a solar panel gives nothing";
+    const LIVE: bool = false;
 
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
         if cx.node().ok() != Some(twin_core::network::EPS) {

@@ -23,6 +23,7 @@ impl FaultKind for StuckSwitch {
     const LABEL: &'static str = "StuckSwitch";
     const ABOUT: &'static str =
         "an EPS channel ignores commands (CHSET, the scenario's channel events)";
+    const LIVE: bool = false;
 
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
         if cx.node().ok() != Some(twin_core::network::EPS) {

@@ -24,14 +24,23 @@ The console (interactive): give no request. One line per request, as above witho
 completion of nodes, commands, argument names and values, and `help`; Ctrl-D leaves:
     m6p-twin gs --connect 127.0.0.1:52001
   With standard input not a terminal it runs the lines of standard input (a script):
-    m6p-twin gs --connect 127.0.0.1:52001 < lines.txt";
+    m6p-twin gs --connect 127.0.0.1:52001 < lines.txt
+
+The run's control channel (`m6p-twin run --control ADDR`): faults now or later, the time:
+    m6p-twin gs --control 127.0.0.1:7700 fault power-off PL12 --for 5s
+    m6p-twin gs --control 127.0.0.1:7700 fault drop main probability=0.5 --at 20m --until 25m
+    m6p-twin gs --control 127.0.0.1:7700 clear 0
+    m6p-twin gs --control 127.0.0.1:7700 time";
 
 #[derive(Debug, clap::Args)]
 #[command(after_help = AFTER_HELP)]
 pub struct GsArgs {
-    /// The twin's KISS/TCP server.
+    /// The twin's KISS/TCP server (every request but `fault`, `clear` and `time`).
+    #[arg(long, value_name = "ADDR", required_unless_present = "control")]
+    pub connect: Option<SocketAddr>,
+    /// The run's control channel (`run --control ADDR`), for `fault`, `clear` and `time`.
     #[arg(long, value_name = "ADDR")]
-    pub connect: SocketAddr,
+    pub control: Option<SocketAddr>,
     /// This ground node's CSP address (0-30).
     #[arg(long = "as", default_value_t = 17, value_name = "ID",
           value_parser = clap::value_parser!(u8).range(0..=30))]
@@ -123,17 +132,102 @@ pub enum GsRequest {
         /// Session id.
         session: u8,
     },
+    /// Inject a fault into the run through its control channel (`--control`): KIND TARGET
+    /// [NAME=VALUE ...] as a scenario's `[[faults]]` entry says it (`power-off PL12`, `drop
+    /// main probability=0.5`, `reboot FC`), now or at `--at`; the reply gives its id.
+    Fault {
+        /// The fault's kind (`m6p-twin schema` lists them with their fields).
+        kind: String,
+        /// The medium (`main`, `payload`, `uhf`), node (`PL12`, `3`) or outside link.
+        target: String,
+        /// The kind's own fields, NAME=VALUE.
+        fields: Vec<String>,
+        /// When it starts, simulated time since the run's start (default: now).
+        #[arg(long, value_name = "T")]
+        at: Option<String>,
+        /// How long it lasts.
+        #[arg(long = "for", value_name = "DURATION")]
+        lasting: Option<String>,
+        /// When it is lifted, simulated time since the run's start.
+        #[arg(long, value_name = "T")]
+        until: Option<String>,
+    },
+    /// Lift a fault injected through the control channel, now, by its id.
+    Clear {
+        /// Its id (as `fault` answered).
+        id: u32,
+    },
+    /// The run's simulated time, through its control channel.
+    Time,
+}
+
+/// A control request's JSON, or `None` for a request over KISS.
+fn control_request(r: &GsRequest) -> anyhow::Result<Option<serde_json::Value>> {
+    Ok(Some(match r {
+        GsRequest::Time => serde_json::json!({ "op": "time" }),
+        GsRequest::Clear { id } => serde_json::json!({ "op": "clear", "id": id }),
+        GsRequest::Fault {
+            kind,
+            target,
+            fields,
+            at,
+            lasting,
+            until,
+        } => {
+            let mut req = serde_json::json!({ "op": "fault", "kind": kind });
+            req["target"] = match target.parse::<u8>() {
+                Ok(a) => a.into(),
+                Err(_) => target.clone().into(),
+            };
+            for (k, v) in [("at", at), ("for", lasting), ("until", until)] {
+                if let Some(v) = v {
+                    req[k] = v.clone().into();
+                }
+            }
+            for f in fields {
+                let Some((k, v)) = f.split_once('=') else {
+                    anyhow::bail!("`{f}`: a field is NAME=VALUE");
+                };
+                // A number or true/false as such; anything else as text.
+                req[k] = serde_json::from_str::<serde_json::Value>(v)
+                    .ok()
+                    .filter(|v| v.is_number() || v.is_boolean())
+                    .unwrap_or_else(|| v.into());
+            }
+            req
+        }
+        _ => return Ok(None),
+    }))
 }
 
 pub fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
+    if let Some(req) = a
+        .request
+        .as_ref()
+        .map(control_request)
+        .transpose()?
+        .flatten()
+    {
+        let Some(addr) = a.control else {
+            anyhow::bail!(
+                "`fault`, `clear` and `time` go to the run's control channel: give --control ADDR (the address `run --control` printed)"
+            );
+        };
+        return gs::control(addr, &req, a.timeout);
+    }
+    let Some(connect) = a.connect else {
+        anyhow::bail!(
+            "this request goes over KISS: give --connect ADDR (the twin's KISS/TCP server)"
+        );
+    };
     let Some(request) = a.request else {
-        return m6p_twin::gs_shell::run(a.connect, a.as_addr, a.port, a.timeout);
+        return m6p_twin::gs_shell::run(connect, a.as_addr, a.port, a.timeout);
     };
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
     rt.block_on(async {
-        let mut client = gs::GsClient::connect(a.connect, a.as_addr).await?;
+        let mut client = gs::GsClient::connect(connect, a.as_addr).await?;
         match request {
             GsRequest::Ping {
                 node,
@@ -197,6 +291,9 @@ pub fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
                     a.timeout,
                 )
                 .await
+            }
+            GsRequest::Fault { .. } | GsRequest::Clear { .. } | GsRequest::Time => {
+                anyhow::bail!("a control request goes to --control")
             }
         }
     })

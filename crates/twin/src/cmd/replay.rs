@@ -58,6 +58,28 @@ pub fn recorded_kiss_input(
         .collect())
 }
 
+/// The requests a recording's control channel took (`/control`), in the order it took them.
+pub fn recorded_control(
+    file: &std::path::Path,
+) -> anyhow::Result<Vec<m6p_twin::runtime::control::RecordedRequest>> {
+    let mut out = Vec::new();
+    for m in m6p_twin::recording::messages(file)? {
+        let m = m?;
+        if &*m.topic != m6p_twin::record::TOPIC_CONTROL {
+            continue;
+        }
+        let c: m6p_twin::record::ControlMsg = m
+            .decode()
+            .with_context(|| format!("decoding a {} message", m.topic))?;
+        out.push(m6p_twin::runtime::control::RecordedRequest {
+            t: csp::SimTime(c.t_ns),
+            conn: c.conn,
+            request: c.request,
+        });
+    }
+    Ok(out)
+}
+
 pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
     let meta = m6p_twin::recording::load_meta(&a.file)?;
     let file = format!(
@@ -116,6 +138,19 @@ pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
         compiled.opts.kiss_links.clear();
         compiled.opts.clock = bus::ClockMode::Virtual;
         compiled.opts.kiss_replay = input;
+        if compiled.opts.duration.is_none() {
+            anyhow::bail!("the recorded run had no fixed duration");
+        }
+    }
+    // What the control channel took, fed again at its instants.
+    let control = recorded_control(&a.file)?;
+    if !control.is_empty() {
+        compiled.opts.control = Some(m6p_twin::runtime::control::ControlOptions {
+            listen: None,
+            faults: m6p_twin::faults::live(&loaded.scenario),
+            replay: control,
+        });
+        compiled.opts.clock = bus::ClockMode::Virtual;
         if compiled.opts.duration.is_none() {
             anyhow::bail!("the recorded run had no fixed duration");
         }

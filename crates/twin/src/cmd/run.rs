@@ -111,6 +111,31 @@ pub struct RunArgs {
     /// [default: 127.0.0.1:8765]; implies real time. Needs a build with --features live.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765", value_parser = parse_live_addr)]
     pub live: Option<SocketAddr>,
+    /// Serve the run's control channel on ADDR (a loopback IP:PORT, or a port on
+    /// 127.0.0.1): line-delimited JSON requests to inject a fault now or later, clear it,
+    /// read the simulated time (`m6p-twin gs --control ADDR fault|clear|time`); each is
+    /// recorded on `/control` and replayed. Implies real time (docs/operations.md, "The
+    /// control channel").
+    #[arg(long, value_name = "ADDR", value_parser = parse_control_addr)]
+    pub control: Option<SocketAddr>,
+}
+
+/// `--control ADDR`: a loopback IP:PORT, or a port on 127.0.0.1.
+pub fn parse_control_addr(s: &str) -> Result<SocketAddr, String> {
+    let addr = match s.parse::<u16>() {
+        Ok(port) => SocketAddr::from(([127, 0, 0, 1], port)),
+        Err(_) => s
+            .parse::<SocketAddr>()
+            .map_err(|_| "expected IP:PORT or a port".to_owned())?,
+    };
+    if addr.ip().is_loopback() {
+        Ok(addr)
+    } else {
+        Err(format!(
+            "{addr}: the control channel listens on a loopback address only (127.0.0.1, ::1): \
+             it can power nodes off"
+        ))
+    }
 }
 
 /// `--live ADDR`: IP:PORT, or a port on 127.0.0.1.
@@ -219,6 +244,13 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
         opts.duration = Some(d);
     }
     add_links(opts, cli_links, &a)?;
+    if let Some(addr) = a.control {
+        opts.control = Some(m6p_twin::runtime::control::ControlOptions {
+            listen: Some(addr),
+            faults: m6p_twin::faults::live(&loaded.scenario),
+            replay: Vec::new(),
+        });
+    }
     if cfg!(not(feature = "live")) && a.live.is_some() {
         anyhow::bail!(
             "--live needs the Foxglove WebSocket server, which this build leaves out: \
@@ -379,12 +411,16 @@ fn choose_clock(
         eprintln!(
             "note: the live view follows the wall clock: running in real time (--speed sets the pace)"
         );
+    } else if a.control.is_some() && !a.realtime && opts.clock == ClockMode::Virtual {
+        eprintln!(
+            "note: the control channel needs the wall clock: running in real time (--speed sets the pace)"
+        );
     }
     if matches!(opts.clock, ClockMode::VirtualThenRealtime { .. }) {
         if a.forever && a.duration.is_none() {
             opts.duration = None;
         }
-    } else if a.realtime || opts.has_outside_links() || a.live.is_some() {
+    } else if a.realtime || opts.has_outside_links() || a.live.is_some() || a.control.is_some() {
         let speed = match opts.clock {
             ClockMode::Realtime { speed } if !a.realtime => speed,
             _ => a.speed,

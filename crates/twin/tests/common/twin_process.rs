@@ -50,7 +50,8 @@ pub struct Twin {
 }
 
 impl Twin {
-    /// `m6p-twin run` with `args`, waiting until `listeners` KISS servers listen.
+    /// `m6p-twin run` with `args`, waiting until `listeners` KISS servers (then the control
+    /// channel, with `--control`) listen.
     pub fn start(args: &[&str], listeners: usize) -> Twin {
         let mut child = Command::new(twin_bin())
             .arg("run")
@@ -68,7 +69,11 @@ impl Twin {
             let log = stderr.clone();
             std::thread::spawn(move || {
                 for line in err.lines().map_while(Result::ok) {
-                    if let Some(rest) = line.strip_prefix("KISS/TCP: listening on ") {
+                    // KISS servers, and the control channel (bound after them).
+                    if let Some(rest) = line
+                        .strip_prefix("KISS/TCP: listening on ")
+                        .or_else(|| line.strip_prefix("control channel: on "))
+                    {
                         let addr = rest.split_whitespace().next().unwrap_or_default();
                         let _ = tx.send(addr.parse::<SocketAddr>().unwrap());
                     }

@@ -1,0 +1,688 @@
+//! The run's control channel (`run --control ADDR`): line-delimited JSON over TCP, on the
+//! loopback interface only, for a person or a script at a running twin: the simulated time
+//! now, a fault of the scenario's catalogue injected now or at a later instant, a live
+//! fault cleared (docs/operations.md, "The control channel").
+//!
+//! A request enters the run as outside input does ([`bus::pace::take_in`]): at the first
+//! idle point of a millisecond tick, in the order requests came, stamped with that tick's
+//! instant. The run's loop answers it there, records it with its reply
+//! ([`RunEvent::Control`]), and applies what it asked at that instant; `replay` feeds the
+//! recorded requests again at their instants ([`ControlOptions::replay`]), so a live
+//! session replays exactly.
+//!
+//! Bounded like every outside link: at most [`MAX_CONNECTIONS`] connections at once (one
+//! more is told why and closed, counted and logged), lines of at most [`MAX_LINE`] bytes (a
+//! longer one is refused whole, counted), one request in the run per connection at a time
+//! (the next line is read after the reply), at most [`MAX_LIVE_FAULTS`] live faults a run.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+
+use anyhow::Context as _;
+use csp::SimTime;
+use serde::Deserialize;
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt};
+use tokio::sync::{mpsc, oneshot};
+use twin_scenario::scenario::Dur;
+
+use crate::faults::TimedFault;
+use twin_core::events::RunEvent;
+
+/// Connections served at once.
+pub const MAX_CONNECTIONS: usize = 4;
+/// Longest request line, bytes.
+pub const MAX_LINE: usize = 4096;
+/// Live faults a run takes (each is kept for `clear` until the run ends).
+pub const MAX_LIVE_FAULTS: u32 = 10_000;
+/// Fault ids of live faults start here (a scenario's faults are numbered from 0), so that
+/// live and scenario faults on one medium or node compose.
+pub const LIVE_FAULT_ID_BASE: u32 = 1 << 24;
+
+/// What compiles a live fault into actions on the run's fault timeline: the scenario's
+/// fault catalogue (the twin's `faults` module), given to the run by its caller.
+pub trait LiveFaults: Send + Sync + std::fmt::Debug {
+    /// The actions of `fault`, or why it cannot be injected.
+    fn compile(&self, fault: &LiveFault) -> Result<Vec<TimedFault>, String>;
+}
+
+/// One fault asked for on the control channel, its instants resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveFault {
+    /// Its number in the run (`control[n]`), from 0.
+    pub n: u32,
+    /// When it starts.
+    pub at: SimTime,
+    /// When it is lifted, if it is.
+    pub until: Option<SimTime>,
+    /// The kind and its fields as a scenario's `[[faults]]` entry has them (`kind`,
+    /// `target`, the kind's own), without `at` and `until`.
+    pub fields: serde_json::Map<String, serde_json::Value>,
+}
+
+impl LiveFault {
+    /// Its fault id (what composes it with the others on its medium or node).
+    pub fn id(&self) -> u32 {
+        LIVE_FAULT_ID_BASE.saturating_add(self.n)
+    }
+}
+
+/// The control channel of a run.
+#[derive(Debug, Clone)]
+pub struct ControlOptions {
+    /// Where to listen (a loopback address; port 0 picks one); `None`: no server (a
+    /// replay).
+    pub listen: Option<SocketAddr>,
+    /// The fault catalogue.
+    pub faults: Arc<dyn LiveFaults>,
+    /// Recorded requests to feed again at their instants, in the recording's order.
+    pub replay: Vec<RecordedRequest>,
+}
+
+/// A request as a recording keeps it (`/control`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordedRequest {
+    /// When the run took it in.
+    pub t: SimTime,
+    /// Its connection.
+    pub conn: u32,
+    /// The line.
+    pub request: String,
+}
+
+/// What the control channel counted.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ControlStats {
+    /// Connections served.
+    pub connections: u64,
+    /// Connections refused: [`MAX_CONNECTIONS`] were open.
+    pub refused_connections: u64,
+    /// Requests answered (refusals included).
+    pub requests: u64,
+    /// Lines longer than [`MAX_LINE`], refused whole.
+    pub long_lines: u64,
+}
+
+/// A request on its way to the run's loop.
+#[derive(Debug)]
+pub(crate) struct Admitted {
+    pub t: SimTime,
+    pub conn: u32,
+    pub request: String,
+    /// Where the reply goes (`None`: a replayed request).
+    pub reply: Option<oneshot::Sender<String>>,
+}
+
+/// The control channel of a running run: where its requests come in, what judges them,
+/// what it counted.
+pub(crate) struct Control {
+    rx: mpsc::UnboundedReceiver<Admitted>,
+    catalogue: Option<Arc<dyn LiveFaults>>,
+    stats: Arc<Mutex<ControlStats>>,
+}
+
+impl Control {
+    /// Start the run's control channel, if it has one: its server (its address added to
+    /// `bound`) and the feed of a replay's recorded requests.
+    pub async fn start(
+        opts: Option<ControlOptions>,
+        clock: bus::Clock,
+        bound: &mut Vec<SocketAddr>,
+        background: &mut Vec<tokio::task::JoinHandle<()>>,
+    ) -> anyhow::Result<Control> {
+        let (tx, rx) = mpsc::unbounded_channel();
+        let stats = Arc::new(Mutex::new(ControlStats::default()));
+        let Some(c) = opts else {
+            return Ok(Control {
+                rx,
+                catalogue: None,
+                stats,
+            });
+        };
+        if let Some(addr) = c.listen {
+            bound.push(listen(addr, clock, &tx, &stats, background).await?);
+        }
+        if !c.replay.is_empty() {
+            background.push(tokio::spawn(feed(c.replay, clock, tx)));
+        }
+        Ok(Control {
+            rx,
+            catalogue: Some(c.faults),
+            stats,
+        })
+    }
+
+    /// The next request (never, for a run without a control channel).
+    pub async fn recv(&mut self) -> Option<Admitted> {
+        if self.catalogue.is_none() {
+            return std::future::pending().await;
+        }
+        self.rx.recv().await
+    }
+
+    /// Answer `req` on `faults` (its actions due now are first in line): the reply goes
+    /// back to its connection, and the event that records both.
+    pub fn answer(&mut self, req: Admitted, faults: &mut Timeline) -> RunEvent {
+        let reply = match self.catalogue.as_deref() {
+            Some(c) => faults.answer(&req.request, req.t, c),
+            None => String::new(),
+        };
+        count(&self.stats, |s| s.requests += 1);
+        if let Some(tx) = req.reply {
+            let _ = tx.send(reply.clone());
+        }
+        RunEvent::Control {
+            t: req.t,
+            conn: req.conn,
+            request: req.request,
+            reply,
+        }
+    }
+
+    /// What it counted, if the run had one.
+    pub fn stats(&self) -> Option<ControlStats> {
+        self.catalogue.as_ref().map(|_| {
+            self.stats
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .clone()
+        })
+    }
+}
+
+/// A request, as the JSON line says it.
+#[derive(Debug, Deserialize)]
+#[serde(tag = "op", rename_all = "kebab-case", deny_unknown_fields)]
+enum Request {
+    /// The simulated time now.
+    Time {},
+    /// Inject a fault.
+    Fault(FaultFields),
+    /// Lift live fault `id` now (and take its later actions off the timeline).
+    Clear {
+        /// Its number (`control[id]`).
+        id: u32,
+    },
+}
+
+/// A fault request: when, for how long, and the scenario entry's other fields.
+#[derive(Debug, Deserialize)]
+struct FaultFields {
+    /// When it starts (simulated time since the run's start; default: now).
+    #[serde(default)]
+    at: Option<Dur>,
+    /// How long it lasts.
+    #[serde(default, rename = "for")]
+    lasting: Option<Dur>,
+    /// When it is lifted (simulated time).
+    #[serde(default)]
+    until: Option<Dur>,
+    #[serde(flatten)]
+    fields: serde_json::Map<String, serde_json::Value>,
+}
+
+/// A live fault the run took, for `clear`.
+#[derive(Debug)]
+struct Taken {
+    fault: LiveFault,
+    cleared: bool,
+}
+
+/// The live faults of a run and the fault timeline they share with the scenario's.
+#[derive(Debug, Default)]
+pub(crate) struct Timeline {
+    /// Actions in time order (equal instants in the order they were put there), each with
+    /// the live fault it belongs to.
+    queue: VecDeque<(Option<u32>, TimedFault)>,
+    live: BTreeMap<u32, Taken>,
+}
+
+impl Timeline {
+    /// The scenario's timeline (in time order).
+    pub fn new(faults: Vec<TimedFault>) -> Self {
+        Timeline {
+            queue: faults.into_iter().map(|f| (None, f)).collect(),
+            live: BTreeMap::new(),
+        }
+    }
+
+    /// The next action's instant.
+    pub fn next_at(&self) -> Option<SimTime> {
+        self.queue.front().map(|(_, f)| f.at)
+    }
+
+    /// The next action if it is due by `t`.
+    pub fn pop_due(&mut self, t: SimTime) -> Option<TimedFault> {
+        if self.next_at()? <= t {
+            self.queue.pop_front().map(|(_, f)| f)
+        } else {
+            None
+        }
+    }
+
+    /// Put `f` after every action at or before its instant.
+    fn insert(&mut self, n: Option<u32>, f: TimedFault) {
+        let i = self.queue.partition_point(|(_, g)| g.at <= f.at);
+        self.queue.insert(i, (n, f));
+    }
+
+    /// Answer `req` taken in at `t`: the reply line, and the actions are on the timeline
+    /// (those due at `t` first in line).
+    pub fn answer(&mut self, req: &str, t: SimTime, catalogue: &dyn LiveFaults) -> String {
+        let reply = match serde_json::from_str::<Request>(req) {
+            Err(e) => Err(format!("not a request: {e}")),
+            Ok(Request::Time {}) => Ok(serde_json::json!({})),
+            Ok(Request::Fault(f)) => self.inject(f, t, catalogue),
+            Ok(Request::Clear { id }) => self.clear(id, t, catalogue),
+        };
+        let mut out = match reply {
+            Ok(serde_json::Value::Object(m)) => m,
+            Ok(_) => serde_json::Map::new(),
+            Err(why) => {
+                let mut m = serde_json::Map::new();
+                m.insert("error".into(), why.into());
+                m
+            }
+        };
+        let ok = !out.contains_key("error");
+        out.insert("ok".into(), ok.into());
+        out.insert("t_ns".into(), t.as_ns().into());
+        serde_json::Value::Object(out).to_string()
+    }
+
+    fn inject(
+        &mut self,
+        f: FaultFields,
+        t: SimTime,
+        catalogue: &dyn LiveFaults,
+    ) -> Result<serde_json::Value, String> {
+        let n = u32::try_from(self.live.len()).unwrap_or(u32::MAX);
+        if n >= MAX_LIVE_FAULTS {
+            return Err(format!(
+                "this run took {MAX_LIVE_FAULTS} live faults already"
+            ));
+        }
+        let at = f.at.map_or(t, |d| SimTime::ZERO + d.0);
+        if at < t {
+            return Err(format!(
+                "`at` ({}) has passed: the run is at {}",
+                fmt_t(at),
+                fmt_t(t)
+            ));
+        }
+        let until = match (f.lasting, f.until) {
+            (Some(_), Some(_)) => return Err("give `for` or `until`, not both".into()),
+            (Some(d), None) if d.0.is_zero() => return Err("`for` must be above zero".into()),
+            (Some(d), None) => Some(at + d.0),
+            (None, Some(u)) if SimTime::ZERO + u.0 <= at => {
+                return Err("`until` must be after `at`".into());
+            }
+            (None, Some(u)) => Some(SimTime::ZERO + u.0),
+            (None, None) => None,
+        };
+        for k in ["at", "until", "for"] {
+            if f.fields.contains_key(k) {
+                return Err(format!("`{k}` given twice"));
+            }
+        }
+        let fault = LiveFault {
+            n,
+            at,
+            until,
+            fields: f.fields,
+        };
+        let actions = catalogue.compile(&fault)?;
+        let what = actions.first().map(|a| a.what.clone()).unwrap_or_default();
+        for a in actions {
+            self.insert(Some(n), a);
+        }
+        let mut reply = serde_json::json!({ "id": n, "what": what, "at_ns": at.as_ns() });
+        if let Some(u) = until {
+            reply["until_ns"] = u.as_ns().into();
+        }
+        self.live.insert(
+            n,
+            Taken {
+                fault,
+                cleared: false,
+            },
+        );
+        Ok(reply)
+    }
+
+    fn clear(
+        &mut self,
+        id: u32,
+        t: SimTime,
+        catalogue: &dyn LiveFaults,
+    ) -> Result<serde_json::Value, String> {
+        let Some(taken) = self.live.get_mut(&id) else {
+            return Err(format!("no live fault {id} in this run"));
+        };
+        if taken.cleared {
+            return Err(format!("live fault {id} was cleared already"));
+        }
+        taken.cleared = true;
+        let fault = taken.fault.clone();
+        let pending = self.queue.len();
+        self.queue.retain(|(n, _)| *n != Some(id));
+        let started = fault.at <= t;
+        let over = fault.until.is_some_and(|u| u <= t);
+        let mut lifted = Vec::new();
+        if started && !over {
+            // Its lift is what compiling it again with `until` now puts there: the actions
+            // at `until` (strictly after `at`, so none of its start). At the instant it
+            // started, a nanosecond later.
+            let until = t.max(fault.at + std::time::Duration::from_nanos(1));
+            let again = LiveFault {
+                until: Some(until),
+                ..fault
+            };
+            lifted = catalogue
+                .compile(&again)?
+                .into_iter()
+                .filter(|a| a.at == until)
+                .collect();
+        }
+        let lifts = lifted.len();
+        for a in lifted {
+            self.insert(Some(id), a);
+        }
+        let was = match (started, over) {
+            (false, _) => "pending",
+            (true, false) => "active",
+            (true, true) => "over",
+        };
+        Ok(serde_json::json!({
+            "id": id,
+            "was": was,
+            "taken_off": pending + lifts - self.queue.len(),
+            "lifted": lifts > 0,
+        }))
+    }
+}
+
+fn fmt_t(t: SimTime) -> String {
+    format!("{:.3} s", t.as_ns() as f64 * 1e-9)
+}
+
+/// Serve the run's control channel on `addr` (a loopback address: anything else is
+/// refused, as the channel can cut any node's power); the bound address.
+async fn listen(
+    addr: SocketAddr,
+    clock: bus::Clock,
+    to_run: &mpsc::UnboundedSender<Admitted>,
+    stats: &Arc<Mutex<ControlStats>>,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+) -> anyhow::Result<SocketAddr> {
+    if !addr.ip().is_loopback() {
+        anyhow::bail!(
+            "--control {addr}: the control channel listens on a loopback address only \
+             (127.0.0.1 or ::1): it can power nodes off"
+        );
+    }
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .with_context(|| format!("control channel: listening on {addr}"))?;
+    let local = listener.local_addr().context("reading the bound address")?;
+    tracing::info!("control channel on {local}");
+    background.push(tokio::spawn(serve(
+        listener,
+        clock,
+        to_run.clone(),
+        stats.clone(),
+    )));
+    Ok(local)
+}
+
+/// Serve the control channel on `listener` for as long as the run lasts: each line handed
+/// to the run at its next idle point, its reply written back.
+pub(crate) async fn serve(
+    listener: tokio::net::TcpListener,
+    clock: bus::Clock,
+    to_run: mpsc::UnboundedSender<Admitted>,
+    stats: Arc<Mutex<ControlStats>>,
+) {
+    let open = Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
+    let mut conns = 0u32;
+    loop {
+        let (mut stream, peer) = match listener.accept().await {
+            Ok(c) => c,
+            Err(e) => {
+                tracing::warn!("control: accept failed: {e}");
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let Ok(permit) = open.clone().try_acquire_owned() else {
+            count(&stats, |s| s.refused_connections += 1);
+            tracing::warn!("control: {peer} refused: {MAX_CONNECTIONS} connections are open");
+            let line = serde_json::json!({
+                "ok": false,
+                "error": format!("{MAX_CONNECTIONS} control connections are open already"),
+            });
+            let _ = stream.write_all(format!("{line}\n").as_bytes()).await;
+            continue;
+        };
+        conns += 1;
+        count(&stats, |s| s.connections += 1);
+        tracing::info!("control: {peer} connected (connection {conns})");
+        let (to_run, stats) = (to_run.clone(), stats.clone());
+        tokio::spawn(async move {
+            let why = connection(stream, conns, clock, &to_run, &stats).await;
+            tracing::info!("control: {peer} closed ({why})");
+            drop(permit);
+        });
+    }
+}
+
+fn count(stats: &Mutex<ControlStats>, f: impl FnOnce(&mut ControlStats)) {
+    f(&mut stats
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner));
+}
+
+/// One connection: a line, its reply, until the peer closes.
+async fn connection(
+    stream: tokio::net::TcpStream,
+    conn: u32,
+    clock: bus::Clock,
+    to_run: &mpsc::UnboundedSender<Admitted>,
+    stats: &Mutex<ControlStats>,
+) -> String {
+    let (read, mut write) = stream.into_split();
+    let mut read = tokio::io::BufReader::new(read);
+    let mut line = Vec::with_capacity(256);
+    loop {
+        line.clear();
+        // At most MAX_LINE + 1 bytes are kept of a line: a longer one is refused whole and
+        // its rest skipped.
+        let n = match (&mut read)
+            .take(MAX_LINE as u64 + 1)
+            .read_until(b'\n', &mut line)
+            .await
+        {
+            Ok(0) => return "end of stream".into(),
+            Ok(n) => n,
+            Err(e) => return e.to_string(),
+        };
+        let reply = if line.last() != Some(&b'\n') && n > MAX_LINE {
+            count(stats, |s| s.long_lines += 1);
+            if let Err(e) = skip_line(&mut read).await {
+                return e.to_string();
+            }
+            serde_json::json!({
+                "ok": false,
+                "error": format!("line longer than {MAX_LINE} bytes"),
+            })
+            .to_string()
+        } else {
+            let text = String::from_utf8_lossy(&line).trim().to_owned();
+            if text.is_empty() {
+                continue;
+            }
+            let (tx, rx) = oneshot::channel();
+            let to_run = to_run.clone();
+            bus::pace::take_in(clock, move |t| {
+                let _ = to_run.send(Admitted {
+                    t,
+                    conn,
+                    request: text,
+                    reply: Some(tx),
+                });
+            });
+            match rx.await {
+                Ok(r) => r,
+                Err(_) => return "the run has ended".into(),
+            }
+        };
+        if let Err(e) = write.write_all(format!("{reply}\n").as_bytes()).await {
+            return e.to_string();
+        }
+    }
+}
+
+/// Read up to the end of the current line.
+async fn skip_line<R: tokio::io::AsyncBufRead + Unpin>(r: &mut R) -> std::io::Result<()> {
+    loop {
+        let buf = r.fill_buf().await?;
+        if buf.is_empty() {
+            return Ok(());
+        }
+        if let Some(i) = buf.iter().position(|&b| b == b'\n') {
+            r.consume(i + 1);
+            return Ok(());
+        }
+        let n = buf.len();
+        r.consume(n);
+    }
+}
+
+/// Feed recorded requests again at their instants (a replay): each taken in at the first
+/// idle point of its tick, as it was.
+pub(crate) async fn feed(
+    requests: Vec<RecordedRequest>,
+    clock: bus::Clock,
+    to_run: mpsc::UnboundedSender<Admitted>,
+) {
+    for r in requests {
+        clock.sleep_until(r.t).await;
+        let to_run = to_run.clone();
+        bus::pace::take_in(clock, move |t| {
+            let _ = to_run.send(Admitted {
+                t,
+                conn: r.conn,
+                request: r.request,
+                reply: None,
+            });
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::faults::FaultAction;
+
+    /// A catalogue of one kind, `power-off` of a node by address, lasting.
+    #[derive(Debug)]
+    struct PowerOnly;
+
+    impl LiveFaults for PowerOnly {
+        fn compile(&self, f: &LiveFault) -> Result<Vec<TimedFault>, String> {
+            if f.fields.get("kind").and_then(|k| k.as_str()) != Some("power-off") {
+                return Err("unknown kind".into());
+            }
+            let addr = f.fields["target"].as_u64().unwrap() as u8;
+            let act = |off| FaultAction::Power {
+                addr,
+                fault: f.id(),
+                off,
+            };
+            let what = format!("control[{}]: PowerOff on {addr}", f.n);
+            let mut v = vec![TimedFault {
+                at: f.at,
+                action: act(true),
+                what: what.clone(),
+            }];
+            if let Some(u) = f.until {
+                v.push(TimedFault {
+                    at: u,
+                    action: act(false),
+                    what: format!("{what} (power on)"),
+                });
+            }
+            Ok(v)
+        }
+    }
+
+    fn s(secs: u64) -> SimTime {
+        SimTime::from_secs(secs)
+    }
+
+    fn reply(r: &str) -> serde_json::Value {
+        serde_json::from_str(r).unwrap()
+    }
+
+    /// A fault for 5 s from now goes on the timeline with its lift, in time order with the
+    /// scenario's; clearing it at once takes both off; the time request answers the
+    /// instant; bad requests are refused with why.
+    #[test]
+    fn faults_go_on_the_timeline_and_clear_takes_them_off() {
+        let scenario = TimedFault {
+            at: s(7),
+            action: FaultAction::Reboot(3),
+            what: "faults[0]: Reboot on FC".into(),
+        };
+        let mut tl = Timeline::new(vec![scenario]);
+        let r = reply(&tl.answer(
+            r#"{"op":"fault","kind":"power-off","target":12,"for":"5s"}"#,
+            s(4),
+            &PowerOnly,
+        ));
+        assert_eq!(r["ok"], true, "{r}");
+        assert_eq!(r["id"], 0);
+        assert_eq!(r["until_ns"], s(9).as_ns());
+        let order: Vec<_> = tl.queue.iter().map(|(n, f)| (*n, f.at)).collect();
+        assert_eq!(order, [(Some(0), s(4)), (None, s(7)), (Some(0), s(9))]);
+        assert_eq!(tl.pop_due(s(4)).unwrap().at, s(4));
+        assert!(tl.pop_due(s(4)).is_none());
+        // Cleared at 6 s: its lift moves to 6 s, before the scenario's reboot.
+        let r = reply(&tl.answer(r#"{"op":"clear","id":0}"#, s(6), &PowerOnly));
+        assert_eq!(r["lifted"], true, "{r}");
+        let order: Vec<_> = tl.queue.iter().map(|(n, f)| (*n, f.at)).collect();
+        assert_eq!(order, [(Some(0), s(6)), (None, s(7))]);
+        assert!(matches!(
+            tl.queue[0].1.action,
+            FaultAction::Power { off: false, .. }
+        ));
+        let r = reply(&tl.answer(r#"{"op":"time"}"#, s(6), &PowerOnly));
+        assert_eq!(
+            (r["ok"].clone(), r["t_ns"].clone()),
+            (true.into(), s(6).as_ns().into())
+        );
+        for (bad, why) in [
+            (r#"{"op":"clear","id":0}"#, "cleared already"),
+            (r#"{"op":"clear","id":9}"#, "no live fault 9"),
+            (
+                r#"{"op":"fault","kind":"power-off","target":12,"at":"1s"}"#,
+                "has passed",
+            ),
+            (
+                r#"{"op":"fault","kind":"power-off","target":12,"for":"1s","until":"9s"}"#,
+                "not both",
+            ),
+            (
+                r#"{"op":"fault","kind":"melt","target":12}"#,
+                "unknown kind",
+            ),
+            (r#"{"op":"snapshot"}"#, "not a request"),
+            ("power-off PL12", "not a request"),
+        ] {
+            let r = reply(&tl.answer(bad, s(6), &PowerOnly));
+            assert_eq!(r["ok"], false, "{bad}: {r}");
+            assert!(r["error"].as_str().unwrap().contains(why), "{bad}: {r}");
+        }
+    }
+}

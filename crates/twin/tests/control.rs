@@ -1,0 +1,136 @@
+//! The run's control channel (`run --control`, `gs --control`): faults injected into a
+//! real-time run while it goes on, at instants the run defines, recorded on `/control` and
+//! `/faults`, and reproduced by `replay`.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use common::on;
+use common::twin_process::{Twin, output_text, test_dir, twin};
+
+/// `gs --control ADDR ARGS...`: (exit success, stdout and stderr).
+fn gs(addr: &str, args: &[&str]) -> (bool, String) {
+    let o = twin()
+        .args(["gs", "--control", addr])
+        .args(args)
+        .output()
+        .unwrap();
+    (o.status.success(), output_text(&o))
+}
+
+/// A real-time run of the default scenario takes a power-off of PL12 from 20 s for 5 s, a
+/// hang of PL13 now, cleared at once, and refuses what it cannot take; each fault is on
+/// `/faults` at its instants with its origin, each request on `/control` with its reply,
+/// and `replay` reproduces the run.
+#[test]
+fn faults_from_the_control_channel_are_recorded_and_replayed() {
+    let dir = test_dir("control", "faults");
+    let rec = dir.join("run.mcap");
+    let scenario = common::repo_root().join("scenarios/default.toml");
+    let twin_run = Twin::start(
+        &[
+            scenario.to_str().unwrap(),
+            "--duration",
+            "40s",
+            "--speed",
+            "5",
+            "--no-checks",
+            "--control",
+            "127.0.0.1:0",
+            "--record",
+            rec.to_str().unwrap(),
+        ],
+        1,
+    );
+    let addr = twin_run.addrs[0].to_string();
+    let (ok, out) = gs(&addr, &["time"]);
+    assert!(ok, "{out}");
+    assert!(out.trim().ends_with(" s"), "{out}");
+    let (ok, out) = gs(
+        &addr,
+        &["fault", "power-off", "PL12", "--at", "20s", "--for", "5s"],
+    );
+    assert!(ok, "{out}");
+    assert!(
+        out.contains("control[0]: PowerOff on PL12 (id 0): from 20.000 s until 25.000 s"),
+        "{out}"
+    );
+    let (ok, out) = gs(&addr, &["fault", "hang", "PL13"]);
+    assert!(ok, "{out}");
+    let (ok, out) = gs(&addr, &["clear", "1"]);
+    assert!(ok && out.contains("control[1] cleared"), "{out}");
+    for (args, why) in [
+        (&["fault", "melt", "PL12"][..], "unknown fault kind `melt`"),
+        (&["fault", "power-off", "PL99"], "PL99"),
+        (&["fault", "reboot", "FC", "--for", "1s"], "instantaneous"),
+        (
+            &["fault", "battery-fade", "EPS", "fraction=0.1"],
+            "own timeline",
+        ),
+        (&["fault", "power-off", "PL12", "--at", "0s"], "has passed"),
+        (&["clear", "7"], "no live fault 7"),
+    ] {
+        let (ok, out) = gs(&addr, args);
+        assert!(!ok, "{args:?} was taken: {out}");
+        assert!(out.contains(why), "{args:?}: {out}");
+    }
+    let (_, out, err) = twin_run.finish();
+    assert!(rec.exists(), "no recording: {out}{err}");
+
+    let faults: Vec<(u64, String)> = on(&rec, "/faults")
+        .iter()
+        .map(|m| {
+            let f: m6p_twin::record::FaultMsg = m.decode().unwrap();
+            (f.t_ns, f.what)
+        })
+        .collect();
+    let s = |secs: u64| secs * 1_000_000_000;
+    assert!(
+        faults.contains(&(s(20), "control[0]: PowerOff on PL12".into())),
+        "{faults:?}"
+    );
+    assert!(
+        faults.contains(&(s(25), "control[0]: PowerOff on PL12 (power on)".into())),
+        "{faults:?}"
+    );
+    let hang: Vec<_> = faults
+        .iter()
+        .filter(|(_, w)| w.starts_with("control[1]: Hang on PL13"))
+        .collect();
+    assert_eq!(hang.len(), 2, "the hang and its lift: {faults:?}");
+    assert!(hang[1].1.ends_with("(recovered)"), "{hang:?}");
+    let control: Vec<m6p_twin::record::ControlMsg> = on(&rec, "/control")
+        .iter()
+        .map(|m| m.decode().unwrap())
+        .collect();
+    assert_eq!(
+        control.len(),
+        10,
+        "every request, refusals included: {control:?}"
+    );
+    assert!(control[1].reply.contains(r#""ok":true"#), "{control:?}");
+    assert!(control[4].reply.contains(r#""ok":false"#), "{control:?}");
+
+    let again = dir.join("replay.mcap");
+    let o = twin()
+        .args([
+            "replay",
+            rec.to_str().unwrap(),
+            "--record",
+            again.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "replay differs: {}", output_text(&o));
+    // `diff` compares what crossed the media; the faults and the requests are the same too.
+    for topic in ["/faults", "/control"] {
+        let data = |p: &std::path::Path| -> Vec<(u64, Vec<u8>)> {
+            on(p, topic)
+                .iter()
+                .map(|m| (m.log_time, m.data.clone()))
+                .collect()
+        };
+        assert_eq!(data(&rec), data(&again), "{topic}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
