@@ -84,6 +84,24 @@ struct Supply {
     hangs: BTreeSet<u32>,
 }
 
+/// The supply of one outside link: the EPS channel that powers it, if one does, and the
+/// power faults holding it off.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct LinkSupply {
+    /// The address of the node whose channel powers it.
+    channel_of: Option<u8>,
+    /// That channel is on (`true` without one).
+    channel_on: bool,
+    /// Power faults holding it off, by fault id.
+    holds: BTreeSet<u32>,
+}
+
+impl LinkSupply {
+    fn powered(&self) -> bool {
+        self.channel_on && self.holds.is_empty()
+    }
+}
+
 impl Supply {
     fn powered(&self) -> bool {
         !self.channel_off && self.holds.is_empty()
@@ -103,8 +121,8 @@ pub struct PowerRules {
     carrier: u8,
     /// Whose radio is the active one (1 or 2): the switches as they stand.
     active: u8,
-    /// Outside links powered by a channel: the channel's node address, and whether on.
-    links: BTreeMap<u16, (u8, bool)>,
+    /// Outside links powered by a channel or held off by a power fault.
+    links: BTreeMap<u16, LinkSupply>,
 }
 
 impl PowerRules {
@@ -125,12 +143,50 @@ impl PowerRules {
     /// Outside link `link` is powered by the EPS channel of node `channel_of`, which is on
     /// (`on`) or off now.
     pub fn power_link(&mut self, link: u16, channel_of: u8, on: bool) {
-        self.links.insert(link, (channel_of, on));
+        self.links.insert(
+            link,
+            LinkSupply {
+                channel_of: Some(channel_of),
+                channel_on: on,
+                holds: BTreeSet::new(),
+            },
+        );
     }
 
-    /// Whether outside link `link` is powered (links without a channel always are).
+    /// Whether outside link `link` is powered (links without a channel are, unless a
+    /// power fault holds them off).
     pub fn link_powered(&self, link: u16) -> bool {
-        self.links.get(&link).is_none_or(|(_, on)| *on)
+        self.links.get(&link).is_none_or(LinkSupply::powered)
+    }
+
+    /// Whether the channel powering outside link `link` is on (links without one: yes).
+    pub fn link_channel_on(&self, link: u16) -> bool {
+        self.links.get(&link).is_none_or(|l| l.channel_on)
+    }
+
+    /// Power fault `fault` holds outside link `link` off (`off`) or releases it: the
+    /// program behind it loses power as a node of the twin would (a payload the twin does
+    /// not simulate, cut by a fault on its supply).
+    pub fn hold_link(&mut self, link: u16, fault: u32, off: bool) -> Vec<Effect> {
+        let l = self.links.entry(link).or_insert(LinkSupply {
+            channel_of: None,
+            channel_on: true,
+            holds: BTreeSet::new(),
+        });
+        let was = l.powered();
+        if off {
+            l.holds.insert(fault);
+        } else {
+            l.holds.remove(&fault);
+        }
+        if l.powered() == was {
+            Vec::new()
+        } else {
+            vec![Effect::LinkPower {
+                link,
+                on: l.powered(),
+            }]
+        }
     }
 
     /// Whether node `addr` is powered (unknown nodes: no).
@@ -151,10 +207,16 @@ impl PowerRules {
     /// Node `addr`'s EPS channel switched on or off (and the outside links it powers).
     pub fn channel(&mut self, addr: u8, on: bool) -> Vec<Effect> {
         let mut out = self.change(addr, |s| s.channel_off = !on);
-        for (link, (of, powered)) in &mut self.links {
-            if *of == addr && *powered != on {
-                *powered = on;
-                out.push(Effect::LinkPower { link: *link, on });
+        for (link, l) in &mut self.links {
+            if l.channel_of == Some(addr) && l.channel_on != on {
+                let was = l.powered();
+                l.channel_on = on;
+                if l.powered() != was {
+                    out.push(Effect::LinkPower {
+                        link: *link,
+                        on: l.powered(),
+                    });
+                }
             }
         }
         out
@@ -351,6 +413,44 @@ mod tests {
                 .any(|e| matches!(e, Effect::LinkPower { .. }))
         );
         assert!(r.link_powered(0));
+    }
+
+    /// A power fault on a link holds the program off whatever its channel does, and
+    /// composes with the channel: powered again only when both allow.
+    #[test]
+    fn a_power_fault_holds_a_link_off_and_composes_with_its_channel() {
+        let mut r = rules();
+        r.power_link(0, 12, true);
+        assert_eq!(
+            r.hold_link(0, 5, true),
+            vec![Effect::LinkPower { link: 0, on: false }]
+        );
+        assert_eq!(
+            r.channel(12, false).len(),
+            1,
+            "the node only: the link is off already"
+        );
+        assert_eq!(r.hold_link(0, 5, false), vec![], "the channel is still off");
+        assert!(!r.link_powered(0));
+        assert_eq!(
+            r.channel(12, true),
+            vec![
+                Effect::Power { addr: 12, on: true },
+                Effect::LinkPower { link: 0, on: true }
+            ]
+        );
+        // A link no channel powers: only its faults.
+        assert_eq!(
+            r.hold_link(1, 6, true),
+            vec![Effect::LinkPower { link: 1, on: false }]
+        );
+        assert_eq!(r.hold_link(1, 7, true), vec![], "a second hold");
+        assert_eq!(r.hold_link(1, 6, false), vec![]);
+        assert_eq!(
+            r.hold_link(1, 7, false),
+            vec![Effect::LinkPower { link: 1, on: true }]
+        );
+        assert!(r.link_powered(1));
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! The run's control channel (`run --control ADDR`): line-delimited JSON over TCP, on the
 //! loopback interface only, for a person or a script at a running twin: the simulated time
 //! now, a fault of the scenario's catalogue injected now or at a later instant, a live
-//! fault cleared (docs/operations.md, "The control channel").
+//! fault cleared (docs/control.md).
 //!
 //! A request enters the run as outside input does ([`bus::pace::take_in`]): at the first
 //! idle point of a millisecond tick, in the order requests came, stamped with that tick's

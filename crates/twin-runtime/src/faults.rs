@@ -73,6 +73,16 @@ pub enum FaultAction {
         /// Held off or released.
         off: bool,
     },
+    /// Power fault `fault` holds outside link `link` off (`off`) or releases it: the twin
+    /// forwards nothing to or from the program behind it meanwhile.
+    LinkPower {
+        /// The link (`MediumId::Link`'s index).
+        link: u16,
+        /// The fault.
+        fault: u32,
+        /// Held off or released.
+        off: bool,
+    },
     /// Hang fault `fault` starts (`hung`) or ends on outside link `link`: the twin
     /// forwards nothing to or from it.
     LinkHang {
@@ -171,6 +181,9 @@ impl Director<'_> {
             }
             FaultAction::Power { addr, fault, off } => {
                 self.power.power_fault(f.at, *addr, *fault, *off)
+            }
+            FaultAction::LinkPower { link, fault, off } => {
+                self.power.power_link_fault(f.at, *link, *fault, *off)
             }
             FaultAction::Reboot(a) => {
                 // A node that is off or hung does not reboot (its task ignores it then).

@@ -717,6 +717,7 @@ fn power_shell(
         power_shell.register_comm(*addr, ports);
     }
     for (i, (link, gate)) in opts.outside.iter().zip(gates).enumerate() {
+        power_shell.register_link(i, link.name.clone(), gate.clone());
         if let Some(ch) = link.powered_by {
             let on = opts.eps.channels_on & ch.bit() != 0;
             power_shell.power_link(i, link.name.clone(), ch, gate.clone(), on);

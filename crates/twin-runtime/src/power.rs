@@ -32,8 +32,9 @@ pub struct PowerShell {
     comm2_can: Option<CanPort>,
     /// COMM1's and COMM2's radio endpoints.
     radios: [Option<NetPort>; 2],
-    /// The outside links powered by a channel: name and gate, by link index.
-    links: BTreeMap<u16, (String, nodes_eps::Channel, LinkGate)>,
+    /// The outside links of the scenario: name, the channel that powers it if one does,
+    /// and gate, by link index.
+    links: BTreeMap<u16, (String, Option<nodes_eps::Channel>, LinkGate)>,
 }
 
 impl PowerShell {
@@ -65,7 +66,27 @@ impl PowerShell {
         };
         gate.set_powered(on);
         self.rules.power_link(link, addr, on);
-        self.links.insert(link, (name, channel, gate));
+        self.links.insert(link, (name, Some(channel), gate));
+    }
+
+    /// Outside link `link` (named `name`, behind `gate`), which power faults may hold off;
+    /// [`PowerShell::power_link`] if a channel powers it.
+    pub fn register_link(&mut self, link: usize, name: String, gate: LinkGate) {
+        if let Ok(link) = u16::try_from(link) {
+            self.links.entry(link).or_insert((name, None, gate));
+        }
+    }
+
+    /// Power fault `fault` holds outside link `link` off (`off`) or releases it at `t`.
+    pub fn power_link_fault(
+        &mut self,
+        t: SimTime,
+        link: u16,
+        fault: u32,
+        off: bool,
+    ) -> Vec<RunEvent> {
+        let effects = self.rules.hold_link(link, fault, off);
+        self.apply(t, effects)
     }
 
     /// Register a COMM's attachments (for the take-over).
@@ -170,12 +191,19 @@ impl PowerShell {
                         continue;
                     };
                     gate.set_powered(on);
+                    // Why, in the words of what switched it: its channel, or a fault.
+                    let cause = match channel {
+                        Some(c) if on || !self.rules.link_channel_on(link) => {
+                            format!("{} {}", c.name(), if on { "on" } else { "off" })
+                        }
+                        _ if on => "the power-off fault lifted".to_owned(),
+                        _ => "a power-off fault".to_owned(),
+                    };
                     let message = if on {
-                        format!("link {name}: powered again ({} on)", channel.name())
+                        format!("link {name}: powered again ({cause})")
                     } else {
                         format!(
-                            "link {name}: unpowered ({} off): the twin forwards nothing to or from it",
-                            channel.name()
+                            "link {name}: unpowered ({cause}): the twin forwards nothing to or from it"
                         )
                     };
                     tracing::info!(%t, "{message}");

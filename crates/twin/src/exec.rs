@@ -174,7 +174,7 @@ fn announce_bound(
             if control && let Some(a) = addrs.pop() {
                 eprintln!(
                     "control channel: on {a} (try: m6p-twin gs --control {a} time); \
-                     docs/operations.md, \"The control channel\""
+                     see docs/control.md"
                 );
             }
             let (kiss, rest) = addrs.split_at(listen_addrs.len().min(addrs.len()));

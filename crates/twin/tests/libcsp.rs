@@ -277,3 +277,102 @@ fn opts_network() -> m6p_twin::network::NetworkSpec {
     let scenario = m6p_twin::scenario::parse("examples/sil-pass.toml", &text).unwrap();
     m6p_twin::plan::compile(&scenario).opts.network
 }
+
+libcsp_test! {
+    /// The libcsp payload serves session 1 as payload 12 over the hub in a real-time run;
+    /// mid-session `gs --control ... fault power-off PL12 --for 5s` cuts it (the link that
+    /// holds address 12 loses power): the PC's polls go unanswered for 5 s and the downlink
+    /// stops, then both resume; the session still ends done. The recording replays
+    /// identically, the fault and the payload's input with it.
+    fn a_live_power_cut_of_the_libcsp_payload_shows_in_its_session_and_replays() {
+        use common::twin_process::{Twin, output_text, test_dir, twin};
+        let _one = ONE_SESSION_AT_A_TIME
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let progs = programs();
+        let host = "127.0.0.66";
+        let dir = test_dir("libcsp", "live-cut");
+        let scenario = common::readme_scenario()
+            .replace("\"kiss-listen\"", "\"zmq-hub\"")
+            .replace("\"127.0.0.1:52001\"", &format!("\"{host}\""))
+            .replace("duration = \"8s\"", "duration = \"16s\"")
+            .replace("/tmp/outside_payload.downlink", &dir.join("down").display().to_string());
+        let file = dir.join("cut.toml");
+        std::fs::write(&file, scenario).unwrap();
+        let rec = dir.join("cut.mcap");
+        let run = Twin::start(
+            &[
+                file.to_str().unwrap(),
+                "--control",
+                "127.0.0.1:0",
+                "--record",
+                rec.to_str().unwrap(),
+            ],
+            1,
+        );
+        let control = run.addrs[0].to_string();
+        let payload = std::process::Command::new(&progs.payload)
+            .args(["--zmq", host, "--addr", "12", "--api", "conn", "--idle", "7"])
+            .args(["--seconds", "17", "--sent"])
+            .arg(dir.join("sent.bin"))
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Into the session (set up at 2 s, a poll every 100 ms), then the cut.
+        let now_s = || -> f64 {
+            let o = twin().args(["gs", "--control", &control, "time"]).output().unwrap();
+            let text = output_text(&o);
+            text.trim().trim_end_matches(" s").parse().unwrap_or_else(|_| panic!("{text}"))
+        };
+        while now_s() < 3.0 {
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        let o = twin()
+            .args(["gs", "--control", &control, "fault", "power-off", "PL12", "--for", "5s"])
+            .output()
+            .unwrap();
+        let said = output_text(&o);
+        assert!(o.status.success(), "{said}");
+        assert!(said.contains("control[0]: PowerOff on PL12 (id 0): from "), "{said}");
+        let (_, out, err) = run.finish();
+        let served = output_text(&payload.wait_with_output().unwrap());
+        println!("{out}{err}\n{served}");
+
+        // The link's table counts what it held back. (Which frames the cut catches depends
+        // on the instant the request came at, on the wall clock: that the downlink's
+        // verdict fails is not asserted, the gap below is.)
+        let link = out.lines().find(|l| l.contains("lost at the link")).unwrap_or_default();
+        assert!(link.contains(" while unpowered") && !link.contains(" 0 while unpowered"), "{out}");
+        let faults: Vec<m6p_twin::record::FaultMsg> =
+            common::on(&rec, "/faults").iter().map(|m| m.decode().unwrap()).collect();
+        assert_eq!(faults.len(), 2, "{faults:?}");
+        let (cut, back) = (faults[0].t_ns, faults[1].t_ns);
+        assert_eq!(back - cut, 5_000_000_000, "{faults:?}");
+        assert!(cut >= 3_000_000_000, "{faults:?}");
+        let logs: Vec<String> = common::on(&rec, "/log")
+            .iter()
+            .map(|m| m.json().unwrap().to_string())
+            .collect();
+        assert!(
+            logs.iter().any(|l| l.contains("unpowered (a power-off fault)")),
+            "{logs:?}"
+        );
+        // The downlink stops within a poll's reply time of the cut and resumes after it.
+        let down: Vec<u64> = common::on(&rec, "/pc/downlink")
+            .iter()
+            .map(|m| m.decode::<m6p_twin::record::DownlinkMsg>().unwrap().t_ns)
+            .collect();
+        let during = down.iter().filter(|&&t| t > cut + 300_000_000 && t < back).count();
+        assert_eq!(during, 0, "downlink during the cut: {down:?}");
+        assert!(down.iter().any(|&t| t < cut), "before: {down:?}");
+        assert!(down.iter().any(|&t| t > back), "after: {down:?}");
+        let summary: Vec<m6p_twin::record::PcSessionSummaryMsg> =
+            common::on(&rec, "/pc/sessions/summary").iter().map(|m| m.decode().unwrap()).collect();
+        assert_eq!(summary.last().map(|s| (s.result.as_str(), s.packets)), Some(("done", 25)), "{summary:?}");
+
+        let o = twin().args(["replay", rec.to_str().unwrap()]).output().unwrap();
+        assert!(o.status.success(), "replay differs: {}", output_text(&o));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -104,6 +104,28 @@ impl FaultCx<'_> {
             NodeRef::Addr(_) => None,
         }
     }
+    /// The outside link of the scenario that holds the address `target` names (among its
+    /// `addrs`, or a node it `replaces`), whether or not the network has a node there
+    /// (`PL12` names the payload program of a scenario whose network has no PL12): the
+    /// program behind it is that node.
+    pub fn link_holding_target(&self) -> Option<u16> {
+        let addr = match &self.common.target {
+            NodeRef::Addr(a) => *a,
+            NodeRef::Name(n) => (0..=30u8).find(|&a| {
+                platform::addr::node_name(a).is_some_and(|m| m.eq_ignore_ascii_case(n))
+            })?,
+        };
+        self.scenario
+            .links
+            .iter()
+            .position(|l| {
+                l.addrs.contains(&addr)
+                    || l.replaces
+                        .iter()
+                        .any(|r| self.net.resolve(&NodeRef::Name(r.clone())) == Ok(addr))
+            })
+            .and_then(|i| u16::try_from(i).ok())
+    }
     /// The node `target` names, if it names one.
     pub fn node(&self) -> Result<u8, twin_core::network::NodeRefError> {
         self.net.resolve(&self.common.target)

@@ -15,7 +15,10 @@ fn node_target(cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
 }
 
 /// `power-off`: the node loses power at `at` (its core meets the loss at that instant) and
-/// is powered again at `until` if its EPS channel is on.
+/// is powered again at `until` if its EPS channel is on. On an outside link (`target` = its
+/// `name`, or the node whose address a link of the scenario holds), the program behind it
+/// loses power: the twin forwards nothing to or from it until `until` (and while the
+/// channel it is `powered_by`, if any, is off).
 #[derive(Debug, Clone, PartialEq, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PowerOff {}
@@ -26,11 +29,23 @@ impl FaultKind for PowerOff {
     const ABOUT: &'static str =
         "the node is powered off (back on at `until` if its EPS channel is on)";
     fn validate(&self, cx: &FaultCx<'_>, err: &mut dyn FnMut(&str, String)) {
-        node_target(cx, err);
+        if cx.link().or_else(|| cx.link_holding_target()).is_none() {
+            node_target(cx, err);
+        }
     }
     fn compile(&self, cx: &FaultCx<'_>, plan: &mut FaultPlan<'_>) {
-        let Ok(addr) = cx.node() else { return };
         let fault = cx.id();
+        // A link named, or the program a link puts at the node's address: the twin
+        // forwards nothing to or from it while the fault holds its power off.
+        if let Some(link) = cx.link().or_else(|| cx.link_holding_target()) {
+            plan.window(cx, " (power on)", |off| FaultAction::LinkPower {
+                link,
+                fault,
+                off,
+            });
+            return;
+        }
+        let Ok(addr) = cx.node() else { return };
         plan.window(cx, " (power on)", |off| FaultAction::Power {
             addr,
             fault,

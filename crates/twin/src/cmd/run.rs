@@ -114,8 +114,7 @@ pub struct RunArgs {
     /// Serve the run's control channel on ADDR (a loopback IP:PORT, or a port on
     /// 127.0.0.1): line-delimited JSON requests to inject a fault now or later, clear it,
     /// read the simulated time (`m6p-twin gs --control ADDR fault|clear|time`); each is
-    /// recorded on `/control` and replayed. Implies real time (docs/operations.md, "The
-    /// control channel").
+    /// recorded on `/control` and replayed. Implies real time (docs/control.md).
     #[arg(long, value_name = "ADDR", value_parser = parse_control_addr)]
     pub control: Option<SocketAddr>,
 }
