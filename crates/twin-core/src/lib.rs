@@ -13,6 +13,7 @@ pub mod icd_lengths;
 pub mod network;
 pub mod packets;
 pub mod seed;
+pub mod snapshot_file;
 pub mod tagged;
 pub mod timefmt;
 pub mod transit;

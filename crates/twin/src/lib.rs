@@ -12,7 +12,8 @@
 
 // The vocabulary below the twin's layers (its own crate: docs/architecture.md).
 pub use twin_core::{
-    duration, events, icd, icd_lengths, network, packets, seed, tagged, timefmt, transit,
+    duration, events, icd, icd_lengths, network, packets, seed, snapshot_file, tagged, timefmt,
+    transit,
 };
 // The layers it is built on, by the names the twin's users know (docs/architecture.md).
 pub use twin_domains::{
