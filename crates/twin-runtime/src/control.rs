@@ -43,7 +43,62 @@ pub const LIVE_FAULT_ID_BASE: u32 = 1 << 24;
 /// fault catalogue (the twin's `faults` module), given to the run by its caller.
 pub trait LiveFaults: Send + Sync + std::fmt::Debug {
     /// The actions of `fault`, or why it cannot be injected.
-    fn compile(&self, fault: &LiveFault) -> Result<Vec<TimedFault>, String>;
+    fn compile(&self, fault: &LiveFault) -> Result<Vec<TimedFault>, ControlError>;
+}
+
+/// Why a request on the control channel was refused (the reply's `error`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControlError {
+    /// The line is not one of the requests.
+    #[error("not a request: {0}")]
+    NotARequest(String),
+    /// [`MAX_LIVE_FAULTS`] were taken.
+    #[error("this run took {MAX_LIVE_FAULTS} live faults already")]
+    TooManyFaults,
+    /// `at` is before the instant the request came at.
+    #[error("`at` ({at}) has passed: the run is at {now}")]
+    AtPassed {
+        /// When the fault was to start.
+        at: SimTime,
+        /// The instant the request came at.
+        now: SimTime,
+    },
+    /// Both `for` and `until`.
+    #[error("give `for` or `until`, not both")]
+    ForAndUntil,
+    /// `for` of zero.
+    #[error("`for` must be above zero")]
+    ForZero,
+    /// `until` at or before `at`.
+    #[error("`until` must be after `at`")]
+    UntilNotAfterAt,
+    /// `at`, `for` or `until` among the kind's fields too.
+    #[error("`{0}` given twice")]
+    GivenTwice(&'static str),
+    /// `clear` of a number the run did not give.
+    #[error("no live fault {0} in this run")]
+    NoLiveFault(u32),
+    /// `clear` of a fault cleared before.
+    #[error("live fault {0} was cleared already")]
+    ClearedAlready(u32),
+    /// The fields are not a fault entry.
+    #[error("not a fault: {0}")]
+    NotAFault(String),
+    /// No `target`.
+    #[error("a fault needs `target` (a medium, a node or a link)")]
+    NoTarget,
+    /// A kind that a node applies from its own timeline, set before the run.
+    #[error(
+        "a `{0}` fault acts on its node's own timeline, which is set before the run: put it \
+         in the scenario's [[faults]]"
+    )]
+    NotLive(String),
+    /// `for` or `until` on an instantaneous kind.
+    #[error("a `{0}` fault is instantaneous: it takes no `for` or `until`")]
+    Instantaneous(String),
+    /// What the catalogue found wrong with its fields, as (field, why).
+    #[error("{}", .0.iter().map(|(f, m)| format!("`{f}`: {m}")).collect::<Vec<_>>().join("; "))]
+    Fields(Vec<(String, String)>),
 }
 
 /// One fault asked for on the control channel, its instants resolved.
@@ -270,7 +325,7 @@ impl Timeline {
     /// (those due at `t` first in line).
     pub fn answer(&mut self, req: &str, t: SimTime, catalogue: &dyn LiveFaults) -> String {
         let reply = match serde_json::from_str::<Request>(req) {
-            Err(e) => Err(format!("not a request: {e}")),
+            Err(e) => Err(ControlError::NotARequest(e.to_string())),
             Ok(Request::Time {}) => Ok(serde_json::json!({})),
             Ok(Request::Fault(f)) => self.inject(f, t, catalogue),
             Ok(Request::Clear { id }) => self.clear(id, t, catalogue),
@@ -280,7 +335,7 @@ impl Timeline {
             Ok(_) => serde_json::Map::new(),
             Err(why) => {
                 let mut m = serde_json::Map::new();
-                m.insert("error".into(), why.into());
+                m.insert("error".into(), why.to_string().into());
                 m
             }
         };
@@ -295,34 +350,28 @@ impl Timeline {
         f: FaultFields,
         t: SimTime,
         catalogue: &dyn LiveFaults,
-    ) -> Result<serde_json::Value, String> {
+    ) -> Result<serde_json::Value, ControlError> {
         let n = u32::try_from(self.live.len()).unwrap_or(u32::MAX);
         if n >= MAX_LIVE_FAULTS {
-            return Err(format!(
-                "this run took {MAX_LIVE_FAULTS} live faults already"
-            ));
+            return Err(ControlError::TooManyFaults);
         }
         let at = f.at.map_or(t, |d| SimTime::ZERO + d.0);
         if at < t {
-            return Err(format!(
-                "`at` ({}) has passed: the run is at {}",
-                fmt_t(at),
-                fmt_t(t)
-            ));
+            return Err(ControlError::AtPassed { at, now: t });
         }
         let until = match (f.lasting, f.until) {
-            (Some(_), Some(_)) => return Err("give `for` or `until`, not both".into()),
-            (Some(d), None) if d.0.is_zero() => return Err("`for` must be above zero".into()),
+            (Some(_), Some(_)) => return Err(ControlError::ForAndUntil),
+            (Some(d), None) if d.0.is_zero() => return Err(ControlError::ForZero),
             (Some(d), None) => Some(at + d.0),
             (None, Some(u)) if SimTime::ZERO + u.0 <= at => {
-                return Err("`until` must be after `at`".into());
+                return Err(ControlError::UntilNotAfterAt);
             }
             (None, Some(u)) => Some(SimTime::ZERO + u.0),
             (None, None) => None,
         };
         for k in ["at", "until", "for"] {
             if f.fields.contains_key(k) {
-                return Err(format!("`{k}` given twice"));
+                return Err(ControlError::GivenTwice(k));
             }
         }
         let fault = LiveFault {
@@ -355,12 +404,12 @@ impl Timeline {
         id: u32,
         t: SimTime,
         catalogue: &dyn LiveFaults,
-    ) -> Result<serde_json::Value, String> {
+    ) -> Result<serde_json::Value, ControlError> {
         let Some(taken) = self.live.get_mut(&id) else {
-            return Err(format!("no live fault {id} in this run"));
+            return Err(ControlError::NoLiveFault(id));
         };
         if taken.cleared {
-            return Err(format!("live fault {id} was cleared already"));
+            return Err(ControlError::ClearedAlready(id));
         }
         taken.cleared = true;
         let fault = taken.fault.clone();
@@ -400,10 +449,6 @@ impl Timeline {
             "lifted": lifts > 0,
         }))
     }
-}
-
-fn fmt_t(t: SimTime) -> String {
-    format!("{:.3} s", t.as_ns() as f64 * 1e-9)
 }
 
 /// Serve the run's control channel on `addr` (a loopback address: anything else is
@@ -590,9 +635,12 @@ mod tests {
     struct PowerOnly;
 
     impl LiveFaults for PowerOnly {
-        fn compile(&self, f: &LiveFault) -> Result<Vec<TimedFault>, String> {
+        fn compile(&self, f: &LiveFault) -> Result<Vec<TimedFault>, ControlError> {
             if f.fields.get("kind").and_then(|k| k.as_str()) != Some("power-off") {
-                return Err("unknown kind".into());
+                return Err(ControlError::Fields(vec![(
+                    "kind".into(),
+                    "unknown kind".into(),
+                )]));
             }
             let addr = f.fields["target"].as_u64().unwrap() as u8;
             let act = |off| FaultAction::Power {

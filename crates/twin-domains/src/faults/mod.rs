@@ -39,6 +39,7 @@ use twin_core::tagged::{Kind, Parsed, Registry, Tagged, schema_of};
 use twin_runtime::RunOptions;
 use twin_scenario::scenario::{Dur, NodeRef, PathStep, Scenario};
 
+use twin_runtime::control::ControlError;
 pub use twin_runtime::faults::{FaultAction, MediumId, TimedFault};
 
 /// The fields every fault takes.
@@ -378,32 +379,30 @@ pub fn live(s: &Scenario) -> std::sync::Arc<dyn twin_runtime::control::LiveFault
 }
 
 impl twin_runtime::control::LiveFaults for Live {
-    fn compile(&self, f: &twin_runtime::control::LiveFault) -> Result<Vec<TimedFault>, String> {
+    fn compile(
+        &self,
+        f: &twin_runtime::control::LiveFault,
+    ) -> Result<Vec<TimedFault>, ControlError> {
         let table: toml::Table =
             serde_json::from_value(serde_json::Value::Object(f.fields.clone()))
-                .map_err(|e| format!("not a fault: {e}"))?;
+                .map_err(|e| ControlError::NotAFault(e.to_string()))?;
         let entry = Tagged(table);
         let target = entry
             .0
             .get("target")
-            .ok_or_else(|| "a fault needs `target` (a medium, a node or a link)".to_owned())?
+            .ok_or(ControlError::NoTarget)?
             .clone()
             .try_into::<NodeRef>()
-            .map_err(|e| format!("`target`: {e}"))?;
+            .map_err(|e| ControlError::Fields(vec![("target".into(), e.to_string())]))?;
         let kind = REGISTRY
             .kind_of(&entry)
-            .map_err(|(f, m)| format!("`{f}`: {m}"))?;
+            .map_err(|fm| ControlError::Fields(vec![fm]))?;
         let name = entry.kind().unwrap_or_default().to_owned();
         if !kind.live() {
-            return Err(format!(
-                "a `{name}` fault acts on its node's own timeline, which is set before the run: \
-                 put it in the scenario's [[faults]]"
-            ));
+            return Err(ControlError::NotLive(name));
         }
         if !kind.lasts() && f.until.is_some() {
-            return Err(format!(
-                "a `{name}` fault is instantaneous: it takes no `for` or `until`"
-            ));
+            return Err(ControlError::Instantaneous(name));
         }
         let common = Common {
             at: Dur(f.at.saturating_since(SimTime::ZERO)),
@@ -419,11 +418,9 @@ impl twin_runtime::control::LiveFaults for Live {
             live: Some(f.n),
         };
         let mut problems = Vec::new();
-        kind.validate(&cx, &mut |field, m| {
-            problems.push(format!("`{field}`: {m}"))
-        });
+        kind.validate(&cx, &mut |field, m| problems.push((field.to_owned(), m)));
         if !problems.is_empty() {
-            return Err(problems.join("; "));
+            return Err(ControlError::Fields(problems));
         }
         let mut timeline = Vec::new();
         let mut opts = self
