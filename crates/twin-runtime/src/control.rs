@@ -207,12 +207,14 @@ impl Control {
         })
     }
 
-    /// The next request (never, for a run without a control channel).
-    pub async fn recv(&mut self) -> Option<Admitted> {
-        if self.catalogue.is_none() {
-            return std::future::pending().await;
-        }
-        self.rx.recv().await
+    /// Whether the run has a control channel.
+    pub fn is_on(&self) -> bool {
+        self.catalogue.is_some()
+    }
+
+    /// The next request.
+    pub fn recv(&mut self) -> impl Future<Output = Option<Admitted>> + '_ {
+        self.rx.recv()
     }
 
     /// Answer `req` on `faults` (its actions due now are first in line): the reply goes

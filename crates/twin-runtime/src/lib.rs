@@ -563,6 +563,7 @@ pub async fn run_with(
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let kiss_budget = kiss.budget.clone();
     let handle_event = |ev: RunEvent, sink: &mut dyn RunSink| hand_on(ev, sink, &kiss_budget);
+    let control_on = control.is_on();
     let signalled = signalled();
     tokio::pin!(signalled);
     let mut interrupted: Option<StopCause> = None;
@@ -588,7 +589,7 @@ pub async fn run_with(
                     break;
                 }
             }
-            Some(req) = control.recv() => {
+            Some(req) = control.recv(), if control_on => {
                 let t = req.t;
                 hand_on(control.answer(req, &mut faults), sink, &kiss_budget);
                 // What it asked for at this instant takes effect now.
