@@ -1654,6 +1654,19 @@ fn divergence_text(x: Option<&RecordedMessage>, y: Option<&RecordedMessage>) -> 
 /// the first divergence) and the earliest `max_listed` divergences of all channels in
 /// detail (none when 0). The listing is kept in a heap of at most `max_listed` entries.
 pub fn diff_summary(a: &Path, b: &Path, max_listed: usize) -> anyhow::Result<DiffSummary> {
+    diff_summary_from(a, b, max_listed, 0)
+}
+
+/// [`diff_summary`] of what the two recordings hold from simulated time `from_ns` on: each
+/// channel's messages before it are left out of both (`diff --from T`, a run started from
+/// a snapshot at T against the run that took it). Indices count from the first message
+/// compared.
+pub fn diff_summary_from(
+    a: &Path,
+    b: &Path,
+    max_listed: usize,
+    from_ns: u64,
+) -> anyhow::Result<DiffSummary> {
     // Each medium channel is compared as its own sequence: messages of different channels
     // that happen within the same scheduler tick may be written in either order, and that
     // order is not part of what happened on the wire.
@@ -1661,7 +1674,17 @@ pub fn diff_summary(a: &Path, b: &Path, max_listed: usize) -> anyhow::Result<Dif
         |path: &Path, label: &str| -> anyhow::Result<BTreeMap<Arc<str>, Vec<RecordedMessage>>> {
             let mut r = Reader::open(path)?;
             let mut by_topic: BTreeMap<Arc<str>, Vec<RecordedMessage>> = BTreeMap::new();
+            // A message's log time is the run's start plus its simulated time: the start
+            // is worked out once, from the first message (decoding each would be slow).
+            let mut start_ns: Option<u64> = None;
             while let Some(m) = next_medium(&mut r, label)? {
+                if from_ns > 0 {
+                    let start =
+                        *start_ns.get_or_insert_with(|| m.log_time - t_ns_of(&m).min(m.log_time));
+                    if m.log_time.saturating_sub(start) < from_ns {
+                        continue;
+                    }
+                }
                 by_topic.entry(m.topic.clone()).or_default().push(m);
             }
             Ok(by_topic)

@@ -292,3 +292,40 @@ fn diff_of_two_seeds_names_every_differing_channel_with_its_counts() {
         .collect();
     assert!(times.is_sorted(), "{out}");
 }
+
+/// `diff --from T`: what two recordings hold before T is left out of both; they are
+/// identical from the instant after their last difference on, and the first divergence
+/// after T is found and indexed from T.
+#[test]
+fn diff_from_compares_what_both_hold_from_an_instant_on() {
+    let ev_a = vec![
+        ground(1000, 0),
+        ground(2000, 1),
+        ground(3000, 2),
+        ground(4000, 3),
+    ];
+    let ev_b = vec![
+        ground(1000, 9),
+        ground(2000, 1),
+        ground(3000, 2),
+        ground(4000, 8),
+    ];
+    let (a, b) = (TempFile::new("from-a"), TempFile::new("from-b"));
+    common::record(a.path(), meta(), &ev_a);
+    common::record(b.path(), meta(), &ev_b);
+    let from =
+        |ms: u64| recording::diff_summary_from(a.path(), b.path(), 0, ms * 1_000_000).unwrap();
+    assert_eq!(from(0).differing(), 2);
+    let s = from(1500);
+    assert_eq!(s.differing(), 1, "{s}");
+    let c = &s.channels[0];
+    assert_eq!((c.expected, c.actual), (3, 3));
+    assert_eq!(c.first.map(|p| (p.index, p.t_ns)), Some((2, 4_000_000_000)));
+    assert!(from(4001).result.is_identical());
+    let (code, out) = diff(a.path(), b.path(), &["--from", "1.5s"]);
+    assert_eq!(code, 1, "{out}");
+    assert!(out.starts_with("from t = 1.5s on\n"), "{out}");
+    assert!(out.contains("message 2 at t = 4.000000000 s"), "{out}");
+    let (code, out) = diff(a.path(), b.path(), &["--from", "4.5s"]);
+    assert_eq!(code, 0, "{out}");
+}
