@@ -1650,6 +1650,30 @@ fn divergence_text(x: Option<&RecordedMessage>, y: Option<&RecordedMessage>) -> 
     (x.map_or_else(end, describe), y.map_or_else(end, describe))
 }
 
+/// The medium channels of the recording at `path`, each its own sequence, from simulated
+/// time `from_ns` on.
+fn medium_by_topic(
+    path: &Path,
+    label: &str,
+    from_ns: u64,
+) -> anyhow::Result<BTreeMap<Arc<str>, Vec<RecordedMessage>>> {
+    let mut r = Reader::open(path)?;
+    let mut by_topic: BTreeMap<Arc<str>, Vec<RecordedMessage>> = BTreeMap::new();
+    // A message's log time is the run's start plus its simulated time: the start is worked
+    // out once, from the first message (decoding each would be slow).
+    let mut start_ns: Option<u64> = None;
+    while let Some(m) = next_medium(&mut r, label)? {
+        if from_ns > 0 {
+            let start = *start_ns.get_or_insert_with(|| m.log_time - t_ns_of(&m).min(m.log_time));
+            if m.log_time.saturating_sub(start) < from_ns {
+                continue;
+            }
+        }
+        by_topic.entry(m.topic.clone()).or_default().push(m);
+    }
+    Ok(by_topic)
+}
+
 /// [`diff`] with a line per medium channel (messages in each recording, how many differ,
 /// the first divergence) and the earliest `max_listed` divergences of all channels in
 /// detail (none when 0). The listing is kept in a heap of at most `max_listed` entries.
@@ -1670,27 +1694,8 @@ pub fn diff_summary_from(
     // Each medium channel is compared as its own sequence: messages of different channels
     // that happen within the same scheduler tick may be written in either order, and that
     // order is not part of what happened on the wire.
-    let collect =
-        |path: &Path, label: &str| -> anyhow::Result<BTreeMap<Arc<str>, Vec<RecordedMessage>>> {
-            let mut r = Reader::open(path)?;
-            let mut by_topic: BTreeMap<Arc<str>, Vec<RecordedMessage>> = BTreeMap::new();
-            // A message's log time is the run's start plus its simulated time: the start
-            // is worked out once, from the first message (decoding each would be slow).
-            let mut start_ns: Option<u64> = None;
-            while let Some(m) = next_medium(&mut r, label)? {
-                if from_ns > 0 {
-                    let start =
-                        *start_ns.get_or_insert_with(|| m.log_time - t_ns_of(&m).min(m.log_time));
-                    if m.log_time.saturating_sub(start) < from_ns {
-                        continue;
-                    }
-                }
-                by_topic.entry(m.topic.clone()).or_default().push(m);
-            }
-            Ok(by_topic)
-        };
-    let xa = collect(a, "expected")?;
-    let xb = collect(b, "actual")?;
+    let xa = medium_by_topic(a, "expected", from_ns)?;
+    let xb = medium_by_topic(b, "actual", from_ns)?;
     let topics: Vec<&Arc<str>> = xa
         .keys()
         .chain(xb.keys())
