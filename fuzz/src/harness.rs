@@ -659,15 +659,8 @@ impl<K: NodeKind> Harness<K> {
                 ));
             }
             BoardOp::Activity { what, on } => {
-                let what = match what % 7 {
-                    0 => Activity::SbandTx,
-                    1 => Activity::UhfTx,
-                    2 => Activity::UhfTxSecondary,
-                    3 => Activity::ThrusterHeater,
-                    4 => Activity::Firing,
-                    5 => Activity::SbandPowerOff,
-                    _ => Activity::PowerFault(NETWORK[usize::from(*what / 7) % NETWORK.len()]),
-                };
+                let node = NETWORK[usize::from(*what / 7) % NETWORK.len()];
+                let what = Activity::from_tag(*what % 7, node).unwrap_or(Activity::SbandTx);
                 let _ = self.boards.activity.set(what, now, *on);
             }
             BoardOp::Burn {

@@ -77,3 +77,19 @@ impl fmt::Display for SimTime {
         write!(f, "{s}.{ns:09}s")
     }
 }
+/// Saved as its nanoseconds.
+impl snap::Snap for SimTime {
+    fn save(&self, w: &mut snap::Writer) {
+        self.0.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.0.load(r)
+    }
+}
+
+impl snap::SnapNew for SimTime {
+    const MIN_BYTES: usize = 8;
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        <u64 as snap::SnapNew>::read(r).map(SimTime)
+    }
+}

@@ -122,3 +122,16 @@ impl Default for AdcsSnapshot {
         }
     }
 }
+snap::fields!(TruthSnapshot {
+    t,
+    unix_ns,
+    r_eci_m,
+    v_eci_m_s,
+    q_eci_from_body,
+    w_body_rad_s,
+    sun_eci_unit,
+    in_eclipse_fraction_visible,
+    b_eci_nt,
+    wheel_speed_rad_s,
+    mtq_dipole_am2,
+});
