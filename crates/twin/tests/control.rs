@@ -134,3 +134,64 @@ fn faults_from_the_control_channel_are_recorded_and_replayed() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The channel's bounds, each counted and answered: a fifth connection while four are
+/// open is told why and closed; a line over 4 096 bytes is refused whole and the
+/// connection goes on; the run's table counts both.
+#[test]
+fn a_fifth_connection_and_a_long_line_are_refused_and_counted() {
+    use std::io::{BufRead as _, BufReader, Write as _};
+    let scenario = common::repo_root().join("scenarios/default.toml");
+    let twin_run = Twin::start(
+        &[
+            scenario.to_str().unwrap(),
+            "--duration",
+            "20s",
+            "--speed",
+            "4",
+            "--no-checks",
+            "--control",
+            "127.0.0.1:0",
+        ],
+        1,
+    );
+    let addr = twin_run.addrs[0];
+    let connect = || {
+        let s = std::net::TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(std::time::Duration::from_secs(10)))
+            .unwrap();
+        s
+    };
+    let line_of = |s: &std::net::TcpStream| {
+        let mut line = String::new();
+        BufReader::new(s).read_line(&mut line).unwrap();
+        line
+    };
+    let mut open: Vec<_> = (0..4).map(|_| connect()).collect();
+    // Each of the four is served (a request answered), so all four are open in the run.
+    for s in &mut open {
+        s.write_all(b"{\"op\":\"time\"}\n").unwrap();
+        assert!(line_of(s).contains("\"ok\":true"));
+    }
+    let fifth = connect();
+    let refused = line_of(&fifth);
+    assert!(
+        refused.contains("4 control connections are open already"),
+        "{refused}"
+    );
+    let long = format!("{{\"op\":\"time\",\"pad\":\"{}\"}}\n", "x".repeat(5000));
+    open[0].write_all(long.as_bytes()).unwrap();
+    let reply = line_of(&open[0]);
+    assert!(reply.contains("line longer than 4096 bytes"), "{reply}");
+    open[0].write_all(b"{\"op\":\"time\"}\n").unwrap();
+    assert!(
+        line_of(&open[0]).contains("\"ok\":true"),
+        "the connection goes on"
+    );
+    drop(open);
+    let (_, out, err) = twin_run.finish();
+    assert!(
+        out.contains("control channel: 4 connections (1 refused: 4 open), 5 requests, 1 lines over 4096 bytes refused"),
+        "{out}{err}"
+    );
+}
