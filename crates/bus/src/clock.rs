@@ -95,6 +95,9 @@ impl Clock {
 
     /// Sleep until simulated time `t` (returns at once if it has passed).
     pub async fn sleep_until(&self, t: SimTime) {
+        if crate::exec::in_run_task() {
+            return Timer::new(*self).sleep_until(t).await;
+        }
         if t == SimTime::MAX {
             std::future::pending::<()>().await;
         }
@@ -102,14 +105,27 @@ impl Clock {
     }
 }
 
+impl crate::exec::RunClock for Clock {
+    fn now(&self) -> SimTime {
+        Clock::now(self)
+    }
+
+    fn instant_of(&self, t: SimTime) -> Instant {
+        Clock::instant_of(self, t)
+    }
+}
+
 /// A task's one timer, kept from one wait to the next: waiting again for the same instant
 /// keeps the timer where it is (a fresh sleep registers a timer and takes it out again on
-/// every turn of a task's loop, and a node task turns for every arrival).
+/// every turn of a task's loop, and a node task turns for every arrival). In a run's task
+/// it waits in the run's ordered timers ([`crate::exec`]); elsewhere on tokio's.
 #[derive(Debug)]
 pub struct Timer {
     clock: Clock,
+    /// Its place among the run's timers, while it waits there.
+    key: Option<crate::exec::TimerKey>,
     sleep: std::pin::Pin<Box<tokio::time::Sleep>>,
-    /// The instant the sleep is set for, if any.
+    /// The instant tokio's sleep is set for, if any.
     armed: Option<SimTime>,
 }
 
@@ -118,6 +134,7 @@ impl Timer {
     pub fn new(clock: Clock) -> Self {
         Timer {
             clock,
+            key: None,
             sleep: Box::pin(tokio::time::sleep_until(clock.instant_of(SimTime::MAX))),
             armed: None,
         }
@@ -127,23 +144,37 @@ impl Timer {
     pub async fn sleep_until(&mut self, t: SimTime) {
         if t == SimTime::MAX {
             self.disarm();
-            return self.clock.sleep_until(t).await;
+            return std::future::pending().await;
+        }
+        std::future::poll_fn(|cx| self.poll_until(t, cx)).await;
+    }
+
+    fn poll_until(&mut self, t: SimTime, cx: &mut std::task::Context<'_>) -> std::task::Poll<()> {
+        if let Some(p) = crate::exec::poll_timer(&mut self.key, t) {
+            return p;
         }
         if self.armed != Some(t) {
             self.sleep.as_mut().reset(self.clock.instant_of(t));
             self.armed = Some(t);
         }
-        self.sleep.as_mut().await;
+        self.sleep.as_mut().poll(cx)
     }
 
     /// Take the timer out (a task with nothing to wait for is not woken by its last
     /// instant).
     pub fn disarm(&mut self) {
+        crate::exec::cancel_timer(&mut self.key);
         if self.armed.take().is_some() {
             self.sleep
                 .as_mut()
                 .reset(self.clock.instant_of(SimTime::MAX));
         }
+    }
+}
+
+impl Drop for Timer {
+    fn drop(&mut self) {
+        crate::exec::cancel_timer(&mut self.key);
     }
 }
 

@@ -4,6 +4,7 @@
 //! - [`can`]: an in-process CAN segment (bit timing, arbitration, acceptance, impairments).
 //! - [`net`]: a packet network (the ground segment and the UHF air channel).
 //! - [`driver`]: the task that runs one node.
+//! - [`exec`]: the run's executor, which orders the tasks due at one instant.
 //! - [`outside`]: what a link to a program outside the twin attaches to (segments,
 //!   endpoints, counters); the links themselves (KISS over TCP and ptys, the ZMQ hub,
 //!   SocketCAN, node consoles) are the `m6p-links` crate's.
@@ -12,6 +13,7 @@
 pub mod can;
 pub mod clock;
 pub mod driver;
+pub mod exec;
 pub mod gate;
 pub mod impair;
 pub mod inbox;
