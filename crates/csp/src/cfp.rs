@@ -294,6 +294,9 @@ pub enum CfpDrop {
     Restarted,
     /// A partial packet went stale and was purged.
     Timeout,
+    /// The node rebooted with the packet partly reassembled (its memory is gone; libcsp
+    /// loses it without a word, the twin says so for the ledgers).
+    Reset,
 }
 
 impl fmt::Display for CfpDrop {
@@ -307,6 +310,7 @@ impl fmt::Display for CfpDrop {
             CfpDrop::Overflow => "RX buffer overflow",
             CfpDrop::Restarted => "incomplete packet restarted by BEGIN",
             CfpDrop::Timeout => "partial packet timed out",
+            CfpDrop::Reset => "partial packet lost to a reboot",
         })
     }
 }
@@ -334,6 +338,8 @@ pub struct CfpStats {
     pub restarted: u64,
     /// [`CfpDrop::Timeout`] purges.
     pub timeout: u64,
+    /// [`CfpDrop::Reset`] partial packets.
+    pub reset: u64,
 }
 
 /// One packet under reassembly (libcsp's `csp_can_pbuf_element_t`).
@@ -558,6 +564,22 @@ impl Reassembler {
         purged
     }
 
+    /// Empty every slot (a reboot), telling `on_clear` each partial packet as
+    /// [`Reassembler::purge_stale`] does.
+    pub fn clear(&mut self, mut on_clear: impl FnMut(u32, Header, usize)) -> usize {
+        let mut cleared = 0;
+        for slot in &mut self.slots {
+            if let Some(s) = slot.take() {
+                on_clear(s.key, s.header, s.length);
+                cleared += 1;
+            }
+        }
+        self.stale_from = SimTime::MAX;
+        self.held = 0;
+        self.stats.reset += cleared as u64;
+        cleared
+    }
+
     /// Free slot `idx` and count `why`.
     fn free(&mut self, idx: usize, why: CfpDrop) -> CfpDrop {
         if let Some(slot) = self.slots.get_mut(idx)
@@ -580,6 +602,7 @@ impl Reassembler {
             CfpDrop::Overflow => c.overflow += 1,
             CfpDrop::Restarted => c.restarted += 1,
             CfpDrop::Timeout => c.timeout += 1,
+            CfpDrop::Reset => c.reset += 1,
         }
         why
     }

@@ -935,20 +935,26 @@ impl Node {
         let mut purged = Vec::new();
         for r in self.reasm.iter_mut().flatten() {
             r.purge_stale(now, |key, header, data_len| {
-                purged.push(DroppedPacket {
-                    header,
-                    data_len,
-                    cfp: Some((key, CfpDrop::Timeout)),
-                })
+                purged.push((key, header, data_len));
             });
         }
-        for packet in purged {
+        self.report_partials(purged, CfpDrop::Timeout, now);
+    }
+
+    /// Partial CFP packets `lost` (key, header, data length) for `why`: counted and told,
+    /// with the packet, so that a ledger can place their bytes.
+    fn report_partials(&mut self, lost: Vec<(u32, Header, usize)>, why: CfpDrop, now: SimTime) {
+        for (key, header, data_len) in lost {
             self.counters.drop(DropReason::Cfp);
             self.push_event(NodeEvent::Drop {
                 t: now,
                 reason: DropReason::Cfp.into(),
-                detail: "partial packet timed out".to_owned(),
-                packet: Some(packet),
+                detail: why.to_string(),
+                packet: Some(DroppedPacket {
+                    header,
+                    data_len,
+                    cfp: Some((key, why)),
+                }),
             });
         }
     }
@@ -991,6 +997,12 @@ impl Node {
     }
     /// Reboot: uptime from zero, queues, partial packets and bindings cleared.
     pub fn reboot(&mut self, now: SimTime) {
+        // The partial packets go with the memory; their bytes are lost here, and said so.
+        let mut lost = Vec::new();
+        for r in self.reasm.iter_mut().flatten() {
+            r.clear(|key, header, data_len| lost.push((key, header, data_len)));
+        }
+        self.report_partials(lost, CfpDrop::Reset, now);
         self.boot = now;
         self.reboot_requested = false;
         self.tx.clear();
@@ -1626,6 +1638,37 @@ mod tests {
         let out = reassemble(&drain(&mut n));
         assert_eq!(out, vec![(1, p)]);
         assert_eq!(n.counters().forwarded, 1);
+    }
+
+    /// A reboot with a packet half reassembled reports it, with its CFP key, so that a
+    /// ledger can place its bytes; the frames after the reboot find no BEGIN.
+    #[test]
+    fn a_reboot_reports_the_packets_it_caught_half_reassembled() {
+        let mut n = router_node();
+        let p = Packet::new(Header::new(12, 6, 10, 40), vec![7; 40]);
+        let f = frames_of(&p, 6);
+        n.handle_frame(1, &f[0], SimTime::ZERO);
+        n.reboot(SimTime::from_ms(3));
+        let dropped: Vec<_> = std::iter::from_fn(|| n.poll_event())
+            .filter_map(|e| match e {
+                NodeEvent::Drop { t, packet, .. } => Some((t, packet)),
+                _ => None,
+            })
+            .collect();
+        let key = f[0].id & cfp::CFP_ID_CONN_MASK;
+        assert_eq!(
+            dropped,
+            [(
+                SimTime::from_ms(3),
+                Some(DroppedPacket {
+                    header: p.header,
+                    data_len: 40,
+                    cfp: Some((key, CfpDrop::Reset)),
+                })
+            )]
+        );
+        n.handle_frame(1, &f[1], SimTime::from_ms(4));
+        assert!(n.poll_delivery().is_none());
     }
 
     #[test]

@@ -76,8 +76,8 @@ impl SessionsReport {
                 }
             }
             // A packet a node's CAN reassembly dropped (its BEGIN refused for want of a
-            // free buffer, or the partial packet timed out): lost there, unless it lost a
-            // frame on the bus before.
+            // free buffer, the partial packet timed out or went with a reboot): lost there,
+            // unless it lost a frame on the bus before.
             RunEvent::PacketDropped {
                 log,
                 packet:
@@ -89,6 +89,7 @@ impl SessionsReport {
             } => {
                 let why = match drop {
                     csp::cfp::CfpDrop::Timeout => "the receiver's CAN reassembly timed out",
+                    csp::cfp::CfpDrop::Reset => "the receiver rebooted during its reassembly",
                     _ => "the receiver's CAN reassembly refused it",
                 };
                 if let Some(lost) = self.transit.receiver_dropped(*can_id, log.t(), why) {
