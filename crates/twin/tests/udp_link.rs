@@ -97,8 +97,11 @@ fn a_ground_program_over_udp_pings_the_fc_and_reads_tmgen() {
     );
     assert_eq!(tm.data.len(), 2 + 16, "{tm:?}");
     assert_eq!(tm.data[..2], [1, 1]);
-    // Shorter than a header: counted, nothing else.
+    // Shorter than a header: counted, nothing else. The ping after it is answered once the
+    // link has read both (in order): the stop does not race the short datagram.
     gs.send_to(&[0xa2, 0x30], twin).unwrap();
+    send(&gs, twin, &ping);
+    assert_eq!(receive(&gs).data, ping.data);
     let said = stop(child, rest);
     assert!(said.contains("1 short"), "{said}");
 }
