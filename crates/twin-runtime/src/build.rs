@@ -25,7 +25,7 @@ pub(super) fn media(
     opts: &RunOptions,
     clock: Clock,
     events: &mpsc::UnboundedSender<RunEvent>,
-) -> (Segments, Vec<tokio::task::JoinHandle<()>>) {
+) -> (Segments, Vec<bus::exec::JoinHandle<()>>) {
     let ev_tx = events;
     let segs = Segments {
         main: CanBus::new(
@@ -63,15 +63,15 @@ pub(super) fn media(
     segs.payload.set_trace(tracer.clone());
     segs.ground.set_trace(tracer);
     let background = vec![
-        tokio::spawn(segs.main.clone().run(clock)),
-        tokio::spawn(segs.payload.clone().run(clock)),
-        tokio::spawn(segs.ground.clone().run(clock)),
+        bus::exec::spawn(segs.main.clone().run(clock)),
+        bus::exec::spawn(segs.payload.clone().run(clock)),
+        bus::exec::spawn(segs.ground.clone().run(clock)),
     ];
     (segs, background)
 }
 
 /// A node's task: its spec, its control channel and the task that hands its host back.
-pub(super) type NodeTask = (NodeSpec, CtlTx, tokio::task::JoinHandle<Host<NodeApp>>);
+pub(super) type NodeTask = (NodeSpec, CtlTx, bus::exec::JoinHandle<Host<NodeApp>>);
 
 /// The nodes of a run, each booted and running as its own task.
 pub(super) struct Nodes {
@@ -160,10 +160,9 @@ pub(super) fn nodes(
             }));
         }
         let out = ev_tx.clone();
-        let handle =
-            tokio::spawn(
-                async move { run_node_with(host, ports, inbox_rx, ctl_rx, clock, out).await },
-            );
+        let handle = bus::exec::spawn(async move {
+            run_node_with(host, ports, inbox_rx, ctl_rx, clock, out).await
+        });
         nodes.push((spec.clone(), ctl_tx, handle));
     }
 

@@ -521,6 +521,18 @@ const EVENTS_PER_WAKE: usize = 1024;
 /// and UDP links (in `opts.kiss_links`' order), then those of the TCP consoles
 /// (`opts.uart`), once they listen.
 pub async fn run_with(
+    opts: RunOptions,
+    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+    sink: &mut dyn RunSink,
+) -> anyhow::Result<RunCounters> {
+    let clock = Clock::new(opts.clock);
+    // The run's tasks on the run's executor: those due at one instant run in an order of
+    // the run's own (`bus::exec`).
+    bus::exec::run(clock, run_on(clock, opts, ready, sink)).await
+}
+
+async fn run_on(
+    clock: Clock,
     mut opts: RunOptions,
     ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
     sink: &mut dyn RunSink,
@@ -528,12 +540,12 @@ pub async fn run_with(
     let wall_start = Instant::now();
     let mut tapped = counters::Tapped::new(sink, opts.packet_events);
     let sink: &mut dyn RunSink = &mut tapped;
-    let clock = Clock::new(opts.clock);
     // Outside input taken in at the run's idle points, and real time's hold (`bus::pace`).
     let _pace = bus::pace::install(clock);
     // Every event of the run goes through one channel, in the order it happens.
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<RunEvent>();
-    let (segs, mut background) = build::media(&opts, clock, &ev_tx);
+    let (segs, media_tasks) = build::media(&opts, clock, &ev_tx);
+    let mut background = Vec::new();
     // The gates of the scenario's outside links: their faults and power.
     let gates = links::gates(&opts);
     let socketcan_stats =
@@ -568,6 +580,7 @@ pub async fn run_with(
     tokio::pin!(signalled);
     let mut interrupted: Option<StopCause> = None;
     let wall_deadline = opts.wall_limit.map(|d| (d, wall_start + d));
+    let mut fault_timer = bus::clock::Timer::new(clock);
     loop {
         let next_fault = faults.next_at().unwrap_or(SimTime::MAX).min(end);
         tokio::select! {
@@ -598,7 +611,7 @@ pub async fn run_with(
                     apply_fault(&f, &mut director, sink, &kiss_budget);
                 }
             }
-            () = clock.sleep_until(next_fault), if next_fault < SimTime::MAX => {
+            () = fault_timer.sleep_until(next_fault), if next_fault < SimTime::MAX => {
                 if next_fault >= end && faults.next_at().is_none_or(|at| at >= end) {
                     break;
                 }
@@ -612,9 +625,8 @@ pub async fn run_with(
     let (sim_time, interrupted) = ended(opts.duration, clock, interrupted);
 
     let node_reports = stop_nodes(nodes.tasks, sim_time, &ev_tx).await?;
-    for h in background {
-        h.abort();
-    }
+    background.iter().for_each(tokio::task::JoinHandle::abort);
+    media_tasks.iter().for_each(bus::exec::JoinHandle::abort);
     drop(ev_tx);
     while let Ok(ev) = ev_rx.try_recv() {
         handle_event(ev, sink);

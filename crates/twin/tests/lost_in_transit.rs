@@ -77,6 +77,16 @@ fn replies_lost_behind_a_babbler() {
     );
 }
 
+/// The PC reboots while a reply's frames are half across: the partial packet goes with the
+/// PC's memory, and its bytes are lost there (they were in no ledger).
+#[test]
+fn a_reply_half_reassembled_when_the_pc_reboots() {
+    accounted(
+        "pc-sessions-run-216.toml",
+        &["lost on the payload bus (the receiver rebooted during its reassembly)"],
+    );
+}
+
 /// The PC hangs for 95 s; when it comes back it sends every POLL it missed at once, and
 /// the payload's replies overflow its transmit queue.
 #[test]
