@@ -608,6 +608,25 @@ impl Reassembler {
     }
 }
 
+// Saved whole (docs/snapshots.md): the configuration is plain data and small.
+snap::fields!(Fragmenter { next_ident, mtu });
+snap::fields!(Slot {
+    key,
+    header,
+    length,
+    data,
+    remain,
+    last_used
+});
+snap::fields!(Reassembler {
+    config,
+    slots,
+    stats,
+    stale_from,
+    held,
+    last
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -28,6 +28,7 @@ pub mod params;
 pub mod reqrep;
 pub mod router;
 pub mod service;
+pub mod state;
 pub mod time;
 pub mod udp;
 pub mod zmqhub;
