@@ -139,3 +139,12 @@ impl Client {
         self.pending.clear();
     }
 }
+snap::fields!(Pending {
+    tag,
+    dst,
+    dport,
+    sport,
+    sent,
+    deadline
+});
+snap::fields!(Client { pending });

@@ -1610,6 +1610,46 @@ snap::fields!(Node {
     skip cfg
 });
 
+/// What an application's outbox holds (nothing, between inputs) and dropped; its capacity
+/// is the built one's.
+impl<E: snap::SnapNew> snap::Snap for Outbox<E> {
+    fn save(&self, w: &mut snap::Writer) {
+        let Outbox {
+            queue,
+            capacity: _,
+            dropped,
+        } = self;
+        queue.save(w);
+        dropped.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        let Outbox {
+            queue,
+            capacity: _,
+            dropped,
+        } = self;
+        queue.load(r)?;
+        dropped.load(r)
+    }
+}
+
+/// A host: its node, its application (whose state is its own to save) and its parameter
+/// memory.
+impl<A: snap::Snap> snap::Snap for Host<A> {
+    fn save(&self, w: &mut snap::Writer) {
+        let Host { node, app, nv } = self;
+        node.save(w);
+        app.save(w);
+        nv.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        let Host { node, app, nv } = self;
+        node.load(r)?;
+        app.load(r)?;
+        nv.load(r)
+    }
+}
+
 impl snap::Snap for ClockErrors {
     fn save(&self, w: &mut snap::Writer) {
         self.0.save(w);

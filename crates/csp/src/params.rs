@@ -595,6 +595,9 @@ pub fn serve(
     }
 }
 
+// The factory defaults are the built node's; what was saved since, and how often, is state.
+snap::fields!(ParamStore { saved, saves; skip defaults });
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -706,6 +709,22 @@ mod tests {
         assert_eq!(t.v[&1], 30.0);
         s.load(&mut t);
         assert_eq!(t.v[&1], 30.0, "nothing saved any more");
+    }
+
+    /// What a snapshot keeps of the parameter memory: the saved table and the count of
+    /// saves; a store built fresh and loaded with it boots with the saved values.
+    #[test]
+    fn the_saved_table_comes_back_from_a_snapshot() {
+        let (mut t, mut s) = table();
+        ask(&mut t, &mut s, &[2, 1, 60, 0]);
+        assert_eq!(ask(&mut t, &mut s, &[5]), [5, 1]);
+        let bytes = snap::to_bytes(&s);
+        let (mut t2, mut s2) = table();
+        snap::load_from(&mut s2, &bytes).unwrap();
+        assert_eq!(snap::to_bytes(&s2), bytes);
+        assert_eq!(s2.saves, 1);
+        s2.load(&mut t2);
+        assert_eq!(t2.v[&1], 60.0);
     }
 
     /// Two thresholds with a rule between them (lower < upper), loaded from 10/20 to 30/40:
