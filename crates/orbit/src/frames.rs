@@ -541,6 +541,11 @@ pub fn angle_between(q1: &UnitQuaternion<f64>, q2: &UnitQuaternion<f64>) -> f64 
     q1.rotation_to(q2).angle()
 }
 
+snap::fields!(StateVector { r_km, v_km_s });
+// The memo of the last minute's matrices: saved, so that a restored run multiplies by
+// the same bits (a recomputation would give them, but a snapshot does not rely on it).
+snap::fields!(J2000FromTemeByMinute { minute });
+
 #[cfg(test)]
 mod tests {
     use super::*;

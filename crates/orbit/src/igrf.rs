@@ -471,6 +471,13 @@ pub fn field_eci_at(
         .field_eci(r_eci_km, &frames::a_ecef_from_eci(t, eop))
 }
 
+snap::fields!(GaussCoefficients {
+    g_nt,
+    h_nt,
+    g_gauss_nt,
+    h_gauss_nt
+});
+
 #[cfg(test)]
 mod tests {
     use super::*;

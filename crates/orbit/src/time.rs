@@ -671,6 +671,8 @@ impl EopTable {
     }
 }
 
+snap::fields!(UtcTime { unix_ns });
+
 #[cfg(test)]
 mod tests {
     use super::*;
