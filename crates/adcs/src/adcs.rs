@@ -64,15 +64,46 @@ pub const STATE_ACQUIRING: u8 = 2;
 /// TMACD `state`: tracking the target.
 pub const STATE_TRACKING: u8 = 3;
 
-/// [`Adcs::fallback_reason`]: the body rate stayed above the safe rate.
-pub const REASON_RATE: &str = "rate above the safe limit";
-/// [`Adcs::fallback_reason`]: the MEKF gated out too many updates.
-pub const REASON_GATED: &str = "estimator unhealthy: updates gated out";
-/// [`Adcs::fallback_reason`]: the accepted innovations were too large for the filter's
-/// covariance.
-pub const REASON_INNOVATION: &str = "estimator unhealthy: innovations too large";
-/// [`Adcs::fallback_reason`]: the attitude uncertainty grew too large.
-pub const REASON_SIGMA: &str = "estimator unhealthy: attitude uncertainty too large";
+/// Why the ADCS fell back to detumble ([`Adcs::fallback_reason`]), or which threshold of
+/// the estimator's health was exceeded ([`EstimatorHealth::unhealthy`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FallbackReason {
+    /// The body rate stayed above the safe rate.
+    Rate,
+    /// The MEKF gated out too many updates.
+    Gated,
+    /// The accepted innovations were too large for the filter's covariance.
+    Innovation,
+    /// The attitude uncertainty grew too large.
+    Sigma,
+}
+
+impl FallbackReason {
+    /// What the logs and the health check say.
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            FallbackReason::Rate => "rate above the safe limit",
+            FallbackReason::Gated => "estimator unhealthy: updates gated out",
+            FallbackReason::Innovation => "estimator unhealthy: innovations too large",
+            FallbackReason::Sigma => "estimator unhealthy: attitude uncertainty too large",
+        }
+    }
+}
+
+impl std::fmt::Display for FallbackReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// [`FallbackReason::Rate`].
+pub const REASON_RATE: FallbackReason = FallbackReason::Rate;
+/// [`FallbackReason::Gated`].
+pub const REASON_GATED: FallbackReason = FallbackReason::Gated;
+/// [`FallbackReason::Innovation`].
+pub const REASON_INNOVATION: FallbackReason = FallbackReason::Innovation;
+/// [`FallbackReason::Sigma`].
+pub const REASON_SIGMA: FallbackReason = FallbackReason::Sigma;
 
 /// Thresholds of the estimator health monitor.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -131,7 +162,7 @@ pub struct EstimatorHealth {
     pub attitude_sigma_rad: f64,
     /// The first threshold exceeded ([`REASON_GATED`], [`REASON_INNOVATION`],
     /// [`REASON_SIGMA`]); `None` while healthy or uninitialised.
-    pub unhealthy: Option<&'static str>,
+    pub unhealthy: Option<FallbackReason>,
     /// How long it has been unhealthy without a break, s.
     pub unhealthy_s: f64,
 }
@@ -293,7 +324,7 @@ pub struct Adcs {
     avg_rejected: f64,
     avg_nis: f64,
     health: EstimatorHealth,
-    fallback_reason: Option<&'static str>,
+    fallback_reason: Option<FallbackReason>,
     estimator_restarts: u64,
 }
 
@@ -327,7 +358,7 @@ impl Adcs {
     /// Why the ADCS last fell back to detumble ([`REASON_RATE`], [`REASON_GATED`],
     /// [`REASON_INNOVATION`], [`REASON_SIGMA`]): `Some` from the fallback until it leaves
     /// detumble again; `None` otherwise (and for a commanded detumble).
-    pub fn fallback_reason(&self) -> Option<&'static str> {
+    pub fn fallback_reason(&self) -> Option<FallbackReason> {
         self.fallback_reason
     }
 
@@ -449,7 +480,7 @@ impl Adcs {
 
     /// Update the health monitor with one tick's update tally; restart the estimator after
     /// `dwell_s` unhealthy. Returns the reason when it has just done so.
-    fn monitor_health(&mut self, tally: (u32, u32, f64), dt_s: f64) -> Option<&'static str> {
+    fn monitor_health(&mut self, tally: (u32, u32, f64), dt_s: f64) -> Option<FallbackReason> {
         let h = self.cfg.health;
         let a = if h.window_s > 0.0 {
             (dt_s / h.window_s).clamp(0.0, 1.0)
@@ -563,7 +594,7 @@ impl Adcs {
         &mut self,
         inp: &Inputs<'_>,
         rate: Option<f64>,
-        restarted: Option<&'static str>,
+        restarted: Option<FallbackReason>,
         dt_s: f64,
     ) {
         if self.detumbling {

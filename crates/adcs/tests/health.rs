@@ -12,8 +12,8 @@
 
 use icd::fc::TargetMode;
 use m6p_adcs::adcs::{
-    Adcs, AdcsConfig, Inputs, Output, REASON_GATED, REASON_INNOVATION, REASON_RATE, Request,
-    STATE_DETUMBLING, STATE_TRACKING,
+    Adcs, AdcsConfig, FallbackReason, Inputs, Output, REASON_GATED, REASON_INNOVATION, REASON_RATE,
+    Request, STATE_DETUMBLING, STATE_TRACKING,
 };
 use m6p_adcs::environment::{self, DragConfig, EnvModel, Environment};
 use m6p_adcs::guidance::{self, GuidanceInputs, Pointing};
@@ -303,7 +303,7 @@ fn the_horizon_sensor_keeps_the_estimate_known_through_an_eclipse_without_the_ma
 /// Nadir in sunlight, then `fault` on `id` for `secs`: the first fallback's time and
 /// reason, the estimator restarts, and the run's figures over its last `tail_s`.
 struct FaultRun {
-    fallback: Option<(f64, &'static str)>,
+    fallback: Option<(f64, FallbackReason)>,
     restarts: u64,
     tail: Stats,
     before: Stats,

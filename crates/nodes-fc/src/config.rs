@@ -553,7 +553,7 @@ impl FcApp {
                 Health::Degraded,
                 adcs.estimator_restarts() as f64,
                 "restarts",
-                why.to_owned(),
+                why.to_string(),
             ),
             (None, None) => check(
                 "estimator",

@@ -100,7 +100,7 @@ pub enum SafeCause {
     /// The battery is low.
     LowBattery,
     /// The ADCS fell back from its estimator (the reason it gives).
-    Estimator(&'static str),
+    Estimator(adcs::adcs::FallbackReason),
 }
 
 /// The FC's state machine and its EPS housekeeping (volatile).
@@ -240,7 +240,10 @@ impl SafeMonitor {
 
     /// The state after the ADCS's tick (`fallback`: its fallback reason, if any). A change
     /// of state comes back as its log line and whether it is a warning.
-    pub fn update(&mut self, fallback: Option<&'static str>) -> Option<(bool, String)> {
+    pub fn update(
+        &mut self,
+        fallback: Option<adcs::adcs::FallbackReason>,
+    ) -> Option<(bool, String)> {
         let cause = if self.low_battery {
             Some(SafeCause::LowBattery)
         } else {
@@ -318,10 +321,14 @@ mod tests {
         assert_eq!(m.state(), STATE_SAFE);
         // 20 % is not yet back: still low; an estimator fallback does not hide the battery.
         m.handle_reply(&tm(0.20));
-        assert_eq!(m.update(Some("gated")), None);
+        let gated = Some(adcs::adcs::FallbackReason::Gated);
+        assert_eq!(m.update(gated), None);
         m.handle_reply(&tm(0.30));
-        let (_, line) = m.update(Some("gated")).unwrap();
-        assert!(line.contains("estimator (gated)"), "{line}");
+        let (_, line) = m.update(gated).unwrap();
+        assert!(
+            line.contains("estimator (estimator unhealthy: updates gated out)"),
+            "{line}"
+        );
         let (warn, line) = m.update(None).unwrap();
         assert!(!warn && line.starts_with("fc: NOMINAL"), "{line}");
         assert_eq!(m.state(), STATE_NOMINAL);
