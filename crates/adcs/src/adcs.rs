@@ -721,3 +721,66 @@ impl Adcs {
         out
     }
 }
+
+// What a snapshot keeps of the ADCS (docs/snapshots.md): the configuration too, which the
+// FC's parameters change in flight; the body is the scenario's.
+snap::unit_enum!(FallbackReason {
+    Rate,
+    Gated,
+    Innovation,
+    Sigma
+});
+snap::fields!(EstimatorHealth {
+    rejected_fraction,
+    mean_nis,
+    attitude_sigma_rad,
+    unhealthy,
+    unhealthy_s
+});
+snap::fields!(HealthConfig {
+    window_s,
+    max_rejected_fraction,
+    max_mean_nis,
+    max_attitude_sigma_rad,
+    dwell_s
+});
+snap::fields!(SensorUse {
+    gyro,
+    mag,
+    sun,
+    horizon
+});
+snap::fields!(AdcsConfig {
+    control,
+    mekf,
+    mag_sigma_rad,
+    sun_sigma_rad,
+    horizon_sigma_rad,
+    mag_calibration_bias_nt,
+    residual_dipole_am2,
+    detumble_exit_rate_rad_s,
+    detumble_exit_hold_s,
+    safe_rate_rad_s,
+    safe_hold_s,
+    tracking_threshold_rad,
+    panel_normal_body,
+    health,
+    use_sensors
+});
+snap::fields!(Adcs {
+    cfg,
+    mekf,
+    detumbling,
+    below_exit_s,
+    above_safe_s,
+    prev_mag_body_nt,
+    prev_h_wheels_body_nms,
+    known_torque_body_nm,
+    avg_attempts,
+    avg_rejected,
+    avg_nis,
+    health,
+    fallback_reason,
+    estimator_restarts;
+    skip body
+});

@@ -423,6 +423,18 @@ pub fn mtq_torque_body_nm(m_body_am2: &Vector3<f64>, b_body_nt: &Vector3<f64>) -
     m_body_am2.cross(b_body_nt) * 1e-9
 }
 
+snap::fields!(ControlConfig {
+    bdot_gain,
+    natural_freq_rad_s,
+    damping_ratio,
+    max_rate_rad_s,
+    desat_gain,
+    desat_deadband_nms,
+    null_motion_gain,
+    null_speed_rad_s,
+    null_max_torque_fraction
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -763,6 +763,33 @@ pub fn triad(
     q.coords.iter().all(|x| x.is_finite()).then_some(q)
 }
 
+snap::fields!(MekfConfig {
+    gyro_noise_rad_s,
+    gyro_bias_walk_rad_s2,
+    no_gyro_rate_sigma_rad_s,
+    gyro_rate_smoothing_s,
+    no_gyro_accel_sigma_rad_s2,
+    init_attitude_sigma_rad,
+    init_bias_sigma_rad_s,
+    gate_sigma,
+    max_consecutive_rejections
+});
+snap::fields!(Mekf {
+    cfg,
+    q_eci_from_body,
+    bias_rad_s,
+    p,
+    rate_rad_s,
+    frozen_bias_cov,
+    gyroless_s,
+    last_gyro_rate_rad_s,
+    consecutive_rejections,
+    rejected_updates,
+    accepted_updates,
+    gate_reopenings,
+    last_nis
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
