@@ -1078,6 +1078,108 @@ pub fn sun_from_counts(counts: &[u16; 6], min_total_counts: f64) -> Option<Vecto
     Vector3::new(d(0), d(2), d(4)).try_normalize(0.0)
 }
 
+// What a snapshot keeps of the sensors: every generator where it is in its stream, the
+// hidden truths (bias walk, temperatures), the faults and the held values; the
+// configuration is the scenario's.
+snap::fields!(Noise { rng });
+snap::fields!(Held3 { raw, present });
+snap::fields!(Sensors {
+    gyro_rng,
+    mag_rng,
+    css_rng,
+    acc_rng,
+    gps_rng,
+    temp_rng,
+    horizon_rng,
+    gyro_bias_rad_s,
+    temps_true_c,
+    mcu_true_c,
+    faults,
+    last_gyro,
+    last_mag,
+    last_acc,
+    last_css,
+    last_gps,
+    last_horizon;
+    skip cfg
+});
+
+impl snap::Snap for SensorId {
+    fn save(&self, w: &mut snap::Writer) {
+        let (tag, face): (u8, u8) = match *self {
+            SensorId::Gyro => (0, 0),
+            SensorId::Magnetometer => (1, 0),
+            SensorId::SunSensor(f) => (2, f),
+            SensorId::SunSensors => (3, 0),
+            SensorId::Accelerometer => (4, 0),
+            SensorId::Gps => (5, 0),
+            SensorId::Horizon => (6, 0),
+        };
+        snap::Snap::save(&(tag, face), w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for SensorId {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        let at = r.at();
+        let (tag, face): (u8, u8) = snap::SnapNew::read(r)?;
+        Ok(match tag {
+            0 => SensorId::Gyro,
+            1 => SensorId::Magnetometer,
+            2 => SensorId::SunSensor(face),
+            3 => SensorId::SunSensors,
+            4 => SensorId::Accelerometer,
+            5 => SensorId::Gps,
+            6 => SensorId::Horizon,
+            _ => {
+                return Err(snap::SnapError::Bad {
+                    what: "SensorId",
+                    at,
+                });
+            }
+        })
+    }
+}
+
+impl snap::Snap for SensorFault {
+    fn save(&self, w: &mut snap::Writer) {
+        let (tag, x): (u8, f64) = match *self {
+            SensorFault::Dead => (0, 0.0),
+            SensorFault::Stuck => (1, 0.0),
+            SensorFault::Bias(b) => (2, b),
+            SensorFault::Noisy(k) => (3, k),
+        };
+        snap::Snap::save(&(tag, x), w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for SensorFault {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        let at = r.at();
+        let (tag, x): (u8, f64) = snap::SnapNew::read(r)?;
+        Ok(match tag {
+            0 => SensorFault::Dead,
+            1 => SensorFault::Stuck,
+            2 => SensorFault::Bias(x),
+            3 => SensorFault::Noisy(x),
+            _ => {
+                return Err(snap::SnapError::Bad {
+                    what: "SensorFault",
+                    at,
+                });
+            }
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

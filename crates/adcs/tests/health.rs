@@ -413,8 +413,9 @@ fn the_gyro_less_rate_state_starts_from_the_averaged_gyro_and_gives_way_to_it_ag
 }
 
 /// The ADCS saved mid-run (a parameter changed in flight, the MEKF converged, the monitor's
-/// averages running) and loaded into one fresh from the defaults goes on to the same bits
-/// as the one that was never saved: outputs, estimate, bias, health.
+/// averages running) and loaded into one fresh from the defaults, and the sensors (a gyro
+/// fault on) into sensors seeded otherwise, go on to the same bits as those never saved:
+/// outputs, estimate, bias, health, every generator's draws.
 #[test]
 fn an_adcs_saved_mid_run_and_loaded_into_a_fresh_one_goes_on_to_the_same_bits() {
     let run = || {
@@ -425,6 +426,13 @@ fn an_adcs_saved_mid_run_and_loaded_into_a_fresh_one_goes_on_to_the_same_bits() 
     };
     let mut a = run();
     let mut b = run();
+    // The sensors too, with a fault on, into sensors seeded otherwise.
+    let fault = SensorFault::Bias(2e-4);
+    a.sensors.set_fault(SensorId::Gyro, Some(fault));
+    let sensors = snap::to_bytes(&a.sensors);
+    b.sensors = Sensors::new(SensorConfig::default(), 999);
+    snap::load_from(&mut b.sensors, &sensors).unwrap();
+    assert_eq!(snap::to_bytes(&b.sensors), sensors);
     let bytes = snap::to_bytes(&a.adcs);
     b.adcs = Adcs::new(AdcsConfig::default(), BodyConfig::default());
     snap::load_from(&mut b.adcs, &bytes).unwrap();
@@ -439,4 +447,5 @@ fn an_adcs_saved_mid_run_and_loaded_into_a_fresh_one_goes_on_to_the_same_bits() 
     assert_eq!(a.adcs.gyro_bias_rad_s(), b.adcs.gyro_bias_rad_s());
     assert_eq!(a.adcs.health(), b.adcs.health());
     assert_eq!(snap::to_bytes(&a.adcs), snap::to_bytes(&b.adcs));
+    assert_eq!(snap::to_bytes(&a.sensors), snap::to_bytes(&b.sensors));
 }
