@@ -1610,16 +1610,17 @@ snap::fields!(Node {
     skip cfg
 });
 
-/// What an application's outbox holds (nothing, between inputs) and dropped; its capacity
-/// is the built one's.
-impl<E: snap::SnapNew> snap::Snap for Outbox<E> {
+/// An application's outbox: empty between inputs (the node's task drains it after each),
+/// so a snapshot keeps how many it held, which must be none, and how many it dropped; its
+/// capacity is the built one's. A snapshot that says it held some is refused on load.
+impl<E> snap::Snap for Outbox<E> {
     fn save(&self, w: &mut snap::Writer) {
         let Outbox {
             queue,
             capacity: _,
             dropped,
         } = self;
-        queue.save(w);
+        queue.len().save(w);
         dropped.save(w);
     }
     fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
@@ -1628,7 +1629,10 @@ impl<E: snap::SnapNew> snap::Snap for Outbox<E> {
             capacity: _,
             dropped,
         } = self;
-        queue.load(r)?;
+        if <usize as snap::SnapNew>::read(r)? != 0 {
+            return Err(snap::SnapError::NotQuiescent("an application's outbox"));
+        }
+        queue.clear();
         dropped.load(r)
     }
 }
@@ -1761,6 +1765,24 @@ mod tests {
         assert_eq!(events(&mut a), events(&mut b));
         assert_eq!(a.counters(), b.counters());
         assert_eq!(snap::to_bytes(&a), snap::to_bytes(&b));
+    }
+
+    /// An outbox saves what it dropped; one that holds outputs (not between inputs) saves
+    /// a snapshot that is refused on load.
+    #[test]
+    fn an_outbox_saves_its_drops_and_refuses_to_load_outputs_it_held() {
+        let mut o: Outbox<u8> = Outbox::new(1);
+        o.push(1);
+        o.push(2);
+        assert_eq!(o.pop(), Some(2));
+        let mut fresh: Outbox<u8> = Outbox::new(1);
+        snap::load_from(&mut fresh, &snap::to_bytes(&o)).unwrap();
+        assert_eq!(fresh.dropped(), 1);
+        o.push(3);
+        assert_eq!(
+            snap::load_from(&mut fresh, &snap::to_bytes(&o)),
+            Err(snap::SnapError::NotQuiescent("an application's outbox"))
+        );
     }
 
     /// A reboot with a packet half reassembled reports it, with its CFP key, so that a
