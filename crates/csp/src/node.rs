@@ -1637,6 +1637,26 @@ impl<E> snap::Snap for Outbox<E> {
     }
 }
 
+/// A tap saves its application (what it tapped is the test's).
+impl<A: App + snap::Snap> snap::Snap for Tap<A> {
+    fn save(&self, w: &mut snap::Writer) {
+        self.app.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.app.load(r)
+    }
+}
+
+/// An application whose events are mapped saves the application (the map is wiring).
+impl<A: snap::Snap, F> snap::Snap for MapEvents<A, F> {
+    fn save(&self, w: &mut snap::Writer) {
+        self.app.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.app.load(r)
+    }
+}
+
 /// A host: its node, its application (whose state is its own to save) and its parameter
 /// memory.
 impl<A: snap::Snap> snap::Snap for Host<A> {

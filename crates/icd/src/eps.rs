@@ -429,6 +429,39 @@ impl Thresholds {
 /// At most this many solar panels (the telemetry's fixed slots).
 pub const MAX_PANELS: usize = 8;
 
+/// By its wire id.
+impl snap::Snap for Channel {
+    fn save(&self, w: &mut snap::Writer) {
+        snap::Snap::save(&(*self as u8), w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for Channel {
+    const MIN_BYTES: usize = 1;
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        let at = r.at();
+        let id = <u8 as snap::SnapNew>::read(r)?;
+        Channel::ALL
+            .get(usize::from(id))
+            .copied()
+            .ok_or(snap::SnapError::Bad {
+                what: "Channel",
+                at,
+            })
+    }
+}
+
+snap::fields!(Thresholds {
+    payload_shed_pct,
+    payload_restore_pct,
+    platform_shed_pct,
+    platform_restore_pct
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

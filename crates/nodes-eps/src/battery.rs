@@ -311,6 +311,25 @@ impl Battery {
     }
 }
 
+snap::fields!(BatteryConfig {
+    capacity_wh,
+    ocv_table,
+    internal_resistance_ohm,
+    charge_efficiency,
+    discharge_efficiency,
+    max_charge_w,
+    max_discharge_w
+});
+snap::fields!(BatteryStep {
+    terminal_w,
+    current_a,
+    voltage_v,
+    spilled_w,
+    unmet_w
+});
+// The configuration too: a battery fade and the parameters change it in flight.
+snap::fields!(Battery { cfg, energy_wh });
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -273,3 +273,22 @@ impl Eps {
         }
     }
 }
+snap::fields!(StepState {
+    panels_w,
+    solar_w,
+    loads,
+    battery
+});
+snap::fields!(Eps {
+    array,
+    loads,
+    battery,
+    configured_thresholds,
+    thresholds,
+    channels_on,
+    protection,
+    failed_panels,
+    last,
+    solar_wh,
+    load_wh
+});

@@ -188,6 +188,28 @@ impl LoadConfig {
     }
 }
 
+snap::fields!(LoadConfig {
+    fc_w,
+    eps_w,
+    wheel_idle_w,
+    wheel_drag_w_per_rad2_s2,
+    mtq_w_per_am2,
+    comm_rx_w,
+    uhf_tx_w,
+    ecu_idle_w,
+    thruster_heater_w,
+    firing_w,
+    pc_idle_w,
+    payload_w,
+    sband_standby_w,
+    sband_tx_w
+});
+snap::fields!(LoadBreakdown {
+    fc_w,
+    eps_w,
+    channel_w
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

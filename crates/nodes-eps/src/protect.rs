@@ -87,6 +87,8 @@ impl Protection {
     }
 }
 
+snap::fields!(Protection { groups, shed });
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

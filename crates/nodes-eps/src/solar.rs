@@ -263,6 +263,18 @@ impl SolarArray {
     }
 }
 
+snap::fields!(Panel {
+    name,
+    normal_body,
+    area_m2,
+    packing_factor,
+    efficiency
+});
+snap::fields!(SolarArray {
+    panels,
+    solar_constant_w_m2
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

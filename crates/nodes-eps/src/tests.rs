@@ -940,3 +940,36 @@ fn a_stuck_channel_ignores_chset_until_it_is_freed() {
     // working one.
     assert_eq!(one_reply(&mut h, &[3, 4, 1], s(14)), [3, 0]);
 }
+
+/// The EPS saved mid-run (part-drained in the dark, a channel switched off by command) and
+/// loaded into a host built from another configuration goes on as the original: the same
+/// samples and switches, to the bit, and the configuration is the saved one.
+#[test]
+fn an_eps_saved_mid_run_and_loaded_into_a_fresh_one_goes_on_the_same() {
+    let cfg = EpsConfig {
+        initial_soc: 0.31,
+        ..EpsConfig::default()
+    };
+    let (mut a, out_a) = host(EpsApp::new(cfg));
+    let reply = request(
+        &mut a,
+        &[3, Channel::Payload13 as u8, 0],
+        SimTime::from_secs(100),
+    );
+    assert_eq!(reply.len(), 1, "{reply:?}");
+    run_until(&mut a, SimTime::from_secs(300));
+    let bytes = snap::to_bytes(&a);
+    let (mut b, out_b) = host(EpsApp::new(EpsConfig::default()));
+    snap::load_from(&mut b, &bytes).unwrap();
+    assert_eq!(snap::to_bytes(&b), bytes);
+    out_b.lock().unwrap().clear();
+    let n = out_a.lock().unwrap().len();
+    for h in [&mut a, &mut b] {
+        run_until(h, SimTime::from_secs(3000));
+    }
+    let after_a = format!("{:?}", &out_a.lock().unwrap()[n..]);
+    let after_b = format!("{:?}", &*out_b.lock().unwrap());
+    assert!(after_a.contains("Channel"), "shedding happened: {after_a}");
+    assert_eq!(after_a, after_b);
+    assert_eq!(snap::to_bytes(&a), snap::to_bytes(&b));
+}
