@@ -643,3 +643,28 @@ impl App for EcuApp {
 pub fn app() -> EcuApp {
     EcuApp::new(EcuConfig::default())
 }
+
+// What a snapshot keeps of the ECU (docs/snapshots.md): its configuration (the parameters
+// change it), the propellant and the burns so far, an arming or a firing under way; the
+// boards are the run's.
+snap::fields!(EcuConfig {
+    thruster,
+    max_burn,
+    warmup,
+    port
+});
+snap::fields!(Firing { start, end, burn });
+snap::fields!(EcuApp {
+    cfg,
+    out,
+    propellant_kg,
+    total_impulse_n_s,
+    burns,
+    last_burn_ms,
+    armed_at,
+    ready_logged,
+    firing,
+    refused,
+    log;
+    skip burn_board, activity
+});

@@ -163,6 +163,16 @@ impl ThrusterConfig {
     }
 }
 
+snap::fields!(ThrusterConfig {
+    thrust_n,
+    isp_s,
+    propellant_kg,
+    dry_mass_kg,
+    full_pressure_kpa,
+    blowdown_ratio,
+    dir_body
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -477,3 +477,31 @@ proptest! {
         }
     }
 }
+
+/// The ECU saved in the middle of a burn (armed, firing, propellant part-spent) and loaded
+/// into one built from another configuration ends the burn as the original: the same
+/// outputs, telemetry and propellant, to the bit.
+#[test]
+fn an_ecu_saved_mid_burn_and_loaded_into_a_fresh_one_ends_it_the_same() {
+    let mut a = Sim::new(fast());
+    a.arm_and_warm();
+    let r = a.fire(4_000);
+    assert_eq!(&r[..2], &[3, 1], "{r:?}");
+    a.run_to(a.now + Duration::from_millis(1_500));
+    let bytes = snap::to_bytes(&a.host);
+    let mut b = Sim::new(EcuConfig::default());
+    snap::load_from(&mut b.host, &bytes).unwrap();
+    assert_eq!(snap::to_bytes(&b.host), bytes);
+    b.now = a.now;
+    b.outputs.lock().unwrap().clear();
+    let n = a.outputs.lock().unwrap().len();
+    let end = a.now + Duration::from_secs(10);
+    a.run_to(end);
+    b.run_to(end);
+    assert_eq!(
+        format!("{:?}", &a.outputs.lock().unwrap()[n..]),
+        format!("{:?}", &*b.outputs.lock().unwrap())
+    );
+    assert_eq!(format!("{:?}", a.tm()), format!("{:?}", b.tm()));
+    assert_eq!(snap::to_bytes(&a.host), snap::to_bytes(&b.host));
+}
