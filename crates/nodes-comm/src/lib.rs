@@ -646,5 +646,42 @@ pub fn app() -> CommApp {
     CommApp::new(CommConfig::default())
 }
 
+// What a snapshot keeps of COMM (docs/snapshots.md): its configuration (the parameters
+// change the beacon period, the ground address and the EIRP), the radio's state, the beacon
+// schedule and counts. The sites are the stations' (which the run never changes), the truth
+// board the run's.
+snap::unit_enum!(CommRole { Primary, Secondary });
+snap::fields!(CommConfig {
+    role,
+    port,
+    beacon_period,
+    stations,
+    mask_deg,
+    link,
+    ground_addr,
+    ground_port,
+    air_rate_bps,
+    air_overhead_bytes
+});
+snap::fields!(CommCounters {
+    beacons_sent,
+    beacon_air,
+    beacon_failures,
+    refused
+});
+snap::fields!(CommApp {
+    cfg,
+    active,
+    arm_pending,
+    period,
+    next_beacon,
+    seq,
+    air_since_boot,
+    refused_since_boot,
+    last_now,
+    counters;
+    skip sites, truth
+});
+
 #[cfg(test)]
 mod tests;

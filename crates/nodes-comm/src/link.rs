@@ -178,6 +178,21 @@ pub fn link_state(
     })
 }
 
+snap::fields!(Station {
+    name,
+    lat_deg,
+    lon_deg,
+    alt_m
+});
+snap::fields!(LinkBudget {
+    eirp_dbm,
+    rx_gain_dbi,
+    other_losses_db,
+    frequency_hz,
+    system_noise_temp_k,
+    noise_bandwidth_hz
+});
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -612,3 +612,27 @@ fn selftest_reports_radio_link_and_beacons() {
     let r = platform(&mut h, &[7], SimTime::from_secs(3));
     assert_eq!([r[2], r[4], r[9], r[14]], [1, 0, 1, 0]);
 }
+
+/// COMM saved after a BEACONSET (period 30 s) and loaded into one built from the defaults
+/// beacons on the saved schedule: the same beacons at the same instants, the same bytes.
+#[test]
+fn comm_saved_after_a_beaconset_and_loaded_into_a_fresh_one_beacons_the_same() {
+    let mut a = host(CommConfig::default());
+    drive(&mut a, SimTime::from_secs(125));
+    assert_eq!(
+        request(&mut a, &[2, 30, 0], SimTime::from_secs(125)),
+        vec![2, 1]
+    );
+    drive(&mut a, SimTime::from_secs(170));
+    let bytes = snap::to_bytes(&a);
+    let mut b = host(CommConfig::default());
+    snap::load_from(&mut b, &bytes).unwrap();
+    assert_eq!(snap::to_bytes(&b), bytes);
+    let (ba, bb) = (
+        drive(&mut a, SimTime::from_secs(400)),
+        drive(&mut b, SimTime::from_secs(400)),
+    );
+    assert_eq!(ba.len(), 8, "every 30 s from 185 s");
+    assert_eq!(ba, bb);
+    assert_eq!(snap::to_bytes(&a), snap::to_bytes(&b));
+}
