@@ -491,6 +491,51 @@ impl DataStream {
     }
 }
 
+/// A generator: the counter, or the scenario's bytes (saved with it: a parameter never
+/// changes them, but a configuration is saved whole).
+impl snap::Snap for Generator {
+    fn save(&self, w: &mut snap::Writer) {
+        match self {
+            Generator::Counter => snap::Snap::save(&0u8, w),
+            Generator::Bytes(b) => {
+                snap::Snap::save(&1u8, w);
+                snap::Snap::save(&b.to_vec(), w);
+            }
+        }
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for Generator {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        let at = r.at();
+        match <u8 as snap::SnapNew>::read(r)? {
+            0 => Ok(Generator::Counter),
+            1 => Ok(Generator::Bytes(
+                <Vec<u8> as snap::SnapNew>::read(r)?.into(),
+            )),
+            _ => Err(snap::SnapError::Bad {
+                what: "Generator",
+                at,
+            }),
+        }
+    }
+}
+
+// Where the stream is: its start and position (the generator, rate and address are the
+// configuration's, saved with it).
+snap::fields!(DataStream {
+    generator,
+    rate_bytes_per_s,
+    addr,
+    t0,
+    made_before_t0,
+    position
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
