@@ -924,6 +924,46 @@ impl CommandSet for TelemetryCommand {
 /// Sessions the PC serves (one per payload, CSP 12-15).
 pub const MAX_SESSIONS: usize = 4;
 
+/// [`snap::Snap`] for an enum by its wire byte (its `from_u8` reads it back).
+macro_rules! snap_by_wire_byte {
+    ($($t:ident),+) => {$(
+        impl snap::Snap for $t {
+            fn save(&self, w: &mut snap::Writer) {
+                snap::Snap::save(&(*self as u8), w);
+            }
+            fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+                *self = snap::SnapNew::read(r)?;
+                Ok(())
+            }
+        }
+        impl snap::SnapNew for $t {
+            const MIN_BYTES: usize = 1;
+            fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+                let at = r.at();
+                let v = <u8 as snap::SnapNew>::read(r)?;
+                $t::from_u8(v).ok_or(snap::SnapError::Bad { what: stringify!($t), at })
+            }
+        }
+    )+};
+}
+snap_by_wire_byte!(SessionState, SessionResult, RefusalCode);
+snap::fields!(SessionConfig {
+    session_id,
+    timestamp,
+    duration_s,
+    max_packets,
+    poll_frame_size,
+    sync_message
+});
+snap::fields!(Why {
+    code,
+    port,
+    command,
+    session_id,
+    other_session_id,
+    reason
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -1912,3 +1912,181 @@ impl std::fmt::Display for LostCause {
 pub fn app() -> PcApp {
     PcApp::new(PcConfig::default())
 }
+
+// What a snapshot keeps of the PC (docs/snapshots.md): its configuration (the parameters
+// change it), the session table, each session's run (its phase, file and ledger), the
+// S-band's queue and frame in flight, the ports in use, the refusals WHY tells, counts; the
+// activity board is the run's.
+snap::fields!(SessionSpec {
+    session_id,
+    payload_addr,
+    payload_port,
+    mode,
+    buffer_capacity_bytes
+});
+snap::unit_enum!(PcEvent {
+    SbandFail,
+    SbandRestore,
+    SbandOff,
+    SbandOn
+});
+snap::fields!(TimedPcEvent { at, event });
+snap::fields!(PcConfig {
+    sessions,
+    sband,
+    control_port,
+    ingest_port,
+    telemetry_port,
+    files_port,
+    timeline,
+    payload_access
+});
+snap::fields!(PcCounters {
+    refused,
+    denied,
+    file_reads,
+    file_bytes_read,
+    file_deletes,
+    syncs_sent,
+    polls_sent,
+    poll_retries,
+    polls_given_up,
+    late_sync_replies,
+    ingest_packets,
+    frames_sent
+});
+snap::fields!(ByteFifo { buf, head, removed });
+snap::fields!(RawLedger {
+    received,
+    downlinked,
+    dropped
+});
+snap::unit_enum!(ReqKind { Sync, Poll });
+snap::fields!(PortUse { slot, kind, live });
+snap::fields!(Run {
+    phase,
+    file,
+    ledger,
+    tm_downlinked,
+    tm_dropped
+});
+snap::fields!(PcApp {
+    cfg,
+    table,
+    runs,
+    sband,
+    ports,
+    retired,
+    timeline_next,
+    unattributed,
+    tm_sband_downlinked,
+    counters,
+    out,
+    log,
+    unpowered,
+    refusals;
+    skip activity
+});
+
+impl snap::Snap for SessionMode {
+    fn save(&self, w: &mut snap::Writer) {
+        match *self {
+            SessionMode::Polling {
+                poll_period,
+                reply_timeout,
+            } => (0u8, poll_period, reply_timeout).save(w),
+            SessionMode::Buffering => 1u8.save(w),
+        }
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for SessionMode {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        use snap::SnapNew;
+        let at = r.at();
+        match u8::read(r)? {
+            0 => Ok(SessionMode::Polling {
+                poll_period: SnapNew::read(r)?,
+                reply_timeout: SnapNew::read(r)?,
+            }),
+            1 => Ok(SessionMode::Buffering),
+            _ => Err(snap::SnapError::Bad {
+                what: "SessionMode",
+                at,
+            }),
+        }
+    }
+}
+
+impl snap::Snap for Wait {
+    fn save(&self, w: &mut snap::Writer) {
+        match *self {
+            Wait::Reply { port, deadline } => (0u8, port, deadline).save(w),
+            Wait::Next(t) => (1u8, t).save(w),
+        }
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for Wait {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        use snap::SnapNew;
+        let at = r.at();
+        match u8::read(r)? {
+            0 => Ok(Wait::Reply {
+                port: SnapNew::read(r)?,
+                deadline: SnapNew::read(r)?,
+            }),
+            1 => Ok(Wait::Next(SnapNew::read(r)?)),
+            _ => Err(snap::SnapError::Bad { what: "Wait", at }),
+        }
+    }
+}
+
+impl snap::Snap for Phase {
+    fn save(&self, w: &mut snap::Writer) {
+        match *self {
+            Phase::Idle => 0u8.save(w),
+            Phase::Sync { port, deadline } => (1u8, port, deadline).save(w),
+            Phase::Poll {
+                cycle_start,
+                attempt,
+                wait,
+            } => {
+                (2u8, cycle_start, attempt).save(w);
+                wait.save(w);
+            }
+        }
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for Phase {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        use snap::SnapNew;
+        let at = r.at();
+        match u8::read(r)? {
+            0 => Ok(Phase::Idle),
+            1 => Ok(Phase::Sync {
+                port: SnapNew::read(r)?,
+                deadline: SnapNew::read(r)?,
+            }),
+            2 => Ok(Phase::Poll {
+                cycle_start: SnapNew::read(r)?,
+                attempt: SnapNew::read(r)?,
+                wait: SnapNew::read(r)?,
+            }),
+            _ => Err(snap::SnapError::Bad { what: "Phase", at }),
+        }
+    }
+}

@@ -292,6 +292,28 @@ impl Sband {
     }
 }
 
+snap::fields!(SbandConfig {
+    rate_bps,
+    frame_data_bytes,
+    frame_overhead_bytes,
+    on
+});
+snap::fields!(Segment { slot, bytes });
+snap::fields!(Frame {
+    slot,
+    bytes,
+    done_at
+});
+// The configuration too: a parameter changes the rate.
+snap::fields!(Sband {
+    cfg,
+    on,
+    failed,
+    queue,
+    queued_bytes,
+    in_flight
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -307,6 +307,18 @@ impl SessionTable {
     }
 }
 
+snap::fields!(Slot {
+    spec,
+    state,
+    last_result,
+    config,
+    start_at,
+    end_at,
+    window_unix_ns,
+    packets
+});
+snap::fields!(SessionTable { slots });
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -137,10 +137,11 @@ pub struct Refused {
     pub reason: Reason,
 }
 
-/// The last refusal of each address (see the module doc).
+/// The last refusal of each address (see the module doc), as WHY tells it (made when the
+/// refusal is kept: refusals are rare, WHY's text is then plain data).
 #[derive(Debug, Clone)]
 pub struct Refusals {
-    last: [Option<Refused>; ADDRS],
+    last: [Option<Why>; ADDRS],
 }
 
 impl Default for Refusals {
@@ -155,36 +156,41 @@ impl Refusals {
     /// Keep `r` as `src`'s last refusal (an address beyond CSP's is not kept).
     pub fn record(&mut self, src: u8, r: Refused) {
         if let Some(e) = self.last.get_mut(usize::from(src)) {
-            *e = Some(r);
+            let (session_id, other_session_id) = r.reason.sessions();
+            *e = Some(Why {
+                code: r.reason.code(),
+                port: r.port,
+                command: r.command,
+                session_id,
+                other_session_id,
+                reason: r.reason.to_string(),
+            });
         }
     }
-    /// `src`'s last refusal.
-    pub fn last(&self, src: u8) -> Option<&Refused> {
+
+    /// `src`'s last refusal, as WHY tells it.
+    pub fn last(&self, src: u8) -> Option<&Why> {
         self.last.get(usize::from(src)).and_then(Option::as_ref)
     }
+
     /// WHY's reply data for `src`: its last refusal, or code none.
     pub fn why(&self, src: u8) -> Why {
-        let Some(r) = self.last(src) else {
-            return Why {
+        match self.last(src) {
+            Some(w) => w.clone(),
+            None => Why {
                 reason: "no request from this address refused since the PC booted".to_owned(),
                 ..Why::default()
-            };
-        };
-        let (session_id, other_session_id) = r.reason.sessions();
-        Why {
-            code: r.reason.code(),
-            port: r.port,
-            command: r.command,
-            session_id,
-            other_session_id,
-            reason: r.reason.to_string(),
+            },
         }
     }
+
     /// Forget every refusal (a reboot).
     pub fn clear(&mut self) {
         self.last = std::array::from_fn(|_| None);
     }
 }
+
+snap::fields!(Refusals { last });
 
 #[cfg(test)]
 mod tests {

@@ -978,3 +978,34 @@ fn buffer_files_are_listed_read_at_stream_offsets_and_deleted_into_the_accountin
     assert_eq!((r.header.dst, r.data.clone()), (13, vec![1, 0]));
     assert_eq!(s.host.app.counters().denied, denied + 1);
 }
+
+/// The PC saved in the middle of a polling session (a POLL out, its reply on the way, the
+/// S-band sending) and loaded into a host built from the default configuration ends the
+/// session as the original: the same outputs, end, downlinked bytes and saved bytes.
+#[test]
+fn a_pc_saved_mid_session_and_loaded_into_a_fresh_one_ends_it_the_same() {
+    let run = || {
+        let mut s = sim();
+        assert_eq!(s.setup(&session(1, 0, 5, 0, 64, b"hello")), 1);
+        s.run_until(SimTime::from_ms(2_347));
+        s
+    };
+    let mut a = run();
+    let mut b = run();
+    let bytes = snap::to_bytes(&a.host);
+    b.host = csp::node::Host::new(
+        node_cfg(),
+        m6p_nodes_pc::PcApp::new(m6p_nodes_pc::PcConfig::default()),
+        SimTime::ZERO,
+    );
+    snap::load_from(&mut b.host, &bytes).unwrap();
+    assert_eq!(snap::to_bytes(&b.host), bytes);
+    for s in [&mut a, &mut b] {
+        s.run_until(SimTime::from_secs(10));
+    }
+    assert_eq!(format!("{:?}", a.outputs()), format!("{:?}", b.outputs()));
+    assert_eq!(a.ends(), b.ends());
+    assert_eq!(a.ends().len(), 1);
+    assert_eq!(a.downlinked(1), b.downlinked(1));
+    assert_eq!(snap::to_bytes(&a.host), snap::to_bytes(&b.host));
+}

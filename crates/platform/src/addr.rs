@@ -119,6 +119,8 @@ pub fn node_name(addr: u8) -> Option<String> {
     })
 }
 
+snap::unit_enum!(PayloadAccess { Icd, Open });
+
 #[cfg(test)]
 mod tests {
     use super::*;
