@@ -585,8 +585,9 @@ pub fn load_from<T: Snap + ?Sized>(value: &mut T, bytes: &[u8]) -> Result<(), Sn
 }
 
 /// [`Snap`] and [`SnapNew`] for a struct whose every field is state, by naming them all:
-/// `snap::fields!(Battery { soc, temperature_c, cycles });`. The names are destructured
-/// exhaustively, so a field the list leaves out does not compile:
+/// `snap::fields!(Battery { soc, temperature_c, cycles });` (`; skip a, b` keeps fields as
+/// built, `; in_place` saves every field but loads them into a built value only). The
+/// names are destructured exhaustively, so a field the list leaves out does not compile:
 ///
 /// ```
 /// struct Two { a: u32, b: Vec<f64> }
@@ -622,6 +623,20 @@ macro_rules! fields {
         impl $crate::SnapNew for $ty {
             fn read(r: &mut $crate::Reader<'_>) -> Result<Self, $crate::SnapError> {
                 Ok($ty { $($f: $crate::SnapNew::read(r)?),* })
+            }
+        }
+    };
+    // Every field saved, loaded in place (no `SnapNew`: a field needs a value built first).
+    ($ty:ident { $($f:ident),* ; in_place $(,)? }) => {
+        impl $crate::Snap for $ty {
+            fn save(&self, w: &mut $crate::Writer) {
+                let $ty { $($f),* } = self;
+                $( $crate::Snap::save($f, w); )*
+            }
+            fn load(&mut self, r: &mut $crate::Reader<'_>) -> Result<(), $crate::SnapError> {
+                let $ty { $($f),* } = self;
+                $( $crate::Snap::load($f, r)?; )*
+                Ok(())
             }
         }
     };
