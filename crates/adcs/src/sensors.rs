@@ -1079,11 +1079,42 @@ pub fn sun_from_counts(counts: &[u16; 6], min_total_counts: f64) -> Option<Vecto
 }
 
 // What a snapshot keeps of the sensors: every generator where it is in its stream, the
-// hidden truths (bias walk, temperatures), the faults and the held values; the
-// configuration is the scenario's.
+// hidden truths (bias walk, temperatures), the faults and the held values, and the
+// configuration (an FC parameter switches the GPS).
+snap::fields!(ThermalChannel {
+    initial_c,
+    eclipse_equilibrium_c,
+    sunlit_equilibrium_c,
+    face_sun_gain_c,
+    face_normal_body,
+    time_constant_s
+});
+snap::fields!(SensorConfig {
+    gyro_noise_rad_s,
+    gyro_bias_initial_rad_s,
+    gyro_bias_turn_on_sigma_rad_s,
+    gyro_bias_walk_rad_s_per_sqrt_s,
+    mag_noise_nt,
+    mag_bias_nt,
+    css_fov_half_angle_rad,
+    css_noise_counts,
+    css_min_total_counts,
+    acc_noise_m_s2,
+    acc_bias_m_s2,
+    gps_enabled,
+    gps_position_noise_m,
+    gps_velocity_noise_m_s,
+    horizon_boresight_body,
+    horizon_fov_half_angle_rad,
+    horizon_noise_rad,
+    thermal,
+    mcu_thermal,
+    temp_noise_c
+});
 snap::fields!(Noise { rng });
 snap::fields!(Held3 { raw, present });
 snap::fields!(Sensors {
+    cfg,
     gyro_rng,
     mag_rng,
     css_rng,
@@ -1100,8 +1131,7 @@ snap::fields!(Sensors {
     last_acc,
     last_css,
     last_gps,
-    last_horizon;
-    skip cfg
+    last_horizon
 });
 
 impl snap::Snap for SensorId {

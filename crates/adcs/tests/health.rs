@@ -414,7 +414,7 @@ fn the_gyro_less_rate_state_starts_from_the_averaged_gyro_and_gives_way_to_it_ag
 
 /// The ADCS saved mid-run (a parameter changed in flight, the MEKF converged, the monitor's
 /// averages running) and loaded into one fresh from the defaults, and the sensors (a gyro
-/// fault on) into sensors seeded otherwise, go on to the same bits as those never saved:
+/// fault on, the GPS switched as an FC parameter does) into sensors seeded otherwise, go on to the same bits as those never saved:
 /// outputs, estimate, bias, health, every generator's draws.
 #[test]
 fn an_adcs_saved_mid_run_and_loaded_into_a_fresh_one_goes_on_to_the_same_bits() {
@@ -429,6 +429,7 @@ fn an_adcs_saved_mid_run_and_loaded_into_a_fresh_one_goes_on_to_the_same_bits() 
     // The sensors too, with a fault on, into sensors seeded otherwise.
     let fault = SensorFault::Bias(2e-4);
     a.sensors.set_fault(SensorId::Gyro, Some(fault));
+    a.sensors.config_mut().gps_enabled = !a.sensors.config().gps_enabled;
     let sensors = snap::to_bytes(&a.sensors);
     b.sensors = Sensors::new(SensorConfig::default(), 999);
     snap::load_from(&mut b.sensors, &sensors).unwrap();
