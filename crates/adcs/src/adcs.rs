@@ -784,3 +784,11 @@ snap::fields!(Adcs {
     estimator_restarts;
     skip body
 });
+snap::fields!(Output {
+    wheel_torque_cmd_nm,
+    mtq_dipole_cmd_am2,
+    mode_in_effect,
+    state,
+    target,
+    w_body_rad_s_est
+});

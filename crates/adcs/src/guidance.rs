@@ -374,6 +374,15 @@ fn attitude(p: &Pointing, g: &GuidanceInputs) -> Option<Attitude> {
     (finite_q(&att.q).is_some() && finite(&att.axis_target_eci)).then_some(att)
 }
 
+snap::fields!(GuidanceTarget {
+    q_eci_from_body,
+    w_body_rad_s,
+    dw_body_rad_s2,
+    axis_body,
+    axis_target_eci,
+    target_elevation_deg
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -1111,6 +1111,24 @@ snap::fields!(SensorConfig {
     mcu_thermal,
     temp_noise_c
 });
+snap::fields!(SensorReadings {
+    gyro_body_rad_s,
+    mag_body_nt,
+    css_counts,
+    sun_body_unit,
+    acc_body_m_s2,
+    gps_r_eci_m,
+    gps_v_eci_m_s,
+    temps_c,
+    mcu_temp_c,
+    gyro_raw,
+    acc_raw,
+    mag_raw,
+    temps_raw,
+    horizon_nadir_body,
+    horizon_raw,
+    horizon_status
+});
 snap::fields!(Noise { rng });
 snap::fields!(Held3 { raw, present });
 snap::fields!(Sensors {

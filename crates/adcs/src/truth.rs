@@ -365,3 +365,9 @@ pub fn lock_wheel(state: &mut AttitudeState, cfg: &BodyConfig, i: usize) {
         state.wheel_speed_rad_s[i] = 0.0;
     }
 }
+
+snap::fields!(AttitudeState {
+    q_eci_from_body,
+    w_body_rad_s,
+    wheel_speed_rad_s
+});

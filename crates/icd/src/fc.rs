@@ -832,6 +832,37 @@ impl CommandSet for AttitudeCommand {
     }
 }
 
+/// By its wire byte.
+impl snap::Snap for TargetMode {
+    fn save(&self, w: &mut snap::Writer) {
+        snap::Snap::save(&(*self as u8), w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for TargetMode {
+    const MIN_BYTES: usize = 1;
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        let at = r.at();
+        let v = <u8 as snap::SnapNew>::read(r)?;
+        TargetMode::try_from(v).map_err(|_| snap::SnapError::Bad {
+            what: "TargetMode",
+            at,
+        })
+    }
+}
+
+snap::fields!(Periodic {
+    dst,
+    dport,
+    period_ms,
+    mask
+});
+snap::fields!(TleLines { line1, line2 });
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -275,6 +275,53 @@ impl SafeMonitor {
     }
 }
 
+// The FC's SAFE monitor: its configuration (parameters 11 and 12 change it), the EPS
+// poll's schedule, the last state of charge, the cause it is SAFE for, counts.
+snap::fields!(SafeConfig {
+    eps_poll,
+    eps,
+    enter_soc,
+    exit_soc
+});
+snap::fields!(SafeMonitor {
+    cfg,
+    port,
+    next_poll,
+    soc,
+    low_battery,
+    cause,
+    polls,
+    replies,
+    bad_replies
+});
+
+impl snap::Snap for SafeCause {
+    fn save(&self, w: &mut snap::Writer) {
+        match self {
+            SafeCause::LowBattery => snap::Snap::save(&0u8, w),
+            SafeCause::Estimator(why) => snap::Snap::save(&(1u8, *why), w),
+        }
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = snap::SnapNew::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for SafeCause {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        let at = r.at();
+        match <u8 as snap::SnapNew>::read(r)? {
+            0 => Ok(SafeCause::LowBattery),
+            1 => Ok(SafeCause::Estimator(snap::SnapNew::read(r)?)),
+            _ => Err(snap::SnapError::Bad {
+                what: "SafeCause",
+                at,
+            }),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

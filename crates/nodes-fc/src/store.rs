@@ -273,6 +273,24 @@ impl Store {
     }
 }
 
+snap::fields!(StoreConfig {
+    period,
+    mask,
+    capacity_bytes,
+    eps,
+    comm
+});
+snap::fields!(Record { rtc_s, kind, data });
+snap::fields!(Store {
+    cfg,
+    records,
+    bytes,
+    overwritten,
+    taken,
+    next,
+    port
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -116,3 +116,12 @@ impl TimeSync {
         true
     }
 }
+
+snap::fields!(TimeSyncConfig { to, period });
+snap::fields!(TimeSync {
+    cfg,
+    port,
+    next,
+    sent,
+    replies
+});
