@@ -570,6 +570,72 @@ impl SnapNew for rand_chacha::ChaCha8Rng {
     }
 }
 
+/// A list whose length is the build's (the endpoints a medium's scenario attaches): saved
+/// whole, loaded in place element by element (each keeps its wiring), and a saved list of
+/// another length is refused ([`SnapError::Mismatch`]). It is a `Vec` otherwise.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fixed<T>(pub Vec<T>);
+
+impl<T> Default for Fixed<T> {
+    fn default() -> Self {
+        Fixed(Vec::new())
+    }
+}
+
+impl<T> std::ops::Deref for Fixed<T> {
+    type Target = Vec<T>;
+    fn deref(&self) -> &Vec<T> {
+        &self.0
+    }
+}
+
+impl<T> std::ops::DerefMut for Fixed<T> {
+    fn deref_mut(&mut self) -> &mut Vec<T> {
+        &mut self.0
+    }
+}
+
+impl<'a, T> IntoIterator for &'a Fixed<T> {
+    type Item = &'a T;
+    type IntoIter = std::slice::Iter<'a, T>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.0.iter()
+    }
+}
+
+impl<'a, T> IntoIterator for &'a mut Fixed<T> {
+    type Item = &'a mut T;
+    type IntoIter = std::slice::IterMut<'a, T>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.0.iter_mut()
+    }
+}
+
+impl<T: Snap> Snap for Fixed<T> {
+    fn save(&self, w: &mut Writer) {
+        w.len(self.0.len());
+        for v in &self.0 {
+            v.save(w);
+        }
+    }
+    fn load(&mut self, r: &mut Reader<'_>) -> Result<(), SnapError> {
+        let what = std::any::type_name::<T>();
+        let what = what.rsplit("::").next().unwrap_or(what);
+        let n = r.len(0, what)?;
+        if n != self.0.len() {
+            return Err(SnapError::Mismatch {
+                what,
+                saved: n as u64,
+                built: self.0.len() as u64,
+            });
+        }
+        for v in &mut self.0 {
+            v.load(r)?;
+        }
+        Ok(())
+    }
+}
+
 /// Save `value` into a byte vector.
 pub fn to_bytes<T: Snap + ?Sized>(value: &T) -> Vec<u8> {
     let mut w = Writer::new();
@@ -682,6 +748,72 @@ macro_rules! unit_enum {
                 let at = r.at();
                 let i = <u32 as $crate::SnapNew>::read(r)? as usize;
                 ALL.get(i).copied().ok_or($crate::SnapError::Bad { what: stringify!($ty), at })
+            }
+        }
+    };
+}
+
+/// [`Snap`] and [`SnapNew`] for an enum whose variants carry data, as the variant's index in
+/// the list and then its fields in order: `snap::tagged_enum!(Fate { Deliver, Drop,
+/// Corrupt { bit } })`, a tuple variant with a name for each field (`Error(e)`). Every
+/// variant must be listed, and every field of each (the destructurings are exhaustive):
+///
+/// ```
+/// #[derive(Debug, PartialEq)]
+/// enum Shape { Dot, Circle { r: f64 }, Pair(u8, String) }
+/// m6p_snap::tagged_enum!(Shape { Dot, Circle { r }, Pair(a, b) });
+/// for s in [Shape::Dot, Shape::Circle { r: 0.5 }, Shape::Pair(3, "x".into())] {
+///     let bytes = m6p_snap::to_bytes(&s);
+///     let back = <Shape as m6p_snap::SnapNew>::read(&mut m6p_snap::Reader::new(&bytes));
+///     assert_eq!(back.unwrap(), s);
+/// }
+/// ```
+///
+/// ```compile_fail
+/// enum Shape { Dot, Circle { r: f64 } }
+/// m6p_snap::tagged_enum!(Shape { Dot });
+/// ```
+#[macro_export]
+macro_rules! tagged_enum {
+    ($ty:ident { $( $v:ident $( { $($f:ident),* $(,)? } )? $( ( $($p:ident),* $(,)? ) )? ),+ $(,)? }) => {
+        impl $crate::Snap for $ty {
+            #[allow(unused_assignments, unused_variables)]
+            fn save(&self, w: &mut $crate::Writer) {
+                // Exhaustive: a variant added to the enum and not to the list fails here.
+                match self { $( $ty::$v { .. } => {} )+ }
+                let mut tag = 0u32;
+                $(
+                    if let $ty::$v $( { $($f),* } )? $( ( $($p),* ) )? = self {
+                        $crate::Snap::save(&tag, w);
+                        $( $( $crate::Snap::save($f, w); )* )?
+                        $( $( $crate::Snap::save($p, w); )* )?
+                        return;
+                    }
+                    tag += 1;
+                )+
+            }
+            fn load(&mut self, r: &mut $crate::Reader<'_>) -> Result<(), $crate::SnapError> {
+                *self = <$ty as $crate::SnapNew>::read(r)?;
+                Ok(())
+            }
+        }
+        impl $crate::SnapNew for $ty {
+            const MIN_BYTES: usize = 4;
+            #[allow(unused_assignments)]
+            fn read(r: &mut $crate::Reader<'_>) -> Result<Self, $crate::SnapError> {
+                let at = r.at();
+                let tag = <u32 as $crate::SnapNew>::read(r)?;
+                let mut i = 0u32;
+                $(
+                    if tag == i {
+                        return Ok($ty::$v
+                            $( { $( $f: $crate::SnapNew::read(r)? ),* } )?
+                            $( ( $( { let $p = $crate::SnapNew::read(r)?; $p } ),* ) )?
+                        );
+                    }
+                    i += 1;
+                )+
+                Err($crate::SnapError::Bad { what: stringify!($ty), at })
             }
         }
     };
