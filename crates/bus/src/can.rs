@@ -43,8 +43,10 @@ use std::time::Duration;
 
 use csp::SimTime;
 use csp::cfp::{CanFrame, CfpId};
+use snap::{Snap, SnapError};
 
 use crate::clock::Clock;
+use crate::exec::Start;
 use crate::impair::{Fate, ImpairRng, ImpairmentSet, Impairments};
 use crate::inbox::{Arrival, Inbound, InboxTx};
 use crate::reserve::ClaimError;
@@ -355,7 +357,7 @@ const RECOVERY_SEQUENCES: u64 = 128;
 struct State {
     cfg: CanBusConfig,
     name: Arc<str>,
-    ports: Vec<Port>,
+    ports: snap::Fixed<Port>,
     claims: BTreeMap<u8, usize>,
     reserved: crate::reserve::Reservations,
     busy_until: SimTime,
@@ -386,6 +388,8 @@ struct State {
     bell: bool,
     /// The bus task, while it waits.
     bus_waker: Option<Waker>,
+    /// The instant the bus task waits for.
+    waiting_until: SimTime,
 }
 
 /// A CAN segment; clone it freely (all clones are the same bus).
@@ -461,7 +465,7 @@ impl CanBus {
             state: Arc::new(Mutex::new(State {
                 cfg,
                 name,
-                ports: Vec::new(),
+                ports: snap::Fixed::default(),
                 claims: BTreeMap::new(),
                 reserved: Default::default(),
                 busy_until: SimTime::ZERO,
@@ -480,6 +484,7 @@ impl CanBus {
                 last_bits: None,
                 bell: false,
                 bus_waker: None,
+                waiting_until: SimTime::ZERO,
             })),
         }
     }
@@ -724,17 +729,35 @@ impl CanBus {
 
     /// The bus task: serialise, arbitrate and deliver until the runtime stops.
     pub async fn run(self, clock: Clock) {
+        self.run_from(clock, Start::Fresh).await;
+    }
+
+    /// The bus task of a bus loaded from a snapshot: it waits first, for what it waited for
+    /// when the snapshot was taken.
+    pub async fn resume(self, clock: Clock) {
+        self.run_from(clock, Start::Resumed).await;
+    }
+
+    async fn run_from(self, clock: Clock, start: Start) {
         let mut timer = crate::clock::Timer::new(clock);
+        let mut start = start;
         loop {
             let next_wake = {
                 let mut st = self.lock();
-                let now = clock.now();
-                // Whatever rang the bell is seen now.
-                st.bell = false;
-                st.schedule(now);
-                st.deliver_due(now);
-                st.hand_over();
-                st.next_wake()
+                if start == Start::Resumed {
+                    // What it waited for: an endpoint's change that rang no bell since may
+                    // have moved what it would wait for now.
+                    start = Start::Fresh;
+                } else {
+                    let now = clock.now();
+                    // Whatever rang the bell is seen now.
+                    st.bell = false;
+                    st.schedule(now);
+                    st.deliver_due(now);
+                    st.hand_over();
+                    st.waiting_until = st.next_wake();
+                }
+                st.waiting_until
             };
             tokio::select! {
                 biased;
@@ -742,6 +765,140 @@ impl CanBus {
                 () = timer.sleep_until(next_wake) => {}
             }
         }
+    }
+}
+
+// The state a snapshot saves (docs/snapshots.md): everything the bus's task and its
+// endpoints change. The configuration, the names, the wiring (inboxes, trace, the task's
+// waker) and which endpoints are attached stay as built from the scenario.
+snap::tagged_enum!(CanFault {
+    BitErrors {
+        ber,
+        node,
+        from,
+        until
+    },
+    Babble {
+        node,
+        can_id,
+        period,
+        from,
+        until
+    }
+});
+snap::fields!(PortStats {
+    name,
+    frames_tx,
+    frames_rx,
+    bytes_tx,
+    bytes_rx,
+    tec,
+    rec,
+    state,
+    tec_max,
+    tx_errors,
+    passive_count,
+    bus_off_count,
+    recoveries,
+    bus_off_drops,
+    tx_overflow,
+    off_drops,
+    offered,
+    babbled,
+    sent_while_off,
+    first_sent_while_off,
+    queued,
+    rx_overflow,
+    tx_queue_max,
+    budget_held
+});
+snap::fields!(BusStats {
+    name,
+    frames,
+    bytes,
+    bits,
+    busy,
+    dropped,
+    corrupted,
+    error_frames,
+    bus_off,
+    ports
+});
+snap::fields!(TxBudget {
+    period_ns,
+    slack_ns,
+    tat
+});
+snap::tagged_enum!(Delivery {
+    Frame { from, frame, fate },
+    Error(e)
+});
+
+impl Snap for AddrSet {
+    fn save(&self, w: &mut snap::Writer) {
+        self.0.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), SnapError> {
+        self.0.load(r)
+    }
+}
+
+snap::fields!(Port {
+    stats,
+    addrs,
+    enabled,
+    queue,
+    budget,
+    departed,
+    arrivals;
+    skip name, own, promiscuous, inbox, iface, link
+});
+snap::fields!(State {
+    ports,
+    claims,
+    reserved,
+    busy_until,
+    recessive_seqs,
+    bus_off_since,
+    errors_seen,
+    in_flight,
+    seq,
+    stats,
+    impair,
+    faults,
+    can_faults,
+    babble_next,
+    rng,
+    last_bits,
+    bell,
+    waiting_until;
+    skip cfg, name, trace, bus_waker
+});
+
+impl CanBus {
+    /// Whether the bus is as a settled run leaves it (`crate::exec::settled`): nothing rang
+    /// that its task has not seen, nothing delivered that is not in its inbox. Its state is
+    /// then whole, and a snapshot may save it.
+    pub fn check_settled(&self) -> Result<(), SnapError> {
+        let st = self.lock();
+        if st.bell {
+            return Err(SnapError::NotQuiescent("a CAN bus's bell"));
+        }
+        if st.ports.iter().any(|p| !p.arrivals.is_empty()) {
+            return Err(SnapError::NotQuiescent("a CAN endpoint's arrivals"));
+        }
+        Ok(())
+    }
+}
+
+/// The bus's state, under its lock; a bus loaded from a snapshot is started with
+/// [`CanBus::resume`].
+impl Snap for CanBus {
+    fn save(&self, w: &mut snap::Writer) {
+        self.lock().save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), SnapError> {
+        self.lock().load(r)
     }
 }
 

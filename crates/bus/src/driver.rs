@@ -3,7 +3,7 @@
 //! sends what the host wants sent. All the behaviour is in the host; this loop only moves
 //! things and keeps the node's time (`t = max(t, event stamp)`, never the wake-up time).
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use csp::SimTime;
 use csp::node::{App, Host, NodeEvent, Severity, Transmit};
@@ -11,7 +11,7 @@ use tokio::sync::mpsc;
 
 use crate::can::CanPort;
 use crate::clock::Clock;
-use crate::inbox::{Arrival, Inbound, InboxRx};
+use crate::inbox::{Arrival, Inbound, InboxRx, InboxState};
 use crate::net::NetPort;
 
 /// Where one interface of a node is attached.
@@ -89,6 +89,98 @@ enum Output<E> {
 /// channel and its timers again.
 const INBOX_BATCH: usize = 64;
 
+/// A node's task's state between two of its wake-ups: the node, its time (the latest
+/// stamp it has seen: it only moves forward), whether it is powered and hung, and its
+/// inbox. The task holds it only while it works on a wake-up, so that the run can save it
+/// for a snapshot (and load it before the task starts) while the task waits.
+pub struct NodeCore<A: App> {
+    /// The node.
+    pub host: Host<A>,
+    task: TaskState,
+    inbox: InboxState,
+}
+
+/// What a node's task knows besides its node.
+#[derive(Debug, Clone, Copy)]
+struct TaskState {
+    t: SimTime,
+    power: Power,
+    hang: Hang,
+}
+
+/// Whether a node is powered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Power {
+    On,
+    Off,
+}
+
+/// Whether a node hangs (alive on its buses, silent).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Hang {
+    Running,
+    Hung,
+}
+
+snap::unit_enum!(Power { On, Off });
+snap::unit_enum!(Hang { Running, Hung });
+snap::fields!(TaskState { t, power, hang });
+
+impl<A: App> NodeCore<A> {
+    /// A node as booted, its task not started yet, with the inbox it will read.
+    pub fn new(host: Host<A>, inbox: &InboxRx) -> Self {
+        NodeCore {
+            host,
+            task: TaskState {
+                t: SimTime::ZERO,
+                power: Power::On,
+                hang: Hang::Running,
+            },
+            inbox: inbox.state(),
+        }
+    }
+
+    /// Whether it takes what comes in and runs its timers.
+    fn listening(&self) -> bool {
+        self.task.power == Power::On && self.task.hang == Hang::Running
+    }
+}
+
+impl<A: App> std::fmt::Debug for NodeCore<A> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("NodeCore")
+            .field("node", &self.host.node.name())
+            .field("task", &self.task)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Everything of a node's task between two wake-ups, its inbox's frames included.
+impl<A: App + snap::Snap> snap::Snap for NodeCore<A> {
+    fn save(&self, w: &mut snap::Writer) {
+        let NodeCore { host, task, inbox } = self;
+        host.save(w);
+        task.save(w);
+        inbox.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        let NodeCore { host, task, inbox } = self;
+        host.load(r)?;
+        task.load(r)?;
+        inbox.load(r)
+    }
+}
+
+/// A node's core, shared by its task and the run.
+pub type SharedCore<A> = Arc<Mutex<NodeCore<A>>>;
+
+/// The core, locked (a panic elsewhere leaves it usable: its state is whole between two
+/// inputs).
+pub fn lock_core<A: App>(core: &Mutex<NodeCore<A>>) -> MutexGuard<'_, NodeCore<A>> {
+    core.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// Run a node until [`NodeCtl::Stop`] (or every sender of `ctl` is gone); returns the host.
 /// Its events go to the tracing log only.
 pub async fn run_node<A: App>(
@@ -98,25 +190,31 @@ pub async fn run_node<A: App>(
     ctl: CtlRx,
     clock: Clock,
 ) -> Host<A> {
-    run(host, ports, inbox, ctl, clock, Discard).await
+    let core = Arc::new(Mutex::new(NodeCore::new(host, &inbox)));
+    run(&core, ports, inbox, ctl, clock, Discard).await;
+    let core = Arc::into_inner(core).expect("the core is the task's alone");
+    core.into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .host
 }
 
-/// [`run_node`], handing the application's events and the node's drops and log lines to
-/// `out` in the order the host produced them (`E` gathers every node's events in one type).
+/// Run the node of `core` (booted, or loaded from a snapshot: it goes on from where it
+/// was) until [`NodeCtl::Stop`] (or every sender of `ctl` is gone), handing the
+/// application's events and the node's drops and log lines to `out` in the order the host
+/// produced them (`E` gathers every node's events in one type).
 pub async fn run_node_with<A, E>(
-    host: Host<A>,
+    core: SharedCore<A>,
     ports: Vec<Attachment>,
     inbox: InboxRx,
     ctl: CtlRx,
     clock: Clock,
     out: mpsc::UnboundedSender<E>,
-) -> Host<A>
-where
+) where
     A: App,
     E: From<NodeLog> + From<A::Event> + Send + 'static,
 {
-    let name: Arc<str> = host.node.name().into();
-    run(host, ports, inbox, ctl, clock, Channel { name, out }).await
+    let name: Arc<str> = lock_core(&core).host.node.name().into();
+    run(&core, ports, inbox, ctl, clock, Channel { name, out }).await;
 }
 
 /// Where a node's task hands what it pulls out of the host.
@@ -150,115 +248,174 @@ impl<Ev, E: From<NodeLog> + From<Ev> + Send> Outputs<Ev> for Channel<E> {
     }
 }
 
+/// What woke a node's task.
+enum Woke {
+    Ctl(Option<(SimTime, NodeCtl)>),
+    Inbox(usize),
+    Timer(SimTime),
+}
+
+/// Whether a node's task goes on.
+#[derive(PartialEq, Eq)]
+enum Flow {
+    Continue,
+    Stop,
+}
+
 async fn run<A: App, O: Outputs<A::Event>>(
-    mut host: Host<A>,
+    core: &Mutex<NodeCore<A>>,
     ports: Vec<Attachment>,
     mut inbox: InboxRx,
     mut ctl: CtlRx,
     clock: Clock,
     mut out: O,
-) -> Host<A> {
-    // Every stamp the node sees is at or after the start; its own time only moves forward.
-    let mut t = SimTime::ZERO;
-    let mut powered = true;
-    let mut hung = false;
+) {
     // Frames whose packet's next frame is on the wire need no wake-up of their own: they
     // are taken before anything else the node does (a timer, a command, the next arrival).
     inbox.take_quiet();
     let mut timer = crate::clock::Timer::new(clock);
     let mut batch = std::collections::VecDeque::with_capacity(INBOX_BATCH);
     loop {
-        flush(&mut host, &ports, t, &mut out);
-        let deadline = if powered && !hung {
-            host.poll_timeout()
-        } else {
-            None
+        let deadline = {
+            let mut c = lock_core(core);
+            let c = &mut *c;
+            flush(&mut c.host, &ports, c.task.t, &mut out);
+            if c.listening() {
+                c.host.poll_timeout()
+            } else {
+                None
+            }
         };
         if deadline.is_none() {
             timer.disarm();
         }
-        tokio::select! {
+        // What woke the task is handled with its core held (the run reads it only while
+        // every task waits).
+        let woke = tokio::select! {
             biased;
-            c = ctl.recv() => {
-                let Some((at, c)) = c else { break };
-                let listening = powered && !hung;
-                // Frames that came quietly were there before the command (had they woken
-                // the task, it would have taken them then), with the timers due before each.
-                while let Some(m) = inbox.try_recv_quiet() {
-                    if listening {
-                        timers_due(&mut host, &ports, &mut t, &mut out, |d| d < m.t);
-                    }
-                    t = t.max(m.t);
-                    arrive(&mut host, m, t, listening);
-                    flush(&mut host, &ports, t, &mut out);
-                }
-                // The node's own timers due by the command's instant come first, so that a
-                // command meets the same node whichever task ran first at that instant
-                // (a beacon due at the instant the EPS switches its COMM off goes out).
-                if listening && c != NodeCtl::Stop {
-                    timers_due(&mut host, &ports, &mut t, &mut out, |d| d <= at);
-                }
-                t = t.max(at);
-                match c {
-                    NodeCtl::Stop => break,
-                    NodeCtl::Reboot => if powered { host.reboot(t) },
-                    NodeCtl::Power(on) => {
-                        if on != powered {
-                            powered = on;
-                            if !on {
-                                // The core meets the loss at its instant (a burn stops there).
-                                host.power_lost(t);
-                                flush(&mut host, &[], t, &mut out);
-                            }
-                            for p in &ports { p.set_enabled(on); }
-                            if on {
-                                hung = false;
-                                host.reboot(t);
-                            }
-                        }
-                    }
-                    NodeCtl::Hang(h) => hung = h,
-                    NodeCtl::Switch(switch, to) => host.switch(switch, to, t),
-                    NodeCtl::Fault(id, f) => host.fault(id, f, t),
-                    NodeCtl::Console(req) => {
-                        if listening {
-                            // The line is in the node's log (and so in the recording).
-                            host.node.log(t, format!("console: {}", req.line()));
-                            let text = host.console(req.line(), t);
-                            req.answer(Some(text));
-                        } else {
-                            req.answer(None);
-                        }
-                    }
-                }
+            c = ctl.recv() => Woke::Ctl(c),
+            n = inbox.recv_many(&mut batch, INBOX_BATCH) => Woke::Inbox(n),
+            () = timer.sleep_until(deadline.unwrap_or(SimTime::MAX)), if deadline.is_some() => {
+                Woke::Timer(deadline.unwrap_or(SimTime::MAX))
             }
-            n = inbox.recv_many(&mut batch, INBOX_BATCH) => {
-                if n == 0 {
+        };
+        let mut c = lock_core(core);
+        let c = &mut *c;
+        match woke {
+            Woke::Ctl(None) | Woke::Inbox(0) => break,
+            Woke::Ctl(Some((at, cmd))) => {
+                if command(c, &ports, &mut inbox, at, cmd, &mut out) == Flow::Stop {
                     break;
                 }
+            }
+            Woke::Inbox(_) => {
                 // Whatever was waiting in the inbox is taken now (at most INBOX_BATCH), one
-                // at a time, as the biased select would take it (no control command can come
-                // in meanwhile: it would come from a task of this single-threaded runtime),
-                // without a select and a timer per frame. The node's timers due before each
-                // arrival's instant come first: its events in the order of their instants,
-                // however late the arrival woke the task (frames that came quietly wake
-                // nobody).
+                // at a time, as the biased select would take it (no control command can
+                // come in meanwhile: it would come from a task of this single-threaded
+                // runtime), without a select and a timer per frame. The node's timers due
+                // before each arrival's instant come first: its events in the order of
+                // their instants, however late the arrival woke the task (frames that came
+                // quietly wake nobody).
                 while let Some(m) = batch.pop_front() {
-                    if powered && !hung {
-                        timers_due(&mut host, &ports, &mut t, &mut out, |d| d < m.t);
-                    }
-                    t = t.max(m.t);
-                    arrive(&mut host, m, t, powered && !hung);
-                    flush(&mut host, &ports, t, &mut out);
+                    take(c, &ports, m, &mut out);
                 }
             }
-            () = timer.sleep_until(deadline.unwrap_or(SimTime::MAX)), if deadline.is_some() => {
-                t = t.max(deadline.unwrap_or(t));
-                host.handle_timeout(t);
+            Woke::Timer(deadline) => {
+                // Frames that came quietly came before the timer's instant: they are taken
+                // first (with the timers due before each), and the deadline looked at again.
+                if inbox.has_quiet() {
+                    while let Some(m) = inbox.try_recv_quiet() {
+                        take(c, &ports, m, &mut out);
+                    }
+                    continue;
+                }
+                c.task.t = c.task.t.max(deadline);
+                c.host.handle_timeout(c.task.t);
             }
         }
     }
-    host
+}
+
+/// Take an arrival at its instant, after the node's timers due before it (a node off or
+/// hung takes nothing).
+fn take<A: App>(
+    c: &mut NodeCore<A>,
+    ports: &[Attachment],
+    m: Inbound,
+    out: &mut impl Outputs<A::Event>,
+) {
+    let listening = c.listening();
+    if listening {
+        timers_due(&mut c.host, ports, &mut c.task.t, out, |d| d < m.t);
+    }
+    c.task.t = c.task.t.max(m.t);
+    arrive(&mut c.host, m, c.task.t, listening);
+    flush(&mut c.host, ports, c.task.t, out);
+}
+
+/// A control command at its instant `at`.
+fn command<A: App>(
+    c: &mut NodeCore<A>,
+    ports: &[Attachment],
+    inbox: &mut InboxRx,
+    at: SimTime,
+    cmd: NodeCtl,
+    out: &mut impl Outputs<A::Event>,
+) -> Flow {
+    // Frames that came quietly were there before the command (had they woken the task, it
+    // would have taken them then), with the timers due before each.
+    while let Some(m) = inbox.try_recv_quiet() {
+        take(c, ports, m, out);
+    }
+    // The node's own timers due by the command's instant come first, so that a command
+    // meets the same node whichever task ran first at that instant (a beacon due at the
+    // instant the EPS switches its COMM off goes out).
+    let listening = c.listening();
+    if listening && cmd != NodeCtl::Stop {
+        timers_due(&mut c.host, ports, &mut c.task.t, out, |d| d <= at);
+    }
+    c.task.t = c.task.t.max(at);
+    let t = c.task.t;
+    match cmd {
+        NodeCtl::Stop => return Flow::Stop,
+        NodeCtl::Reboot => {
+            if c.task.power == Power::On {
+                c.host.reboot(t);
+            }
+        }
+        NodeCtl::Power(on) => {
+            let to = if on { Power::On } else { Power::Off };
+            if to != c.task.power {
+                c.task.power = to;
+                if !on {
+                    // The core meets the loss at its instant (a burn stops there).
+                    c.host.power_lost(t);
+                    flush(&mut c.host, &[], t, out);
+                }
+                for p in ports {
+                    p.set_enabled(on);
+                }
+                if on {
+                    c.task.hang = Hang::Running;
+                    c.host.reboot(t);
+                }
+            }
+        }
+        NodeCtl::Hang(h) => c.task.hang = if h { Hang::Hung } else { Hang::Running },
+        NodeCtl::Switch(switch, to) => c.host.switch(switch, to, t),
+        NodeCtl::Fault(id, f) => c.host.fault(id, f, t),
+        NodeCtl::Console(req) => {
+            if listening {
+                // The line is in the node's log (and so in the recording).
+                c.host.node.log(t, format!("console: {}", req.line()));
+                let text = c.host.console(req.line(), t);
+                req.answer(Some(text));
+            } else {
+                req.answer(None);
+            }
+        }
+    }
+    Flow::Continue
 }
 
 /// Run the node's timers while the next is `due` (bounded: an application whose timer

@@ -62,6 +62,16 @@ struct TimerEntry {
     rank: Rank,
 }
 
+/// How a task of the run begins.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    /// At the run's start.
+    Fresh,
+    /// Loaded from a snapshot: it waits first, for what it waited for when the snapshot
+    /// was taken, as if it had never stopped (its state says what that is).
+    Resumed,
+}
+
 /// Why a task gave no result.
 #[derive(Debug, thiserror::Error)]
 pub enum TaskError {
@@ -141,6 +151,10 @@ struct Inner {
     next_at: Cell<SimTime>,
     /// `next_at` may be before the earliest waiting instant (a timer there moved on).
     next_stale: Cell<bool>,
+    /// Tasks waiting in [`settled`].
+    settled_waiters: RefCell<Vec<Waker>>,
+    /// How many times the run has settled with a task waiting for it.
+    settlings: Cell<u64>,
 }
 
 thread_local! {
@@ -216,6 +230,8 @@ impl<C: RunClock + Copy + Unpin, F> Run<C, F> {
             due: RefCell::new(Vec::new()),
             next_at: Cell::new(SimTime::MAX),
             next_stale: Cell::new(false),
+            settled_waiters: RefCell::new(Vec::new()),
+            settlings: Cell::new(0),
         });
         let id = RUN_IDS.fetch_add(1, Ordering::Relaxed);
         RUNS.with_borrow_mut(|r| r.insert(id, inner.clone()));
@@ -272,7 +288,7 @@ impl<C: RunClock + Copy + Unpin, F: Future> Future for Run<C, F> {
                 shared.polling.store(false, Ordering::SeqCst);
                 return Poll::Ready(v);
             }
-            if inner.wake_due() {
+            if inner.wake_due() || inner.wake_settled() {
                 continue;
             }
             if this.sleep_until_next(&inner, cx).is_ready() {
@@ -387,6 +403,20 @@ impl Inner {
         !due.is_empty()
     }
 
+    /// The run has settled (nothing to run, no timer due now): wake the tasks waiting for
+    /// that; whether any.
+    fn wake_settled(&self) -> bool {
+        let waiters = std::mem::take(&mut *self.settled_waiters.borrow_mut());
+        if waiters.is_empty() {
+            return false;
+        }
+        self.settlings.set(self.settlings.get() + 1);
+        for w in waiters {
+            w.wake();
+        }
+        true
+    }
+
     fn spawn<F>(&self, fut: F) -> JoinHandle<F::Output>
     where
         F: Future + Send + 'static,
@@ -430,6 +460,32 @@ where
         Some(inner) => inner.spawn(fut),
         None => JoinHandle(Handle::Tokio(tokio::spawn(fut))),
     }
+}
+
+/// Ready once the run has settled at the instant it is awaited at, or a later one: every
+/// other task waits, for an outside input or for a timer at a later instant. The state of
+/// the run is then whole (nothing half done, every channel between its tasks empty but the
+/// quiet frames of nodes' inboxes), and it is what a snapshot saves (docs/snapshots.md).
+/// Ready at once outside a run.
+pub fn settled() -> impl Future<Output = ()> {
+    let mut seen: Option<u64> = None;
+    std::future::poll_fn(move |cx| {
+        CURRENT.with_borrow(|c| {
+            let Some(inner) = c.as_ref() else {
+                return Poll::Ready(());
+            };
+            let now = inner.settlings.get();
+            if seen.is_some_and(|s| now > s) {
+                return Poll::Ready(());
+            }
+            seen.get_or_insert(now);
+            let mut waiters = inner.settled_waiters.borrow_mut();
+            if !waiters.iter().any(|w| w.will_wake(cx.waker())) {
+                waiters.push(cx.waker().clone());
+            }
+            Poll::Pending
+        })
+    })
 }
 
 /// A timer at `t` of the task being polled, when a run's task is: ready if the run's time

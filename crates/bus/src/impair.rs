@@ -121,6 +121,30 @@ impl ImpairRng {
     }
 }
 
+// The state a snapshot saves (docs/snapshots.md).
+snap::fields!(Impairments {
+    drop_prob,
+    corrupt_prob,
+    delay,
+    down
+});
+snap::fields!(ImpairmentSet { active });
+snap::tagged_enum!(Fate {
+    Deliver,
+    Drop,
+    Corrupt { bit }
+});
+
+/// Where the generator is in its stream.
+impl snap::Snap for ImpairRng {
+    fn save(&self, w: &mut snap::Writer) {
+        self.0.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.0.load(r)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

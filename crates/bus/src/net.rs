@@ -28,9 +28,11 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use csp::{Packet, SimTime};
+use snap::{Snap, SnapError};
 use tokio::sync::Notify;
 
 use crate::clock::Clock;
+use crate::exec::Start;
 use crate::impair::{Fate, ImpairRng, ImpairmentSet, Impairments};
 use crate::inbox::{Arrival, Inbound, InboxTx};
 use crate::reserve::ClaimError;
@@ -158,7 +160,7 @@ struct Endpoint {
 struct State {
     cfg: PacketNetConfig,
     name: Arc<str>,
-    eps: Vec<Endpoint>,
+    eps: snap::Fixed<Endpoint>,
     default_ep: Option<usize>,
     claims: BTreeMap<u8, usize>,
     reserved: crate::reserve::Reservations,
@@ -183,6 +185,8 @@ struct State {
     /// Whether the radio link can close (a pass over a ground station); see
     /// [`PacketNet::set_contact`].
     contact: bool,
+    /// The instant the network task waits for.
+    waiting_until: SimTime,
 }
 
 /// A packet network; clones share it.
@@ -228,7 +232,7 @@ impl PacketNet {
                 },
                 cfg,
                 name,
-                eps: Vec::new(),
+                eps: snap::Fixed::default(),
                 default_ep: None,
                 claims: BTreeMap::new(),
                 reserved: Default::default(),
@@ -243,6 +247,7 @@ impl PacketNet {
                 trace: None,
                 air_tap: None,
                 contact: true,
+                waiting_until: SimTime::ZERO,
             })),
             wake: Arc::new(Notify::new()),
         }
@@ -430,17 +435,33 @@ impl PacketNet {
 
     /// The network task: put packets on the air in turn and deliver them when they arrive.
     pub async fn run(self, clock: Clock) {
+        self.run_from(clock, Start::Fresh).await;
+    }
+
+    /// The network task of a network loaded from a snapshot: it waits first, for what it
+    /// waited for when the snapshot was taken.
+    pub async fn resume(self, clock: Clock) {
+        self.run_from(clock, Start::Resumed).await;
+    }
+
+    async fn run_from(self, clock: Clock, start: Start) {
+        let mut start = start;
         loop {
             let next = {
                 let mut st = self.lock();
-                let now = clock.now();
-                st.take_turns(now);
-                st.deliver_due(now);
-                let delivery = st
-                    .in_flight
-                    .first_key_value()
-                    .map_or(SimTime::MAX, |((t, _), _)| *t);
-                delivery.min(st.next_turn().unwrap_or(SimTime::MAX))
+                if start == Start::Resumed {
+                    start = Start::Fresh;
+                } else {
+                    let now = clock.now();
+                    st.take_turns(now);
+                    st.deliver_due(now);
+                    let delivery = st
+                        .in_flight
+                        .first_key_value()
+                        .map_or(SimTime::MAX, |((t, _), _)| *t);
+                    st.waiting_until = delivery.min(st.next_turn().unwrap_or(SimTime::MAX));
+                }
+                st.waiting_until
             };
             let notified = self.wake.notified();
             tokio::select! {
@@ -791,6 +812,83 @@ impl AirBuffer {
         self.waiting -= len;
         self.chosen.push_back((start, len));
         self.chosen_bytes += len;
+    }
+}
+
+// The state a snapshot saves (docs/snapshots.md): everything the network's task and its
+// endpoints change. The configuration, the names, the wiring (inboxes, trace, air tap) and
+// which endpoints are attached stay as built from the scenario.
+snap::fields!(NetStats {
+    name,
+    packets,
+    bytes,
+    air_busy,
+    dropped,
+    unroutable,
+    no_contact,
+    endpoints,
+    air_overflow,
+    rx_overflow,
+    air_backlog_max
+});
+snap::fields!(InFlight {
+    from,
+    to,
+    generation,
+    packet,
+    fate
+});
+snap::fields!(AirPacket {
+    ready,
+    from,
+    to,
+    generation,
+    len,
+    packet
+});
+snap::fields!(AirBuffer {
+    waiting,
+    chosen,
+    chosen_bytes
+});
+snap::fields!(Endpoint {
+    addrs,
+    enabled,
+    tx,
+    rx,
+    departed,
+    generation;
+    skip name, own, radio, inbox, iface, link
+});
+
+snap::fields!(State {
+    eps,
+    default_ep,
+    claims,
+    reserved,
+    air_busy_until,
+    air_waiting,
+    air_last,
+    air_buffers,
+    in_flight,
+    seq,
+    stats,
+    impair,
+    faults,
+    rng,
+    contact,
+    waiting_until;
+    skip cfg, name, trace, air_tap
+});
+
+/// The network's state, under its lock; a network loaded from a snapshot is started with
+/// [`PacketNet::resume`].
+impl Snap for PacketNet {
+    fn save(&self, w: &mut snap::Writer) {
+        self.lock().save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), SnapError> {
+        self.lock().load(r)
     }
 }
 

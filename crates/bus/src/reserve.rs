@@ -62,6 +62,32 @@ impl Reservations {
     }
 }
 
+// The state a snapshot saves (docs/snapshots.md).
+impl snap::Snap for LinkId {
+    fn save(&self, w: &mut snap::Writer) {
+        self.0.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.0.load(r)
+    }
+}
+
+impl snap::SnapNew for LinkId {
+    const MIN_BYTES: usize = 4;
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        u32::read(r).map(LinkId)
+    }
+}
+
+impl snap::Snap for Reservations {
+    fn save(&self, w: &mut snap::Writer) {
+        self.0.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.0.load(r)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -190,3 +190,20 @@ impl std::fmt::Debug for TraceTx {
         f.write_str("TraceTx")
     }
 }
+
+// The state a snapshot saves (docs/snapshots.md): error events on their way.
+snap::unit_enum!(ErrorState {
+    Active,
+    Passive,
+    BusOff
+});
+snap::tagged_enum!(CanErrorKind {
+    ErrorFrame { can_id },
+    State(s)
+});
+snap::fields!(CanErrorEvent {
+    node,
+    kind,
+    tec,
+    rec
+});

@@ -12,13 +12,8 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap()
 }
 
-fn runtime() -> tokio::runtime::Runtime {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_time()
-        .start_paused(true)
-        .build()
-        .unwrap()
-}
+mod common;
+use common::runtime;
 
 /// Which of the tasks due at one instant runs first is their spawn order, whatever
 /// order and history their timers were set with; the root is first of all.

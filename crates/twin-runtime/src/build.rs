@@ -4,8 +4,9 @@
 //! [`RunEvent`]s.
 
 use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
 
-use bus::driver::{Attachment, CtlTx, run_node_with};
+use bus::driver::{Attachment, CtlTx, NodeCore, SharedCore, run_node_with};
 use bus::inbox::{InboxTx, inbox};
 use bus::outside::Segments;
 use bus::trace::TraceTx;
@@ -70,8 +71,14 @@ pub(super) fn media(
     (segs, background)
 }
 
-/// A node's task: its spec, its control channel and the task that hands its host back.
-pub(super) type NodeTask = (NodeSpec, CtlTx, bus::exec::JoinHandle<Host<NodeApp>>);
+/// A node's task: its spec, its control channel, its core (shared with the task) and the
+/// task.
+pub(super) struct NodeTask {
+    pub(super) spec: NodeSpec,
+    pub(super) ctl: CtlTx,
+    pub(super) core: SharedCore<NodeApp>,
+    pub(super) handle: bus::exec::JoinHandle<()>,
+}
 
 /// The nodes of a run, each booted and running as its own task.
 pub(super) struct Nodes {
@@ -86,7 +93,7 @@ impl Nodes {
     pub(super) fn ctls(&self) -> BTreeMap<u8, CtlTx> {
         self.tasks
             .iter()
-            .map(|(spec, ctl, _)| (spec.addr, ctl.clone()))
+            .map(|n| (n.spec.addr, n.ctl.clone()))
             .collect()
     }
 }
@@ -160,10 +167,21 @@ pub(super) fn nodes(
             }));
         }
         let out = ev_tx.clone();
-        let handle = bus::exec::spawn(async move {
-            run_node_with(host, ports, inbox_rx, ctl_rx, clock, out).await
+        let core = Arc::new(Mutex::new(NodeCore::new(host, &inbox_rx)));
+        let handle = bus::exec::spawn(run_node_with(
+            core.clone(),
+            ports,
+            inbox_rx,
+            ctl_rx,
+            clock,
+            out,
+        ));
+        nodes.push(NodeTask {
+            spec: spec.clone(),
+            ctl: ctl_tx,
+            core,
+            handle,
         });
-        nodes.push((spec.clone(), ctl_tx, handle));
     }
 
     charge_air_time(segs, boards, secondary_radios, ev_tx);

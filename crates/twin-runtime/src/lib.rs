@@ -834,14 +834,19 @@ async fn stop_nodes(
     sim_time: SimTime,
     ev_tx: &mpsc::UnboundedSender<RunEvent>,
 ) -> anyhow::Result<Vec<NodeReport>> {
-    for (_, ctl, _) in &tasks {
-        let _ = ctl.send((SimTime::ZERO, NodeCtl::Stop));
+    for n in &tasks {
+        let _ = n.ctl.send((SimTime::ZERO, NodeCtl::Stop));
     }
     let mut node_reports = Vec::new();
-    for (spec, _, handle) in tasks {
-        let mut host = handle
+    for build::NodeTask {
+        spec, core, handle, ..
+    } in tasks
+    {
+        handle
             .await
             .with_context(|| format!("node {} task failed", spec.name))?;
+        let mut core = bus::driver::lock_core(&core);
+        let host = &mut core.host;
         host.app.finish(&mut host.node, sim_time);
         while let Some(e) = host.poll_event() {
             let _ = ev_tx.send(e);
