@@ -188,6 +188,36 @@ impl LinkGate {
     }
 }
 
+// The state a snapshot saves (docs/snapshots.md): a gate's faults, power, hangs, generator
+// and counts (the delay lines are their links' tasks', outside the twin's run).
+snap::fields!(GateStats {
+    dropped,
+    down,
+    hung,
+    unpowered,
+    delayed,
+    overflow
+});
+snap::fields!(State {
+    faults,
+    imp,
+    hangs,
+    powered,
+    rng,
+    stats;
+    in_place
+});
+
+/// The gate's state, under its lock.
+impl snap::Snap for LinkGate {
+    fn save(&self, w: &mut snap::Writer) {
+        self.lock().save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.lock().load(r)
+    }
+}
+
 /// Packets or frames waiting out a delay: first in, first out, at most
 /// [`DELAY_LINE_CAPACITY`].
 #[derive(Debug)]

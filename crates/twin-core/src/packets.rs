@@ -27,6 +27,12 @@ pub struct PacketTap {
     cfp_drops: u64,
 }
 
+// A snapshot saves the partial packets of every bus (docs/snapshots.md).
+snap::fields!(PacketTap {
+    reassemblers,
+    cfp_drops
+});
+
 impl PacketTap {
     /// A tap with no bus seen yet.
     pub fn new() -> Self {

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 
 use bus::driver::{Attachment, CtlTx, NodeCore, SharedCore, run_node_with};
+use bus::exec::Start;
 use bus::inbox::{InboxTx, inbox};
 use bus::outside::Segments;
 use bus::trace::TraceTx;
@@ -26,6 +27,7 @@ pub(super) fn media(
     opts: &RunOptions,
     clock: Clock,
     events: &mpsc::UnboundedSender<RunEvent>,
+    start: Start,
 ) -> (Segments, Vec<bus::exec::JoinHandle<()>>) {
     let ev_tx = events;
     let segs = Segments {
@@ -63,11 +65,18 @@ pub(super) fn media(
     segs.main.set_trace(tracer.clone());
     segs.payload.set_trace(tracer.clone());
     segs.ground.set_trace(tracer);
-    let background = vec![
-        bus::exec::spawn(segs.main.clone().run(clock)),
-        bus::exec::spawn(segs.payload.clone().run(clock)),
-        bus::exec::spawn(segs.ground.clone().run(clock)),
-    ];
+    let background = match start {
+        Start::Fresh => vec![
+            bus::exec::spawn(segs.main.clone().run(clock)),
+            bus::exec::spawn(segs.payload.clone().run(clock)),
+            bus::exec::spawn(segs.ground.clone().run(clock)),
+        ],
+        Start::Resumed => vec![
+            bus::exec::spawn(segs.main.clone().resume(clock)),
+            bus::exec::spawn(segs.payload.clone().resume(clock)),
+            bus::exec::spawn(segs.ground.clone().resume(clock)),
+        ],
+    };
     (segs, background)
 }
 
@@ -117,6 +126,7 @@ pub(super) fn nodes(
     clock: Clock,
     boards: &Boards,
     events: &mpsc::UnboundedSender<RunEvent>,
+    start: Start,
 ) -> Nodes {
     let ev_tx = events;
 
@@ -152,9 +162,11 @@ pub(super) fn nodes(
         // Every node boots at the start of the run (in real time, not when its task is made).
         let mut host = Host::new(cfg, app, SimTime::ZERO);
         // What it reported at boot (the EPS's channels configured off) goes out now, in
-        // node order, before any task runs.
+        // node order, before any task runs; a run from a snapshot had it long ago.
         while let Some(e) = host.app.poll_event() {
-            let _ = ev_tx.send(e);
+            if start == Start::Fresh {
+                let _ = ev_tx.send(e);
+            }
         }
         let (ctl_tx, ctl_rx) = mpsc::unbounded_channel();
         if matches!(spec.role, Role::CommPrimary | Role::CommSecondary) {
@@ -273,7 +285,23 @@ fn charge_air_time(
 }
 
 /// A node's application, its events turned into [`RunEvent`]s (`twin_core::events`).
-type NodeApp = Box<dyn App<Event = RunEvent>>;
+pub(super) type NodeApp = Box<dyn RunApp>;
+
+/// An application of a run's node: its events are [`RunEvent`]s, and it saves its state
+/// for snapshots.
+pub(super) trait RunApp: App<Event = RunEvent> + snap::Snap {}
+
+impl<T: App<Event = RunEvent> + snap::Snap> RunApp for T {}
+
+/// The application's own state.
+impl snap::Snap for Box<dyn RunApp> {
+    fn save(&self, w: &mut snap::Writer) {
+        (**self).save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        (**self).load(r)
+    }
+}
 
 fn app_for(
     role: Role,

@@ -626,6 +626,56 @@ pub(crate) async fn feed(
     }
 }
 
+// The state a snapshot saves (docs/snapshots.md): the timeline's actions to come, the live
+// faults taken (their fields as the JSON they came in).
+impl snap::Snap for LiveFault {
+    fn save(&self, w: &mut snap::Writer) {
+        let LiveFault {
+            n,
+            at,
+            until,
+            fields,
+        } = self;
+        n.save(w);
+        at.save(w);
+        until.save(w);
+        serde_json::Value::Object(fields.clone())
+            .to_string()
+            .save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        *self = <LiveFault as snap::SnapNew>::read(r)?;
+        Ok(())
+    }
+}
+
+impl snap::SnapNew for LiveFault {
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        let n = u32::read(r)?;
+        let at = SimTime::read(r)?;
+        let until = Option::read(r)?;
+        let json_at = r.at();
+        let fields = match serde_json::from_str(&String::read(r)?) {
+            Ok(serde_json::Value::Object(m)) => m,
+            _ => {
+                return Err(snap::SnapError::Bad {
+                    what: "a live fault's fields",
+                    at: json_at,
+                });
+            }
+        };
+        Ok(LiveFault {
+            n,
+            at,
+            until,
+            fields,
+        })
+    }
+}
+
+snap::fields!(Taken { fault, cleared });
+snap::fields!(Timeline { queue, live });
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

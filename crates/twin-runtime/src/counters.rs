@@ -23,6 +23,13 @@ pub trait RunSink: Send {
     fn contact(&mut self, t: SimTime, on: bool) {
         let _ = (t, on);
     }
+    /// The run settled at `t`, an instant a snapshot was asked for
+    /// (`RunOptions::snapshot_at`): `run_state` is the runtime's part of it (media, nodes,
+    /// the loop's own: [`crate::snapshot`]); the sink adds its own and keeps it. Told
+    /// between two events, every event before it handed on.
+    fn snapshot(&mut self, t: SimTime, run_state: Vec<u8>) {
+        let _ = (t, run_state);
+    }
 }
 
 impl<F: FnMut(&RunEvent) + Send> RunSink for F {
@@ -46,6 +53,11 @@ impl<'a> Tapped<'a> {
         }
     }
 
+    /// The packet tap's state, for a snapshot.
+    pub(crate) fn tap_mut(&mut self) -> &mut Option<twin_core::packets::PacketTap> {
+        &mut self.tap
+    }
+
     /// CFP frames or partial packets the tap could not place (lost frames).
     pub(crate) fn cfp_drops(&self) -> u64 {
         self.tap.as_ref().map_or(0, |t| t.cfp_drops())
@@ -53,6 +65,9 @@ impl<'a> Tapped<'a> {
 }
 
 impl RunSink for Tapped<'_> {
+    fn snapshot(&mut self, t: SimTime, run_state: Vec<u8>) {
+        self.sink.snapshot(t, run_state);
+    }
     fn event(&mut self, ev: &RunEvent) {
         self.sink.event(ev);
         if let Some(p) = self.tap.as_mut().and_then(|tap| tap.event(ev)) {

@@ -206,3 +206,24 @@ impl Director<'_> {
         }
     }
 }
+
+// The state a snapshot saves (docs/snapshots.md): the fault timeline's actions to come.
+snap::tagged_enum!(MediumId {
+    Main,
+    Payload,
+    Uhf,
+    Link(link)
+});
+snap::tagged_enum!(FaultAction {
+    Impair { medium, fault, imp },
+    Can { medium, fault, can },
+    Power { addr, fault, off },
+    LinkPower { link, fault, off },
+    LinkHang { link, fault, hung },
+    Reboot(addr),
+    Hang { addr, fault, hung },
+    Node { addr, fault, what },
+    Record,
+    Contact(on)
+});
+snap::fields!(TimedFault { at, action, what });

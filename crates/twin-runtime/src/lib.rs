@@ -17,12 +17,15 @@
 //!   the order it happens and applies the faults at their instants.
 
 mod build;
+pub use snapshot::Resume;
 pub mod control;
 pub mod counters;
 pub mod faults;
 pub mod ground;
 mod links;
 pub mod power;
+mod snapshot;
+use snapshot::LoopState;
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -115,6 +118,12 @@ pub struct RunOptions {
     pub comm: nodes_comm::CommConfig,
     /// The run's control channel (`run --control`, or a replay's recorded requests).
     pub control: Option<control::ControlOptions>,
+    /// Instants to take a snapshot at (docs/snapshots.md), each handed to the sink
+    /// ([`counters::RunSink::snapshot`]) once the run has settled there.
+    pub snapshot_at: Vec<SimTime>,
+    /// Start from a snapshot instead of the start ([`Resume`]): the run is built from
+    /// these options as any run is, then loaded, and goes on from the snapshot's instant.
+    pub resume: Option<Resume>,
 }
 
 /// A link of the scenario to a program outside the twin, which faults and power act on
@@ -253,6 +262,8 @@ impl RunOptions {
             ecu: nodes_ecu::EcuConfig::default(),
             comm: nodes_comm::CommConfig::default(),
             control: None,
+            snapshot_at: Vec::new(),
+            resume: None,
         }
     }
 
@@ -526,6 +537,11 @@ pub async fn run_with(
     sink: &mut dyn RunSink,
 ) -> anyhow::Result<RunCounters> {
     let clock = Clock::new(opts.clock);
+    // A run from a snapshot starts at its instant: the clock is there before any task is
+    // made.
+    if let Some(r) = &opts.resume {
+        tokio::time::advance(Duration::from_nanos(r.t.as_ns())).await;
+    }
     // The run's tasks on the run's executor: those due at one instant run in an order of
     // the run's own (`bus::exec`).
     bus::exec::run(clock, run_on(clock, opts, ready, sink)).await
@@ -539,31 +555,32 @@ async fn run_on(
 ) -> anyhow::Result<RunCounters> {
     let wall_start = Instant::now();
     let mut tapped = counters::Tapped::new(sink, opts.packet_events);
-    let sink: &mut dyn RunSink = &mut tapped;
     // Outside input taken in at the run's idle points, and real time's hold (`bus::pace`).
     let _pace = bus::pace::install(clock);
     // Every event of the run goes through one channel, in the order it happens.
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel::<RunEvent>();
-    let (segs, media_tasks) = build::media(&opts, clock, &ev_tx);
+    let start = snapshot::start_of(opts.resume.as_ref());
+    let (segs, media_tasks) = build::media(&opts, clock, &ev_tx, start);
     let mut background = Vec::new();
     // The gates of the scenario's outside links: their faults and power.
     let gates = links::gates(&opts);
     let socketcan_stats =
         links::spawn_socketcan_bridges(&opts, &segs, clock, &gates, &mut background)?;
     let boards = Boards::default();
-    let nodes = build::nodes(&mut opts, &segs, clock, &boards, &ev_tx);
-    let mut kiss = links::kiss(&opts, &segs, clock, &gates, &ev_tx, &mut background).await?;
-    let consoles = links::uart(&opts, &nodes.ctls(), clock, &ev_tx, &mut background).await?;
-    // The KISS servers' and UDP links' addresses, then the TCP consoles', then the control
-    // channel's.
-    kiss.bound.extend(consoles);
-    let mut control =
-        control::Control::start(opts.control.take(), clock, &mut kiss.bound, &mut background)
-            .await?;
-    spawn_pacer(&opts, clock, &ev_tx, &mut background);
-    if let Some(r) = ready {
-        let _ = r.send(kiss.bound.clone());
-    }
+    let nodes = build::nodes(&mut opts, &segs, clock, &boards, &ev_tx, start);
+    // What the tasks share is loaded before any of them first runs.
+    let resume_at = snapshot::resume_shared(opts.resume.as_ref(), &segs, &boards, &nodes.tasks)?;
+    let (kiss, mut control) = outside(
+        &mut opts,
+        &segs,
+        &nodes,
+        clock,
+        &gates,
+        &ev_tx,
+        &mut background,
+        ready,
+    )
+    .await?;
 
     // Faults are applied by the main loop at their times, so that their events sit in the
     // stream exactly where they take effect.
@@ -572,14 +589,15 @@ async fn run_on(
     // the platform's rules.
     let mut power_shell = power_shell(&opts, &nodes, &boards, &segs, &gates);
     let mut faults = control::Timeline::new(std::mem::take(&mut opts.faults));
+    if let Some(r) = opts.resume.take() {
+        LoopState::of(&mut power_shell, &gates, &mut faults, &mut tapped).resume(&r, resume_at)?;
+    }
+    let mut snapshots = Snapshots::new(&opts.snapshot_at, clock);
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let kiss_budget = kiss.budget.clone();
-    let handle_event = |ev: RunEvent, sink: &mut dyn RunSink| hand_on(ev, sink, &kiss_budget);
-    let control_on = control.is_on();
     let signalled = signalled();
     tokio::pin!(signalled);
     let mut interrupted: Option<StopCause> = None;
-    let wall_deadline = opts.wall_limit.map(|d| (d, wall_start + d));
     let mut fault_timer = bus::clock::Timer::new(clock);
     loop {
         let next_fault = faults.next_at().unwrap_or(SimTime::MAX).min(end);
@@ -591,25 +609,27 @@ async fn run_on(
                 break;
             }
             ev = ev_rx.recv() => {
-                handle_batch(ev, &mut ev_rx, &mut power_shell, sink, &kiss_budget);
+                handle_batch(ev, &mut ev_rx, &mut power_shell, &mut tapped, &kiss_budget);
                 // The wall clock's limit, looked at once a batch (a run in virtual time
                 // sleeps on no wall-clock timer).
-                if let Some((d, at)) = wall_deadline
-                    && std::time::Instant::now() >= at
-                {
-                    tracing::warn!("the run's wall-clock limit ({d:?}) passed: stopping");
-                    interrupted = Some(StopCause::WallLimit(d));
+                if let Some(cause) = wall_limit_passed(opts.wall_limit, wall_start) {
+                    interrupted = Some(cause);
                     break;
                 }
             }
-            Some(req) = control.recv(), if control_on => {
+            Some(req) = control.recv(), if control.is_on() => {
                 let t = req.t;
-                hand_on(control.answer(req, &mut faults), sink, &kiss_budget);
+                hand_on(control.answer(req, &mut faults), &mut tapped, &kiss_budget);
                 // What it asked for at this instant takes effect now.
                 let mut director = director(&segs, &ctls, &mut power_shell, &gates);
                 while let Some(f) = faults.pop_due(t) {
-                    apply_fault(&f, &mut director, sink, &kiss_budget);
+                    apply_fault(&f, &mut director, &mut tapped, &kiss_budget);
                 }
+            }
+            t = snapshots.due(), if snapshots.is_on() => {
+                let state = LoopState::of(&mut power_shell, &gates, &mut faults, &mut tapped);
+                let bytes = state.take(&segs, &boards, &nodes.tasks);
+                tapped.snapshot(t, bytes);
             }
             () = fault_timer.sleep_until(next_fault), if next_fault < SimTime::MAX => {
                 if next_fault >= end && faults.next_at().is_none_or(|at| at >= end) {
@@ -617,7 +637,7 @@ async fn run_on(
                 }
                 let mut director = director(&segs, &ctls, &mut power_shell, &gates);
                 while let Some(f) = faults.pop_due(next_fault) {
-                    apply_fault(&f, &mut director, sink, &kiss_budget);
+                    apply_fault(&f, &mut director, &mut tapped, &kiss_budget);
                 }
             }
         }
@@ -629,7 +649,7 @@ async fn run_on(
     media_tasks.iter().for_each(bus::exec::JoinHandle::abort);
     drop(ev_tx);
     while let Ok(ev) = ev_rx.try_recv() {
-        handle_event(ev, sink);
+        hand_on(ev, &mut tapped, &kiss_budget);
     }
     Ok(RunCounters {
         sim_time,
@@ -643,13 +663,90 @@ async fn run_on(
         cfp_drops: tapped.cfp_drops(),
         control: control.stats(),
         boards: boards.stats(),
-        links: opts
-            .outside
-            .iter()
-            .zip(&gates)
-            .map(|(l, g)| (l.name.clone(), g.stats()))
-            .collect(),
+        links: link_stats(&opts, &gates),
     })
+}
+
+/// The cause to stop if the run's wall-clock limit has passed since `wall_start`.
+fn wall_limit_passed(limit: Option<Duration>, wall_start: Instant) -> Option<StopCause> {
+    let d = limit?;
+    (wall_start.elapsed() >= d).then(|| {
+        tracing::warn!("the run's wall-clock limit ({d:?}) passed: stopping");
+        StopCause::WallLimit(d)
+    })
+}
+
+/// Each outside link's gate counts, by the link's name.
+fn link_stats(
+    opts: &RunOptions,
+    gates: &[bus::gate::LinkGate],
+) -> Vec<(String, bus::gate::GateStats)> {
+    opts.outside
+        .iter()
+        .zip(gates)
+        .map(|(l, g)| (l.name.clone(), g.stats()))
+        .collect()
+}
+
+/// The links to programs outside the twin: KISS servers and UDP links, the TCP consoles,
+/// the control channel and real time's pacer; `ready` is told the addresses bound (the
+/// KISS servers' and UDP links', then the consoles', then the control channel's).
+#[allow(clippy::too_many_arguments)]
+async fn outside(
+    opts: &mut RunOptions,
+    segs: &bus::outside::Segments,
+    nodes: &build::Nodes,
+    clock: Clock,
+    gates: &[bus::gate::LinkGate],
+    ev_tx: &mpsc::UnboundedSender<RunEvent>,
+    background: &mut Vec<tokio::task::JoinHandle<()>>,
+    ready: Option<oneshot::Sender<Vec<SocketAddr>>>,
+) -> anyhow::Result<(links::KissLinks, control::Control)> {
+    let mut kiss = links::kiss(opts, segs, clock, gates, ev_tx, background).await?;
+    let consoles = links::uart(opts, &nodes.ctls(), clock, ev_tx, background).await?;
+    kiss.bound.extend(consoles);
+    let control =
+        control::Control::start(opts.control.take(), clock, &mut kiss.bound, background).await?;
+    spawn_pacer(opts, clock, ev_tx, background);
+    if let Some(r) = ready {
+        let _ = r.send(kiss.bound.clone());
+    }
+    Ok((kiss, control))
+}
+
+/// The instants a run takes snapshots at, those to come.
+struct Snapshots {
+    at: std::collections::VecDeque<SimTime>,
+    timer: bus::clock::Timer,
+}
+
+impl Snapshots {
+    fn new(at: &[SimTime], clock: Clock) -> Self {
+        let now = clock.now();
+        let mut at: Vec<SimTime> = at.iter().copied().filter(|&t| t > now).collect();
+        at.sort_unstable();
+        at.dedup();
+        Snapshots {
+            at: at.into(),
+            timer: bus::clock::Timer::new(clock),
+        }
+    }
+
+    fn is_on(&self) -> bool {
+        !self.at.is_empty()
+    }
+
+    /// The next instant, once the run has settled there (or after: nothing happened
+    /// between).
+    async fn due(&mut self) -> SimTime {
+        let Some(&t) = self.at.front() else {
+            return std::future::pending().await;
+        };
+        self.timer.sleep_until(t).await;
+        bus::exec::settled().await;
+        self.at.pop_front();
+        t
+    }
 }
 
 /// Where a run ended, and why if it was stopped before its end: a virtual run ends exactly

@@ -228,3 +228,14 @@ impl PowerShell {
         events
     }
 }
+
+/// The rules' state (what they act on is the run's wiring; the links' gates and the
+/// activity board are saved with the media and the boards).
+impl snap::Snap for PowerShell {
+    fn save(&self, w: &mut snap::Writer) {
+        self.rules.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.rules.load(r)
+    }
+}

@@ -1,0 +1,183 @@
+//! The runtime's part of a snapshot (docs/snapshots.md): the media, every node's task, the
+//! boards, the power rules, the outside links' gates, the fault timeline and the run's
+//! packet tap. Saved where the run has settled at an instant asked for
+//! (`RunOptions::snapshot_at`, [`bus::exec::settled`]: every task waits, every channel
+//! between them is empty) and handed to the run's sink, which adds its own part; loaded
+//! into a run built from the same scenario (`RunOptions::resume`) before any of its tasks
+//! first runs, its clock already at the snapshot's instant.
+
+use anyhow::Context as _;
+use bus::driver::lock_core;
+use bus::exec::Start;
+use bus::gate::LinkGate;
+use bus::outside::Segments;
+use csp::SimTime;
+use platform::board::Boards;
+use snap::{Reader, Snap, SnapError, SnapNew as _, Writer};
+use twin_core::packets::PacketTap;
+
+use crate::build::NodeTask;
+use crate::control::Timeline;
+use crate::counters::Tapped;
+use crate::power::PowerShell;
+
+/// Where a run starts from a snapshot: the instant it was taken at and the runtime's part
+/// of it (what [`crate::counters::RunSink::snapshot`] was handed).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Resume {
+    /// The instant.
+    pub t: SimTime,
+    /// The runtime's state then.
+    pub run_state: Vec<u8>,
+}
+
+/// How a run's tasks begin: fresh, or resumed from `resume`.
+pub(crate) fn start_of(resume: Option<&Resume>) -> Start {
+    match resume {
+        Some(_) => Start::Resumed,
+        None => Start::Fresh,
+    }
+}
+
+/// What a run's tasks share, saved and loaded first: the media and the boards, which tasks
+/// may use as soon as they run.
+fn save_shared(w: &mut Writer, segs: &Segments, boards: &Boards, nodes: &[NodeTask]) {
+    segs.main.save(w);
+    segs.payload.save(w);
+    segs.ground.save(w);
+    boards.save(w);
+    nodes.len().save(w);
+    for n in nodes {
+        n.spec.addr.save(w);
+        lock_core(&n.core).save(w);
+    }
+}
+
+/// Load what [`save_shared`] saved into a run just built, before its tasks first run.
+fn load_shared(
+    r: &mut Reader<'_>,
+    segs: &Segments,
+    boards: &Boards,
+    nodes: &[NodeTask],
+) -> Result<(), SnapError> {
+    segs.main.clone().load(r)?;
+    segs.payload.clone().load(r)?;
+    segs.ground.clone().load(r)?;
+    boards.clone().load(r)?;
+    let n = usize::read(r)?;
+    if n != nodes.len() {
+        return Err(SnapError::Mismatch {
+            what: "nodes",
+            saved: n as u64,
+            built: nodes.len() as u64,
+        });
+    }
+    for node in nodes {
+        let at = r.at();
+        if u8::read(r)? != node.spec.addr {
+            return Err(SnapError::Bad {
+                what: "node address",
+                at,
+            });
+        }
+        lock_core(&node.core).load(r)?;
+    }
+    Ok(())
+}
+
+/// Load the shared part of `resume` (if the run is resumed) into a run just built; where
+/// the loop's part begins.
+pub(crate) fn resume_shared(
+    resume: Option<&Resume>,
+    segs: &Segments,
+    boards: &Boards,
+    nodes: &[NodeTask],
+) -> anyhow::Result<usize> {
+    let Some(r) = resume else { return Ok(0) };
+    let mut rd = Reader::new(&r.run_state);
+    load_shared(&mut rd, segs, boards, nodes).context(NOT_THIS_RUN)?;
+    Ok(rd.at())
+}
+
+const NOT_THIS_RUN: &str = "the snapshot does not fit this run";
+
+/// The run's loop's own state, saved and loaded after [`save_shared`]'s: the power rules,
+/// the gates (which the power rules switch as they are built), the fault timeline and the
+/// packet tap.
+pub(crate) struct LoopState<'a> {
+    power: &'a mut PowerShell,
+    gates: &'a [LinkGate],
+    faults: &'a mut Timeline,
+    tap: &'a mut Option<PacketTap>,
+}
+
+impl<'a> LoopState<'a> {
+    pub(crate) fn of(
+        power: &'a mut PowerShell,
+        gates: &'a [LinkGate],
+        faults: &'a mut Timeline,
+        tapped: &'a mut Tapped<'_>,
+    ) -> Self {
+        LoopState {
+            power,
+            gates,
+            faults,
+            tap: tapped.tap_mut(),
+        }
+    }
+
+    /// The runtime's part of a snapshot now (the run has settled).
+    pub(crate) fn take(&self, segs: &Segments, boards: &Boards, nodes: &[NodeTask]) -> Vec<u8> {
+        let mut w = Writer::new();
+        save_shared(&mut w, segs, boards, nodes);
+        self.save(&mut w);
+        w.into_bytes()
+    }
+
+    /// Load the loop's part of `r`, which begins at byte `at`.
+    pub(crate) fn resume(&mut self, r: &Resume, at: usize) -> anyhow::Result<()> {
+        let mut rd = Reader::new(r.run_state.get(at..).unwrap_or_default());
+        self.load(&mut rd)
+            .and_then(|()| rd.finish())
+            .context(NOT_THIS_RUN)
+    }
+
+    fn save(&self, w: &mut Writer) {
+        self.power.save(w);
+        self.gates.len().save(w);
+        for g in self.gates {
+            g.save(w);
+        }
+        self.faults.save(w);
+        self.tap.is_some().save(w);
+        if let Some(tap) = self.tap.as_ref() {
+            tap.save(w);
+        }
+    }
+
+    fn load(&mut self, r: &mut Reader<'_>) -> Result<(), SnapError> {
+        self.power.load(r)?;
+        let n = usize::read(r)?;
+        if n != self.gates.len() {
+            return Err(SnapError::Mismatch {
+                what: "outside links",
+                saved: n as u64,
+                built: self.gates.len() as u64,
+            });
+        }
+        for g in self.gates {
+            g.clone().load(r)?;
+        }
+        self.faults.load(r)?;
+        let at = r.at();
+        let tapped = bool::read(r)?;
+        match (tapped, self.tap.as_mut()) {
+            (true, Some(tap)) => tap.load(r),
+            (false, None) => Ok(()),
+            _ => Err(SnapError::Bad {
+                what: "packet tap (taken with packet events on, loaded with them off, or the other way)",
+                at,
+            }),
+        }
+    }
+}
