@@ -207,3 +207,22 @@ snap::fields!(CanErrorEvent {
     tec,
     rec
 });
+snap::unit_enum!(FrameLoss {
+    QueueFull,
+    BusOff,
+    Off
+});
+snap::tagged_enum!(TraceFrame {
+    Can(f),
+    Packet(bytes),
+    CanError(e),
+    CanLost(f, why),
+    CanUnreceived(f, why)
+});
+snap::fields!(TraceEvent {
+    t,
+    medium,
+    from,
+    frame,
+    dropped
+});

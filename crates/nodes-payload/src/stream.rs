@@ -536,6 +536,28 @@ snap::fields!(DataStream {
     position
 });
 
+// What a snapshot saves of a stream being checked (docs/snapshots.md).
+snap::fields!(StreamCheck {
+    frames_ok,
+    frames_bad,
+    addr,
+    first_seq,
+    last_seq,
+    missing_seqs,
+    missing_count,
+    out_of_order,
+    good_bytes,
+    lead_bytes,
+    skipped_bytes,
+    tail_bytes
+});
+snap::fields!(Walk {
+    check,
+    synced,
+    lead
+});
+snap::fields!(StreamChecker { walk, pending });
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

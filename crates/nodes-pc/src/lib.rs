@@ -2090,3 +2090,5 @@ impl snap::SnapNew for Phase {
         }
     }
 }
+
+snap::unit_enum!(LostCause { PowerLoss, Reboot });

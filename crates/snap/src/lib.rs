@@ -315,6 +315,42 @@ impl SnapNew for Arc<str> {
 }
 by_read!(Arc<str>);
 
+/// Distinct texts [`SnapNew`] for `&'static str` keeps for the process at most.
+pub const MAX_STATIC_TEXTS: usize = 4096;
+
+/// A text the program holds as a constant (why a frame was lost): saved as its text, read
+/// back as the same text, kept once for the whole process (each distinct text is allocated
+/// once and kept, at most [`MAX_STATIC_TEXTS`] of them, so that no input makes the process
+/// keep more; the program's own come to a few dozen).
+impl SaveRaw for &'static str {
+    fn save_raw(&self, w: &mut Writer) {
+        w.len(self.len());
+        w.raw(self.as_bytes());
+    }
+}
+impl SnapNew for &'static str {
+    const MIN_BYTES: usize = 4;
+    fn read(r: &mut Reader<'_>) -> Result<Self, SnapError> {
+        static TEXTS: std::sync::Mutex<BTreeSet<&'static str>> =
+            std::sync::Mutex::new(BTreeSet::new());
+        let at = r.at();
+        let text = String::read(r)?;
+        let mut texts = TEXTS
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(&kept) = texts.get(text.as_str()) {
+            return Ok(kept);
+        }
+        if texts.len() >= MAX_STATIC_TEXTS {
+            return Err(SnapError::Bad { what: "text", at });
+        }
+        let kept: &'static str = Box::leak(text.into_boxed_str());
+        texts.insert(kept);
+        Ok(kept)
+    }
+}
+by_read!(&'static str);
+
 impl SaveRaw for Duration {
     fn save_raw(&self, w: &mut Writer) {
         w.raw(&self.as_secs().to_le_bytes());

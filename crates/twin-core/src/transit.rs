@@ -249,6 +249,50 @@ impl Transit {
     }
 }
 
+// What a snapshot saves (docs/snapshots.md): the packets in progress, the recent ones and
+// the refusals not matched yet.
+snap::fields!(LostPacket {
+    t,
+    bus,
+    header,
+    data_len,
+    head,
+    reason
+});
+snap::fields!(Partial {
+    first,
+    begin,
+    fates,
+    receiver
+});
+snap::fields!(Fates {
+    seen,
+    count,
+    first_lost
+});
+snap::fields!(Transit {
+    partial,
+    recent,
+    refusals,
+    evicted
+});
+
+impl snap::Snap for BusName {
+    fn save(&self, w: &mut snap::Writer) {
+        self.0.save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        self.0.load(r)
+    }
+}
+
+impl snap::SnapNew for BusName {
+    const MIN_BYTES: usize = 4;
+    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
+        snap::SnapNew::read(r).map(BusName)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

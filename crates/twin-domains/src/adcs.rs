@@ -528,6 +528,19 @@ impl AttitudeExpect {
     }
 }
 
+// What a snapshot saves (docs/snapshots.md): the tally so far (the sampler is the
+// scenario's orbit and a cache).
+snap::fields!(AttitudeTally {
+    n,
+    range,
+    failures,
+    first
+});
+snap::fields!(AttitudeWatch {
+    tally;
+    skip expect, sampler
+});
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -834,6 +834,21 @@ fn unfinished(timeout: Duration) -> String {
     )
 }
 
+// What a snapshot saves (docs/snapshots.md): the tally so far.
+snap::fields!(OccurrenceTally {
+    n,
+    problems,
+    first,
+    last
+});
+snap::fields!(CommandWatch {
+    tally,
+    waiting,
+    sends,
+    outcomes;
+    skip command, occurrence, problem
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

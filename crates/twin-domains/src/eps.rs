@@ -346,3 +346,15 @@ impl PowerExpect {
         }
     }
 }
+
+// What a snapshot saves (docs/snapshots.md): the tally so far.
+snap::fields!(PowerTally {
+    n,
+    range,
+    sum,
+    first_bad
+});
+snap::fields!(PowerWatch {
+    tally;
+    skip expect
+});

@@ -203,7 +203,7 @@ pub struct WatchCx<'a> {
 
 /// An expectation judged while the run goes, from its events, so that what it looks at
 /// (a sample every second, for days) need not be kept in the report.
-pub trait Watch: Send {
+pub trait Watch: Send + snap::Snap {
     /// Take in one event of the run, in the order they happen (only those of
     /// [`Watch::kinds`]).
     fn observe(&mut self, ev: &RunEvent);
@@ -353,5 +353,17 @@ pub fn bounds(min: Option<u64>, max: Option<u64>) -> String {
         (Some(a), None) => format!(">= {a}"),
         (None, Some(b)) => format!("<= {b}"),
         (None, None) => "any".into(),
+    }
+}
+
+// What a snapshot saves of a watch: its tally so far (what it judges is the scenario's).
+snap::fields!(Extremes { lo, hi });
+
+impl snap::Snap for Box<dyn Watch> {
+    fn save(&self, w: &mut snap::Writer) {
+        (**self).save(w);
+    }
+    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
+        (**self).load(r)
     }
 }

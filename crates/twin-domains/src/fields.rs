@@ -408,6 +408,20 @@ impl Watch for FieldWatch {
     }
 }
 
+// What a snapshot saves (docs/snapshots.md): the tally so far.
+snap::fields!(Tally {
+    n,
+    first_held,
+    first_failed,
+    last,
+    lo,
+    hi
+});
+snap::fields!(FieldWatch {
+    tally;
+    skip expect, target, icd, net
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -408,6 +408,17 @@ impl Invariants {
     }
 }
 
+// What a snapshot saves (docs/snapshots.md): the first violations and what the checks
+// carry from event to event (the ICD's table and the settings are the scenario's).
+snap::fields!(Violation { name, t, detail });
+snap::fields!(Exchange { window, up, down });
+snap::fields!(Invariants {
+    first,
+    replies_checked,
+    exchanged;
+    skip icd, settings
+});
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -298,3 +298,16 @@ impl Watch for LatencyWatch {
 
 #[cfg(test)]
 mod tests;
+
+// What a snapshot saves (docs/snapshots.md): the round trips so far.
+snap::fields!(RoundTrips {
+    answered_ns,
+    unanswered,
+    unfinished
+});
+snap::fields!(LatencyWatch {
+    trips,
+    sent,
+    decided;
+    skip expect
+});

@@ -362,6 +362,13 @@ snap::fields!(GroundApp {
     in_place
 });
 
+snap::tagged_enum!(Outcome {
+    Reply { data, rtt },
+    Timeout,
+    SendFailed(why),
+    Unfinished
+});
+
 #[cfg(test)]
 mod tests {
     use std::collections::VecDeque;

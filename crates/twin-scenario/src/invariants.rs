@@ -109,3 +109,15 @@ pub struct ReplyStormSpec {
     #[serde(default)]
     pub window: Option<Dur>,
 }
+
+snap::unit_enum!(InvariantName {
+    FiniteState,
+    FramesAccounted,
+    IcdReplyLength,
+    NoReplyStorm,
+    OneActiveSession,
+    PcBalanced,
+    SilentWhileOff,
+    SocRange,
+    UnitQuaternion
+});

@@ -242,3 +242,5 @@ pub fn result_name(r: u8) -> &'static str {
         _ => "?",
     }
 }
+
+snap::tagged_enum!(RunEnd { Result(r), Lost(c) });

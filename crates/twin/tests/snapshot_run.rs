@@ -12,6 +12,7 @@ use m6p_twin::exec::{compile_seeded, load};
 use m6p_twin::runtime::build_runtime;
 use m6p_twin::runtime::counters::RunSink;
 use m6p_twin::runtime::{Resume, RunOptions, run_with};
+use snap::Snap as _;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -121,4 +122,110 @@ fn every_shipped_scenario_resumed_from_its_midpoint_goes_on_the_same() {
         resumes_the_same(&name, None, &[mid]);
         eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f64());
     }
+}
+
+/// The sink's part of a snapshot: the report's observers, the expectations' watches and the
+/// invariants, saved part way through a run's events and loaded into ones built fresh from
+/// the scenario, see the rest of the events and end in the same state, with the same report
+/// and the same verdicts, as those that saw every event.
+#[test]
+fn the_sinks_observers_watches_and_invariants_saved_mid_run_end_the_same() {
+    use m6p_twin::expectations::{Watch, WatchCx, check_watched};
+    use m6p_twin::invariants::Invariants;
+    use m6p_twin::report::observe::{Keep, Observer};
+
+    type Sink = (Observer, Vec<Option<Box<dyn Watch>>>, Invariants);
+    let mut watched = 0;
+    for name in [
+        "default.toml",
+        "eps-day.toml",
+        "pc-buffering.toml",
+        "adcs-nadir.toml",
+    ] {
+        let loaded = load(&repo().join("scenarios").join(name)).unwrap();
+        let compiled = compile_seeded(&loaded, None);
+        let mut opts = compiled.opts.clone();
+        opts.packet_events = true;
+        let mut seen = Vec::new();
+        let report = build_runtime()
+            .unwrap()
+            .block_on(m6p_twin::report::run_with(
+                opts.clone(),
+                None,
+                &mut |ev: &RunEvent| seen.push(ev.clone()),
+            ))
+            .unwrap();
+        let icd = opts.icd_map();
+        let cx = WatchCx {
+            tle: opts.tle.as_ref(),
+            net: Some(&opts.network),
+            icd: Some(&icd),
+        };
+        let fresh = || -> Sink {
+            (
+                Observer::new(
+                    Keep {
+                        trace: false,
+                        series: true,
+                    },
+                    opts.tle.as_ref(),
+                ),
+                compiled.expectations.iter().map(|x| x.watch(&cx)).collect(),
+                Invariants::for_run(&opts, &compiled.invariants),
+            )
+        };
+        let feed = |s: &mut Sink, seen: &[RunEvent]| {
+            for ev in seen {
+                s.0.observe(ev);
+                for w in s.1.iter_mut().flatten() {
+                    if w.kinds().has(ev.kind()) {
+                        w.observe(ev);
+                    }
+                }
+                s.2.observe(ev);
+            }
+        };
+        let save = |s: &Sink| {
+            let mut w = snap::Writer::new();
+            s.0.save(&mut w);
+            s.1.iter().flatten().for_each(|x| x.save(&mut w));
+            s.2.save(&mut w);
+            w.into_bytes()
+        };
+        let mid = seen.len() / 2;
+        let mut whole = fresh();
+        feed(&mut whole, &seen[..mid]);
+        let bytes = save(&whole);
+        feed(&mut whole, &seen[mid..]);
+        let mut resumed = fresh();
+        let mut r = snap::Reader::new(&bytes);
+        resumed.0.load(&mut r).unwrap();
+        for x in resumed.1.iter_mut().flatten() {
+            x.load(&mut r).unwrap();
+        }
+        resumed.2.load(&mut r).unwrap();
+        r.finish().unwrap();
+        feed(&mut resumed, &seen[mid..]);
+        assert!(
+            save(&resumed) == save(&whole),
+            "{name}: the same state at the end"
+        );
+        let net = &opts.network;
+        assert_eq!(
+            check_watched(&compiled.expectations, &resumed.1, &report, net),
+            check_watched(&compiled.expectations, &whole.1, &report, net),
+            "{name}: the same verdicts"
+        );
+        assert_eq!(resumed.2.verdicts(&report), whole.2.verdicts(&report));
+        assert_eq!(
+            format!("{:?}", resumed.0.finish()),
+            format!("{:?}", whole.0.finish()),
+            "{name}: the same report"
+        );
+        watched += whole.1.iter().flatten().count();
+    }
+    assert!(
+        watched >= 4,
+        "expectations judged as the run goes: {watched}"
+    );
 }

@@ -176,3 +176,30 @@ impl AttitudeObserver {
         (self.samples, self.summary)
     }
 }
+
+// What a snapshot saves (docs/snapshots.md); the sampler is the scenario's orbit and a
+// cache of rotations, the same whenever it is built.
+snap::fields!(AttitudeSample {
+    t,
+    rate_deg_s,
+    pointing_error_deg,
+    axis_error_deg,
+    estimation_error_deg,
+    target_elevation_deg,
+    max_wheel_rpm,
+    sun_visible_fraction,
+    mode,
+    tle_offset_m,
+    state
+});
+snap::fields!(AttitudeSummary {
+    samples,
+    first,
+    max_rate_deg_s,
+    first_detumbled
+});
+snap::fields!(AttitudeObserver {
+    samples,
+    summary;
+    skip sampler, forget_samples
+});

@@ -170,6 +170,33 @@ impl CommandObserver {
     }
 }
 
+// What a snapshot saves (docs/snapshots.md).
+snap::fields!(CommandSent {
+    label,
+    dst,
+    dport,
+    data,
+    timeout
+});
+snap::fields!(RequestResult {
+    request,
+    sent,
+    outcome
+});
+snap::fields!(RequestSummary {
+    requests,
+    answered,
+    unfinished
+});
+snap::fields!(CommandObserver {
+    kept,
+    summary,
+    waiting,
+    in_flight,
+    sends;
+    skip keep
+});
+
 #[cfg(test)]
 mod tests {
     use super::*;

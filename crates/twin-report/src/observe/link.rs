@@ -36,3 +36,6 @@ impl LinkObserver {
         (self.beacons, self.contact)
     }
 }
+
+// What a snapshot saves (docs/snapshots.md).
+snap::fields!(LinkObserver { beacons, contact });

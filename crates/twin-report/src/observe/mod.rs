@@ -120,3 +120,14 @@ impl Observer {
         }
     }
 }
+
+// What a snapshot saves (docs/snapshots.md): everything gathered so far.
+snap::fields!(Observer {
+    trace,
+    attitude,
+    power,
+    link,
+    sessions,
+    commands;
+    in_place
+});

@@ -89,3 +89,19 @@ impl PowerObserver {
         (self.samples, self.summary)
     }
 }
+
+// What a snapshot saves (docs/snapshots.md).
+snap::fields!(PowerSample {
+    t,
+    soc,
+    battery_v,
+    battery_a,
+    solar_w,
+    load_w
+});
+snap::fields!(PowerSummary { samples, min_soc });
+snap::fields!(PowerObserver {
+    samples,
+    summary;
+    skip forget_samples
+});

@@ -362,3 +362,25 @@ const REPLY_HEAD_BYTES: usize = 2;
 /// The drop reason of a payload's reply that reached the PC after the PC's own memory of
 /// its request (its retired ephemeral ports) and was dropped by CSP as `unbound port`.
 pub const LATE_AT_CSP: &str = "late, after the PC forgot the request (unbound port)";
+
+// What a snapshot saves (docs/snapshots.md).
+snap::fields!(SessionRun {
+    session,
+    payload,
+    started,
+    ended,
+    bytes,
+    len,
+    stream
+});
+snap::fields!(SessionsReport {
+    runs,
+    downlinked,
+    dropped,
+    produced,
+    syncs,
+    held,
+    pc_balanced,
+    transit;
+    skip forget_bytes
+});
