@@ -331,6 +331,23 @@ impl SnapshotFile {
     }
 }
 
+/// The CRC-32C and length of the file at `path`, read a piece at a time (an executable with
+/// its debug information is a hundred megabytes: it is not held in memory whole).
+fn crc_of_file(path: std::path::PathBuf) -> std::io::Result<(u32, u64)> {
+    use std::io::Read as _;
+    let mut f = std::fs::File::open(path)?;
+    let mut buf = vec![0u8; 1 << 16];
+    let (mut crc, mut len) = (0u32, 0u64);
+    loop {
+        let n = f.read(&mut buf)?;
+        if n == 0 {
+            return Ok((crc, len));
+        }
+        crc = crc32c::crc32c_append(crc, &buf[..n]);
+        len += n as u64;
+    }
+}
+
 /// This build's identity: the package's version and the CRC-32C and length of the running
 /// executable, so that two builds of one source (debug and release, another compiler) are
 /// told apart as surely as two sources are.
@@ -338,8 +355,8 @@ pub fn build_id() -> String {
     static ID: std::sync::OnceLock<String> = std::sync::OnceLock::new();
     ID.get_or_init(|| {
         let exe = std::env::current_exe()
-            .and_then(std::fs::read)
-            .map(|b| format!("{:08x}-{}", crc32c::crc32c(&b), b.len()))
+            .and_then(crc_of_file)
+            .map(|(crc, len)| format!("{crc:08x}-{len}"))
             .unwrap_or_else(|e| format!("unknown executable ({e})"));
         format!("m6p-twin {} exe {exe}", env!("CARGO_PKG_VERSION"))
     })
