@@ -44,6 +44,7 @@ DOCS = [
     "python/README.md",
     "docs/scenarios.md",
     "docs/campaigns.md",
+    "docs/snapshots.md",
     "docs/control.md",
     "docs/operations.md",
 ]

@@ -5,6 +5,8 @@
 pub mod observe;
 
 use std::fmt::Write as _;
+
+use anyhow::Context as _;
 use std::time::Duration;
 
 use bus::can::BusStats;
@@ -115,34 +117,46 @@ pub async fn run(
     run_with(opts, ready, &mut |_: &RunEvent| {}).await
 }
 
+/// The name of the report's part of a snapshot (its observers).
+pub const REPORT_SECTION: &str = "report";
+
 /// [`run`], handing every [`RunEvent`] to `sink` in the order they happen (the recorder),
 /// then to the report's observers.
 pub async fn run_with(
     opts: RunOptions,
     ready: Option<tokio::sync::oneshot::Sender<Vec<std::net::SocketAddr>>>,
-    sink: &mut (dyn FnMut(&RunEvent) + Send),
+    sink: &mut dyn RunSink,
 ) -> anyhow::Result<RunReport> {
     /// The sink first, then the observers.
     struct Both<'a> {
-        sink: &'a mut (dyn FnMut(&RunEvent) + Send),
+        sink: &'a mut dyn RunSink,
         observer: Observer,
     }
     impl RunSink for Both<'_> {
         fn event(&mut self, ev: &RunEvent) {
-            (self.sink)(ev);
+            self.sink.event(ev);
             self.observer.observe(ev);
         }
         fn contact(&mut self, t: SimTime, on: bool) {
+            self.sink.contact(t, on);
             self.observer.contact(t, on);
         }
+        fn snapshot(&mut self, t: SimTime, sections: &mut twin_runtime::Sections) {
+            sections.push((REPORT_SECTION.to_owned(), snap::to_bytes(&self.observer)));
+            self.sink.snapshot(t, sections);
+        }
     }
-    let observer = Observer::new(
+    let mut observer = Observer::new(
         Keep {
             trace: opts.trace,
             series: opts.keep_series,
         },
         opts.tle.as_ref(),
     );
+    if let Some(r) = &opts.resume {
+        snap::load_from(&mut observer, r.section(REPORT_SECTION)?)
+            .context("the snapshot's report does not fit this run")?;
+    }
     let mut both = Both { sink, observer };
     let counters = twin_runtime::run_with(opts, ready, &mut both).await?;
     Ok(RunReport::of(counters, both.observer.finish()))

@@ -24,11 +24,13 @@ pub trait RunSink: Send {
         let _ = (t, on);
     }
     /// The run settled at `t`, an instant a snapshot was asked for
-    /// (`RunOptions::snapshot_at`): `run_state` is the runtime's part of it (media, nodes,
-    /// the loop's own: [`crate::snapshot`]); the sink adds its own and keeps it. Told
-    /// between two events, every event before it handed on.
-    fn snapshot(&mut self, t: SimTime, run_state: Vec<u8>) {
-        let _ = (t, run_state);
+    /// (`RunOptions::snapshot_at`): `sections` holds the runtime's part (media, nodes, the
+    /// loop's own: [`crate::snapshot`]) and those of the sinks this one is inside; a sink
+    /// that keeps state adds its part and hands them on to the sink inside it, and the one
+    /// that wants the snapshot keeps them. Told between two events, every event before it
+    /// handed on.
+    fn snapshot(&mut self, t: SimTime, sections: &mut crate::Sections) {
+        let _ = (t, sections);
     }
 }
 
@@ -65,8 +67,8 @@ impl<'a> Tapped<'a> {
 }
 
 impl RunSink for Tapped<'_> {
-    fn snapshot(&mut self, t: SimTime, run_state: Vec<u8>) {
-        self.sink.snapshot(t, run_state);
+    fn snapshot(&mut self, t: SimTime, sections: &mut crate::Sections) {
+        self.sink.snapshot(t, sections);
     }
     fn event(&mut self, ev: &RunEvent) {
         self.sink.event(ev);

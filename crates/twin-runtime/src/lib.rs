@@ -17,7 +17,7 @@
 //!   the order it happens and applies the faults at their instants.
 
 mod build;
-pub use snapshot::Resume;
+pub use snapshot::{RUNTIME_SECTION, Resume, Sections};
 pub mod control;
 pub mod counters;
 pub mod faults;
@@ -121,6 +121,9 @@ pub struct RunOptions {
     /// Instants to take a snapshot at (docs/snapshots.md), each handed to the sink
     /// ([`counters::RunSink::snapshot`]) once the run has settled there.
     pub snapshot_at: Vec<SimTime>,
+    /// The file the snapshots go to (the twin's `run --snapshot`; the runtime hands them
+    /// to its sink, whose caller writes them).
+    pub snapshot_to: Option<std::path::PathBuf>,
     /// Start from a snapshot instead of the start ([`Resume`]): the run is built from
     /// these options as any run is, then loaded, and goes on from the snapshot's instant.
     pub resume: Option<Resume>,
@@ -263,6 +266,7 @@ impl RunOptions {
             comm: nodes_comm::CommConfig::default(),
             control: None,
             snapshot_at: Vec::new(),
+            snapshot_to: None,
             resume: None,
         }
     }
@@ -629,7 +633,7 @@ async fn run_on(
             t = snapshots.due(), if snapshots.is_on() => {
                 let state = LoopState::of(&mut power_shell, &gates, &mut faults, &mut tapped);
                 let bytes = state.take(&segs, &boards, &nodes.tasks);
-                tapped.snapshot(t, bytes);
+                tapped.snapshot(t, &mut vec![(RUNTIME_SECTION.to_owned(), bytes)]);
             }
             () = fault_timer.sleep_until(next_fault), if next_fault < SimTime::MAX => {
                 if next_fault >= end && faults.next_at().is_none_or(|at| at >= end) {

@@ -21,14 +21,32 @@ use crate::control::Timeline;
 use crate::counters::Tapped;
 use crate::power::PowerShell;
 
-/// Where a run starts from a snapshot: the instant it was taken at and the runtime's part
-/// of it (what [`crate::counters::RunSink::snapshot`] was handed).
+/// Where a run starts from a snapshot: the instant it was taken at and its sections, each
+/// layer's part under its name ([`Sections`]; the runtime's is [`RUNTIME_SECTION`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Resume {
     /// The instant.
     pub t: SimTime,
-    /// The runtime's state then.
-    pub run_state: Vec<u8>,
+    /// The parts.
+    pub sections: Sections,
+}
+
+/// A snapshot's parts, in the order they were taken: each layer of the run (the runtime,
+/// the report, the expectations, ...) saves its own under its name.
+pub type Sections = Vec<(String, Vec<u8>)>;
+
+/// The name of the runtime's part.
+pub const RUNTIME_SECTION: &str = "runtime";
+
+impl Resume {
+    /// The part named `name`, or an error saying it is missing.
+    pub fn section(&self, name: &str) -> anyhow::Result<&[u8]> {
+        self.sections
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, b)| b.as_slice())
+            .ok_or_else(|| anyhow::anyhow!("the snapshot has no `{name}` part"))
+    }
 }
 
 /// How a run's tasks begin: fresh, or resumed from `resume`.
@@ -94,7 +112,7 @@ pub(crate) fn resume_shared(
     nodes: &[NodeTask],
 ) -> anyhow::Result<usize> {
     let Some(r) = resume else { return Ok(0) };
-    let mut rd = Reader::new(&r.run_state);
+    let mut rd = Reader::new(r.section(RUNTIME_SECTION)?);
     load_shared(&mut rd, segs, boards, nodes).context(NOT_THIS_RUN)?;
     Ok(rd.at())
 }
@@ -136,7 +154,7 @@ impl<'a> LoopState<'a> {
 
     /// Load the loop's part of `r`, which begins at byte `at`.
     pub(crate) fn resume(&mut self, r: &Resume, at: usize) -> anyhow::Result<()> {
-        let mut rd = Reader::new(r.run_state.get(at..).unwrap_or_default());
+        let mut rd = Reader::new(r.section(RUNTIME_SECTION)?.get(at..).unwrap_or_default());
         self.load(&mut rd)
             .and_then(|()| rd.finish())
             .context(NOT_THIS_RUN)

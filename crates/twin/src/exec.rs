@@ -11,6 +11,8 @@ use crate::events::RunEvent;
 use crate::expectations::{Verdict, WatchCx, check_watched};
 use crate::plan::{Compiled, compile};
 use crate::report::{RunReport, run_with};
+use crate::runtime::counters::RunSink;
+use snap::Snap as _;
 use twin_scenario::scenario::Scenario;
 
 /// The embedded default scenario (`scenarios/default.toml`).
@@ -215,9 +217,77 @@ fn announce_bound(
 /// `keep` (`RunOptions::keep_series`), for the tests and programs that read them; the
 /// verdicts are the same.
 pub async fn execute_keeping(
-    mut compiled: Compiled,
+    compiled: Compiled,
     keep: bool,
     sink: &mut (dyn FnMut(&RunEvent) + Send),
+) -> anyhow::Result<Outcome> {
+    execute_sink(compiled, keep, &mut |ev: &RunEvent| sink(ev)).await
+}
+
+/// The expectations' watches and the invariants, judging the run as it goes, then the
+/// sink; their state is the expectations' part of a snapshot
+/// ([`crate::snapshots::EXPECTATIONS_SECTION`]).
+struct Watched<'a> {
+    invariants: Option<crate::invariants::Invariants>,
+    watches: Vec<Option<Box<dyn crate::expectations::Watch>>>,
+    /// The kinds of event each watch looks at (it is handed only those: a virtual call per
+    /// watch per frame otherwise).
+    kinds: Vec<crate::events::Kinds>,
+    sink: &'a mut dyn RunSink,
+}
+
+impl Watched<'_> {
+    fn save(&self) -> Vec<u8> {
+        let mut w = snap::Writer::new();
+        if let Some(i) = &self.invariants {
+            i.save(&mut w);
+        }
+        self.watches.iter().flatten().for_each(|x| x.save(&mut w));
+        w.into_bytes()
+    }
+
+    fn load(&mut self, bytes: &[u8]) -> Result<(), snap::SnapError> {
+        let mut r = snap::Reader::new(bytes);
+        if let Some(i) = self.invariants.as_mut() {
+            i.load(&mut r)?;
+        }
+        for x in self.watches.iter_mut().flatten() {
+            x.load(&mut r)?;
+        }
+        r.finish()
+    }
+}
+
+impl RunSink for Watched<'_> {
+    fn event(&mut self, ev: &RunEvent) {
+        if let Some(i) = self.invariants.as_mut() {
+            i.observe(ev);
+        }
+        let kind = ev.kind();
+        for (w, k) in self.watches.iter_mut().zip(&self.kinds) {
+            if k.has(kind)
+                && let Some(w) = w
+            {
+                w.observe(ev);
+            }
+        }
+        self.sink.event(ev);
+    }
+    fn contact(&mut self, t: SimTime, on: bool) {
+        self.sink.contact(t, on);
+    }
+    fn snapshot(&mut self, t: SimTime, sections: &mut twin_runtime::Sections) {
+        let part = self.save();
+        sections.push((crate::snapshots::EXPECTATIONS_SECTION.to_owned(), part));
+        self.sink.snapshot(t, sections);
+    }
+}
+
+/// [`execute_keeping`] into any sink (one that takes snapshots too).
+pub(crate) async fn execute_sink(
+    mut compiled: Compiled,
+    keep: bool,
+    sink: &mut dyn RunSink,
 ) -> anyhow::Result<Outcome> {
     let (tx, rx) = tokio::sync::oneshot::channel::<Vec<std::net::SocketAddr>>();
     let print_listen = announce_bound(&compiled.opts, rx);
@@ -234,9 +304,7 @@ pub async fn execute_keeping(
         net: Some(&running),
         icd: Some(&icd),
     };
-    let mut watches: Vec<_> = compiled.expectations.iter().map(|x| x.watch(&cx)).collect();
-    // Each watch is handed only the kinds of event it looks at (a virtual call per watch
-    // per frame otherwise).
+    let watches: Vec<_> = compiled.expectations.iter().map(|x| x.watch(&cx)).collect();
     let kinds: Vec<crate::events::Kinds> = watches
         .iter()
         .map(|w| {
@@ -250,33 +318,36 @@ pub async fn execute_keeping(
         .iter()
         .any(|k| k.has(crate::events::EventKind::Packet));
     // The invariants the scenario checks (`[invariants] check`; a campaign's runs: all).
-    let mut invariants = (!compiled.invariants.check.is_empty())
+    let invariants = (!compiled.invariants.check.is_empty())
         .then(|| crate::invariants::Invariants::for_run(&compiled.opts, &compiled.invariants));
-    let mut watched = |ev: &RunEvent| {
-        if let Some(i) = invariants.as_mut() {
-            i.observe(ev);
-        }
-        let kind = ev.kind();
-        for (w, k) in watches.iter_mut().zip(&kinds) {
-            if k.has(kind)
-                && let Some(w) = w
-            {
-                w.observe(ev);
-            }
-        }
-        sink(ev);
+    let mut watched = Watched {
+        invariants,
+        watches,
+        kinds,
+        sink,
     };
+    if let Some(r) = &compiled.opts.resume {
+        watched
+            .load(r.section(crate::snapshots::EXPECTATIONS_SECTION)?)
+            .context("the snapshot's expectations do not fit this run")?;
+    }
     let (report, ()) = tokio::join!(
         run_with(compiled.opts, Some(tx), &mut watched),
         print_listen
     );
     let report = report?;
+    let Watched {
+        invariants,
+        watches,
+        sink,
+        ..
+    } = watched;
     let mut verdicts = check_watched(&compiled.expectations, &watches, &report, &net);
     if let Some(i) = invariants {
         verdicts.extend(i.verdicts(&report));
     }
     for v in &verdicts {
-        sink(&RunEvent::Expectation {
+        sink.event(&RunEvent::Expectation {
             t: v.t.min(report.sim_time),
             name: v.name.clone(),
             passed: v.passed,
@@ -386,9 +457,16 @@ async fn execute_inner(
         }
         live(ev);
     };
+    let scenario = (loaded.name(), loaded.text.clone());
+    let mut taker = crate::snapshots::Taker::new(scenario, &compiled.opts);
     let Some(RecordTo { path, existing }) = record else {
-        let outcome = execute(compiled, &mut live).await?;
+        let mut sink = Taking {
+            events: &mut live,
+            taker: taker.as_mut(),
+        };
+        let outcome = execute_sink(compiled, false, &mut sink).await?;
         downlink_written(files)?;
+        snapshots_written(taker)?;
         return Ok((outcome, None));
     };
     // The scenario is never recorded over, whatever `--overwrite` says.
@@ -445,14 +523,47 @@ async fn execute_inner(
     compiled.opts.packet_events |=
         twin_scenario::channels::action(&loaded.scenario.record.channels, crate::record::TOPIC_CSP)
             != twin_scenario::channels::ChannelAction::Omit;
-    let outcome = execute(compiled, &mut |ev| {
-        recorder.write(ev);
-        live(ev);
-    })
-    .await?;
+    let mut sink = Taking {
+        events: |ev: &RunEvent| {
+            recorder.write(ev);
+            live(ev);
+        },
+        taker: taker.as_mut(),
+    };
+    let outcome = execute_sink(compiled, false, &mut sink).await?;
     let stats = recorder.finish();
     downlink_written(files)?;
+    snapshots_written(taker)?;
     Ok((outcome, Some(stats)))
+}
+
+/// A run's last sink: its events go to `events`, its snapshots to their files.
+struct Taking<'a, F> {
+    events: F,
+    taker: Option<&'a mut crate::snapshots::Taker>,
+}
+
+impl<F: FnMut(&RunEvent) + Send> RunSink for Taking<'_, F> {
+    fn event(&mut self, ev: &RunEvent) {
+        (self.events)(ev);
+    }
+    fn snapshot(&mut self, t: SimTime, sections: &mut twin_runtime::Sections) {
+        if let Some(taker) = self.taker.as_mut() {
+            taker.take(t, sections);
+        }
+    }
+}
+
+/// Say where the snapshots went; a write that failed fails the command, after the run.
+fn snapshots_written(taker: Option<crate::snapshots::Taker>) -> anyhow::Result<()> {
+    let Some(taker) = taker else { return Ok(()) };
+    for f in &taker.written {
+        eprintln!("snapshot: {}", f.display());
+    }
+    match taker.failed {
+        Some(e) => Err(e.context("writing a snapshot")),
+        None => Ok(()),
+    }
 }
 
 /// Where the S-band sink's files go: `[pc] downlink_dir`, else beside the recording

@@ -39,6 +39,7 @@ pub mod campaign_shrink;
 pub mod exec;
 pub mod gs;
 pub mod gs_shell;
+pub mod snapshots;
 
 /// The scenario: its data (m6p-twin-scenario), read and checked with every slice's check
 /// ([`validate::parse`]), and its JSON schema.

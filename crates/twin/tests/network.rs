@@ -407,15 +407,19 @@ fn with_both_comms_down_nobody_carries_the_link_until_one_comes_back() {
     let rt = build_runtime().unwrap();
     let mut radio = Vec::new();
     let report = rt
-        .block_on(m6p_twin::report::run_with(opts, None, &mut |ev| {
-            if let RunEvent::Log {
-                t, source, message, ..
-            } = ev
-                && source == "radio"
-            {
-                radio.push((t.as_ns() / 1_000_000_000, message.clone()));
-            }
-        }))
+        .block_on(m6p_twin::report::run_with(
+            opts,
+            None,
+            &mut |ev: &RunEvent| {
+                if let RunEvent::Log {
+                    t, source, message, ..
+                } = ev
+                    && source == "radio"
+                {
+                    radio.push((t.as_ns() / 1_000_000_000, message.clone()));
+                }
+            },
+        ))
         .unwrap();
     let said: Vec<(u64, &str)> = radio.iter().map(|(t, m)| (*t, m.as_str())).collect();
     assert_eq!(

@@ -48,9 +48,11 @@ fn a_run_judged_as_it_goes_keeps_no_samples_and_says_the_same() {
     let rt = build_runtime().unwrap();
     let mut inv = Invariants::for_run(&compiled.opts, &compiled.invariants);
     let kept = rt
-        .block_on(run_with(compiled.opts.clone(), None, &mut |ev| {
-            inv.observe(ev)
-        }))
+        .block_on(run_with(
+            compiled.opts.clone(),
+            None,
+            &mut |ev: &m6p_twin::events::RunEvent| inv.observe(ev),
+        ))
         .unwrap();
     let kept_broken = inv.finish(&kept);
     let kept_verdicts = check_all(&compiled.expectations, &kept, &compiled.opts.network);

@@ -11,7 +11,7 @@ use m6p_twin::events::RunEvent;
 use m6p_twin::exec::{compile_seeded, load};
 use m6p_twin::runtime::build_runtime;
 use m6p_twin::runtime::counters::RunSink;
-use m6p_twin::runtime::{Resume, RunOptions, run_with};
+use m6p_twin::runtime::{Resume, RunOptions, Sections, run_with};
 use snap::Snap as _;
 
 fn repo() -> PathBuf {
@@ -23,7 +23,7 @@ fn repo() -> PathBuf {
 #[derive(Default)]
 struct Collect {
     events: Vec<String>,
-    snapshots: Vec<(SimTime, Vec<u8>, usize)>,
+    snapshots: Vec<(SimTime, Sections, usize)>,
 }
 
 impl RunSink for Collect {
@@ -33,8 +33,9 @@ impl RunSink for Collect {
     fn contact(&mut self, t: SimTime, on: bool) {
         self.events.push(format!("contact {t} {on}"));
     }
-    fn snapshot(&mut self, t: SimTime, run_state: Vec<u8>) {
-        self.snapshots.push((t, run_state, self.events.len()));
+    fn snapshot(&mut self, t: SimTime, sections: &mut Sections) {
+        self.snapshots
+            .push((t, std::mem::take(sections), self.events.len()));
     }
 }
 
@@ -73,10 +74,7 @@ fn resumes_the_same(name: &str, span: Option<Duration>, at: &[SimTime]) {
     assert_eq!(taken.snapshots.len(), at.len());
     for (t, state, before) in taken.snapshots {
         let mut opts = options(name, span);
-        opts.resume = Some(Resume {
-            t,
-            run_state: state,
-        });
+        opts.resume = Some(Resume { t, sections: state });
         let resumed = run(opts);
         let expected = &plain.events[before..];
         let first_diff = resumed

@@ -117,6 +117,59 @@ pub struct RunArgs {
     /// recorded on `/control` and replayed. Implies real time (docs/control.md).
     #[arg(long, value_name = "ADDR", value_parser = parse_control_addr)]
     pub control: Option<SocketAddr>,
+    /// Take a snapshot of the whole twin where the run has settled at each of these
+    /// simulated instants (comma-separated: 1h,90m), into --snapshot (docs/snapshots.md).
+    #[arg(long, value_name = "T[,T...]", value_parser = parse_duration, value_delimiter = ',', requires = "snapshot")]
+    pub snapshot_at: Vec<Duration>,
+    /// The snapshot file (with several instants, each named for its own:
+    /// `x.snap` -> `x.3600000000000ns.snap`).
+    #[arg(long, value_name = "FILE", requires = "snapshot_at")]
+    pub snapshot: Option<PathBuf>,
+    /// Start from a snapshot taken by this build of this scenario with this seed, instead
+    /// of from the start: the run goes on from its instant as the run that took it did.
+    #[arg(long, value_name = "FILE")]
+    pub from_snapshot: Option<PathBuf>,
+}
+
+/// The run's snapshots: those to take, and the one it starts from.
+fn snapshot_options(
+    opts: &mut m6p_twin::runtime::RunOptions,
+    a: &RunArgs,
+    loaded: &exec::Loaded,
+) -> anyhow::Result<()> {
+    opts.snapshot_at = a
+        .snapshot_at
+        .iter()
+        .map(|d| csp::SimTime::ZERO + *d)
+        .collect();
+    opts.snapshot_to.clone_from(&a.snapshot);
+    let Some(path) = &a.from_snapshot else {
+        return Ok(());
+    };
+    if a.record.is_some() || loaded.scenario.record.file.is_some() {
+        anyhow::bail!(
+            "{}: a run from a snapshot is not recorded yet (the recorder's state is not in \
+             snapshots); run it without --record (and without the scenario's record.file)",
+            path.display()
+        );
+    }
+    let scenario = (loaded.name(), loaded.text.as_str());
+    let resume = m6p_twin::snapshots::resume_from(path, (&scenario.0, scenario.1), opts.seed)?;
+    // Real time begins where the run does.
+    opts.clock = match opts.clock {
+        ClockMode::Realtime { speed } => ClockMode::VirtualThenRealtime {
+            from: resume.t,
+            speed,
+        },
+        ClockMode::VirtualThenRealtime { from, speed } => ClockMode::VirtualThenRealtime {
+            from: from.max(resume.t),
+            speed,
+        },
+        ClockMode::Virtual => ClockMode::Virtual,
+    };
+    eprintln!("from snapshot {} at {}", path.display(), resume.t);
+    opts.resume = Some(resume);
+    Ok(())
 }
 
 /// `--control ADDR`: a loopback IP:PORT, or a port on 127.0.0.1.
@@ -257,6 +310,7 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
         );
     }
     choose_clock(opts, &a, &loaded.scenario)?;
+    snapshot_options(opts, &a, &loaded)?;
     let name = loaded.name();
     eprintln!(
         "running scenario `{name}` ({}), seed {}, {}",

@@ -1,0 +1,123 @@
+//! A run's snapshot files (docs/snapshots.md): `run --snapshot-at T --snapshot FILE` writes
+//! one where the run settles at each instant, `run --from-snapshot FILE` starts a run from
+//! one. The file is `twin_core::snapshot_file`'s container; its sections are the parts each
+//! layer of the run saved (the runtime's, the report's, the expectations').
+
+use std::path::{Path, PathBuf};
+
+use csp::SimTime;
+use twin_core::snapshot_file::{SnapshotFile, SnapshotHeader, build_id};
+use twin_runtime::{Resume, Sections};
+
+/// The name of the expectations' part of a snapshot (their watches and the invariants).
+pub const EXPECTATIONS_SECTION: &str = "expectations";
+
+/// Where a run's snapshots go, and what their header says.
+#[derive(Debug)]
+pub struct Taker {
+    path: PathBuf,
+    /// More than one instant: each file is named for its instant.
+    several: bool,
+    scenario_name: String,
+    scenario_toml: String,
+    seed: u64,
+    /// The files written so far.
+    pub written: Vec<PathBuf>,
+    /// The first write that failed (the run goes on; the command fails at its end).
+    pub failed: Option<anyhow::Error>,
+}
+
+impl Taker {
+    /// The taker of the run of `scenario` (its name and text) with `opts`, if it takes
+    /// snapshots.
+    pub fn new(scenario: (String, String), opts: &twin_runtime::RunOptions) -> Option<Self> {
+        let path = opts.snapshot_to.clone()?;
+        let (scenario_name, scenario_toml) = scenario;
+        Some(Taker {
+            path,
+            several: opts.snapshot_at.len() > 1,
+            scenario_name,
+            scenario_toml,
+            seed: opts.seed,
+            written: Vec::new(),
+            failed: None,
+        })
+    }
+
+    /// Write the snapshot taken at `t`.
+    pub fn take(&mut self, t: SimTime, sections: &Sections) {
+        let path = file_at(&self.path, t, self.several);
+        let file = SnapshotFile {
+            header: SnapshotHeader {
+                build: build_id(),
+                scenario_name: self.scenario_name.clone(),
+                scenario_toml: self.scenario_toml.clone(),
+                seed: self.seed,
+                t_ns: t.as_ns(),
+                sections: sections
+                    .iter()
+                    .map(|(n, b)| (n.clone(), b.len() as u64))
+                    .collect(),
+            },
+            sections: sections.iter().map(|(_, b)| b.clone()).collect(),
+        };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+            && let Err(e) = std::fs::create_dir_all(dir)
+        {
+            tracing::warn!(%t, "snapshot not written: creating {}: {e}", dir.display());
+            self.failed
+                .get_or_insert(anyhow::anyhow!("creating {}: {e}", dir.display()));
+            return;
+        }
+        match file.write(&path) {
+            Ok(()) => {
+                tracing::info!(%t, "snapshot: {}", path.display());
+                self.written.push(path);
+            }
+            Err(e) => {
+                tracing::warn!(%t, "snapshot not written: {e}");
+                self.failed.get_or_insert(e.into());
+            }
+        }
+    }
+}
+
+/// The file of the snapshot at `t`: `path` itself, or with several instants `path` with
+/// the instant in nanoseconds before its extension (`x.snap` -> `x.3600000000000ns.snap`).
+pub fn file_at(path: &Path, t: SimTime, several: bool) -> PathBuf {
+    if !several {
+        return path.to_path_buf();
+    }
+    let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}.{}ns.{}", t.as_ns(), ext.to_string_lossy()),
+        None => format!("{stem}.{}ns", t.as_ns()),
+    };
+    path.with_file_name(name)
+}
+
+/// Where the run of `scenario` (its name and text) with seed `seed` starts from the
+/// snapshot at `path`: refused, with the file's name and why, unless this build took it of
+/// this scenario's text with this seed.
+pub fn resume_from(path: &Path, scenario: (&str, &str), seed: u64) -> anyhow::Result<Resume> {
+    let file = SnapshotFile::read(path)?;
+    file.check(path, &build_id(), Some(scenario))?;
+    if file.header.seed != seed {
+        anyhow::bail!(
+            "{}: a snapshot of the run with seed {}, not {seed}",
+            path.display(),
+            file.header.seed
+        );
+    }
+    let sections = file
+        .header
+        .sections
+        .iter()
+        .map(|(n, _)| n.clone())
+        .zip(file.sections)
+        .collect();
+    Ok(Resume {
+        t: SimTime::from_ns(file.header.t_ns),
+        sections,
+    })
+}
