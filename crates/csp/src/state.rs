@@ -144,106 +144,21 @@ impl SnapNew for DropCause {
     }
 }
 
-impl Snap for NodeEvent {
-    fn save(&self, w: &mut Writer) {
-        match self {
-            NodeEvent::Drop {
-                t,
-                reason,
-                detail,
-                packet,
-            } => {
-                tag(w, 0);
-                t.save(w);
-                reason.save(w);
-                detail.save(w);
-                packet.save(w);
-            }
-            NodeEvent::Log { t, severity, text } => {
-                tag(w, 1);
-                t.save(w);
-                severity.save(w);
-                text.save(w);
-            }
-        }
-    }
-    load_by_read!();
-}
+snap::tagged_enum!(NodeEvent {
+    Drop {
+        t,
+        reason,
+        detail,
+        packet
+    },
+    Log { t, severity, text }
+});
 
-impl SnapNew for NodeEvent {
-    fn read(r: &mut Reader<'_>) -> Result<Self, SnapError> {
-        match u8::read(r)? {
-            0 => Ok(NodeEvent::Drop {
-                t: SnapNew::read(r)?,
-                reason: SnapNew::read(r)?,
-                detail: SnapNew::read(r)?,
-                packet: SnapNew::read(r)?,
-            }),
-            1 => Ok(NodeEvent::Log {
-                t: SnapNew::read(r)?,
-                severity: SnapNew::read(r)?,
-                text: SnapNew::read(r)?,
-            }),
-            _ => Err(r.bad("NodeEvent")),
-        }
-    }
-}
+snap::tagged_enum!(Transmit {
+    Can { iface, frame },
+    Packet { iface, packet }
+});
 
-impl Snap for Transmit {
-    fn save(&self, w: &mut Writer) {
-        match self {
-            Transmit::Can { iface, frame } => {
-                tag(w, 0);
-                iface.save(w);
-                frame.save(w);
-            }
-            Transmit::Packet { iface, packet } => {
-                tag(w, 1);
-                iface.save(w);
-                packet.save(w);
-            }
-        }
-    }
-    load_by_read!();
-}
-
-impl SnapNew for Transmit {
-    fn read(r: &mut Reader<'_>) -> Result<Self, SnapError> {
-        match u8::read(r)? {
-            0 => Ok(Transmit::Can {
-                iface: SnapNew::read(r)?,
-                frame: SnapNew::read(r)?,
-            }),
-            1 => Ok(Transmit::Packet {
-                iface: SnapNew::read(r)?,
-                packet: SnapNew::read(r)?,
-            }),
-            _ => Err(r.bad("Transmit")),
-        }
-    }
-}
-
-impl Snap for NodeFault {
-    fn save(&self, w: &mut Writer) {
-        match self {
-            NodeFault::Clock { jump_ns, drift_ppm } => {
-                tag(w, 0);
-                jump_ns.save(w);
-                drift_ppm.save(w);
-            }
-        }
-    }
-    load_by_read!();
-}
-
-impl SnapNew for NodeFault {
-    fn read(r: &mut Reader<'_>) -> Result<Self, SnapError> {
-        match u8::read(r)? {
-            0 => Ok(NodeFault::Clock {
-                jump_ns: SnapNew::read(r)?,
-                drift_ppm: SnapNew::read(r)?,
-            }),
-            _ => Err(r.bad("NodeFault")),
-        }
-    }
-}
+snap::tagged_enum!(NodeFault {
+    Clock { jump_ns, drift_ppm }
+});

@@ -751,48 +751,15 @@ snap::fields!(EpsApp {
     skip truth, activity
 });
 
-impl snap::Snap for EpsEvent {
-    fn save(&self, w: &mut snap::Writer) {
-        match *self {
-            EpsEvent::Channel { channel, on } => (0u8, channel, on).save(w),
-            EpsEvent::SetSoc(x) => (1u8, x).save(w),
-            EpsEvent::PanelFail(i) => (2u8, i).save(w),
-            EpsEvent::PanelRestore(i) => (3u8, i).save(w),
-            EpsEvent::BatteryFade(x) => (4u8, x).save(w),
-            EpsEvent::ChannelStuck(c) => (5u8, c).save(w),
-            EpsEvent::ChannelFreed(c) => (6u8, c).save(w),
-        }
-    }
-    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
-        *self = snap::SnapNew::read(r)?;
-        Ok(())
-    }
-}
-
-impl snap::SnapNew for EpsEvent {
-    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
-        use snap::SnapNew;
-        let at = r.at();
-        Ok(match u8::read(r)? {
-            0 => EpsEvent::Channel {
-                channel: SnapNew::read(r)?,
-                on: SnapNew::read(r)?,
-            },
-            1 => EpsEvent::SetSoc(SnapNew::read(r)?),
-            2 => EpsEvent::PanelFail(SnapNew::read(r)?),
-            3 => EpsEvent::PanelRestore(SnapNew::read(r)?),
-            4 => EpsEvent::BatteryFade(SnapNew::read(r)?),
-            5 => EpsEvent::ChannelStuck(SnapNew::read(r)?),
-            6 => EpsEvent::ChannelFreed(SnapNew::read(r)?),
-            _ => {
-                return Err(snap::SnapError::Bad {
-                    what: "EpsEvent",
-                    at,
-                });
-            }
-        })
-    }
-}
+snap::tagged_enum!(EpsEvent {
+    Channel { channel, on },
+    SetSoc(soc),
+    PanelFail(panel),
+    PanelRestore(panel),
+    BatteryFade(fade),
+    ChannelStuck(channel),
+    ChannelFreed(channel)
+});
 
 #[cfg(test)]
 mod tests;

@@ -295,32 +295,10 @@ snap::fields!(SafeMonitor {
     bad_replies
 });
 
-impl snap::Snap for SafeCause {
-    fn save(&self, w: &mut snap::Writer) {
-        match self {
-            SafeCause::LowBattery => snap::Snap::save(&0u8, w),
-            SafeCause::Estimator(why) => snap::Snap::save(&(1u8, *why), w),
-        }
-    }
-    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
-        *self = snap::SnapNew::read(r)?;
-        Ok(())
-    }
-}
-
-impl snap::SnapNew for SafeCause {
-    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
-        let at = r.at();
-        match <u8 as snap::SnapNew>::read(r)? {
-            0 => Ok(SafeCause::LowBattery),
-            1 => Ok(SafeCause::Estimator(snap::SnapNew::read(r)?)),
-            _ => Err(snap::SnapError::Bad {
-                what: "SafeCause",
-                at,
-            }),
-        }
-    }
-}
+snap::tagged_enum!(SafeCause {
+    LowBattery,
+    Estimator(why)
+});
 
 #[cfg(test)]
 mod tests {

@@ -836,49 +836,14 @@ snap::fields!(Script {
 // The scripts uploaded (the capacity is the FC's).
 snap::fields!(Schedule { scripts; skip capacity });
 
-impl snap::Snap for ScriptAttitude {
-    fn save(&self, w: &mut snap::Writer) {
-        match self {
-            ScriptAttitude::Eci(q) => (0u8, *q).save(w),
-            ScriptAttitude::Lvlh(q) => (1u8, *q).save(w),
-            ScriptAttitude::Tnw(q) => (2u8, *q).save(w),
-            ScriptAttitude::Geo {
-                lat_deg,
-                lon_deg,
-                alt_m,
-                axis_body,
-            } => {
-                (3u8, *lat_deg, *lon_deg, *alt_m).save(w);
-                axis_body.save(w);
-            }
-        }
+snap::tagged_enum!(ScriptAttitude {
+    Eci(q),
+    Lvlh(q),
+    Tnw(q),
+    Geo {
+        lat_deg,
+        lon_deg,
+        alt_m,
+        axis_body
     }
-    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
-        *self = snap::SnapNew::read(r)?;
-        Ok(())
-    }
-}
-
-impl snap::SnapNew for ScriptAttitude {
-    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
-        use snap::SnapNew;
-        let at = r.at();
-        Ok(match u8::read(r)? {
-            0 => ScriptAttitude::Eci(SnapNew::read(r)?),
-            1 => ScriptAttitude::Lvlh(SnapNew::read(r)?),
-            2 => ScriptAttitude::Tnw(SnapNew::read(r)?),
-            3 => ScriptAttitude::Geo {
-                lat_deg: SnapNew::read(r)?,
-                lon_deg: SnapNew::read(r)?,
-                alt_m: SnapNew::read(r)?,
-                axis_body: SnapNew::read(r)?,
-            },
-            _ => {
-                return Err(snap::SnapError::Bad {
-                    what: "ScriptAttitude",
-                    at,
-                });
-            }
-        })
-    }
-}
+});

@@ -861,89 +861,22 @@ snap::fields!(PayloadApp {
     skip addr
 });
 
-impl snap::Snap for ReplyKind {
-    fn save(&self, w: &mut snap::Writer) {
-        match self {
-            ReplyKind::Fixed(b) => {
-                0u8.save(w);
-                b.save(w);
-            }
-            ReplyKind::Poll { take, pad_to } => (1u8, *take, *pad_to).save(w),
-        }
-    }
-    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
-        *self = snap::SnapNew::read(r)?;
-        Ok(())
-    }
-}
+snap::tagged_enum!(ReplyKind {
+    Fixed(bytes),
+    Poll { take, pad_to }
+});
 
-impl snap::SnapNew for ReplyKind {
-    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
-        use snap::SnapNew;
-        let at = r.at();
-        match u8::read(r)? {
-            0 => Ok(ReplyKind::Fixed(SnapNew::read(r)?)),
-            1 => Ok(ReplyKind::Poll {
-                take: SnapNew::read(r)?,
-                pad_to: SnapNew::read(r)?,
-            }),
-            _ => Err(snap::SnapError::Bad {
-                what: "ReplyKind",
-                at,
-            }),
-        }
-    }
-}
-
-impl snap::Snap for Behaviour {
-    fn save(&self, w: &mut snap::Writer) {
-        match *self {
-            Behaviour::Normal => 0u8.save(w),
-            Behaviour::NoAck => 1u8.save(w),
-            Behaviour::WrongEcho => 2u8.save(w),
-            Behaviour::Slow { extra } => (3u8, extra).save(w),
-            Behaviour::SilentFor { polls } => (4u8, polls).save(w),
-            Behaviour::Silent => 5u8.save(w),
-            Behaviour::Oversize { extra_bytes } => (6u8, extra_bytes).save(w),
-            Behaviour::Garbage => 7u8.save(w),
-            Behaviour::ZeroLength => 8u8.save(w),
-        }
-    }
-    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
-        *self = snap::SnapNew::read(r)?;
-        Ok(())
-    }
-}
-
-impl snap::SnapNew for Behaviour {
-    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
-        use snap::SnapNew;
-        let at = r.at();
-        Ok(match u8::read(r)? {
-            0 => Behaviour::Normal,
-            1 => Behaviour::NoAck,
-            2 => Behaviour::WrongEcho,
-            3 => Behaviour::Slow {
-                extra: SnapNew::read(r)?,
-            },
-            4 => Behaviour::SilentFor {
-                polls: SnapNew::read(r)?,
-            },
-            5 => Behaviour::Silent,
-            6 => Behaviour::Oversize {
-                extra_bytes: SnapNew::read(r)?,
-            },
-            7 => Behaviour::Garbage,
-            8 => Behaviour::ZeroLength,
-            _ => {
-                return Err(snap::SnapError::Bad {
-                    what: "Behaviour",
-                    at,
-                });
-            }
-        })
-    }
-}
+snap::tagged_enum!(Behaviour {
+    Normal,
+    NoAck,
+    WrongEcho,
+    Slow { extra },
+    SilentFor { polls },
+    Silent,
+    Oversize { extra_bytes },
+    Garbage,
+    ZeroLength
+});
 
 #[cfg(test)]
 mod tests {

@@ -1988,67 +1988,18 @@ snap::fields!(PcApp {
     skip activity
 });
 
-impl snap::Snap for SessionMode {
-    fn save(&self, w: &mut snap::Writer) {
-        match *self {
-            SessionMode::Polling {
-                poll_period,
-                reply_timeout,
-            } => (0u8, poll_period, reply_timeout).save(w),
-            SessionMode::Buffering => 1u8.save(w),
-        }
-    }
-    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
-        *self = snap::SnapNew::read(r)?;
-        Ok(())
-    }
-}
+snap::tagged_enum!(SessionMode {
+    Polling {
+        poll_period,
+        reply_timeout
+    },
+    Buffering
+});
 
-impl snap::SnapNew for SessionMode {
-    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
-        use snap::SnapNew;
-        let at = r.at();
-        match u8::read(r)? {
-            0 => Ok(SessionMode::Polling {
-                poll_period: SnapNew::read(r)?,
-                reply_timeout: SnapNew::read(r)?,
-            }),
-            1 => Ok(SessionMode::Buffering),
-            _ => Err(snap::SnapError::Bad {
-                what: "SessionMode",
-                at,
-            }),
-        }
-    }
-}
-
-impl snap::Snap for Wait {
-    fn save(&self, w: &mut snap::Writer) {
-        match *self {
-            Wait::Reply { port, deadline } => (0u8, port, deadline).save(w),
-            Wait::Next(t) => (1u8, t).save(w),
-        }
-    }
-    fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), snap::SnapError> {
-        *self = snap::SnapNew::read(r)?;
-        Ok(())
-    }
-}
-
-impl snap::SnapNew for Wait {
-    fn read(r: &mut snap::Reader<'_>) -> Result<Self, snap::SnapError> {
-        use snap::SnapNew;
-        let at = r.at();
-        match u8::read(r)? {
-            0 => Ok(Wait::Reply {
-                port: SnapNew::read(r)?,
-                deadline: SnapNew::read(r)?,
-            }),
-            1 => Ok(Wait::Next(SnapNew::read(r)?)),
-            _ => Err(snap::SnapError::Bad { what: "Wait", at }),
-        }
-    }
-}
+snap::tagged_enum!(Wait {
+    Reply { port, deadline },
+    Next(t)
+});
 
 impl snap::Snap for Phase {
     fn save(&self, w: &mut snap::Writer) {
