@@ -62,6 +62,14 @@ impl LogOrder {
         self.held.is_empty()
     }
 
+    /// The held messages in the order they will be written: channel, log time, bytes (a
+    /// snapshot keeps them; holding them again in this order gives the same order).
+    pub fn held(&self) -> impl Iterator<Item = (usize, u64, &[u8])> + '_ {
+        self.held
+            .iter()
+            .map(|h| (h.chan, h.log_time, &self.arena[h.start..h.start + h.len]))
+    }
+
     /// Hold a copy of a message, after every held message of its log time or earlier.
     pub fn hold(&mut self, chan: usize, log_time: u64, data: &[u8]) {
         let h = Held {

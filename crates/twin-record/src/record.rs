@@ -136,6 +136,12 @@ pub const METADATA_NAME: &str = "m6p-twin";
 pub const SCENARIO_ATTACHMENT: &str = "scenario.toml";
 /// Version of the recording layout (channels and fields), stored in the metadata.
 pub const FORMAT_VERSION: &str = "6";
+/// The metadata record of a recording that starts from a snapshot (`at_ns`: its instant).
+pub const RESUMED_METADATA_NAME: &str = "m6p-twin-resumed";
+/// The attachment holding the snapshot a resumed recording starts from.
+pub const SNAPSHOT_ATTACHMENT: &str = "snapshot.snap";
+/// The name of the recorder's part of a snapshot ([`Recorder::save_state`]).
+pub const RECORD_SECTION: &str = "record";
 
 /// Topic of every decoded CSP packet.
 pub const TOPIC_CSP: &str = "/csp/packets";
@@ -2961,6 +2967,8 @@ impl Recorder {
     }
 }
 
+mod state;
+
 /// Events handed to a [`RecorderThread`] at once.
 const RECORDER_BATCH: usize = 512;
 
@@ -2974,6 +2982,11 @@ enum ToRecorder {
     Flush,
     /// The run ended: finish the file.
     Finish,
+    /// Answer with the recorder's state after the events sent before (none: the
+    /// recording stopped).
+    Snapshot(std::sync::mpsc::SyncSender<Option<Vec<u8>>>),
+    /// Carry the snapshot file taken at this instant.
+    Attach(SimTime, Vec<u8>),
 }
 
 /// A [`Recorder`] on a thread of its own: the run hands it copies of its events in
@@ -3037,6 +3050,18 @@ impl RecorderThread {
                                 recorder = None;
                             }
                         }
+                        ToRecorder::Snapshot(reply) => {
+                            let _ = reply.send(recorder.as_ref().map(Recorder::save_state));
+                        }
+                        ToRecorder::Attach(t, file) => {
+                            if let Some(r) = recorder.as_mut()
+                                && let Err(e) = r.attach_snapshot(t, &file)
+                            {
+                                stopped(&path, &partial, r.position(), &e);
+                                failure = Some(e);
+                                recorder = None;
+                            }
+                        }
                         ToRecorder::Finish => {
                             if let Some(e) = failure {
                                 return Err(
@@ -3079,6 +3104,23 @@ impl RecorderThread {
             if let Some(tx) = &self.tx {
                 let _ = tx.send(ToRecorder::Flush);
             }
+        }
+    }
+
+    /// The recorder's state after every event written so far (for a snapshot; the run
+    /// waits for the thread to get there); none when the recording stopped.
+    pub fn snapshot(&mut self) -> Option<Vec<u8>> {
+        self.send_batch();
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        self.tx.as_ref()?.send(ToRecorder::Snapshot(tx)).ok()?;
+        rx.recv().ok().flatten()
+    }
+
+    /// Carry the snapshot file taken at `t` in the recording (after the events sent before).
+    pub fn attach_snapshot(&mut self, t: SimTime, file: Vec<u8>) {
+        self.send_batch();
+        if let Some(tx) = &self.tx {
+            let _ = tx.send(ToRecorder::Attach(t, file));
         }
     }
 

@@ -111,6 +111,7 @@ enum Item {
     Metadata(Metadata),
     Attachment {
         name: String,
+        log_time: u64,
         data: Vec<u8>,
     },
     /// A summary record after the data section ended.
@@ -590,6 +591,7 @@ impl Reader {
             Record::Metadata(m) => Item::Metadata(m),
             Record::Attachment { header, data, .. } => Item::Attachment {
                 name: header.name,
+                log_time: header.log_time,
                 data: data.into_owned(),
             },
             _ => return None,
@@ -706,7 +708,9 @@ pub fn load_meta(path: &Path) -> anyhow::Result<RecordingMeta> {
     while let Some(item) = r.next_item() {
         match item? {
             Item::Metadata(m) if m.name == METADATA_NAME => meta = Some(m),
-            Item::Attachment { name, data } if name == SCENARIO_ATTACHMENT => scenario = Some(data),
+            Item::Attachment { name, data, .. } if name == SCENARIO_ATTACHMENT => {
+                scenario = Some(data)
+            }
             Item::Message(_) => break,
             _ => {}
         }
@@ -721,6 +725,74 @@ pub fn load_meta(path: &Path) -> anyhow::Result<RecordingMeta> {
         );
     };
     meta_from(&m, scenario.as_deref(), path)
+}
+
+/// Where a recording can be replayed from: the instant it starts at when it was recorded
+/// from a snapshot, and the snapshot it carries at or before an instant.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct ReplayStart {
+    /// The snapshot's instant a resumed recording starts at (metadata
+    /// `m6p-twin-resumed`), ns of simulated time.
+    pub resumed_at_ns: Option<u64>,
+    /// The latest snapshot carried at or before the instant asked for: its instant (ns of
+    /// simulated time) and its file's bytes.
+    pub snapshot: Option<(u64, Vec<u8>)>,
+}
+
+/// Where the recording at `path` can be replayed from to compare from `at_most_ns` of
+/// simulated time on (reads the file up to a little after that instant: its snapshots are
+/// among its messages).
+pub fn replay_start(path: &Path, at_most_ns: u64) -> anyhow::Result<ReplayStart> {
+    let mut r = Reader::open(path)?;
+    let mut start = ReplayStart::default();
+    let mut base_ns = None;
+    while let Some(item) = r.next_item() {
+        match item? {
+            Item::Metadata(m) if m.name == METADATA_NAME => {
+                let utc = m.metadata.get("start_utc").with_context(|| {
+                    format!(
+                        "{}: metadata `{METADATA_NAME}` lacks `start_utc`",
+                        path.display()
+                    )
+                })?;
+                base_ns = Some(crate::record::start_ns(utc)?);
+            }
+            Item::Metadata(m) if m.name == crate::record::RESUMED_METADATA_NAME => {
+                let at = m.metadata.get("at_ns").and_then(|t| t.parse().ok());
+                start.resumed_at_ns = Some(at.with_context(|| {
+                    format!(
+                        "{}: metadata `{}` lacks a number `at_ns`",
+                        path.display(),
+                        crate::record::RESUMED_METADATA_NAME
+                    )
+                })?);
+            }
+            Item::Attachment {
+                name,
+                log_time,
+                data,
+            } if name == crate::record::SNAPSHOT_ATTACHMENT => {
+                let Some(base) = base_ns else { continue };
+                let t = log_time.saturating_sub(base);
+                if t <= at_most_ns && start.snapshot.as_ref().is_none_or(|(s, _)| *s <= t) {
+                    start.snapshot = Some((t, data));
+                }
+            }
+            // A snapshot is carried when the file has reached its instant less the messages
+            // held for log-time order (`crate::log_order`): later messages than that, and
+            // none at or before the instant asked for is still to come.
+            Item::Message(m)
+                if base_ns.is_some_and(|b| {
+                    m.log_time.saturating_sub(b)
+                        > at_most_ns.saturating_add(2 * crate::log_order::REORDER_WINDOW_NS)
+                }) =>
+            {
+                break;
+            }
+            _ => {}
+        }
+    }
+    Ok(start)
 }
 
 /// Messages on one channel.
@@ -827,7 +899,9 @@ pub fn read_summary(path: &Path) -> anyhow::Result<Summary> {
         match item {
             Item::Header { library } => s.library = library,
             Item::Metadata(m) if m.name == METADATA_NAME => meta = Some(m),
-            Item::Attachment { name, data } if name == SCENARIO_ATTACHMENT => scenario = Some(data),
+            Item::Attachment { name, data, .. } if name == SCENARIO_ATTACHMENT => {
+                scenario = Some(data)
+            }
             Item::Message(m) => {
                 s.messages += 1;
                 first = first.min(m.log_time);

@@ -426,6 +426,11 @@ pub struct RecordSpec {
     /// the channels").
     #[serde(default)]
     pub channels: Vec<crate::channels::ChannelRule>,
+    /// Carry a snapshot of the whole twin every this much simulated time (`"10m"`), as
+    /// attachments of the recording, so that `replay --from T` starts at the latest one
+    /// before T (docs/snapshots.md, "Seeking a recording"); none: no snapshots.
+    #[serde(default)]
+    pub snapshot_every: Option<crate::dur::Dur>,
 }
 
 /// A problem in a scenario file, located in its source.
@@ -674,12 +679,37 @@ fn check_time(s: &Scenario, _: &NetworkSpec, err: &mut dyn FnMut(Vec<PathStep>, 
     if s.duration.0.is_zero() {
         err(vec![key("duration")], "must be longer than zero".into());
     }
+    if let Some(every) = s.record.snapshot_every
+        && let Err(why) = check_snapshot_every(every.0, s.duration.0)
+    {
+        err(vec![key("record"), key("snapshot_every")], why);
+    }
     if !(s.clock.speed.is_finite() && s.clock.speed > 0.0 && s.clock.speed <= 1e6) {
         err(
             vec![key("clock"), key("speed")],
             format!("{} is out of range (0, 1e6]", s.clock.speed),
         );
     }
+}
+
+/// The most snapshots a recording carries (`[record] snapshot_every`): each is about
+/// 50-250 kB (docs/snapshots.md).
+pub const RECORDED_SNAPSHOTS_MAX: u128 = 1000;
+
+/// Whether a recording of a run `duration` long may carry a snapshot every `every`: at
+/// least a second apart, at most [`RECORDED_SNAPSHOTS_MAX`] of them.
+pub fn check_snapshot_every(every: Duration, duration: Duration) -> Result<(), String> {
+    if every < Duration::from_secs(1) {
+        return Err("must be at least 1s".into());
+    }
+    let count = duration.as_nanos() / every.as_nanos();
+    if count > RECORDED_SNAPSHOTS_MAX {
+        return Err(format!(
+            "would carry {count} snapshots in the run's {}; at most {RECORDED_SNAPSHOTS_MAX}",
+            twin_core::duration::format_duration(duration)
+        ));
+    }
+    Ok(())
 }
 
 /// `[satellite] tle`: two lines that parse, with an epoch the FC would fly.
@@ -983,6 +1013,29 @@ mod tests {
             e.contains("satellite.tle") && e.contains("days from `start` 1686-04-30"),
             "{e}"
         );
+    }
+
+    /// `[record] snapshot_every`: a second at least, a bounded number in the run.
+    #[test]
+    fn snapshots_carried_by_a_recording_are_bounded_and_named_by_their_field() {
+        let text =
+            |every: &str| format!("duration = \"2h\"\n\n[record]\nsnapshot_every = \"{every}\"\n");
+        assert!(Scenario::parse_with("s.toml", &text("30m"), &[]).is_ok());
+        for (every, why) in [
+            ("500ms", "must be at least 1s"),
+            (
+                "5s",
+                "would carry 1440 snapshots in the run's 2h; at most 1000",
+            ),
+        ] {
+            let e = Scenario::parse_with("s.toml", &text(every), &[])
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("record.snapshot_every") && e.contains(why),
+                "{e}"
+            );
+        }
     }
 
     #[test]

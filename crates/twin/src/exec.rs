@@ -462,6 +462,7 @@ async fn execute_inner(
     let Some(RecordTo { path, existing }) = record else {
         let mut sink = Taking {
             events: &mut live,
+            recorder: None,
             taker: taker.as_mut(),
         };
         let outcome = execute_sink(compiled, false, &mut sink).await?;
@@ -512,6 +513,19 @@ async fn execute_inner(
     };
     let mut recorder = crate::record::Recorder::create(path, meta, existing)?;
     recorder.set_icd(compiled.opts.icd_map());
+    if let Some(r) = &compiled.opts.resume {
+        let state = r.section(crate::record::RECORD_SECTION).context(
+            "the snapshot was taken by a run that did not record (or whose recording had \
+             stopped): a recording goes on only from a snapshot taken with --record",
+        )?;
+        let file = crate::snapshots::file_of(
+            (&loaded.name(), &loaded.text),
+            compiled.opts.seed,
+            r.t,
+            &r.sections,
+        );
+        recorder.resume(state, r.t, &file.encode())?;
+    }
     // The recorder runs on a thread of its own, fed copies of the events in order; on the
     // wall clock its file is flushed every second (a process killed loses at most that).
     let every = (compiled.opts.clock != bus::ClockMode::Virtual)
@@ -523,11 +537,14 @@ async fn execute_inner(
     compiled.opts.packet_events |=
         twin_scenario::channels::action(&loaded.scenario.record.channels, crate::record::TOPIC_CSP)
             != twin_scenario::channels::ChannelAction::Omit;
+    let carried = crate::snapshots::Carried::plan(
+        (loaded.name(), loaded.text.clone()),
+        loaded.scenario.record.snapshot_every.map(|d| d.0),
+        &mut compiled.opts,
+    )?;
     let mut sink = Taking {
-        events: |ev: &RunEvent| {
-            recorder.write(ev);
-            live(ev);
-        },
+        events: live,
+        recorder: Some((&mut recorder, carried)),
         taker: taker.as_mut(),
     };
     let outcome = execute_sink(compiled, false, &mut sink).await?;
@@ -537,17 +554,33 @@ async fn execute_inner(
     Ok((outcome, Some(stats)))
 }
 
-/// A run's last sink: its events go to `events`, its snapshots to their files.
+/// A run's last sink: its events go to the recorder, then to `events`; its snapshots, with
+/// the recorder's part, to their files and, those the recording carries, into it.
 struct Taking<'a, F> {
     events: F,
+    recorder: Option<(
+        &'a mut crate::record::RecorderThread,
+        crate::snapshots::Carried,
+    )>,
     taker: Option<&'a mut crate::snapshots::Taker>,
 }
 
 impl<F: FnMut(&RunEvent) + Send> RunSink for Taking<'_, F> {
     fn event(&mut self, ev: &RunEvent) {
+        if let Some((r, _)) = self.recorder.as_mut() {
+            r.write(ev);
+        }
         (self.events)(ev);
     }
     fn snapshot(&mut self, t: SimTime, sections: &mut twin_runtime::Sections) {
+        if let Some((r, carried)) = self.recorder.as_mut()
+            && let Some(state) = r.snapshot()
+        {
+            sections.push((crate::record::RECORD_SECTION.to_owned(), state));
+            if carried.carries(t) {
+                r.attach_snapshot(t, carried.file(t, sections));
+            }
+        }
         if let Some(taker) = self.taker.as_mut() {
             taker.take(t, sections);
         }

@@ -16,6 +16,8 @@ pub const EXPECTATIONS_SECTION: &str = "expectations";
 #[derive(Debug)]
 pub struct Taker {
     path: PathBuf,
+    /// The instants it writes (the run may take others, for its recording).
+    at: Vec<SimTime>,
     /// More than one instant: each file is named for its instant.
     several: bool,
     scenario_name: String,
@@ -35,6 +37,7 @@ impl Taker {
         let (scenario_name, scenario_toml) = scenario;
         Some(Taker {
             path,
+            at: opts.snapshot_at.clone(),
             several: opts.snapshot_at.len() > 1,
             scenario_name,
             scenario_toml,
@@ -44,23 +47,14 @@ impl Taker {
         })
     }
 
-    /// Write the snapshot taken at `t`.
+    /// Write the snapshot taken at `t`, if it is one of the taker's instants.
     pub fn take(&mut self, t: SimTime, sections: &Sections) {
+        if !self.at.contains(&t) {
+            return;
+        }
         let path = file_at(&self.path, t, self.several);
-        let file = SnapshotFile {
-            header: SnapshotHeader {
-                build: build_id(),
-                scenario_name: self.scenario_name.clone(),
-                scenario_toml: self.scenario_toml.clone(),
-                seed: self.seed,
-                t_ns: t.as_ns(),
-                sections: sections
-                    .iter()
-                    .map(|(n, b)| (n.clone(), b.len() as u64))
-                    .collect(),
-            },
-            sections: sections.iter().map(|(_, b)| b.clone()).collect(),
-        };
+        let scenario = (self.scenario_name.as_str(), self.scenario_toml.as_str());
+        let file = file_of(scenario, self.seed, t, sections);
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
             && let Err(e) = std::fs::create_dir_all(dir)
         {
@@ -82,6 +76,86 @@ impl Taker {
     }
 }
 
+/// The snapshots a recording carries (`[record] snapshot_every`, `run --snapshot-every`):
+/// the instants, and what their files' headers say.
+#[derive(Debug, Default)]
+pub struct Carried {
+    every: Option<std::time::Duration>,
+    scenario_name: String,
+    scenario_toml: String,
+    seed: u64,
+}
+
+impl Carried {
+    /// The snapshots the recording of the run of `scenario` (its name and text) with
+    /// `opts` carries, one `every` (`[record] snapshot_every`): their instants, up to the
+    /// run's end, join those the run takes.
+    pub fn plan(
+        scenario: (String, String),
+        every: Option<std::time::Duration>,
+        opts: &mut twin_runtime::RunOptions,
+    ) -> anyhow::Result<Carried> {
+        let Some(every) = every else {
+            return Ok(Carried::default());
+        };
+        let Some(duration) = opts.duration else {
+            anyhow::bail!(
+                "record.snapshot_every: the run has no end (a recording carries a bounded number of snapshots)"
+            );
+        };
+        twin_scenario::scenario::check_snapshot_every(every, duration)
+            .map_err(|why| anyhow::anyhow!("record.snapshot_every: {why}"))?;
+        let from = opts.resume.as_ref().map_or(SimTime::ZERO, |r| r.t);
+        let mut t = SimTime::ZERO + every;
+        while t < SimTime::ZERO + duration {
+            if t > from {
+                opts.snapshot_at.push(t);
+            }
+            t = t + every;
+        }
+        opts.snapshot_at.sort();
+        opts.snapshot_at.dedup();
+        Ok(Carried {
+            every: Some(every),
+            scenario_name: scenario.0,
+            scenario_toml: scenario.1,
+            seed: opts.seed,
+        })
+    }
+
+    /// Whether the recording carries the snapshot at `t`.
+    pub fn carries(&self, t: SimTime) -> bool {
+        self.every.is_some_and(|every| {
+            let every = u64::try_from(every.as_nanos()).unwrap_or(u64::MAX);
+            t.as_ns() > 0 && t.as_ns() % every == 0
+        })
+    }
+
+    /// The file of the snapshot at `t`, as the recording carries it.
+    pub fn file(&self, t: SimTime, sections: &Sections) -> Vec<u8> {
+        let scenario = (self.scenario_name.as_str(), self.scenario_toml.as_str());
+        file_of(scenario, self.seed, t, sections).encode()
+    }
+}
+
+/// The snapshot of the run of `scenario` (its name and text) with seed `seed` at `t`.
+pub fn file_of(scenario: (&str, &str), seed: u64, t: SimTime, sections: &Sections) -> SnapshotFile {
+    SnapshotFile {
+        header: SnapshotHeader {
+            build: build_id(),
+            scenario_name: scenario.0.to_owned(),
+            scenario_toml: scenario.1.to_owned(),
+            seed,
+            t_ns: t.as_ns(),
+            sections: sections
+                .iter()
+                .map(|(n, b)| (n.clone(), b.len() as u64))
+                .collect(),
+        },
+        sections: sections.iter().map(|(_, b)| b.clone()).collect(),
+    }
+}
+
 /// The file of the snapshot at `t`: `path` itself, or with several instants `path` with
 /// the instant in nanoseconds before its extension (`x.snap` -> `x.3600000000000ns.snap`).
 pub fn file_at(path: &Path, t: SimTime, several: bool) -> PathBuf {
@@ -100,7 +174,25 @@ pub fn file_at(path: &Path, t: SimTime, several: bool) -> PathBuf {
 /// snapshot at `path`: refused, with the file's name and why, unless this build took it of
 /// this scenario's text with this seed.
 pub fn resume_from(path: &Path, scenario: (&str, &str), seed: u64) -> anyhow::Result<Resume> {
-    let file = SnapshotFile::read(path)?;
+    resume_checked(path, SnapshotFile::read(path)?, scenario, seed)
+}
+
+/// [`resume_from`] a snapshot file's bytes, read from `path` (a recording carrying it).
+pub fn resume_from_bytes(
+    path: &Path,
+    bytes: &[u8],
+    scenario: (&str, &str),
+    seed: u64,
+) -> anyhow::Result<Resume> {
+    resume_checked(path, SnapshotFile::decode(path, bytes)?, scenario, seed)
+}
+
+fn resume_checked(
+    path: &Path,
+    file: SnapshotFile,
+    scenario: (&str, &str),
+    seed: u64,
+) -> anyhow::Result<Resume> {
     file.check(path, &build_id(), Some(scenario))?;
     if file.header.seed != seed {
         anyhow::bail!(

@@ -72,6 +72,129 @@ fn a_run_from_a_snapshot_reports_what_the_whole_run_reports() {
     }
 }
 
+/// `run --record` from a snapshot taken by a recorded run: `diff --from T` finds the
+/// recording the same as the whole run's from T on, and says it is identical.
+#[test]
+fn a_recorded_run_from_a_snapshot_records_what_the_whole_run_recorded_from_there() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_owned();
+    let (snap, whole, resumed) = (path("w.snap"), path("w.mcap"), path("r.mcap"));
+    let taken = run(&[
+        "--duration",
+        "20m",
+        "--record",
+        &whole,
+        "--snapshot-at",
+        "10m",
+        "--snapshot",
+        &snap,
+    ]);
+    assert!(taken.status.success(), "{}", stderr(&taken));
+    let from = run(&[
+        "--duration",
+        "20m",
+        "--record",
+        &resumed,
+        "--from-snapshot",
+        &snap,
+    ]);
+    assert!(from.status.success(), "{}", stderr(&from));
+    // The same report but for the recording's line (the resumed file holds the second half).
+    assert_eq!(without_recorded(&from), without_recorded(&taken));
+    identical_from(&["diff", &whole, &resumed, "--from", "10m"], "10m");
+    // Compared from the start, the resumed recording lacks the first ten minutes.
+    let diff = twin().args(["diff", &whole, &resumed]).output().unwrap();
+    assert!(!diff.status.success(), "{}", stdout(&diff));
+    // It carries the snapshot it started from: `replay` starts there and compares from it.
+    identical_from(&["replay", &resumed], "10m");
+}
+
+/// `m6p-twin ARGS` succeeds, saying the two recordings are identical from `from` on.
+fn identical_from(args: &[&str], from: &str) -> Output {
+    let o = twin().args(args).output().unwrap();
+    let out = stdout(&o);
+    assert!(o.status.success(), "{args:?}: {out}{}", stderr(&o));
+    assert!(
+        out.contains(&format!("from t = {from} on\nidentical")),
+        "{args:?}: {out}"
+    );
+    o
+}
+
+/// Every message of a recording (channel, sequence, times, bytes), in file order.
+fn messages(path: &str) -> Vec<(u16, u32, u64, u64, Vec<u8>)> {
+    let bytes = std::fs::read(path).unwrap();
+    mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| {
+            let m = m.unwrap();
+            let head = (m.channel.id, m.sequence, m.log_time, m.publish_time);
+            (head.0, head.1, head.2, head.3, m.data.to_vec())
+        })
+        .collect()
+}
+
+/// A recording carrying snapshots (`--snapshot-every`) holds the same messages as one
+/// without; `replay --from T` starts from the latest one at or before T and compares from T.
+#[test]
+fn replay_from_starts_at_the_recordings_latest_snapshot_before_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_owned();
+    let (plain, carrying) = (path("plain.mcap"), path("carrying.mcap"));
+    let o = run(&["--duration", "20m", "--record", &plain]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(&[
+        "--duration",
+        "20m",
+        "--record",
+        &carrying,
+        "--snapshot-every",
+        "5m",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        messages(&plain) == messages(&carrying),
+        "carrying snapshots changes no message"
+    );
+    let replay = identical_from(&["replay", &carrying, "--from", "12m"], "12m");
+    assert!(
+        stderr(&replay).contains("replaying from its snapshot at 600.000000000s"),
+        "{}",
+        stderr(&replay)
+    );
+    // Before the first snapshot: from the start.
+    let replay = twin()
+        .args(["replay", &carrying, "--from", "4m"])
+        .output()
+        .unwrap();
+    assert!(replay.status.success(), "{}", stdout(&replay));
+    assert!(!stderr(&replay).contains("replaying from its snapshot"));
+    // Too many snapshots for the run are refused, naming the setting.
+    let o = run(&[
+        "--duration",
+        "20m",
+        "--record",
+        &path("x.mcap"),
+        "--snapshot-every",
+        "1s",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("record.snapshot_every: would carry 1200 snapshots"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+/// The report without its line about the recording.
+fn without_recorded(o: &Output) -> String {
+    report(o)
+        .lines()
+        .filter(|l| !l.starts_with("recorded "))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// Each refused with the file's name and why; nothing runs.
 #[test]
 fn a_snapshot_not_of_this_run_is_refused_naming_the_file_and_why() {
@@ -117,7 +240,7 @@ fn a_snapshot_not_of_this_run_is_refused_naming_the_file_and_why() {
                 dir.path().join("r.mcap").display().to_string(),
             ],
             &snap,
-            "a run from a snapshot is not recorded yet",
+            "taken by a run that did not record",
         ),
     ];
     for (args, file, why) in cases {

@@ -1,6 +1,7 @@
 //! A run resumed from the runtime's part of a snapshot (docs/snapshots.md) goes on as the
 //! run it was taken from: every event from the snapshot's instant on is the same, in the
-//! same order; and a run that takes snapshots is the run that takes none.
+//! same order; and a run that takes snapshots is the run that takes none. (Every shipped
+//! scenario, at the recording's level: `snapshot_recording.rs`.)
 #![allow(clippy::unwrap_used)]
 
 use std::path::PathBuf;
@@ -100,26 +101,6 @@ fn the_default_scenario_resumed_from_snapshots_goes_on_the_same() {
         Some(Duration::from_secs(1200)),
         &[SimTime::from_secs(300), SimTime::from_ms(777_777)],
     );
-}
-
-/// Every shipped scenario, resumed from its midpoint (the runtime's part of the snapshot:
-/// the events are the run's whole story; what the sink keeps is its own part).
-#[test]
-fn every_shipped_scenario_resumed_from_its_midpoint_goes_on_the_same() {
-    let mut names: Vec<String> = std::fs::read_dir(repo().join("scenarios"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n.ends_with(".toml"))
-        .collect();
-    names.sort();
-    assert_eq!(names.len(), 25);
-    for name in names {
-        let length = options(&name, None).duration.unwrap();
-        let mid = SimTime::from_ns(u64::try_from(length.as_nanos() / 2).unwrap());
-        let started = std::time::Instant::now();
-        resumes_the_same(&name, None, &[mid]);
-        eprintln!("{name}: {:.1} s", started.elapsed().as_secs_f64());
-    }
 }
 
 /// The sink's part of a snapshot: the report's observers, the expectations' watches and the

@@ -14,6 +14,11 @@ pub struct ReplayArgs {
     /// Keep the new recording here (default: a temporary file, deleted afterwards).
     #[arg(long, value_name = "FILE")]
     pub record: Option<PathBuf>,
+    /// Compare from simulated time T on (90s, 10m, 2h), starting from the latest snapshot
+    /// the recording carries at or before T (`run --snapshot-every`), else from the start
+    /// (docs/snapshots.md, "Seeking a recording").
+    #[arg(long, value_name = "T", value_parser = m6p_twin::duration::parse_duration)]
+    pub from: Option<Duration>,
     /// Test-only: change a node's behaviour to prove that divergences are found
     /// (`fc-uptime-icd`).
     #[arg(long, hide = true)]
@@ -142,19 +147,8 @@ pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
             anyhow::bail!("the recorded run had no fixed duration");
         }
     }
-    // What the control channel took, fed again at its instants.
-    let control = recorded_control(&a.file)?;
-    if !control.is_empty() {
-        compiled.opts.control = Some(m6p_twin::runtime::control::ControlOptions {
-            listen: None,
-            faults: m6p_twin::faults::live(&loaded.scenario),
-            replay: control,
-        });
-        compiled.opts.clock = bus::ClockMode::Virtual;
-        if compiled.opts.duration.is_none() {
-            anyhow::bail!("the recorded run had no fixed duration");
-        }
-    }
+    control_input(&a.file, &loaded, &mut compiled)?;
+    let from_ns = seek(&a, &loaded, &mut compiled)?;
     match a.test_knob.as_deref() {
         None => {}
         Some("fc-uptime-icd") => {
@@ -189,9 +183,81 @@ pub fn cmd_replay(a: ReplayArgs) -> anyhow::Result<bool> {
     ));
     let d = result
         .and_then(|(_, recorded)| recorded.transpose())
-        .and_then(|_| m6p_twin::recording::diff(&a.file, &path));
+        .and_then(|_| m6p_twin::recording::diff_summary_from(&a.file, &path, 0, from_ns))
+        .map(|d| d.result);
     drop(scratch);
     let d = d?;
+    if from_ns > 0 {
+        println!(
+            "from t = {} on",
+            m6p_twin::duration::format_duration(Duration::from_nanos(from_ns))
+        );
+    }
     println!("{d}");
     Ok(d.is_identical())
+}
+
+/// What the recording's control channel took, fed again at its instants.
+fn control_input(
+    file: &std::path::Path,
+    loaded: &exec::Loaded,
+    compiled: &mut m6p_twin::plan::Compiled,
+) -> anyhow::Result<()> {
+    // What the control channel took, fed again at its instants.
+    let control = recorded_control(file)?;
+    if !control.is_empty() {
+        compiled.opts.control = Some(m6p_twin::runtime::control::ControlOptions {
+            listen: None,
+            faults: m6p_twin::faults::live(&loaded.scenario),
+            replay: control,
+        });
+        compiled.opts.clock = bus::ClockMode::Virtual;
+        if compiled.opts.duration.is_none() {
+            anyhow::bail!("the recorded run had no fixed duration");
+        }
+    }
+    Ok(())
+}
+
+/// Where the replay starts and compares from: `--from T` or, for a recording made from a
+/// snapshot, its start (whichever is later); the run starts from the latest snapshot the
+/// recording carries at or before that instant (a run with outside input: from the start,
+/// its links' state is not in snapshots). Returns the instant compared from, ns.
+fn seek(
+    a: &ReplayArgs,
+    loaded: &exec::Loaded,
+    compiled: &mut m6p_twin::plan::Compiled,
+) -> anyhow::Result<u64> {
+    let asked = a
+        .from
+        .map_or(0, |t| u64::try_from(t.as_nanos()).unwrap_or(u64::MAX));
+    let mut start = m6p_twin::recording::replay_start(&a.file, asked)?;
+    let from_ns = match start.resumed_at_ns {
+        Some(r) if r > asked => {
+            start = m6p_twin::recording::replay_start(&a.file, r)?;
+            r
+        }
+        _ => asked,
+    };
+    let outside = !compiled.opts.kiss_replay.is_empty() || compiled.opts.control.is_some();
+    match (start.snapshot, outside) {
+        (Some((_, bytes)), false) => {
+            let scenario = (loaded.name(), loaded.text.as_str());
+            let resume = m6p_twin::snapshots::resume_from_bytes(
+                &a.file,
+                &bytes,
+                (&scenario.0, scenario.1),
+                compiled.opts.seed,
+            )?;
+            eprintln!("replaying from its snapshot at {}", resume.t);
+            compiled.opts.resume = Some(resume);
+        }
+        _ if start.resumed_at_ns.is_some() => anyhow::bail!(
+            "{}: recorded from a snapshot it does not carry in a form this replay can use \
+             (outside input, or no snapshot attachment): not replayable",
+            a.file.display()
+        ),
+        _ => {}
+    }
+    Ok(from_ns)
 }

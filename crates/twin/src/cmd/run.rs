@@ -125,6 +125,11 @@ pub struct RunArgs {
     /// `x.snap` -> `x.3600000000000ns.snap`).
     #[arg(long, value_name = "FILE", requires = "snapshot_at")]
     pub snapshot: Option<PathBuf>,
+    /// Carry a snapshot every T of simulated time in the recording (overrides the
+    /// scenario's `record.snapshot_every`), so that `replay --from` starts near where it
+    /// compares (docs/snapshots.md, "Seeking a recording").
+    #[arg(long, value_name = "T", value_parser = parse_duration)]
+    pub snapshot_every: Option<Duration>,
     /// Start from a snapshot taken by this build of this scenario with this seed, instead
     /// of from the start: the run goes on from its instant as the run that took it did.
     #[arg(long, value_name = "FILE")]
@@ -146,15 +151,17 @@ fn snapshot_options(
     let Some(path) = &a.from_snapshot else {
         return Ok(());
     };
-    if a.record.is_some() || loaded.scenario.record.file.is_some() {
+    let scenario = (loaded.name(), loaded.text.as_str());
+    let resume = m6p_twin::snapshots::resume_from(path, (&scenario.0, scenario.1), opts.seed)?;
+    let records = a.record.is_some() || loaded.scenario.record.file.is_some();
+    if records && resume.section(m6p_twin::record::RECORD_SECTION).is_err() {
         anyhow::bail!(
-            "{}: a run from a snapshot is not recorded yet (the recorder's state is not in \
-             snapshots); run it without --record (and without the scenario's record.file)",
+            "{}: taken by a run that did not record, so it holds no recorder state: a \
+             recording goes on only from a snapshot taken with --record (or run it without \
+             --record and the scenario's record.file)",
             path.display()
         );
     }
-    let scenario = (loaded.name(), loaded.text.as_str());
-    let resume = m6p_twin::snapshots::resume_from(path, (&scenario.0, scenario.1), opts.seed)?;
     // Real time begins where the run does.
     opts.clock = match opts.clock {
         ClockMode::Realtime { speed } => ClockMode::VirtualThenRealtime {
@@ -286,6 +293,12 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
     }
     if let Some(ChannelRules(rules)) = &a.channels {
         loaded.scenario.record.channels = rules.clone();
+    }
+    if let Some(every) = a.snapshot_every {
+        if a.record.is_none() && loaded.scenario.record.file.is_none() {
+            anyhow::bail!("--snapshot-every: the run is not recorded (add --record FILE)");
+        }
+        loaded.scenario.record.snapshot_every = Some(twin_scenario::dur::Dur(every));
     }
     let mut compiled = exec::compile_seeded(&loaded, a.seed);
     if a.no_checks {
