@@ -292,6 +292,8 @@ pub(crate) struct Timeline {
     /// the live fault it belongs to.
     queue: VecDeque<(Option<u32>, TimedFault)>,
     live: BTreeMap<u32, Taken>,
+    /// How many of the scenario's actions were taken (the first of its list).
+    scenario_taken: usize,
 }
 
 impl Timeline {
@@ -300,7 +302,34 @@ impl Timeline {
         Timeline {
             queue: faults.into_iter().map(|f| (None, f)).collect(),
             live: BTreeMap::new(),
+            scenario_taken: 0,
         }
+    }
+
+    /// After a snapshot of another run was loaded (a campaign's fork): the scenario's
+    /// actions to come are this run's own, `own` (its whole list, in time order) less as
+    /// many of its first as the snapshot's run had taken: the runs share those, and
+    /// differ only after the snapshot's instant. A snapshot with live faults is refused
+    /// (they are the other run's).
+    pub fn take_own(&mut self, own: Vec<TimedFault>) -> Result<(), snap::SnapError> {
+        if !self.live.is_empty() {
+            return Err(snap::SnapError::Unsupported(
+                "a fork from a snapshot with live faults".into(),
+            ));
+        }
+        if own.len() < self.scenario_taken {
+            return Err(snap::SnapError::Mismatch {
+                what: "scenario fault actions taken before the fork",
+                saved: self.scenario_taken as u64,
+                built: own.len() as u64,
+            });
+        }
+        self.queue = own
+            .into_iter()
+            .skip(self.scenario_taken)
+            .map(|f| (None, f))
+            .collect();
+        Ok(())
     }
 
     /// The next action's instant.
@@ -311,7 +340,11 @@ impl Timeline {
     /// The next action if it is due by `t`.
     pub fn pop_due(&mut self, t: SimTime) -> Option<TimedFault> {
         if self.next_at()? <= t {
-            self.queue.pop_front().map(|(_, f)| f)
+            let (n, f) = self.queue.pop_front()?;
+            if n.is_none() {
+                self.scenario_taken += 1;
+            }
+            Some(f)
         } else {
             None
         }
@@ -674,7 +707,11 @@ impl snap::SnapNew for LiveFault {
 }
 
 snap::fields!(Taken { fault, cleared });
-snap::fields!(Timeline { queue, live });
+snap::fields!(Timeline {
+    queue,
+    live,
+    scenario_taken
+});
 
 #[cfg(test)]
 mod tests {

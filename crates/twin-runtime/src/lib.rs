@@ -17,7 +17,7 @@
 //!   the order it happens and applies the faults at their instants.
 
 mod build;
-pub use snapshot::{RUNTIME_SECTION, Resume, Sections};
+pub use snapshot::{FaultsToCome, RUNTIME_SECTION, Resume, Sections};
 pub mod control;
 pub mod counters;
 pub mod faults;
@@ -592,9 +592,10 @@ async fn run_on(
     // One truth for power: the EPS's switches and the power and hang faults go through
     // the platform's rules.
     let mut power_shell = power_shell(&opts, &nodes, &boards, &segs, &gates);
-    let mut faults = control::Timeline::new(std::mem::take(&mut opts.faults));
+    let (mut faults, own) = snapshot::timeline(&mut opts);
     if let Some(r) = opts.resume.take() {
-        LoopState::of(&mut power_shell, &gates, &mut faults, &mut tapped).resume(&r, resume_at)?;
+        LoopState::of(&mut power_shell, &gates, &mut faults, &mut tapped)
+            .resume(&r, resume_at, own)?;
     }
     let mut snapshots = Snapshots::new(&opts.snapshot_at, clock);
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);

@@ -19,6 +19,7 @@ use twin_core::packets::PacketTap;
 use crate::build::NodeTask;
 use crate::control::Timeline;
 use crate::counters::Tapped;
+use crate::faults::TimedFault;
 use crate::power::PowerShell;
 
 /// Where a run starts from a snapshot: the instant it was taken at and its sections, each
@@ -29,6 +30,19 @@ pub struct Resume {
     pub t: SimTime,
     /// The parts.
     pub sections: Sections,
+    /// Whose fault actions to come the run takes.
+    pub faults: FaultsToCome,
+}
+
+/// The scenario's fault actions to come of a run from a snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FaultsToCome {
+    /// The snapshot's (its run is this run).
+    #[default]
+    Saved,
+    /// This run's own, past as many as the snapshot's run had taken: a fork of a campaign,
+    /// whose runs are the same up to the snapshot and differ only in faults after it.
+    Own,
 }
 
 /// A snapshot's parts, in the order they were taken: each layer of the run (the runtime,
@@ -47,6 +61,18 @@ impl Resume {
             .map(|(_, b)| b.as_slice())
             .ok_or_else(|| anyhow::anyhow!("the snapshot has no `{name}` part"))
     }
+}
+
+/// The run's fault timeline (its scenario's actions, taken from `opts`), and a copy of
+/// those actions when it starts from another run's snapshot (a fork,
+/// [`FaultsToCome::Own`]: [`LoopState::resume`] puts them back after loading it).
+pub(crate) fn timeline(opts: &mut crate::RunOptions) -> (Timeline, Option<Vec<TimedFault>>) {
+    let own = opts
+        .resume
+        .as_ref()
+        .is_some_and(|r| r.faults == FaultsToCome::Own)
+        .then(|| opts.faults.clone());
+    (Timeline::new(std::mem::take(&mut opts.faults)), own)
 }
 
 /// How a run's tasks begin: fresh, or resumed from `resume`.
@@ -152,11 +178,18 @@ impl<'a> LoopState<'a> {
         w.into_bytes()
     }
 
-    /// Load the loop's part of `r`, which begins at byte `at`.
-    pub(crate) fn resume(&mut self, r: &Resume, at: usize) -> anyhow::Result<()> {
+    /// Load the loop's part of `r`, which begins at byte `at`; a fork's run then takes its
+    /// `own` fault actions to come ([`timeline`]).
+    pub(crate) fn resume(
+        &mut self,
+        r: &Resume,
+        at: usize,
+        own: Option<Vec<TimedFault>>,
+    ) -> anyhow::Result<()> {
         let mut rd = Reader::new(r.section(RUNTIME_SECTION)?.get(at..).unwrap_or_default());
         self.load(&mut rd)
             .and_then(|()| rd.finish())
+            .and_then(|()| own.map_or(Ok(()), |own| self.faults.take_own(own)))
             .context(NOT_THIS_RUN)
     }
 

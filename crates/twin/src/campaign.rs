@@ -56,6 +56,28 @@ pub struct CampaignSpec {
     /// error row, never a hang.
     #[serde(default)]
     pub limits: RunLimits,
+    /// Each run's scenario seed: `"per-run"` (from the campaign's seed and the run's
+    /// index: the runs differ from the start) or `"shared"` (one for all: the runs differ
+    /// only by their draws, and run their common prefix once: docs/campaigns.md,
+    /// "Forking").
+    #[serde(default)]
+    pub run_seeds: RunSeeds,
+    /// Start every run from a snapshot taken at this instant of a run of the common prefix
+    /// (needs `run_seeds = "shared"`; refused if a draw acts before it); default: the latest
+    /// instant before which no draw changes anything.
+    #[serde(default)]
+    pub fork_at: Option<twin_scenario::scenario::Dur>,
+}
+
+/// Where the runs' scenario seeds come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum RunSeeds {
+    /// Each run its own, from the campaign's seed and the run's index.
+    #[default]
+    PerRun,
+    /// One for every run, from the campaign's seed.
+    Shared,
 }
 
 fn default_seed() -> u64 {
@@ -761,7 +783,10 @@ impl Campaign {
         // Drawn catalogue entries: where each landed in the scenario, and its index.
         let mut appended: Vec<(String, usize)> = Vec::new();
         // The run's own seed (the scenario's `seed`): from the campaign's seed and k too.
-        let run_seed = mix(mix(seed, k), 0x5eed);
+        let run_seed = match self.spec.run_seeds {
+            RunSeeds::PerRun => mix(mix(seed, k), 0x5eed),
+            RunSeeds::Shared => mix(seed, 0x5eed),
+        };
         table.insert("seed".into(), toml::Value::Integer((run_seed >> 1) as i64));
         let name = format!(
             "{} run {k}",

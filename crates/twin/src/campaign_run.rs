@@ -24,6 +24,11 @@ use twin_scenario::scenario::{ScenarioError, ScenarioErrors};
 /// Run run `k` of `c`: resolve, compile, run in virtual time, check. A panic inside the
 /// run is caught and becomes the row's error.
 pub fn run_one(c: &Campaign, k: u64) -> RunRow {
+    run_one_from(c, k, None)
+}
+
+/// [`run_one`], from the campaign's fork when there is one.
+pub fn run_one_from(c: &Campaign, k: u64, fork: Option<&crate::campaign_fork::Fork>) -> RunRow {
     let r = match c.resolve(k) {
         Ok(r) => r,
         Err(e) => {
@@ -39,7 +44,7 @@ pub fn run_one(c: &Campaign, k: u64) -> RunRow {
             };
         }
     };
-    let j = run_limited(&format!("{} run {k}", c.file), &r.text, c.spec.limits);
+    let j = run_limited_from(&format!("{} run {k}", c.file), &r.text, c.spec.limits, fork);
     RunRow {
         run: k,
         seed: r.seed,
@@ -264,6 +269,16 @@ pub fn run_judged(file: &str, text: &str) -> Judged {
 /// scenario's (`[invariants] check`: a campaign's resolved runs check all), judged with
 /// its expectations.
 pub fn run_limited(file: &str, text: &str, limits: crate::campaign::RunLimits) -> Judged {
+    run_limited_from(file, text, limits, None)
+}
+
+/// [`run_limited`], from `fork` when given (a campaign's common prefix).
+pub fn run_limited_from(
+    file: &str,
+    text: &str,
+    limits: crate::campaign::RunLimits,
+    fork: Option<&crate::campaign_fork::Fork>,
+) -> Judged {
     use crate::runtime::StopCause;
     let outcome = std::panic::catch_unwind(|| -> anyhow::Result<exec::Outcome> {
         let scenario = crate::validate::parse(file, text)?;
@@ -282,6 +297,7 @@ pub fn run_limited(file: &str, text: &str, limits: crate::campaign::RunLimits) -
         }
         compiled.opts.clock = bus::ClockMode::Virtual;
         compiled.opts.wall_limit = Some(limits.wall.0);
+        compiled.opts.resume = fork.map(crate::campaign_fork::Fork::resume);
         let rt = crate::runtime::build_runtime_for(&compiled.opts)?;
         rt.block_on(exec::execute(compiled, &mut |_| {}))
     });
@@ -391,7 +407,18 @@ pub fn run_all(
     jobs: usize,
     done: &(dyn Fn(&RunRow) + Sync),
 ) -> Vec<RunRow> {
-    let mut rows = in_parallel(runs, jobs, &|&k| run_one(c, k), done);
+    run_all_from(c, runs, jobs, None, done)
+}
+
+/// [`run_all`], each run from the campaign's fork when there is one.
+pub fn run_all_from(
+    c: &Campaign,
+    runs: &[u64],
+    jobs: usize,
+    fork: Option<&crate::campaign_fork::Fork>,
+    done: &(dyn Fn(&RunRow) + Sync),
+) -> Vec<RunRow> {
+    let mut rows = in_parallel(runs, jobs, &|&k| run_one_from(c, k, fork), done);
     rows.sort_by_key(|r| r.run);
     rows
 }

@@ -32,6 +32,7 @@ pub use twin_runtime::ground;
 
 pub mod bench;
 pub mod campaign;
+pub mod campaign_fork;
 pub mod campaign_report;
 pub mod campaign_rows;
 pub mod campaign_run;

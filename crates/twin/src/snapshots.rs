@@ -211,5 +211,6 @@ fn resume_checked(
     Ok(Resume {
         t: SimTime::from_ns(file.header.t_ns),
         sections,
+        faults: twin_runtime::FaultsToCome::Saved,
     })
 }

@@ -75,7 +75,11 @@ fn resumes_the_same(name: &str, span: Option<Duration>, at: &[SimTime]) {
     assert_eq!(taken.snapshots.len(), at.len());
     for (t, state, before) in taken.snapshots {
         let mut opts = options(name, span);
-        opts.resume = Some(Resume { t, sections: state });
+        opts.resume = Some(Resume {
+            t,
+            sections: state,
+            faults: m6p_twin::runtime::FaultsToCome::Saved,
+        });
         let resumed = run(opts);
         let expected = &plain.events[before..];
         let first_diff = resumed

@@ -68,6 +68,10 @@ pub struct CampaignRunArgs {
     /// campaign), run those not run.
     #[arg(long)]
     pub resume: bool,
+    /// Run every run from the start, even when the runs share a prefix (docs/campaigns.md,
+    /// "Forking").
+    #[arg(long)]
+    pub no_fork: bool,
 }
 
 pub fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
@@ -98,10 +102,11 @@ pub fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     } else {
         Vec::new()
     };
+    let fork = fork_of(&c, runs, &indices, a.no_fork)?;
     let bar = progress_bar(indices.len() as u64);
     let failed = std::sync::atomic::AtomicU64::new(0);
     let started = std::time::Instant::now();
-    let ran = campaign_run::run_all(&c, &indices, jobs, &|row| {
+    let ran = campaign_run::run_all_from(&c, &indices, jobs, fork.as_ref(), &|row| {
         if row.verdict != RunVerdict::Pass {
             let n = failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             bar.set_message(format!("{n} failed"));
@@ -185,6 +190,39 @@ pub fn cmd_campaign_run(a: CampaignRunArgs) -> anyhow::Result<bool> {
     }
     println!("results in {}", a.out.display());
     Ok(recording_ok && rows.iter().all(|r| r.verdict == RunVerdict::Pass))
+}
+
+/// The campaign's fork for the runs `indices` (of its `runs`), said on the terminal: its
+/// instant is found over all the runs (every shard forks at the same instant), its prefix
+/// run here.
+fn fork_of(
+    c: &m6p_twin::campaign::Campaign,
+    runs: u64,
+    indices: &[u64],
+    off: bool,
+) -> anyhow::Result<Option<m6p_twin::campaign_fork::Fork>> {
+    use m6p_twin::campaign_fork::{self, NoFork};
+    let all: Vec<u64> = (0..runs).collect();
+    let at = match campaign_fork::plan(c, &all)? {
+        Ok(_) if off => Err(NoFork::Off),
+        Ok(_) if indices.is_empty() => return Ok(None),
+        planned => planned,
+    };
+    let at = match at {
+        Ok(at) => at,
+        Err(why) => {
+            println!("fork: none ({why})");
+            return Ok(None);
+        }
+    };
+    let started = std::time::Instant::now();
+    let fork = campaign_fork::take(c, 0, at)?;
+    println!(
+        "fork: every run starts from the common prefix's snapshot at {} (run once, {:.1} s)",
+        m6p_twin::duration::format_instant(at),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(Some(fork))
 }
 
 /// A progress bar on a terminal, none in CI or when standard error is not a terminal.
