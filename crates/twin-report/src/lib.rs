@@ -141,9 +141,14 @@ pub async fn run_with(
             self.sink.contact(t, on);
             self.observer.contact(t, on);
         }
-        fn snapshot(&mut self, t: SimTime, sections: &mut twin_runtime::Sections) {
+        fn snapshot(
+            &mut self,
+            t: SimTime,
+            by: twin_runtime::AskedBy,
+            sections: &mut twin_runtime::Sections,
+        ) {
             sections.push((REPORT_SECTION.to_owned(), snap::to_bytes(&self.observer)));
-            self.sink.snapshot(t, sections);
+            self.sink.snapshot(t, by, sections);
         }
     }
     let mut observer = Observer::new(

@@ -78,6 +78,9 @@ pub enum ControlError {
     /// `clear` of a number the run did not give.
     #[error("no live fault {0} in this run")]
     NoLiveFault(u32),
+    /// A snapshot asked of a run with nowhere to write it.
+    #[error("this run takes no snapshots on request: start it with --snapshot-dir DIR")]
+    NoSnapshotDir,
     /// `clear` of a fault cleared before.
     #[error("live fault {0} was cleared already")]
     ClearedAlready(u32),
@@ -132,6 +135,15 @@ pub struct ControlOptions {
     pub faults: Arc<dyn LiveFaults>,
     /// Recorded requests to feed again at their instants, in the recording's order.
     pub replay: Vec<RecordedRequest>,
+    /// Where the snapshots the channel asks for go (`run --snapshot-dir`; each file named
+    /// by [`snapshot_name`]); `None`: such requests are refused (a replay's too).
+    pub snapshot_dir: Option<std::path::PathBuf>,
+}
+
+/// The file name of the snapshot the control channel asked for at `t`, in the run's
+/// snapshot directory: the run names it, never the request.
+pub fn snapshot_name(t: SimTime) -> String {
+    format!("snapshot-{}ns.snap", t.as_ns())
 }
 
 /// A request as a recording keeps it (`/control`).
@@ -174,6 +186,17 @@ pub(crate) struct Control {
     rx: mpsc::UnboundedReceiver<Admitted>,
     catalogue: Option<Arc<dyn LiveFaults>>,
     stats: Arc<Mutex<ControlStats>>,
+    /// Whether it takes the snapshots it is asked for.
+    snapshots: OnRequest,
+}
+
+/// Whether a run takes the snapshots its control channel asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum OnRequest {
+    /// It has somewhere to write them (`run --snapshot-dir`).
+    Take,
+    /// It has not.
+    Refuse,
 }
 
 impl Control {
@@ -192,6 +215,7 @@ impl Control {
                 rx,
                 catalogue: None,
                 stats,
+                snapshots: OnRequest::Refuse,
             });
         };
         if let Some(addr) = c.listen {
@@ -204,6 +228,10 @@ impl Control {
             rx,
             catalogue: Some(c.faults),
             stats,
+            snapshots: match c.snapshot_dir {
+                Some(_) => OnRequest::Take,
+                None => OnRequest::Refuse,
+            },
         })
     }
 
@@ -218,9 +246,29 @@ impl Control {
     }
 
     /// Answer `req` on `faults` (its actions due now are first in line): the reply goes
-    /// back to its connection, and the event that records both.
-    pub fn answer(&mut self, req: Admitted, faults: &mut Timeline) -> RunEvent {
+    /// back to its connection, and the event that records both; `asked` is told the
+    /// instant of a snapshot it asked for and the run takes.
+    pub fn answer(
+        &mut self,
+        req: Admitted,
+        faults: &mut Timeline,
+        asked: &mut dyn FnMut(SimTime),
+    ) -> RunEvent {
+        let snapshot = matches!(
+            serde_json::from_str::<Request>(&req.request),
+            Ok(Request::Snapshot {})
+        );
         let reply = match self.catalogue.as_deref() {
+            Some(_) if snapshot => {
+                let taken = match self.snapshots {
+                    OnRequest::Take => {
+                        asked(req.t);
+                        Ok(serde_json::json!({ "snapshot": snapshot_name(req.t) }))
+                    }
+                    OnRequest::Refuse => Err(ControlError::NoSnapshotDir),
+                };
+                reply_line(taken, req.t)
+            }
             Some(c) => faults.answer(&req.request, req.t, c),
             None => String::new(),
         };
@@ -247,6 +295,23 @@ impl Control {
     }
 }
 
+/// A request's reply line: what it gave, or why not, with `ok` and the instant.
+fn reply_line(reply: Result<serde_json::Value, ControlError>, t: SimTime) -> String {
+    let mut out = match reply {
+        Ok(serde_json::Value::Object(m)) => m,
+        Ok(_) => serde_json::Map::new(),
+        Err(why) => {
+            let mut m = serde_json::Map::new();
+            m.insert("error".into(), why.to_string().into());
+            m
+        }
+    };
+    let ok = !out.contains_key("error");
+    out.insert("ok".into(), ok.into());
+    out.insert("t_ns".into(), t.as_ns().into());
+    serde_json::Value::Object(out).to_string()
+}
+
 /// A request, as the JSON line says it.
 #[derive(Debug, Deserialize)]
 #[serde(tag = "op", rename_all = "kebab-case", deny_unknown_fields)]
@@ -260,6 +325,8 @@ enum Request {
         /// Its number (`control[id]`).
         id: u32,
     },
+    /// Take a snapshot of the run now, into its snapshot directory.
+    Snapshot {},
 }
 
 /// A fault request: when, for how long, and the scenario entry's other fields.
@@ -364,20 +431,10 @@ impl Timeline {
             Ok(Request::Time {}) => Ok(serde_json::json!({})),
             Ok(Request::Fault(f)) => self.inject(f, t, catalogue),
             Ok(Request::Clear { id }) => self.clear(id, t, catalogue),
+            // The run's control channel takes these ([`Control::answer`]).
+            Ok(Request::Snapshot {}) => Err(ControlError::NoSnapshotDir),
         };
-        let mut out = match reply {
-            Ok(serde_json::Value::Object(m)) => m,
-            Ok(_) => serde_json::Map::new(),
-            Err(why) => {
-                let mut m = serde_json::Map::new();
-                m.insert("error".into(), why.to_string().into());
-                m
-            }
-        };
-        let ok = !out.contains_key("error");
-        out.insert("ok".into(), ok.into());
-        out.insert("t_ns".into(), t.as_ns().into());
-        serde_json::Value::Object(out).to_string()
+        reply_line(reply, t)
     }
 
     fn inject(

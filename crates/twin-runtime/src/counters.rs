@@ -13,6 +13,16 @@ use links::kiss_tcp::KissLinkStats;
 
 use twin_core::events::RunEvent;
 
+/// Who asked for a snapshot ([`RunSink::snapshot`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AskedBy {
+    /// The run's options, before it began (`RunOptions::snapshot_at`: `run --snapshot-at`,
+    /// a recording's carried snapshots, a campaign's fork).
+    Schedule,
+    /// The run's control channel, at the instant its request came (`gs snapshot`).
+    Control,
+}
+
 /// Whoever observes a run (the recorder, the report's observers, the invariants): handed
 /// every event in the order it happens, on the run's loop.
 pub trait RunSink: Send {
@@ -23,14 +33,14 @@ pub trait RunSink: Send {
     fn contact(&mut self, t: SimTime, on: bool) {
         let _ = (t, on);
     }
-    /// The run settled at `t`, an instant a snapshot was asked for
-    /// (`RunOptions::snapshot_at`): `sections` holds the runtime's part (media, nodes, the
+    /// The run settled at `t`, an instant a snapshot was asked for `by` the run's options
+    /// or its control channel: `sections` holds the runtime's part (media, nodes, the
     /// loop's own: [`crate::snapshot`]) and those of the sinks this one is inside; a sink
     /// that keeps state adds its part and hands them on to the sink inside it, and the one
     /// that wants the snapshot keeps them. Told between two events, every event before it
     /// handed on.
-    fn snapshot(&mut self, t: SimTime, sections: &mut crate::Sections) {
-        let _ = (t, sections);
+    fn snapshot(&mut self, t: SimTime, by: AskedBy, sections: &mut crate::Sections) {
+        let _ = (t, by, sections);
     }
 }
 
@@ -67,8 +77,8 @@ impl<'a> Tapped<'a> {
 }
 
 impl RunSink for Tapped<'_> {
-    fn snapshot(&mut self, t: SimTime, sections: &mut crate::Sections) {
-        self.sink.snapshot(t, sections);
+    fn snapshot(&mut self, t: SimTime, by: AskedBy, sections: &mut crate::Sections) {
+        self.sink.snapshot(t, by, sections);
     }
     fn event(&mut self, ev: &RunEvent) {
         self.sink.event(ev);

@@ -41,7 +41,7 @@ use tokio::sync::{mpsc, oneshot};
 
 use crate::ground::Recurring;
 pub use build::fc_config;
-pub use counters::{Interruption, NodeReport, RunCounters, RunSink, StopCause};
+pub use counters::{AskedBy, Interruption, NodeReport, RunCounters, RunSink, StopCause};
 use faults::{FaultAction, TimedFault};
 use twin_core::events::RunEvent;
 use twin_core::network::NetworkSpec;
@@ -600,8 +600,7 @@ async fn run_on(
     let mut snapshots = Snapshots::new(&opts.snapshot_at, clock);
     let end = opts.duration.map_or(SimTime::MAX, |d| SimTime::ZERO + d);
     let kiss_budget = kiss.budget.clone();
-    let signalled = signalled();
-    tokio::pin!(signalled);
+    let mut signalled = std::pin::pin!(signalled());
     let mut interrupted: Option<StopCause> = None;
     let mut fault_timer = bus::clock::Timer::new(clock);
     loop {
@@ -624,17 +623,18 @@ async fn run_on(
             }
             Some(req) = control.recv(), if control.is_on() => {
                 let t = req.t;
-                hand_on(control.answer(req, &mut faults), &mut tapped, &kiss_budget);
+                let ev = control.answer(req, &mut faults, &mut |t| snapshots.ask(t));
+                hand_on(ev, &mut tapped, &kiss_budget);
                 // What it asked for at this instant takes effect now.
                 let mut director = director(&segs, &ctls, &mut power_shell, &gates);
                 while let Some(f) = faults.pop_due(t) {
                     apply_fault(&f, &mut director, &mut tapped, &kiss_budget);
                 }
             }
-            t = snapshots.due(), if snapshots.is_on() => {
+            (t, by) = snapshots.due(), if snapshots.is_on() => {
                 let state = LoopState::of(&mut power_shell, &gates, &mut faults, &mut tapped);
                 let bytes = state.take(&segs, &boards, &nodes.tasks);
-                tapped.snapshot(t, &mut vec![(RUNTIME_SECTION.to_owned(), bytes)]);
+                tapped.snapshot(t, by, &mut vec![(RUNTIME_SECTION.to_owned(), bytes)]);
             }
             () = fault_timer.sleep_until(next_fault), if next_fault < SimTime::MAX => {
                 if next_fault >= end && faults.next_at().is_none_or(|at| at >= end) {
@@ -721,7 +721,8 @@ async fn outside(
 
 /// The instants a run takes snapshots at, those to come.
 struct Snapshots {
-    at: std::collections::VecDeque<SimTime>,
+    /// The instants, in order, and who asked for each.
+    at: std::collections::VecDeque<(SimTime, AskedBy)>,
     timer: bus::clock::Timer,
 }
 
@@ -732,7 +733,7 @@ impl Snapshots {
         at.sort_unstable();
         at.dedup();
         Snapshots {
-            at: at.into(),
+            at: at.into_iter().map(|t| (t, AskedBy::Schedule)).collect(),
             timer: bus::clock::Timer::new(clock),
         }
     }
@@ -741,16 +742,23 @@ impl Snapshots {
         !self.at.is_empty()
     }
 
-    /// The next instant, once the run has settled there (or after: nothing happened
-    /// between).
-    async fn due(&mut self) -> SimTime {
-        let Some(&t) = self.at.front() else {
+    /// A snapshot the control channel asked for at `t` (now), taken where the run settles
+    /// at `t`, before the scheduled ones of later instants.
+    fn ask(&mut self, t: SimTime) {
+        let i = self.at.partition_point(|(s, _)| *s <= t);
+        self.at.insert(i, (t, AskedBy::Control));
+    }
+
+    /// The next instant and who asked, once the run has settled there (or after: nothing
+    /// happened between).
+    async fn due(&mut self) -> (SimTime, AskedBy) {
+        let Some(&(t, by)) = self.at.front() else {
             return std::future::pending().await;
         };
         self.timer.sleep_until(t).await;
         bus::exec::settled().await;
         self.at.pop_front();
-        t
+        (t, by)
     }
 }
 

@@ -160,7 +160,7 @@ struct Keep {
 
 impl RunSink for Keep {
     fn event(&mut self, _: &RunEvent) {}
-    fn snapshot(&mut self, _: SimTime, sections: &mut Sections) {
+    fn snapshot(&mut self, _: SimTime, _: crate::runtime::AskedBy, sections: &mut Sections) {
         self.taken = Some(std::mem::take(sections));
     }
 }

@@ -276,10 +276,15 @@ impl RunSink for Watched<'_> {
     fn contact(&mut self, t: SimTime, on: bool) {
         self.sink.contact(t, on);
     }
-    fn snapshot(&mut self, t: SimTime, sections: &mut twin_runtime::Sections) {
+    fn snapshot(
+        &mut self,
+        t: SimTime,
+        by: twin_runtime::AskedBy,
+        sections: &mut twin_runtime::Sections,
+    ) {
         let part = self.save();
         sections.push((crate::snapshots::EXPECTATIONS_SECTION.to_owned(), part));
-        self.sink.snapshot(t, sections);
+        self.sink.snapshot(t, by, sections);
     }
 }
 
@@ -572,17 +577,22 @@ impl<F: FnMut(&RunEvent) + Send> RunSink for Taking<'_, F> {
         }
         (self.events)(ev);
     }
-    fn snapshot(&mut self, t: SimTime, sections: &mut twin_runtime::Sections) {
+    fn snapshot(
+        &mut self,
+        t: SimTime,
+        by: twin_runtime::AskedBy,
+        sections: &mut twin_runtime::Sections,
+    ) {
         if let Some((r, carried)) = self.recorder.as_mut()
             && let Some(state) = r.snapshot()
         {
             sections.push((crate::record::RECORD_SECTION.to_owned(), state));
-            if carried.carries(t) {
+            if by == twin_runtime::AskedBy::Schedule && carried.carries(t) {
                 r.attach_snapshot(t, carried.file(t, sections));
             }
         }
         if let Some(taker) = self.taker.as_mut() {
-            taker.take(t, sections);
+            taker.take(t, by, sections);
         }
     }
 }

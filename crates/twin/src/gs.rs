@@ -644,6 +644,10 @@ pub fn control(
                 _ => "it was over already",
             }
         ),
+        Some("snapshot") => println!(
+            "snapshot at {now}: {} in the run's --snapshot-dir, when the run settles there",
+            reply["snapshot"].as_str().unwrap_or("")
+        ),
         _ => println!("{now}"),
     }
     Ok(true)

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use csp::SimTime;
 use twin_core::snapshot_file::{SnapshotFile, SnapshotHeader, build_id};
-use twin_runtime::{Resume, Sections};
+use twin_runtime::{AskedBy, Resume, Sections};
 
 /// The name of the expectations' part of a snapshot (their watches and the invariants).
 pub const EXPECTATIONS_SECTION: &str = "expectations";
@@ -15,11 +15,14 @@ pub const EXPECTATIONS_SECTION: &str = "expectations";
 /// Where a run's snapshots go, and what their header says.
 #[derive(Debug)]
 pub struct Taker {
-    path: PathBuf,
-    /// The instants it writes (the run may take others, for its recording).
+    /// `--snapshot FILE`, for the instants of `--snapshot-at`.
+    path: Option<PathBuf>,
+    /// The instants it writes there (the run may take others, for its recording).
     at: Vec<SimTime>,
     /// More than one instant: each file is named for its instant.
     several: bool,
+    /// `--snapshot-dir DIR`, for those the control channel asks for.
+    dir: Option<PathBuf>,
     scenario_name: String,
     scenario_toml: String,
     seed: u64,
@@ -33,12 +36,17 @@ impl Taker {
     /// The taker of the run of `scenario` (its name and text) with `opts`, if it takes
     /// snapshots.
     pub fn new(scenario: (String, String), opts: &twin_runtime::RunOptions) -> Option<Self> {
-        let path = opts.snapshot_to.clone()?;
+        let path = opts.snapshot_to.clone();
+        let dir = opts.control.as_ref().and_then(|c| c.snapshot_dir.clone());
+        if path.is_none() && dir.is_none() {
+            return None;
+        }
         let (scenario_name, scenario_toml) = scenario;
         Some(Taker {
             path,
             at: opts.snapshot_at.clone(),
             several: opts.snapshot_at.len() > 1,
+            dir,
             scenario_name,
             scenario_toml,
             seed: opts.seed,
@@ -47,12 +55,16 @@ impl Taker {
         })
     }
 
-    /// Write the snapshot taken at `t`, if it is one of the taker's instants.
-    pub fn take(&mut self, t: SimTime, sections: &Sections) {
-        if !self.at.contains(&t) {
-            return;
-        }
-        let path = file_at(&self.path, t, self.several);
+    /// Write the snapshot taken at `t`, if it is one of the taker's instants or the control
+    /// channel asked for it.
+    pub fn take(&mut self, t: SimTime, by: AskedBy, sections: &Sections) {
+        let path = match (by, &self.path, &self.dir) {
+            (AskedBy::Schedule, Some(path), _) if self.at.contains(&t) => {
+                file_at(path, t, self.several)
+            }
+            (AskedBy::Control, _, Some(dir)) => dir.join(twin_runtime::control::snapshot_name(t)),
+            _ => return,
+        };
         let scenario = (self.scenario_name.as_str(), self.scenario_toml.as_str());
         let file = file_of(scenario, self.seed, t, sections);
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())

@@ -195,3 +195,66 @@ fn a_fifth_connection_and_a_long_line_are_refused_and_counted() {
         "{out}{err}"
     );
 }
+
+/// `gs snapshot`: the run takes a snapshot where it settles at the request's instant and
+/// writes it to its `--snapshot-dir`, named by the instant (never by the request); a run
+/// goes on from it. A run without `--snapshot-dir` refuses the request, saying so.
+#[test]
+fn a_snapshot_asked_over_the_control_channel_is_written_to_the_runs_dir() {
+    let dir = test_dir("control", "snapshot");
+    let snaps = dir.join("snaps");
+    let scenario = common::repo_root().join("scenarios/default.toml");
+    let scenario = scenario.to_str().unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            scenario,
+            "--duration",
+            "20s",
+            "--speed",
+            "5",
+            "--no-checks",
+            "--control",
+            "127.0.0.1:0",
+        ];
+        args.extend_from_slice(extra);
+        Twin::start(&args, 1)
+    };
+    let twin_run = run(&["--snapshot-dir", snaps.to_str().unwrap()]);
+    let addr = twin_run.addrs[0].to_string();
+    let (ok, out) = gs(&addr, &["snapshot"]);
+    assert!(ok, "{out}");
+    let name = out
+        .split_whitespace()
+        .find(|w| w.starts_with("snapshot-") && w.ends_with("ns.snap"))
+        .unwrap_or_else(|| panic!("no file named: {out}"))
+        .to_owned();
+    let (ok, out, err) = twin_run.finish();
+    assert!(ok, "{out}{err}");
+    let file = snaps.join(&name);
+    assert!(
+        err.contains(&format!("snapshot: {}", file.display())),
+        "{err}"
+    );
+    let o = twin()
+        .args([
+            "run",
+            scenario,
+            "--duration",
+            "20s",
+            "--no-checks",
+            "--from-snapshot",
+        ])
+        .arg(&file)
+        .output()
+        .unwrap();
+    let text = output_text(&o);
+    assert!(o.status.success(), "{text}");
+    assert!(text.contains("from snapshot "), "{text}");
+
+    let twin_run = run(&[]);
+    let (ok, out) = gs(&twin_run.addrs[0].to_string(), &["snapshot"]);
+    assert!(!ok, "{out}");
+    assert!(out.contains("start it with --snapshot-dir"), "{out}");
+    let _ = twin_run.finish();
+    let _ = std::fs::remove_dir_all(&dir);
+}

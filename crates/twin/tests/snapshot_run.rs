@@ -34,7 +34,7 @@ impl RunSink for Collect {
     fn contact(&mut self, t: SimTime, on: bool) {
         self.events.push(format!("contact {t} {on}"));
     }
-    fn snapshot(&mut self, t: SimTime, sections: &mut Sections) {
+    fn snapshot(&mut self, t: SimTime, _: m6p_twin::runtime::AskedBy, sections: &mut Sections) {
         self.snapshots
             .push((t, std::mem::take(sections), self.events.len()));
     }

@@ -159,12 +159,16 @@ pub enum GsRequest {
     },
     /// The run's simulated time, through its control channel.
     Time,
+    /// Take a snapshot of the run now, through its control channel: the run writes it to
+    /// its --snapshot-dir, named by its instant (docs/snapshots.md).
+    Snapshot,
 }
 
 /// A control request's JSON, or `None` for a request over KISS.
 fn control_request(r: &GsRequest) -> anyhow::Result<Option<serde_json::Value>> {
     Ok(Some(match r {
         GsRequest::Time => serde_json::json!({ "op": "time" }),
+        GsRequest::Snapshot => serde_json::json!({ "op": "snapshot" }),
         GsRequest::Clear { id } => serde_json::json!({ "op": "clear", "id": id }),
         GsRequest::Fault {
             kind,
@@ -292,7 +296,10 @@ pub fn cmd_gs(a: GsArgs) -> anyhow::Result<bool> {
                 )
                 .await
             }
-            GsRequest::Fault { .. } | GsRequest::Clear { .. } | GsRequest::Time => {
+            GsRequest::Fault { .. }
+            | GsRequest::Clear { .. }
+            | GsRequest::Time
+            | GsRequest::Snapshot => {
                 anyhow::bail!("a control request goes to --control")
             }
         }

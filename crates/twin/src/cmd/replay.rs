@@ -210,6 +210,8 @@ fn control_input(
             listen: None,
             faults: m6p_twin::faults::live(&loaded.scenario),
             replay: control,
+            // A replay writes no snapshot: the run it repeats took them.
+            snapshot_dir: None,
         });
         compiled.opts.clock = bus::ClockMode::Virtual;
         if compiled.opts.duration.is_none() {

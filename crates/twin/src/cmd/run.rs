@@ -130,6 +130,10 @@ pub struct RunArgs {
     /// compares (docs/snapshots.md, "Seeking a recording").
     #[arg(long, value_name = "T", value_parser = parse_duration)]
     pub snapshot_every: Option<Duration>,
+    /// Where the snapshots the control channel asks for go (`gs snapshot`), each named by
+    /// its instant (`snapshot-<ns>ns.snap`); without it, such requests are refused.
+    #[arg(long, value_name = "DIR", requires = "control")]
+    pub snapshot_dir: Option<PathBuf>,
     /// Start from a snapshot taken by this build of this scenario with this seed, instead
     /// of from the start: the run goes on from its instant as the run that took it did.
     #[arg(long, value_name = "FILE")]
@@ -314,6 +318,7 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
             listen: Some(addr),
             faults: m6p_twin::faults::live(&loaded.scenario),
             replay: Vec::new(),
+            snapshot_dir: a.snapshot_dir.clone(),
         });
     }
     if cfg!(not(feature = "live")) && a.live.is_some() {
