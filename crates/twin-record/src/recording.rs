@@ -755,7 +755,10 @@ pub fn replay_start(path: &Path, at_most_ns: u64) -> anyhow::Result<ReplayStart>
                         path.display()
                     )
                 })?;
-                base_ns = Some(crate::record::start_ns(utc)?);
+                base_ns = Some(
+                    crate::record::start_ns(utc)
+                        .with_context(|| format!("{}: metadata `start_utc`", path.display()))?,
+                );
             }
             Item::Metadata(m) if m.name == crate::record::RESUMED_METADATA_NAME => {
                 let at = m.metadata.get("at_ns").and_then(|t| t.parse().ok());

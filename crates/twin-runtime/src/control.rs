@@ -13,7 +13,8 @@
 //! Bounded like every outside link: at most [`MAX_CONNECTIONS`] connections at once (one
 //! more is told why and closed, counted and logged), lines of at most [`MAX_LINE`] bytes (a
 //! longer one is refused whole, counted), one request in the run per connection at a time
-//! (the next line is read after the reply), at most [`MAX_LIVE_FAULTS`] live faults a run.
+//! (the next line is read after the reply), at most [`MAX_LIVE_FAULTS`] live faults and
+//! [`MAX_ASKED_SNAPSHOTS`] snapshots a run.
 
 use std::collections::{BTreeMap, VecDeque};
 use std::net::SocketAddr;
@@ -35,6 +36,8 @@ pub const MAX_CONNECTIONS: usize = 4;
 pub const MAX_LINE: usize = 4096;
 /// Live faults a run takes (each is kept for `clear` until the run ends).
 pub const MAX_LIVE_FAULTS: u32 = 10_000;
+/// Snapshots a run takes on request (each some 50-400 kB on disk: docs/snapshots.md).
+pub const MAX_ASKED_SNAPSHOTS: u32 = 100;
 /// Fault ids of live faults start here (a scenario's faults are numbered from 0), so that
 /// live and scenario faults on one medium or node compose.
 pub const LIVE_FAULT_ID_BASE: u32 = 1 << 24;
@@ -78,6 +81,9 @@ pub enum ControlError {
     /// `clear` of a number the run did not give.
     #[error("no live fault {0} in this run")]
     NoLiveFault(u32),
+    /// [`MAX_ASKED_SNAPSHOTS`] were taken.
+    #[error("this run took {MAX_ASKED_SNAPSHOTS} snapshots on request already")]
+    TooManySnapshots,
     /// A snapshot asked of a run with nowhere to write it.
     #[error("this run takes no snapshots on request: start it with --snapshot-dir DIR")]
     NoSnapshotDir,
@@ -188,6 +194,8 @@ pub(crate) struct Control {
     stats: Arc<Mutex<ControlStats>>,
     /// Whether it takes the snapshots it is asked for.
     snapshots: OnRequest,
+    /// How many it took.
+    snapshots_taken: u32,
 }
 
 /// Whether a run takes the snapshots its control channel asks for.
@@ -216,6 +224,7 @@ impl Control {
                 catalogue: None,
                 stats,
                 snapshots: OnRequest::Refuse,
+                snapshots_taken: 0,
             });
         };
         if let Some(addr) = c.listen {
@@ -232,6 +241,7 @@ impl Control {
                 Some(_) => OnRequest::Take,
                 None => OnRequest::Refuse,
             },
+            snapshots_taken: 0,
         })
     }
 
@@ -261,10 +271,12 @@ impl Control {
         let reply = match self.catalogue.as_deref() {
             Some(_) if snapshot => {
                 let taken = match self.snapshots {
-                    OnRequest::Take => {
+                    OnRequest::Take if self.snapshots_taken < MAX_ASKED_SNAPSHOTS => {
+                        self.snapshots_taken += 1;
                         asked(req.t);
                         Ok(serde_json::json!({ "snapshot": snapshot_name(req.t) }))
                     }
+                    OnRequest::Take => Err(ControlError::TooManySnapshots),
                     OnRequest::Refuse => Err(ControlError::NoSnapshotDir),
                 };
                 reply_line(taken, req.t)
@@ -871,12 +883,58 @@ mod tests {
                 r#"{"op":"fault","kind":"melt","target":12}"#,
                 "unknown kind",
             ),
-            (r#"{"op":"snapshot"}"#, "not a request"),
+            (r#"{"op":"reboot-everything"}"#, "not a request"),
             ("power-off PL12", "not a request"),
         ] {
             let r = reply(&tl.answer(bad, s(6), &PowerOnly));
             assert_eq!(r["ok"], false, "{bad}: {r}");
             assert!(r["error"].as_str().unwrap().contains(why), "{bad}: {r}");
         }
+    }
+
+    /// A snapshot request: taken (its instant handed on, the file named by it) up to
+    /// [`MAX_ASKED_SNAPSHOTS`] a run, refused after; refused by a run without a directory.
+    #[test]
+    fn snapshots_asked_are_named_by_their_instant_and_bounded() {
+        let control = |snapshots| Control {
+            rx: mpsc::unbounded_channel().1,
+            catalogue: Some(Arc::new(PowerOnly)),
+            stats: Arc::default(),
+            snapshots,
+            snapshots_taken: 0,
+        };
+        let ask = |c: &mut Control, t: SimTime, asked: &mut Vec<SimTime>| {
+            let req = Admitted {
+                t,
+                conn: 0,
+                request: r#"{"op":"snapshot"}"#.into(),
+                reply: None,
+            };
+            match c.answer(req, &mut Timeline::default(), &mut |t| asked.push(t)) {
+                RunEvent::Control { reply: r, .. } => reply(&r),
+                other => panic!("{other:?}"),
+            }
+        };
+        let mut c = control(OnRequest::Take);
+        let mut asked = Vec::new();
+        let r = ask(&mut c, s(7), &mut asked);
+        assert_eq!(r["snapshot"], "snapshot-7000000000ns.snap", "{r}");
+        assert_eq!(asked, [s(7)]);
+        for i in 1..MAX_ASKED_SNAPSHOTS {
+            assert_eq!(ask(&mut c, s(7 + u64::from(i)), &mut asked)["ok"], true);
+        }
+        let r = ask(&mut c, s(1000), &mut asked);
+        assert_eq!(r["ok"], false);
+        assert!(
+            r["error"].as_str().unwrap().contains("100 snapshots"),
+            "{r}"
+        );
+        assert_eq!(asked.len(), MAX_ASKED_SNAPSHOTS as usize);
+        let r = ask(&mut control(OnRequest::Refuse), s(7), &mut asked);
+        assert!(
+            r["error"].as_str().unwrap().contains("--snapshot-dir"),
+            "{r}"
+        );
+        assert_eq!(asked.len(), MAX_ASKED_SNAPSHOTS as usize);
     }
 }

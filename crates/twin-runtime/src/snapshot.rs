@@ -220,15 +220,15 @@ impl<'a> LoopState<'a> {
             g.clone().load(r)?;
         }
         self.faults.load(r)?;
-        let at = r.at();
         let tapped = bool::read(r)?;
         match (tapped, self.tap.as_mut()) {
             (true, Some(tap)) => tap.load(r),
-            (false, None) => Ok(()),
-            _ => Err(SnapError::Bad {
-                what: "packet tap (taken with packet events on, loaded with them off, or the other way)",
-                at,
-            }),
+            // Taken by a run that reassembled its packets (it recorded them), loaded by one
+            // that does not: read past them.
+            (true, None) => PacketTap::new().load(r),
+            // The other way: this run's tap starts empty at the instant (the packets then
+            // on their way are not told as packets; the run's media are the same).
+            (false, _) => Ok(()),
         }
     }
 }

@@ -251,6 +251,25 @@ fn a_snapshot_asked_over_the_control_channel_is_written_to_the_runs_dir() {
     assert!(o.status.success(), "{text}");
     assert!(text.contains("from snapshot "), "{text}");
 
+    // Outside programs' links are not in snapshots: such a run takes none on request.
+    let o = twin()
+        .args([
+            "run",
+            scenario,
+            "--control",
+            "0",
+            "--kiss-listen",
+            "127.0.0.1:0",
+        ])
+        .args(["--snapshot-dir", snaps.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        output_text(&o).contains("--snapshot-dir: a run with connections to outside programs"),
+        "{}",
+        output_text(&o)
+    );
     let twin_run = run(&[]);
     let (ok, out) = gs(&twin_run.addrs[0].to_string(), &["snapshot"]);
     assert!(!ok, "{out}");

@@ -105,6 +105,13 @@ fn a_recorded_run_from_a_snapshot_records_what_the_whole_run_recorded_from_there
     // Compared from the start, the resumed recording lacks the first ten minutes.
     let diff = twin().args(["diff", &whole, &resumed]).output().unwrap();
     assert!(!diff.status.success(), "{}", stdout(&diff));
+    // The recorded run's snapshot serves a run that does not record, too.
+    let plain = run(&["--duration", "20m", "--from-snapshot", &snap]);
+    assert!(plain.status.success(), "{}", stderr(&plain));
+    assert_eq!(
+        without_recorded(&plain).trim(),
+        without_recorded(&taken).trim()
+    );
     // It carries the snapshot it started from: `replay` starts there and compares from it.
     identical_from(&["replay", &resumed], "10m");
 }

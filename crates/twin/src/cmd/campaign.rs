@@ -202,13 +202,15 @@ fn fork_of(
     off: bool,
 ) -> anyhow::Result<Option<m6p_twin::campaign_fork::Fork>> {
     use m6p_twin::campaign_fork::{self, NoFork};
+    if indices.is_empty() {
+        return Ok(None);
+    }
+    if off {
+        println!("fork: none ({})", NoFork::Off);
+        return Ok(None);
+    }
     let all: Vec<u64> = (0..runs).collect();
     let at = match campaign_fork::plan(c, &all)? {
-        Ok(_) if off => Err(NoFork::Off),
-        Ok(_) if indices.is_empty() => return Ok(None),
-        planned => planned,
-    };
-    let at = match at {
         Ok(at) => at,
         Err(why) => {
             println!("fork: none ({why})");
@@ -216,7 +218,14 @@ fn fork_of(
         }
     };
     let started = std::time::Instant::now();
-    let fork = campaign_fork::take(c, 0, at)?;
+    let fork = match campaign_fork::take(c, 0, at) {
+        Ok(fork) => fork,
+        // Every run from the start instead: its rows say what became of it.
+        Err(e) => {
+            println!("fork: none (the common prefix did not give its snapshot: {e:#})");
+            return Ok(None);
+        }
+    };
     println!(
         "fork: every run starts from the common prefix's snapshot at {} (run once, {:.1} s)",
         m6p_twin::duration::format_instant(at),

@@ -245,14 +245,22 @@ fn seek(
     match (start.snapshot, outside) {
         (Some((_, bytes)), false) => {
             let scenario = (loaded.name(), loaded.text.as_str());
-            let resume = m6p_twin::snapshots::resume_from_bytes(
+            match m6p_twin::snapshots::resume_from_bytes(
                 &a.file,
                 &bytes,
                 (&scenario.0, scenario.1),
                 compiled.opts.seed,
-            )?;
-            eprintln!("replaying from its snapshot at {}", resume.t);
-            compiled.opts.resume = Some(resume);
+            ) {
+                Ok(resume) => {
+                    eprintln!("replaying from its snapshot at {}", resume.t);
+                    compiled.opts.resume = Some(resume);
+                }
+                // A recording from the start runs from the start instead (slower, the same).
+                Err(e) if start.resumed_at_ns.is_none() => {
+                    eprintln!("replaying from the start: its snapshot does not serve ({e:#})");
+                }
+                Err(e) => return Err(e),
+            }
         }
         _ if start.resumed_at_ns.is_some() => anyhow::bail!(
             "{}: recorded from a snapshot it does not carry in a form this replay can use \

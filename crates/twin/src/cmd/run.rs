@@ -140,6 +140,17 @@ pub struct RunArgs {
     pub from_snapshot: Option<PathBuf>,
 }
 
+/// A run's result, its error naming the snapshot it started `from` (a part of the snapshot
+/// that does not fit the run is found while it runs).
+fn naming_snapshot<T>(ran: anyhow::Result<T>, from: Option<&std::path::Path>) -> anyhow::Result<T> {
+    match from {
+        Some(p) => {
+            anyhow::Context::with_context(ran, || format!("running from snapshot {}", p.display()))
+        }
+        None => ran,
+    }
+}
+
 /// The run's snapshots: those to take, and the one it starts from.
 fn snapshot_options(
     opts: &mut m6p_twin::runtime::RunOptions,
@@ -152,6 +163,14 @@ fn snapshot_options(
         .map(|d| csp::SimTime::ZERO + *d)
         .collect();
     opts.snapshot_to.clone_from(&a.snapshot);
+    if a.snapshot_dir.is_some()
+        && (!opts.kiss_links.is_empty() || !opts.socketcan.is_empty() || !opts.uart.is_empty())
+    {
+        anyhow::bail!(
+            "--snapshot-dir: a run with connections to outside programs cannot be saved in a \
+             snapshot yet (their links' state is not in it: docs/snapshots.md)"
+        );
+    }
     let Some(path) = &a.from_snapshot else {
         return Ok(());
     };
@@ -374,8 +393,8 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
             m6p_twin::record::Existing::Refuse
         },
     });
-    let (outcome, stats) =
-        rt.block_on(exec::execute_with(&loaded, compiled, record_to, &mut tap))?;
+    let ran = rt.block_on(exec::execute_with(&loaded, compiled, record_to, &mut tap));
+    let (outcome, stats) = naming_snapshot(ran, a.from_snapshot.as_deref())?;
     #[cfg(feature = "live")]
     if let Some(l) = live.take() {
         eprintln!("live view: {} messages published; stopping", l.messages());
