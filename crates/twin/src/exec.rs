@@ -456,17 +456,18 @@ async fn execute_inner(
 ) -> anyhow::Result<(Outcome, RecordingResult)> {
     // The ground sink's files grow as the bytes arrive.
     let mut files = downlink.map(crate::sessions::DownlinkFiles::new);
-    let mut live = |ev: &RunEvent| {
-        if let Some(f) = files.as_mut() {
-            f.observe(ev);
-        }
-        live(ev);
-    };
+    if let (Some(f), Some(r)) = (files.as_mut(), &compiled.opts.resume)
+        && let Ok(state) = r.section(DOWNLINK_SECTION)
+    {
+        f.resume(state)
+            .context("the snapshot's downlink files' part")?;
+    }
     let scenario = (loaded.name(), loaded.text.clone());
     let mut taker = crate::snapshots::Taker::new(scenario, &compiled.opts);
     let Some(RecordTo { path, existing }) = record else {
         let mut sink = Taking {
-            events: &mut live,
+            events: live,
+            files: files.as_mut(),
             recorder: None,
             taker: taker.as_mut(),
         };
@@ -549,6 +550,7 @@ async fn execute_inner(
     )?;
     let mut sink = Taking {
         events: live,
+        files: files.as_mut(),
         recorder: Some((&mut recorder, carried)),
         taker: taker.as_mut(),
     };
@@ -563,6 +565,8 @@ async fn execute_inner(
 /// the recorder's part, to their files and, those the recording carries, into it.
 struct Taking<'a, F> {
     events: F,
+    /// The ground sink's files.
+    files: Option<&'a mut crate::sessions::DownlinkFiles>,
     recorder: Option<(
         &'a mut crate::record::RecorderThread,
         crate::snapshots::Carried,
@@ -575,6 +579,9 @@ impl<F: FnMut(&RunEvent) + Send> RunSink for Taking<'_, F> {
         if let Some((r, _)) = self.recorder.as_mut() {
             r.write(ev);
         }
+        if let Some(f) = self.files.as_mut() {
+            f.observe(ev);
+        }
         (self.events)(ev);
     }
     fn snapshot(
@@ -583,6 +590,9 @@ impl<F: FnMut(&RunEvent) + Send> RunSink for Taking<'_, F> {
         by: twin_runtime::AskedBy,
         sections: &mut twin_runtime::Sections,
     ) {
+        if let Some(f) = self.files.as_ref() {
+            sections.push((DOWNLINK_SECTION.to_owned(), f.save()));
+        }
         if let Some((r, carried)) = self.recorder.as_mut()
             && let Some(state) = r.snapshot()
         {
@@ -596,6 +606,9 @@ impl<F: FnMut(&RunEvent) + Send> RunSink for Taking<'_, F> {
         }
     }
 }
+
+/// The name of the downlink files' part of a snapshot.
+const DOWNLINK_SECTION: &str = "downlink";
 
 /// Say where the snapshots went; a write that failed fails the command, after the run.
 fn snapshots_written(taker: Option<crate::snapshots::Taker>) -> anyhow::Result<()> {

@@ -270,3 +270,92 @@ fn a_snapshot_not_of_this_run_is_refused_naming_the_file_and_why() {
         assert!(!stdout(&o).contains("simulated "), "{why}: nothing ran");
     }
 }
+
+/// Two runs of a session (set up at 20 s and at 40 s), each downlinking to
+/// `DIR/session-1-run<k>.bin`; `{DIR}` is the downlink folder.
+const TWO_RUNS: &str = r#"name = "two-runs"
+duration = "50s"
+
+[network]
+payloads = [12, 13]
+
+[pc]
+downlink_dir = "{DIR}"
+
+[[pc.sessions]]
+id = 1
+payload = 12
+mode = "polling"
+poll_period = "100ms"
+reply_timeout = "1s"
+
+[[commands]]
+at = "20s"
+to = "PC"
+request = "raw"
+port = 10
+data = "01 01 00000000 0a00 1900 c8 68656c6c6f2066726f6d20746865205043"
+
+[[commands]]
+at = "40s"
+to = "PC"
+request = "raw"
+port = 10
+data = "01 01 00000000 0a00 1900 c8 68656c6c6f2066726f6d20746865205043"
+"#;
+
+/// A run from a snapshot numbers its session runs' downlink files on from the snapshot's
+/// (the second run is `run2`, whatever the process), and a run under way at the snapshot
+/// goes on in its file, cut back to what it held then: the files end as the whole run's.
+#[test]
+fn a_run_from_a_snapshot_goes_on_with_the_downlink_files_where_they_were() {
+    let dir = tempfile::tempdir().unwrap();
+    let down = dir.path().join("down");
+    let file = dir.path().join("two-runs.toml");
+    std::fs::write(&file, TWO_RUNS.replace("{DIR}", down.to_str().unwrap())).unwrap();
+    let (file, snap) = (file.to_str().unwrap(), dir.path().join("s.snap"));
+    let whole = run(&[
+        file,
+        "--snapshot-at",
+        "30s,41s",
+        "--snapshot",
+        snap.to_str().unwrap(),
+    ]);
+    assert!(whole.status.success(), "{}", stderr(&whole));
+    let read = |k: u32| std::fs::read(down.join(format!("session-1-run{k}.bin"))).unwrap();
+    let (run1, run2) = (read(1), read(2));
+    assert!(!run1.is_empty() && !run2.is_empty());
+
+    // Between the runs: the second run's file is run2, and the first is not written.
+    std::fs::remove_dir_all(&down).unwrap();
+    let between = dir.path().join("s.30000000000ns.snap");
+    let o = run(&[file, "--from-snapshot", between.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(read(2), run2);
+    assert!(!down.join("session-1-run1.bin").exists());
+
+    // Mid-run, over the whole run's files: run2 is cut back and goes on to the same bytes,
+    // run1 is left as it was.
+    std::fs::write(down.join("session-1-run1.bin"), &run1).unwrap();
+    std::fs::write(down.join("session-1-run2.bin"), &run2).unwrap();
+    let mid = dir.path().join("s.41000000000ns.snap");
+    let o = run(&[file, "--from-snapshot", mid.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!((read(1), read(2)), (run1, run2.clone()));
+    // Without the file, it holds what came after the snapshot: the run's tail.
+    std::fs::remove_dir_all(&down).unwrap();
+    let o = run(&[file, "--from-snapshot", mid.to_str().unwrap()]);
+    assert!(
+        stderr(&o).contains("holds only what is downlinked from the snapshot on"),
+        "{}",
+        stderr(&o)
+    );
+    let tail = read(2);
+    assert!(!tail.is_empty() && tail.len() < run2.len());
+    assert!(run2.ends_with(&tail));
+    // Another run's file of that name is not taken for this one's: it starts afresh.
+    std::fs::write(down.join("session-1-run2.bin"), vec![0xAA; run2.len()]).unwrap();
+    let o = run(&[file, "--from-snapshot", mid.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(read(2), tail);
+}

@@ -267,14 +267,61 @@ impl SessionsReport {
 pub struct DownlinkFiles {
     dir: std::path::PathBuf,
     runs: BTreeMap<u8, u32>,
-    /// The latest run's file of each session, and whether that run has ended.
-    open: BTreeMap<u8, (std::path::PathBuf, Option<std::fs::File>, bool)>,
+    /// The latest run's file of each session.
+    open: BTreeMap<u8, OpenRun>,
     /// The files written, in the order their runs started.
     pub files: Vec<std::path::PathBuf>,
     /// Writes that failed (the first is logged).
     pub errors: u64,
     /// The first failure.
     pub first_error: Option<String>,
+}
+
+/// A session's latest run's file.
+#[derive(Debug)]
+struct OpenRun {
+    path: std::path::PathBuf,
+    file: Option<std::fs::File>,
+    /// The run has ended.
+    ended: bool,
+    /// Bytes written to it.
+    len: u64,
+    /// Their CRC-32C: a run from a snapshot goes on in a file only if it begins with them.
+    crc: u32,
+}
+
+/// `path`, under `dir`, opened to go on after its first `len` bytes (cut back to them;
+/// `true`) when they are the ones written (CRC-32C `crc`), else created afresh (`false`):
+/// missing, shorter, or another run's.
+fn go_on_in(
+    dir: &std::path::Path,
+    path: &std::path::Path,
+    len: u64,
+    crc: u32,
+) -> Result<(std::fs::File, bool), String> {
+    let opened = std::fs::create_dir_all(dir).and_then(|()| {
+        if begins_with(path, len, crc) {
+            let f = std::fs::OpenOptions::new().append(true).open(path)?;
+            f.set_len(len)?;
+            Ok((f, true))
+        } else {
+            std::fs::File::create(path).map(|f| (f, false))
+        }
+    });
+    opened.map_err(|e| format!("opening {}: {e}", path.display()))
+}
+
+/// Whether the file at `path` begins with `len` bytes of CRC-32C `crc`.
+fn begins_with(path: &std::path::Path, len: u64, crc: u32) -> bool {
+    use std::io::Read as _;
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut head = Vec::new();
+    match f.take(len).read_to_end(&mut head) {
+        Ok(n) => n as u64 == len && crc32c::crc32c(&head) == crc,
+        Err(_) => false,
+    }
 }
 
 impl DownlinkFiles {
@@ -305,6 +352,16 @@ impl DownlinkFiles {
         let file = std::fs::create_dir_all(&self.dir)
             .and_then(|()| std::fs::File::create(&path))
             .map_err(|e| format!("creating {}: {e}", path.display()));
+        self.opened(session, path, file, (0, 0));
+    }
+
+    fn opened(
+        &mut self,
+        session: u8,
+        path: std::path::PathBuf,
+        file: Result<std::fs::File, String>,
+        (len, crc): (u64, u32),
+    ) {
         let file = match file {
             Ok(f) => Some(f),
             Err(e) => {
@@ -313,7 +370,69 @@ impl DownlinkFiles {
             }
         };
         self.files.push(path.clone());
-        self.open.insert(session, (path, file, false));
+        self.open.insert(
+            session,
+            OpenRun {
+                path,
+                file,
+                ended: false,
+                len,
+                crc,
+            },
+        );
+    }
+
+    /// Its state for a snapshot: each session's count of runs, and its latest run's
+    /// bytes written and whether it has ended.
+    pub fn save(&self) -> Vec<u8> {
+        let open: Vec<(u8, bool, u64, u32)> = self
+            .open
+            .iter()
+            .map(|(s, r)| (*s, r.ended, r.len, r.crc))
+            .collect();
+        snap::to_bytes(&(self.runs.clone(), open))
+    }
+
+    /// Go on from a snapshot's state ([`DownlinkFiles::save`]): runs are numbered on from
+    /// the snapshot's, and a run under way at its instant goes on in its file, cut back to
+    /// the bytes it had then (the file then ends as the uninterrupted run's did); a file
+    /// that is not there, or shorter, starts again and holds what comes after the instant.
+    pub fn resume(&mut self, bytes: &[u8]) -> Result<(), snap::SnapError> {
+        use snap::SnapNew as _;
+        let mut r = snap::Reader::new(bytes);
+        let (runs, open) = <(BTreeMap<u8, u32>, Vec<(u8, bool, u64, u32)>)>::read(&mut r)?;
+        r.finish()?;
+        self.runs = runs;
+        for (session, ended, len, crc) in open {
+            let k = self.runs.get(&session).copied().unwrap_or_default();
+            let path = self.dir.join(format!("session-{session}-run{k}.bin"));
+            if ended {
+                self.open.insert(
+                    session,
+                    OpenRun {
+                        path,
+                        file: None,
+                        ended,
+                        len,
+                        crc,
+                    },
+                );
+                continue;
+            }
+            let file = go_on_in(&self.dir, &path, len, crc);
+            let written = if file.as_ref().is_ok_and(|(_, whole)| *whole) {
+                (len, crc)
+            } else {
+                // Info, not a warning: a replay's fresh folder always starts so.
+                tracing::info!(
+                    "downlink files: {} holds only what is downlinked from the snapshot on",
+                    path.display()
+                );
+                (0, 0)
+            };
+            self.opened(session, path, file.map(|(f, _)| f), written);
+        }
+        Ok(())
     }
 
     /// The directory, for messages.
@@ -332,18 +451,28 @@ impl DownlinkFiles {
             // As the report: an end without an open run is a run of its own; a run lost
             // with the PC's memory ends there.
             O::SessionEnded { session_id, .. } | O::SessionLost { session_id, .. } => {
-                if !matches!(self.open.get(session_id), Some((_, _, false))) {
+                if self.open.get(session_id).is_none_or(|r| r.ended) {
                     self.start(*session_id);
                 }
                 if let Some(run) = self.open.get_mut(session_id) {
-                    run.2 = true;
+                    run.ended = true;
                 }
             }
             O::Downlinked {
                 session_id, bytes, ..
             } => {
                 let res = match self.open.get_mut(session_id) {
-                    Some((path, Some(f), _)) => std::io::Write::write_all(f, bytes)
+                    Some(OpenRun {
+                        path,
+                        file: Some(f),
+                        len,
+                        crc,
+                        ..
+                    }) => std::io::Write::write_all(f, bytes)
+                        .map(|()| {
+                            *len += bytes.len() as u64;
+                            *crc = crc32c::crc32c_append(*crc, bytes);
+                        })
                         .map_err(|e| format!("appending to {}: {e}", path.display())),
                     _ => Ok(()),
                 };
