@@ -652,16 +652,11 @@ impl CanBus {
         st.reserved.reserve(addr, link, label)
     }
 
-    /// Give back every claim of an endpoint and disable it (an outside link went away).
+    /// Give back every address of an endpoint, claimed or attached with, and disable it:
+    /// an outside link went away, or an outside program takes a node's place in a run from
+    /// a snapshot (its place on the bus stays, its counts with it).
     pub fn release(&self, port: &CanPort) {
-        let mut st = self.lock();
-        st.claims.retain(|_, idx| *idx != port.idx);
-        if let Some(p) = st.ports.get_mut(port.idx) {
-            p.addrs = AddrSet::default();
-            p.enabled = false;
-            p.departed = p.link.is_some();
-        }
-        st.lose_queue(port.idx, None, FrameLoss::Off);
+        self.lock().release(port.idx);
     }
 
     /// Fault `id` impairs the medium with `imp` (`Some`) or is lifted (`None`); the
@@ -850,13 +845,13 @@ snap::fields!(Port {
     queue,
     budget,
     departed,
-    arrivals;
-    skip name, own, promiscuous, inbox, iface, link
+    arrivals,
+    link;
+    skip name, own, promiscuous, inbox, iface
 });
 snap::fields!(State {
     ports,
     claims,
-    reserved,
     busy_until,
     recessive_seqs,
     bus_off_since,
@@ -872,7 +867,7 @@ snap::fields!(State {
     last_bits,
     bell,
     waiting_until;
-    skip cfg, name, trace, bus_waker
+    skip cfg, name, reserved, trace, bus_waker
 });
 
 impl CanBus {
@@ -893,14 +888,44 @@ impl CanBus {
 
 /// The bus's state, under its lock; a bus loaded from a snapshot is started with
 /// [`CanBus::resume`].
+/// The endpoints of outside programs' connections (attached after those the run builds)
+/// load into places made for them and are let go at once: a connection is no state a run
+/// can take up again, so a run from a snapshot begins with its programs gone, and the
+/// next connection of each link takes its place (as a program's reconnecting does). The
+/// addresses the links reserve are this run's, reserved as its links start.
 impl Snap for CanBus {
     fn save(&self, w: &mut snap::Writer) {
         self.lock().save(w);
     }
     fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), SnapError> {
-        self.lock().load(r)
+        let mut st = self.lock();
+        let built = st.ports.len();
+        let saved = r.clone().len(MIN_PORT_BYTES, "CAN endpoints")?;
+        for _ in built..saved {
+            st.push_port("", &[], false, crate::inbox::inbox().0, 0);
+        }
+        st.load(r)?;
+        // Only connections' endpoints are taken in: a node's that this run did not build is
+        // another build of the bus.
+        if st.ports.iter().skip(built).any(|p| p.link.is_none()) {
+            return Err(SnapError::Mismatch {
+                what: "Port",
+                saved: saved as u64,
+                built: built as u64,
+            });
+        }
+        for idx in built..saved {
+            if let Some(p) = st.ports.get_mut(idx) {
+                p.name = p.stats.name.as_str().into();
+            }
+            st.release(idx);
+        }
+        Ok(())
     }
 }
+
+/// The fewest bytes an endpoint's saved state takes (its counters alone take more).
+const MIN_PORT_BYTES: usize = 64;
 
 /// Trace a frame that never went on the wire.
 fn lost(
@@ -945,6 +970,18 @@ impl State {
                 why,
             );
         }
+    }
+
+    /// [`CanBus::release`] of endpoint `idx`.
+    fn release(&mut self, idx: usize) {
+        self.claims.retain(|_, i| *i != idx);
+        if let Some(p) = self.ports.get_mut(idx) {
+            p.addrs = AddrSet::default();
+            p.own = AddrSet::default();
+            p.enabled = false;
+            p.departed = p.link.is_some();
+        }
+        self.lose_queue(idx, None, FrameLoss::Off);
     }
 
     /// Add an endpoint; its index.
@@ -2122,6 +2159,28 @@ mod tests {
         a.send(clock.now(), cfp_frame(6, 12, 2));
         tokio::time::sleep(Duration::from_millis(2)).await;
         assert!(rx_int.try_recv().is_ok());
+    }
+
+    /// A node's endpoint released (an outside program takes the node's place in a run from
+    /// a snapshot) gives back the address it was attached with: a link's connection claims
+    /// it, and the released place keeps its counts.
+    #[test]
+    fn a_released_nodes_endpoint_gives_its_address_to_a_link() {
+        let bus = CanBus::new(CanBusConfig::new("payload"), 1);
+        let (tx_node, _r1) = inbox();
+        let (tx_link, _r2) = inbox();
+        let node = bus.attach("PL12", &[12], false, tx_node, 0);
+        let link = crate::reserve::LinkId(0);
+        assert_eq!(
+            bus.attach_claimed("hub", link, 12, tx_link.clone(), 0)
+                .err(),
+            Some(ClaimError::Node("PL12".to_owned()))
+        );
+        bus.release(&node);
+        assert_eq!(bus.node_holding(12), None);
+        let port = bus.attach_claimed("hub", link, 12, tx_link, 0).unwrap();
+        assert_ne!(port.index(), node.index());
+        assert_eq!(bus.stats().ports.len(), 2);
     }
 
     /// A sender whose every frame is destroyed (`corrupt` at 1.0): no frame reaches the

@@ -30,6 +30,14 @@ impl Attachment {
             Attachment::Net(p) => p.net().set_enabled(p, on),
         }
     }
+
+    /// Give back the endpoint's addresses and disable it ([`crate::CanBus::release`]).
+    pub fn release(&self) {
+        match self {
+            Attachment::Can(p) => p.bus().release(p),
+            Attachment::Net(p) => p.net().release(p),
+        }
+    }
 }
 
 /// A node's control channel: each command with the simulated instant it takes effect

@@ -384,15 +384,11 @@ impl PacketNet {
         st.reserved.reserve(addr, link, label)
     }
 
-    /// Give back an endpoint's claims and disable it.
+    /// Give back every address of an endpoint, claimed or attached with, and disable it:
+    /// an outside link went away, or an outside program takes a node's place in a run from
+    /// a snapshot (its place stays, its counts with it).
     pub fn release(&self, port: &NetPort) {
-        let mut st = self.lock();
-        st.claims.retain(|_, i| *i != port.idx);
-        if let Some(e) = st.eps.get_mut(port.idx) {
-            e.addrs.clear();
-            e.enabled = false;
-            e.departed = e.link.is_some();
-        }
+        self.lock().release(port.idx);
     }
 
     /// Fault `id` impairs the medium with `imp` (`Some`) or is lifted (`None`); the
@@ -474,6 +470,20 @@ impl PacketNet {
 }
 
 impl State {
+    /// [`PacketNet::release`] of endpoint `idx`.
+    fn release(&mut self, idx: usize) {
+        self.claims.retain(|_, i| *i != idx);
+        if self.default_ep == Some(idx) {
+            self.default_ep = None;
+        }
+        if let Some(e) = self.eps.get_mut(idx) {
+            e.addrs.clear();
+            e.own.clear();
+            e.enabled = false;
+            e.departed = e.link.is_some();
+        }
+    }
+
     /// Add an endpoint; its index.
     fn push_endpoint(
         &mut self,
@@ -857,15 +867,16 @@ snap::fields!(Endpoint {
     tx,
     rx,
     departed,
-    generation;
-    skip name, own, radio, inbox, iface, link
+    generation,
+    name,
+    link;
+    skip own, radio, inbox, iface
 });
 
 snap::fields!(State {
     eps,
     default_ep,
     claims,
-    reserved,
     air_busy_until,
     air_waiting,
     air_last,
@@ -878,19 +889,41 @@ snap::fields!(State {
     rng,
     contact,
     waiting_until;
-    skip cfg, name, trace, air_tap
+    skip cfg, name, reserved, trace, air_tap
 });
 
 /// The network's state, under its lock; a network loaded from a snapshot is started with
 /// [`PacketNet::resume`].
+/// Outside programs' connections are let go as they load, as on a CAN bus
+/// ([`CanBus`]'s `Snap`).
 impl Snap for PacketNet {
     fn save(&self, w: &mut snap::Writer) {
         self.lock().save(w);
     }
     fn load(&mut self, r: &mut snap::Reader<'_>) -> Result<(), SnapError> {
-        self.lock().load(r)
+        let mut st = self.lock();
+        let built = st.eps.len();
+        let saved = r.clone().len(MIN_ENDPOINT_BYTES, "ground endpoints")?;
+        for _ in built..saved {
+            st.push_endpoint("", &[], false, crate::inbox::inbox().0, 0);
+        }
+        st.load(r)?;
+        if st.eps.iter().skip(built).any(|e| e.link.is_none()) {
+            return Err(SnapError::Mismatch {
+                what: "Endpoint",
+                saved: saved as u64,
+                built: built as u64,
+            });
+        }
+        for idx in built..saved {
+            st.release(idx);
+        }
+        Ok(())
     }
 }
+
+/// The fewest bytes an endpoint's saved state takes.
+const MIN_ENDPOINT_BYTES: usize = 16;
 
 #[cfg(test)]
 mod tests {

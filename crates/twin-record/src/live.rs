@@ -17,7 +17,9 @@
 //! is attached: the SDK writes nothing to disk (recordings are [`crate::record::Recorder`]'s).
 //! It runs on a small tokio runtime of its own (one worker thread), so a busy simulation
 //! and a slow client do not stall each other; each client has a queue of
-//! [`BACKLOG`] messages, and the oldest are dropped when a client falls behind.
+//! [`BACKLOG`] messages, and the oldest are dropped when a client falls behind. Its
+//! clients may publish, in [`PUBLISH_ENCODING`], to a listener its caller gives (the run's
+//! control channel: `m6p_twin::live_control`).
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -25,7 +27,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use foxglove::websocket::Capability;
+use foxglove::websocket::{Capability, ServerListener};
 use foxglove::{
     ChannelBuilder, Context, PartialMetadata, RawChannel, Schema, WebSocketServer,
     WebSocketServerHandle,
@@ -42,6 +44,9 @@ pub const DEFAULT_ADDR: &str = "127.0.0.1:8765";
 
 /// Messages queued per client before the oldest are dropped.
 pub const BACKLOG: usize = 4096;
+
+/// The encoding the server takes its clients' messages in, when they may publish.
+pub const PUBLISH_ENCODING: &str = "json";
 
 /// The least wall-clock time between two broadcasts of the simulated time.
 const TIME_EVERY: Duration = Duration::from_millis(20);
@@ -64,6 +69,8 @@ pub struct LiveServer {
     messages: u64,
     /// Set after the first error, which is reported once; publishing then stops.
     failed: bool,
+    /// Whether its clients may publish.
+    publishing: bool,
 }
 
 impl std::fmt::Debug for LiveServer {
@@ -78,9 +85,17 @@ impl std::fmt::Debug for LiveServer {
 
 impl LiveServer {
     /// Start a server on `addr` (port 0: any free port) for a run that starts `start_ns`
-    /// after the Unix epoch, with the channels every run has. Call it outside an async
-    /// runtime (it blocks on its own).
-    pub fn start(addr: SocketAddr, start_ns: u64) -> anyhow::Result<LiveServer> {
+    /// after the Unix epoch, with the channels every run has. With `publish`, its clients
+    /// may publish (in [`PUBLISH_ENCODING`]) to that listener, when `addr` is a loopback
+    /// address: it is the run's control channel, which can power nodes off, and the
+    /// protocol has no authentication; browser pages of other sites are then turned away
+    /// ([`live_front::Origins::Trusted`]). Call it outside an async runtime (it blocks on
+    /// its own).
+    pub fn start(
+        addr: SocketAddr,
+        start_ns: u64,
+        publish: Option<Arc<dyn ServerListener>>,
+    ) -> anyhow::Result<LiveServer> {
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .thread_name("m6p-live")
@@ -92,21 +107,41 @@ impl LiveServer {
             .block_on(tokio::net::TcpListener::bind(addr))
             .with_context(|| format!("starting the live view on {addr}"))?;
         let addr = listener.local_addr()?;
+        let mut server = WebSocketServer::new()
+            .name(format!("m6p-twin {}", env!("CARGO_PKG_VERSION")))
+            .bind("127.0.0.1", 0)
+            .capabilities([Capability::Time])
+            .message_backlog_size(BACKLOG)
+            .context(&ctx);
+        let publishing = match publish {
+            Some(listener) if addr.ip().is_loopback() => {
+                server = server
+                    .capabilities([Capability::Time, Capability::ClientPublish])
+                    .supported_encodings([PUBLISH_ENCODING])
+                    .listener(listener);
+                true
+            }
+            Some(_) => {
+                tracing::warn!(
+                    "live view on {addr}: not a loopback address, so its clients may not \
+                     publish (to the control channel, which can power nodes off)"
+                );
+                false
+            }
+            None => false,
+        };
         // Started from within `rt`, the server spawns its tasks on `rt`.
         let server = rt
-            .block_on(
-                WebSocketServer::new()
-                    .name(format!("m6p-twin {}", env!("CARGO_PKG_VERSION")))
-                    .bind("127.0.0.1", 0)
-                    .capabilities([Capability::Time])
-                    .message_backlog_size(BACKLOG)
-                    .context(&ctx)
-                    .start(),
-            )
+            .block_on(server.start())
             .context("starting the live view's server")?;
         let inner = SocketAddr::from(([127, 0, 0, 1], server.port()));
         let front = Arc::new(FrontCounts::default());
-        rt.spawn(live_front::serve(listener, inner, front.clone()));
+        let origins = if publishing {
+            live_front::Origins::Trusted
+        } else {
+            live_front::Origins::Any
+        };
+        rt.spawn(live_front::serve(listener, inner, front.clone(), origins));
         let mut live = LiveServer {
             rt: Some(rt),
             server: Some(server),
@@ -119,6 +154,7 @@ impl LiveServer {
             broadcast: None,
             messages: 0,
             failed: false,
+            publishing,
         };
         for (kind, key) in FIXED_CHANNELS {
             channel(&mut live.chans, &live.ctx, kind, key)?;
@@ -140,6 +176,11 @@ impl LiveServer {
     /// Messages handed to the server so far.
     pub fn messages(&self) -> u64 {
         self.messages
+    }
+
+    /// Whether its clients may publish.
+    pub fn publishing(&self) -> bool {
+        self.publishing
     }
 
     /// Publish one event's messages, with their simulated log times, and the simulated

@@ -15,6 +15,13 @@
 //! Bounded like every outside link: at most [`MAX_CLIENTS`] connections at once (one more is
 //! closed, counted and logged), a request head of at most [`MAX_HEAD`] bytes that must arrive
 //! within [`HEAD_TIMEOUT`].
+//!
+//! When its clients may publish control requests ([`Origins::Trusted`]), a browser page
+//! of another site must not be one of them: any page may open a WebSocket to a loopback
+//! port, and its browser says which page in `Origin`. Requests from pages other than
+//! those on this machine (`http(s)://127.0.0.1`, `localhost`, `[::1]`, any port), the
+//! Foxglove web app (`https://app.foxglove.dev`) or a desktop app's `file://` are answered
+//! 403 and closed, counted and logged; programs that are no browser send no `Origin`.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -38,6 +45,49 @@ pub const MAX_HEAD: usize = 16 * 1024;
 /// How long a client has to send its whole upgrade request.
 pub const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// Whose browser pages the front lets in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Origins {
+    /// Any (a view that only shows the run).
+    Any,
+    /// Pages of this machine, Foxglove's web app and desktop apps (a view whose clients
+    /// publish control requests).
+    Trusted,
+}
+
+/// The pages trusted besides those served from this machine.
+const TRUSTED_ORIGINS: [&str; 2] = ["https://app.foxglove.dev", "file://"];
+
+/// Whether an upgrade request `head` comes from a page `origins` lets in: `Err` with the
+/// page's origin when not.
+pub fn origin_allowed(head: &[u8], origins: Origins) -> Result<(), String> {
+    if origins == Origins::Any {
+        return Ok(());
+    }
+    let text = String::from_utf8_lossy(head);
+    let Some(origin) = text.split("\r\n").find_map(|line| {
+        let (name, value) = line.split_once(':')?;
+        name.trim()
+            .eq_ignore_ascii_case("origin")
+            .then(|| value.trim().to_ascii_lowercase())
+    }) else {
+        return Ok(());
+    };
+    let host = origin
+        .strip_prefix("http://")
+        .or_else(|| origin.strip_prefix("https://"))
+        .map(|rest| match rest.strip_prefix("[::1]") {
+            Some(_) => "[::1]",
+            None => rest.split(':').next().unwrap_or_default(),
+        });
+    let local = matches!(host, Some("127.0.0.1" | "localhost" | "[::1]"));
+    if local || TRUSTED_ORIGINS.contains(&origin.as_str()) {
+        Ok(())
+    } else {
+        Err(origin)
+    }
+}
+
 /// Which name the client offered the protocol under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Offer {
@@ -56,6 +106,8 @@ pub enum FrontError {
     Truncated,
     #[error("no complete upgrade request within {HEAD_TIMEOUT:?}")]
     Slow,
+    #[error("a page of {0} may not publish control requests (403)")]
+    Origin(String),
     #[error("{0}")]
     Io(#[from] std::io::Error),
 }
@@ -144,7 +196,12 @@ async fn read_head<R: AsyncRead + Unpin>(r: &mut R) -> Result<(Vec<u8>, Vec<u8>)
 
 /// Accept connections on `listener` and pass each to the server at `inner`, until the
 /// runtime stops.
-pub async fn serve(listener: TcpListener, inner: SocketAddr, counts: Arc<FrontCounts>) {
+pub async fn serve(
+    listener: TcpListener,
+    inner: SocketAddr,
+    counts: Arc<FrontCounts>,
+    origins: Origins,
+) {
     let slots = Arc::new(Semaphore::new(MAX_CLIENTS));
     loop {
         let (client, peer) = match listener.accept().await {
@@ -164,7 +221,7 @@ pub async fn serve(listener: TcpListener, inner: SocketAddr, counts: Arc<FrontCo
         };
         let counts = counts.clone();
         tokio::spawn(async move {
-            if let Err(e) = pass(client, inner, &counts).await {
+            if let Err(e) = pass(client, inner, &counts, origins).await {
                 let n = counts.refused_head.fetch_add(1, Ordering::Relaxed) + 1;
                 tracing::warn!("live view: {peer} closed: {e} ({n} so far)");
             }
@@ -179,10 +236,17 @@ async fn pass(
     mut client: TcpStream,
     inner: SocketAddr,
     counts: &FrontCounts,
+    origins: Origins,
 ) -> Result<(), FrontError> {
     let (head, rest) = tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut client))
         .await
         .map_err(|_| FrontError::Slow)??;
+    if let Err(origin) = origin_allowed(&head, origins) {
+        let _ = client
+            .write_all(b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+            .await;
+        return Err(FrontError::Origin(origin));
+    }
     let (head, offer) = rewrite_request(&head);
     if offer == Offer::Legacy {
         counts.legacy.fetch_add(1, Ordering::Relaxed);
@@ -204,6 +268,36 @@ mod tests {
     use super::*;
 
     const REQ: &str = "GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n";
+
+    #[test]
+    fn a_view_taking_control_requests_lets_in_only_trusted_pages() {
+        let with = |origin: &str| format!("{REQ}Origin: {origin}\r\n\r\n").into_bytes();
+        let none = format!("{REQ}\r\n").into_bytes();
+        for ok in [
+            "http://127.0.0.1:8080",
+            "http://localhost",
+            "HTTPS://LOCALHOST:3000",
+            "http://[::1]:9",
+            "https://app.foxglove.dev",
+            "file://",
+        ] {
+            assert_eq!(origin_allowed(&with(ok), Origins::Trusted), Ok(()), "{ok}");
+        }
+        assert_eq!(origin_allowed(&none, Origins::Trusted), Ok(()));
+        for bad in [
+            "https://evil.example",
+            "null",
+            "http://127.0.0.1.evil.example",
+            "http://localhost.evil.example:80",
+            "https://app.foxglove.dev.evil.example",
+        ] {
+            assert!(
+                origin_allowed(&with(bad), Origins::Trusted).is_err(),
+                "{bad}"
+            );
+            assert_eq!(origin_allowed(&with(bad), Origins::Any), Ok(()), "{bad}");
+        }
+    }
 
     fn req(protocols: &str) -> Vec<u8> {
         format!("{REQ}Sec-WebSocket-Protocol: {protocols}\r\n\r\n").into_bytes()

@@ -474,7 +474,7 @@ pub struct FaultMsg {
 pub struct ControlMsg {
     /// Simulated ns since the start of the run.
     pub t_ns: u64,
-    /// The connection it came on (from 1).
+    /// The connection it came on (from 1; 0: published by a client of the live view).
     pub conn: u32,
     /// The request line (JSON).
     pub request: String,

@@ -95,9 +95,42 @@ pub(super) struct Nodes {
     pub(super) tasks: Vec<NodeTask>,
     /// The COMMs' attachments (for the radio take-over).
     pub(super) comm_ports: Vec<(u8, Vec<Attachment>)>,
+    /// The nodes built only for their saved state to load into, and their attachments: an
+    /// outside program takes their place in this run from a snapshot
+    /// ([`Nodes::hand_over_replaced`]).
+    replaced_later: Vec<(u8, Vec<Attachment>)>,
+    /// Every node built, in build order (those handed over included: their places on the
+    /// media stay, and a snapshot of this run says so).
+    pub(super) built: Vec<u8>,
+    /// Those handed over to outside programs.
+    pub(super) handed_over: Vec<u8>,
 }
 
 impl Nodes {
+    /// The nodes an outside program replaces in this run from a snapshot leave, once the
+    /// snapshot has loaded: their tasks end before they first run, their endpoints give
+    /// back their addresses for the program's link to claim (their places on the media
+    /// stay, with what they counted). What they had under way ends with them, as a
+    /// node's does when it is swapped for another at that instant.
+    pub(super) fn hand_over_replaced(&mut self) {
+        for (addr, ports) in std::mem::take(&mut self.replaced_later) {
+            ports.iter().for_each(Attachment::release);
+            self.handed_over.push(addr);
+            self.tasks.retain(|t| {
+                let leaves = t.spec.addr == addr;
+                if leaves {
+                    t.handle.abort();
+                    tracing::info!(
+                        "{}: an outside program takes its place from the snapshot on",
+                        t.spec.name
+                    );
+                }
+                !leaves
+            });
+            self.comm_ports.retain(|(a, _)| *a != addr);
+        }
+    }
+
     /// Every node's control channel by address.
     pub(super) fn ctls(&self) -> BTreeMap<u8, CtlTx> {
         self.tasks
@@ -119,7 +152,9 @@ pub fn fc_config(opts: &RunOptions) -> nodes_fc::FcConfig {
     }
 }
 
-/// Boot every node of `opts.network` on `segs` and start its task.
+/// Boot every node of `opts.network` on `segs` and start its task: those an outside
+/// program replaces are not built, but for those in `replaced_later` (a run from a
+/// snapshot whose run had them).
 pub(super) fn nodes(
     opts: &mut RunOptions,
     segs: &Segments,
@@ -127,6 +162,7 @@ pub(super) fn nodes(
     boards: &Boards,
     events: &mpsc::UnboundedSender<RunEvent>,
     start: Start,
+    replaced_later: &std::collections::BTreeSet<u8>,
 ) -> Nodes {
     let ev_tx = events;
 
@@ -135,8 +171,10 @@ pub(super) fn nodes(
     // The secondary COMM's radio: its air time is its own transmitter's.
     let mut secondary_radios = Vec::new();
     let mut nodes = Vec::new();
+    let mut later = Vec::new();
+    let mut built = Vec::new();
     for spec in &opts.network.nodes {
-        if opts.replaced.contains(&spec.addr) {
+        if opts.replaced.contains(&spec.addr) && !replaced_later.contains(&spec.addr) {
             // An outside program takes its place (`replaces` on a link): never attached, so
             // its address is free for that link to claim.
             tracing::info!("{}: replaced by an outside program, not started", spec.name);
@@ -151,6 +189,10 @@ pub(super) fn nodes(
         let (inbox_tx, inbox_rx) = inbox();
         let ports = attach(spec, &media, segs, &inbox_tx);
         drop(inbox_tx);
+        if replaced_later.contains(&spec.addr) {
+            later.push((spec.addr, ports.clone()));
+        }
+        built.push(spec.addr);
         let plan = opts.ground_plan.remove(&spec.addr).unwrap_or_default();
         let mut app = app_for(spec.role, spec.addr, opts, boards, plan);
         // The scenario's parameter values are the node's factory values.
@@ -201,6 +243,9 @@ pub(super) fn nodes(
     Nodes {
         tasks: nodes,
         comm_ports,
+        replaced_later: later,
+        built,
+        handed_over: Vec::new(),
     }
 }
 

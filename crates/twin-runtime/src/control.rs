@@ -144,6 +144,93 @@ pub struct ControlOptions {
     /// Where the snapshots the channel asks for go (`run --snapshot-dir`; each file named
     /// by [`snapshot_name`]); `None`: such requests are refused (a replay's too).
     pub snapshot_dir: Option<std::path::PathBuf>,
+    /// Requests from within the process (the live view's clients), if any: [`inlet`].
+    pub inlet: Option<Intake>,
+}
+
+/// The connection number of the requests that come through an [`Inlet`] (those of the
+/// channel's TCP connections count from 1).
+pub const INLET_CONN: u32 = 0;
+
+/// Requests an [`Inlet`] holds before it refuses more (the run takes them in at its next
+/// idle point: a client publishing faster than that is refused, counted).
+pub const INLET_DEPTH: usize = 16;
+
+/// Where requests from within the process come in (the live view's clients publishing on
+/// `/control`): each one line of the channel's protocol, taken in as a connection's are
+/// (connection [`INLET_CONN`]), its reply on `/control` with it. Bounded at
+/// [`INLET_DEPTH`] and [`MAX_LINE`]; clones offer to the same run.
+#[derive(Debug, Clone)]
+pub struct Inlet {
+    tx: mpsc::Sender<String>,
+}
+
+/// Why an [`Inlet`] refused a request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum InletRefusal {
+    /// [`INLET_DEPTH`] requests wait already.
+    #[error("{INLET_DEPTH} requests wait already")]
+    Full,
+    /// Longer than [`MAX_LINE`] bytes.
+    #[error("longer than {MAX_LINE} bytes")]
+    TooLong,
+    /// Not on one line.
+    #[error("not one line")]
+    NotOneLine,
+    /// The run has ended (or never took the inlet).
+    #[error("the run has ended")]
+    Closed,
+}
+
+/// The run's side of an [`Inlet`]; a clone shares the one receiver, which the run takes.
+#[derive(Debug, Clone)]
+pub struct Intake(Arc<Mutex<Option<mpsc::Receiver<String>>>>);
+
+/// An inlet and its intake (for [`ControlOptions::inlet`]).
+pub fn inlet() -> (Inlet, Intake) {
+    let (tx, rx) = mpsc::channel(INLET_DEPTH);
+    (Inlet { tx }, Intake(Arc::new(Mutex::new(Some(rx)))))
+}
+
+impl Inlet {
+    /// Hand `line` (one request) to the run, or say why not.
+    pub fn offer(&self, line: String) -> Result<(), InletRefusal> {
+        if line.len() > MAX_LINE {
+            return Err(InletRefusal::TooLong);
+        }
+        if line.contains('\n') {
+            return Err(InletRefusal::NotOneLine);
+        }
+        self.tx.try_send(line).map_err(|e| match e {
+            mpsc::error::TrySendError::Full(_) => InletRefusal::Full,
+            mpsc::error::TrySendError::Closed(_) => InletRefusal::Closed,
+        })
+    }
+}
+
+/// Take in an inlet's requests for as long as the run lasts.
+async fn take_inlet(
+    mut rx: mpsc::Receiver<String>,
+    clock: bus::Clock,
+    to_run: mpsc::UnboundedSender<Admitted>,
+) {
+    while let Some(request) = rx.recv().await {
+        let (tx, answered) = oneshot::channel();
+        let to_run = to_run.clone();
+        bus::pace::take_in(clock, move |t| {
+            let _ = to_run.send(Admitted {
+                t,
+                conn: INLET_CONN,
+                request,
+                reply: Some(tx),
+            });
+        });
+        // One request in the run at a time, as a connection's: the rest wait in the inlet,
+        // whose bound then holds. (The reply is on `/control`, where the clients see it.)
+        if answered.await.is_err() {
+            return;
+        }
+    }
 }
 
 /// The file name of the snapshot the control channel asked for at `t`, in the run's
@@ -229,6 +316,14 @@ impl Control {
         };
         if let Some(addr) = c.listen {
             bound.push(listen(addr, clock, &tx, &stats, background).await?);
+        }
+        let intake = c.inlet.and_then(|i| {
+            i.0.lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .take()
+        });
+        if let Some(rx) = intake {
+            background.push(tokio::spawn(take_inlet(rx, clock, tx.clone())));
         }
         if !c.replay.is_empty() {
             background.push(tokio::spawn(feed(c.replay, clock, tx)));
@@ -787,6 +882,22 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
     use crate::faults::FaultAction;
+
+    /// An inlet holds at most INLET_DEPTH requests, each one line of at most MAX_LINE
+    /// bytes, and refuses once its run is gone.
+    #[test]
+    fn an_inlet_is_bounded_and_refuses_once_its_run_is_gone() {
+        let (inlet, intake) = inlet();
+        for i in 0..INLET_DEPTH {
+            assert_eq!(inlet.offer(format!("{{\"n\":{i}}}")), Ok(()));
+        }
+        assert_eq!(inlet.offer("{}".into()), Err(InletRefusal::Full));
+        assert_eq!(inlet.offer("{\n}".into()), Err(InletRefusal::NotOneLine));
+        let long = format!("\"{}\"", "x".repeat(MAX_LINE));
+        assert_eq!(inlet.offer(long), Err(InletRefusal::TooLong));
+        drop(intake);
+        assert_eq!(inlet.offer("{}".into()), Err(InletRefusal::Closed));
+    }
 
     /// A catalogue of one kind, `power-off` of a node by address, lasting.
     #[derive(Debug)]

@@ -571,9 +571,7 @@ async fn run_on(
     let socketcan_stats =
         links::spawn_socketcan_bridges(&opts, &segs, clock, &gates, &mut background)?;
     let boards = Boards::default();
-    let nodes = build::nodes(&mut opts, &segs, clock, &boards, &ev_tx, start);
-    // What the tasks share is loaded before any of them first runs.
-    let resume_at = snapshot::resume_shared(opts.resume.as_ref(), &segs, &boards, &nodes.tasks)?;
+    let (nodes, resume_at) = nodes_of_run(&mut opts, &segs, clock, &boards, &ev_tx, start)?;
     let (kiss, mut control) = outside(
         &mut opts,
         &segs,
@@ -633,7 +631,7 @@ async fn run_on(
             }
             (t, by) = snapshots.due(), if snapshots.is_on() => {
                 let state = LoopState::of(&mut power_shell, &gates, &mut faults, &mut tapped);
-                let bytes = state.take(&segs, &boards, &nodes.tasks);
+                let bytes = state.take(&segs, &boards, &nodes);
                 tapped.snapshot(t, by, &mut vec![(RUNTIME_SECTION.to_owned(), bytes)]);
             }
             () = fault_timer.sleep_until(next_fault), if next_fault < SimTime::MAX => {
@@ -670,6 +668,25 @@ async fn run_on(
         boards: boards.stats(),
         links: link_stats(&opts, &gates),
     })
+}
+
+/// The run's nodes, each its own task, and where the loop's part of the snapshot the run
+/// starts from begins: what the tasks share is loaded before any of them first runs, and
+/// the nodes outside programs replace from the snapshot on leave then.
+fn nodes_of_run(
+    opts: &mut RunOptions,
+    segs: &bus::outside::Segments,
+    clock: Clock,
+    boards: &Boards,
+    ev_tx: &mpsc::UnboundedSender<RunEvent>,
+    start: bus::exec::Start,
+) -> anyhow::Result<(build::Nodes, usize)> {
+    let later = snapshot::replaced_later(opts.resume.as_ref(), &opts.replaced)?;
+    let mut nodes = build::nodes(opts, segs, clock, boards, ev_tx, start, &later);
+    let resume_at =
+        snapshot::resume_shared(opts.resume.as_ref(), segs, boards, &nodes, &opts.replaced)?;
+    nodes.hand_over_replaced();
+    Ok((nodes, resume_at))
 }
 
 /// The cause to stop if the run's wall-clock limit has passed since `wall_start`.

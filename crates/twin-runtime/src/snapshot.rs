@@ -6,6 +6,8 @@
 //! into a run built from the same scenario (`RunOptions::resume`) before any of its tasks
 //! first runs, its clock already at the snapshot's instant.
 
+use std::collections::BTreeSet;
+
 use anyhow::Context as _;
 use bus::driver::lock_core;
 use bus::exec::Start;
@@ -16,7 +18,7 @@ use platform::board::Boards;
 use snap::{Reader, Snap, SnapError, SnapNew as _, Writer};
 use twin_core::packets::PacketTap;
 
-use crate::build::NodeTask;
+use crate::build::{NodeTask, Nodes};
 use crate::control::Timeline;
 use crate::counters::Tapped;
 use crate::faults::TimedFault;
@@ -85,61 +87,97 @@ pub(crate) fn start_of(resume: Option<&Resume>) -> Start {
 
 /// What a run's tasks share, saved and loaded first: the media and the boards, which tasks
 /// may use as soon as they run.
-fn save_shared(w: &mut Writer, segs: &Segments, boards: &Boards, nodes: &[NodeTask]) {
+fn save_shared(w: &mut Writer, segs: &Segments, boards: &Boards, nodes: &Nodes) {
+    // The nodes first, each with whether its state follows: a run from it builds those an
+    // outside program replaces in it, when this run built them ([`replaced_later`]).
+    saved_nodes(nodes).save(w);
     segs.main.save(w);
     segs.payload.save(w);
     segs.ground.save(w);
     boards.save(w);
-    nodes.len().save(w);
-    for n in nodes {
-        n.spec.addr.save(w);
+    for n in &nodes.tasks {
         lock_core(&n.core).save(w);
     }
 }
 
-/// Load what [`save_shared`] saved into a run just built, before its tasks first run.
+/// Every node built, in build order, and whether its state is saved (not when an outside
+/// program took its place).
+fn saved_nodes(nodes: &Nodes) -> Vec<(u8, bool)> {
+    nodes
+        .built
+        .iter()
+        .map(|a| (*a, !nodes.handed_over.contains(a)))
+        .collect()
+}
+
+/// Of the nodes an outside program replaces in a run from `resume`, those its snapshot's
+/// run built (built again, their state loaded, then handed over:
+/// `build::Nodes::hand_over_replaced`).
+pub(crate) fn replaced_later(
+    resume: Option<&Resume>,
+    replaced: &BTreeSet<u8>,
+) -> anyhow::Result<BTreeSet<u8>> {
+    let Some(r) = resume else {
+        return Ok(BTreeSet::new());
+    };
+    let saved = Vec::<(u8, bool)>::read(&mut Reader::new(r.section(RUNTIME_SECTION)?))
+        .context(NOT_THIS_RUN)?;
+    Ok(saved
+        .into_iter()
+        .map(|(a, _)| a)
+        .filter(|a| replaced.contains(a))
+        .collect())
+}
+
+/// Load what [`save_shared`] saved after its list of nodes (`saved`) into a run just built,
+/// before its tasks first run.
 fn load_shared(
     r: &mut Reader<'_>,
     segs: &Segments,
     boards: &Boards,
     nodes: &[NodeTask],
+    saved: &[(u8, bool)],
 ) -> Result<(), SnapError> {
     segs.main.clone().load(r)?;
     segs.payload.clone().load(r)?;
     segs.ground.clone().load(r)?;
     boards.clone().load(r)?;
-    let n = usize::read(r)?;
-    if n != nodes.len() {
-        return Err(SnapError::Mismatch {
-            what: "nodes",
-            saved: n as u64,
-            built: nodes.len() as u64,
-        });
-    }
-    for node in nodes {
-        let at = r.at();
-        if u8::read(r)? != node.spec.addr {
-            return Err(SnapError::Bad {
-                what: "node address",
-                at,
-            });
+    for (node, (_, has_state)) in nodes.iter().zip(saved) {
+        if *has_state {
+            lock_core(&node.core).load(r)?;
         }
-        lock_core(&node.core).load(r)?;
     }
     Ok(())
 }
 
-/// Load the shared part of `resume` (if the run is resumed) into a run just built; where
-/// the loop's part begins.
+/// Load the shared part of `resume` (if the run is resumed) into a run just built, whose
+/// outside programs replace the nodes `replaced`; where the loop's part begins.
 pub(crate) fn resume_shared(
     resume: Option<&Resume>,
     segs: &Segments,
     boards: &Boards,
-    nodes: &[NodeTask],
+    nodes: &Nodes,
+    replaced: &BTreeSet<u8>,
 ) -> anyhow::Result<usize> {
     let Some(r) = resume else { return Ok(0) };
     let mut rd = Reader::new(r.section(RUNTIME_SECTION)?);
-    load_shared(&mut rd, segs, boards, nodes).context(NOT_THIS_RUN)?;
+    let saved = Vec::<(u8, bool)>::read(&mut rd).context(NOT_THIS_RUN)?;
+    let addrs: Vec<u8> = saved.iter().map(|(a, _)| *a).collect();
+    if addrs != nodes.built {
+        anyhow::bail!(
+            "{NOT_THIS_RUN}: its run had the nodes at {addrs:?}, this one has {:?} (a node an \
+             outside program replaced when it was taken is replaced in a run from it too)",
+            nodes.built
+        );
+    }
+    if let Some((a, _)) = saved.iter().find(|(a, s)| !s && !replaced.contains(a)) {
+        anyhow::bail!(
+            "{NOT_THIS_RUN}: an outside program had node {a}'s place when it was taken, so \
+             its state is not in it: replace it in this run too (--kiss-addr {a} after its \
+             link)"
+        );
+    }
+    load_shared(&mut rd, segs, boards, &nodes.tasks, &saved).context(NOT_THIS_RUN)?;
     Ok(rd.at())
 }
 
@@ -171,7 +209,7 @@ impl<'a> LoopState<'a> {
     }
 
     /// The runtime's part of a snapshot now (the run has settled).
-    pub(crate) fn take(&self, segs: &Segments, boards: &Boards, nodes: &[NodeTask]) -> Vec<u8> {
+    pub(crate) fn take(&self, segs: &Segments, boards: &Boards, nodes: &Nodes) -> Vec<u8> {
         let mut w = Writer::new();
         save_shared(&mut w, segs, boards, nodes);
         self.save(&mut w);

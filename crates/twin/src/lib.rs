@@ -40,6 +40,8 @@ pub mod campaign_shrink;
 pub mod exec;
 pub mod gs;
 pub mod gs_shell;
+#[cfg(feature = "live")]
+pub mod live_control;
 pub mod snapshots;
 
 /// The scenario: its data (m6p-twin-scenario), read and checked with every slice's check

@@ -18,6 +18,14 @@ fn gs(addr: &str, args: &[&str]) -> (bool, String) {
     (o.status.success(), output_text(&o))
 }
 
+/// The snapshot file a reply to `gs snapshot` names.
+fn snapshot_named(said: &str) -> String {
+    said.split_whitespace()
+        .find(|w| w.starts_with("snapshot-") && w.ends_with("ns.snap"))
+        .unwrap_or_else(|| panic!("no file named: {said}"))
+        .to_owned()
+}
+
 /// A real-time run of the default scenario takes a power-off of PL12 from 20 s for 5 s, a
 /// hang of PL13 now, cleared at once, and refuses what it cannot take; each fault is on
 /// `/faults` at its instants with its origin, each request on `/control` with its reply,
@@ -223,11 +231,7 @@ fn a_snapshot_asked_over_the_control_channel_is_written_to_the_runs_dir() {
     let addr = twin_run.addrs[0].to_string();
     let (ok, out) = gs(&addr, &["snapshot"]);
     assert!(ok, "{out}");
-    let name = out
-        .split_whitespace()
-        .find(|w| w.starts_with("snapshot-") && w.ends_with("ns.snap"))
-        .unwrap_or_else(|| panic!("no file named: {out}"))
-        .to_owned();
+    let name = snapshot_named(&out);
     let (ok, out, err) = twin_run.finish();
     assert!(ok, "{out}{err}");
     let file = snaps.join(&name);
@@ -251,29 +255,83 @@ fn a_snapshot_asked_over_the_control_channel_is_written_to_the_runs_dir() {
     assert!(o.status.success(), "{text}");
     assert!(text.contains("from snapshot "), "{text}");
 
-    // Outside programs' links are not in snapshots: such a run takes none on request.
-    let o = twin()
-        .args([
-            "run",
-            scenario,
-            "--control",
-            "0",
-            "--kiss-listen",
-            "127.0.0.1:0",
-        ])
-        .args(["--snapshot-dir", snaps.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(!o.status.success());
-    assert!(
-        output_text(&o).contains("--snapshot-dir: a run with connections to outside programs"),
-        "{}",
-        output_text(&o)
-    );
     let twin_run = run(&[]);
     let (ok, out) = gs(&twin_run.addrs[0].to_string(), &["snapshot"]);
     assert!(!ok, "{out}");
     assert!(out.contains("start it with --snapshot-dir"), "{out}");
     let _ = twin_run.finish();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Ground station 16 simulated up to 2 s, saved there; a run from that snapshot with a
+/// program taking GS16's place (`--kiss-addr 16`) is answered, and with the program
+/// connected takes a snapshot on request; a run from that one begins with the program gone
+/// (a connection is no state a run can take up again) and GS16's place its link's again:
+/// the program connects and is answered. Without the program, that snapshot is refused:
+/// GS16's state is not in it.
+#[test]
+fn a_program_in_a_nodes_place_from_a_snapshot_is_saved_and_connects_again() {
+    use common::twin_process::Client;
+    use std::time::Duration;
+    let dir = test_dir("control", "snapshot-connected");
+    let (snaps, at_2s) = (dir.join("snaps"), dir.join("at-2s.snap"));
+    // A bare scenario: the ground reaches the FC all the time.
+    let scenario = common::twin_process::bare("connected", 20);
+    let scenario = scenario.to_str().unwrap();
+    let o = twin()
+        .args(["run", scenario, "--snapshot-at", "2s", "--snapshot"])
+        .arg(&at_2s)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", output_text(&o));
+    let args = [scenario, "--duration", "20s", "--speed", "5", "--no-checks"];
+    let link = ["--kiss-listen", "127.0.0.1:0", "--kiss-addr", "16"];
+    let first = Twin::start(
+        &[
+            &args[..],
+            &link,
+            &["--from-snapshot", at_2s.to_str().unwrap()],
+            &[
+                "--control",
+                "127.0.0.1:0",
+                "--snapshot-dir",
+                snaps.to_str().unwrap(),
+            ],
+        ]
+        .concat(),
+        2,
+    );
+    // The control channel's line may come first: which is which, from the KISS line.
+    let log = first.stderr.lock().unwrap().clone();
+    let (kiss, control) = match first.addrs[..] {
+        [a, b] if log.contains(&format!("KISS/TCP: listening on {a} ")) => (a, b),
+        [a, b] => (b, a),
+        _ => unreachable!(),
+    };
+    let mut program = Client::connect(kiss);
+    assert!(program.ping(16, 3, 1, Duration::from_secs(5)).is_some());
+    let (ok, out) = gs(&control.to_string(), &["snapshot"]);
+    assert!(ok, "{out}");
+    let file = snaps.join(snapshot_named(&out));
+    let (ok, out, err) = first.finish();
+    assert!(ok, "{out}{err}");
+    assert!(err.contains("from snapshot "), "{err}");
+    drop(program);
+
+    let from = ["--from-snapshot", file.to_str().unwrap()];
+    let second = Twin::start(&[&args[..], &link, &from].concat(), 1);
+    let mut program = Client::connect(second.addrs[0]);
+    assert!(program.ping(16, 3, 2, Duration::from_secs(5)).is_some());
+    let (ok, out, err) = second.finish();
+    assert!(ok, "{out}{err}");
+    assert!(out.contains(": 1 connections (0 closed idle"), "{out}");
+
+    let o = twin().arg("run").args(args).args(from).output().unwrap();
+    let text = output_text(&o);
+    assert!(!o.status.success(), "{text}");
+    assert!(
+        text.contains("an outside program had node 16's place when it was taken"),
+        "{text}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

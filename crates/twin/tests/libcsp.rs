@@ -376,3 +376,86 @@ libcsp_test! {
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
+
+libcsp_test! {
+    /// Software in the loop from a snapshot: the README's session with payload 12 simulated
+    /// up to 15 s, saved there; a run from that snapshot with the libcsp payload taking
+    /// payload 12's place on the hub (`--kiss-addr 12`) serves the session set up at 20 s,
+    /// its bytes downlinked intact, and the recording of that run replays identically (from
+    /// the snapshot it carries, the payload's input with it).
+    fn the_libcsp_payload_takes_the_simulated_payloads_place_in_a_run_from_a_snapshot() {
+        use common::twin_process::{Twin, output_text, test_dir, twin};
+        let _one = ONE_SESSION_AT_A_TIME
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let progs = programs();
+        let host = "127.0.0.68";
+        let dir = test_dir("libcsp", "sil-from-snapshot");
+        let links = "[[links]]\nkind = \"kiss-listen\"\naddr = \"127.0.0.1:52001\"\n";
+        let scenario = common::readme_scenario();
+        let at = scenario.find(links).unwrap();
+        let end = at + scenario[at..].find("\n\n").unwrap();
+        let scenario = format!("{}{}", &scenario[..at], &scenario[end + 2..])
+            .replace("payloads = [13]", "payloads = [12, 13] #")
+            .replace("duration = \"8s\"", "duration = \"25s\"")
+            .replace("at = \"2s\"", "at = \"20s\"")
+            .replace("/tmp/outside_payload.downlink", &dir.join("down").display().to_string());
+        let file = dir.join("swap.toml");
+        std::fs::write(&file, scenario).unwrap();
+        let (file, snap, rec) = (
+            file.to_str().unwrap(),
+            dir.join("at-15s.snap"),
+            dir.join("swap.mcap"),
+        );
+        let o = twin()
+            .args(["run", file, "--snapshot-at", "15s", "--snapshot"])
+            .arg(&snap)
+            .arg("--record")
+            .arg(dir.join("simulated.mcap"))
+            .output()
+            .unwrap();
+        let text = output_text(&o);
+        // The simulated payload serves the session in the run that takes the snapshot.
+        assert!(text.contains("5000 B"), "{text}");
+        std::fs::remove_dir_all(dir.join("down")).unwrap();
+
+        let run = Twin::start(
+            &[
+                file,
+                "--from-snapshot",
+                snap.to_str().unwrap(),
+                "--zmq-hub",
+                host,
+                "--kiss-addr",
+                "12",
+                "--record",
+                rec.to_str().unwrap(),
+            ],
+            0,
+        );
+        let sent = dir.join("sent.bin");
+        let payload = std::process::Command::new(&progs.payload)
+            .args(["--zmq", host, "--addr", "12", "--api", "conn", "--idle", "1.5"])
+            .args(["--seconds", "12", "--sent"])
+            .arg(&sent)
+            .output()
+            .unwrap();
+        let served = output_text(&payload);
+        let (ok, out, err) = run.finish();
+        println!("{out}{err}\n{served}");
+        assert!(ok, "{out}{err}");
+        assert!(err.contains("from snapshot ") && err.contains(" at 15.000000000s"), "{err}");
+        assert!(served.contains("served syncs=1 polls=25 bytes=3416"), "{served}");
+        assert!(out.contains("3 passed, 0 failed"), "{out}");
+        let sent = std::fs::read(&sent).unwrap();
+        same_bytes("sent", &sent, "frame_data", &expected_stream(25, 200));
+        let down = std::fs::read(dir.join("down/session-1-run1.bin")).unwrap();
+        same_bytes("downlinked", &down, "sent by the libcsp payload", &sent);
+
+        let o = twin().args(["replay", rec.to_str().unwrap()]).output().unwrap();
+        let said = output_text(&o);
+        assert!(o.status.success(), "replay differs: {said}");
+        assert!(said.contains("replaying from its snapshot at 15.000000000s"), "{said}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -84,24 +84,26 @@ port = 20
         }
     }
 
-    #[test]
-    fn a_foxglove_client_sees_the_channels_packets_and_simulated_time() {
-        let scenario = tmp("live.toml");
-        std::fs::write(&scenario, SCENARIO).unwrap();
-        let rec = tmp("live.mcap");
+    /// `run SCENARIO ARGS --record REC`, and its stderr's lines as they come (the twin
+    /// prints the address it bound: port 0 is any free port).
+    fn start(
+        scenario: &std::path::Path,
+        args: &[&str],
+        rec: &std::path::Path,
+    ) -> (Twin, mpsc::Receiver<String>) {
         let mut twin = Twin(Some(
             Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
                 .arg("run")
-                .arg(&scenario)
-                .args(["--live", "127.0.0.1:0", "--record"])
-                .arg(&rec)
+                .arg(scenario)
+                .args(args)
+                .arg("--record")
+                .arg(rec)
                 .current_dir(repo())
                 .stdout(Stdio::piped())
                 .stderr(Stdio::piped())
                 .spawn()
                 .unwrap(),
         ));
-        // The twin prints the address it bound (port 0: any free port).
         let (tx, lines) = mpsc::channel();
         let stderr = twin.0.as_mut().unwrap().stderr.take().unwrap();
         std::thread::spawn(move || {
@@ -109,6 +111,15 @@ port = 20
                 let _ = tx.send(l);
             }
         });
+        (twin, lines)
+    }
+
+    #[test]
+    fn a_foxglove_client_sees_the_channels_packets_and_simulated_time() {
+        let scenario = tmp("live.toml");
+        std::fs::write(&scenario, SCENARIO).unwrap();
+        let rec = tmp("live.mcap");
+        let (mut twin, lines) = start(&scenario, &["--live", "127.0.0.1:0"], &rec);
         let mut seen = Vec::new();
         let addr = loop {
             let l = lines
@@ -163,6 +174,126 @@ port = 20
         let stderr: Vec<String> = lines.try_iter().collect();
         assert_eq!(out.status.code(), Some(0), "{stdout}\n{stderr:#?}");
         assert!(stdout.contains("recorded"), "{stdout}");
+        let _ = std::fs::remove_file(&rec);
+        let _ = std::fs::remove_file(&scenario);
+    }
+
+    /// A Foxglove client publishes a control request on `/control` (JSON, pretty-printed
+    /// as a panel may send it): the run takes it as its control channel's (connection 0),
+    /// the fault is on `/faults` with its origin, the request and its reply on `/control`,
+    /// and `replay` of the recording is identical.
+    #[test]
+    fn a_foxglove_client_publishing_on_control_cuts_a_payloads_power() {
+        let scenario = tmp("live-control.toml");
+        std::fs::write(&scenario, "name = \"live-control\"\nduration = \"4s\"\n").unwrap();
+        let rec = tmp("live-control.mcap");
+        let args = [
+            "--live",
+            "127.0.0.1:0",
+            "--control",
+            "127.0.0.1:0",
+            "--no-checks",
+        ];
+        let (mut twin, lines) = start(&scenario, &args, &rec);
+        let addr = loop {
+            let l = lines.recv_timeout(Duration::from_secs(30)).unwrap();
+            if let Some(rest) = l.strip_prefix("live view: ws://") {
+                break rest.split_whitespace().next().unwrap().to_owned();
+            }
+        };
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            let request = || {
+                let mut req = format!("ws://{addr}").into_client_request().unwrap();
+                req.headers_mut()
+                    .insert("sec-websocket-protocol", "foxglove.sdk.v1".parse().unwrap());
+                req
+            };
+            // A page of another site, whose browser says so, is turned away.
+            let mut evil = request();
+            evil.headers_mut()
+                .insert("origin", "https://evil.example".parse().unwrap());
+            let refused = tokio_tungstenite::connect_async(evil).await;
+            assert!(refused.is_err(), "a page of another site joined");
+            let (mut ws, _) = tokio_tungstenite::connect_async(request()).await.unwrap();
+            let info = next_json(&mut ws).await;
+            assert_eq!(info["op"], "serverInfo", "{info}");
+            let caps = info["capabilities"].as_array().unwrap();
+            assert!(caps.iter().any(|c| c == "clientPublish"), "{info}");
+            assert!(
+                info["supportedEncodings"].as_array().unwrap().iter().any(|e| e == "json"),
+                "{info}"
+            );
+            let advertise = serde_json::json!({
+                "op": "advertise",
+                "channels": [
+                    {"id": 1, "topic": "/control", "encoding": "json", "schemaName": "m6p.ControlRequest"},
+                    {"id": 2, "topic": "/elsewhere", "encoding": "json", "schemaName": "x"}
+                ]
+            });
+            ws.send(Message::text(advertise.to_string())).await.unwrap();
+            let publish = |chan: u32, payload: &str| {
+                let mut m = vec![0x01];
+                m.extend(chan.to_le_bytes());
+                m.extend(payload.as_bytes());
+                Message::binary(m)
+            };
+            let cut = "{\n  \"op\": \"fault\",\n  \"kind\": \"power-off\",\n  \"target\": \"PL12\",\n  \"for\": \"1s\"\n}";
+            ws.send(publish(2, "{\"op\":\"time\"}")).await.unwrap();
+            ws.send(publish(1, "not json")).await.unwrap();
+            ws.send(publish(1, cut)).await.unwrap();
+            // The connection stays open until the run ends.
+            while ws.next().await.is_some_and(|m| m.is_ok()) {}
+        });
+        let (done_tx, done) = mpsc::channel();
+        let child = twin.0.take().unwrap();
+        std::thread::spawn(move || {
+            let _ = done_tx.send(child.wait_with_output());
+        });
+        let out = done.recv_timeout(Duration::from_secs(30)).unwrap().unwrap();
+        let said: Vec<String> = lines.try_iter().collect();
+        assert_eq!(out.status.code(), Some(0), "{said:#?}");
+        assert!(
+            said.iter()
+                .any(|l| l.contains("1 control request(s) from its clients taken, 2 refused")),
+            "{said:#?}"
+        );
+
+        let on = |topic: &str| -> Vec<m6p_twin::recording::RecordedMessage> {
+            m6p_twin::recording::messages(&rec)
+                .unwrap()
+                .map(Result::unwrap)
+                .filter(|m| &*m.topic == topic)
+                .collect()
+        };
+        let control: Vec<m6p_twin::record::ControlMsg> =
+            on("/control").iter().map(|m| m.decode().unwrap()).collect();
+        assert_eq!(control.len(), 1, "{control:?}");
+        assert_eq!(control[0].conn, 0);
+        assert_eq!(
+            control[0].request,
+            r#"{"for":"1s","kind":"power-off","op":"fault","target":"PL12"}"#
+        );
+        assert!(control[0].reply.contains(r#""ok":true"#), "{control:?}");
+        let faults: Vec<m6p_twin::record::FaultMsg> =
+            on("/faults").iter().map(|m| m.decode().unwrap()).collect();
+        assert_eq!(faults.len(), 2, "{faults:?}");
+        assert!(
+            faults[0].what.starts_with("control[0]: PowerOff on PL12"),
+            "{faults:?}"
+        );
+        assert_eq!(faults[1].t_ns - faults[0].t_ns, 1_000_000_000, "{faults:?}");
+
+        let o = Command::new(env!("CARGO_BIN_EXE_m6p-twin"))
+            .arg("replay")
+            .arg(&rec)
+            .current_dir(repo())
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));
         let _ = std::fs::remove_file(&rec);
         let _ = std::fs::remove_file(&scenario);
     }

@@ -212,6 +212,7 @@ fn control_input(
             replay: control,
             // A replay writes no snapshot: the run it repeats took them.
             snapshot_dir: None,
+            inlet: None,
         });
         compiled.opts.clock = bus::ClockMode::Virtual;
         if compiled.opts.duration.is_none() {
@@ -223,8 +224,10 @@ fn control_input(
 
 /// Where the replay starts and compares from: `--from T` or, for a recording made from a
 /// snapshot, its start (whichever is later); the run starts from the latest snapshot the
-/// recording carries at or before that instant (a run with outside input: from the start,
-/// its links' state is not in snapshots). Returns the instant compared from, ns.
+/// recording carries at or before that instant. A run with outside input (a link's, the
+/// control channel's) starts where its recording does, from t = 0 or from the snapshot a
+/// recording made from one carries: the input came after it, and the links' connections
+/// are in no snapshot. Returns the instant compared from, ns.
 fn seek(
     a: &ReplayArgs,
     loaded: &exec::Loaded,
@@ -233,17 +236,22 @@ fn seek(
     let asked = a
         .from
         .map_or(0, |t| u64::try_from(t.as_nanos()).unwrap_or(u64::MAX));
-    let mut start = m6p_twin::recording::replay_start(&a.file, asked)?;
-    let from_ns = match start.resumed_at_ns {
-        Some(r) if r > asked => {
-            start = m6p_twin::recording::replay_start(&a.file, r)?;
-            r
-        }
-        _ => asked,
-    };
+    let probe = m6p_twin::recording::replay_start(&a.file, asked)?;
+    let resumed_at = probe.resumed_at_ns;
+    let from_ns = resumed_at.map_or(asked, |r| r.max(asked));
     let outside = !compiled.opts.kiss_replay.is_empty() || compiled.opts.control.is_some();
-    match (start.snapshot, outside) {
-        (Some((_, bytes)), false) => {
+    let start_ns = if outside { resumed_at } else { Some(from_ns) };
+    // From t = 0, no snapshot.
+    let Some(start_ns) = start_ns else {
+        return Ok(from_ns);
+    };
+    let start = if start_ns == asked {
+        probe
+    } else {
+        m6p_twin::recording::replay_start(&a.file, start_ns)?
+    };
+    match start.snapshot {
+        Some((_, bytes)) => {
             let scenario = (loaded.name(), loaded.text.as_str());
             match m6p_twin::snapshots::resume_from_bytes(
                 &a.file,
@@ -256,18 +264,17 @@ fn seek(
                     compiled.opts.resume = Some(resume);
                 }
                 // A recording from the start runs from the start instead (slower, the same).
-                Err(e) if start.resumed_at_ns.is_none() => {
+                Err(e) if resumed_at.is_none() => {
                     eprintln!("replaying from the start: its snapshot does not serve ({e:#})");
                 }
                 Err(e) => return Err(e),
             }
         }
-        _ if start.resumed_at_ns.is_some() => anyhow::bail!(
-            "{}: recorded from a snapshot it does not carry in a form this replay can use \
-             (outside input, or no snapshot attachment): not replayable",
+        None if resumed_at.is_some() => anyhow::bail!(
+            "{}: recorded from a snapshot it does not carry: not replayable",
             a.file.display()
         ),
-        _ => {}
+        None => {}
     }
     Ok(from_ns)
 }

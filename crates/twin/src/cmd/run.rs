@@ -163,12 +163,15 @@ fn snapshot_options(
         .map(|d| csp::SimTime::ZERO + *d)
         .collect();
     opts.snapshot_to.clone_from(&a.snapshot);
-    if a.snapshot_dir.is_some()
-        && (!opts.kiss_links.is_empty() || !opts.socketcan.is_empty() || !opts.uart.is_empty())
-    {
+    let snapshots = a.snapshot_dir.is_some()
+        || !a.snapshot_at.is_empty()
+        || a.from_snapshot.is_some()
+        || a.snapshot_every.is_some()
+        || loaded.scenario.record.snapshot_every.is_some();
+    if snapshots && !opts.socketcan.is_empty() {
         anyhow::bail!(
-            "--snapshot-dir: a run with connections to outside programs cannot be saved in a \
-             snapshot yet (their links' state is not in it: docs/snapshots.md)"
+            "a run bridging SocketCAN takes no snapshot and starts from none: a bridge's \
+             interface is not saved (docs/snapshots.md, \"Outside programs\")"
         );
     }
     let Some(path) = &a.from_snapshot else {
@@ -332,14 +335,7 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
         opts.duration = Some(d);
     }
     add_links(opts, cli_links, &a)?;
-    if let Some(addr) = a.control {
-        opts.control = Some(m6p_twin::runtime::control::ControlOptions {
-            listen: Some(addr),
-            faults: m6p_twin::faults::live(&loaded.scenario),
-            replay: Vec::new(),
-            snapshot_dir: a.snapshot_dir.clone(),
-        });
-    }
+    let inlet = control_options(opts, &a, &loaded.scenario);
     if cfg!(not(feature = "live")) && a.live.is_some() {
         anyhow::bail!(
             "--live needs the Foxglove WebSocket server, which this build leaves out: \
@@ -370,16 +366,15 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
     let rt = build_runtime_for(opts)?;
     #[cfg(feature = "live")]
     let mut live = match a.live {
-        Some(addr) => {
-            let mut l = start_live(addr, compiled.opts.epoch_unix_s)?;
-            l.set_icd(compiled.opts.icd_map());
-            Some(l)
-        }
+        Some(addr) => Some(start_live(addr, &compiled.opts, inlet)?),
         None => None,
     };
+    // A build without the live view has refused --live above.
+    #[cfg(not(feature = "live"))]
+    drop(inlet);
     #[cfg(feature = "live")]
     let mut tap = |ev: &m6p_twin::events::RunEvent| {
-        if let Some(l) = live.as_mut() {
+        if let Some((l, _)) = live.as_mut() {
             l.publish(ev);
         }
     };
@@ -396,8 +391,14 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
     let ran = rt.block_on(exec::execute_with(&loaded, compiled, record_to, &mut tap));
     let (outcome, stats) = naming_snapshot(ran, a.from_snapshot.as_deref())?;
     #[cfg(feature = "live")]
-    if let Some(l) = live.take() {
+    if let Some((l, control)) = live.take() {
         eprintln!("live view: {} messages published; stopping", l.messages());
+        if l.publishing() {
+            let (taken, refused) = control.read();
+            eprintln!(
+                "live view: {taken} control request(s) from its clients taken, {refused} refused"
+            );
+        }
         l.finish();
     }
     print!("{}", outcome.report.table());
@@ -421,6 +422,31 @@ pub fn cmd_run(a: RunArgs, cli_links: Vec<m6p_twin::runtime::KissLink>) -> anyho
         _ => true,
     };
     Ok(outcome.passed() && recorded)
+}
+
+/// `--control ADDR` into `opts`; with `--live` too, the inlet through which the live
+/// view's clients publish control requests.
+fn control_options(
+    opts: &mut m6p_twin::runtime::RunOptions,
+    a: &RunArgs,
+    scenario: &m6p_twin::scenario::Scenario,
+) -> Option<m6p_twin::runtime::control::Inlet> {
+    let addr = a.control?;
+    let (inlet, intake) = match a.live {
+        Some(_) => {
+            let (i, t) = m6p_twin::runtime::control::inlet();
+            (Some(i), Some(t))
+        }
+        None => (None, None),
+    };
+    opts.control = Some(m6p_twin::runtime::control::ControlOptions {
+        listen: Some(addr),
+        faults: m6p_twin::faults::live(scenario),
+        replay: Vec::new(),
+        snapshot_dir: a.snapshot_dir.clone(),
+        inlet: intake,
+    });
+    inlet
 }
 
 /// `--no-checks`: no expectation and no invariant is judged (the scenario's commands and
@@ -527,12 +553,18 @@ fn choose_clock(
     Ok(())
 }
 
-/// Start the live view on `addr` for a run starting at `epoch_unix_s`.
+/// Start the live view on `addr` for the run `opts`; its clients publish control requests
+/// through `inlet` (the run's `--control`), counted in what it returns beside the server.
 #[cfg(feature = "live")]
 pub fn start_live(
     addr: SocketAddr,
-    epoch_unix_s: u64,
-) -> anyhow::Result<m6p_twin::live::LiveServer> {
+    opts: &m6p_twin::runtime::RunOptions,
+    inlet: Option<m6p_twin::runtime::control::Inlet>,
+) -> anyhow::Result<(
+    m6p_twin::live::LiveServer,
+    std::sync::Arc<m6p_twin::live_control::ControlCounts>,
+)> {
+    use std::sync::Arc;
     if !addr.ip().is_loopback() {
         eprintln!(
             "warning: the live view on {addr} is reachable from other machines, without \
@@ -540,15 +572,28 @@ pub fn start_live(
         );
     }
     use anyhow::Context as _;
-    let start_ns = epoch_unix_s
+    let start_ns = opts
+        .epoch_unix_s
         .checked_mul(1_000_000_000)
         .context("the scenario's start epoch is out of range")?;
-    let live = m6p_twin::live::LiveServer::start(addr, start_ns)?;
+    let counts = Arc::new(m6p_twin::live_control::ControlCounts::default());
+    let publish = inlet.map(|i| {
+        let l = m6p_twin::live_control::ControlListener::new(i, counts.clone());
+        Arc::new(l) as Arc<dyn foxglove::websocket::ServerListener>
+    });
+    let mut live = m6p_twin::live::LiveServer::start(addr, start_ns, publish)?;
+    live.set_icd(opts.icd_map());
     eprintln!(
         "live view: ws://{} (Foxglove: Open connection, Foxglove WebSocket)",
         live.addr()
     );
-    Ok(live)
+    if live.publishing() {
+        eprintln!(
+            "live view: its clients may publish control requests on /control (JSON, \
+             docs/control.md)"
+        );
+    }
+    Ok((live, counts))
 }
 
 /// `m6p-twin run` with the command line's KISS links in the order they were given.
