@@ -48,6 +48,14 @@ pub const BACKLOG: usize = 4096;
 /// The encoding the server takes its clients' messages in, when they may publish.
 pub const PUBLISH_ENCODING: &str = "json";
 
+/// Ports above 1023 that browsers refuse to fetch from or open a WebSocket to (the Fetch
+/// standard's "bad ports"): the server behind the front listens on one of them when its
+/// clients may publish.
+const BROWSER_REFUSED_PORTS: [u16; 19] = [
+    6665, 6666, 6667, 6668, 6669, 6679, 6697, 10080, 6566, 6000, 5060, 5061, 4190, 4045, 3659,
+    2049, 1723, 1720, 1719,
+];
+
 /// The least wall-clock time between two broadcasts of the simulated time.
 const TIME_EVERY: Duration = Duration::from_millis(20);
 
@@ -107,33 +115,54 @@ impl LiveServer {
             .block_on(tokio::net::TcpListener::bind(addr))
             .with_context(|| format!("starting the live view on {addr}"))?;
         let addr = listener.local_addr()?;
-        let mut server = WebSocketServer::new()
-            .name(format!("m6p-twin {}", env!("CARGO_PKG_VERSION")))
-            .bind("127.0.0.1", 0)
-            .capabilities([Capability::Time])
-            .message_backlog_size(BACKLOG)
-            .context(&ctx);
-        let publishing = match publish {
-            Some(listener) if addr.ip().is_loopback() => {
-                server = server
+        let builder = |port: u16, publish: Option<&Arc<dyn ServerListener>>| {
+            let b = WebSocketServer::new()
+                .name(format!("m6p-twin {}", env!("CARGO_PKG_VERSION")))
+                .bind("127.0.0.1", port)
+                .capabilities([Capability::Time])
+                .message_backlog_size(BACKLOG)
+                .context(&ctx);
+            match publish {
+                Some(l) => b
                     .capabilities([Capability::Time, Capability::ClientPublish])
                     .supported_encodings([PUBLISH_ENCODING])
-                    .listener(listener);
-                true
+                    .listener(l.clone()),
+                None => b,
             }
+        };
+        let publish = match publish {
+            Some(l) if addr.ip().is_loopback() => Some(l),
             Some(_) => {
                 tracing::warn!(
                     "live view on {addr}: not a loopback address, so its clients may not \
                      publish (to the control channel, which can power nodes off)"
                 );
-                false
+                None
             }
-            None => false,
+            None => None,
         };
-        // Started from within `rt`, the server spawns its tasks on `rt`.
-        let server = rt
-            .block_on(server.start())
-            .context("starting the live view's server")?;
+        // Started from within `rt`, the server spawns its tasks on `rt`. A server its
+        // clients publish to sits on a port browsers refuse to open a WebSocket to: a page
+        // of another site can find no way round the front's `Origin` check.
+        let mut started = None;
+        if let Some(l) = &publish {
+            started = BROWSER_REFUSED_PORTS
+                .iter()
+                .find_map(|&port| rt.block_on(builder(port, Some(l)).start()).ok());
+            if started.is_none() {
+                tracing::warn!(
+                    "live view: none of the ports browsers refuse ({BROWSER_REFUSED_PORTS:?}) \
+                     is free on 127.0.0.1, so its clients may not publish"
+                );
+            }
+        }
+        let publishing = started.is_some();
+        let server = match started {
+            Some(s) => s,
+            None => rt
+                .block_on(builder(0, None).start())
+                .context("starting the live view's server")?,
+        };
         let inner = SocketAddr::from(([127, 0, 0, 1], server.port()));
         let front = Arc::new(FrontCounts::default());
         let origins = if publishing {

@@ -73,19 +73,28 @@ pub fn origin_allowed(head: &[u8], origins: Origins) -> Result<(), String> {
     }) else {
         return Ok(());
     };
-    let host = origin
+    let local = origin
         .strip_prefix("http://")
         .or_else(|| origin.strip_prefix("https://"))
-        .map(|rest| match rest.strip_prefix("[::1]") {
-            Some(_) => "[::1]",
-            None => rest.split(':').next().unwrap_or_default(),
-        });
-    let local = matches!(host, Some("127.0.0.1" | "localhost" | "[::1]"));
+        .is_some_and(this_machine);
     if local || TRUSTED_ORIGINS.contains(&origin.as_str()) {
         Ok(())
     } else {
         Err(origin)
     }
+}
+
+/// Whether an origin's `host[:port]` is this machine's: a loopback host, then nothing or
+/// a port's digits.
+fn this_machine(host_port: &str) -> bool {
+    ["127.0.0.1", "localhost", "[::1]"].iter().any(|host| {
+        host_port.strip_prefix(host).is_some_and(|port| {
+            port.is_empty()
+                || port
+                    .strip_prefix(':')
+                    .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+        })
+    })
 }
 
 /// Which name the client offered the protocol under.
@@ -290,6 +299,9 @@ mod tests {
             "http://127.0.0.1.evil.example",
             "http://localhost.evil.example:80",
             "https://app.foxglove.dev.evil.example",
+            "http://127.0.0.1:80.evil.example",
+            "http://[::1]x.evil.example",
+            "http://127.0.0.1@evil.example",
         ] {
             assert!(
                 origin_allowed(&with(bad), Origins::Trusted).is_err(),

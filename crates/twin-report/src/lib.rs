@@ -306,13 +306,14 @@ impl RunReport {
         if let Some(c) = &self.control {
             let _ = writeln!(
                 s,
-                "\ncontrol channel: {} connections ({} refused: {} open), {} requests, {} lines over {} bytes refused",
+                "\ncontrol channel: {} connections ({} refused: {} open), {} requests, {} lines over {} bytes refused, {} HTTP requests closed",
                 c.connections,
                 c.refused_connections,
                 twin_runtime::control::MAX_CONNECTIONS,
                 c.requests,
                 c.long_lines,
                 twin_runtime::control::MAX_LINE,
+                c.http_closed,
             );
         }
         for (name, k) in &self.kiss {

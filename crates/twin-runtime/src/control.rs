@@ -261,6 +261,9 @@ pub struct ControlStats {
     pub requests: u64,
     /// Lines longer than [`MAX_LINE`], refused whole.
     pub long_lines: u64,
+    /// Connections closed because they began as an HTTP request (a browser page's
+    /// `fetch` to the port: its body must not be taken for requests).
+    pub http_closed: u64,
 }
 
 /// A request on its way to the run's loop.
@@ -737,6 +740,7 @@ async fn connection(
     let (read, mut write) = stream.into_split();
     let mut read = tokio::io::BufReader::new(read);
     let mut line = Vec::with_capacity(256);
+    let mut first = true;
     loop {
         line.clear();
         // At most MAX_LINE + 1 bytes are kept of a line: a longer one is refused whole and
@@ -762,6 +766,10 @@ async fn connection(
             .to_string()
         } else {
             let text = String::from_utf8_lossy(&line).trim().to_owned();
+            if std::mem::take(&mut first) && http_request_line(&text) {
+                count(stats, |s| s.http_closed += 1);
+                return "an HTTP request (a browser page's?): closed unanswered".into();
+            }
             if text.is_empty() {
                 continue;
             }
@@ -784,6 +792,18 @@ async fn connection(
             return e.to_string();
         }
     }
+}
+
+/// Whether `line` is an HTTP request line (`POST / HTTP/1.1`): any web page may send one
+/// to a loopback port, with a body of its choosing, so a connection that begins so is no
+/// client of the channel.
+fn http_request_line(line: &str) -> bool {
+    let mut words = line.split_ascii_whitespace();
+    let method = words.next().unwrap_or_default();
+    let version = words.nth(1).unwrap_or_default();
+    !method.is_empty()
+        && method.bytes().all(|b| b.is_ascii_uppercase())
+        && version.starts_with("HTTP/")
 }
 
 /// Read up to the end of the current line.
@@ -882,6 +902,15 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
     use crate::faults::FaultAction;
+
+    #[test]
+    fn a_connection_that_begins_as_an_http_request_is_no_client() {
+        assert!(http_request_line("POST / HTTP/1.1"));
+        assert!(http_request_line("GET /x?y HTTP/1.0"));
+        assert!(!http_request_line(r#"{"op":"time"}"#));
+        assert!(!http_request_line("post / http/1.1"));
+        assert!(!http_request_line(""));
+    }
 
     /// An inlet holds at most INLET_DEPTH requests, each one line of at most MAX_LINE
     /// bytes, and refuses once its run is gone.

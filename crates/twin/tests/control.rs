@@ -197,11 +197,24 @@ fn a_fifth_connection_and_a_long_line_are_refused_and_counted() {
         "the connection goes on"
     );
     drop(open);
+    // A web page's `fetch` to the port: its body is no request, the connection is closed
+    // unanswered.
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let mut page = connect();
+    page.write_all(
+        b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: text/plain\r\n\r\n\
+          {\"op\":\"fault\",\"kind\":\"power-off\",\"target\":\"PL12\"}\n",
+    )
+    .unwrap();
+    let mut answer = String::new();
+    let read = BufReader::new(&page).read_line(&mut answer);
+    assert!(matches!(read, Ok(0) | Err(_)), "{read:?} {answer}");
     let (_, out, err) = twin_run.finish();
     assert!(
-        out.contains("control channel: 4 connections (1 refused: 4 open), 5 requests, 1 lines over 4096 bytes refused"),
+        out.contains("control channel: 5 connections (1 refused: 4 open), 5 requests, 1 lines over 4096 bytes refused, 1 HTTP requests closed"),
         "{out}{err}"
     );
+    assert!(!err.contains("PowerOff"), "{err}");
 }
 
 /// `gs snapshot`: the run takes a snapshot where it settles at the request's instant and

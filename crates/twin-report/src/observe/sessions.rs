@@ -407,11 +407,17 @@ impl DownlinkFiles {
             let k = self.runs.get(&session).copied().unwrap_or_default();
             let path = self.dir.join(format!("session-{session}-run{k}.bin"));
             if ended {
+                // An ended run's last frames may still come down (the S-band's queue): they
+                // go on in its file when it is the one written, never in a file made anew.
+                let file = begins_with(&path, len, crc)
+                    .then(|| std::fs::OpenOptions::new().append(true).open(&path).ok())
+                    .flatten()
+                    .filter(|f| f.set_len(len).is_ok());
                 self.open.insert(
                     session,
                     OpenRun {
                         path,
-                        file: None,
+                        file,
                         ended,
                         len,
                         crc,
